@@ -1,0 +1,46 @@
+# The two commands of the README: `make demo` and `make test`.
+# Each creates .venv when it is missing and installs the package with its test extra.
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: demo test lint format system-deps bench clean
+
+$(PY):
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+
+$(STAMP): pyproject.toml | $(PY)
+	$(PY) -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+# Debian packages some tests use (headless Chromium for the meshcat browser test).
+# Installed when missing and when apt-get can run; the test skips with a reason otherwise.
+system-deps:
+	@if ! command -v chromium >/dev/null 2>&1; then \
+		if command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
+			echo "installing chromium (Debian package) for the browser test"; \
+			(apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null) \
+				|| echo "could not install chromium: the browser test will skip"; \
+		else \
+			echo "chromium missing and apt-get unavailable: the browser test will skip"; \
+		fi; \
+	fi
+
+test: $(STAMP) system-deps
+	$(PY) -m pytest -q
+
+demo: $(STAMP)
+	$(VENV)/bin/manip-id demo
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check manip_id tests experiments
+	$(VENV)/bin/ruff format --check manip_id tests experiments
+
+format: $(STAMP)
+	$(VENV)/bin/ruff format manip_id tests experiments
+	$(VENV)/bin/ruff check --fix manip_id tests experiments
+
+clean:
+	rm -rf $(VENV) .pytest_cache .ruff_cache

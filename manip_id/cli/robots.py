@@ -1,0 +1,28 @@
+"""``manip-id robots``: the robots that load by name."""
+
+from __future__ import annotations
+
+import argparse
+
+from ..errors import RobotError
+from ..robot import available_robots, load_robot
+
+
+def register(sub) -> None:
+    p = sub.add_parser("robots", help="list the robots available by name",
+                       description="List the robots available by name with nv and the number "
+                                   "of rigid-body parameters.")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    print(f"{'name':28s} {'nq':>4s} {'nv':>4s} {'parameters':>11s}")
+    for name in available_robots():
+        try:
+            robot = load_robot(name)
+        except RobotError as exc:
+            print(f"{name:28s} unavailable: {exc}")
+            continue
+        print(f"{name:28s} {robot.nq:4d} {robot.nv:4d} {robot.n_parameters:11d}")
+    print("any fixed-base URDF also loads by path; 'msd' is the mass-spring-damper")
+    return 0

@@ -1,0 +1,317 @@
+"""Regressors: Y(q, dq, ddq) and the Slotine-Li Y(q, dq, v, w), with joint-level terms.
+
+Inverse dynamics is linear in the parameters of :class:`~manip_id.robot.Robot`::
+
+    tau = M(q) ddq + C(q, dq) dq + g(q) + joint terms = Y(q, dq, ddq) theta
+
+The rigid-body columns come from ``pinocchio.computeJointTorqueRegressor``; the
+joint-term columns (only row ``j`` is non-zero for the terms of joint ``j``) are
+
+    Ia: ddq_j    fv: dq_j    fc: sign(dq_j)    fo: 1    k: q_j
+
+(``q_j`` is the joint angle; for a continuous joint stored as (cos, sin) it is
+``atan2(sin, cos)``).
+
+Slotine-Li form. ``Y(q, dq, v, w) theta = M(q) v + C(q, dq) w + g(q)`` with the
+Christoffel-consistent C. Its velocity part is the symmetric bilinear form
+``Q(dq, w) = C(q, dq) w = C(q, w) dq`` with ``Q(x, x) = C(q, x) x``, so with
+``a = (dq + w)/2`` and ``b = (dq - w)/2`` the polarization identity gives it
+from two regressor calls, exactly::
+
+    Y(q, dq, v, w) = Y_rnea(q, a, v) - Y_rnea^{g=0}(q, b, 0)
+
+because ``Q(a, a) - Q(b, b) = Q(dq, w)``. The joint terms take ``v`` as the
+acceleration and ``w`` as the velocity: ``Ia: v_j, fv: w_j, fc: sign(w_j),
+fo: 1, k: q_j``. Hence ``Y(q, dq, ddq, dq) == Y(q, dq, ddq)``.
+
+Stacking is sample-major: a batch is returned as shape (N, nv, p), whose
+``reshape(N * nv, p)`` has row ``k*nv + j`` for joint ``j`` of sample ``k``.
+Over long trajectories use :func:`iter_regressor`, which evaluates chunk by
+chunk into one preallocated buffer.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from ._checks import as_float_array, check_finite
+from .errors import InputError
+from .robot import Robot
+
+DEFAULT_CHUNK = 1024
+
+
+@dataclass(frozen=True)
+class RegressorChunk:
+    """A block of a stacked regressor.
+
+    ``Y`` has shape (stop - start, nv, p) and covers samples ``start:stop``.
+    It is a view of a buffer reused for the next chunk: copy it to keep it.
+    """
+
+    start: int
+    stop: int
+    Y: np.ndarray
+
+
+class RegressorEvaluator:
+    """Preallocated evaluation of the regressors of one robot (for hot loops).
+
+    The methods assume float64 arrays of the right shapes (the public
+    functions of this module check them); they are what online estimators and
+    the adaptive controller call at every step.
+    """
+
+    def __init__(self, robot: Robot):
+        self.robot = robot
+        self.model = robot.model
+        self.data = robot.model.createData()
+        self.model0 = robot.gravity_free_model
+        self.data0 = self.model0.createData()
+        self.nv = robot.nv
+        self.nq = robot.nq
+        self.p = robot.n_parameters
+        self.n_rigid = robot.n_rigid
+        self.terms = robot.terms.enabled
+        nt = len(self.terms)
+        self._rows = np.repeat(np.arange(self.nv), nt)
+        self._cols = self.n_rigid + np.arange(self.nv * nt)
+        idx = np.array([i for i, _ in robot._spring_q_index], dtype=int)
+        nqj = np.array([n for _, n in robot._spring_q_index], dtype=int)
+        self._q_idx = idx
+        self._continuous = nqj == 2
+        self._zero = np.zeros(self.nv)
+
+    # ------------------------------------------------------------ joint terms
+    def joint_angles(self, q: np.ndarray) -> np.ndarray:
+        """Joint coordinate per velocity DoF, shape (..., nv) [rad or m]."""
+        out = q[..., self._q_idx]
+        if self._continuous.any():
+            c = self._continuous
+            out[..., c] = np.arctan2(q[..., self._q_idx[c] + 1], q[..., self._q_idx[c]])
+        return out
+
+    def joint_values(self, q, vel, acc) -> np.ndarray:
+        """Joint-term regressor entries, shape (..., nv, n_terms)."""
+        cols = []
+        for t in self.terms:
+            if t == "Ia":
+                cols.append(acc)
+            elif t == "fv":
+                cols.append(vel)
+            elif t == "fc":
+                cols.append(np.sign(vel))
+            elif t == "fo":
+                cols.append(np.ones_like(vel))
+            else:  # "k"
+                cols.append(self.joint_angles(q))
+        return np.stack(cols, axis=-1)
+
+    def _fill_joint_terms(self, Y, q, vel, acc) -> None:
+        if not self.terms:
+            return
+        vals = self.joint_values(q, vel, acc)
+        if Y.ndim == 2:
+            Y[self._rows, self._cols] = vals.reshape(-1)
+        else:
+            Y[:, self._rows, self._cols] = vals.reshape(vals.shape[0], -1)
+
+    # ----------------------------------------------------------- one sample
+    def regressor(self, q, dq, ddq, out: np.ndarray | None = None) -> np.ndarray:
+        """Y(q, dq, ddq), shape (nv, p), written into ``out`` when given."""
+        if out is None:
+            out = np.zeros((self.nv, self.p))
+        out[:, : self.n_rigid] = pin.computeJointTorqueRegressor(self.model, self.data, q, dq, ddq)
+        self._fill_joint_terms(out, q, dq, ddq)
+        return out
+
+    def slotine_li(self, q, dq, v, w, out: np.ndarray | None = None) -> np.ndarray:
+        """Y(q, dq, v, w), shape (nv, p), written into ``out`` when given."""
+        if out is None:
+            out = np.zeros((self.nv, self.p))
+        a = 0.5 * (dq + w)
+        b = 0.5 * (dq - w)
+        f = pin.computeJointTorqueRegressor
+        np.subtract(
+            f(self.model, self.data, q, a, v),
+            f(self.model0, self.data0, q, b, self._zero),
+            out=out[:, : self.n_rigid],
+        )
+        self._fill_joint_terms(out, q, w, v)
+        return out
+
+    # -------------------------------------------------------------- batches
+    def iter_regressor(self, q, dq, ddq, chunk: int) -> Iterator[RegressorChunk]:
+        """Chunks of Y over a trajectory (arrays already checked)."""
+        n = q.shape[0]
+        buf = np.zeros((min(chunk, max(n, 1)), self.nv, self.p))
+        rigid = buf[:, :, : self.n_rigid]
+        f, m, d = pin.computeJointTorqueRegressor, self.model, self.data
+        for start in range(0, n, chunk):
+            stop = min(start + chunk, n)
+            for k in range(start, stop):
+                rigid[k - start] = f(m, d, q[k], dq[k], ddq[k])
+            Y = buf[: stop - start]
+            self._fill_joint_terms(Y, q[start:stop], dq[start:stop], ddq[start:stop])
+            yield RegressorChunk(start, stop, Y)
+
+    def iter_slotine_li(self, q, dq, v, w, chunk: int) -> Iterator[RegressorChunk]:
+        """Chunks of the Slotine-Li regressor over a trajectory (arrays already checked)."""
+        n = q.shape[0]
+        buf = np.zeros((min(chunk, max(n, 1)), self.nv, self.p))
+        rigid = buf[:, :, : self.n_rigid]
+        f = pin.computeJointTorqueRegressor
+        m, d, m0, d0, zero = self.model, self.data, self.model0, self.data0, self._zero
+        for start in range(0, n, chunk):
+            stop = min(start + chunk, n)
+            a = 0.5 * (dq[start:stop] + w[start:stop])
+            b = 0.5 * (dq[start:stop] - w[start:stop])
+            for k in range(start, stop):
+                i = k - start
+                np.subtract(f(m, d, q[k], a[i], v[k]), f(m0, d0, q[k], b[i], zero), out=rigid[i])
+            Y = buf[: stop - start]
+            self._fill_joint_terms(Y, q[start:stop], w[start:stop], v[start:stop])
+            yield RegressorChunk(start, stop, Y)
+
+
+# ------------------------------------------------------------------ checking
+def _evaluator(robot: Robot) -> RegressorEvaluator:
+    ev = robot.__dict__.get("_evaluator")
+    if ev is None:
+        ev = RegressorEvaluator(robot)
+        robot.__dict__["_evaluator"] = ev
+    return ev
+
+
+def check_states(robot: Robot, **arrays) -> tuple[bool, list[np.ndarray]]:
+    """Validate state arrays: the first is positions (nq wide), the others nv wide.
+
+    Accepts one sample (1-D arrays) or a trajectory (2-D, N rows each).
+    Returns ``(batched, arrays)`` as float64 C-contiguous arrays. Errors state
+    the shapes that came and the ones expected, and the sample index of a NaN/Inf.
+    """
+    names = list(arrays)
+    out = [as_float_array(arrays[n], n, ndim=(1, 2)) for n in names]
+    batched = out[0].ndim == 2
+    for name, arr in zip(names, out, strict=True):
+        if arr.ndim != out[0].ndim:
+            raise InputError(f"{names[0]}.shape={out[0].shape} but {name}.shape={arr.shape}: "
+                             "give all states for one sample (1-D) or all for N samples (2-D)")
+    width = {names[0]: robot.nq, **{n: robot.nv for n in names[1:]}}
+    for name, arr in zip(names, out, strict=True):
+        expected = width[name]
+        if arr.shape[-1] != expected:
+            what = "robot.nq" if name == names[0] else "robot.nv"
+            raise InputError(f"{name}.shape={arr.shape} but {what}={expected}")
+        if batched and arr.shape[0] != out[0].shape[0]:
+            raise InputError(f"{names[0]}.shape={out[0].shape} but {name}.shape={arr.shape}: "
+                             "every state array needs the same number of samples")
+        check_finite(arr, name, robot.dof_names if name != names[0] else None)
+    return batched, out
+
+
+# ---------------------------------------------------------------- public API
+def regressor(robot: Robot, q, dq, ddq) -> np.ndarray:
+    """The joint torque regressor Y(q, dq, ddq) with the robot's joint terms.
+
+    Parameters
+    ----------
+    q: joint positions [rad or m], shape (nq,) or (N, nq)
+    dq: joint velocities [rad/s or m/s], shape (nv,) or (N, nv)
+    ddq: joint accelerations [rad/s^2 or m/s^2], shape (nv,) or (N, nv)
+
+    Returns
+    -------
+    Y of shape (nv, p) for one sample, (N, nv, p) for N samples, such that
+    ``Y @ theta`` is the joint torque [N m or N] of the full inverse dynamics
+    (rigid bodies, armature, friction, offset and spring as enabled).
+    ``Y.reshape(-1, p)`` is the sample-major stacked regressor.
+    """
+    batched, (q, dq, ddq) = check_states(robot, q=q, dq=dq, ddq=ddq)
+    ev = _evaluator(robot)
+    if not batched:
+        return ev.regressor(q, dq, ddq)
+    out = np.empty((q.shape[0], robot.nv, robot.n_parameters))
+    for c in ev.iter_regressor(q, dq, ddq, DEFAULT_CHUNK):
+        out[c.start : c.stop] = c.Y
+    return out
+
+
+def slotine_li_regressor(robot: Robot, q, dq, v, w) -> np.ndarray:
+    """The Slotine-Li regressor: ``Y(q, dq, v, w) theta = M(q) v + C(q, dq) w + g(q)`` + joint terms.
+
+    The joint terms are evaluated with ``v`` as acceleration and ``w`` as
+    velocity (``Ia v_j + fv w_j + fc sign(w_j) + fo + k q_j``), so that
+    ``slotine_li_regressor(robot, q, dq, ddq, dq) == regressor(robot, q, dq, ddq)``.
+
+    Parameters
+    ----------
+    q: joint positions [rad or m], shape (nq,) or (N, nq)
+    dq: joint velocities [rad/s or m/s], shape (nv,) or (N, nv)
+    v: the vector multiplying M(q) (reference acceleration), shape like dq
+    w: the vector multiplying C(q, dq) (reference velocity), shape like dq
+
+    Returns
+    -------
+    Y of shape (nv, p) or (N, nv, p).
+    """
+    batched, (q, dq, v, w) = check_states(robot, q=q, dq=dq, v=v, w=w)
+    ev = _evaluator(robot)
+    if not batched:
+        return ev.slotine_li(q, dq, v, w)
+    out = np.empty((q.shape[0], robot.nv, robot.n_parameters))
+    for c in ev.iter_slotine_li(q, dq, v, w, DEFAULT_CHUNK):
+        out[c.start : c.stop] = c.Y
+    return out
+
+
+def iter_regressor(robot: Robot, q, dq, ddq, chunk: int = DEFAULT_CHUNK) -> Iterator[RegressorChunk]:
+    """Y(q, dq, ddq) over N samples, ``chunk`` samples at a time.
+
+    Memory is O(chunk * nv * p) whatever N. Each yielded
+    :class:`RegressorChunk` is a view of one reused buffer.
+    """
+    if int(chunk) < 1:
+        raise InputError(f"chunk must be a positive number of samples, got {chunk}")
+    batched, (q, dq, ddq) = check_states(robot, q=q, dq=dq, ddq=ddq)
+    if not batched:
+        raise InputError(f"iter_regressor takes N samples (2-D arrays), got q.shape={q.shape}")
+    return _evaluator(robot).iter_regressor(q, dq, ddq, int(chunk))
+
+
+def iter_slotine_li_regressor(
+    robot: Robot, q, dq, v, w, chunk: int = DEFAULT_CHUNK
+) -> Iterator[RegressorChunk]:
+    """The Slotine-Li regressor over N samples, ``chunk`` samples at a time (see :func:`iter_regressor`)."""
+    if int(chunk) < 1:
+        raise InputError(f"chunk must be a positive number of samples, got {chunk}")
+    batched, (q, dq, v, w) = check_states(robot, q=q, dq=dq, v=v, w=w)
+    if not batched:
+        raise InputError(f"iter_slotine_li_regressor takes N samples (2-D arrays), got q.shape={q.shape}")
+    return _evaluator(robot).iter_slotine_li(q, dq, v, w, int(chunk))
+
+
+def joint_torques(robot: Robot, theta, q, dq, ddq=None) -> np.ndarray:
+    """Torques of the joint-level terms alone, shape (nv,) or (N, nv) [N m or N].
+
+    ``Ia ddq + fv dq + fc sign(dq) + fo + k q`` for the enabled terms with the
+    values in ``theta`` (shape (p,)). With ``ddq=None`` the armature term is
+    left out (for forward dynamics, where armature belongs in the mass matrix:
+    see :meth:`Robot.with_parameters`).
+    """
+    theta = as_float_array(theta, "theta", ndim=1)
+    if theta.shape[0] != robot.n_parameters:
+        raise InputError(f"{theta.shape=} but robot.n_parameters={robot.n_parameters}")
+    acc = np.zeros_like(np.asarray(dq, dtype=float)) if ddq is None else ddq
+    _, (q, dq, acc) = check_states(robot, q=q, dq=dq, ddq=acc)
+    ev = _evaluator(robot)
+    vals = ev.joint_values(q, dq, acc)  # (..., nv, nt)
+    coef = theta[robot.n_rigid :].reshape(robot.nv, len(ev.terms))
+    if ddq is None and "Ia" in ev.terms:
+        coef = coef.copy()
+        coef[:, ev.terms.index("Ia")] = 0.0
+    return np.einsum("...jt,jt->...j", vals, coef)

@@ -1,0 +1,549 @@
+"""Robots: loading a model by name, URDF path or ``"msd"``; active joints; joint-level terms.
+
+A :class:`Robot` wraps a fixed-base Pinocchio model together with the layout of
+its parameter vector::
+
+    theta = [body_1 (10), ..., body_nb (10), joint terms]
+
+where each body block is Pinocchio's standard inertial parameters of the body
+carried by joint ``i`` (``Inertia.toDynamicParameters()``)::
+
+    [m, mcx, mcy, mcz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]   [kg, kg m, kg m^2]
+
+(first moments and inertia about the joint frame origin) and the joint terms
+follow, per velocity coordinate ``j``, only those enabled, in the order
+
+    Ia (armature, column ddq_j), fv (viscous, dq_j), fc (Coulomb, sign(dq_j)),
+    fo (offset, 1), k (spring, q_j).
+
+Names read ``<joint>.<parameter>``, e.g. ``panda_joint3.Ixx`` or ``panda_joint3.fv``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+
+from ._checks import as_float_array
+from .errors import InputError, RobotError
+
+#: Inertial parameter names of one body, in Pinocchio's order.
+INERTIAL_NAMES: tuple[str, ...] = ("m", "mcx", "mcy", "mcz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
+#: Joint-level term names, in the order their columns appear for each joint.
+JOINT_TERM_NAMES: tuple[str, ...] = ("Ia", "fv", "fc", "fo", "k")
+FRICTION_KINDS: tuple[str, ...] = ("viscous", "coulomb", "offset")
+
+#: Fixed-base manipulators of example-robot-data listed by ``manip-id robots``.
+#: Any other fixed-base name of example-robot-data loads too.
+MANIPULATORS: tuple[str, ...] = (
+    "panda",
+    "ur3",
+    "ur3_gripper",
+    "ur3_limited",
+    "ur5",
+    "ur5_gripper",
+    "ur5_limited",
+    "ur10",
+    "ur10_limited",
+    "talos_arm",
+    "z1",
+    "xarm7",
+    "kinova",
+    "bravo7_no_ee",
+    "bravo7_gripper",
+    "baxter",
+    "tiago_no_hand",
+    "finger_edu",
+    "asr_twodof",
+    "double_pendulum",
+    "double_pendulum_simple",
+    "double_pendulum_continuous",
+)
+#: Joints removed (locked) by default, per robot name.
+DEFAULT_LOCKED: dict[str, tuple[str, ...]] = {
+    "panda": ("panda_finger_joint1", "panda_finger_joint2"),
+}
+OUR_ROBOTS: tuple[str, ...] = ("msd",)
+
+_UNITS_REVOLUTE = {"Ia": "kg m^2", "fv": "N m s/rad", "fc": "N m", "fo": "N m", "k": "N m/rad"}
+_UNITS_PRISMATIC = {"Ia": "kg", "fv": "N s/m", "fc": "N", "fo": "N", "k": "N/m"}
+_UNITS_INERTIAL = ("kg", "kg m", "kg m", "kg m", *("kg m^2",) * 6)
+_FLOATING = ("JointModelFreeFlyer", "JointModelPlanar", "JointModelSpherical", "JointModelSphericalZYX")
+
+
+@dataclass(frozen=True)
+class JointTerms:
+    """Which joint-level terms the model carries (for every active joint)."""
+
+    armature: bool = False
+    viscous: bool = False
+    coulomb: bool = False
+    offset: bool = False
+    spring: bool = False
+
+    @property
+    def enabled(self) -> tuple[str, ...]:
+        """Short names of the enabled terms, in column order (subset of ``Ia fv fc fo k``)."""
+        flags = (self.armature, self.viscous, self.coulomb, self.offset, self.spring)
+        return tuple(n for n, f in zip(JOINT_TERM_NAMES, flags, strict=True) if f)
+
+
+def available_robots() -> list[str]:
+    """Names :func:`load_robot` lists: our own robots, then example-robot-data manipulators."""
+    return [*OUR_ROBOTS, *MANIPULATORS]
+
+
+class Robot:
+    """A fixed-base manipulator and the layout of its dynamic parameters.
+
+    Build one with :func:`load_robot`. Attributes of interest: ``model``
+    (Pinocchio model of the active joints), ``nq``, ``nv``, ``joint_names``,
+    ``dof_names`` (one per velocity coordinate), ``lower``, ``upper`` [rad or m],
+    ``velocity_limit``, ``effort_limit``, ``terms``, ``parameter_names``,
+    ``parameter_units``, ``nominal_parameters``, ``settings`` (per-robot extras,
+    e.g. the input gain ``b`` of ``"msd"``).
+    """
+
+    def __init__(
+        self,
+        name: str,
+        model: pin.Model,
+        terms: JointTerms,
+        *,
+        source: str | None = None,
+        package_dirs: Sequence[str] = (),
+        full_model: pin.Model | None = None,
+        locked_ids: Sequence[int] = (),
+        reference_configuration: np.ndarray | None = None,
+        settings: Mapping | None = None,
+        geometry: Mapping | None = None,
+    ):
+        kinds = [model.joints[i].shortname() for i in range(1, model.njoints)]
+        floating = [k for k in kinds if k in _FLOATING]
+        if floating:
+            raise RobotError(
+                f"robot {name!r} has a floating or multi-DoF base joint ({floating[0]}): "
+                "floating-base models are not supported, only fixed-base manipulators"
+            )
+        if model.nv == 0:
+            raise RobotError(f"robot {name!r} has no movable joint")
+        self.name = name
+        self.model = model
+        self.data = model.createData()
+        self.terms = terms
+        self.source = source
+        self.package_dirs = list(package_dirs)
+        self._full_model = full_model if full_model is not None else model
+        self._locked_ids = list(locked_ids)
+        self._qref = reference_configuration
+        self.settings = dict(settings or {})
+        self._full_geometry = dict(geometry or {})
+        self.joint_names: list[str] = [model.names[i] for i in range(1, model.njoints)]
+        self.dof_names: list[str] = []
+        self._dof_prismatic: list[bool] = []
+        self._spring_q_index: list[tuple[int, int]] = []  # (idx_q, nq of joint) per dof
+        for i in range(1, model.njoints):
+            jm = model.joints[i]
+            kind = jm.shortname()
+            prismatic = "Prismatic" in kind or kind.startswith("JointModelP")
+            for k in range(jm.nv):
+                self.dof_names.append(model.names[i] if jm.nv == 1 else f"{model.names[i]}[{k}]")
+                self._dof_prismatic.append(prismatic)
+                self._spring_q_index.append((jm.idx_q + k, jm.nq))
+            if terms.spring and not (jm.nv == 1 and jm.nq in (1, 2)):
+                raise RobotError(f"a spring term needs one-DoF joints, but {model.names[i]} is {kind}")
+        self.dof_names_prismatic = tuple(self._dof_prismatic)
+
+    # ----------------------------------------------------------------- sizes
+    @property
+    def nq(self) -> int:
+        """Number of configuration coordinates."""
+        return self.model.nq
+
+    @property
+    def nv(self) -> int:
+        """Number of velocity coordinates (= number of joint torques)."""
+        return self.model.nv
+
+    @property
+    def n_bodies(self) -> int:
+        """Number of moving bodies (one per joint of the reduced model)."""
+        return self.model.njoints - 1
+
+    @property
+    def n_rigid(self) -> int:
+        """Number of rigid-body parameters, 10 per body."""
+        return 10 * self.n_bodies
+
+    @property
+    def n_parameters(self) -> int:
+        """Total number of standard parameters (columns of the regressor)."""
+        return self.n_rigid + len(self.terms.enabled) * self.nv
+
+    # ---------------------------------------------------------------- limits
+    @property
+    def lower(self) -> np.ndarray:
+        """Lower position limits, shape (nq,) [rad or m]."""
+        return np.array(self.model.lowerPositionLimit, dtype=float)
+
+    @property
+    def upper(self) -> np.ndarray:
+        """Upper position limits, shape (nq,) [rad or m]."""
+        return np.array(self.model.upperPositionLimit, dtype=float)
+
+    @property
+    def velocity_limit(self) -> np.ndarray:
+        """Velocity limits, shape (nv,) [rad/s or m/s]."""
+        return np.array(self.model.velocityLimit, dtype=float)
+
+    @property
+    def effort_limit(self) -> np.ndarray:
+        """Effort limits, shape (nv,) [N m or N]."""
+        return np.array(self.model.effortLimit, dtype=float)
+
+    def is_prismatic(self, dof: int) -> bool:
+        """Whether velocity coordinate ``dof`` is a translation."""
+        return self._dof_prismatic[dof]
+
+    # ------------------------------------------------------------ parameters
+    @cached_property
+    def parameter_names(self) -> list[str]:
+        """One readable name per regressor column, e.g. ``panda_joint3.Ixx``."""
+        names = [f"{j}.{p}" for j in self.joint_names for p in INERTIAL_NAMES]
+        for dof in self.dof_names:
+            names += [f"{dof}.{t}" for t in self.terms.enabled]
+        return names
+
+    @cached_property
+    def parameter_units(self) -> list[str]:
+        """Unit of each parameter, aligned with :attr:`parameter_names`."""
+        units = list(_UNITS_INERTIAL) * self.n_bodies
+        for dof in range(self.nv):
+            table = _UNITS_PRISMATIC if self._dof_prismatic[dof] else _UNITS_REVOLUTE
+            units += [table[t] for t in self.terms.enabled]
+        return units
+
+    @cached_property
+    def nominal_parameters(self) -> np.ndarray:
+        """Parameters of the model description, shape (p,).
+
+        Rigid bodies from the URDF inertias; joint terms from ``model.armature``,
+        ``model.damping`` (viscous), ``model.friction`` (Coulomb), zero offset and
+        the per-robot spring stiffness (``settings["spring"]``, else zero).
+        """
+        rigid = [self.model.inertias[i].toDynamicParameters() for i in range(1, self.model.njoints)]
+        per_term = {
+            "Ia": np.asarray(self.model.armature, dtype=float),
+            "fv": np.asarray(self.model.damping, dtype=float),
+            "fc": np.asarray(self.model.friction, dtype=float),
+            "fo": np.zeros(self.nv),
+            "k": np.broadcast_to(np.asarray(self.settings.get("spring", 0.0), dtype=float), (self.nv,)),
+        }
+        joint = [[per_term[t][dof] for t in self.terms.enabled] for dof in range(self.nv)]
+        return np.concatenate([np.concatenate(rigid), np.asarray(joint, dtype=float).ravel()])
+
+    def parameter_index(self, name: str) -> int:
+        """Column index of a parameter name; the error lists close matches."""
+        try:
+            return self.parameter_names.index(name)
+        except ValueError:
+            joint = name.split(".")[0]
+            close = [n for n in self.parameter_names if n.startswith(joint + ".")]
+            raise InputError(
+                f"unknown parameter {name!r}; parameters of {joint!r}: {close or 'none'}"
+            ) from None
+
+    def rigid_body_parameters(self, theta) -> np.ndarray:
+        """The rigid-body block of a parameter vector, shape (n_bodies, 10)."""
+        theta = as_float_array(theta, "theta", ndim=1)
+        if theta.shape[0] != self.n_parameters:
+            raise InputError(f"{theta.shape=} but robot.n_parameters={self.n_parameters}")
+        return theta[: self.n_rigid].reshape(self.n_bodies, 10)
+
+    def with_parameters(self, theta) -> pin.Model:
+        """A copy of the model whose inertias and armature are those of ``theta``.
+
+        Friction and spring terms are not part of a Pinocchio model: apply them
+        with :func:`manip_id.regressor.joint_torques`.
+        """
+        blocks = self.rigid_body_parameters(theta)
+        model = self.model.copy()
+        for i, block in enumerate(blocks, start=1):
+            model.inertias[i] = pin.Inertia.FromDynamicParameters(np.asarray(block))
+        if self.terms.armature:
+            stride = len(self.terms.enabled)
+            col = self.n_rigid + self.terms.enabled.index("Ia")
+            model.armature = np.asarray(theta)[col : col + stride * self.nv : stride].copy()
+        return model
+
+    # ------------------------------------------------------------- sampling
+    def sampling_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Finite position bounds for sampling, shape (nq,) each.
+
+        Unbounded or absurdly wide limits are replaced by [-pi, pi].
+        """
+        lo, hi = self.lower.copy(), self.upper.copy()
+        wide = ~np.isfinite(lo) | ~np.isfinite(hi) | (hi - lo > 1e3) | (hi <= lo)
+        lo[wide], hi[wide] = -math.pi, math.pi
+        return lo, hi
+
+    def velocity_bounds(self) -> np.ndarray:
+        """Finite velocity bounds for sampling, shape (nv,) (unset limits become 2 [unit/s])."""
+        v = self.velocity_limit
+        bad = ~np.isfinite(v) | (v <= 0) | (v > 1e3)
+        v[bad] = 2.0
+        return v
+
+    def random_states(self, n: int, seed: int = 0, acceleration: float = 5.0):
+        """``n`` random states within the joint limits.
+
+        Returns ``(q, dq, ddq)`` of shapes (n, nq), (n, nv), (n, nv): positions
+        uniform within the limits (angles of continuous joints uniform in
+        [-pi, pi], stored as cos/sin), velocities uniform within +-velocity
+        limit, accelerations uniform within +-``acceleration`` [rad/s^2 or m/s^2].
+        """
+        rng = np.random.default_rng(seed)
+        lo, hi = self.sampling_bounds()
+        q = rng.uniform(lo, hi, size=(n, self.nq))
+        for i in range(1, self.model.njoints):
+            jm = self.model.joints[i]
+            if jm.nq == 2 and jm.nv == 1:  # continuous joint: (cos, sin)
+                angle = rng.uniform(-math.pi, math.pi, size=n)
+                q[:, jm.idx_q] = np.cos(angle)
+                q[:, jm.idx_q + 1] = np.sin(angle)
+        vmax = self.velocity_bounds()
+        dq = rng.uniform(-vmax, vmax, size=(n, self.nv))
+        ddq = rng.uniform(-acceleration, acceleration, size=(n, self.nv))
+        return q, dq, ddq
+
+    def neutral(self) -> np.ndarray:
+        """A valid configuration in the middle of the limits, shape (nq,)."""
+        q = pin.neutral(self.model)
+        lo, hi = self.sampling_bounds()
+        for i in range(1, self.model.njoints):
+            jm = self.model.joints[i]
+            if jm.nq == jm.nv:
+                s = slice(jm.idx_q, jm.idx_q + jm.nq)
+                q[s] = np.clip(q[s], lo[s], hi[s]) if np.all(hi[s] > lo[s]) else q[s]
+        return q
+
+    # ------------------------------------------------------------- geometry
+    @cached_property
+    def visual_model(self) -> pin.GeometryModel:
+        """Visual geometry of the active bodies (meshes loaded on first use)."""
+        return self._geometry(pin.GeometryType.VISUAL)
+
+    @cached_property
+    def collision_model(self) -> pin.GeometryModel:
+        """Collision geometry of the active bodies (loaded on first use)."""
+        return self._geometry(pin.GeometryType.COLLISION)
+
+    def _geometry(self, kind) -> pin.GeometryModel:
+        geom = self._full_geometry.get(kind)
+        if geom is None:
+            if self.source is None:
+                raise RobotError(f"robot {self.name!r} has no URDF to read geometry from")
+            try:
+                geom = pin.buildGeomFromUrdf(
+                    self._full_model, self.source, kind, package_dirs=self.package_dirs
+                )
+            except Exception as exc:  # Pinocchio raises plain RuntimeError / ValueError
+                raise RobotError(f"cannot load the geometry of {self.source}: {exc}") from exc
+        if self._locked_ids:
+            _, geom = pin.buildReducedModel(self._full_model, geom, self._locked_ids, self._qref)
+        return geom
+
+    @cached_property
+    def gravity_free_model(self) -> pin.Model:
+        """The same model with zero gravity (for velocity-only terms)."""
+        model = self.model.copy()
+        model.gravity = pin.Motion.Zero()
+        return model
+
+    def __repr__(self) -> str:
+        return (f"Robot({self.name!r}, nq={self.nq}, nv={self.nv}, "
+                f"p={self.n_parameters}, terms={self.terms.enabled})")
+
+
+# --------------------------------------------------------------------- loading
+def _terms(armature, friction, spring, defaults: JointTerms) -> JointTerms:
+    if friction is None:
+        kinds = {k for k, on in zip(FRICTION_KINDS, (defaults.viscous, defaults.coulomb, defaults.offset),
+                                    strict=True) if on}
+    else:
+        if isinstance(friction, str):
+            friction = [f for f in friction.replace(",", " ").split() if f]
+        kinds = set()
+        for f in friction:
+            if f not in FRICTION_KINDS:
+                raise InputError(f"unknown friction kind {f!r}; expected some of {list(FRICTION_KINDS)}")
+            kinds.add(f)
+    return JointTerms(
+        armature=defaults.armature if armature is None else bool(armature),
+        viscous="viscous" in kinds,
+        coulomb="coulomb" in kinds,
+        offset="offset" in kinds,
+        spring=defaults.spring if spring is None else bool(spring),
+    )
+
+
+def _our_robot_dir() -> Path:
+    return Path(__file__).resolve().parent / "robots"
+
+
+def _load_urdf(path: Path, package_dirs: Sequence[str]) -> pin.Model:
+    if not path.is_file():
+        raise RobotError(f"cannot read URDF {path}: no such file")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return pin.buildModelFromUrdf(str(path))
+    except Exception as exc:
+        cause = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise RobotError(f"cannot read URDF {path}: {cause}") from exc
+
+
+def load_robot(
+    spec: str | Path,
+    *,
+    armature: bool | None = None,
+    friction: Iterable[str] | str | None = None,
+    spring: bool | None = None,
+    active_joints: Sequence[str] | None = None,
+    locked_configuration: Mapping[str, float] | Sequence[float] | None = None,
+    package_dirs: Sequence[str | Path] = (),
+) -> Robot:
+    """Load a fixed-base robot.
+
+    Parameters
+    ----------
+    spec: a name of example-robot-data (``"panda"``, ``"ur5"``, ...), a path to a
+        URDF file, or ``"msd"`` (the one-DoF mass-spring-damper of
+        ``manip_id/robots/msd.urdf``).
+    armature: model a rotor inertia per joint (column ddq_j). Default off.
+    friction: friction kinds per joint, some of ``("viscous", "coulomb",
+        "offset")`` (also a comma-separated string). Default none; ``"msd"``
+        defaults to viscous.
+    spring: model a linear spring per joint (column q_j). Default off; on for ``"msd"``.
+    active_joints: names of the joints to identify; the others are locked at
+        ``locked_configuration``. Default: every joint (the panda's two finger
+        joints are locked by default).
+    locked_configuration: positions of the locked joints, a full configuration
+        vector of the unreduced model (shape (nq,)) or a mapping joint name ->
+        position [rad or m]. Default: the neutral configuration clipped to the limits.
+    package_dirs: folders where ``package://`` mesh paths of a URDF are resolved.
+    """
+    spec_str = str(spec)
+    settings: dict = {}
+    geometry: dict = {}
+    defaults = JointTerms()
+    pkg = [str(p) for p in package_dirs]
+    if spec_str in OUR_ROBOTS:
+        base = _our_robot_dir()
+        path = base / f"{spec_str}.urdf"
+        model = _load_urdf(path, pkg)
+        settings_file = base / f"{spec_str}.json"
+        if settings_file.is_file():
+            settings = json.loads(settings_file.read_text())
+        defaults = JointTerms(viscous=True, spring=True)
+        name, source = spec_str, str(path)
+        pkg = pkg or [str(path.parent)]
+    elif spec_str.endswith(".urdf") or Path(spec_str).suffix == ".urdf" or "/" in spec_str:
+        path = Path(spec_str).expanduser()
+        model = _load_urdf(path, pkg)
+        name, source = path.stem, str(path)
+        pkg = pkg or [str(path.parent), str(path.parent.parent)]
+    else:
+        model, source, pkg_erd, geometry = _load_erd(spec_str)
+        name = spec_str
+        pkg = pkg or pkg_erd
+    terms = _terms(armature, friction, spring, defaults)
+
+    all_joints = [model.names[i] for i in range(1, model.njoints)]
+    if active_joints is None:
+        locked_names = [j for j in DEFAULT_LOCKED.get(name, ()) if j in all_joints]
+    else:
+        active_joints = list(active_joints)
+        unknown = [j for j in active_joints if j not in all_joints]
+        if unknown:
+            raise InputError(f"unknown joint {unknown[0]!r} for robot {name!r}; valid joints: {all_joints}")
+        if not active_joints:
+            raise InputError("active_joints is empty: at least one joint must move")
+        locked_names = [j for j in all_joints if j not in active_joints]
+    full_model = model
+    locked_ids: list[int] = []
+    qref = None
+    if locked_names:
+        qref = _reference_configuration(model, locked_configuration, all_joints)
+        locked_ids = [model.getJointId(j) for j in locked_names]
+        model = pin.buildReducedModel(model, locked_ids, qref)
+    return Robot(
+        name,
+        model,
+        terms,
+        source=source,
+        package_dirs=pkg,
+        full_model=full_model,
+        locked_ids=locked_ids,
+        reference_configuration=qref,
+        settings=settings,
+        geometry=geometry,
+    )
+
+
+def _reference_configuration(model: pin.Model, locked, all_joints) -> np.ndarray:
+    q = pin.neutral(model)
+    lo, hi = np.asarray(model.lowerPositionLimit), np.asarray(model.upperPositionLimit)
+    finite = np.isfinite(lo) & np.isfinite(hi) & (hi >= lo)
+    q[finite] = np.clip(q[finite], lo[finite], hi[finite])
+    if locked is None:
+        return q
+    if isinstance(locked, Mapping):
+        for joint, value in locked.items():
+            if joint not in all_joints:
+                raise InputError(f"unknown joint {joint!r} in locked_configuration; valid joints: {all_joints}")
+            jm = model.joints[model.getJointId(joint)]
+            q[jm.idx_q : jm.idx_q + jm.nq] = value
+        return q
+    arr = as_float_array(locked, "locked_configuration", ndim=1)
+    if arr.shape != (model.nq,):
+        raise InputError(f"locked_configuration.shape={arr.shape} but the full model has nq={model.nq}")
+    return arr.copy()
+
+
+def _load_erd(name: str):
+    try:
+        import example_robot_data as erd
+        from example_robot_data.robots_loader import ROBOTS
+    except ImportError as exc:  # pragma: no cover - dependency of the package
+        raise RobotError("example-robot-data-loaders is not installed") from exc
+    if name not in ROBOTS:
+        raise RobotError(f"unknown robot {name!r}; available: {', '.join(available_robots())} "
+                         "or a path to a .urdf file")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            loader = ROBOTS[name]()
+            wrapper = loader.robot
+    except Exception as exc:
+        raise RobotError(f"cannot load robot {name!r} from example-robot-data: {exc}") from exc
+    model = wrapper.model
+    if model.njoints > 1 and model.joints[1].shortname() in _FLOATING:
+        raise RobotError(f"robot {name!r} is a floating-base model: not supported "
+                         "(manip_id identifies fixed-base manipulators)")
+    source = getattr(loader, "df_path", None)
+    model_dir = getattr(loader, "model_path", None)
+    pkg = [str(Path(model_dir).parent.parent)] if model_dir else []
+    geometry = {
+        pin.GeometryType.VISUAL: getattr(wrapper, "visual_model", None),
+        pin.GeometryType.COLLISION: getattr(wrapper, "collision_model", None),
+    }
+    return model, (str(source) if source else None), pkg, geometry
