@@ -10,7 +10,9 @@ from .errors import InputError
 def as_float_array(x, name: str, ndim: int | tuple[int, ...] | None = None) -> np.ndarray:
     """``x`` as a C-contiguous float64 array, with a clear error otherwise."""
     try:
-        arr = np.ascontiguousarray(x, dtype=np.float64)
+        arr = np.asarray(x, dtype=np.float64)
+        if not arr.flags.c_contiguous:
+            arr = np.ascontiguousarray(arr)
     except (TypeError, ValueError) as exc:
         raise InputError(f"{name} must be numeric array-like, got {type(x).__name__}") from exc
     if ndim is not None:
