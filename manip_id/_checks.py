@@ -18,8 +18,10 @@ def as_float_array(x, name: str, ndim: int | tuple[int, ...] | None = None) -> n
     if ndim is not None:
         allowed = (ndim,) if isinstance(ndim, int) else ndim
         if arr.ndim not in allowed:
-            raise InputError(f"{name} must have {' or '.join(map(str, allowed))} dimensions, "
-                             f"got {name}.shape={arr.shape}")
+            raise InputError(
+                f"{name} must have {' or '.join(map(str, allowed))} dimensions, "
+                f"got {name}.shape={arr.shape}"
+            )
     return arr
 
 

@@ -199,8 +199,10 @@ def check_states(robot: Robot, **arrays) -> tuple[bool, list[np.ndarray]]:
     batched = out[0].ndim == 2
     for name, arr in zip(names, out, strict=True):
         if arr.ndim != out[0].ndim:
-            raise InputError(f"{names[0]}.shape={out[0].shape} but {name}.shape={arr.shape}: "
-                             "give all states for one sample (1-D) or all for N samples (2-D)")
+            raise InputError(
+                f"{names[0]}.shape={out[0].shape} but {name}.shape={arr.shape}: "
+                "give all states for one sample (1-D) or all for N samples (2-D)"
+            )
     width = {names[0]: robot.nq, **{n: robot.nv for n in names[1:]}}
     for name, arr in zip(names, out, strict=True):
         expected = width[name]
@@ -208,8 +210,10 @@ def check_states(robot: Robot, **arrays) -> tuple[bool, list[np.ndarray]]:
             what = "robot.nq" if name == names[0] else "robot.nv"
             raise InputError(f"{name}.shape={arr.shape} but {what}={expected}")
         if batched and arr.shape[0] != out[0].shape[0]:
-            raise InputError(f"{names[0]}.shape={out[0].shape} but {name}.shape={arr.shape}: "
-                             "every state array needs the same number of samples")
+            raise InputError(
+                f"{names[0]}.shape={out[0].shape} but {name}.shape={arr.shape}: "
+                "every state array needs the same number of samples"
+            )
         check_finite(arr, name, robot.dof_names if name != names[0] else None)
     return batched, out
 
@@ -242,7 +246,7 @@ def regressor(robot: Robot, q, dq, ddq) -> np.ndarray:
 
 
 def slotine_li_regressor(robot: Robot, q, dq, v, w) -> np.ndarray:
-    """The Slotine-Li regressor: ``Y(q, dq, v, w) theta = M(q) v + C(q, dq) w + g(q)`` + joint terms.
+    """The Slotine-Li regressor: ``Y(q, dq, v, w) theta = M(q) v + C(q, dq) w + g(q) + joint terms``.
 
     The joint terms are evaluated with ``v`` as acceleration and ``w`` as
     velocity (``Ia v_j + fv w_j + fc sign(w_j) + fo + k q_j``), so that
@@ -269,7 +273,9 @@ def slotine_li_regressor(robot: Robot, q, dq, v, w) -> np.ndarray:
     return out
 
 
-def iter_regressor(robot: Robot, q, dq, ddq, chunk: int = DEFAULT_CHUNK) -> Iterator[RegressorChunk]:
+def iter_regressor(
+    robot: Robot, q, dq, ddq, chunk: int = DEFAULT_CHUNK
+) -> Iterator[RegressorChunk]:
     """Y(q, dq, ddq) over N samples, ``chunk`` samples at a time.
 
     Memory is O(chunk * nv * p) whatever N. Each yielded
@@ -286,12 +292,14 @@ def iter_regressor(robot: Robot, q, dq, ddq, chunk: int = DEFAULT_CHUNK) -> Iter
 def iter_slotine_li_regressor(
     robot: Robot, q, dq, v, w, chunk: int = DEFAULT_CHUNK
 ) -> Iterator[RegressorChunk]:
-    """The Slotine-Li regressor over N samples, ``chunk`` samples at a time (see :func:`iter_regressor`)."""
+    """The Slotine-Li regressor over N samples, ``chunk`` at a time (see :func:`iter_regressor`)."""
     if int(chunk) < 1:
         raise InputError(f"chunk must be a positive number of samples, got {chunk}")
     batched, (q, dq, v, w) = check_states(robot, q=q, dq=dq, v=v, w=w)
     if not batched:
-        raise InputError(f"iter_slotine_li_regressor takes N samples (2-D arrays), got q.shape={q.shape}")
+        raise InputError(
+            f"iter_slotine_li_regressor takes N samples (2-D arrays), got q.shape={q.shape}"
+        )
     return _evaluator(robot).iter_slotine_li(q, dq, v, w, int(chunk))
 
 

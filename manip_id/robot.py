@@ -36,7 +36,18 @@ from ._checks import as_float_array
 from .errors import InputError, RobotError
 
 #: Inertial parameter names of one body, in Pinocchio's order.
-INERTIAL_NAMES: tuple[str, ...] = ("m", "mcx", "mcy", "mcz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")
+INERTIAL_NAMES: tuple[str, ...] = (
+    "m",
+    "mcx",
+    "mcy",
+    "mcz",
+    "Ixx",
+    "Ixy",
+    "Iyy",
+    "Ixz",
+    "Iyz",
+    "Izz",
+)
 #: Joint-level term names, in the order their columns appear for each joint.
 JOINT_TERM_NAMES: tuple[str, ...] = ("Ia", "fv", "fc", "fo", "k")
 FRICTION_KINDS: tuple[str, ...] = ("viscous", "coulomb", "offset")
@@ -76,7 +87,12 @@ OUR_ROBOTS: tuple[str, ...] = ("msd",)
 _UNITS_REVOLUTE = {"Ia": "kg m^2", "fv": "N m s/rad", "fc": "N m", "fo": "N m", "k": "N m/rad"}
 _UNITS_PRISMATIC = {"Ia": "kg", "fv": "N s/m", "fc": "N", "fo": "N", "k": "N/m"}
 _UNITS_INERTIAL = ("kg", "kg m", "kg m", "kg m", *("kg m^2",) * 6)
-_FLOATING = ("JointModelFreeFlyer", "JointModelPlanar", "JointModelSpherical", "JointModelSphericalZYX")
+_FLOATING = (
+    "JointModelFreeFlyer",
+    "JointModelPlanar",
+    "JointModelSpherical",
+    "JointModelSphericalZYX",
+)
 
 
 @dataclass(frozen=True)
@@ -159,7 +175,9 @@ class Robot:
                 self._dof_prismatic.append(prismatic)
                 self._spring_q_index.append((jm.idx_q + k, jm.nq))
             if terms.spring and not (jm.nv == 1 and jm.nq in (1, 2)):
-                raise RobotError(f"a spring term needs one-DoF joints, but {model.names[i]} is {kind}")
+                raise RobotError(
+                    f"a spring term needs one-DoF joints, but {model.names[i]} is {kind}"
+                )
         self.dof_names_prismatic = tuple(self._dof_prismatic)
 
     # ----------------------------------------------------------------- sizes
@@ -245,7 +263,9 @@ class Robot:
             "fv": np.asarray(self.model.damping, dtype=float),
             "fc": np.asarray(self.model.friction, dtype=float),
             "fo": np.zeros(self.nv),
-            "k": np.broadcast_to(np.asarray(self.settings.get("spring", 0.0), dtype=float), (self.nv,)),
+            "k": np.broadcast_to(
+                np.asarray(self.settings.get("spring", 0.0), dtype=float), (self.nv,)
+            ),
         }
         joint = [[per_term[t][dof] for t in self.terms.enabled] for dof in range(self.nv)]
         return np.concatenate([np.concatenate(rigid), np.asarray(joint, dtype=float).ravel()])
@@ -369,22 +389,31 @@ class Robot:
         return model
 
     def __repr__(self) -> str:
-        return (f"Robot({self.name!r}, nq={self.nq}, nv={self.nv}, "
-                f"p={self.n_parameters}, terms={self.terms.enabled})")
+        return (
+            f"Robot({self.name!r}, nq={self.nq}, nv={self.nv}, "
+            f"p={self.n_parameters}, terms={self.terms.enabled})"
+        )
 
 
 # --------------------------------------------------------------------- loading
 def _terms(armature, friction, spring, defaults: JointTerms) -> JointTerms:
     if friction is None:
-        kinds = {k for k, on in zip(FRICTION_KINDS, (defaults.viscous, defaults.coulomb, defaults.offset),
-                                    strict=True) if on}
+        kinds = {
+            k
+            for k, on in zip(
+                FRICTION_KINDS, (defaults.viscous, defaults.coulomb, defaults.offset), strict=True
+            )
+            if on
+        }
     else:
         if isinstance(friction, str):
             friction = [f for f in friction.replace(",", " ").split() if f]
         kinds = set()
         for f in friction:
             if f not in FRICTION_KINDS:
-                raise InputError(f"unknown friction kind {f!r}; expected some of {list(FRICTION_KINDS)}")
+                raise InputError(
+                    f"unknown friction kind {f!r}; expected some of {list(FRICTION_KINDS)}"
+                )
             kinds.add(f)
     return JointTerms(
         armature=defaults.armature if armature is None else bool(armature),
@@ -460,7 +489,8 @@ def load_robot(
         path = Path(spec_str).expanduser()
         model = _load_urdf(path, pkg)
         name, source = path.stem, str(path)
-        pkg = pkg or [str(path.parent), str(path.parent.parent)]
+        # package://NAME/... resolves in any ancestor folder holding NAME
+        pkg = pkg or [str(d) for d in path.resolve().parents]
     else:
         model, source, pkg_erd, geometry = _load_erd(spec_str)
         name = spec_str
@@ -474,7 +504,9 @@ def load_robot(
         active_joints = list(active_joints)
         unknown = [j for j in active_joints if j not in all_joints]
         if unknown:
-            raise InputError(f"unknown joint {unknown[0]!r} for robot {name!r}; valid joints: {all_joints}")
+            raise InputError(
+                f"unknown joint {unknown[0]!r} for robot {name!r}; valid joints: {all_joints}"
+            )
         if not active_joints:
             raise InputError("active_joints is empty: at least one joint must move")
         locked_names = [j for j in all_joints if j not in active_joints]
@@ -509,25 +541,30 @@ def _reference_configuration(model: pin.Model, locked, all_joints) -> np.ndarray
     if isinstance(locked, Mapping):
         for joint, value in locked.items():
             if joint not in all_joints:
-                raise InputError(f"unknown joint {joint!r} in locked_configuration; valid joints: {all_joints}")
+                raise InputError(
+                    f"unknown joint {joint!r} in locked_configuration; valid joints: {all_joints}"
+                )
             jm = model.joints[model.getJointId(joint)]
             q[jm.idx_q : jm.idx_q + jm.nq] = value
         return q
     arr = as_float_array(locked, "locked_configuration", ndim=1)
     if arr.shape != (model.nq,):
-        raise InputError(f"locked_configuration.shape={arr.shape} but the full model has nq={model.nq}")
+        raise InputError(
+            f"locked_configuration.shape={arr.shape} but the full model has nq={model.nq}"
+        )
     return arr.copy()
 
 
 def _load_erd(name: str):
     try:
-        import example_robot_data as erd
         from example_robot_data.robots_loader import ROBOTS
     except ImportError as exc:  # pragma: no cover - dependency of the package
         raise RobotError("example-robot-data-loaders is not installed") from exc
     if name not in ROBOTS:
-        raise RobotError(f"unknown robot {name!r}; available: {', '.join(available_robots())} "
-                         "or a path to a .urdf file")
+        raise RobotError(
+            f"unknown robot {name!r}; available: {', '.join(available_robots())} "
+            "or a path to a .urdf file"
+        )
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -537,8 +574,10 @@ def _load_erd(name: str):
         raise RobotError(f"cannot load robot {name!r} from example-robot-data: {exc}") from exc
     model = wrapper.model
     if model.njoints > 1 and model.joints[1].shortname() in _FLOATING:
-        raise RobotError(f"robot {name!r} is a floating-base model: not supported "
-                         "(manip_id identifies fixed-base manipulators)")
+        raise RobotError(
+            f"robot {name!r} is a floating-base model: not supported "
+            "(manip_id identifies fixed-base manipulators)"
+        )
     source = getattr(loader, "df_path", None)
     model_dir = getattr(loader, "model_path", None)
     pkg = [str(Path(model_dir).parent.parent)] if model_dir else []

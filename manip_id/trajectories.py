@@ -42,8 +42,10 @@ class FourierTrajectory:
         a = as_float_array(self.a, "a", ndim=2)
         b = as_float_array(self.b, "b", ndim=2)
         if a.shape != b.shape or a.shape[0] != q0.shape[0]:
-            raise InputError(f"expected a and b of shape (nv, L) with nv = q0.shape[0]; "
-                             f"got {q0.shape=}, {a.shape=}, {b.shape=}")
+            raise InputError(
+                f"expected a and b of shape (nv, L) with nv = q0.shape[0]; "
+                f"got {q0.shape=}, {a.shape=}, {b.shape=}"
+            )
         for name, arr in (("q0", q0), ("a", a), ("b", b)):
             check_finite(arr, name)
         if not np.isfinite(self.wf) or self.wf <= 0:

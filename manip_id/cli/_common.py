@@ -14,19 +14,35 @@ from ..robot import Robot, load_robot
 
 
 def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
-    """ROBOT positional plus the joint-term options (``--friction``, ``--armature``, ``--spring``)."""
-    parser.add_argument("robot", metavar="ROBOT",
-                        help="example-robot-data name (see 'manip-id robots'), a .urdf path, or 'msd'")
-    parser.add_argument("--friction", default=None,
-                        help="comma-separated friction terms per joint: viscous,coulomb,offset")
-    parser.add_argument("--armature", action="store_true", default=None,
-                        help="model a rotor inertia (armature) per joint")
-    parser.add_argument("--spring", action="store_true", default=None,
-                        help="model a linear spring per joint")
-    parser.add_argument("--joints", default=None,
-                        help="comma-separated active joints (the others are locked)")
-    parser.add_argument("--package-dir", action="append", default=[],
-                        help="folder where package:// paths of a URDF resolve (repeatable)")
+    """Add ROBOT and the joint-term options ``--friction``, ``--armature``, ``--spring``."""
+    parser.add_argument(
+        "robot",
+        metavar="ROBOT",
+        help="example-robot-data name (see 'manip-id robots'), a .urdf path, or 'msd'",
+    )
+    parser.add_argument(
+        "--friction",
+        default=None,
+        help="comma-separated friction terms per joint: viscous,coulomb,offset",
+    )
+    parser.add_argument(
+        "--armature",
+        action="store_true",
+        default=None,
+        help="model a rotor inertia (armature) per joint",
+    )
+    parser.add_argument(
+        "--spring", action="store_true", default=None, help="model a linear spring per joint"
+    )
+    parser.add_argument(
+        "--joints", default=None, help="comma-separated active joints (the others are locked)"
+    )
+    parser.add_argument(
+        "--package-dir",
+        action="append",
+        default=[],
+        help="folder where package:// paths of a URDF resolve (repeatable)",
+    )
 
 
 def robot_from_args(args: argparse.Namespace) -> Robot:

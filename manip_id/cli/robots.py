@@ -9,9 +9,12 @@ from ..robot import available_robots, load_robot
 
 
 def register(sub) -> None:
-    p = sub.add_parser("robots", help="list the robots available by name",
-                       description="List the robots available by name with nv and the number "
-                                   "of rigid-body parameters.")
+    p = sub.add_parser(
+        "robots",
+        help="list the robots available by name",
+        description="List the robots available by name with nv and the number "
+        "of rigid-body parameters.",
+    )
     p.set_defaults(func=run)
 
 
