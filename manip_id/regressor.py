@@ -85,6 +85,12 @@ class RegressorEvaluator:
         self._q_idx = idx
         self._continuous = nqj == 2
         self._zero = np.zeros(self.nv)
+        # flat indices into a (nv, p) block of the diagonal entries of each term
+        self._flat = {
+            t: np.arange(self.nv) * self.p + self.n_rigid + np.arange(self.nv) * nt + i
+            for i, t in enumerate(self.terms)
+        }
+        self._needs_angles = "k" in self.terms
 
     # ------------------------------------------------------------ joint terms
     def joint_angles(self, q: np.ndarray) -> np.ndarray:
@@ -114,11 +120,22 @@ class RegressorEvaluator:
     def _fill_joint_terms(self, Y, q, vel, acc) -> None:
         if not self.terms:
             return
+        if Y.ndim == 2:  # one sample: a few flat writes, no temporaries beyond sign()
+            flat = Y.reshape(-1)
+            for t, idx in self._flat.items():
+                if t == "Ia":
+                    flat[idx] = acc
+                elif t == "fv":
+                    flat[idx] = vel
+                elif t == "fc":
+                    flat[idx] = np.sign(vel)
+                elif t == "fo":
+                    flat[idx] = 1.0
+                else:
+                    flat[idx] = self.joint_angles(q)
+            return
         vals = self.joint_values(q, vel, acc)
-        if Y.ndim == 2:
-            Y[self._rows, self._cols] = vals.reshape(-1)
-        else:
-            Y[:, self._rows, self._cols] = vals.reshape(vals.shape[0], -1)
+        Y[:, self._rows, self._cols] = vals.reshape(vals.shape[0], -1)
 
     # ----------------------------------------------------------- one sample
     def regressor(self, q, dq, ddq, out: np.ndarray | None = None) -> np.ndarray:
@@ -246,7 +263,7 @@ def regressor(robot: Robot, q, dq, ddq) -> np.ndarray:
 
 
 def slotine_li_regressor(robot: Robot, q, dq, v, w) -> np.ndarray:
-    """The Slotine-Li regressor: ``Y(q, dq, v, w) theta = M(q) v + C(q, dq) w + g(q) + joint terms``.
+    """Slotine-Li regressor: ``Y(q, dq, v, w) theta = M(q) v + C(q, dq) w + g(q) + joint terms``.
 
     The joint terms are evaluated with ``v`` as acceleration and ``w`` as
     velocity (``Ia v_j + fv w_j + fc sign(w_j) + fo + k q_j``), so that
