@@ -165,17 +165,23 @@ def _infer_format(path: Path) -> str:
     if path.is_dir():
         if all((path / f).is_file() for f in _PANDA_FILES.values()):
             return "panda_gaz2019"
-        raise DataError(f"{path} is a folder but not a Panda log (expected {', '.join(_PANDA_FILES.values())})")
+        raise DataError(
+            f"{path} is a folder but not a Panda log (expected {', '.join(_PANDA_FILES.values())})"
+        )
     suffix = path.suffix.lower()
     if suffix == ".npz":
         return "npz"
     if suffix in (".csv", ".txt"):
         return "csv"
-    raise DataError(f"unknown data format of {path} (suffix {suffix!r}); expected one of .npz, .csv "
-                    "or a Panda log folder, or pass format= one of " + ", ".join(FORMATS))
+    raise DataError(
+        f"unknown data format of {path} (suffix {suffix!r}); expected one of .npz, .csv "
+        "or a Panda log folder, or pass format= one of " + ", ".join(FORMATS)
+    )
 
 
-def load_dataset(path: str | Path, *, format: str | None = None, columns: Mapping | None = None) -> Dataset:
+def load_dataset(
+    path: str | Path, *, format: str | None = None, columns: Mapping | None = None
+) -> Dataset:
     """Load measurements from a file or folder.
 
     Parameters
@@ -219,12 +225,16 @@ def _load_npz(path: Path) -> Dataset:
         raise DataError(f"cannot read {path} as NPZ: {exc}") from exc
     missing = [k for k in ("t", "q", "dq", "tau") if k not in arrays]
     if missing:
-        raise DataError(f"{path} lacks array(s) {', '.join(missing)}; an NPZ dataset holds t, q, dq, "
-                        f"tau and optionally ddq, joint_names (found {', '.join(sorted(arrays)) or 'none'})")
+        raise DataError(
+            f"{path} lacks array(s) {', '.join(missing)}; an NPZ dataset holds t, q, dq, "
+            f"tau and optionally ddq, joint_names (found {', '.join(sorted(arrays)) or 'none'})"
+        )
     unknown = sorted(set(arrays) - {*_FIELDS, "joint_names"})
     if unknown:
-        raise DataError(f"{path} holds unexpected array(s) {', '.join(unknown)}; "
-                        "expected t, q, dq, tau, ddq, joint_names")
+        raise DataError(
+            f"{path} holds unexpected array(s) {', '.join(unknown)}; "
+            "expected t, q, dq, tau, ddq, joint_names"
+        )
     names = arrays.pop("joint_names", None)
     if names is not None:
         names = tuple(str(n) for n in np.atleast_1d(names))
@@ -253,7 +263,9 @@ def _read_csv_table(path: Path) -> tuple[list[str] | None, np.ndarray]:
     except ValueError as exc:
         raise DataError(f"cannot read {path} as a numeric CSV table: {exc}") from exc
     if header is not None and table.shape[1] != len(header):
-        raise DataError(f"{path}: the header has {len(header)} columns but rows have {table.shape[1]}")
+        raise DataError(
+            f"{path}: the header has {len(header)} columns but rows have {table.shape[1]}"
+        )
     return header, table
 
 
@@ -261,21 +273,26 @@ def _column_index(spec, header: list[str] | None, path: Path, field_name: str) -
     if isinstance(spec, (int, np.integer)):
         return int(spec)
     if header is None:
-        raise DataError(f"{path} has no header row, so column {spec!r} of {field_name!r} must be "
-                        "given as a 0-based index")
+        raise DataError(
+            f"{path} has no header row, so column {spec!r} of {field_name!r} must be "
+            "given as a 0-based index"
+        )
     try:
         return header.index(str(spec))
     except ValueError:
-        raise DataError(f"column {spec!r} of {field_name!r} is not in {path} "
-                        f"(columns: {', '.join(header)})") from None
+        raise DataError(
+            f"column {spec!r} of {field_name!r} is not in {path} (columns: {', '.join(header)})"
+        ) from None
 
 
 def _columns_for(spec, header, path, field_name) -> list[int]:
     if isinstance(spec, str) and header is not None and any(ch in spec for ch in "*?["):
         idx = [i for i, h in enumerate(header) if fnmatch.fnmatchcase(h, spec)]
         if not idx:
-            raise DataError(f"pattern {spec!r} of {field_name!r} matches no column of {path} "
-                            f"(columns: {', '.join(header)})")
+            raise DataError(
+                f"pattern {spec!r} of {field_name!r} matches no column of {path} "
+                f"(columns: {', '.join(header)})"
+            )
         return idx
     specs = [spec] if isinstance(spec, (str, int, np.integer)) else list(spec)
     return [_column_index(s, header, path, field_name) for s in specs]
@@ -286,8 +303,10 @@ def _load_csv(path: Path, columns: Mapping | None) -> Dataset:
     columns = dict(columns or {})
     unknown = sorted(set(columns) - {*_FIELDS, "joint_names"})
     if unknown:
-        raise DataError(f"column map has unknown field(s) {', '.join(unknown)}; "
-                        f"expected some of {', '.join(_FIELDS)}, joint_names")
+        raise DataError(
+            f"column map has unknown field(s) {', '.join(unknown)}; "
+            f"expected some of {', '.join(_FIELDS)}, joint_names"
+        )
     idx: dict[str, list[int]] = {}
     for name in _FIELDS:
         if name in columns:
@@ -302,8 +321,11 @@ def _load_csv(path: Path, columns: Mapping | None) -> Dataset:
     required = ("t", "q", "tau")
     missing = [n for n in required if n not in idx]
     if missing:
-        layout = ("header t,q_<joint>...,dq_<joint>...,tau_<joint>..." if header is not None
-                  else "no header row: give a column map with 0-based indices")
+        layout = (
+            "header t,q_<joint>...,dq_<joint>...,tau_<joint>..."
+            if header is not None
+            else "no header row: give a column map with 0-based indices"
+        )
         raise DataError(f"{path}: cannot find column(s) for {', '.join(missing)} ({layout})")
     if len(idx["t"]) != 1:
         raise DataError(f"{path}: 't' must be one column, got {len(idx['t'])}")
@@ -311,7 +333,9 @@ def _load_csv(path: Path, columns: Mapping | None) -> Dataset:
     for name, cols in idx.items():
         bad = [c for c in cols if not -width <= c < width]
         if bad:
-            raise DataError(f"column map: {name!r} refers to column {bad[0]} but {path} has {width} columns")
+            raise DataError(
+                f"column map: {name!r} refers to column {bad[0]} but {path} has {width} columns"
+            )
     data = {name: table[:, cols] for name, cols in idx.items()}
     data["t"] = data["t"][:, 0]
     names = columns.get("joint_names")
@@ -322,8 +346,10 @@ def _load_csv(path: Path, columns: Mapping | None) -> Dataset:
     if "dq" not in data:
         t = data["t"]
         if data["q"].shape[1] != data["tau"].shape[1]:
-            raise DataError(f"{path}: no dq columns, and q ({data['q'].shape[1]} columns) cannot be "
-                            f"differentiated into {data['tau'].shape[1]} velocities")
+            raise DataError(
+                f"{path}: no dq columns, and q ({data['q'].shape[1]} columns) cannot be "
+                f"differentiated into {data['tau'].shape[1]} velocities"
+            )
         if t.shape[0] < 3:
             raise DataError(f"{path}: need at least 3 samples to differentiate q, got {t.shape[0]}")
         if np.any(np.diff(t) <= 0):
@@ -363,8 +389,10 @@ def load_panda_gaz2019(folder: str | Path) -> Dataset:
     for name in ("q", "dq", "tau"):
         size = arrays[name].shape[0]
         if size != 7 * n:
-            raise DataError(f"{folder / _PANDA_FILES[name]} has {size} values but 7 x {n} time stamps "
-                            f"= {7 * n} were expected")
+            raise DataError(
+                f"{folder / _PANDA_FILES[name]} has {size} values but 7 x {n} time stamps "
+                f"= {7 * n} were expected"
+            )
         arrays[name] = arrays[name].reshape(n, 7)
     ds = _build(folder, joint_names=PANDA_JOINTS, **arrays)
     ds.meta["format"] = "panda_gaz2019"
@@ -390,8 +418,10 @@ def save_dataset(dataset: Dataset, path: str | Path, *, format: str | None = Non
     path = Path(path).expanduser()
     fmt = format or {".npz": "npz", ".csv": "csv"}.get(path.suffix.lower())
     if fmt not in ("npz", "csv"):
-        raise DataError(f"cannot save to {path}: unknown format {format or path.suffix!r}; "
-                        "expected .npz or .csv")
+        raise DataError(
+            f"cannot save to {path}: unknown format {format or path.suffix!r}; "
+            "expected .npz or .csv"
+        )
     names = dataset.joint_names or tuple(f"j{i}" for i in range(dataset.nv))
     fd, tmp = _atomic_target(path)
     try:
@@ -404,16 +434,29 @@ def save_dataset(dataset: Dataset, path: str | Path, *, format: str | None = Non
                     arrays["joint_names"] = np.array(dataset.joint_names, dtype=str)
                 np.savez(fh, **arrays)
             else:
-                qnames = names if dataset.q.shape[1] == dataset.nv else [
-                    str(i) for i in range(dataset.q.shape[1])]
-                head = ["t", *(f"q_{n}" for n in qnames), *(f"dq_{n}" for n in names),
-                        *(f"tau_{n}" for n in names)]
+                qnames = (
+                    names
+                    if dataset.q.shape[1] == dataset.nv
+                    else [str(i) for i in range(dataset.q.shape[1])]
+                )
+                head = [
+                    "t",
+                    *(f"q_{n}" for n in qnames),
+                    *(f"dq_{n}" for n in names),
+                    *(f"tau_{n}" for n in names),
+                ]
                 blocks = [dataset.t[:, None], dataset.q, dataset.dq, dataset.tau]
                 if dataset.ddq is not None:
                     head += [f"ddq_{n}" for n in names]
                     blocks.append(dataset.ddq)
-                np.savetxt(fh, np.hstack(blocks), delimiter=",", header=",".join(head),
-                           comments="", fmt="%.17g")
+                np.savetxt(
+                    fh,
+                    np.hstack(blocks),
+                    delimiter=",",
+                    header=",".join(head),
+                    comments="",
+                    fmt="%.17g",
+                )
         os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
@@ -422,19 +465,25 @@ def save_dataset(dataset: Dataset, path: str | Path, *, format: str | None = Non
 
 
 def check_robot(dataset: Dataset, robot) -> None:
-    """Raise :class:`DataError` unless the dataset fits ``robot`` (a :class:`~manip_id.robot.Robot`).
+    """Raise :class:`DataError` unless the dataset fits ``robot`` (a :class:`~.robot.Robot`).
 
     Checks q has ``robot.nq`` columns, dq and tau ``robot.nv``, and, when the
     dataset names its joints, that the names are ``robot.dof_names`` in order.
     """
     if dataset.q.shape[1] != robot.nq or dataset.nv != robot.nv:
-        raise DataError(f"the data have {dataset.nv} joints (q.shape={dataset.q.shape}, "
-                        f"dq.shape={dataset.dq.shape}) but robot {robot.name!r} has nq={robot.nq}, "
-                        f"nv={robot.nv}")
+        raise DataError(
+            f"the data have {dataset.nv} joints (q.shape={dataset.q.shape}, "
+            f"dq.shape={dataset.dq.shape}) but robot {robot.name!r} has nq={robot.nq}, "
+            f"nv={robot.nv}"
+        )
     if dataset.joint_names is not None and list(dataset.joint_names) != list(robot.dof_names):
         if set(dataset.joint_names) == set(robot.dof_names):
-            raise DataError(f"the data's joints are in the order {list(dataset.joint_names)} but robot "
-                            f"{robot.name!r} expects {list(robot.dof_names)}")
+            raise DataError(
+                f"the data's joints are in the order {list(dataset.joint_names)} but robot "
+                f"{robot.name!r} expects {list(robot.dof_names)}"
+            )
         extra = [n for n in dataset.joint_names if n not in robot.dof_names]
-        raise DataError(f"the data name joints {extra} that robot {robot.name!r} does not have "
-                        f"(its joints: {list(robot.dof_names)})")
+        raise DataError(
+            f"the data name joints {extra} that robot {robot.name!r} does not have "
+            f"(its joints: {list(robot.dof_names)})"
+        )

@@ -7,17 +7,54 @@ For joint ``j`` with ``L`` harmonics and base pulsation ``wf`` [rad/s]::
     ddq_j(t) =        sum_l [ -a_jl l wf sin(l wf t) + b_jl l wf cos(l wf t) ]
 
 The trajectory is periodic with period ``2 pi / wf``; velocity and
-acceleration are exact (analytic), never differentiated numerically.
+acceleration are exact (analytic), never differentiated numerically. Position,
+velocity and acceleration are linear in the coefficients ``x = (q0, a, b)``,
+so joint limits sampled on a time grid are linear inequalities ``G x <= h``.
+
+A trajectory lives in joint coordinates, one per velocity coordinate (shape
+(N, nv)). For a continuous joint (Pinocchio stores it as ``(cos, sin)``, so
+``nq != nv``) the coordinate is the angle; :func:`trajectory_to_configuration`
+maps angles to configurations of shape (N, nq). Continuous joints have no
+position limit.
+
+Limits (:func:`check_limits`) with a relative ``margin`` ``m``::
+
+    position      lo + m (hi - lo)  <=  q_j(t)  <=  hi - m (hi - lo)   (URDF limits)
+    velocity      |dq_j(t)|   <= (1 - m) robot.velocity_limit_j
+    acceleration  |ddq_j(t)|  <= (1 - m) acceleration_limit_j           (when given)
+
+A limit that the description leaves unset (infinite, zero, inverted or wider
+than 1e3) is not checked. Trajectory design (:func:`random_trajectory`,
+:func:`optimize_excitation`) still needs finite bounds: it uses
+:meth:`Robot.sampling_bounds` ([-pi, pi] for unset positions) and
+:meth:`Robot.velocity_bounds` (2 [unit/s] for unset velocities).
+
+Excitation (:func:`optimize_excitation`) minimizes the condition number of the
+base regressor ``W = [Y(q(t_k), dq(t_k), ddq(t_k))[:, base]]_k`` (stacked,
+shape (n_points nv, n_base)) over the coefficients, subject to the sampled
+limits, with SLSQP (linear constraints, objective ``log cond(W)``).
 """
 
 from __future__ import annotations
 
+import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
+import pinocchio as pin
+import scipy.optimize
 
 from ._checks import as_float_array, check_finite
-from .errors import InputError
+from .errors import InfeasibleTrajectoryError, InputError
+from .regressor import iter_regressor
+from .robot import Robot
+
+#: Default base pulsation [rad/s]: a period of 10 s.
+DEFAULT_WF = 2.0 * math.pi / 10.0
+#: Default number of time samples per period for limit checks.
+DEFAULT_CHECK_POINTS = 1000
+_UNSET = 1e3  # limits wider than this are treated as unset
 
 
 @dataclass(frozen=True)
@@ -74,6 +111,8 @@ class FourierTrajectory:
         """Positions, velocities and accelerations at times ``t`` [s].
 
         ``t`` scalar gives arrays of shape (nv,); ``t`` of shape (N,) gives (N, nv).
+        Positions are joint coordinates (angles for continuous joints, see
+        :func:`trajectory_to_configuration`).
         """
         t_arr = as_float_array(t, "t", ndim=(0, 1))
         tt = np.atleast_1d(t_arr)
@@ -90,3 +129,662 @@ class FourierTrajectory:
     def __call__(self, t):
         """Same as :meth:`sample`."""
         return self.sample(t)
+
+    def scaled(self, factor: float) -> FourierTrajectory:
+        """The same motion about ``q0`` with every coefficient times ``factor``.
+
+        Position excursion, velocity and acceleration all scale by ``factor``.
+        """
+        return FourierTrajectory(self.q0, self.a * factor, self.b * factor, self.wf)
+
+    def to_vector(self) -> np.ndarray:
+        """The coefficients as one vector ``x = [q0 (nv), a_1, b_1, ..., a_nv, b_nv]``.
+
+        Shape (nv + 2 nv L,): ``q0`` first, then per joint its ``L`` sine and
+        ``L`` cosine coefficients (the variables of :func:`optimize_excitation`).
+        """
+        return np.concatenate([self.q0, np.hstack([self.a, self.b]).ravel()])
+
+    @classmethod
+    def from_vector(cls, x, nv: int, harmonics: int, wf: float) -> FourierTrajectory:
+        """Inverse of :meth:`to_vector`."""
+        x = as_float_array(x, "x", ndim=1)
+        if x.shape[0] != nv * (1 + 2 * harmonics):
+            raise InputError(
+                f"{x.shape=} but nv (1 + 2 L) = {nv * (1 + 2 * harmonics)} for {nv=}, L={harmonics}"
+            )
+        ab = x[nv:].reshape(nv, 2 * harmonics)
+        return cls(x[:nv], ab[:, :harmonics], ab[:, harmonics:], wf)
+
+    def basis(self, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Time functions multiplying ``(a, b)``, each of shape (N, 2L).
+
+        ``q_j(t) = q0_j + P(t) @ [a_j, b_j]``, ``dq_j(t) = V(t) @ [a_j, b_j]``,
+        ``ddq_j(t) = A(t) @ [a_j, b_j]``; returns ``(P, V, A)``.
+        """
+        tt = np.atleast_1d(as_float_array(t, "t", ndim=(0, 1)))
+        l_wf = self.wf * np.arange(1, self.harmonics + 1)
+        phase = np.multiply.outer(tt, l_wf)
+        s, c = np.sin(phase), np.cos(phase)
+        P = np.hstack([s / l_wf, -c / l_wf])
+        V = np.hstack([c, s])
+        A = np.hstack([-s * l_wf, c * l_wf])
+        return P, V, A
+
+
+# ------------------------------------------------------------------ joint layout
+def _dof_layout(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
+    """Per velocity coordinate: its index in q, and whether it is a continuous joint.
+
+    Raises :class:`InputError` for joints that are neither one coordinate per
+    DoF nor a continuous (cos, sin) joint.
+    """
+    idx, continuous = [], []
+    for i in range(1, robot.model.njoints):
+        jm = robot.model.joints[i]
+        if jm.nq == jm.nv:
+            idx += [jm.idx_q + k for k in range(jm.nv)]
+            continuous += [False] * jm.nv
+        elif jm.nq == 2 and jm.nv == 1:
+            idx.append(jm.idx_q)
+            continuous.append(True)
+        else:
+            raise InputError(
+                f"joint {robot.model.names[i]!r} ({jm.shortname()}) has nq={jm.nq}, "
+                f"nv={jm.nv}: Fourier trajectories need one coordinate per DoF "
+                "or continuous (cos, sin) joints"
+            )
+    return np.array(idx, dtype=int), np.array(continuous, dtype=bool)
+
+
+def trajectory_to_configuration(robot: Robot, angles) -> np.ndarray:
+    """Joint coordinates (one per DoF) to Pinocchio configurations.
+
+    Parameters
+    ----------
+    angles: joint coordinates [rad or m], shape (nv,) or (N, nv); for a
+        continuous joint the angle, stored as ``(cos, sin)`` in ``q``.
+
+    Returns
+    -------
+    q of shape (nq,) or (N, nq).
+    """
+    x = as_float_array(angles, "angles", ndim=(1, 2))
+    if x.shape[-1] != robot.nv:
+        raise InputError(f"angles.shape={x.shape} but robot.nv={robot.nv}")
+    idx, cont = _dof_layout(robot)
+    q = np.empty((*x.shape[:-1], robot.nq))
+    lin = ~cont
+    q[..., idx[lin]] = x[..., lin]
+    if cont.any():
+        q[..., idx[cont]] = np.cos(x[..., cont])
+        q[..., idx[cont] + 1] = np.sin(x[..., cont])
+    return q
+
+
+def _position_limits(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
+    """URDF position limits per DoF, NaN where unset (continuous or absurd), shape (nv,) each."""
+    idx, cont = _dof_layout(robot)
+    lo, hi = robot.lower[idx], robot.upper[idx]
+    unset = cont | ~np.isfinite(lo) | ~np.isfinite(hi) | (hi <= lo) | (hi - lo > _UNSET)
+    lo[unset], hi[unset] = np.nan, np.nan
+    return lo, hi
+
+
+def _design_position_bounds(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
+    """Finite position bounds per DoF for designing trajectories, shape (nv,) each."""
+    idx, cont = _dof_layout(robot)
+    lo, hi = robot.sampling_bounds()
+    lo, hi = lo[idx], hi[idx]
+    lo[cont], hi[cont] = -math.pi, math.pi
+    return lo, hi
+
+
+def _velocity_limits(robot: Robot) -> np.ndarray:
+    v = robot.velocity_limit
+    v[~np.isfinite(v) | (v <= 0) | (v > _UNSET)] = np.nan
+    return v
+
+
+def _acceleration_limits(robot: Robot, acceleration_limit) -> np.ndarray:
+    if acceleration_limit is None:
+        return np.full(robot.nv, np.nan)
+    acc = as_float_array(acceleration_limit, "acceleration_limit", ndim=(0, 1))
+    acc = np.broadcast_to(acc, (robot.nv,)).copy() if acc.ndim == 0 else acc.copy()
+    if acc.shape != (robot.nv,):
+        raise InputError(f"acceleration_limit.shape={acc.shape} but robot.nv={robot.nv}")
+    if np.any(~(acc > 0)):
+        raise InputError(f"acceleration limits must be positive [rad/s^2 or m/s^2], got {acc}")
+    return acc
+
+
+def _check_margin(margin: float) -> float:
+    margin = float(margin)
+    if not 0.0 <= margin < 0.5:
+        raise InputError(f"margin must be a fraction in [0, 0.5), got {margin}")
+    return margin
+
+
+def _check_trajectory(robot: Robot, trajectory: FourierTrajectory) -> None:
+    if not isinstance(trajectory, FourierTrajectory):
+        raise InputError(f"expected a FourierTrajectory, got {type(trajectory).__name__}")
+    if trajectory.nv != robot.nv:
+        raise InputError(f"trajectory.nv={trajectory.nv} but robot.nv={robot.nv}")
+
+
+# ------------------------------------------------------------------------ limits
+@dataclass(frozen=True)
+class LimitUsage:
+    """Peak use of each limit by a trajectory, as a fraction of the allowed range.
+
+    Each array has shape (nv,); 1 means the limit (with its margin) is just
+    reached, NaN means the limit is not set. Position use is the largest
+    distance from the middle of the allowed range over its half-width.
+    """
+
+    position: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+
+    @property
+    def worst(self) -> float:
+        """Largest use over every joint and limit (NaN-free; 0 when nothing is limited)."""
+        vals = np.concatenate([self.position, self.velocity, self.acceleration])
+        vals = vals[np.isfinite(vals)]
+        return float(vals.max()) if vals.size else 0.0
+
+
+def _grid(trajectory: FourierTrajectory, duration: float | None, n_points: int) -> np.ndarray:
+    span = trajectory.period if duration is None else min(float(duration), trajectory.period)
+    return np.linspace(0.0, span, int(n_points))
+
+
+def _usage(trajectory, t, pos_lo, pos_hi, vel, acc):
+    q, dq, ddq = trajectory.sample(t)
+    mid, half = 0.5 * (pos_lo + pos_hi), 0.5 * (pos_hi - pos_lo)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        pos = np.abs(q - mid) / half  # NaN columns stay NaN
+        v = np.abs(dq) / vel
+        a = np.abs(ddq) / acc
+    return (q, dq, ddq), (pos, v, a)
+
+
+def _peak(use: np.ndarray) -> np.ndarray:
+    """Column maxima ignoring NaN; NaN for a column without any limit."""
+    peak = np.max(np.where(np.isfinite(use), use, -np.inf), axis=0)
+    peak[np.isneginf(peak)] = np.nan
+    return peak
+
+
+def check_limits(
+    robot: Robot,
+    trajectory: FourierTrajectory,
+    *,
+    duration: float | None = None,
+    margin: float = 0.05,
+    acceleration_limit=None,
+    n_points: int = DEFAULT_CHECK_POINTS,
+) -> LimitUsage:
+    """Check a trajectory against position, velocity and acceleration limits.
+
+    Parameters
+    ----------
+    robot: the robot whose URDF limits apply.
+    trajectory: a :class:`FourierTrajectory` with ``nv`` joints.
+    duration: time span checked from t = 0 [s]; default (and at most, since
+        the motion is periodic) one period.
+    margin: relative margin, a fraction of each position range and of each
+        velocity and acceleration limit (see module docstring).
+    acceleration_limit: [rad/s^2 or m/s^2], scalar or shape (nv,); None: unchecked.
+    n_points: number of time samples over the checked span.
+
+    Returns
+    -------
+    :class:`LimitUsage` (each entry <= 1) when feasible.
+
+    Raises
+    ------
+    InfeasibleTrajectoryError naming the joint, the limit ("position",
+    "velocity", "acceleration") and the excess [rad, rad/s, rad/s^2 or m...]
+    of the worst violation (largest relative use).
+    """
+    _check_trajectory(robot, trajectory)
+    margin = _check_margin(margin)
+    if duration is not None and not (np.isfinite(duration) and duration > 0):
+        raise InputError(f"duration must be a positive time [s], got {duration}")
+    if int(n_points) < 2:
+        raise InputError(f"n_points must be at least 2, got {n_points}")
+    lo, hi = _position_limits(robot)
+    width = hi - lo
+    lo_m, hi_m = lo + margin * width, hi - margin * width
+    vel = (1.0 - margin) * _velocity_limits(robot)
+    acc = (1.0 - margin) * _acceleration_limits(robot, acceleration_limit)
+    t = _grid(trajectory, duration, n_points)
+    states, uses = _usage(trajectory, t, lo_m, hi_m, vel, acc)
+    usage = LimitUsage(*(_peak(u) for u in uses))
+    kinds = ("position", "velocity", "acceleration")
+    worst = None
+    for kind, use in zip(kinds, uses, strict=True):
+        u = np.where(np.isfinite(use), use, -np.inf)
+        k, j = np.unravel_index(np.argmax(u), u.shape)
+        if u[k, j] > 1.0 + 1e-12 and (worst is None or u[k, j] > worst[0]):
+            worst = (u[k, j], kind, int(k), int(j))
+    if worst is None:
+        return usage
+    _, kind, k, j = worst
+    name = robot.dof_names[j]
+    unit = "m" if robot.is_prismatic(j) else "rad"
+    value = states[kinds.index(kind)][k, j]
+    if kind == "position":
+        bound = hi_m[j] if value > hi_m[j] else lo_m[j]
+        excess = abs(value - bound)
+        allowed = f"[{lo_m[j]:.4g}, {hi_m[j]:.4g}] {unit}"
+        unit_k = unit
+    else:
+        limit = vel[j] if kind == "velocity" else acc[j]
+        excess = abs(value) - limit
+        unit_k = f"{unit}/s" if kind == "velocity" else f"{unit}/s^2"
+        allowed = f"+-{limit:.4g} {unit_k}"
+    others = sum(int(np.any(np.nan_to_num(u) > 1.0 + 1e-12)) for u in uses) - 1
+    also = f" (and {others} other limit kind(s) exceeded)" if others > 0 else ""
+    raise InfeasibleTrajectoryError(
+        f"joint {name!r} exceeds its {kind} limit by {excess:.4g} {unit_k} at t={t[k]:.4g} s: "
+        f"{kind} {value:.4g} {unit_k}, allowed {allowed} with margin {margin:g}{also}",
+        joint=name,
+        limit=kind,
+        excess=float(excess),
+    )
+
+
+# ------------------------------------------------------------- random trajectory
+def _design_limits(robot: Robot, margin: float, acceleration_limit):
+    """Finite design bounds per DoF: (lo, hi, vel, acc) with margin; acc NaN when unset."""
+    lo, hi = _design_position_bounds(robot)
+    width = hi - lo
+    lo, hi = lo + margin * width, hi - margin * width
+    vel = (1.0 - margin) * robot.velocity_bounds()
+    acc = (1.0 - margin) * _acceleration_limits(robot, acceleration_limit)
+    return lo, hi, vel, acc
+
+
+def _check_design_args(harmonics: int, wf: float) -> tuple[int, float]:
+    if int(harmonics) != harmonics or int(harmonics) < 1:
+        raise InputError(f"harmonics must be a positive integer, got {harmonics}")
+    if not (np.isfinite(wf) and wf > 0):
+        raise InputError(f"wf must be a positive pulsation [rad/s], got {wf}")
+    return int(harmonics), float(wf)
+
+
+def random_trajectory(
+    robot: Robot,
+    harmonics: int = 5,
+    wf: float = DEFAULT_WF,
+    seed: int = 0,
+    *,
+    margin: float = 0.05,
+    acceleration_limit=None,
+    fill: float = 0.98,
+) -> FourierTrajectory:
+    """A random trajectory that fits in the limits.
+
+    ``q0`` is the middle of each joint's position range (0 for continuous
+    joints); the coefficients ``a_jl, b_jl ~ N(0, 1)`` are scaled per joint so
+    that the tightest of its position, velocity and (given) acceleration
+    limits is used to the fraction ``fill`` (checked on a dense grid, then
+    confirmed by :func:`check_limits`). Unset limits use the design bounds of
+    the module docstring.
+    """
+    harmonics, wf = _check_design_args(harmonics, wf)
+    margin = _check_margin(margin)
+    if not 0.0 < fill <= 1.0:
+        raise InputError(f"fill must be in (0, 1], got {fill}")
+    lo, hi, vel, acc = _design_limits(robot, margin, acceleration_limit)
+    rng = np.random.default_rng(seed)
+    a = rng.standard_normal((robot.nv, harmonics))
+    b = rng.standard_normal((robot.nv, harmonics))
+    traj = FourierTrajectory(0.5 * (lo + hi), a, b, wf)
+    t = _grid(traj, None, 4 * DEFAULT_CHECK_POINTS)
+    _, (pos, v, ac) = _usage(traj, t, lo, hi, vel, acc)
+    peak = np.fmax(np.fmax(pos.max(axis=0), v.max(axis=0)), np.nan_to_num(ac.max(axis=0)))
+    scale = fill / peak
+    traj = FourierTrajectory(traj.q0, a * scale[:, None], b * scale[:, None], wf)
+    check_limits(robot, traj, margin=margin, acceleration_limit=acceleration_limit)
+    return traj
+
+
+# --------------------------------------------------------------------- excitation
+def base_columns(robot: Robot, seed: int = 0) -> np.ndarray:
+    """Indices of the base (structurally independent) regressor columns, ascending.
+
+    Those of :func:`manip_id.identifiability.analyze` (structural analysis at
+    random states drawn with ``seed``).
+    """
+    from .identifiability import analyze
+
+    return np.asarray(analyze(robot, seed=seed).base.independent, dtype=int)
+
+
+def _condition(robot: Robot, q, dq, ddq, base: np.ndarray) -> float:
+    """Condition number of the base regressor stacked over the samples (inf if rank deficient)."""
+    n = q.shape[0]
+    W = np.empty((n * robot.nv, base.size))
+    for c in iter_regressor(robot, q, dq, ddq, chunk=max(n, 1)):
+        W[c.start * robot.nv : c.stop * robot.nv] = c.Y[:, :, base].reshape(-1, base.size)
+    s = np.linalg.svd(W, compute_uv=False)
+    return float(s[0] / s[-1]) if s[-1] > 0 else math.inf
+
+
+def _cost_grid(period: float, n_points: int) -> np.ndarray:
+    return np.arange(int(n_points)) * (period / int(n_points))
+
+
+def excitation_condition_number(
+    robot: Robot, trajectory: FourierTrajectory, n_points: int = 100, base=None
+) -> float:
+    """cond of the base regressor at ``n_points`` equally spaced times over one period.
+
+    ``base``: column indices (default :func:`base_columns`).
+    """
+    _check_trajectory(robot, trajectory)
+    if int(n_points) < 1:
+        raise InputError(f"n_points must be positive, got {n_points}")
+    base = base_columns(robot) if base is None else np.asarray(base, dtype=int)
+    angles, dq, ddq = trajectory.sample(_cost_grid(trajectory.period, n_points))
+    return _condition(robot, trajectory_to_configuration(robot, angles), dq, ddq, base)
+
+
+@dataclass(frozen=True)
+class ExcitationResult:
+    """Outcome of :func:`optimize_excitation`.
+
+    Condition numbers are those of the base regressor on the optimization's
+    time grid (``n_points`` samples over one period).
+    """
+
+    trajectory: FourierTrajectory
+    condition_number_initial: float
+    condition_number: float
+    condition_number_random: float
+    condition_numbers_random: np.ndarray
+    iterations: int
+    evaluations: int
+    time: float
+    n_points: int
+    base: np.ndarray
+    success: bool
+    message: str
+    usage: LimitUsage
+
+
+def _linear_constraints(robot, traj_shape, wf, lo, hi, vel, acc, n_constraint_points):
+    """G, h with G x <= h for x = [q0 (nv), then per joint (a_j, b_j) (nv * 2L)]."""
+    nv, L = traj_shape
+    proto = FourierTrajectory(np.zeros(nv), np.zeros((nv, L)), np.zeros((nv, L)), wf)
+    t = _grid(proto, None, n_constraint_points)
+    P, V, A = proto.basis(t)  # (M, 2L)
+    M = t.size
+    n_x = nv + nv * 2 * L
+    rows, rhs = [], []
+    for j in range(nv):
+        cols = slice(nv + j * 2 * L, nv + (j + 1) * 2 * L)
+        e = np.zeros((M, n_x))
+        e[:, j] = 1.0
+        e[:, cols] = P
+        rows += [e, -e]
+        rhs += [np.full(M, hi[j]), np.full(M, -lo[j])]
+        for basis, limit in ((V, vel[j]), (A, acc[j])):
+            if not np.isfinite(limit):
+                continue
+            g = np.zeros((M, n_x))
+            g[:, cols] = basis
+            rows += [g, -g]
+            rhs += [np.full(M, limit), np.full(M, limit)]
+    return np.vstack(rows), np.concatenate(rhs)
+
+
+class ExcitationObjective:
+    """``f(x) = log cond(W(x))`` and its gradient, for ``x = (q0, a, b)``.
+
+    ``W`` stacks the base regressor columns ``Y(q(t_k), dq(t_k), ddq(t_k))[:, base]``
+    over ``t_k = k T / n_points``. With the thin SVD ``W = U S V^T``::
+
+        df = u_1^T dW v_1 / s_1 - u_n^T dW v_n / s_n = <G, dW>,
+        G = u_1 v_1^T / s_1 - u_n v_n^T / s_n
+
+    so the gradient needs ``dY_k / d(q_k, dq_k, ddq_k)`` contracted with the
+    block ``G_k`` of each sample, then the chain rule through the linear maps
+    ``q_k = q0 + P_k [a, b]``, ``dq_k = V_k [a, b]``, ``ddq_k = A_k [a, b]``.
+    The rigid-body part ``dY_k / dq`` and ``dY_k / ddq`` comes from forward
+    differences of ``pinocchio.computeJointTorqueRegressor`` (step ``h`` for
+    positions and velocities; ``Y`` is linear in ``ddq``, so a unit step is
+    exact); the joint-term columns are differentiated analytically (Coulomb's
+    ``sign(dq)`` has zero derivative), so no difference straddles its jump.
+    The extreme singular pairs come from the eigen-decomposition of the small
+    Gram matrix ``W^T W`` (``u_i = W v_i / s_i``; an SVD of ``W`` when
+    ``cond(W) > 1e5``, where the Gram matrix would lose precision). One
+    gradient costs ``n_points (1 + 3 nv)`` regressor calls.
+    """
+
+    def __init__(
+        self, robot: Robot, base, harmonics: int, wf: float, n_points: int, h: float = 1e-6
+    ):
+        self.robot = robot
+        self.base = np.asarray(base, dtype=int)
+        self.nv, self.L, self.wf = robot.nv, int(harmonics), float(wf)
+        proto = FourierTrajectory(
+            np.zeros(self.nv), np.zeros((self.nv, self.L)), np.zeros((self.nv, self.L)), self.wf
+        )
+        self.P, self.V, self.A = proto.basis(_cost_grid(proto.period, n_points))
+        self.n = int(n_points)
+        self.h = float(h)
+        self.model = robot.model
+        self.data = robot.model.createData()
+        rigid = self.base < robot.n_rigid
+        self.base_rigid = self.base[rigid]
+        self._rigid_pos = np.flatnonzero(rigid)
+        # analytic joint-term derivatives: (position in base, dof, state kind 0/1/2)
+        terms = robot.terms.enabled
+        kind_of = {"k": 0, "fv": 1, "Ia": 2}
+        self._joint_derivs = []
+        for pos in np.flatnonzero(~rigid):
+            offset = int(self.base[pos]) - robot.n_rigid
+            dof, term = divmod(offset, len(terms))
+            if terms[term] in kind_of:
+                self._joint_derivs.append((int(pos), dof, kind_of[terms[term]]))
+        self.evaluations = 0
+
+    def states(self, x: np.ndarray):
+        """Joint coordinates, velocities, accelerations at the cost grid, each (n_points, nv)."""
+        ab = x[self.nv :].reshape(self.nv, 2 * self.L)
+        return x[: self.nv] + self.P @ ab.T, self.V @ ab.T, self.A @ ab.T
+
+    def _matrix(self, x: np.ndarray):
+        angles, dq, ddq = self.states(x)
+        q = trajectory_to_configuration(self.robot, angles)
+        n, nv = self.n, self.nv
+        W = np.empty((n * nv, self.base.size))
+        for c in iter_regressor(self.robot, q, dq, ddq, chunk=n):
+            W[c.start * nv : c.stop * nv] = c.Y[:, :, self.base].reshape(-1, self.base.size)
+        self.evaluations += 1
+        return W, (angles, q, dq, ddq)
+
+    def value(self, x: np.ndarray) -> float:
+        """``log cond(W(x))`` (1e3 when W is rank deficient)."""
+        W, _ = self._matrix(np.asarray(x, dtype=float))
+        lam = np.linalg.eigvalsh(W.T @ W)
+        if lam[0] > 1e-10 * lam[-1]:
+            return 0.5 * math.log(lam[-1] / lam[0])
+        s = np.linalg.svd(W, compute_uv=False)
+        return math.log(s[0] / s[-1]) if s[-1] > 0 else 1e3
+
+    def value_and_gradient(self, x: np.ndarray) -> tuple[float, np.ndarray]:
+        """``(f(x), df/dx)``, the gradient of shape (nv + 2 nv L,)."""
+        x = np.asarray(x, dtype=float)
+        W, (angles, q, dq, ddq) = self._matrix(x)
+        lam, E = np.linalg.eigh(W.T @ W)  # s_i^2 ascending; v_i; u_i = W v_i / s_i
+        if lam[0] > 1e-10 * lam[-1]:
+            value = 0.5 * math.log(lam[-1] / lam[0])
+            v1, vn = E[:, -1], E[:, 0]
+            G = np.outer(W @ v1, v1) / lam[-1] - np.outer(W @ vn, vn) / lam[0]
+        else:  # ill-conditioned: the Gram matrix loses the smallest singular value
+            U, s, Vt = np.linalg.svd(W, full_matrices=False)
+            if not s[-1] > 0:
+                return 1e3, np.zeros_like(x)
+            value = math.log(s[0] / s[-1])
+            G = np.outer(U[:, 0], Vt[0]) / s[0] - np.outer(U[:, -1], Vt[-1]) / s[-1]
+        n, nv, h = self.n, self.nv, self.h
+        G = G.reshape(n, nv, self.base.size)
+        g = np.zeros((3, n, nv))  # d f / d (angle, dq, ddq) per sample and dof
+        br = self.base_rigid
+        if br.size:
+            Gr = G[:, :, self._rigid_pos]
+            m, d = self.model, self.data
+
+            def f(qk, vk, ak):  # rigid base columns, (nv, n_rigid_base); 1-DoF models give 1-D
+                return pin.computeJointTorqueRegressor(m, d, qk, vk, ak).reshape(nv, -1)[:, br]
+
+            eye = np.eye(nv)
+            q_pert = trajectory_to_configuration(
+                self.robot, (angles[:, None, :] + h * eye[None]).reshape(n * nv, nv)
+            ).reshape(n, nv, -1)
+            for k in range(n):
+                Gk = Gr[k]
+                y0 = np.vdot(Gk, f(q[k], dq[k], ddq[k]))
+                for i in range(nv):
+                    g[0, k, i] = np.vdot(Gk, f(q_pert[k, i], dq[k], ddq[k])) - y0
+                    g[1, k, i] = np.vdot(Gk, f(q[k], dq[k] + h * eye[i], ddq[k])) - y0
+                    g[2, k, i] = np.vdot(Gk, f(q[k], dq[k], ddq[k] + eye[i])) - y0
+            g[:2] /= h
+        for pos, dof, kind in self._joint_derivs:
+            g[kind, :, dof] += G[:, dof, pos]
+        grad_q0 = g[0].sum(axis=0)
+        grad_ab = self.P.T @ g[0] + self.V.T @ g[1] + self.A.T @ g[2]  # (2L, nv)
+        return value, np.concatenate([grad_q0, grad_ab.T.ravel()])
+
+
+def optimize_excitation(
+    robot: Robot,
+    harmonics: int = 5,
+    wf: float = DEFAULT_WF,
+    seed: int = 0,
+    *,
+    n_points: int = 60,
+    maxiter: int = 100,
+    margin: float = 0.05,
+    acceleration_limit=None,
+    n_constraint_points: int = 200,
+    n_random: int = 10,
+    base=None,
+) -> ExcitationResult:
+    """Fourier coefficients minimizing the condition number of the base regressor.
+
+    Minimizes ``log cond(W(x))`` over ``x = (q0, a, b)``, where ``W`` is the
+    base regressor stacked over ``n_points`` equally spaced times of one
+    period, subject to the position, velocity and (given) acceleration limits
+    sampled at ``n_constraint_points`` times (linear inequalities), with
+    ``scipy.optimize.minimize(method="SLSQP")`` and the gradient of
+    :class:`ExcitationObjective`, from ``random_trajectory(robot, harmonics, wf, seed)``. The
+    result is confirmed with :func:`check_limits` on a dense grid; should the
+    optimum overshoot a limit between constraint samples, its coefficients
+    are shrunk about ``q0`` until it fits.
+
+    ``condition_number_random`` is the median over ``n_random`` random
+    feasible trajectories (seeds ``seed + 1, ...``) for comparison.
+    Cost per iteration: about ``n_points (1 + 3 nv)`` regressor calls and an SVD
+    (plus line-search evaluations).
+    """
+    harmonics, wf = _check_design_args(harmonics, wf)
+    margin = _check_margin(margin)
+    for name, value, least in (
+        ("n_points", n_points, 1),
+        ("maxiter", maxiter, 0),
+        ("n_constraint_points", n_constraint_points, 2),
+        ("n_random", n_random, 0),
+    ):
+        if int(value) != value or value < least:
+            raise InputError(f"{name} must be an integer >= {least}, got {value}")
+    t0 = time.perf_counter()
+    base = base_columns(robot) if base is None else np.asarray(base, dtype=int)
+    nv, L = robot.nv, harmonics
+    lo, hi, vel, acc = _design_limits(robot, margin, acceleration_limit)
+    G, h = _linear_constraints(robot, (nv, L), wf, lo, hi, vel, acc, n_constraint_points)
+    start = random_trajectory(
+        robot, L, wf, seed, margin=margin, acceleration_limit=acceleration_limit
+    )
+    objective = ExcitationObjective(robot, base, L, wf, n_points)
+    x0 = start.to_vector()
+    f0 = objective.value(x0)
+    constraint = {"type": "ineq", "fun": lambda x: h - G @ x, "jac": lambda x: -G}
+    try:
+        res = scipy.optimize.minimize(
+            objective.value_and_gradient,
+            x0,
+            jac=True,
+            method="SLSQP",
+            constraints=[constraint],
+            options={"maxiter": int(maxiter), "ftol": 1e-6},
+        )
+    except ValueError as exc:  # pragma: no cover - SciPy input errors
+        raise InputError(f"excitation optimization failed: {exc}") from exc
+    x = res.x if objective.value(res.x) <= f0 else x0
+    traj = FourierTrajectory.from_vector(x, nv, L, wf)
+    traj = _fit_into_limits(robot, traj, margin, acceleration_limit)
+    usage = check_limits(robot, traj, margin=margin, acceleration_limit=acceleration_limit)
+    cond0 = excitation_condition_number(robot, start, n_points, base)
+    cond = excitation_condition_number(robot, traj, n_points, base)
+    randoms = np.array(
+        [
+            excitation_condition_number(
+                robot,
+                random_trajectory(
+                    robot, L, wf, seed + 1 + i, margin=margin, acceleration_limit=acceleration_limit
+                ),
+                n_points,
+                base,
+            )
+            for i in range(int(n_random))
+        ]
+    )
+    return ExcitationResult(
+        trajectory=traj,
+        condition_number_initial=cond0,
+        condition_number=cond,
+        condition_number_random=float(np.median(randoms)) if randoms.size else math.nan,
+        condition_numbers_random=randoms,
+        iterations=int(getattr(res, "nit", 0)),
+        evaluations=objective.evaluations,
+        time=time.perf_counter() - t0,
+        n_points=int(n_points),
+        base=base,
+        success=bool(res.success),
+        message=str(res.message),
+        usage=usage,
+    )
+
+
+def _fit_into_limits(robot, traj, margin, acceleration_limit) -> FourierTrajectory:
+    """Shrink the coefficients about ``q0`` until :func:`check_limits` passes (at most ~5%)."""
+    for _ in range(50):
+        try:
+            check_limits(robot, traj, margin=margin, acceleration_limit=acceleration_limit)
+            return traj
+        except InfeasibleTrajectoryError:
+            traj = traj.scaled(0.999)
+    # q0 itself outside the range cannot be fixed by shrinking: report it
+    check_limits(robot, traj, margin=margin, acceleration_limit=acceleration_limit)
+    return traj
+
+
+__all__ = [
+    "DEFAULT_WF",
+    "ExcitationObjective",
+    "ExcitationResult",
+    "FourierTrajectory",
+    "LimitUsage",
+    "base_columns",
+    "check_limits",
+    "excitation_condition_number",
+    "optimize_excitation",
+    "random_trajectory",
+    "trajectory_to_configuration",
+]

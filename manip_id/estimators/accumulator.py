@@ -52,6 +52,7 @@ class InformationAccumulator:
     def add(self, Y, tau, *, columns=None, check: bool = True) -> InformationAccumulator:
         """Accumulate samples: Y of shape (n, nv, P), tau of shape (n, nv) [N m or N].
 
+        A scalar output (nv = 1) also takes Y of shape (n, P) and tau of shape (n,).
         ``columns``: indices of the columns of Y to accumulate (``len == p``);
         default all (then P must equal p). ``check=False`` skips the NaN/Inf
         scan (for callers that have already validated their inputs).
@@ -65,8 +66,10 @@ class InformationAccumulator:
             raise InputError(f"Y.shape={Y.shape} but expected (n, nv={self.nv}, columns)")
         n = Y.shape[0]
         if tau.shape != (n, self.nv):
-            raise InputError(f"Y.shape={Y.shape} but tau.shape={tau.shape}; expected tau of "
-                             f"shape ({n}, {self.nv})")
+            raise InputError(
+                f"Y.shape={Y.shape} but tau.shape={tau.shape}; expected tau of "
+                f"shape ({n}, {self.nv})"
+            )
         if columns is None:
             if Y.shape[2] != self.p:
                 raise InputError(f"Y.shape={Y.shape} but the accumulator has p={self.p} columns")
@@ -74,10 +77,12 @@ class InformationAccumulator:
         else:
             columns = np.asarray(columns, dtype=np.intp)
             if columns.shape != (self.p,):
-                raise InputError(f"columns.shape={columns.shape} but the accumulator has p={self.p}")
+                raise InputError(
+                    f"columns.shape={columns.shape} but the accumulator has p={self.p}"
+                )
             if columns.size and (columns.max() >= Y.shape[2] or columns.min() < -Y.shape[2]):
                 raise InputError(f"Y.shape={Y.shape} has no column {int(columns.max())}")
-            Yt = np.ascontiguousarray(Y.transpose(1, 0, 2)[:, :, columns])
+            Yt = np.take(Y.transpose(1, 0, 2), columns, axis=2)  # one copy, C order
         if check:
             _check_rows(Yt, "Y", self.n)
             _check_rows(tau.T, "tau", self.n)
@@ -94,10 +99,14 @@ class InformationAccumulator:
     def merge(self, other: InformationAccumulator) -> InformationAccumulator:
         """Add the sums of ``other`` into ``self`` (data concatenated); returns ``self``."""
         if not isinstance(other, InformationAccumulator):
-            raise InputError(f"can merge an InformationAccumulator only, got {type(other).__name__}")
+            raise InputError(
+                f"can merge an InformationAccumulator only, got {type(other).__name__}"
+            )
         if (other.p, other.nv) != (self.p, self.nv):
-            raise InputError(f"cannot merge an accumulator of (p={other.p}, nv={other.nv}) "
-                             f"into one of (p={self.p}, nv={self.nv})")
+            raise InputError(
+                f"cannot merge an accumulator of (p={other.p}, nv={other.nv}) "
+                f"into one of (p={self.p}, nv={self.nv})"
+            )
         self._A += other._A
         self._b += other._b
         self._zz += other._zz
@@ -161,7 +170,7 @@ class InformationAccumulator:
         return (np.einsum("j,jab->ab", w, self.A_joint), w @ self._b, float(w @ self._zz))
 
     def residual_sum_of_squares(self, theta) -> np.ndarray:
-        """Per-joint ``||tau_j - Y_j theta||^2 = zz_j - 2 b_j.theta + theta.A_j.theta``, shape (nv,).
+        """Per-joint ``||tau_j - Y_j theta||^2 = zz_j - 2 b_j.theta + theta.A_j.theta``, (nv,).
 
         Computed from the sums alone (no pass over the data); clipped at zero
         (round-off makes tiny residuals slightly negative).
@@ -185,4 +194,3 @@ def _check_rows(arr: np.ndarray, name: str, offset: int) -> None:
     if arr.ndim == 3:
         where += f", column {int(bad[2])}"
     raise InputError(f"{name} holds {arr[tuple(bad)]} at {where}")
-

@@ -37,6 +37,8 @@ INFO_RANK_RTOL = 1e-6
 STACKED_RANK_RTOL = 1e-10
 #: Scaled condition number of the regressor above which Cholesky gives way to eigen.
 COND_LIMIT = 1e6
+#: Weighted least squares: no joint variance counts below this fraction of the largest.
+WLS_MIN_VARIANCE_RATIO = 1e-6
 
 
 def format_direction(v: np.ndarray, names: Sequence[str] | None, tol: float = 1e-3) -> str:
@@ -131,7 +133,10 @@ def solve_normal_equations(
             cf = sla.cho_factor(As, lower=True, check_finite=False)
             xs = sla.cho_solve(cf, bs, check_finite=False)
             Ainv_s = sla.cho_solve(cf, np.eye(p), check_finite=False)
-            solver = f"Cholesky of the column-scaled information matrix (scaled condition {scaled_cond:.3g})"
+            solver = (
+                "Cholesky of the column-scaled information matrix "
+                f"(scaled condition {scaled_cond:.3g})"
+            )
         except np.linalg.LinAlgError:
             solver = "eigen solve (Cholesky failed)"
     else:
@@ -152,6 +157,7 @@ def solve_accumulator(
     minimum_norm: bool = False,
     cond_limit: float = COND_LIMIT,
     rank_rtol: float = INFO_RANK_RTOL,
+    wls_iterations: int = 3,
 ) -> LeastSquaresSolution:
     """Ordinary (``"ols"``) or weighted (``"wls"``) least squares from accumulated sums.
 
@@ -159,7 +165,11 @@ def solve_accumulator(
     ``RSS_j = zz_j - 2 b_j.theta + theta.A_j.theta``, so weighted least squares
     needs no second pass over the data: the per-joint variances
     ``sigma_j^2 = RSS_j / (n - rank / nv)`` of the ordinary fit weight the
-    second solve.
+    second solve. A noisy joint inflates the ordinary residuals of the quiet
+    ones (through the error of the ordinary estimate), so the weights are
+    re-estimated from the weighted residuals ``wls_iterations`` times (each
+    costs one p x p solve, no data pass); ``noise_variance`` is the last
+    estimate and the covariance is ``(Phi^T W Phi)^-1`` with its weights.
     """
     if not isinstance(acc, InformationAccumulator):
         raise InputError(f"expected an InformationAccumulator, got {type(acc).__name__}")
@@ -172,35 +182,62 @@ def solve_accumulator(
     rss_j = acc.residual_sum_of_squares(theta)
     dof = acc.n_rows - rank
     if dof <= 0:
-        raise InputError(f"{acc.n_rows} equations for {rank} parameters: no residual degrees of "
-                         "freedom to estimate the noise; give more samples")
+        raise InputError(
+            f"{acc.n_rows} equations for {rank} parameters: no residual degrees of "
+            "freedom to estimate the noise; give more samples"
+        )
     var_j = rss_j / max(acc.n - rank / acc.nv, 1e-300)
     sigma2 = float(rss_j.sum() / dof)
     if method == "ols":
         return LeastSquaresSolution(
-            estimate=theta, covariance=sigma2 * Ainv, sigma2=sigma2, noise_variance=var_j,
-            rss_per_joint=rss_j, zz_per_joint=acc.zz_joint, n_rows=acc.n_rows, rank=rank,
-            condition_number=cond, scaled_condition_number=scond, solver=solver,
+            estimate=theta,
+            covariance=sigma2 * Ainv,
+            sigma2=sigma2,
+            noise_variance=var_j,
+            rss_per_joint=rss_j,
+            zz_per_joint=acc.zz_joint,
+            n_rows=acc.n_rows,
+            rank=rank,
+            condition_number=cond,
+            scaled_condition_number=scond,
+            solver=solver,
         )
-    weights = _weights(var_j)
-    Aw, bw, _ = acc.weighted(weights)
-    theta_w, Ainv_w, rank, cond_w, scond_w, solver_w = solve_normal_equations(Aw, bw, **kw)
-    rss_w = acc.residual_sum_of_squares(theta_w)
+    theta_w, rank_w, cond_w, scond_w, solver_w = theta, rank, cond, scond, solver
+    for _ in range(max(int(wls_iterations), 1)):
+        weights = _weights(var_j, acc.zz_joint, acc.n)
+        Aw, bw, _ = acc.weighted(weights)
+        theta_w, Ainv_w, rank_w, cond_w, scond_w, solver_w = solve_normal_equations(Aw, bw, **kw)
+        rss_w = acc.residual_sum_of_squares(theta_w)
+        var_j = rss_w / max(acc.n - rank_w / acc.nv, 1e-300)
     return LeastSquaresSolution(
-        estimate=theta_w, covariance=Ainv_w, sigma2=float(weights @ rss_w / dof),
-        noise_variance=var_j, rss_per_joint=rss_w, zz_per_joint=acc.zz_joint,
-        n_rows=acc.n_rows, rank=rank, condition_number=cond_w, scaled_condition_number=scond_w,
-        solver=f"weighted least squares, per-joint variances from the OLS residuals; {solver_w}",
+        estimate=theta_w,
+        covariance=Ainv_w,
+        sigma2=float(weights @ rss_w / dof),
+        noise_variance=var_j,
+        rss_per_joint=rss_w,
+        zz_per_joint=acc.zz_joint,
+        n_rows=acc.n_rows,
+        rank=rank_w,
+        condition_number=cond_w,
+        scaled_condition_number=scond_w,
+        solver=(
+            f"weighted least squares, per-joint variances from the residuals "
+            f"({int(wls_iterations)} reweighting pass(es) after OLS); {solver_w}"
+        ),
         weights=weights,
     )
 
 
-def _weights(var: np.ndarray) -> np.ndarray:
-    """Inverse variances, with a floor so that noise-free joints do not get infinite weight."""
-    top = float(var.max())
-    if top <= 0:
-        return np.ones_like(var)
-    return 1.0 / np.maximum(var, top * 1e-12)
+def _weights(var: np.ndarray, zz: np.ndarray, n: int) -> np.ndarray:
+    """Inverse variances ``1/sigma_j^2``, floored so that no joint gets an absurd weight.
+
+    A variance counts at least ``WLS_MIN_VARIANCE_RATIO * max_j sigma_j^2`` (weight
+    ratios stay below 1e6) and at least the round-off level ``(1e-7)^2 zz_j / n`` of
+    a noise-free fit.
+    """
+    floor = np.maximum(WLS_MIN_VARIANCE_RATIO * float(var.max()), 1e-14 * zz / max(n, 1))
+    floor = np.where(floor > 0, floor, 1.0)
+    return 1.0 / np.maximum(var, floor)
 
 
 # -------------------------------------------------------------------- stacked
@@ -281,7 +318,9 @@ def solve_stacked(
     n = n_rows // nv
     dof = n_rows - rank
     if dof <= 0:
-        raise InputError(f"{n_rows} equations for {rank} parameters: no residual degrees of freedom")
+        raise InputError(
+            f"{n_rows} equations for {rank} parameters: no residual degrees of freedom"
+        )
     var_j = rss_j / max(n - rank / nv, 1e-300)
     if weights is None:
         sigma2 = float(rss_j.sum() / dof)
@@ -293,7 +332,16 @@ def solve_stacked(
         cov = Ginv
         solver = "weighted " + solver
     return LeastSquaresSolution(
-        estimate=theta, covariance=0.5 * (cov + cov.T), sigma2=sigma2, noise_variance=var_j,
-        rss_per_joint=rss_j, zz_per_joint=zz_j, n_rows=n_rows, rank=rank,
-        condition_number=cond, scaled_condition_number=scond, solver=solver, weights=wts,
+        estimate=theta,
+        covariance=0.5 * (cov + cov.T),
+        sigma2=sigma2,
+        noise_variance=var_j,
+        rss_per_joint=rss_j,
+        zz_per_joint=zz_j,
+        n_rows=n_rows,
+        rank=rank,
+        condition_number=cond,
+        scaled_condition_number=scond,
+        solver=solver,
+        weights=wts,
     )

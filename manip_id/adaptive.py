@@ -1,0 +1,409 @@
+"""Slotine-Li adaptive tracking control, with an optional composite (prediction-error) term.
+
+Given a reference ``q_d(t)`` with ``dq_d``, ``ddq_d`` and the estimate ``theta_hat``
+(signs of DESIGN.md: ``theta_tilde = theta_hat - theta``)::
+
+    q_tilde = q - q_d                    (pinocchio.difference for continuous joints)
+    dq_r    = dq_d - Lambda q_tilde      reference velocity
+    ddq_r   = ddq_d - Lambda dq_tilde    reference acceleration
+    s       = dq - dq_r                  sliding variable
+    tau     = Y(q, dq, dq_r, ddq_r) theta_hat - K_D s
+    d theta_hat/dt = -Gamma (Y^T s_D + kappa Y_f^T eps)
+
+with the Slotine-Li regressor ``Y(q, dq, v, w) theta = M v + C(q, dq) w + g + joint
+terms`` (:meth:`manip_id.regressor.RegressorEvaluator.slotine_li`). ``Lambda`` is positive
+diagonal, ``K_D`` and ``Gamma`` symmetric positive definite.
+
+Why it works. With the closed loop ``M ds/dt + C s + F_v s = -K_D s + Y theta_tilde``
+(``F_v`` the viscous friction, part of ``theta``) and ``dM/dt - 2C`` skew-symmetric,
+the Lyapunov function
+
+    V = 1/2 s^T M(q) s + 1/2 theta_tilde^T Gamma^-1 theta_tilde
+
+has ``dV/dt = -s^T (K_D + F_v) s - kappa |eps|^2 <= 0`` (:func:`lyapunov_function`).
+Coulomb friction breaks the exact cancellation (``sign(dq) != sign(dq_r)``).
+
+Robustness options. Dead zone: ``s_D = s - clip(s, -delta, delta)`` replaces ``s`` in
+the adaptation (no adaptation while every ``|s_j| <= delta``). Projection: after each
+step ``theta_hat`` is clipped to ``[lower, upper]``; for a diagonal ``Gamma`` this is
+the Gamma-weighted projection, so V still does not increase.
+
+Composite adaptation (``kappa > 0``). Inverse dynamics is written without the
+acceleration, through the generalized momentum ``p = M(q) dq = Y_p(q, dq) theta``::
+
+    tau = d/dt [Y_p theta] + Y_h(q, dq) theta,
+    Y_p = Y^{g=0}(q, 0, dq) (armature column: dq_j)
+    Y_h = Y(q, dq, 0) - d/de Y^{g=0}(q + e dq, 0, dq)|_{e=0}   (= -C^T dq + g + friction)
+
+(``dM/dt dq`` by a forward difference along ``dq``). Filtering both sides with
+``W(s) = lambda_f / (s + lambda_f)`` gives, exactly and without measured accelerations::
+
+    tau_f = Y_f theta,   Y_f = lambda_f (Y_p - W[Y_p]) + W[Y_h],   tau_f = W[tau]
+
+(starting from ``W[Y_p](0) = Y_p(0)``, ``W[Y_h](0) = 0``, ``tau_f(0) = 0``, the
+identity holds at every instant). The prediction error is
+``eps = Y_f theta_hat - tau_f = Y_f theta_tilde``. The filters are discretized
+exactly for the zero-order-held torque and with a first-order hold (linear
+interpolation between control instants) for the regressors.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from ._checks import as_float_array, check_finite
+from .errors import InputError
+from .regressor import RegressorEvaluator
+from .robot import Robot
+
+
+@dataclass(frozen=True)
+class AdaptiveGains:
+    """Gains of the Slotine-Li controller (validated against a robot by the controller).
+
+    Attributes
+    ----------
+    lam: Lambda, diagonal [1/s], a scalar or shape (nv,), positive.
+    kd: K_D [N m s/rad], a positive scalar, a positive diagonal (nv,) or a symmetric
+        positive definite matrix (nv, nv).
+    gamma: Gamma, adaptation gain, a scalar, its diagonal (p,) or a symmetric
+        positive definite matrix (p, p).
+    composite: kappa >= 0, weight of the prediction-error term [1/(N m)^2 scale];
+        0 gives the plain Slotine-Li law.
+    filter_bandwidth: lambda_f > 0 of the composite filter lambda_f/(s + lambda_f) [rad/s].
+    dead_zone: delta >= 0 on each s_j [rad/s].
+    lower, upper: optional bounds on theta_hat, shape (p,) (+-inf for none).
+    """
+
+    lam: float | np.ndarray = 10.0
+    kd: float | np.ndarray = 10.0
+    gamma: float | np.ndarray = 1.0
+    composite: float = 0.0
+    filter_bandwidth: float = 20.0
+    dead_zone: float = 0.0
+    lower: np.ndarray | None = None
+    upper: np.ndarray | None = None
+
+
+def default_gains(
+    robot: Robot,
+    theta: np.ndarray | None = None,
+    q: np.ndarray | None = None,
+    *,
+    lam: float = 10.0,
+    kd_rate: float = 20.0,
+    gamma: float = 1.0,
+    composite: float = 0.0,
+    filter_bandwidth: float = 20.0,
+    dead_zone: float = 0.0,
+) -> AdaptiveGains:
+    """Gains scaled to the robot.
+
+    ``Lambda = lam I``; ``K_D = kd_rate M(q)`` with M of ``theta`` (default nominal)
+    at ``q`` (default :meth:`Robot.neutral`), so that near ``q`` every mode of
+    ``M ds/dt = -K_D s`` decays at ``kd_rate`` [1/s] (a diagonal K_D is either too
+    stiff for the light modes or too soft for the heavy ones of a coupled arm);
+    ``Gamma = gamma diag(scale^2)`` with ``scale_i = |theta_i| + floor(unit_i)``
+    (floors 0.1 kg, 0.01 kg m, 0.001 kg m^2, 0.1 for joint terms): each parameter
+    adapts in proportion to its size.
+    """
+    theta = robot.nominal_parameters if theta is None else as_float_array(theta, "theta", 1)
+    q = robot.neutral() if q is None else as_float_array(q, "q", 1)
+    model = robot.with_parameters(theta)
+    M = pin.crba(model, model.createData(), q)
+    M = np.triu(M) + np.triu(M, 1).T
+    floors = {"kg": 0.1, "kg m": 0.01, "kg m^2": 1e-3}
+    floor = np.array(
+        [floors.get(u, 0.1) for u in robot.parameter_units[: robot.n_rigid]]
+        + [0.1] * (robot.n_parameters - robot.n_rigid)
+    )
+    scale = np.abs(theta) + floor
+    return AdaptiveGains(
+        lam=lam,
+        kd=kd_rate * M,
+        gamma=gamma * scale**2,
+        composite=composite,
+        filter_bandwidth=filter_bandwidth,
+        dead_zone=dead_zone,
+    )
+
+
+def _positive_vector(x, name: str, n: int, unit: str) -> np.ndarray:
+    arr = as_float_array(x, name, ndim=(0, 1))
+    arr = np.broadcast_to(arr, (n,)).copy() if arr.ndim == 0 else arr
+    if arr.shape != (n,):
+        raise InputError(f"{name} must be a scalar or shape ({n},), got {name}.shape={arr.shape}")
+    check_finite(arr, name)
+    if np.any(arr <= 0):
+        raise InputError(
+            f"{name} must be positive [{unit}], got {arr.min():g} at index {int(np.argmin(arr))}"
+        )
+    return arr
+
+
+def _spd_matrix(x, name: str, p: int, unit: str) -> np.ndarray:
+    arr = as_float_array(x, name, ndim=(0, 1, 2))
+    if arr.ndim < 2:
+        return np.diag(_positive_vector(arr, name, p, unit))
+    if arr.shape != (p, p):
+        raise InputError(
+            f"{name} must be a scalar, shape ({p},) or ({p}, {p}), got {name}.shape={arr.shape}"
+        )
+    check_finite(arr, name)
+    asym = np.abs(arr - arr.T).max()
+    if asym > 1e-12 * max(np.abs(arr).max(), 1e-300):
+        raise InputError(
+            f"{name} must be symmetric positive definite, but it is not symmetric "
+            f"(max |G - G^T| = {asym:.3g})"
+        )
+    low = np.linalg.eigvalsh(arr).min()
+    if low <= 0:
+        raise InputError(
+            f"{name} must be symmetric positive definite, but its smallest eigenvalue is {low:.3g}"
+        )
+    return arr
+
+
+def _nonnegative(x, name: str) -> float:
+    try:
+        v = float(x)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{name} must be a number, got {x!r}") from exc
+    if not math.isfinite(v) or v < 0:
+        raise InputError(f"{name} must be finite and >= 0, got {v}")
+    return v
+
+
+class SlotineLiController:
+    """The Slotine-Li adaptive controller of one robot (see the module docstring).
+
+    Call :meth:`torque` at each control instant, then :meth:`adapt` with the time
+    to the next instant. The hot methods do no input checks (the closed-loop
+    simulation calls them 1000 times per simulated second); the constructor checks
+    everything.
+
+    Parameters
+    ----------
+    robot: the robot (its joint terms define the parameter layout).
+    theta0: initial estimate, shape (p,).
+    gains: :class:`AdaptiveGains`.
+    adapt: False holds ``theta_hat`` fixed at ``theta0`` (computed-torque-like
+        tracking with wrong parameters, the comparison baseline).
+    """
+
+    def __init__(
+        self, robot: Robot, theta0, gains: AdaptiveGains | None = None, *, adapt: bool = True
+    ):
+        gains = AdaptiveGains() if gains is None else gains
+        p, nv = robot.n_parameters, robot.nv
+        theta0 = as_float_array(theta0, "theta0", ndim=1)
+        if theta0.shape != (p,):
+            raise InputError(f"{theta0.shape=} but robot.n_parameters={p}")
+        check_finite(theta0, "theta0")
+        self.robot = robot
+        self.lam = _positive_vector(gains.lam, "lam (Lambda)", nv, "1/s")
+        self.kd = _spd_matrix(gains.kd, "kd (K_D)", nv, "N m s/rad")
+        self.gamma = _spd_matrix(gains.gamma, "gamma (Gamma)", p, "theta unit^2 / s")
+        self.kappa = _nonnegative(gains.composite, "composite (kappa)")
+        self.lam_f = _nonnegative(gains.filter_bandwidth, "filter_bandwidth")
+        if self.kappa > 0 and self.lam_f <= 0:
+            raise InputError("filter_bandwidth must be positive [rad/s] for composite adaptation")
+        self.dead_zone = _nonnegative(gains.dead_zone, "dead_zone")
+        self.lower, self.upper = self._bounds(gains, theta0)
+        self.adapting = bool(adapt)
+        self.gains = gains
+        self.ev = RegressorEvaluator(robot)
+        self._lie = robot.nq != robot.nv
+        self._diag_gamma = np.count_nonzero(self.gamma - np.diag(np.diag(self.gamma))) == 0
+        self._gdiag = np.diag(self.gamma).copy()
+        # state and preallocated work arrays
+        self.theta_hat = theta0.copy()
+        self.Y = np.zeros((nv, p))
+        self.s = np.zeros(nv)
+        self.tau = np.zeros(nv)
+        self.q_tilde = np.zeros(nv)
+        self.eps = np.zeros(nv)
+        self._grad = np.zeros(p)
+        if self.kappa > 0:
+            self._init_composite()
+
+    # --------------------------------------------------------------- checks
+    def _bounds(self, gains: AdaptiveGains, theta0: np.ndarray):
+        p = theta0.shape[0]
+        if gains.lower is None and gains.upper is None:
+            return None, None
+        lo = np.full(p, -np.inf) if gains.lower is None else as_float_array(gains.lower, "lower", 1)
+        hi = np.full(p, np.inf) if gains.upper is None else as_float_array(gains.upper, "upper", 1)
+        if lo.shape != (p,) or hi.shape != (p,):
+            raise InputError(f"bounds must have shape ({p},), got {lo.shape=} and {hi.shape=}")
+        if np.any(np.isnan(lo)) or np.any(np.isnan(hi)) or np.any(lo > hi):
+            i = int(np.argmax(np.isnan(lo) | np.isnan(hi) | (lo > hi)))
+            raise InputError(
+                f"bounds must satisfy lower <= upper; parameter "
+                f"{self.robot.parameter_names[i]}: [{lo[i]}, {hi[i]}]"
+            )
+        out = (theta0 < lo) | (theta0 > hi)
+        if out.any():
+            i = int(np.argmax(out))
+            raise InputError(
+                f"theta0 lies outside the bounds: {self.robot.parameter_names[i]} = "
+                f"{theta0[i]:g} not in [{lo[i]:g}, {hi[i]:g}]"
+            )
+        return lo, hi
+
+    # ------------------------------------------------------------ composite
+    def _init_composite(self) -> None:
+        nv, p, nr = self.robot.nv, self.robot.n_parameters, self.robot.n_rigid
+        self._Yp = np.zeros((nv, p))
+        self._Yh = np.zeros((nv, p))
+        self._Yp_prev = np.zeros((nv, p))
+        self._Yh_prev = np.zeros((nv, p))
+        self._Pf = np.zeros((nv, p))
+        self._Hf = np.zeros((nv, p))
+        self._tauf = np.zeros(nv)
+        self._tau_prev = np.zeros(nv)
+        self.Yf = np.zeros((nv, p))
+        self._h = 0.0  # time since the previous control instant (0: first call)
+        self._started = False
+        terms = self.robot.terms.enabled
+        self._ia_cols = None
+        if "Ia" in terms:
+            self._ia_cols = nr + np.arange(nv) * len(terms) + terms.index("Ia")
+        self._zero = np.zeros(nv)
+        self._rows = np.arange(nv)
+        self._nr = nr
+        self._has_terms = bool(terms)
+
+    def _composite_regressors(self, q, dq) -> None:
+        """Fill Y_p(q, dq) and Y_h(q, dq) (see the module docstring)."""
+        ev, nr = self.ev, self._nr
+        f = pin.computeJointTorqueRegressor
+        zero = self._zero
+        Yp, Yh = self._Yp, self._Yh
+        Yp[:, :nr] = f(ev.model0, ev.data0, q, zero, dq)
+        if self._ia_cols is not None:
+            Yp[self._rows, self._ia_cols] = dq
+        Yh[:, :nr] = f(ev.model, ev.data, q, dq, zero)
+        norm = math.sqrt(float(dq @ dq))
+        if norm > 0:
+            # dM/dt dq by a forward difference along dq (step 1e-8 rad: error ~1e-8 relative)
+            e = 1e-8 / norm
+            qp = pin.integrate(ev.model, q, e * dq) if self._lie else q + e * dq
+            dM = f(ev.model0, ev.data0, qp, zero, dq)
+            dM -= Yp[:, :nr]
+            dM *= 1.0 / e
+            Yh[:, :nr] -= dM
+        if self._has_terms:
+            ev._fill_joint_terms(Yh, q, dq, zero)
+
+    def _advance_filters(self) -> None:
+        """Move the filter states from the previous control instant to this one."""
+        h, lf = self._h, self.lam_f
+        a = math.exp(-lf * h)
+        # first-order hold for the continuous regressors, exact ZOH for the held torque
+        c = (1.0 - a - a * lf * h) / (lf * h)
+        b1 = 1.0 - a - c
+        for state, prev, cur in (
+            (self._Pf, self._Yp_prev, self._Yp),
+            (self._Hf, self._Yh_prev, self._Yh),
+        ):
+            state *= a
+            state += c * prev
+            state += b1 * cur
+        self._tauf *= a
+        self._tauf += (1.0 - a) * self._tau_prev
+
+    # ------------------------------------------------------------ hot path
+    def torque(self, q, dq, q_d, dq_d, ddq_d) -> np.ndarray:
+        """Control torque at one instant, shape (nv,) [N m or N].
+
+        ``q``, ``q_d`` shape (nq,); the others (nv,); float64 arrays (unchecked).
+        The returned array is reused at the next call: copy it to keep it.
+        """
+        ev = self.ev
+        if self._lie:
+            qt = pin.difference(ev.model, q_d, q)
+        else:
+            qt = q - q_d
+        self.q_tilde[:] = qt
+        dqt = dq - dq_d
+        dq_r = dq_d - self.lam * qt
+        ddq_r = ddq_d - self.lam * dqt
+        np.subtract(dq, dq_r, out=self.s)
+        Y = ev.slotine_li(q, dq, ddq_r, dq_r, self.Y)
+        np.dot(Y, self.theta_hat, out=self.tau)
+        self.tau -= self.kd @ self.s
+        if self.kappa > 0:
+            self._composite_regressors(q, dq)
+            if not self._started:
+                self._Pf[:] = self._Yp
+                self._started = True
+            elif self._h > 0:
+                self._advance_filters()
+            Yf = self.Yf
+            np.subtract(self._Yp, self._Pf, out=Yf)
+            Yf *= self.lam_f
+            Yf += self._Hf
+            np.dot(Yf, self.theta_hat, out=self.eps)
+            self.eps -= self._tauf
+        return self.tau
+
+    def adapt(self, dt: float) -> None:
+        """Integrate the adaptation law over ``dt`` [s] (explicit Euler, quantities of the last
+        :meth:`torque` call held), then project onto the bounds."""
+        if self.kappa > 0:
+            self._h = dt
+            self._Yp_prev, self._Yp = self._Yp, self._Yp_prev
+            self._Yh_prev, self._Yh = self._Yh, self._Yh_prev
+            self._tau_prev[:] = self.tau
+        if not self.adapting:
+            return
+        s = self.s
+        if self.dead_zone > 0:
+            s = s - np.clip(s, -self.dead_zone, self.dead_zone)
+        g = self._grad
+        np.dot(s, self.Y, out=g)
+        if self.kappa > 0:
+            g += self.kappa * (self.eps @ self.Yf)
+        if self._diag_gamma:
+            g *= self._gdiag
+            g *= dt
+            self.theta_hat -= g
+        else:
+            self.theta_hat -= dt * (self.gamma @ g)
+        if self.lower is not None:
+            np.clip(self.theta_hat, self.lower, self.upper, out=self.theta_hat)
+
+
+def lyapunov_function(robot: Robot, theta, gamma: np.ndarray, q, s, theta_hat) -> np.ndarray:
+    """``V = 1/2 s^T M(q) s + 1/2 theta_tilde^T Gamma^-1 theta_tilde`` along a run.
+
+    Parameters
+    ----------
+    theta: true parameters, shape (p,) (M includes their armature).
+    gamma: Gamma, shape (p, p) (e.g. ``controller.gamma``).
+    q: positions, shape (N, nq); s: sliding variable, shape (N, nv);
+    theta_hat: estimates, shape (N, p).
+
+    Returns V, shape (N,) [J].
+    """
+    theta = as_float_array(theta, "theta", 1)
+    q = as_float_array(q, "q", 2)
+    s = as_float_array(s, "s", 2)
+    theta_hat = as_float_array(theta_hat, "theta_hat", 2)
+    if not (q.shape[0] == s.shape[0] == theta_hat.shape[0]):
+        raise InputError(f"{q.shape=}, {s.shape=}, {theta_hat.shape=}: need the same N")
+    model = robot.with_parameters(theta)
+    data = model.createData()
+    kinetic = np.empty(q.shape[0])
+    for k in range(q.shape[0]):
+        M = pin.crba(model, data, q[k])
+        M = np.triu(M) + np.triu(M, 1).T
+        kinetic[k] = 0.5 * s[k] @ M @ s[k]
+    tilde = theta_hat - theta
+    sol = np.linalg.solve(np.asarray(gamma, dtype=float), tilde.T).T
+    return kinetic + 0.5 * np.einsum("ij,ij->i", tilde, sol)

@@ -1,0 +1,338 @@
+"""``manip-id identify``: base parameters of a robot from a log or a simulation.
+
+Pipeline: load (``--data``: NPZ, CSV or a Panda log folder) or simulate
+(``--simulate``), split off validation data (``--split`` or ``--validate``),
+preprocess each part alone (resampling, zero-phase low-pass, ddq by central
+differences, edge trimming: :func:`manip_id.signals.preprocess`), identify the
+base parameters, print a table and optionally write JSON (atomically).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+
+import numpy as np
+
+from ..datasets import Dataset, check_robot, load_dataset
+from ..errors import InputError
+from ..signals import DEFAULT_CUTOFF, DEFAULT_ORDER, preprocess
+from ._common import add_robot_arguments, robot_from_args, write_json
+
+METHODS = ("ols", "wls", "rls", "gradient")
+SIM_DEFAULTS = {"duration": 20.0, "rate": 200.0, "noise": 0.01, "seed": 0}
+#: Runs with more samples than this show progress on stderr.
+PROGRESS_SAMPLES = 20000
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "identify",
+        help="identify base parameters from data or a simulation",
+        description="Identify the base dynamic parameters of ROBOT from measured data (--data) or "
+        "from a simulated excitation (--simulate); print the parameters with their "
+        "relative standard deviations, the condition number and the relative torque "
+        "errors on training and validation data.",
+    )
+    add_robot_arguments(p)
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument(
+        "--data",
+        metavar="FILE",
+        help="measurements: .npz (t, q, dq, tau[, ddq, joint_names]), .csv "
+        "(t,q_<joint>...,dq_<joint>...,tau_<joint>...) or a Panda log folder",
+    )
+    src.add_argument(
+        "--simulate",
+        action="store_true",
+        help="simulate measurements along a random Fourier excitation",
+    )
+    sim = p.add_argument_group("simulation (with --simulate)")
+    sim.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        help=f"seconds [default {SIM_DEFAULTS['duration']:g}]",
+    )
+    sim.add_argument(
+        "--rate",
+        type=float,
+        default=None,
+        help=f"sampling rate [Hz] [default {SIM_DEFAULTS['rate']:g}]",
+    )
+    sim.add_argument(
+        "--noise",
+        type=float,
+        default=None,
+        help="torque noise, relative to each joint's RMS torque "
+        f"[default {SIM_DEFAULTS['noise']:g}]",
+    )
+    sim.add_argument(
+        "--seed",
+        type=int,
+        default=None,
+        help=f"seed of trajectory and noise [default {SIM_DEFAULTS['seed']}]",
+    )
+    sim.add_argument(
+        "--optimize",
+        action="store_true",
+        help="optimize the excitation (condition number) instead of a random one",
+    )
+    p.add_argument("--method", choices=METHODS, default="ols", help="estimator [default ols]")
+    val = p.add_mutually_exclusive_group()
+    val.add_argument("--validate", metavar="FILE", help="validation data (same formats as --data)")
+    val.add_argument(
+        "--split",
+        type=float,
+        metavar="FRACTION",
+        help="identify on the first FRACTION of the samples, validate on the rest",
+    )
+    sig = p.add_argument_group(
+        "signal processing (for data without ddq, or when --cutoff is given)"
+    )
+    sig.add_argument(
+        "--cutoff",
+        type=float,
+        default=None,
+        help=f"low-pass cut-off [Hz] [default {DEFAULT_CUTOFF:g}]",
+    )
+    sig.add_argument(
+        "--order",
+        type=int,
+        default=DEFAULT_ORDER,
+        help=f"Butterworth order [default {DEFAULT_ORDER}]",
+    )
+    sig.add_argument(
+        "--trim",
+        type=float,
+        default=None,
+        help="seconds dropped at each end of each part [default: the filter's edge transient]",
+    )
+    sig.add_argument("--decimate", type=int, default=1, help="keep every D-th sample [default 1]")
+    p.add_argument("--json", metavar="OUT", help="write the results as JSON to OUT")
+    p.add_argument("--chunk", type=int, default=1024, help="samples per regressor chunk")
+    p.set_defaults(func=run)
+
+
+# ------------------------------------------------------------------- helpers
+def _progress(total_hint: int):
+    """A callable(done, total) that prints a progress line on stderr at most every 0.5 s."""
+    state = {"last": 0.0, "shown": False}
+    tty = sys.stderr.isatty()
+
+    def report(done: int, total: int) -> None:
+        if total < PROGRESS_SAMPLES and total_hint < PROGRESS_SAMPLES:
+            return
+        now = time.perf_counter()
+        if done < total and now - state["last"] < (0.5 if tty else 5.0):
+            return
+        state["last"] = now
+        state["shown"] = True
+        pct = 100.0 * done / max(total, 1)
+        end = "" if tty and done < total else "\n"
+        lead = "\r" if tty else ""
+        print(f"{lead}identify: {pct:5.1f}% ({done}/{total})", end=end, file=sys.stderr, flush=True)
+
+    return report
+
+
+def _finite(x):
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def _prepare(ds: Dataset, args, what: str) -> Dataset:
+    """Preprocess when ddq is missing or a cut-off was asked for."""
+    if ds.ddq is not None and args.cutoff is None and args.decimate == 1 and args.trim is None:
+        return ds
+    cutoff = DEFAULT_CUTOFF if args.cutoff is None else args.cutoff
+    try:
+        return preprocess(
+            ds, cutoff=cutoff, order=args.order, decimate=args.decimate, trim=args.trim
+        )
+    except InputError as exc:
+        raise InputError(f"{what}: {exc}") from exc
+
+
+def _check_args(args) -> None:
+    if not args.simulate:
+        given = [n for n in ("duration", "rate", "noise", "seed") if getattr(args, n) is not None]
+        if given or args.optimize:
+            raise InputError(f"--{(given or ['optimize'])[0]} applies to --simulate only")
+    else:
+        for name in ("duration", "rate"):
+            value = getattr(args, name)
+            if value is not None and not (math.isfinite(value) and value > 0):
+                raise InputError(f"--{name} must be positive, got {value}")
+        if args.noise is not None and not (math.isfinite(args.noise) and args.noise >= 0):
+            raise InputError(f"--noise must be >= 0 (relative), got {args.noise}")
+    if args.split is not None and not 0.0 < args.split < 1.0:
+        raise InputError(f"--split must be a fraction in (0, 1), got {args.split}")
+    if args.cutoff is not None and not (math.isfinite(args.cutoff) and args.cutoff > 0):
+        raise InputError(f"--cutoff must be a positive frequency [Hz], got {args.cutoff}")
+    if args.trim is not None and not (math.isfinite(args.trim) and args.trim >= 0):
+        raise InputError(f"--trim must be >= 0 seconds, got {args.trim}")
+    if args.decimate < 1:
+        raise InputError(f"--decimate must be >= 1, got {args.decimate}")
+    if args.chunk < 1:
+        raise InputError(f"--chunk must be >= 1, got {args.chunk}")
+
+
+def _simulate(robot, args):
+    from ..simulation import simulate
+    from ..trajectories import optimize_excitation, random_trajectory
+
+    opts = {
+        k: (SIM_DEFAULTS[k] if getattr(args, k) is None else getattr(args, k)) for k in SIM_DEFAULTS
+    }
+    if args.optimize:
+        traj = optimize_excitation(robot, harmonics=5, seed=opts["seed"])
+        traj = getattr(traj, "trajectory", traj)
+    else:
+        traj = random_trajectory(robot, harmonics=5, seed=opts["seed"])
+    sim = simulate(
+        robot,
+        traj,
+        duration=opts["duration"],
+        rate=opts["rate"],
+        noise_tau=opts["noise"],
+        seed=opts["seed"],
+    )
+    return sim, opts
+
+
+# ----------------------------------------------------------------------- run
+def run(args: argparse.Namespace) -> int:
+    t_start = time.perf_counter()
+    _check_args(args)
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    data = validation = None
+    if not args.simulate:  # read the files first: bad data fail before the robot loads
+        data = load_dataset(args.data)
+    if args.validate is not None:
+        validation = load_dataset(args.validate)
+    timings["load"] = time.perf_counter() - t0
+    robot = robot_from_args(args)
+
+    theta_true = None
+    source: dict = {}
+    if args.simulate:
+        t0 = time.perf_counter()
+        sim, opts = _simulate(robot, args)
+        data, theta_true = sim.dataset, np.asarray(sim.theta_true, dtype=float)
+        source = {"simulated": opts}
+        timings["simulate"] = time.perf_counter() - t0
+    else:
+        check_robot(data, robot)
+        source = {"data": str(args.data)}
+    if validation is not None:
+        check_robot(validation, robot)
+        source["validate"] = str(args.validate)
+    elif args.split is not None:
+        data, validation = data.split(args.split)
+        source["split"] = args.split
+
+    t0 = time.perf_counter()
+    train = _prepare(data, args, "training data")
+    valid = None if validation is None else _prepare(validation, args, "validation data")
+    timings["preprocess"] = time.perf_counter() - t0
+    settings = train.meta.get("preprocess")
+
+    from ..identification import identify
+
+    result = identify(
+        robot,
+        train.q,
+        train.dq,
+        train.ddq,
+        train.tau,
+        method=args.method,
+        validation=None if valid is None else (valid.q, valid.dq, valid.ddq, valid.tau),
+        chunk=args.chunk,
+        progress=_progress(train.n_samples + (0 if valid is None else valid.n_samples)),
+    )
+    timings.update({k: float(v) for k, v in dict(result.timings).items()})
+    timings["total"] = time.perf_counter() - t_start
+
+    report = _report(robot, result, train, valid, theta_true, timings, args, source, settings)
+    print(result.table())
+    print(_summary(robot, report))
+    if args.json:
+        write_json(args.json, report)
+        print(f"wrote {args.json}")
+    return 0
+
+
+def _report(robot, result, train, valid, theta_true, timings, args, source, settings) -> dict:
+    rel = result.relative_error
+    estimate = np.asarray(result.estimate, dtype=float)
+    std = np.asarray(result.std, dtype=float)
+    std_percent = np.asarray(result.std_percent, dtype=float)
+    report = {
+        "robot": robot.name,
+        "n_samples": int(result.n_samples),
+        "n_validation_samples": 0 if valid is None else int(valid.n_samples),
+        "n_parameters": int(robot.n_parameters),
+        "n_base": int(len(estimate)),
+        "method": args.method,
+        "joint_terms": list(robot.terms.enabled),
+        "condition_number": _finite(result.condition_number),
+        "relative_error": {
+            "train": _finite(rel.train),
+            "train_per_joint": [_finite(x) for x in np.atleast_1d(rel.train_per_joint)],
+            "validation": None if valid is None else _finite(rel.validation),
+            "per_joint_validation": None
+            if valid is None
+            else [_finite(x) for x in np.atleast_1d(rel.validation_per_joint)],
+        },
+        "joints": list(robot.dof_names),
+        "base_parameters": [
+            {"expression": str(e), "value": float(v), "std": _finite(s), "std_percent": _finite(sp)}
+            for e, v, s, sp in zip(result.expressions, estimate, std, std_percent, strict=True)
+        ],
+        "source": source,
+        "preprocess": None
+        if settings is None
+        else {k: getattr(settings, k) for k in settings.__dataclass_fields__},
+        "timings": {k: round(float(v), 6) for k, v in timings.items()},
+    }
+    if theta_true is not None:
+        beta_true = np.asarray(result.base.to_base(theta_true), dtype=float)
+        err = estimate - beta_true
+        report["parameter_error"] = _finite(np.linalg.norm(err) / np.linalg.norm(beta_true))
+        report["parameter_error_in_std"] = _finite(
+            np.max(np.abs(err) / np.where(std > 0, std, np.inf))
+        )
+        report["true_base_parameters"] = beta_true.tolist()
+    return report
+
+
+def _summary(robot, report: dict) -> str:
+    rel = report["relative_error"]
+
+    def pct(x):
+        return "n/a" if x is None else f"{100 * x:.3f} %"
+
+    lines = [
+        f"robot {report['robot']}: {report['n_base']} base parameters of {report['n_parameters']}, "
+        f"{report['n_samples']} training samples, method {report['method']}",
+        f"condition number {report['condition_number']:.6g}"
+        if report["condition_number"]
+        else "condition number n/a",
+        f"relative torque error: train {pct(rel['train'])}, validation {pct(rel['validation'])}",
+    ]
+    per_joint = rel["per_joint_validation"] or rel["train_per_joint"]
+    label = "validation" if rel["per_joint_validation"] else "train"
+    lines.append(
+        f"per joint ({label}): "
+        + ", ".join(f"{j} {pct(e)}" for j, e in zip(report["joints"], per_joint, strict=True))
+    )
+    if "parameter_error" in report:
+        lines.append(
+            f"base parameter error vs truth: {pct(report['parameter_error'])} "
+            f"(max {report['parameter_error_in_std']:.2f} std)"
+        )
+    return "\n".join(lines)

@@ -1,0 +1,54 @@
+"""Estimators of theta in the linear-in-parameters model.
+
+Every estimator here solves the same regression, sample by sample or in a batch::
+
+    z_k = Y_k theta + e_k        Y_k of shape (nv, p), z_k of shape (nv,)
+                                 (scalar case: phi_k of shape (p,), z_k scalar)
+
+stacked sample-major into ``z = Phi theta + e`` (row ``k*nv + j`` is output
+``j`` of sample ``k``). The prediction error of an estimate is
+``eps = Phi theta_hat - z`` and the parameter error ``theta_tilde = theta_hat - theta``.
+
+Batch least squares minimise ``||z - Phi theta||^2`` (weighted: per output
+``j`` by ``1/sigma_j^2``). Everything they need is the information
+
+    A = Phi^T Phi (p, p),   b = Phi^T z (p,),   z^T z,   number of rows,
+
+kept per output by :class:`InformationAccumulator` (memory O(nv p^2) whatever
+the number of samples; accumulators of disjoint data add). The estimate is
+``theta_hat = A^-1 b``; with white noise of variance ``sigma^2`` its
+covariance is ``sigma^2 A^-1`` with ``sigma^2 = RSS / (n_rows - p)`` and
+``RSS = z^T z - 2 b^T theta_hat + theta_hat^T A theta_hat``.
+
+Online laws (:class:`GradientEstimator`, :class:`RLSEstimator`) update
+``theta_hat`` from one sample at a time; RLS with no forgetting converges to
+the batch estimate (it *is* the batch estimate, regularized by ``P0^-1``).
+"""
+
+from .accumulator import InformationAccumulator
+from .batch import (
+    COND_LIMIT,
+    INFO_RANK_RTOL,
+    STACKED_RANK_RTOL,
+    format_direction,
+    solve_accumulator,
+    solve_normal_equations,
+    solve_stacked,
+)
+from .online import GradientEstimator, OnlineHistory, RLSEstimator
+from .results import LeastSquaresSolution
+
+__all__ = [
+    "COND_LIMIT",
+    "INFO_RANK_RTOL",
+    "STACKED_RANK_RTOL",
+    "GradientEstimator",
+    "InformationAccumulator",
+    "LeastSquaresSolution",
+    "OnlineHistory",
+    "RLSEstimator",
+    "format_direction",
+    "solve_accumulator",
+    "solve_normal_equations",
+    "solve_stacked",
+]

@@ -1,0 +1,440 @@
+"""Identification: robot + data -> base parameters with their uncertainty, streamed.
+
+The pipeline, for N samples ``(q, dq, ddq, tau)``::
+
+    base parameters     theta_b = theta_1 + K theta_2        (structural rank analysis)
+    regressor chunks    Y_b = Y(q, dq, ddq)[..., independent]    (N, nv, r), chunk by chunk
+    accumulate          A_j, b_j, zz_j per joint                (memory O(nv r^2))
+    rank check          what these data excite (RankDeficiencyError otherwise)
+    solve               OLS / WLS from the sums, or one online pass (RLS / gradient)
+    validate            relative torque error on other data, one more streamed pass
+
+Nothing holds the stacked regressor: memory is O(chunk nv p + nv r^2) whatever N.
+The relative torque error is ``||tau - tau_hat|| / ||tau||`` over all samples and
+joints, also per joint; the training one comes from the sums
+(``RSS_j = zz_j - 2 b_j.theta + theta.A_j.theta``), so its floor is about 1e-8.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ._checks import as_float_array, check_finite
+from .errors import InputError, RankDeficiencyError
+from .estimators import (
+    GradientEstimator,
+    InformationAccumulator,
+    LeastSquaresSolution,
+    OnlineHistory,
+    RLSEstimator,
+    solve_accumulator,
+)
+from .identifiability import BaseParameters, RankAnalysis, analyze, analyze_information
+from .regressor import DEFAULT_CHUNK, check_states, iter_regressor
+from .robot import Robot
+
+METHODS: tuple[str, ...] = ("ols", "wls", "rls", "gradient")
+
+
+@dataclass(frozen=True)
+class RelativeError:
+    """Relative torque errors ``||tau - tau_hat|| / ||tau||``, overall and per joint (nv,)."""
+
+    train: float
+    train_per_joint: np.ndarray
+    validation: float | None = None
+    validation_per_joint: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class IdentificationResult:
+    """Identified base parameters, their uncertainty and how they were obtained.
+
+    Attributes
+    ----------
+    method: "ols", "wls", "rls" or "gradient"
+    robot_name: name of the robot
+    names: one name per base parameter (its independent column, ``R`` if regrouped)
+    expressions: each base parameter in standard parameter names
+    estimate: base parameters theta_b, shape (r,) [units of the independent columns]
+    std: standard deviations, shape (r,); std_percent: ``100 std / |estimate|`` [%]
+    covariance: shape (r, r): ``sigma2 (Y_b^T Y_b)^-1`` (OLS, and RLS/gradient at their
+        final estimate), ``(Y_b^T W Y_b)^-1`` for WLS
+    sigma2: residual variance [(N m)^2] (weighted, about 1, for WLS)
+    noise_variance: per-joint residual variance, shape (nv,) [(N m)^2]
+    condition_number: 2-norm condition number of the base regressor on these data
+    rank_analysis: what these data excite (analysis of the accumulated information)
+    relative_error: train / validation relative torque errors
+    n_samples: number of training samples N
+    timings: seconds per stage
+    solver: how the estimate was computed, including any fallback
+    base: the base parametrization used
+    dof_names: joint names, length nv
+    history: record of the online law (``rls``/``gradient``), else None
+    """
+
+    method: str
+    robot_name: str
+    names: list[str]
+    expressions: list[str]
+    estimate: np.ndarray
+    std: np.ndarray
+    std_percent: np.ndarray
+    covariance: np.ndarray
+    sigma2: float
+    noise_variance: np.ndarray
+    condition_number: float
+    rank_analysis: RankAnalysis
+    relative_error: RelativeError
+    n_samples: int
+    timings: dict[str, float]
+    solver: str
+    base: BaseParameters
+    dof_names: list[str] = field(default_factory=list)
+    history: OnlineHistory | None = None
+
+    def predict(self, robot: Robot, q, dq, ddq, *, chunk: int = DEFAULT_CHUNK) -> np.ndarray:
+        """Predicted torques ``Y_b(q, dq, ddq) theta_b``, shape (N, nv) [N m or N].
+
+        ``q`` (N, nq), ``dq`` and ``ddq`` (N, nv); streamed chunk by chunk.
+        """
+        if robot.n_parameters != len(self.base.names):
+            raise InputError(
+                f"robot.n_parameters={robot.n_parameters} but this result was "
+                f"identified for {len(self.base.names)} parameters"
+            )
+        batched, (q, dq, ddq) = check_states(robot, q=q, dq=dq, ddq=ddq)
+        if not batched:
+            q, dq, ddq = q[None], dq[None], ddq[None]
+        out = np.empty((q.shape[0], robot.nv))
+        ind = self.base.independent
+        for c in iter_regressor(robot, q, dq, ddq, chunk=chunk):
+            out[c.start : c.stop] = c.Y[:, :, ind] @ self.estimate
+        return out if batched else out[0]
+
+    def to_dict(self) -> dict:
+        """A JSON-ready dictionary (lists and floats; inf/NaN as None)."""
+        re = self.relative_error
+        return {
+            "method": self.method,
+            "robot": self.robot_name,
+            "n_samples": self.n_samples,
+            "n_base": len(self.names),
+            "parameters": [
+                {"name": n, "expression": e, "estimate": _f(x), "std": _f(s), "std_percent": _f(sp)}
+                for n, e, x, s, sp in zip(
+                    self.names,
+                    self.expressions,
+                    self.estimate,
+                    self.std,
+                    self.std_percent,
+                    strict=True,
+                )
+            ],
+            "sigma2": _f(self.sigma2),
+            "noise_variance": dict(zip(self.dof_names, map(_f, self.noise_variance), strict=True)),
+            "condition_number": _f(self.condition_number),
+            "rank": self.rank_analysis.rank,
+            "unexcited": list(self.rank_analysis.unidentifiable),
+            "relative_error": {
+                "train": _f(re.train),
+                "train_per_joint": dict(
+                    zip(self.dof_names, map(_f, re.train_per_joint), strict=True)
+                ),
+                "validation": _f(re.validation),
+                "validation_per_joint": (
+                    None
+                    if re.validation_per_joint is None
+                    else dict(zip(self.dof_names, map(_f, re.validation_per_joint), strict=True))
+                ),
+            },
+            "covariance": [[_f(v) for v in row] for row in self.covariance],
+            "timings": {k: round(v, 6) for k, v in self.timings.items()},
+            "solver": self.solver,
+        }
+
+    def table(self, max_rows: int | None = None) -> str:
+        """A readable text table: one row per base parameter, then the fit statistics."""
+        re = self.relative_error
+        lines = [
+            f"{self.method.upper()} identification of {self.robot_name}: {len(self.names)} base "
+            f"parameters from {self.n_samples} samples",
+            f"solver: {self.solver}",
+            f"condition number {self.condition_number:.4g}, sigma^2 {self.sigma2:.4g}, "
+            f"relative torque error train {re.train:.4g}"
+            + (f", validation {re.validation:.4g}" if re.validation is not None else ""),
+        ]
+        w = max([len("parameter")] + [len(n) for n in self.names])
+        lines.append(f"{'parameter':<{w}}  {'estimate':>13}  {'std':>11}  {'std %':>8}  expression")
+        rows = list(
+            zip(
+                self.names, self.estimate, self.std, self.std_percent, self.expressions, strict=True
+            )
+        )
+        for n, x, s, sp, e in rows[: max_rows if max_rows is not None else len(rows)]:
+            pct = f"{sp:8.3g}" if np.isfinite(sp) else f"{'inf':>8}"
+            lines.append(f"{n:<{w}}  {x:13.6g}  {s:11.4g}  {pct}  {e}")
+        if max_rows is not None and len(rows) > max_rows:
+            lines.append(f"... {len(rows) - max_rows} more")
+        per = ", ".join(
+            f"{d} {v:.3g}" for d, v in zip(self.dof_names, re.train_per_joint, strict=True)
+        )
+        lines.append(f"train error per joint: {per}")
+        if re.validation_per_joint is not None:
+            per = ", ".join(
+                f"{d} {v:.3g}" for d, v in zip(self.dof_names, re.validation_per_joint, strict=True)
+            )
+            lines.append(f"validation error per joint: {per}")
+        return "\n".join(lines)
+
+
+def _f(x):
+    if x is None:
+        return None
+    x = float(x)
+    return x if np.isfinite(x) else None
+
+
+def _check_tau(robot: Robot, tau, n: int, name: str = "tau") -> np.ndarray:
+    tau = as_float_array(tau, name, ndim=2)
+    if tau.shape != (n, robot.nv):
+        raise InputError(
+            f"{name}.shape={tau.shape} but expected ({n}, robot.nv={robot.nv}) to match the states"
+        )
+    check_finite(tau, name, robot.dof_names)
+    return tau
+
+
+def _states(robot: Robot, q, dq, ddq, tau, prefix: str = ""):
+    batched, (q, dq, ddq) = check_states(robot, q=q, dq=dq, ddq=ddq)
+    if not batched:
+        raise InputError(
+            f"{prefix}identification takes N samples (2-D arrays), got q.shape={q.shape}"
+        )
+    tau = _check_tau(robot, tau, q.shape[0], prefix + "tau")
+    return q, dq, ddq, tau
+
+
+def _online_estimator(method: str, r: int, options: dict):
+    opts = dict(options)
+    theta0 = opts.pop("theta0", np.zeros(r))
+    record = opts.pop("record_every", 0)
+    if method == "rls":
+        P0 = opts.pop("P0", 1e6)
+        est = RLSEstimator(theta0, P0, record_every=record, **opts)
+        what = f"RLS (P0={P0 if np.ndim(P0) == 0 else 'given'}, forgetting {est.forgetting:g})"
+    else:
+        gamma = opts.pop("gamma", 1.0)
+        normalized = opts.pop("normalized", True)
+        est = GradientEstimator(theta0, gamma, normalized=normalized, record_every=record, **opts)
+        what = ("normalized " if normalized else "") + "gradient law"
+    return est, what
+
+
+def identify(
+    robot: Robot,
+    q,
+    dq,
+    ddq,
+    tau,
+    *,
+    method: str = "ols",
+    validation: tuple | None = None,
+    chunk: int = DEFAULT_CHUNK,
+    base: BaseParameters | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    minimum_norm: bool = False,
+    online: dict | None = None,
+    dt: float = 1.0,
+) -> IdentificationResult:
+    """Identify the base parameters of ``robot`` from N samples, streamed.
+
+    Parameters
+    ----------
+    robot: the robot (its joint terms decide the columns)
+    q: positions [rad or m], shape (N, nq); dq [rad/s], ddq [rad/s^2], tau [N m], shape (N, nv)
+    method: "ols" (ordinary least squares), "wls" (weighted by per-joint noise
+        variances from the OLS residuals), "rls" (one pass of recursive least
+        squares), "gradient" (one pass of the normalized gradient law)
+    validation: optional ``(q, dq, ddq, tau)`` for the validation error
+    chunk: samples per regressor chunk
+    base: base parametrization; default the structural one of ``analyze(robot)``
+    progress: called as ``progress(done, total)`` after every chunk
+    minimum_norm: solve rank-deficient data with the minimum-norm solution
+        instead of raising :class:`RankDeficiencyError`
+    online: options of the online law (``theta0``, ``P0``, ``forgetting``,
+        ``p_min``, ``p_max``, ``gamma``, ``normalized``, ``bounds``,
+        ``record_every``); defaults ``theta0 = 0``, ``P0 = 1e6``, ``gamma = 1``,
+        normalized
+    dt: sample time [s] given to the online law (the gradient law's Euler step)
+    """
+    timings: dict[str, float] = {}
+    t_start = time.perf_counter()
+    if method not in METHODS:
+        raise InputError(f"method must be one of {list(METHODS)}, got {method!r}")
+    if int(chunk) < 1:
+        raise InputError(f"chunk must be a positive number of samples, got {chunk}")
+    q, dq, ddq, tau = _states(robot, q, dq, ddq, tau)
+    n = q.shape[0]
+    if validation is not None:
+        try:
+            vq, vdq, vddq, vtau = validation
+        except (TypeError, ValueError) as exc:
+            raise InputError("validation must be a tuple (q, dq, ddq, tau)") from exc
+        vq, vdq, vddq, vtau = _states(robot, vq, vdq, vddq, vtau, prefix="validation ")
+    timings["checks"] = time.perf_counter() - t_start
+
+    t0 = time.perf_counter()
+    if base is None:
+        base = analyze(robot).base
+        timings["structural_analysis"] = time.perf_counter() - t0
+    elif not isinstance(base, BaseParameters):
+        raise InputError(f"base must be BaseParameters, got {type(base).__name__}")
+    if len(base.names) != robot.n_parameters:
+        raise InputError(
+            f"base is for {len(base.names)} parameters but robot.n_parameters={robot.n_parameters}"
+        )
+    ind = base.independent
+    r, nv = base.n_base, robot.nv
+    if n * nv <= r:
+        raise InputError(
+            f"{n} samples give {n * nv} equations for {r} base parameters: need more samples"
+        )
+
+    acc = InformationAccumulator(r, nv)
+    est = None
+    solver_online = ""
+    if method in ("rls", "gradient"):
+        est, solver_online = _online_estimator(method, r, online or {})
+    t_reg = t_acc = t_onl = 0.0
+    t0 = time.perf_counter()
+    for c in iter_regressor(robot, q, dq, ddq, chunk=int(chunk)):
+        t1 = time.perf_counter()
+        t_reg += t1 - t0
+        if est is None:
+            acc.add(c.Y, tau[c.start : c.stop], columns=ind, check=False)
+        else:
+            Yb = np.ascontiguousarray(c.Y[:, :, ind])
+            acc.add(Yb, tau[c.start : c.stop], check=False)
+        t2 = time.perf_counter()
+        t_acc += t2 - t1
+        if est is not None:
+            step = est.step
+            for i in range(c.stop - c.start):
+                step(Yb[i], tau[c.start + i], dt)
+            t_onl += time.perf_counter() - t2
+        if progress is not None:
+            progress(c.stop, n)
+        t0 = time.perf_counter()
+    timings["regressor"] = t_reg
+    timings["accumulate"] = t_acc
+    if est is not None:
+        timings["online"] = t_onl
+
+    t0 = time.perf_counter()
+    ra = analyze_information(acc.A, base.base_names, n_rows=acc.n_rows)
+    timings["rank_analysis"] = time.perf_counter() - t0
+    if ra.rank < r and not minimum_norm:
+        dirs = ra.unidentifiable
+        shown = "; ".join(dirs[:5]) + ("; ..." if len(dirs) > 5 else "")
+        raise RankDeficiencyError(
+            f"these data excite only {ra.rank} of {r} base parameter directions of "
+            f"{robot.name}; unexcited: {shown} (use a more exciting trajectory, or "
+            "minimum_norm=True)",
+            ra.rank,
+            r,
+            dirs,
+        )
+
+    t0 = time.perf_counter()
+    ls_method = "wls" if method == "wls" else "ols"
+    ls: LeastSquaresSolution = solve_accumulator(
+        acc,
+        method=ls_method,
+        names=base.base_names,
+        minimum_norm=minimum_norm,
+        rank_rtol=ra.tolerance,
+    )
+    estimate, covariance, sigma2 = ls.estimate, ls.covariance, ls.sigma2
+    solver = ls.solver
+    rss_j = ls.rss_per_joint
+    noise_var = ls.noise_variance
+    if est is not None:
+        estimate = est.theta
+        rss_j = acc.residual_sum_of_squares(estimate)
+        sigma2 = float(rss_j.sum() / max(acc.n_rows - ls.rank, 1))
+        covariance = ls.covariance * (sigma2 / ls.sigma2) if ls.sigma2 > 0 else ls.covariance * 0
+        noise_var = rss_j / max(n - ls.rank / nv, 1e-300)
+        solver = (
+            f"{solver_online}, one pass over {n} samples; covariance sigma^2 (Y^T Y)^-1 "
+            f"at the final estimate ({ls.solver})"
+        )
+    timings["solve"] = time.perf_counter() - t0
+    zz_j = acc.zz_joint
+    with np.errstate(divide="ignore", invalid="ignore"):
+        train_j = np.sqrt(rss_j / zz_j)
+    train = float(np.sqrt(rss_j.sum() / zz_j.sum())) if zz_j.sum() > 0 else float("nan")
+
+    val = val_j = None
+    if validation is not None:
+        t0 = time.perf_counter()
+        sse, zz = np.zeros(nv), np.zeros(nv)
+        for c in iter_regressor(robot, vq, vdq, vddq, chunk=int(chunk)):
+            err = c.Y[:, :, ind] @ estimate - vtau[c.start : c.stop]
+            sse += np.einsum("nj,nj->j", err, err)
+            zz += np.einsum("nj,nj->j", vtau[c.start : c.stop], vtau[c.start : c.stop])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            val_j = np.sqrt(sse / zz)
+        val = float(np.sqrt(sse.sum() / zz.sum())) if zz.sum() > 0 else float("nan")
+        timings["validation"] = time.perf_counter() - t0
+    timings["total"] = time.perf_counter() - t_start
+
+    std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        std_pct = 100.0 * std / np.abs(estimate)
+    std_pct = np.where(np.isnan(std_pct), np.inf, std_pct)
+    return IdentificationResult(
+        method=method,
+        robot_name=robot.name,
+        names=list(base.base_names),
+        expressions=list(base.expressions),
+        estimate=estimate,
+        std=std,
+        std_percent=std_pct,
+        covariance=covariance,
+        sigma2=sigma2,
+        noise_variance=noise_var,
+        condition_number=float(ra.condition_number),
+        rank_analysis=ra,
+        relative_error=RelativeError(train, train_j, val, val_j),
+        n_samples=n,
+        timings=timings,
+        solver=solver,
+        base=base,
+        dof_names=list(robot.dof_names),
+        history=est.history if est is not None and est.record_every else None,
+    )
+
+
+def identify_dataset(
+    robot: Robot, dataset, *, ddq=None, validation=None, **kwargs
+) -> IdentificationResult:
+    """:func:`identify` on a :class:`~manip_id.datasets.Dataset` (``ddq`` from the dataset
+    unless given); ``validation`` may be another Dataset. Other keywords as :func:`identify`."""
+    acc_arr = dataset.ddq if ddq is None else ddq
+    if acc_arr is None:
+        raise InputError(
+            "the dataset has no accelerations (ddq): estimate them first "
+            "(manip_id.signals) or pass ddq="
+        )
+    if validation is not None and hasattr(validation, "tau"):
+        if validation.ddq is None:
+            raise InputError("the validation dataset has no accelerations (ddq)")
+        validation = (validation.q, validation.dq, validation.ddq, validation.tau)
+    return identify(
+        robot, dataset.q, dataset.dq, acc_arr, dataset.tau, validation=validation, **kwargs
+    )

@@ -1,0 +1,640 @@
+"""A meshcat scene of the robot: meshes, motion, inertia ellipsoids, identifiability colors.
+
+The scene is recorded offline (no server, no network): every meshcat command
+is kept in a scene tree, exactly as meshcat's own server keeps it, and
+exported either as one standalone HTML file (three.js from the meshcat
+package is embedded) or replayed into a live viewer on 127.0.0.1.
+
+Node paths::
+
+    robot/visuals/<geometry>          visual meshes (Pinocchio's MeshcatVisualizer)
+    inertia/<label>/<joint>           equivalent inertia ellipsoids of a parameter set
+
+Animation frames are ``k / fps`` [s] after the first time stamp; the viewer's
+"Animations" panel has play/pause and a time slider. The exported page reads
+``#t=<seconds>`` from its URL to open paused at that time.
+"""
+
+from __future__ import annotations
+
+import base64
+import html as html_lib
+import json
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import meshcat
+import meshcat.geometry as mg
+import numpy as np
+import pinocchio as pin
+import umsgpack
+from meshcat.animation import Animation
+from meshcat.servers.tree import SceneTree, find_node, walk
+
+from .._checks import as_float_array, check_finite
+from ..errors import InfeasibleTrajectoryError, InputError, ManipIdError
+from ..robot import Robot
+from ._io import atomic_write_text
+
+#: Colors of successive parameter sets (RGBA): nominal, then compared ones.
+SET_COLORS: tuple[tuple[float, float, float, float], ...] = (
+    (0.15, 0.45, 0.95, 0.45),
+    (0.95, 0.45, 0.10, 0.45),
+    (0.55, 0.20, 0.80, 0.45),
+    (0.10, 0.70, 0.55, 0.45),
+)
+GREY = (0.6, 0.6, 0.6, 1.0)
+_ROBOT_ROOT = "robot"
+
+
+# ------------------------------------------------------------------ ellipsoids
+@dataclass(frozen=True)
+class EquivalentEllipsoid:
+    """The solid ellipsoid with the inertia of one body (see :mod:`manip_id.viz`).
+
+    Attributes
+    ----------
+    joint: name of the joint carrying the body.
+    mass: m [kg].
+    com: centre of mass in the joint frame [m], shape (3,).
+    axes: principal axes as columns, a rotation matrix, shape (3, 3).
+    moments: principal moments of inertia about the CoM [kg m^2], shape (3,).
+    semi_axes: semi-axes along ``axes`` [m], shape (3,); NaN when not physical.
+    physical: whether the block admits the ellipsoid.
+    note: why it does not (empty when physical).
+    """
+
+    joint: str
+    mass: float
+    com: np.ndarray
+    axes: np.ndarray
+    moments: np.ndarray
+    semi_axes: np.ndarray
+    physical: bool
+    note: str = ""
+
+    @property
+    def placement(self) -> np.ndarray:
+        """Homogeneous transform joint frame <- ellipsoid frame, shape (4, 4)."""
+        T = np.eye(4)
+        T[:3, :3] = self.axes
+        T[:3, 3] = self.com
+        return T
+
+
+def equivalent_ellipsoid(block, joint: str = "") -> EquivalentEllipsoid:
+    """Equivalent solid ellipsoid of one 10-parameter body block.
+
+    ``block = [m, mcx, mcy, mcz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]`` [kg, kg m, kg m^2],
+    inertia about the joint origin. Non-physical blocks return ``physical=False``
+    with a note; they are never an error.
+    """
+    b = as_float_array(block, "block", ndim=1)
+    if b.shape != (10,):
+        raise InputError(f"a body block has 10 parameters, got block.shape={b.shape}")
+    check_finite(b, "block")
+    m = float(b[0])
+    nan3 = np.full(3, np.nan)
+    if m <= 0:
+        return EquivalentEllipsoid(joint, m, nan3, np.eye(3), nan3, nan3, False,
+                                   f"{joint}: mass {m:.4g} kg <= 0")
+    c = b[1:4] / m
+    ixx, ixy, iyy, ixz, iyz, izz = b[4:]
+    I_o = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+    I_c = I_o - m * (float(c @ c) * np.eye(3) - np.outer(c, c))
+    moments, axes = np.linalg.eigh(I_c)
+    if np.linalg.det(axes) < 0:
+        axes[:, 2] *= -1.0
+    scale = max(float(np.abs(moments).max()), 1e-300)
+    tol = 1e-9 * scale
+    if moments.min() <= tol:
+        return EquivalentEllipsoid(joint, m, c, axes, moments, nan3, False,
+                                   f"{joint}: inertia about the CoM is not positive definite "
+                                   f"(smallest moment {moments.min():.3g} kg m^2)")
+    sq = 5.0 / (2.0 * m) * (moments.sum() - 2.0 * moments)
+    if sq.min() < -tol * 5.0 / (2.0 * m):
+        return EquivalentEllipsoid(joint, m, c, axes, moments, nan3, False,
+                                   f"{joint}: principal moments {np.round(moments, 6).tolist()} "
+                                   "violate the triangle inequality")
+    return EquivalentEllipsoid(joint, m, c, axes, moments, np.sqrt(np.clip(sq, 0.0, None)), True)
+
+
+def inertia_ellipsoids(robot: Robot, theta) -> list[EquivalentEllipsoid]:
+    """Equivalent ellipsoid of every body of ``theta`` (shape (p,)), in body order."""
+    blocks = robot.rigid_body_parameters(theta)
+    return [equivalent_ellipsoid(blk, j) for blk, j in zip(blocks, robot.joint_names, strict=True)]
+
+
+# ------------------------------------------------------------- identifiability
+@dataclass(frozen=True)
+class LinkIdentifiability:
+    """How well each link's parameters are determined.
+
+    Attributes
+    ----------
+    joints: joint names, one per body, shape (n_bodies,).
+    share: determined fraction per link in [0, 1], shape (n_bodies,).
+    determined: number of determined parameters per link.
+    total: number of parameters per link.
+    criterion: a sentence saying what "determined" means here.
+    """
+
+    joints: tuple[str, ...]
+    share: np.ndarray
+    determined: np.ndarray
+    total: np.ndarray
+    criterion: str
+
+
+def link_identifiability(
+    robot: Robot,
+    *,
+    identifiable=None,
+    relative_std=None,
+    threshold: float = 0.1,
+) -> LinkIdentifiability:
+    """Share of each link's parameters that the data determine.
+
+    identifiable: per standard parameter, bool, shape (p,): whether it is
+        identifiable (e.g. a base parameter on its own, or excited by the data).
+    relative_std: per standard parameter, shape (p,): ``std / |value|`` [-];
+        infinite or NaN counts as undetermined.
+    threshold: a parameter is determined when its relative std is at most this.
+
+    At least one of the two is needed; with both, a parameter must pass both.
+    """
+    p = robot.n_parameters
+    if identifiable is None and relative_std is None:
+        raise InputError("link_identifiability needs identifiable= and/or relative_std=")
+    ok = np.ones(p, dtype=bool)
+    parts = []
+    if identifiable is not None:
+        flags = np.asarray(identifiable)
+        if flags.shape != (p,) or flags.dtype.kind not in "bi":
+            raise InputError(f"identifiable must be {p} booleans (one per parameter of "
+                             f"{robot.name}), got shape {flags.shape} dtype {flags.dtype}")
+        ok &= flags.astype(bool)
+        parts.append("identifiable")
+    if relative_std is not None:
+        rel = np.asarray(relative_std, dtype=float)
+        if rel.shape != (p,):
+            raise InputError(f"relative_std.shape={rel.shape} but robot.n_parameters={p}")
+        if not np.isfinite(threshold) or threshold <= 0:
+            raise InputError(f"threshold must be a positive number, got {threshold}")
+        ok &= np.isfinite(rel) & (rel <= threshold)
+        parts.append(f"relative std <= {threshold:g}")
+    owner = [_owner_joint(n) for n in robot.parameter_names]
+    det = np.array([sum(1 for o, k in zip(owner, ok, strict=True) if o == j and k)
+                    for j in robot.joint_names])
+    tot = np.array([sum(1 for o in owner if o == j) for j in robot.joint_names])
+    share = det / np.maximum(tot, 1)
+    return LinkIdentifiability(tuple(robot.joint_names), share, det, tot, " and ".join(parts))
+
+
+def _owner_joint(parameter_name: str) -> str:
+    head = parameter_name.rsplit(".", 1)[0]
+    return head.split("[", 1)[0]
+
+
+def share_color(share: float) -> tuple[float, float, float, float]:
+    """Red (0) -> yellow (0.5) -> green (1), RGBA."""
+    s = float(np.clip(share, 0.0, 1.0))
+    red, yellow, green = np.array([0.85, 0.15, 0.1]), np.array([0.95, 0.8, 0.1]), np.array(
+        [0.15, 0.7, 0.2])
+    rgb = red + (yellow - red) * (2 * s) if s <= 0.5 else yellow + (green - yellow) * (2 * s - 1)
+    return (*map(float, rgb), 1.0)
+
+
+def _hex(color) -> int:
+    r, g, b = (int(round(255 * float(np.clip(x, 0, 1)))) for x in color[:3])
+    return r * 256**2 + g * 256 + b
+
+
+def _css(color) -> str:
+    return f"#{_hex(color):06x}"
+
+
+# ------------------------------------------------------------------ trajectory
+def check_trajectory(robot: Robot, t, q, *, tolerance: float = 1e-6):
+    """Validated ``(t, q)``: t [s] shape (N,) strictly increasing, q shape (N, nq) within limits.
+
+    Raises :class:`InputError` for wrong shapes or non-finite values and
+    :class:`InfeasibleTrajectoryError` (carrying joint, limit, excess) for a
+    position outside the robot's finite limits by more than ``tolerance``.
+    """
+    q = as_float_array(q, "q", ndim=(1, 2))
+    if q.ndim == 1:
+        q = q[None, :]
+    if q.shape[1] != robot.nq:
+        raise InputError(f"q.shape={q.shape} but robot.nq={robot.nq} ({robot.name})")
+    t = as_float_array(t, "t", ndim=1)
+    if t.shape[0] != q.shape[0]:
+        raise InputError(f"t.shape={t.shape} but q.shape={q.shape}: one time per row of q")
+    check_finite(t, "t")
+    check_finite(q, "q")
+    if t.shape[0] > 1 and np.any(np.diff(t) <= 0):
+        k = int(np.argmax(np.diff(t) <= 0)) + 1
+        raise InputError(f"time must increase strictly: t[{k}]={t[k]} after t[{k - 1}]={t[k - 1]}")
+    lo, hi = robot.lower, robot.upper
+    names = _q_names(robot)
+    bounded = np.isfinite(lo) & np.isfinite(hi) & (hi > lo) & (hi - lo < 1e3)
+    for i in np.flatnonzero(bounded):
+        below, above = lo[i] - q[:, i].min(), q[:, i].max() - hi[i]
+        excess = max(below, above)
+        if excess > tolerance:
+            k = int(np.argmin(q[:, i]) if below >= above else np.argmax(q[:, i]))
+            raise InfeasibleTrajectoryError(
+                f"trajectory leaves the position limits of {names[i]}: q={q[k, i]:.4g} at "
+                f"sample {k} (t={t[k]:.4g} s), limits [{lo[i]:.4g}, {hi[i]:.4g}]",
+                joint=names[i], limit="position", excess=float(excess))
+    return t, q
+
+
+def _q_names(robot: Robot) -> list[str]:
+    names = []
+    for i in range(1, robot.model.njoints):
+        nq = robot.model.joints[i].nq
+        names += [robot.model.names[i]] if nq == 1 else [f"{robot.model.names[i]}[{k}]"
+                                                          for k in range(nq)]
+    return names
+
+
+# ----------------------------------------------------------------- recording
+class _RecordingWindow:
+    """Stands in for meshcat's ViewerWindow: keeps the scene tree instead of sending it.
+
+    The tree holds, per path, the last object, its properties, its transform and
+    the animation, as meshcat's server does for a newly connected browser.
+    """
+
+    def __init__(self):
+        self.tree = SceneTree()
+
+    def send(self, command) -> None:
+        data = command.lower()
+        packed = umsgpack.packb(data)
+        kind = data["type"]
+        path = [p for p in data.get("path", "").split("/") if p]
+        if kind == "set_object":
+            node = find_node(self.tree, path)
+            node.object = packed
+            node.properties = []
+        elif kind == "set_transform":
+            find_node(self.tree, path).transform = packed
+        elif kind == "set_property":
+            node = find_node(self.tree, path)
+            node.properties = [p for p in node.properties
+                               if umsgpack.unpackb(p)["property"] != data["property"]]
+            node.properties.append(packed)
+        elif kind == "set_animation":
+            find_node(self.tree, path).animation = packed
+        elif kind == "delete":
+            if path:
+                parent = find_node(self.tree, path[:-1])
+                parent.pop(path[-1], None)
+            else:
+                self.tree = SceneTree()
+
+    def commands(self) -> list[bytes]:
+        """Packed commands in replay order (objects, properties, transforms, animation)."""
+        out: list[bytes] = []
+        animations: list[bytes] = []
+        for node in walk(self.tree):
+            if node.object is not None:
+                out.append(node.object)
+            out.extend(node.properties)
+            if node.transform is not None:
+                out.append(node.transform)
+            if node.animation is not None:
+                animations.append(node.animation)
+        return out + animations
+
+    def get_image(self):  # pragma: no cover - Pinocchio only checks that it exists
+        raise ManipIdError("an offline scene has no image; export it with write_html")
+
+
+class _OfflineVisualizer(meshcat.Visualizer):
+    """A meshcat.Visualizer bound to a :class:`_RecordingWindow` (no server)."""
+
+    def get_image(self, *args):  # pragma: no cover
+        return self.window.get_image()
+
+
+@dataclass
+class _Legend:
+    title: str
+    lines: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+
+class RobotScene:
+    """The robot in a meshcat scene, built offline.
+
+    >>> scene = RobotScene(robot)                      # visual meshes (or URDF primitives)
+    >>> scene.animate(t, q)                            # time slider, shapes (N,), (N, nq)
+    >>> scene.add_inertia(robot.nominal_parameters, label="nominal")
+    >>> scene.color_by_identifiability(link_identifiability(robot, identifiable=flags))
+    >>> scene.write_html("scene.html")                 # standalone, opens without a server
+
+    Parameters
+    ----------
+    robot: the robot; its ``visual_model`` is loaded here.
+    q: configuration shown before any animation, shape (nq,); default ``robot.neutral()``.
+    title: a line shown in the page's legend.
+    show_robot: draw the meshes (False draws only ellipsoids; the browser test
+        uses it for a background reference).
+    """
+
+    def __init__(self, robot: Robot, *, q=None, title: str = "", show_robot: bool = True):
+        self.robot = robot
+        self.title = title or f"{robot.name}"
+        self._window = _RecordingWindow()
+        self._vis = _OfflineVisualizer(window=self._window)
+        self._model = robot.model
+        self._data = robot.model.createData()
+        self._geom = robot.visual_model.copy() if show_robot else pin.GeometryModel()
+        self._geom_data = self._geom.createData()
+        self._sets: list[tuple[str, list[EquivalentEllipsoid], tuple]] = []
+        self._legend: list[_Legend] = []
+        self.notes: list[str] = []
+        self._t: np.ndarray | None = None
+        self._q: np.ndarray | None = None
+        self._link_colors: dict[int, tuple] | None = None
+        q0 = robot.neutral() if q is None else check_trajectory(robot, [0.0], q)[1][0]
+        self._q_static = q0
+        self._load_meshes()
+        self._place_all(q0, self._vis)
+        self._set_camera(q0)
+
+    # ------------------------------------------------------------- building
+    def _load_meshes(self) -> None:
+        from pinocchio.visualize import MeshcatVisualizer
+
+        self._viz = MeshcatVisualizer(self._model, None, self._geom)
+        self._viz.initViewer(viewer=self._vis)
+        self._viz.viewerRootNodeName = _ROBOT_ROOT
+        self._viz.viewerVisualGroupName = f"{_ROBOT_ROOT}/visuals"
+        self._viz.viewerCollisionGroupName = f"{_ROBOT_ROOT}/collisions"
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            for obj in self._geom.geometryObjects:
+                if self._link_colors is None:
+                    self._viz.loadViewerGeometryObject(obj, pin.GeometryType.VISUAL)
+                    continue
+                color = self._link_colors.get(obj.parentJoint, GREY)
+                suffix = Path(obj.meshPath).suffix.lower() if obj.meshPath else ""
+                if suffix == ".dae":  # Collada files keep their own materials: load the geometry
+                    material = mg.MeshPhongMaterial(color=_hex(color))
+                    self._vis[self._node(obj)].set_object(
+                        mg.DaeMeshGeometry.from_file(obj.meshPath), material)
+                else:
+                    self._viz.loadViewerGeometryObject(obj, pin.GeometryType.VISUAL,
+                                                       np.array(color))
+        for w in caught:
+            self.notes.append(f"mesh: {w.message}")
+
+    def _node(self, obj) -> str:
+        return f"{_ROBOT_ROOT}/visuals/{obj.name}"
+
+    def _transforms(self, q) -> dict[str, np.ndarray]:
+        """World transforms of every node at configuration ``q``."""
+        from pinocchio.visualize.meshcat_visualizer import applyScalingOnHomegeneousTransform
+
+        pin.forwardKinematics(self._model, self._data, q)
+        out: dict[str, np.ndarray] = {}
+        if self._geom.ngeoms:
+            pin.updateGeometryPlacements(self._model, self._data, self._geom, self._geom_data)
+            for k, obj in enumerate(self._geom.geometryObjects):
+                T = self._geom_data.oMg[k].homogeneous
+                out[self._node(obj)] = applyScalingOnHomegeneousTransform(T, obj.meshScale)
+        for label, ellipsoids, _ in self._sets:
+            for body, ell in enumerate(ellipsoids, start=1):
+                if ell.physical:
+                    out[f"inertia/{label}/{ell.joint}"] = (
+                        self._data.oMi[body].homogeneous @ ell.placement)
+        return out
+
+    def _place_all(self, q, vis) -> None:
+        for path, T in self._transforms(q).items():
+            vis[path].set_transform(T)
+
+    def _set_camera(self, qs) -> None:
+        """Aim the camera at the box around every joint origin over configurations ``qs``."""
+        qs = np.atleast_2d(qs)
+        qs = qs[np.linspace(0, len(qs) - 1, min(len(qs), 60)).astype(int)]
+        pts = []
+        for q in qs:
+            pin.forwardKinematics(self._model, self._data, q)
+            pts += [self._data.oMi[i].translation.copy() for i in range(self._model.njoints)]
+        pts = np.array(pts)
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        center = 0.5 * (lo + hi)
+        size = max(float(np.linalg.norm(hi - lo)), 0.25)
+        # The viewer's orbit controls always aim at the world origin: shift the scene
+        # (robot and world axes) so that the centre of the motion sits there; the
+        # viewer's grid would no longer be the floor, so it is hidden.
+        shift = pin.SE3(np.eye(3), -center).homogeneous
+        for node in ("/meshcat", "/Axes"):
+            self._vis[node].set_transform(shift)
+        self._vis["/Grid"].set_property("visible", False)
+        # camera offset in the viewer's y-up camera frame: world (dx, dy, dz) -> (dx, dz, -dy)
+        d = 0.7 * size * np.array([1.0, 0.7, 0.45])
+        self._vis["/Cameras/default/rotated/<object>"].set_property(
+            "position", [float(d[0]), float(d[2]), float(-d[1])])
+
+    # ------------------------------------------------------------ public API
+    def animate(self, t, q, *, fps: float = 30.0, max_frames: int = 1500,
+                play: bool = True) -> RobotScene:
+        """Animate along positions ``q`` [rad or m], shape (N, nq), at times ``t`` [s], shape (N,).
+
+        The clip has frames every ``1/fps`` s (fewer, evenly spread, when the
+        motion would need more than ``max_frames``); each frame shows the
+        sample nearest in time. A trajectory outside the joint limits raises
+        :class:`InfeasibleTrajectoryError`.
+        """
+        t, q = check_trajectory(self.robot, t, q)
+        if not (np.isfinite(fps) and fps > 0) or max_frames < 2:
+            raise InputError(f"need fps > 0 and max_frames >= 2, got {fps=}, {max_frames=}")
+        self._t, self._q = t, q
+        self._anim_options = (float(fps), int(max_frames), bool(play))
+        self._build_animation()
+        return self
+
+    def _build_animation(self) -> None:
+        if self._t is None:
+            return
+        t, q = self._t, self._q
+        fps, max_frames, play = self._anim_options
+        duration = float(t[-1] - t[0])
+        n_frames = int(np.floor(duration * fps)) + 1
+        if n_frames > max_frames:
+            n_frames = max_frames
+            fps = (n_frames - 1) / duration
+        if n_frames < 2:
+            self._place_all(q[0], self._vis)
+            return
+        times = t[0] + np.arange(n_frames) / fps
+        idx = np.clip(np.searchsorted(t, times), 1, len(t) - 1)
+        idx -= (times - t[idx - 1]) < (t[idx] - times)
+        anim = Animation(default_framerate=fps)
+        for frame, k in enumerate(idx):
+            with anim.at_frame(self._vis, frame) as f:
+                for path, T in self._transforms(q[k]).items():
+                    f[path].set_transform(T)
+        self._place_all(q[idx[0]], self._vis)
+        self._set_camera(q[idx])
+        self._vis.set_animation(anim, play=play, repetitions=1)
+        self.duration = (n_frames - 1) / fps
+
+    def add_inertia(self, theta, *, label: str = "nominal", color=None) -> list[str]:
+        """Draw the equivalent inertia ellipsoid of each body of ``theta`` (shape (p,)).
+
+        Bodies whose block is not physically consistent are skipped; the
+        returned notes (also in :attr:`notes` and in the HTML legend) say why.
+        """
+        if not label or "/" in label:
+            raise InputError(f"label must be a non-empty name without '/', got {label!r}")
+        if any(lb == label for lb, _, _ in self._sets):
+            raise InputError(f"a parameter set labelled {label!r} is already drawn")
+        ellipsoids = inertia_ellipsoids(self.robot, theta)
+        color = tuple(color) if color is not None else SET_COLORS[len(self._sets) % len(SET_COLORS)]
+        if len(color) not in (3, 4):
+            raise InputError(f"color must be RGB or RGBA floats, got {color!r}")
+        color = (*color[:3], color[3] if len(color) == 4 else 0.45)
+        material = mg.MeshLambertMaterial(color=_hex(color), opacity=float(color[3]),
+                                          transparent=float(color[3]) < 1.0)
+        notes = []
+        for ell in ellipsoids:
+            if ell.physical:
+                radii = np.maximum(ell.semi_axes, 1e-4)
+                self._vis[f"inertia/{label}/{ell.joint}"].set_object(mg.Ellipsoid(radii), material)
+            else:
+                notes.append(f"{label}: {ell.note} (not drawn)")
+        self._sets.append((label, ellipsoids, color))
+        self.notes.extend(notes)
+        drawn = sum(e.physical for e in ellipsoids)
+        self._legend.append(_Legend(
+            f"inertia ellipsoids: {label}",
+            [f'<span class="sw" style="background:{_css(color)}"></span> {html_lib.escape(label)}: '
+             f"{drawn} of {len(ellipsoids)} bodies"],
+            notes))
+        self._place_all(self._q_static, self._vis)
+        self._build_animation()
+        return notes
+
+    def color_by_identifiability(self, ident: LinkIdentifiability) -> RobotScene:
+        """Color each link's meshes by its determined share (red 0, yellow 0.5, green 1)."""
+        if tuple(ident.joints) != tuple(self.robot.joint_names):
+            raise InputError(f"identifiability is for joints {list(ident.joints)}, "
+                             f"but the robot has {self.robot.joint_names}")
+        colors = {0: GREY}
+        for body, s in enumerate(ident.share, start=1):
+            colors[body] = share_color(s)
+        self._link_colors = colors
+        self._vis[f"{_ROBOT_ROOT}/visuals"].delete()
+        self._geom = self._geom.copy()
+        self._load_meshes()
+        self._place_all(self._q_static, self._vis)
+        self._build_animation()
+        lines = []
+        for j, s, d, n in zip(ident.joints, ident.share, ident.determined, ident.total, strict=True):
+            lines.append(f'<span class="sw" style="background:{_css(share_color(s))}"></span> '
+                         f"{html_lib.escape(j)}: {int(d)}/{int(n)} determined ({100 * s:.0f}%)")
+        scale = " ".join(f'<span class="sw" style="background:{_css(share_color(s))}"></span>{s:g}'
+                         for s in (0.0, 0.25, 0.5, 0.75, 1.0))
+        self._legend.append(_Legend(
+            f"identifiability ({html_lib.escape(ident.criterion)})",
+            [f"share determined: {scale}", *lines]))
+        return self
+
+    # -------------------------------------------------------------- output
+    def commands(self) -> list[bytes]:
+        """The scene as msgpack-packed meshcat commands, in replay order."""
+        return self._window.commands()
+
+    def html(self) -> str:
+        """A standalone HTML page of the scene (three.js embedded, no network needed).
+
+        Open it with ``#t=<seconds>`` appended to the URL to start paused at that time.
+        """
+        js = (Path(meshcat.__file__).parent / "viewer" / "dist" / "main.min.js").read_text()
+        payload = json.dumps([base64.b64encode(c).decode("ascii") for c in self.commands()])
+        legend = self._legend_html()
+        return _PAGE.format(title=html_lib.escape(self.title), mainjs=js, commands=payload,
+                            legend=legend)
+
+    def _legend_html(self) -> str:
+        parts = [f"<b>{html_lib.escape(self.title)}</b>"]
+        if self._t is not None:
+            parts.append(f"motion: {len(self._t)} samples over {self._t[-1] - self._t[0]:.3g} s "
+                         "(Animations panel: play, pause, time)")
+        for leg in self._legend:
+            parts.append(f"<b>{leg.title}</b>")
+            parts.extend(leg.lines)
+            parts.extend(f'<span class="note">{html_lib.escape(n)}</span>' for n in leg.notes)
+        return "<br>".join(parts)
+
+    def write_html(self, path) -> Path:
+        """Write :meth:`html` to ``path`` atomically (temporary file, then rename)."""
+        return atomic_write_text(path, self.html())
+
+    def serve(self, open_browser: bool = False) -> meshcat.Visualizer:
+        """Replay the scene into a live meshcat viewer on 127.0.0.1; returns the visualizer.
+
+        Its URL is ``vis.url()``; the server runs until the visualizer is closed
+        or the Python process ends.
+        """
+        vis = meshcat.Visualizer()
+        for packed in self.commands():
+            data = umsgpack.unpackb(packed)
+            vis.window.zmq_socket.send_multipart(
+                [data["type"].encode(), data.get("path", "").encode(), packed])
+            vis.window.zmq_socket.recv()
+        if open_browser:
+            vis.open()
+        return vis
+
+
+_PAGE = """<!DOCTYPE html>
+<html>
+<head><meta charset="utf-8"><title>{title}</title>
+<style>
+body {{ margin: 0; }}
+#meshcat-pane {{ width: 100vw; height: 100vh; overflow: hidden; }}
+#legend {{ position: absolute; left: 8px; bottom: 8px; max-width: 46vw; max-height: 45vh;
+  overflow: auto; background: rgba(255,255,255,0.85); font: 12px sans-serif; padding: 6px 8px;
+  border-radius: 4px; line-height: 1.5; }}
+#legend .sw {{ display: inline-block; width: 11px; height: 11px; border: 1px solid #444;
+  vertical-align: middle; margin: 0 3px; }}
+#legend .note {{ color: #a33; }}
+</style></head>
+<body>
+<div id="meshcat-pane"></div>
+<div id="legend">{legend}</div>
+<script>
+{mainjs}
+</script>
+<script>
+var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
+var commands = {commands};
+for (const b64 of commands) {{
+  const raw = atob(b64);
+  const bytes = new Uint8Array(raw.length);
+  for (let i = 0; i < raw.length; i++) bytes[i] = raw.charCodeAt(i);
+  viewer.handle_command_bytearray(bytes);
+}}
+(function () {{
+  const m = /[#&]t=([0-9.eE+-]+)/.exec(window.location.hash);
+  if (m && viewer.animator && viewer.animator.actions.length) {{
+    const t = parseFloat(m[1]);
+    viewer.animator.pause();
+    viewer.animator.seek(t);
+    viewer.animator.display_progress(t);
+  }}
+}})();
+</script>
+</body>
+</html>
+"""
