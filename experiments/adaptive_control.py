@@ -2,7 +2,8 @@
 
     python experiments/adaptive_control.py [--robots panda ur5] [--duration 10] [--json OUT]
 
-For each robot (true parameters: nominal perturbed by 30 % per body, seed 1,
+For each robot (true parameters: nominal perturbed by manip_id.simulation.perturb_parameters
+with rel = 0.1, seed 1,
 plus a 1 kg payload 0.1 m along the last joint axis; the estimate starts at the
 nominal parameters):
 
@@ -26,19 +27,19 @@ from manip_id import load_robot
 from manip_id.adaptive import default_gains, lyapunov_function
 from manip_id.closed_loop import (
     default_reference,
-    perturb_parameters,
     simulate,
     with_payload,
 )
+from manip_id.simulation import perturb_parameters
 
 
 def lyapunov_check(name: str) -> dict:
     robot = load_robot(name, armature=True, friction="viscous")
     theta0 = robot.nominal_parameters.copy()
     theta0[robot.n_rigid :] = 0.05  # armature [kg m^2] and viscous friction [N m s/rad]
-    theta = with_payload(robot, perturb_parameters(robot, 0.3, seed=1, theta=theta0), 1.0)
+    theta = with_payload(robot, perturb_parameters(robot, 0.1, seed=1, theta=theta0), 1.0)
     out = {}
-    for law, kappa in (("plain", 0.0), ("composite", 1.0)):
+    for law, kappa in (("plain", 0.0), ("composite", 50.0)):
         gains = default_gains(robot, theta0, composite=kappa)
         run = simulate(
             robot,
@@ -64,12 +65,12 @@ def lyapunov_check(name: str) -> dict:
 def tracking_and_prediction(name: str, duration: float) -> dict:
     robot = load_robot(name)
     theta0 = robot.nominal_parameters
-    theta = with_payload(robot, perturb_parameters(robot, 0.3, seed=1), 1.0)
+    theta = with_payload(robot, perturb_parameters(robot, 0.1, seed=1), 1.0)
     ref = default_reference(robot)
     runs = {}
     for law, kappa, adapt in (
         ("plain", 0.0, True),
-        ("composite", 1.0, True),
+        ("composite", 50.0, True),
         ("fixed", 0.0, False),
     ):
         gains = default_gains(robot, theta0, composite=kappa)
@@ -116,7 +117,7 @@ def main() -> None:
         lyap = lyapunov_check(name)
         res = tracking_and_prediction(name, args.duration)
         report[name] = {"lyapunov": lyap, **res}
-        print(f"== {name}: true = nominal perturbed 30 % (seed 1) + 1 kg payload")
+        print(f"== {name}: true = perturb_parameters(rel=0.1, seed=1) + 1 kg payload")
         for law, v in lyap.items():
             rel = (v["decrease"] - v["predicted_decrease"]) / v["predicted_decrease"]
             print(

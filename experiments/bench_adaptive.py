@@ -14,13 +14,14 @@ composite law, the wall time of the simulation loop (best and median of
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import statistics
 
 from manip_id import load_robot
 from manip_id.adaptive import default_gains
-from manip_id.closed_loop import perturb_parameters, simulate
+from manip_id.cli._common import write_json
+from manip_id.closed_loop import simulate
+from manip_id.simulation import perturb_parameters
 
 
 def main() -> None:
@@ -41,7 +42,7 @@ def main() -> None:
         f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores"
     )
     results = {}
-    for law, kappa in (("plain", 0.0), ("composite", 1.0)):
+    for law, kappa in (("plain", 0.0), ("composite", 50.0)):
         gains = default_gains(robot, theta0, composite=kappa)
         walls = []
         for _ in range(args.repeat):
@@ -69,8 +70,7 @@ def main() -> None:
             f"{args.duration / best:.1f}, median {args.duration / median:.1f}"
         )
     if args.json:
-        with open(args.json, "w") as fh:
-            json.dump(results, fh, indent=2)
+        write_json(args.json, results)
 
 
 if __name__ == "__main__":

@@ -141,7 +141,7 @@ def case_manip_id(folder: Path, workers: int) -> dict:
         "seconds": seconds,
         "n_base": int(result.base.n_base),
         "estimate_head": [float(x) for x in result.estimate[:3]],
-        "relative_error": float(result.relative_error["train"]),
+        "relative_error": float(result.relative_error.train),
     }
 
 

@@ -8,7 +8,7 @@ Given a reference ``q_d(t)`` with ``dq_d``, ``ddq_d`` and the estimate ``theta_h
     ddq_r   = ddq_d - Lambda dq_tilde    reference acceleration
     s       = dq - dq_r                  sliding variable
     tau     = Y(q, dq, dq_r, ddq_r) theta_hat - K_D s
-    d theta_hat/dt = -Gamma (Y^T s_D + kappa Y_f^T eps)
+    d theta_hat/dt = -Gamma (Y^T s_D + kappa Y_f^T eps / m^2),  m^2 = 1 + tr(Y_f Gamma Y_f^T)
 
 with the Slotine-Li regressor ``Y(q, dq, v, w) theta = M v + C(q, dq) w + g + joint
 terms`` (:meth:`manip_id.regressor.RegressorEvaluator.slotine_li`). ``Lambda`` is positive
@@ -20,7 +20,7 @@ the Lyapunov function
 
     V = 1/2 s^T M(q) s + 1/2 theta_tilde^T Gamma^-1 theta_tilde
 
-has ``dV/dt = -s^T (K_D + F_v) s - kappa |eps|^2 <= 0`` (:func:`lyapunov_function`).
+has ``dV/dt = -s^T (K_D + F_v) s - kappa |eps|^2 / m^2 <= 0`` (:func:`lyapunov_function`).
 Coulomb friction breaks the exact cancellation (``sign(dq) != sign(dq_r)``).
 
 Robustness options. Dead zone: ``s_D = s - clip(s, -delta, delta)`` replaces ``s`` in
@@ -42,9 +42,11 @@ acceleration, through the generalized momentum ``p = M(q) dq = Y_p(q, dq) theta`
 
 (starting from ``W[Y_p](0) = Y_p(0)``, ``W[Y_h](0) = 0``, ``tau_f(0) = 0``, the
 identity holds at every instant). The prediction error is
-``eps = Y_f theta_hat - tau_f = Y_f theta_tilde``. The filters are discretized
-exactly for the zero-order-held torque and with a first-order hold (linear
-interpolation between control instants) for the regressors.
+``eps = Y_f theta_hat - tau_f = Y_f theta_tilde``. The normalization ``m^2`` makes
+``kappa`` a rate [1/s] and keeps the explicit Euler step of the composite term stable
+(``kappa dt < 2``) whatever the scale of ``Y_f``. The filters are discretized exactly
+for the zero-order-held torque and with a first-order hold (linear interpolation
+between control instants) for the regressors.
 """
 
 from __future__ import annotations
@@ -72,8 +74,8 @@ class AdaptiveGains:
         positive definite matrix (nv, nv).
     gamma: Gamma, adaptation gain, a scalar, its diagonal (p,) or a symmetric
         positive definite matrix (p, p).
-    composite: kappa >= 0, weight of the prediction-error term [1/(N m)^2 scale];
-        0 gives the plain Slotine-Li law.
+    composite: kappa >= 0 [1/s], weight of the normalized prediction-error term
+        (see the module docstring); 0 gives the plain Slotine-Li law.
     filter_bandwidth: lambda_f > 0 of the composite filter lambda_f/(s + lambda_f) [rad/s].
     dead_zone: delta >= 0 on each s_j [rad/s].
     lower, upper: optional bounds on theta_hat, shape (p,) (+-inf for none).
@@ -94,8 +96,8 @@ def default_gains(
     theta: np.ndarray | None = None,
     q: np.ndarray | None = None,
     *,
-    lam: float = 10.0,
-    kd_rate: float = 20.0,
+    lam: float = 20.0,
+    kd_rate: float = 50.0,
     gamma: float = 1.0,
     composite: float = 0.0,
     filter_bandwidth: float = 20.0,
@@ -108,18 +110,18 @@ def default_gains(
     ``M ds/dt = -K_D s`` decays at ``kd_rate`` [1/s] (a diagonal K_D is either too
     stiff for the light modes or too soft for the heavy ones of a coupled arm);
     ``Gamma = gamma diag(scale^2)`` with ``scale_i = |theta_i| + floor(unit_i)``
-    (floors 0.1 kg, 0.01 kg m, 0.001 kg m^2, 0.1 for joint terms): each parameter
-    adapts in proportion to its size.
+    (floors 1 kg, 0.1 kg m, 0.01 kg m^2, 1 for joint terms, the sizes of an arm's
+    links): each parameter adapts in proportion to its size.
     """
     theta = robot.nominal_parameters if theta is None else as_float_array(theta, "theta", 1)
     q = robot.neutral() if q is None else as_float_array(q, "q", 1)
     model = robot.with_parameters(theta)
     M = pin.crba(model, model.createData(), q)
     M = np.triu(M) + np.triu(M, 1).T
-    floors = {"kg": 0.1, "kg m": 0.01, "kg m^2": 1e-3}
+    floors = {"kg": 1.0, "kg m": 0.1, "kg m^2": 0.01}
     floor = np.array(
-        [floors.get(u, 0.1) for u in robot.parameter_units[: robot.n_rigid]]
-        + [0.1] * (robot.n_parameters - robot.n_rigid)
+        [floors.get(u, 1.0) for u in robot.parameter_units[: robot.n_rigid]]
+        + [1.0] * (robot.n_parameters - robot.n_rigid)
     )
     scale = np.abs(theta) + floor
     return AdaptiveGains(
@@ -227,6 +229,7 @@ class SlotineLiController:
         self.tau = np.zeros(nv)
         self.q_tilde = np.zeros(nv)
         self.eps = np.zeros(nv)
+        self.norm2 = 1.0
         self._grad = np.zeros(p)
         if self.kappa > 0:
             self._init_composite()
@@ -350,6 +353,11 @@ class SlotineLiController:
             Yf += self._Hf
             np.dot(Yf, self.theta_hat, out=self.eps)
             self.eps -= self._tauf
+            if self._diag_gamma:
+                gy = float(np.einsum("ij,ij,j->", Yf, Yf, self._gdiag))
+            else:
+                gy = float(np.einsum("ij,jk,ik->", Yf, self.gamma, Yf))
+            self.norm2 = 1.0 + gy
         return self.tau
 
     def adapt(self, dt: float) -> None:
@@ -368,7 +376,7 @@ class SlotineLiController:
         g = self._grad
         np.dot(s, self.Y, out=g)
         if self.kappa > 0:
-            g += self.kappa * (self.eps @ self.Yf)
+            g += (self.kappa / self.norm2) * (self.eps @ self.Yf)
         if self._diag_gamma:
             g *= self._gdiag
             g *= dt

@@ -33,7 +33,6 @@ from .adaptive import AdaptiveGains, SlotineLiController, default_gains
 from .errors import InputError
 from .regressor import RegressorEvaluator
 from .robot import Robot
-from .simulation import perturb_parameters
 from .trajectories import FourierTrajectory, check_limits, trajectory_to_configuration
 
 #: Control steps whose reference is evaluated in one vectorized call.
@@ -398,7 +397,7 @@ def simulate(
                 s = ctrl.s
                 dissipation += dt * float(s @ (diss_k @ s))
                 if kappa > 0:
-                    dissipation += dt * kappa * float(ctrl.eps @ ctrl.eps)
+                    dissipation += dt * kappa * float(ctrl.eps @ ctrl.eps) / ctrl.norm2
                 if k == 0:
                     first_err = math.sqrt(e2.sum())
                 if k == next_rec:

@@ -8,6 +8,18 @@ A dataset is a time series of joint states and torques::
     tau  joint torques [N m or N], shape (N, nv)
     ddq  accelerations [rad/s^2 or m/s^2], shape (N, nv), optional
     joint_names  one name per velocity coordinate, optional
+
+Validation on construction: at least 2 samples, one row per time stamp,
+consistent widths, strictly increasing time (the error names the first
+offending stamp), NaN/Inf reported with sample and column, and a warning when
+positions look like degrees. :func:`check_robot` checks a dataset against a
+robot (joint count and names).
+
+Input and output: :func:`load_dataset` reads NPZ (the interchange format
+below), CSV (default header or a column map) and the real Panda log folder
+(:func:`load_panda_gaz2019`); :func:`save_dataset` writes NPZ or CSV through a
+temporary file renamed into place, so a crash never leaves a partial file.
+Raw logs carry no accelerations: see :func:`manip_id.signals.preprocess`.
 """
 
 from __future__ import annotations

@@ -80,14 +80,12 @@ ROWS_PER_PARAMETER = 20
 #: Smallest default rank tolerance (relative, on the column-scaled regressor).
 TOLERANCE_FLOOR = 1e-8
 _EPS = float(np.finfo(float).eps)
+_CHUNK = 256
 
 
 def default_tolerance(n_rows: int, n_parameters: int) -> float:
     """Default rank tolerance of a regressor: ``max(max(M, p) * eps, TOLERANCE_FLOOR)``."""
     return max(max(int(n_rows), int(n_parameters)) * _EPS, TOLERANCE_FLOOR)
-
-
-_CHUNK = 256
 
 
 # ----------------------------------------------------------------- results
@@ -674,7 +672,8 @@ def analyze(
     robot: the robot the array belongs to; then the structural analysis is run too
         (unless ``structural`` is given) and the unexcited directions are reported.
     structural: a structural :class:`RankAnalysis` to compare the data with.
-    tolerance: relative rank tolerance (module docstring); default ``max(M, p) * eps``.
+    tolerance: relative rank tolerance (module docstring); default
+        :func:`default_tolerance`, ``max(max(M, p) * eps, 1e-8)``.
 
     Returns
     -------

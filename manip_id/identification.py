@@ -34,7 +34,7 @@ from .estimators import (
     solve_accumulator,
 )
 from .identifiability import BaseParameters, RankAnalysis, analyze, analyze_information
-from .regressor import DEFAULT_CHUNK, check_states, iter_regressor
+from .regressor import DEFAULT_CHUNK, _evaluator, check_states, iter_regressor
 from .robot import Robot
 
 METHODS: tuple[str, ...] = ("ols", "wls", "rls", "gradient")
@@ -235,6 +235,115 @@ def _online_estimator(method: str, r: int, options: dict):
     return est, what
 
 
+Block = tuple  # (q (n, nq), dq (n, nv), ddq (n, nv), tau (n, nv))
+
+# State handed to forked worker processes (inherited, never pickled).
+_WORK: dict = {}
+
+
+def _resolve_base(robot: Robot, base, timings: dict) -> BaseParameters:
+    t0 = time.perf_counter()
+    if base is None:
+        base = analyze(robot).base
+        timings["structural_analysis"] = time.perf_counter() - t0
+    elif not isinstance(base, BaseParameters):
+        raise InputError(f"base must be BaseParameters, got {type(base).__name__}")
+    if len(base.names) != robot.n_parameters:
+        raise InputError(
+            f"base is for {len(base.names)} parameters but robot.n_parameters={robot.n_parameters}"
+        )
+    return base
+
+
+def _check_method(method: str, chunk: int, workers: int) -> None:
+    if method not in METHODS:
+        raise InputError(f"method must be one of {list(METHODS)}, got {method!r}")
+    if int(chunk) < 1:
+        raise InputError(f"chunk must be a positive number of samples, got {chunk}")
+    if int(workers) < 1:
+        raise InputError(f"workers must be a positive number of processes, got {workers}")
+
+
+def _accumulate_blocks(
+    robot: Robot, blocks, ind: np.ndarray, chunk: int, progress=None, total: int = 0
+) -> tuple[InformationAccumulator, dict[str, float]]:
+    """Accumulate the base-column information of blocks ``(q, dq, ddq, tau)``, each checked."""
+    ev = _evaluator(robot)
+    acc = InformationAccumulator(len(ind), robot.nv)
+    t_reg = t_acc = 0.0
+    done = 0
+    for block in blocks:
+        try:
+            bq, bdq, bddq, btau = block
+        except (TypeError, ValueError) as exc:
+            raise InputError("each data block must be a tuple (q, dq, ddq, tau)") from exc
+        bq, bdq, bddq, btau = _states(
+            robot, bq, bdq, bddq, btau, prefix=f"block at sample {done}: "
+        )
+        t0 = time.perf_counter()
+        for c in ev.iter_regressor(bq, bdq, bddq, chunk):
+            t1 = time.perf_counter()
+            t_reg += t1 - t0
+            acc.add(c.Y, btau[c.start : c.stop], columns=ind, check=False)
+            t0 = time.perf_counter()
+            t_acc += t0 - t1
+            if progress is not None:
+                progress(done + c.stop, total)
+        done += bq.shape[0]
+    return acc, {"regressor": t_reg, "accumulate": t_acc}
+
+
+def _worker_accumulate(i: int):
+    robot, ind, chunk, parts = _WORK["job"]
+    func, args = parts[i]
+    return _accumulate_blocks(robot, func(*args), ind, chunk)
+
+
+def _accumulate_parallel(robot: Robot, parts, ind, chunk: int, workers: int, progress=None):
+    """Accumulate ``parts`` (each ``(func, args)`` with ``func(*args)`` yielding blocks) in
+    ``workers`` forked processes; the accumulators merge by addition in part order."""
+    import multiprocessing as mp
+
+    _WORK["job"] = (robot, ind, chunk, list(parts))
+    try:
+        ctx = mp.get_context("fork")
+        with ctx.Pool(min(workers, len(parts))) as pool:
+            results = []
+            for k, res in enumerate(pool.imap(_worker_accumulate, range(len(parts)))):
+                results.append(res)
+                if progress is not None:
+                    progress(k + 1, len(parts))
+    finally:
+        _WORK.pop("job", None)
+    acc = results[0][0].copy()
+    for other, _ in results[1:]:
+        acc.merge(other)
+    times = {
+        "regressor": sum(t["regressor"] for _, t in results),
+        "accumulate": sum(t["accumulate"] for _, t in results),
+    }
+    return acc, times
+
+
+def _array_part(start: int, stop: int):
+    q, dq, ddq, tau = _WORK["arrays"]
+    yield q[start:stop], dq[start:stop], ddq[start:stop], tau[start:stop]
+
+
+def _validation_error(robot: Robot, blocks, ind, estimate, chunk: int):
+    ev = _evaluator(robot)
+    sse, zz = np.zeros(robot.nv), np.zeros(robot.nv)
+    for block in blocks:
+        vq, vdq, vddq, vtau = _states(robot, *block, prefix="validation ")
+        for c in ev.iter_regressor(vq, vdq, vddq, chunk):
+            err = c.Y[:, :, ind] @ estimate - vtau[c.start : c.stop]
+            sse += np.einsum("nj,nj->j", err, err)
+            zz += np.einsum("nj,nj->j", vtau[c.start : c.stop], vtau[c.start : c.stop])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        per_joint = np.sqrt(sse / zz)
+    return (float(np.sqrt(sse.sum() / zz.sum())) if zz.sum() > 0 else float("nan")), per_joint
+
+
 def identify(
     robot: Robot,
     q,
@@ -250,6 +359,7 @@ def identify(
     minimum_norm: bool = False,
     online: dict | None = None,
     dt: float = 1.0,
+    workers: int = 1,
 ) -> IdentificationResult:
     """Identify the base parameters of ``robot`` from N samples, streamed.
 
@@ -271,13 +381,13 @@ def identify(
         ``record_every``); defaults ``theta0 = 0``, ``P0 = 1e6``, ``gamma = 1``,
         normalized
     dt: sample time [s] given to the online law (the gradient law's Euler step)
+    workers: processes for "ols"/"wls": the samples are cut into ``workers``
+        contiguous parts accumulated in forked processes and merged by addition
+        (the result equals the serial one to round-off)
     """
     timings: dict[str, float] = {}
     t_start = time.perf_counter()
-    if method not in METHODS:
-        raise InputError(f"method must be one of {list(METHODS)}, got {method!r}")
-    if int(chunk) < 1:
-        raise InputError(f"chunk must be a positive number of samples, got {chunk}")
+    _check_method(method, chunk, workers)
     q, dq, ddq, tau = _states(robot, q, dq, ddq, tau)
     n = q.shape[0]
     if validation is not None:
@@ -285,19 +395,9 @@ def identify(
             vq, vdq, vddq, vtau = validation
         except (TypeError, ValueError) as exc:
             raise InputError("validation must be a tuple (q, dq, ddq, tau)") from exc
-        vq, vdq, vddq, vtau = _states(robot, vq, vdq, vddq, vtau, prefix="validation ")
+        validation = [_states(robot, vq, vdq, vddq, vtau, prefix="validation ")]
     timings["checks"] = time.perf_counter() - t_start
-
-    t0 = time.perf_counter()
-    if base is None:
-        base = analyze(robot).base
-        timings["structural_analysis"] = time.perf_counter() - t0
-    elif not isinstance(base, BaseParameters):
-        raise InputError(f"base must be BaseParameters, got {type(base).__name__}")
-    if len(base.names) != robot.n_parameters:
-        raise InputError(
-            f"base is for {len(base.names)} parameters but robot.n_parameters={robot.n_parameters}"
-        )
+    base = _resolve_base(robot, base, timings)
     ind = base.independent
     r, nv = base.n_base, robot.nv
     if n * nv <= r:
@@ -305,36 +405,138 @@ def identify(
             f"{n} samples give {n * nv} equations for {r} base parameters: need more samples"
         )
 
-    acc = InformationAccumulator(r, nv)
     est = None
     solver_online = ""
+    t0 = time.perf_counter()
     if method in ("rls", "gradient"):
         est, solver_online = _online_estimator(method, r, online or {})
-    t_reg = t_acc = t_onl = 0.0
-    t0 = time.perf_counter()
-    for c in iter_regressor(robot, q, dq, ddq, chunk=int(chunk)):
-        t1 = time.perf_counter()
-        t_reg += t1 - t0
-        if est is None:
-            acc.add(c.Y, tau[c.start : c.stop], columns=ind, check=False)
-        else:
+        acc = InformationAccumulator(r, nv)
+        t_reg = t_acc = t_onl = 0.0
+        for c in iter_regressor(robot, q, dq, ddq, chunk=int(chunk)):
+            t1 = time.perf_counter()
+            t_reg += t1 - t0
             Yb = np.ascontiguousarray(c.Y[:, :, ind])
             acc.add(Yb, tau[c.start : c.stop], check=False)
-        t2 = time.perf_counter()
-        t_acc += t2 - t1
-        if est is not None:
+            t2 = time.perf_counter()
+            t_acc += t2 - t1
             step = est.step
             for i in range(c.stop - c.start):
                 step(Yb[i], tau[c.start + i], dt)
             t_onl += time.perf_counter() - t2
-        if progress is not None:
-            progress(c.stop, n)
-        t0 = time.perf_counter()
-    timings["regressor"] = t_reg
-    timings["accumulate"] = t_acc
-    if est is not None:
-        timings["online"] = t_onl
+            if progress is not None:
+                progress(c.stop, n)
+            t0 = time.perf_counter()
+        timings.update(regressor=t_reg, accumulate=t_acc, online=t_onl)
+    elif workers > 1 and n >= 2 * workers:
+        bounds = np.linspace(0, n, workers + 1).astype(int)
+        parts = [
+            (_array_part, (int(a), int(b))) for a, b in zip(bounds[:-1], bounds[1:], strict=True)
+        ]
+        _WORK["arrays"] = (q, dq, ddq, tau)
+        try:
+            acc, times = _accumulate_parallel(robot, parts, ind, int(chunk), workers)
+        finally:
+            _WORK.pop("arrays", None)
+        timings.update(times)
+        timings["accumulate_wall"] = time.perf_counter() - t0
+    else:
+        acc, times = _accumulate_blocks(
+            robot, [(q, dq, ddq, tau)], ind, int(chunk), progress=progress, total=n
+        )
+        timings.update(times)
+    return _finish(
+        robot,
+        acc,
+        base,
+        method,
+        timings,
+        t_start,
+        validation=validation,
+        chunk=int(chunk),
+        minimum_norm=minimum_norm,
+        est=est,
+        solver_online=solver_online,
+    )
 
+
+def identify_chunks(
+    robot: Robot,
+    source,
+    *,
+    method: str = "ols",
+    validation=None,
+    chunk: int = DEFAULT_CHUNK,
+    base: BaseParameters | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    minimum_norm: bool = False,
+    workers: int = 1,
+) -> IdentificationResult:
+    """Least-squares identification from data that arrive in blocks (files, logs, streams).
+
+    ``source`` is either an iterable of blocks ``(q, dq, ddq, tau)`` (shapes
+    (n, nq), (n, nv), (n, nv), (n, nv); processed in one process), or, with
+    ``workers > 1``, a sequence of parts ``(func, args)`` where ``func(*args)``
+    yields such blocks: each part is accumulated in its own forked process and
+    the accumulators merge by addition. Memory stays O(chunk nv p + nv r^2)
+    per process however many samples flow through. ``validation`` is an
+    iterable of blocks too. Methods: "ols" and "wls" (the online laws need
+    the samples in order: use :func:`identify`).
+    """
+    timings: dict[str, float] = {}
+    t_start = time.perf_counter()
+    _check_method(method, chunk, workers)
+    if method not in ("ols", "wls"):
+        raise InputError(f"identify_chunks solves least squares (ols, wls), got {method!r}")
+    base = _resolve_base(robot, base, timings)
+    ind = base.independent
+    t0 = time.perf_counter()
+    if workers > 1:
+        parts = list(source)
+        for k, part in enumerate(parts):
+            if not (isinstance(part, tuple) and len(part) == 2 and callable(part[0])):
+                raise InputError(
+                    f"with workers > 1, source must be parts (func, args); part {k} is "
+                    f"{type(part).__name__}"
+                )
+        acc, times = _accumulate_parallel(robot, parts, ind, int(chunk), workers, progress)
+        timings["accumulate_wall"] = time.perf_counter() - t0
+    else:
+        acc, times = _accumulate_blocks(robot, source, ind, int(chunk), progress=progress)
+    timings.update(times)
+    if acc.n * robot.nv <= base.n_base:
+        raise InputError(
+            f"{acc.n} samples give {acc.n * robot.nv} equations for {base.n_base} base "
+            "parameters: need more samples"
+        )
+    return _finish(
+        robot,
+        acc,
+        base,
+        method,
+        timings,
+        t_start,
+        validation=validation,
+        chunk=int(chunk),
+        minimum_norm=minimum_norm,
+    )
+
+
+def _finish(
+    robot: Robot,
+    acc: InformationAccumulator,
+    base: BaseParameters,
+    method: str,
+    timings: dict,
+    t_start: float,
+    *,
+    validation=None,
+    chunk: int = DEFAULT_CHUNK,
+    minimum_norm: bool = False,
+    est=None,
+    solver_online: str = "",
+) -> IdentificationResult:
+    """Rank check, solve, errors and the result, from the accumulated information."""
+    r, nv, n = base.n_base, robot.nv, acc.n
     t0 = time.perf_counter()
     ra = analyze_information(acc.A, base.base_names, n_rows=acc.n_rows)
     timings["rank_analysis"] = time.perf_counter() - t0
@@ -382,14 +584,7 @@ def identify(
     val = val_j = None
     if validation is not None:
         t0 = time.perf_counter()
-        sse, zz = np.zeros(nv), np.zeros(nv)
-        for c in iter_regressor(robot, vq, vdq, vddq, chunk=int(chunk)):
-            err = c.Y[:, :, ind] @ estimate - vtau[c.start : c.stop]
-            sse += np.einsum("nj,nj->j", err, err)
-            zz += np.einsum("nj,nj->j", vtau[c.start : c.stop], vtau[c.start : c.stop])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            val_j = np.sqrt(sse / zz)
-        val = float(np.sqrt(sse.sum() / zz.sum())) if zz.sum() > 0 else float("nan")
+        val, val_j = _validation_error(robot, validation, base.independent, estimate, chunk)
         timings["validation"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_start
 

@@ -334,6 +334,8 @@ def joint_torques(robot: Robot, theta, q, dq, ddq=None) -> np.ndarray:
     acc = np.zeros_like(np.asarray(dq, dtype=float)) if ddq is None else ddq
     _, (q, dq, acc) = check_states(robot, q=q, dq=dq, ddq=acc)
     ev = _evaluator(robot)
+    if not ev.terms:
+        return np.zeros_like(dq)
     vals = ev.joint_values(q, dq, acc)  # (..., nv, nt)
     coef = theta[robot.n_rigid :].reshape(robot.nv, len(ev.terms))
     if ddq is None and "Ia" in ev.terms:

@@ -683,15 +683,17 @@ def optimize_excitation(
     period, subject to the position, velocity and (given) acceleration limits
     sampled at ``n_constraint_points`` times (linear inequalities), with
     ``scipy.optimize.minimize(method="SLSQP")`` and the gradient of
-    :class:`ExcitationObjective`, from ``random_trajectory(robot, harmonics, wf, seed)``. The
-    result is confirmed with :func:`check_limits` on a dense grid; should the
+    :class:`ExcitationObjective`, from ``random_trajectory(robot, harmonics,
+    wf, seed)``. The result is confirmed with :func:`check_limits` on a dense grid; should the
     optimum overshoot a limit between constraint samples, its coefficients
     are shrunk about ``q0`` until it fits.
 
     ``condition_number_random`` is the median over ``n_random`` random
     feasible trajectories (seeds ``seed + 1, ...``) for comparison.
-    Cost per iteration: about ``n_points (1 + 3 nv)`` regressor calls and an SVD
-    (plus line-search evaluations).
+    Cost per iteration: about ``n_points (1 + 3 nv)`` regressor calls and a
+    small eigen-decomposition (plus line-search evaluations); ``base``
+    defaults to :func:`base_columns`. Condition numbers in the result come
+    from an SVD of ``W`` (:func:`excitation_condition_number`).
     """
     harmonics, wf = _check_design_args(harmonics, wf)
     margin = _check_margin(margin)

@@ -2,12 +2,19 @@
 
 from __future__ import annotations
 
-import functools
-from pathlib import Path
+import os
 
-import pytest
+# One BLAS thread: small matrices gain nothing from threads, and on a loaded
+# 2-core machine threaded BLAS is slower by orders of magnitude.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-from manip_id import load_robot
+import functools  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import pytest  # noqa: E402
+
+from manip_id import load_robot  # noqa: E402
 
 SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 PANDA_LOG = SHARED_DATA / "panda_gaz2019"

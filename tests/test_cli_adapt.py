@@ -10,14 +10,31 @@ import numpy as np
 import pytest
 
 from manip_id.cli import main
-from manip_id.closed_loop import perturb_parameters, with_payload
+from manip_id.closed_loop import with_payload
 from manip_id.robot import load_robot
+from manip_id.simulation import perturb_parameters
 
 
-@pytest.mark.parametrize("extra", [[], ["--composite", "--payload", "1"]])
+@pytest.mark.parametrize("extra", [[], ["--composite"]])
 def test_adapt_prints_figures_and_writes_json(tmp_path, capsys, extra):
     out = tmp_path / "adapt.json"
-    status = main(["adapt", "ur5", "--duration", "2", "--rate", "500", "--json", str(out), *extra])
+    status = main(
+        [
+            "adapt",
+            "ur5",
+            "--duration",
+            "3",
+            "--rate",
+            "500",
+            "--perturb",
+            "0.1",
+            "--payload",
+            "1",
+            "--json",
+            str(out),
+            *extra,
+        ]
+    )
     assert status == 0
     text = capsys.readouterr().out
     assert "rms tracking error" in text and "real-time factor" in text
@@ -30,8 +47,7 @@ def test_adapt_prints_figures_and_writes_json(tmp_path, capsys, extra):
     assert data["composite"] is bool(extra)
     # the true parameters are the documented perturbation (and payload) of the nominal ones
     robot = load_robot("ur5")
-    payload = float(extra[-1]) if extra else 0.0
-    expected = with_payload(robot, perturb_parameters(robot, 0.3, seed=0), payload)
+    expected = with_payload(robot, perturb_parameters(robot, 0.1, seed=0), 1.0)
     np.testing.assert_allclose(data["theta_true"], expected)
     np.testing.assert_allclose(data["theta0"], robot.nominal_parameters)
     assert len(data["theta_hat"]) == len(data["parameter_names"]) == robot.n_parameters
@@ -44,8 +60,8 @@ def test_adapt_prints_figures_and_writes_json(tmp_path, capsys, extra):
         (["--kd-rate", "-1"], "kd"),
         (["--gamma", "-1"], "gamma"),
         (["--duration", "1", "--rate", "333.3"], "does not divide"),
-        (["--amplitude", "0.9", "--period", "0.5"], "limits"),
-        (["--perturb", "1.5"], "rel"),
+        (["--amplitude", "0.9", "--period", "0.5"], "limit"),
+        (["--perturb", "-0.5"], "rel"),
         (["--payload", "-2"], "payload"),
     ],
 )

@@ -170,3 +170,42 @@ def test_bad_input_one_line_exit_2_nothing_written(tmp_path, capsys, args, messa
     assert len(err) == 1 and err[0].startswith("manip-id: error:")
     assert message in err[0]
     assert not out.exists()
+
+
+def test_csv_with_a_column_map(tmp_path, capsys):
+    """Another layout (time last, other names) read through --column; noise-free: exact fit."""
+    robot = get_robot("ur5", friction="viscous,coulomb")
+    sim = simulate(robot, random_trajectory(robot, harmonics=5, seed=5), duration=3.0, rate=100.0)
+    ds = sim.dataset
+    nv = robot.nv
+    head = [f"{p}{j}" for p in ("pos", "vel", "acc", "effort") for j in range(nv)] + ["stamp"]
+    path = tmp_path / "other.csv"
+    np.savetxt(
+        path,
+        np.column_stack([ds.q, ds.dq, ds.ddq, ds.tau, ds.t]),
+        delimiter=",",
+        header=",".join(head),
+        comments="",
+        fmt="%.17g",
+    )
+    cols = [
+        "--column",
+        "t=stamp",
+        "--column",
+        "q=pos*",
+        "--column",
+        "dq=vel*",
+        "--column",
+        "ddq=acc*",
+        "--column",
+        "tau=" + ",".join(f"effort{j}" for j in range(nv)),
+    ]
+    status, report, _ = _run([*ROBOT, "--data", str(path), *cols], tmp_path, capsys)
+    assert status == 0
+    assert report["relative_error"]["train"] < 1e-6
+    (tmp_path / "out.json").unlink()
+    status, report, captured = _run(
+        [*ROBOT, "--data", str(path), "--column", "q=angle*"], tmp_path, capsys
+    )
+    assert status == 2 and report is None
+    assert "pattern 'angle*' of 'q' matches no column" in captured.err

@@ -68,7 +68,6 @@ def test_rank_msd_table_and_json(tmp_path, capsys):
     ("args", "rank", "p"),
     [
         (["panda"], 43, 70),
-        (["panda", "--friction", "viscous,coulomb,offset"], 64, 91),
         (["ur5", "--armature"], 40, 66),
     ],
 )

@@ -11,9 +11,9 @@ from ..closed_loop import (
     _angles_to_q,
     compare_fixed,
     default_reference,
-    perturb_parameters,
     with_payload,
 )
+from ..simulation import perturb_parameters
 from ._common import add_robot_arguments, robot_from_args, write_json
 
 
@@ -59,8 +59,8 @@ def register(sub) -> None:
     p.add_argument(
         "--kappa",
         type=float,
-        default=1.0,
-        help="weight of the prediction-error term with --composite (default 1)",
+        default=50.0,
+        help="weight of the normalized prediction-error term with --composite [1/s] (default 50)",
     )
     p.add_argument(
         "--filter",
@@ -68,9 +68,9 @@ def register(sub) -> None:
         default=20.0,
         help="bandwidth of the composite filter [rad/s] (default 20)",
     )
-    p.add_argument("--lam", type=float, default=10.0, help="Lambda [1/s] (default 10)")
+    p.add_argument("--lam", type=float, default=20.0, help="Lambda [1/s] (default 20)")
     p.add_argument(
-        "--kd-rate", type=float, default=20.0, help="K_D = kd_rate * M(q_d(0)) [1/s] (default 20)"
+        "--kd-rate", type=float, default=50.0, help="K_D = kd_rate * M(q_d(0)) [1/s] (default 50)"
     )
     p.add_argument(
         "--gamma",

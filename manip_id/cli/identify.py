@@ -44,6 +44,15 @@ def register(sub) -> None:
         help="measurements: .npz (t, q, dq, tau[, ddq, joint_names]), .csv "
         "(t,q_<joint>...,dq_<joint>...,tau_<joint>...) or a Panda log folder",
     )
+    p.add_argument(
+        "--column",
+        action="append",
+        default=[],
+        metavar="FIELD=COLUMNS",
+        help="CSV column map for other layouts (repeatable): FIELD is t, q, dq, ddq, tau or "
+        "joint_names; COLUMNS a header name, a glob such as 'pos*', or a comma-separated list of "
+        "names or 0-based indices, e.g. --column t=stamp --column q='pos*'",
+    )
     src.add_argument(
         "--simulate",
         action="store_true",
@@ -156,6 +165,22 @@ def _prepare(ds: Dataset, args, what: str) -> Dataset:
         raise InputError(f"{what}: {exc}") from exc
 
 
+def _column_map(specs: list[str]) -> dict | None:
+    """``["t=stamp", "q=pos*", "tau=3,4,5"]`` -> a column map for :func:`load_dataset`."""
+    if not specs:
+        return None
+    out: dict = {}
+    for spec in specs:
+        field, sep, cols = spec.partition("=")
+        if not sep or not field.strip() or not cols.strip():
+            raise InputError(f"--column expects FIELD=COLUMNS, e.g. q='pos*', got {spec!r}")
+        items = [c.strip() for c in cols.split(",") if c.strip()]
+        items = [int(c) if c.lstrip("-").isdigit() else c for c in items]
+        field = field.strip()
+        out[field] = items if field in ("joint_names",) or len(items) > 1 else items[0]
+    return out
+
+
 def _check_args(args) -> None:
     if not args.simulate:
         given = [n for n in ("duration", "rate", "noise", "seed") if getattr(args, n) is not None]
@@ -168,6 +193,8 @@ def _check_args(args) -> None:
                 raise InputError(f"--{name} must be positive, got {value}")
         if args.noise is not None and not (math.isfinite(args.noise) and args.noise >= 0):
             raise InputError(f"--noise must be >= 0 (relative), got {args.noise}")
+    if args.column and args.simulate and args.validate is None:
+        raise InputError("--column applies to CSV data files (--data, --validate) only")
     if args.split is not None and not 0.0 < args.split < 1.0:
         raise InputError(f"--split must be a fraction in (0, 1), got {args.split}")
     if args.cutoff is not None and not (math.isfinite(args.cutoff) and args.cutoff > 0):
@@ -211,9 +238,9 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     data = validation = None
     if not args.simulate:  # read the files first: bad data fail before the robot loads
-        data = load_dataset(args.data)
+        data = load_dataset(args.data, columns=_column_map(args.column))
     if args.validate is not None:
-        validation = load_dataset(args.validate)
+        validation = load_dataset(args.validate, columns=_column_map(args.column))
     timings["load"] = time.perf_counter() - t0
     robot = robot_from_args(args)
 
@@ -290,8 +317,16 @@ def _report(robot, result, train, valid, theta_true, timings, args, source, sett
         },
         "joints": list(robot.dof_names),
         "base_parameters": [
-            {"expression": str(e), "value": float(v), "std": _finite(s), "std_percent": _finite(sp)}
-            for e, v, s, sp in zip(result.expressions, estimate, std, std_percent, strict=True)
+            {
+                "name": str(n),
+                "expression": str(e),
+                "value": float(v),
+                "std": _finite(s),
+                "std_percent": _finite(sp),
+            }
+            for n, e, v, s, sp in zip(
+                result.names, result.expressions, estimate, std, std_percent, strict=True
+            )
         ],
         "source": source,
         "preprocess": None

@@ -202,7 +202,6 @@ def solve_accumulator(
             scaled_condition_number=scond,
             solver=solver,
         )
-    theta_w, rank_w, cond_w, scond_w, solver_w = theta, rank, cond, scond, solver
     for _ in range(max(int(wls_iterations), 1)):
         weights = _weights(var_j, acc.zz_joint, acc.n)
         Aw, bw, _ = acc.weighted(weights)

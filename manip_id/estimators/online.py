@@ -302,7 +302,7 @@ class RLSEstimator(_OnlineEstimator):
                     raise ValueError("output shape")
                 PYt = P @ Y.T
                 S = Y @ PYt
-                S.flat[:: S.shape[0] + 1] += lam
+                S.reshape(-1)[:: S.shape[0] + 1] += lam
                 _, X, info = dposv(S, PYt.T, lower=1)
                 if info != 0 or not math.isfinite(float(np.sum(e))):
                     raise self._bad(Y, z)

@@ -1,0 +1,94 @@
+"""Chunked and parallel identification give the serial result (to round-off)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import get_robot
+
+from manip_id import InputError
+from manip_id.identification import identify, identify_chunks
+from manip_id.simulation import inverse_dynamics
+
+
+@pytest.fixture(scope="module")
+def ur10_data():
+    robot = get_robot("ur10", friction=("viscous", "coulomb"))
+    q, dq, ddq = robot.random_states(3000, seed=11)
+    theta = robot.nominal_parameters.copy()
+    theta[robot.n_rigid :] = np.linspace(0.2, 1.0, robot.n_parameters - robot.n_rigid)
+    tau = inverse_dynamics(robot, theta, q, dq, ddq)
+    tau += 0.05 * np.random.default_rng(3).standard_normal(tau.shape)
+    return robot, q, dq, ddq, tau
+
+
+def _close(a, b, rtol=1e-9):
+    scale = np.abs(a).max()
+    assert np.abs(a - b).max() <= rtol * scale, np.abs(a - b).max() / scale
+
+
+@pytest.fixture(scope="module")
+def serial(ur10_data):
+    robot, q, dq, ddq, tau = ur10_data
+    return identify(robot, q, dq, ddq, tau, chunk=1024)
+
+
+@pytest.mark.parametrize("chunk", [1, 7, 500, 5000])
+def test_chunk_size_does_not_change_the_result(ur10_data, serial, chunk):
+    robot, q, dq, ddq, tau = ur10_data
+    res = identify(robot, q, dq, ddq, tau, chunk=chunk, base=serial.base)
+    _close(serial.estimate, res.estimate)
+    _close(serial.std, res.std)
+    assert res.relative_error.train == pytest.approx(serial.relative_error.train, rel=1e-9)
+
+
+@pytest.mark.parametrize("method", ["ols", "wls"])
+@pytest.mark.parametrize("workers", [2, 3])
+def test_workers_give_the_serial_result(ur10_data, method, workers):
+    robot, q, dq, ddq, tau = ur10_data
+    ref = identify(robot, q, dq, ddq, tau, method=method)
+    res = identify(robot, q, dq, ddq, tau, method=method, workers=workers, base=ref.base)
+    _close(ref.estimate, res.estimate)
+    # WLS weights come from residual sums (see below), which carry more round-off
+    _close(ref.std, res.std, rtol=1e-8 if method == "wls" else 1e-9)
+    # the training error comes from the sums (zz - 2 b.theta + theta.A.theta), a difference
+    # of large numbers: it carries about 1e-8 of the torque energy as round-off
+    np.testing.assert_allclose(
+        res.relative_error.train_per_joint, ref.relative_error.train_per_joint, rtol=1e-6
+    )
+
+
+def _blocks(arrays, edges):
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        yield tuple(x[a:b] for x in arrays)
+
+
+def test_blocks_from_a_stream_and_parts_in_processes(ur10_data, serial):
+    robot, q, dq, ddq, tau = ur10_data
+    arrays = (q, dq, ddq, tau)
+    res = identify_chunks(
+        robot,
+        _blocks(arrays, [0, 100, 101, 1700, 3000]),
+        base=serial.base,
+        chunk=256,
+        validation=_blocks(arrays, [0, 3000]),
+    )
+    _close(serial.estimate, res.estimate)
+    assert res.n_samples == 3000
+    # validation on the training data equals the training error computed from the sums
+    assert res.relative_error.validation == pytest.approx(res.relative_error.train, rel=1e-6)
+    parts = [(_blocks, (arrays, [0, 1000, 1500])), (_blocks, (arrays, [1500, 3000]))]
+    par = identify_chunks(robot, parts, base=serial.base, workers=2)
+    _close(serial.estimate, par.estimate)
+
+
+def test_bad_sources(ur10_data):
+    robot, q, dq, ddq, tau = ur10_data
+    with pytest.raises(InputError, match="parts"):
+        identify_chunks(robot, [(q, dq, ddq, tau)], workers=2)
+    with pytest.raises(InputError, match="tuple"):
+        identify_chunks(robot, [q])
+    with pytest.raises(InputError, match="workers"):
+        identify(robot, q, dq, ddq, tau, workers=0)
+    with pytest.raises(InputError, match="ols, wls"):
+        identify_chunks(robot, [(q, dq, ddq, tau)], method="rls")
