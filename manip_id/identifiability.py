@@ -311,7 +311,7 @@ def _finite_or_none(x: float):
 
 
 # ---------------------------------------------------------------- streaming
-class InformationAccumulator:
+class RFactorAccumulator:
     """Accumulates a (p, p) factor ``R`` with ``R^T R = Y^T Y`` over regressor chunks.
 
     ``add(Y)`` takes a chunk of shape (n, nv, p) or (M, p); memory is O(p^2)
@@ -636,7 +636,7 @@ def structural_analysis(
         )
     tol = _check_tolerance(tolerance)
     q, dq, ddq = robot.random_states(n_samples, seed)
-    acc = InformationAccumulator(p, robot.parameter_names)
+    acc = RFactorAccumulator(p, robot.parameter_names)
     for chunk in iter_regressor(robot, q, dq, ddq, chunk=_CHUNK):
         acc.add(chunk.Y)
     tol = tol if tol is not None else default_tolerance(acc.n_rows, p)
@@ -693,7 +693,7 @@ def analyze(
             raise InputError(f"Y.shape={Y.shape} but robot.n_parameters={robot.n_parameters}")
     names = _check_names(names, p)
     tol = _check_tolerance(tolerance)
-    acc = InformationAccumulator(p, names)
+    acc = RFactorAccumulator(p, names)
     step = max(1, (64 * 1024) // max(p * (Y.shape[1] if Y.ndim == 3 else 1), 1))
     for start in range(0, Y.shape[0], step):
         acc.add(Y[start : start + step])
@@ -730,7 +730,7 @@ def analyze_trajectory(
     from .regressor import iter_regressor
 
     tol = _check_tolerance(tolerance)
-    acc = InformationAccumulator(robot.n_parameters, robot.parameter_names)
+    acc = RFactorAccumulator(robot.n_parameters, robot.parameter_names)
     for c in iter_regressor(robot, q, dq, ddq, chunk=chunk):
         acc.add(c.Y)
     _check_rows(acc.n_rows, robot.n_parameters)

@@ -17,8 +17,8 @@ from scipy.integrate import solve_ivp
 from manip_id import InputError, RobotError, regressor
 from manip_id.identifiability import (
     BaseParameters,
-    InformationAccumulator,
     RankAnalysis,
+    RFactorAccumulator,
     _format_terms,
     analyze,
     analyze_information,
@@ -154,7 +154,7 @@ def test_streaming_and_information_agree_with_stacked():
     stacked = analyze(Y.reshape(-1, robot.n_parameters), names=names)
     three_d = analyze(Y, names=names)
     streamed = analyze_trajectory(robot, q, dq, ddq, structural=stacked)
-    acc = InformationAccumulator(robot.n_parameters)
+    acc = RFactorAccumulator(robot.n_parameters)
     for k in range(0, 150, 40):
         acc.add(Y[k : k + 40])
     info = analyze_information(acc.information, names, n_rows=acc.n_rows)

@@ -133,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
     law = "composite" if a.composite else "plain"
     print(
         f"robot {robot.name}: nv={robot.nv}, {robot.n_parameters} parameters; true = nominal "
-        f"perturbed by {args.perturb:g}"
+        f"perturbed (perturb_parameters rel={args.perturb:g}, seed={args.seed})"
         + (f" + {args.payload:g} kg payload" if args.payload else "")
     )
     print(
