@@ -45,5 +45,12 @@ format: $(STAMP)
 	$(VENV)/bin/ruff format manip_id tests experiments
 	$(VENV)/bin/ruff check --fix manip_id tests experiments
 
+# Benchmarks of the README's Performance section (minutes; prints tables).
+bench: $(STAMP)
+	$(PY) experiments/bench_regressor.py
+	$(PY) experiments/bench_online.py
+	$(PY) experiments/bench_adaptive.py
+	$(PY) experiments/bench_identify.py --json experiments/results/bench_identify.json
+
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache

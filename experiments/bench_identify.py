@@ -231,14 +231,20 @@ def main() -> None:
 
     cache = Path(args.cache)
     rows = []
-    print(
-        f"{ROBOT} with {'+'.join(FRICTION)} friction; {os.cpu_count()} cores; times in s, memory in MB"
-    )
-    header = (
-        f"{'N':>9s} {'floor s':>8s} {'manip_id s':>10s} {'ratio':>6s} {'MB':>6s} "
-        f"{f'{args.workers} workers s':>12s} {'dense s':>8s} {'dense MB':>9s} {'dense/manip_id':>14s}"
-    )
-    print(header)
+    print(f"{ROBOT} with {'+'.join(FRICTION)} friction, {os.cpu_count()} cores")
+    cols = [
+        ("N", 9),
+        ("floor s", 8),
+        ("floor MB", 8),
+        ("manip_id s", 10),
+        ("MB", 5),
+        ("ratio 2/1", 9),
+        (f"{args.workers} workers s", 11),
+        ("dense s", 8),
+        ("dense MB", 8),
+        ("ratio 3/2", 9),
+    ]
+    print(" ".join(f"{name:>{w}s}" for name, w in cols))
     for n in args.sizes:
         folder = make_log(cache, n)
         floor = child("floor", folder)
@@ -258,17 +264,29 @@ def main() -> None:
             "dense": dense,
         }
         rows.append(row)
-        r21 = serial.get("seconds", np.nan) / floor.get("seconds", np.nan)
-        r32 = dense.get("seconds", np.nan) / serial.get("seconds", np.nan)
-        print(
-            f"{n:9d} {floor.get('seconds', np.nan):8.2f} {serial.get('seconds', np.nan):10.2f} {r21:6.2f} "
-            f"{serial.get('peak_rss_mb', np.nan):6.0f} {parallel.get('seconds', np.nan):12.2f} "
-            f"{dense.get('seconds', np.nan):8.2f} {dense.get('peak_rss_mb', np.nan):9.0f} {r32:14.2f}"
-        )
+
+        def g(res, key="seconds"):
+            return res.get(key, np.nan)
+
+        values = [
+            n,
+            g(floor),
+            g(floor, "peak_rss_mb"),
+            g(serial),
+            g(serial, "peak_rss_mb"),
+            g(serial) / g(floor),
+            g(parallel),
+            g(dense),
+            g(dense, "peak_rss_mb"),
+            g(dense) / g(serial),
+        ]
+        fmts = ["d", ".2f", ".0f", ".2f", ".0f", ".2f", ".2f", ".2f", ".0f", ".2f"]
+        print(" ".join(f"{v:{w}{f}}" for v, (_, w), f in zip(values, cols, fmts, strict=True)))
         for label, res in (("manip_id", serial), ("parallel", parallel), ("dense", dense)):
             if "error" in res or "skipped" in res:
                 print(f"          {label}: {res.get('error') or res.get('skipped')}")
     if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(
             json.dumps({"robot": ROBOT, "friction": FRICTION, "rows": rows}, indent=2)
         )

@@ -281,14 +281,14 @@ def _accumulate_blocks(
             robot, bq, bdq, bddq, btau, prefix=f"block at sample {done}: "
         )
         t0 = time.perf_counter()
-        for c in ev.iter_regressor(bq, bdq, bddq, chunk):
+        for start, stop, Yt in ev.iter_columns_joint_major(bq, bdq, bddq, ind, chunk):
             t1 = time.perf_counter()
             t_reg += t1 - t0
-            acc.add(c.Y, btau[c.start : c.stop], columns=ind, check=False)
+            acc.add_joint_major(Yt, btau[start:stop])
             t0 = time.perf_counter()
             t_acc += t0 - t1
             if progress is not None:
-                progress(done + c.stop, total)
+                progress(done + stop, total)
         done += bq.shape[0]
     return acc, {"regressor": t_reg, "accumulate": t_acc}
 

@@ -43,6 +43,7 @@ from .errors import InputError
 from .robot import Robot
 
 DEFAULT_CHUNK = 1024
+_STACK = 32
 
 
 @dataclass(frozen=True)
@@ -175,6 +176,62 @@ class RegressorEvaluator:
             Y = buf[: stop - start]
             self._fill_joint_terms(Y, q[start:stop], dq[start:stop], ddq[start:stop])
             yield RegressorChunk(start, stop, Y)
+
+    def iter_columns_joint_major(
+        self, q, dq, ddq, columns: np.ndarray, chunk: int
+    ) -> Iterator[tuple[int, int, np.ndarray]]:
+        """Selected columns of Y over a trajectory, joint-major, for accumulation.
+
+        Yields ``(start, stop, Yt)`` with ``Yt`` of shape (nv, stop - start, len(columns)):
+        ``Yt[j, k] = Y(q_k, dq_k, ddq_k)[j, columns]``; each ``Yt[j]`` is C-contiguous.
+        ``columns`` must be sorted ascending. The buffer is reused: copy to keep.
+        This is the hot loop of streaming identification: one contiguous copy of
+        the rigid-body block per sample, one gather per chunk, and the joint-term
+        columns written directly (they are zero except on their own joint's row).
+        """
+        n, nv, nr = q.shape[0], self.nv, self.n_rigid
+        columns = np.asarray(columns, dtype=np.intp)
+        rigid_cols = columns[columns < nr]
+        joint_cols = columns[columns >= nr] - nr
+        n_r = rigid_cols.size
+        size = min(chunk, max(n, 1))
+        jmajor = np.empty((nv, size, nr))
+        picked = np.empty((nv, size, rigid_cols.size))
+        out = np.zeros((nv, size, columns.size))
+        nt = len(self.terms)
+        # joint column c = dof * nt + term index
+        jc_dof = joint_cols // nt if nt else joint_cols
+        jc_term = joint_cols % nt if nt else joint_cols
+        f, m, d = pin.computeJointTorqueRegressor, self.model, self.data
+        for start in range(0, n, chunk):
+            stop = min(start + chunk, n)
+            s = slice(start, stop)
+            size_k = stop - start
+            jm = jmajor[:, :size_k]
+            # Pinocchio's arrays are stacked, joint-major, a few dozen at a time: fewer
+            # Python-level copies than one per sample, while the arrays stay in cache
+            qs, dqs, ddqs = q[s], dq[s], ddq[s]
+            for i in range(0, size_k, _STACK):
+                mats = [
+                    f(m, d, a, b, c)
+                    for a, b, c in zip(
+                        qs[i : i + _STACK], dqs[i : i + _STACK], ddqs[i : i + _STACK], strict=True
+                    )
+                ]
+                if nv > 1:
+                    np.stack(mats, axis=1, out=jm[:, i : i + len(mats)])
+                else:  # Pinocchio returns a 1-D row for one DoF
+                    np.stack(mats, axis=0, out=jm[0, i : i + len(mats)])
+            Yt = out[:, :size_k]
+            # gathers on contiguous memory are several times faster than on a transposed view
+            pk = picked[:, :size_k]
+            np.take(jm, rigid_cols, axis=2, out=pk, mode="clip")
+            Yt[:, :, :n_r] = pk
+            if joint_cols.size:
+                vals = self.joint_values(q[start:stop], dq[start:stop], ddq[start:stop])
+                for i, (j, t) in enumerate(zip(jc_dof, jc_term, strict=True)):
+                    Yt[j, :, n_r + i] = vals[:, j, t]
+            yield start, stop, Yt
 
     def iter_slotine_li(self, q, dq, v, w, chunk: int) -> Iterator[RegressorChunk]:
         """Chunks of the Slotine-Li regressor over a trajectory (arrays already checked)."""

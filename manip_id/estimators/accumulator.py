@@ -96,6 +96,21 @@ class InformationAccumulator:
         self.n += n
         return self
 
+    def add_joint_major(self, Yt: np.ndarray, tau: np.ndarray) -> InformationAccumulator:
+        """Accumulate a joint-major block without checks (the streaming hot loop).
+
+        ``Yt`` of shape (nv, n, p) with each ``Yt[j]`` C-contiguous (as
+        :meth:`~manip_id.regressor.RegressorEvaluator.iter_columns_joint_major`
+        yields), ``tau`` of shape (n, nv). Same sums as :meth:`add`.
+        """
+        for j in range(self.nv):
+            Yj = Yt[j]
+            dsyrk(1.0, Yj.T, beta=1.0, c=self._A[j].T, trans=0, lower=0, overwrite_c=1)
+            self._b[j] += tau[:, j] @ Yj
+        self._zz += np.einsum("nj,nj->j", tau, tau)
+        self.n += Yt.shape[1]
+        return self
+
     def merge(self, other: InformationAccumulator) -> InformationAccumulator:
         """Add the sums of ``other`` into ``self`` (data concatenated); returns ``self``."""
         if not isinstance(other, InformationAccumulator):
