@@ -35,7 +35,7 @@ test: $(STAMP) system-deps
 	$(PY) -m pytest -q
 
 demo: $(STAMP)
-	$(VENV)/bin/manip-id demo
+	$(VENV)/bin/manip-id identify panda --simulate --split 0.7 --report demo-report --force
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check manip_id tests experiments

@@ -90,10 +90,22 @@ def register(sub) -> None:
     p.add_argument("--period", type=float, default=5.0, help="reference period [s] (default 5)")
     p.add_argument("--seed", type=int, default=0, help="seed of the reference and perturbation")
     p.add_argument("--json", metavar="OUT", default=None, help="write the figures as JSON")
+    p.add_argument(
+        "--report",
+        metavar="DIR",
+        default=None,
+        help="write a report folder: result.json, parameter estimates and tracking error over "
+        "time, the robot scene animated along the run (scene.html) and index.html",
+    )
+    p.add_argument("--force", action="store_true", help="replace a non-empty --report folder")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.report is not None:  # fail fast, before the long work
+        from ..viz.report import check_report_target
+
+        check_report_target(args.report, args.force)
     robot = robot_from_args(args)
     theta0 = robot.nominal_parameters
     theta_true = perturb_parameters(robot, args.perturb, seed=args.seed)
@@ -168,27 +180,107 @@ def run(args: argparse.Namespace) -> int:
             f"{a.theta_hat[-1, i]:10.4g}"
         )
     print(f"real-time factor {a.real_time_factor:.1f} (wall {a.wall_time:.3f} s)")
+    out = {
+        "robot": robot.name,
+        "law": law,
+        "perturb": args.perturb,
+        "payload": args.payload,
+        **cmp.summary(),
+        "rms_tracking_error_per_joint": {
+            "adaptive": dict(
+                zip(robot.dof_names, a.rms_tracking_error_per_joint.tolist(), strict=True)
+            ),
+            "fixed": dict(
+                zip(robot.dof_names, f.rms_tracking_error_per_joint.tolist(), strict=True)
+            ),
+        },
+        "parameter_names": robot.parameter_names,
+        "theta_true": a.theta_true,
+        "theta0": a.theta0,
+        "theta_hat": a.theta_hat[-1],
+        "history": {"t": a.t, "prediction_error": a.prediction_error},
+    }
     if args.json:
-        out = {
-            "robot": robot.name,
-            "law": law,
-            "perturb": args.perturb,
-            "payload": args.payload,
-            **cmp.summary(),
-            "rms_tracking_error_per_joint": {
-                "adaptive": dict(
-                    zip(robot.dof_names, a.rms_tracking_error_per_joint.tolist(), strict=True)
-                ),
-                "fixed": dict(
-                    zip(robot.dof_names, f.rms_tracking_error_per_joint.tolist(), strict=True)
-                ),
-            },
-            "parameter_names": robot.parameter_names,
-            "theta_true": a.theta_true,
-            "theta0": a.theta0,
-            "theta_hat": a.theta_hat[-1],
-            "history": {"t": a.t, "prediction_error": a.prediction_error},
-        }
         write_json(args.json, out)
         print(f"wrote {args.json}")
+    if args.report is not None:
+        path = _write_report(robot, cmp, out, law, args)
+        print(f"wrote the report to {path}/index.html")
     return 0
+
+
+def _write_report(robot, cmp, out: dict, law: str, args):
+    """Report folder of an adaptive run (see :func:`manip_id.viz.report.write_report`)."""
+    from ..errors import InfeasibleTrajectoryError
+    from ..viz import figures
+    from ..viz.meshcat_scene import RobotScene
+    from ..viz.report import write_report
+
+    a, f = cmp.adaptive, cmp.fixed
+    run_name = (
+        f"{robot.name}, {law} Slotine-Li adaptation, {args.duration:g} s at {args.rate:g} Hz, "
+        f"perturb {args.perturb:g}" + (f", payload {args.payload:g} kg" if args.payload else "")
+    )
+    joints = list(robot.dof_names)
+    figs = {
+        "parameter_estimates": lambda path: figures.parameter_history(
+            path,
+            a.t,
+            a.theta_hat,
+            names=robot.parameter_names,
+            units=robot.parameter_units,
+            theta_true=a.theta_true,
+            title=f"parameter estimates: {run_name}",
+        ),
+        "tracking_error": lambda path: figures.tracking_error(
+            path,
+            a.t,
+            a.q - a.q_d,
+            joint_names=joints if a.q.shape[1] == len(joints) else None,
+            baseline=f.q - f.q_d if f.q.shape == a.q.shape else None,
+            title=f"tracking error: {run_name}",
+        ),
+    }
+    notes = []
+    scene = RobotScene(robot, title=f"manip-id adapt: {run_name}")
+    try:
+        scene.animate(a.t, a.q)
+    except InfeasibleTrajectoryError as exc:
+        notes.append(f"scene not animated: {exc}")
+    scene.add_inertia(a.theta_true, label="true")
+    scene.add_inertia(a.theta_hat[-1], label="final_estimate")
+    notes += list(scene.notes)
+    rows = [
+        {"parameter": n, "unit": u, "true": t, "initial": s0, "final": s1}
+        for n, u, t, s0, s1 in zip(
+            robot.parameter_names,
+            robot.parameter_units,
+            a.theta_true,
+            a.theta0,
+            a.theta_hat[-1],
+            strict=True,
+        )
+    ]
+    summary = {
+        "robot": robot.name,
+        "law": law,
+        "duration [s]": args.duration,
+        "rate [Hz]": args.rate,
+        "rms tracking error, adaptive [rad]": a.rms_tracking_error,
+        "rms tracking error, fixed parameters [rad]": f.rms_tracking_error,
+        "final tracking error, adaptive [rad]": a.final_tracking_error,
+        "final tracking error, fixed parameters [rad]": f.final_tracking_error,
+        "torque prediction error, start": a.initial_prediction_error,
+        "torque prediction error, end": a.final_prediction_error,
+    }
+    return write_report(
+        args.report,
+        title=f"manip-id adapt: {run_name}",
+        summary=summary,
+        parameter_table=rows,
+        figures=figs,
+        scene=scene,
+        json_result=out,
+        notes=notes,
+        force=args.force,
+    )

@@ -121,6 +121,13 @@ def register(sub) -> None:
     )
     sig.add_argument("--decimate", type=int, default=1, help="keep every D-th sample [default 1]")
     p.add_argument("--json", metavar="OUT", help="write the results as JSON to OUT")
+    p.add_argument(
+        "--report",
+        metavar="DIR",
+        help="write a report folder: result.json, torque fit, residuals, singular values, "
+        "trajectory vs limits (--simulate), the robot scene (scene.html) and index.html",
+    )
+    p.add_argument("--force", action="store_true", help="replace a non-empty --report folder")
     p.add_argument("--chunk", type=int, default=1024, help="samples per regressor chunk")
     p.set_defaults(func=run)
 
@@ -234,6 +241,10 @@ def _simulate(robot, args):
 def run(args: argparse.Namespace) -> int:
     t_start = time.perf_counter()
     _check_args(args)
+    if args.report is not None:  # fail fast, before the long work
+        from ..viz.report import check_report_target
+
+        check_report_target(args.report, args.force)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     data = validation = None
@@ -258,7 +269,8 @@ def run(args: argparse.Namespace) -> int:
     if validation is not None:
         check_robot(validation, robot)
         source["validate"] = str(args.validate)
-    elif args.split is not None:
+    full = data
+    if validation is None and args.split is not None:
         data, validation = data.split(args.split)
         source["split"] = args.split
 
@@ -290,7 +302,124 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         write_json(args.json, report)
         print(f"wrote {args.json}")
+    if args.report is not None:
+        path = _write_report(robot, result, full, train, valid, report, args)
+        print(f"wrote the report to {path}/index.html")
     return 0
+
+
+def _write_report(robot, result, full, train, valid, report: dict, args):
+    """The report folder of an identification (see :func:`manip_id.viz.report.write_report`)."""
+    from ..errors import InfeasibleTrajectoryError
+    from ..viz import figures
+    from ..viz.meshcat_scene import RobotScene, link_identifiability
+    from ..viz.report import write_report
+
+    run_name = (
+        f"{robot.name}, {report['method']}, "
+        + ("simulated" if args.simulate else f"data {args.data}")
+        + f", {train.n_samples} training samples"
+    )
+    pred = result.predict(robot, train.q, train.dq, train.ddq, chunk=args.chunk)
+    val_kw, res_kw = {}, {}
+    if valid is not None:
+        vpred = result.predict(robot, valid.q, valid.dq, valid.ddq, chunk=args.chunk)
+        val_kw = dict(t_validation=valid.t, tau_validation=valid.tau, tau_validation_pred=vpred)
+        res_kw = dict(t_validation=valid.t, residual_validation=valid.tau - vpred)
+    joints = list(robot.dof_names)
+    ra = result.rank_analysis
+    figs = {
+        "torque_fit": lambda path: figures.torque_fit(
+            path,
+            train.t,
+            train.tau,
+            pred,
+            joint_names=joints,
+            title=f"torque fit: {run_name}",
+            **val_kw,
+        ),
+        "residuals": lambda path: figures.residuals(
+            path,
+            train.t,
+            train.tau - pred,
+            joint_names=joints,
+            title=f"residuals tau - Y_b theta_b: {run_name}",
+            **res_kw,
+        ),
+        "singular_values": lambda path: figures.singular_values(
+            path,
+            ra.singular_values_scaled,
+            tolerance=ra.tolerance,
+            rank=ra.rank,
+            title=f"singular values of the data's base regressor: {robot.name}, "
+            f"{ra.n_rows} rows, rank {ra.rank} of {ra.n_parameters}",
+        ),
+    }
+    if args.simulate:
+        figs["trajectory"] = lambda path: figures.trajectory_limits(
+            path,
+            full.t,
+            full.q,
+            lower=robot.lower,
+            upper=robot.upper,
+            joint_names=joints,
+            title=f"simulated excitation of {robot.name} against its position limits",
+        )
+    notes = []
+    scene = RobotScene(robot, title=f"manip-id identify: {run_name}")
+    try:
+        scene.animate(full.t, full.q)
+    except InfeasibleTrajectoryError as exc:
+        notes.append(f"scene not animated: {exc}")
+    scene.add_inertia(robot.nominal_parameters, label="nominal")
+    ind = result.base.independent
+    flags = np.zeros(robot.n_parameters, dtype=bool)
+    flags[ind] = True
+    rel = np.full(robot.n_parameters, np.inf)
+    est = np.asarray(result.estimate, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel[ind] = np.asarray(result.std, dtype=float) / np.abs(est)
+    scene.color_by_identifiability(
+        link_identifiability(robot, identifiable=flags, relative_std=rel, threshold=0.1)
+    )
+    notes += list(scene.notes)
+    rel_err = report["relative_error"]
+    summary = {
+        "robot": robot.name,
+        "method": report["method"],
+        "source": "simulated" if args.simulate else str(args.data),
+        "training samples": report["n_samples"],
+        "validation samples": report["n_validation_samples"],
+        "base parameters": f"{report['n_base']} of {report['n_parameters']}",
+        "condition number": report["condition_number"],
+        "relative torque error (train)": rel_err["train"],
+        "relative torque error (validation)": rel_err["validation"],
+    }
+    if "parameter_error" in report:
+        summary["base parameter error vs truth"] = report["parameter_error"]
+    truth = report.get("true_base_parameters")
+    rows = [
+        {
+            "name": p["name"],
+            "expression": p["expression"],
+            "value": p["value"],
+            "std": p["std"],
+            "std [%]": p["std_percent"],
+            **({"true": truth[i]} if truth is not None else {}),
+        }
+        for i, p in enumerate(report["base_parameters"])
+    ]
+    return write_report(
+        args.report,
+        title=f"manip-id identify: {run_name}",
+        summary=summary,
+        parameter_table=rows,
+        figures=figs,
+        scene=scene,
+        json_result=report,
+        notes=notes,
+        force=args.force,
+    )
 
 
 def _report(robot, result, train, valid, theta_true, timings, args, source, settings) -> dict:

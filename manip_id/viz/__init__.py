@@ -38,6 +38,7 @@ folder, then renamed).
 
 from __future__ import annotations
 
+from . import figures
 from .meshcat_scene import (
     EquivalentEllipsoid,
     LinkIdentifiability,
@@ -47,6 +48,7 @@ from .meshcat_scene import (
     inertia_ellipsoids,
     link_identifiability,
 )
+from .report import ReportExistsError, check_report_target, write_report
 
 __all__ = [
     "EquivalentEllipsoid",
@@ -56,4 +58,8 @@ __all__ = [
     "equivalent_ellipsoid",
     "inertia_ellipsoids",
     "link_identifiability",
+    "figures",
+    "ReportExistsError",
+    "check_report_target",
+    "write_report",
 ]

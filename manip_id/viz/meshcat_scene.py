@@ -21,7 +21,6 @@ import base64
 import html as html_lib
 import json
 import warnings
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -98,8 +97,9 @@ def equivalent_ellipsoid(block, joint: str = "") -> EquivalentEllipsoid:
     m = float(b[0])
     nan3 = np.full(3, np.nan)
     if m <= 0:
-        return EquivalentEllipsoid(joint, m, nan3, np.eye(3), nan3, nan3, False,
-                                   f"{joint}: mass {m:.4g} kg <= 0")
+        return EquivalentEllipsoid(
+            joint, m, nan3, np.eye(3), nan3, nan3, False, f"{joint}: mass {m:.4g} kg <= 0"
+        )
     c = b[1:4] / m
     ixx, ixy, iyy, ixz, iyz, izz = b[4:]
     I_o = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
@@ -110,14 +110,30 @@ def equivalent_ellipsoid(block, joint: str = "") -> EquivalentEllipsoid:
     scale = max(float(np.abs(moments).max()), 1e-300)
     tol = 1e-9 * scale
     if moments.min() <= tol:
-        return EquivalentEllipsoid(joint, m, c, axes, moments, nan3, False,
-                                   f"{joint}: inertia about the CoM is not positive definite "
-                                   f"(smallest moment {moments.min():.3g} kg m^2)")
+        return EquivalentEllipsoid(
+            joint,
+            m,
+            c,
+            axes,
+            moments,
+            nan3,
+            False,
+            f"{joint}: inertia about the CoM is not positive definite "
+            f"(smallest moment {moments.min():.3g} kg m^2)",
+        )
     sq = 5.0 / (2.0 * m) * (moments.sum() - 2.0 * moments)
     if sq.min() < -tol * 5.0 / (2.0 * m):
-        return EquivalentEllipsoid(joint, m, c, axes, moments, nan3, False,
-                                   f"{joint}: principal moments {np.round(moments, 6).tolist()} "
-                                   "violate the triangle inequality")
+        return EquivalentEllipsoid(
+            joint,
+            m,
+            c,
+            axes,
+            moments,
+            nan3,
+            False,
+            f"{joint}: principal moments {np.round(moments, 6).tolist()} "
+            "violate the triangle inequality",
+        )
     return EquivalentEllipsoid(joint, m, c, axes, moments, np.sqrt(np.clip(sq, 0.0, None)), True)
 
 
@@ -173,8 +189,10 @@ def link_identifiability(
     if identifiable is not None:
         flags = np.asarray(identifiable)
         if flags.shape != (p,) or flags.dtype.kind not in "bi":
-            raise InputError(f"identifiable must be {p} booleans (one per parameter of "
-                             f"{robot.name}), got shape {flags.shape} dtype {flags.dtype}")
+            raise InputError(
+                f"identifiable must be {p} booleans (one per parameter of "
+                f"{robot.name}), got shape {flags.shape} dtype {flags.dtype}"
+            )
         ok &= flags.astype(bool)
         parts.append("identifiable")
     if relative_std is not None:
@@ -186,8 +204,9 @@ def link_identifiability(
         ok &= np.isfinite(rel) & (rel <= threshold)
         parts.append(f"relative std <= {threshold:g}")
     owner = [_owner_joint(n) for n in robot.parameter_names]
-    det = np.array([sum(1 for o, k in zip(owner, ok, strict=True) if o == j and k)
-                    for j in robot.joint_names])
+    det = np.array(
+        [sum(1 for o, k in zip(owner, ok, strict=True) if o == j and k) for j in robot.joint_names]
+    )
     tot = np.array([sum(1 for o in owner if o == j) for j in robot.joint_names])
     share = det / np.maximum(tot, 1)
     return LinkIdentifiability(tuple(robot.joint_names), share, det, tot, " and ".join(parts))
@@ -201,8 +220,11 @@ def _owner_joint(parameter_name: str) -> str:
 def share_color(share: float) -> tuple[float, float, float, float]:
     """Red (0) -> yellow (0.5) -> green (1), RGBA."""
     s = float(np.clip(share, 0.0, 1.0))
-    red, yellow, green = np.array([0.85, 0.15, 0.1]), np.array([0.95, 0.8, 0.1]), np.array(
-        [0.15, 0.7, 0.2])
+    red, yellow, green = (
+        np.array([0.85, 0.15, 0.1]),
+        np.array([0.95, 0.8, 0.1]),
+        np.array([0.15, 0.7, 0.2]),
+    )
     rgb = red + (yellow - red) * (2 * s) if s <= 0.5 else yellow + (green - yellow) * (2 * s - 1)
     return (*map(float, rgb), 1.0)
 
@@ -248,7 +270,10 @@ def check_trajectory(robot: Robot, t, q, *, tolerance: float = 1e-6):
             raise InfeasibleTrajectoryError(
                 f"trajectory leaves the position limits of {names[i]}: q={q[k, i]:.4g} at "
                 f"sample {k} (t={t[k]:.4g} s), limits [{lo[i]:.4g}, {hi[i]:.4g}]",
-                joint=names[i], limit="position", excess=float(excess))
+                joint=names[i],
+                limit="position",
+                excess=float(excess),
+            )
     return t, q
 
 
@@ -256,8 +281,11 @@ def _q_names(robot: Robot) -> list[str]:
     names = []
     for i in range(1, robot.model.njoints):
         nq = robot.model.joints[i].nq
-        names += [robot.model.names[i]] if nq == 1 else [f"{robot.model.names[i]}[{k}]"
-                                                          for k in range(nq)]
+        names += (
+            [robot.model.names[i]]
+            if nq == 1
+            else [f"{robot.model.names[i]}[{k}]" for k in range(nq)]
+        )
     return names
 
 
@@ -285,8 +313,9 @@ class _RecordingWindow:
             find_node(self.tree, path).transform = packed
         elif kind == "set_property":
             node = find_node(self.tree, path)
-            node.properties = [p for p in node.properties
-                               if umsgpack.unpackb(p)["property"] != data["property"]]
+            node.properties = [
+                p for p in node.properties if umsgpack.unpackb(p)["property"] != data["property"]
+            ]
             node.properties.append(packed)
         elif kind == "set_animation":
             find_node(self.tree, path).animation = packed
@@ -388,10 +417,12 @@ class RobotScene:
                 if suffix == ".dae":  # Collada files keep their own materials: load the geometry
                     material = mg.MeshPhongMaterial(color=_hex(color))
                     self._vis[self._node(obj)].set_object(
-                        mg.DaeMeshGeometry.from_file(obj.meshPath), material)
+                        mg.DaeMeshGeometry.from_file(obj.meshPath), material
+                    )
                 else:
-                    self._viz.loadViewerGeometryObject(obj, pin.GeometryType.VISUAL,
-                                                       np.array(color))
+                    self._viz.loadViewerGeometryObject(
+                        obj, pin.GeometryType.VISUAL, np.array(color)
+                    )
         for w in caught:
             self.notes.append(f"mesh: {w.message}")
 
@@ -413,7 +444,8 @@ class RobotScene:
             for body, ell in enumerate(ellipsoids, start=1):
                 if ell.physical:
                     out[f"inertia/{label}/{ell.joint}"] = (
-                        self._data.oMi[body].homogeneous @ ell.placement)
+                        self._data.oMi[body].homogeneous @ ell.placement
+                    )
         return out
 
     def _place_all(self, q, vis) -> None:
@@ -442,11 +474,13 @@ class RobotScene:
         # camera offset in the viewer's y-up camera frame: world (dx, dy, dz) -> (dx, dz, -dy)
         d = 0.7 * size * np.array([1.0, 0.7, 0.45])
         self._vis["/Cameras/default/rotated/<object>"].set_property(
-            "position", [float(d[0]), float(d[2]), float(-d[1])])
+            "position", [float(d[0]), float(d[2]), float(-d[1])]
+        )
 
     # ------------------------------------------------------------ public API
-    def animate(self, t, q, *, fps: float = 30.0, max_frames: int = 1500,
-                play: bool = True) -> RobotScene:
+    def animate(
+        self, t, q, *, fps: float = 30.0, max_frames: int = 1500, play: bool = True
+    ) -> RobotScene:
         """Animate along positions ``q`` [rad or m], shape (N, nq), at times ``t`` [s], shape (N,).
 
         The clip has frames every ``1/fps`` s (fewer, evenly spread, when the
@@ -503,8 +537,9 @@ class RobotScene:
         if len(color) not in (3, 4):
             raise InputError(f"color must be RGB or RGBA floats, got {color!r}")
         color = (*color[:3], color[3] if len(color) == 4 else 0.45)
-        material = mg.MeshLambertMaterial(color=_hex(color), opacity=float(color[3]),
-                                          transparent=float(color[3]) < 1.0)
+        material = mg.MeshLambertMaterial(
+            color=_hex(color), opacity=float(color[3]), transparent=float(color[3]) < 1.0
+        )
         notes = []
         for ell in ellipsoids:
             if ell.physical:
@@ -515,11 +550,16 @@ class RobotScene:
         self._sets.append((label, ellipsoids, color))
         self.notes.extend(notes)
         drawn = sum(e.physical for e in ellipsoids)
-        self._legend.append(_Legend(
-            f"inertia ellipsoids: {label}",
-            [f'<span class="sw" style="background:{_css(color)}"></span> {html_lib.escape(label)}: '
-             f"{drawn} of {len(ellipsoids)} bodies"],
-            notes))
+        self._legend.append(
+            _Legend(
+                f"inertia ellipsoids: {label}",
+                [
+                    f'<span class="sw" style="background:{_css(color)}"></span> '
+                    f"{html_lib.escape(label)}: {drawn} of {len(ellipsoids)} bodies"
+                ],
+                notes,
+            )
+        )
         self._place_all(self._q_static, self._vis)
         self._build_animation()
         return notes
@@ -527,8 +567,10 @@ class RobotScene:
     def color_by_identifiability(self, ident: LinkIdentifiability) -> RobotScene:
         """Color each link's meshes by its determined share (red 0, yellow 0.5, green 1)."""
         if tuple(ident.joints) != tuple(self.robot.joint_names):
-            raise InputError(f"identifiability is for joints {list(ident.joints)}, "
-                             f"but the robot has {self.robot.joint_names}")
+            raise InputError(
+                f"identifiability is for joints {list(ident.joints)}, "
+                f"but the robot has {self.robot.joint_names}"
+            )
         colors = {0: GREY}
         for body, s in enumerate(ident.share, start=1):
             colors[body] = share_color(s)
@@ -539,14 +581,23 @@ class RobotScene:
         self._place_all(self._q_static, self._vis)
         self._build_animation()
         lines = []
-        for j, s, d, n in zip(ident.joints, ident.share, ident.determined, ident.total, strict=True):
-            lines.append(f'<span class="sw" style="background:{_css(share_color(s))}"></span> '
-                         f"{html_lib.escape(j)}: {int(d)}/{int(n)} determined ({100 * s:.0f}%)")
-        scale = " ".join(f'<span class="sw" style="background:{_css(share_color(s))}"></span>{s:g}'
-                         for s in (0.0, 0.25, 0.5, 0.75, 1.0))
-        self._legend.append(_Legend(
-            f"identifiability ({html_lib.escape(ident.criterion)})",
-            [f"share determined: {scale}", *lines]))
+        for j, s, d, n in zip(
+            ident.joints, ident.share, ident.determined, ident.total, strict=True
+        ):
+            lines.append(
+                f'<span class="sw" style="background:{_css(share_color(s))}"></span> '
+                f"{html_lib.escape(j)}: {int(d)}/{int(n)} determined ({100 * s:.0f}%)"
+            )
+        scale = " ".join(
+            f'<span class="sw" style="background:{_css(share_color(s))}"></span>{s:g}'
+            for s in (0.0, 0.25, 0.5, 0.75, 1.0)
+        )
+        self._legend.append(
+            _Legend(
+                f"identifiability ({html_lib.escape(ident.criterion)})",
+                [f"share determined: {scale}", *lines],
+            )
+        )
         return self
 
     # -------------------------------------------------------------- output
@@ -562,14 +613,17 @@ class RobotScene:
         js = (Path(meshcat.__file__).parent / "viewer" / "dist" / "main.min.js").read_text()
         payload = json.dumps([base64.b64encode(c).decode("ascii") for c in self.commands()])
         legend = self._legend_html()
-        return _PAGE.format(title=html_lib.escape(self.title), mainjs=js, commands=payload,
-                            legend=legend)
+        return _PAGE.format(
+            title=html_lib.escape(self.title), mainjs=js, commands=payload, legend=legend
+        )
 
     def _legend_html(self) -> str:
         parts = [f"<b>{html_lib.escape(self.title)}</b>"]
         if self._t is not None:
-            parts.append(f"motion: {len(self._t)} samples over {self._t[-1] - self._t[0]:.3g} s "
-                         "(Animations panel: play, pause, time)")
+            parts.append(
+                f"motion: {len(self._t)} samples over {self._t[-1] - self._t[0]:.3g} s "
+                "(Animations panel: play, pause, time)"
+            )
         for leg in self._legend:
             parts.append(f"<b>{leg.title}</b>")
             parts.extend(leg.lines)
@@ -590,7 +644,8 @@ class RobotScene:
         for packed in self.commands():
             data = umsgpack.unpackb(packed)
             vis.window.zmq_socket.send_multipart(
-                [data["type"].encode(), data.get("path", "").encode(), packed])
+                [data["type"].encode(), data.get("path", "").encode(), packed]
+            )
             vis.window.zmq_socket.recv()
         if open_browser:
             vis.open()

@@ -1,0 +1,105 @@
+"""``manip-id view``: the robot in meshcat, animated along data or a simulated excitation.
+
+The scene (visual meshes, a time slider, the nominal inertia ellipsoids) is
+written as a standalone HTML file (``--html``, atomically: temporary file, then
+rename) and/or replayed into a live meshcat viewer on 127.0.0.1 (``--serve``,
+until Ctrl-C). A trajectory that does not fit the robot (number of positions,
+position limits) is an error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+
+from ..errors import InputError
+from ._common import add_robot_arguments, robot_from_args
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "view",
+        help="show the robot in meshcat, animated along data or a simulated excitation",
+        description="Build a meshcat scene of ROBOT (visual meshes and the nominal inertia "
+        "ellipsoids), animated along the positions of a dataset (--data) or of a random "
+        "Fourier excitation (--simulate), with a time slider. Write it as a standalone HTML "
+        "file (--html) and/or serve it live on 127.0.0.1 (--serve).",
+    )
+    add_robot_arguments(p)
+    src = p.add_mutually_exclusive_group()
+    src.add_argument(
+        "--data", metavar="FILE", help="dataset whose q to follow (.npz, .csv or a Panda log)"
+    )
+    src.add_argument("--simulate", action="store_true", help="follow a random Fourier excitation")
+    p.add_argument(
+        "--duration", type=float, default=10.0, help="seconds of --simulate motion [default 10]"
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of the --simulate excitation")
+    p.add_argument("--fps", type=float, default=30.0, help="animation frames per second")
+    p.add_argument(
+        "--no-inertia", action="store_true", help="do not draw the nominal inertia ellipsoids"
+    )
+    p.add_argument("--html", metavar="OUT", help="write the scene as a standalone HTML file")
+    p.add_argument(
+        "--serve",
+        action="store_true",
+        help="open a live meshcat viewer on 127.0.0.1 and wait (Ctrl-C ends)",
+    )
+    p.set_defaults(func=run)
+
+
+def _motion(robot, args):
+    """``(t, q, what)`` to animate along, or None for a still robot."""
+    if args.data is not None:
+        from ..datasets import load_dataset
+
+        ds = load_dataset(args.data)
+        return ds.t, ds.q, f"data {args.data} ({ds.n_samples} samples)"
+    if args.simulate:
+        from ..simulation import simulate
+        from ..trajectories import random_trajectory
+
+        traj = random_trajectory(robot, harmonics=5, seed=args.seed)
+        sim = simulate(robot, traj, duration=args.duration, rate=max(2 * args.fps, 50.0))
+        ds = sim.dataset
+        return ds.t, ds.q, f"random excitation (seed {args.seed}, {args.duration:g} s)"
+    return None
+
+
+def run(args: argparse.Namespace) -> int:
+    if not args.html and not args.serve:
+        raise InputError("nothing to do: give --html OUT and/or --serve")
+    if args.simulate and not (math.isfinite(args.duration) and args.duration > 0):
+        raise InputError(f"--duration must be positive, got {args.duration}")
+    if not (math.isfinite(args.fps) and args.fps > 0):
+        raise InputError(f"--fps must be positive, got {args.fps}")
+    from ..viz.meshcat_scene import RobotScene, check_trajectory
+
+    robot = robot_from_args(args)
+    motion = _motion(robot, args)
+    title = f"manip-id view {robot.name}"
+    if motion is not None:
+        t, q, what = motion
+        t, q = check_trajectory(robot, t, q)  # width and limits: an error, not a warning
+        title += f": {what}"
+    scene = RobotScene(robot, title=title)
+    if motion is not None:
+        scene.animate(t, q, fps=args.fps)
+    if not args.no_inertia:
+        scene.add_inertia(robot.nominal_parameters, label="nominal")
+    for note in scene.notes:
+        print(f"note: {note}", file=sys.stderr)
+    if args.html:
+        path = scene.write_html(args.html)
+        print(f"wrote {path}")
+    if args.serve:  # pragma: no cover - interactive
+        vis = scene.serve()
+        print(f"meshcat viewer at {vis.url()} (Ctrl-C ends)", flush=True)
+        try:
+            while True:
+                time.sleep(1.0)
+        except KeyboardInterrupt:
+            pass
+    return 0

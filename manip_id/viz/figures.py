@@ -1,0 +1,429 @@
+"""Figures of identification and adaptive-control runs (matplotlib, Agg, PNG, no screen).
+
+Every function takes plain arrays (and names and units), writes one PNG
+atomically (temporary file, then rename: :func:`manip_id.viz._io.atomic_write`)
+and returns the :class:`matplotlib.figure.Figure` it drew, so that callers and
+tests can inspect its axes. Figures are built without ``pyplot`` (no global
+state, no display); the PNG has exactly ``figsize * dpi`` pixels.
+
+Long signals are thinned for drawing: at most :data:`MAX_POINTS` points per
+line, taken at an even stride (the arrays themselves are not copied).
+
+Shapes: ``t`` [s] (N,); per-joint signals (N, n) with one column per joint;
+parameter histories (K, p).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from .._checks import as_float_array, check_finite
+from ..errors import InputError
+from ._io import atomic_write
+
+#: Points drawn per line at most (longer signals are strided).
+MAX_POINTS = 4000
+#: Resolution of the PNG files [dots per inch].
+DPI = 100
+
+_TRAIN, _PRED, _VAL, _VPRED = "#7f7f7f", "#1f77b4", "#bcbd22", "#d62728"
+
+
+# ------------------------------------------------------------------ helpers
+def _stride(n: int) -> int:
+    return max(1, int(np.ceil(n / MAX_POINTS)))
+
+
+def _series(t, y, name_t: str, name_y: str, width: int | None = None):
+    """Validated ``t`` (N,) and ``y`` (N, n) (a 1-D ``y`` is one column)."""
+    t = as_float_array(t, name_t, ndim=1)
+    y = as_float_array(y, name_y, ndim=(1, 2))
+    if y.ndim == 1:
+        y = y[:, None]
+    if y.shape[0] != t.shape[0]:
+        raise InputError(f"{name_t}.shape={t.shape} but {name_y}.shape={y.shape}: one row per time")
+    if y.shape[0] < 1:
+        raise InputError(f"{name_y} has no samples ({name_y}.shape={y.shape})")
+    if width is not None and y.shape[1] != width:
+        raise InputError(f"{name_y}.shape={y.shape} but {width} columns were expected")
+    check_finite(t, name_t)
+    check_finite(y, name_y)
+    return t, y
+
+
+def _names(names: Sequence[str] | None, n: int, what: str, default: str) -> list[str]:
+    if names is None:
+        return [f"{default} {i + 1}" for i in range(n)]
+    names = [str(x) for x in names]
+    if len(names) != n:
+        raise InputError(f"{len(names)} {what} given for {n} columns")
+    return names
+
+
+def _units(units, n: int) -> list[str]:
+    if isinstance(units, str):
+        return [units] * n
+    units = [str(u) for u in units]
+    if len(units) != n:
+        raise InputError(f"{len(units)} units given for {n} columns")
+    return units
+
+
+def _figure(
+    n_axes: int,
+    *,
+    cols: int = 1,
+    width: float = 10.0,
+    row_height: float = 1.9,
+    min_height: float = 3.5,
+):
+    """A Figure with ``n_axes`` subplots on a grid of ``cols`` columns; returns (fig, axes)."""
+    cols = max(1, min(cols, n_axes))
+    rows = int(np.ceil(n_axes / cols))
+    height = max(min_height, row_height * rows + 1.0)
+    fig = Figure(figsize=(width, height), dpi=DPI)
+    FigureCanvasAgg(fig)
+    axes = [fig.add_subplot(rows, cols, i + 1) for i in range(n_axes)]
+    return fig, axes
+
+
+def _save(fig: Figure, path) -> Figure:
+    fig.tight_layout()
+    atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=DPI))
+    return fig
+
+
+# ------------------------------------------------------------------ figures
+def torque_fit(
+    path,
+    t,
+    tau,
+    tau_pred,
+    *,
+    joint_names: Sequence[str] | None = None,
+    units: str | Sequence[str] = "N m",
+    t_validation=None,
+    tau_validation=None,
+    tau_validation_pred=None,
+    title: str = "torque fit",
+) -> Figure:
+    """Measured and predicted torque per joint, training (and validation) data.
+
+    t: training times [s], shape (N,); tau, tau_pred: measured and predicted
+    (``Y_b(q, dq, ddq) theta_b``) torques, shape (N, n) [units]. The validation
+    triple, when given, has shapes (M,), (M, n), (M, n). One axes per joint.
+    """
+    t, tau = _series(t, tau, "t", "tau")
+    n = tau.shape[1]
+    _, tau_pred = _series(t, tau_pred, "t", "tau_pred", width=n)
+    val = _validation(t_validation, tau_validation, tau_validation_pred, n, "tau")
+    names, units = _names(joint_names, n, "joint names", "joint"), _units(units, n)
+    fig, axes = _figure(n, row_height=1.7)
+    for j, ax in enumerate(axes):
+        k = _stride(len(t))
+        ax.plot(t[::k], tau[::k, j], color=_TRAIN, lw=2.4, alpha=0.45, label="measured (training)")
+        ax.plot(t[::k], tau_pred[::k, j], color=_PRED, lw=0.9, label="predicted (training)")
+        if val is not None:
+            tv, mv, pv = val
+            k = _stride(len(tv))
+            ax.plot(
+                tv[::k], mv[::k, j], color=_VAL, lw=2.4, alpha=0.6, label="measured (validation)"
+            )
+            ax.plot(
+                tv[::k], pv[::k, j], color=_VPRED, lw=0.9, ls="--", label="predicted (validation)"
+            )
+        ax.set_ylabel(f"{names[j]}\n[{units[j]}]", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("time [s]")
+    axes[0].legend(loc="upper right", fontsize=7, ncol=4)
+    fig.suptitle(title)
+    return _save(fig, path)
+
+
+def residuals(
+    path,
+    t,
+    residual,
+    *,
+    joint_names: Sequence[str] | None = None,
+    units: str | Sequence[str] = "N m",
+    t_validation=None,
+    residual_validation=None,
+    title: str = "torque residuals",
+) -> Figure:
+    """Torque residuals ``tau - tau_pred`` per joint over time, with their RMS in the legend.
+
+    t: [s], shape (N,); residual: shape (N, n) [units]; the validation pair has
+    shapes (M,), (M, n). One axes per joint.
+    """
+    t, res = _series(t, residual, "t", "residual")
+    n = res.shape[1]
+    val = None
+    if (t_validation is None) != (residual_validation is None):
+        raise InputError("give both t_validation and residual_validation, or neither")
+    if t_validation is not None:
+        val = _series(
+            t_validation, residual_validation, "t_validation", "residual_validation", width=n
+        )
+    names, units = _names(joint_names, n, "joint names", "joint"), _units(units, n)
+    fig, axes = _figure(n, row_height=1.5)
+    for j, ax in enumerate(axes):
+        k = _stride(len(t))
+        rms = float(np.sqrt(np.mean(res[:, j] ** 2)))
+        ax.plot(t[::k], res[::k, j], color=_PRED, lw=0.7, label=f"training, RMS {rms:.3g}")
+        if val is not None:
+            tv, rv = val
+            k = _stride(len(tv))
+            rms = float(np.sqrt(np.mean(rv[:, j] ** 2)))
+            ax.plot(tv[::k], rv[::k, j], color=_VPRED, lw=0.7, label=f"validation, RMS {rms:.3g}")
+        ax.axhline(0.0, color="k", lw=0.5)
+        ax.set_ylabel(f"{names[j]}\n[{units[j]}]", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.legend(loc="upper right", fontsize=7, ncol=2)
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("time [s]")
+    fig.suptitle(title)
+    return _save(fig, path)
+
+
+def _validation(t, measured, predicted, n: int, what: str):
+    given = [x is not None for x in (t, measured, predicted)]
+    if not any(given):
+        return None
+    if not all(given):
+        raise InputError(
+            f"validation needs t_validation, {what}_validation and {what}_validation_pred together"
+        )
+    t, measured = _series(t, measured, "t_validation", f"{what}_validation", width=n)
+    _, predicted = _series(t, predicted, "t_validation", f"{what}_validation_pred", width=n)
+    return t, measured, predicted
+
+
+def singular_values(
+    path,
+    sigma,
+    *,
+    tolerance: float,
+    rank: int | None = None,
+    title: str = "singular values",
+    ylabel: str = "sigma_i / sigma_1 (column-scaled regressor) [-]",
+) -> Figure:
+    """Singular-value spectrum ``sigma_i / sigma_1`` (log scale) with the rank threshold.
+
+    sigma: singular values, shape (p,), any order (sorted descending here);
+    tolerance: relative rank threshold: ``sigma_i / sigma_1 > tolerance`` counts
+    toward the rank. rank: the rank to mark (default: the count above the
+    threshold). Zero values are drawn at the bottom of the axis.
+    """
+    s = as_float_array(sigma, "sigma", ndim=1)
+    if s.size == 0:
+        raise InputError(f"sigma must hold at least one singular value, got shape {s.shape}")
+    check_finite(s, "sigma")
+    if np.any(s < 0):
+        raise InputError(f"singular values must be >= 0, got min {s.min():.3g}")
+    if not (np.isfinite(tolerance) and 0 < tolerance < 1):
+        raise InputError(f"tolerance must be a relative threshold in (0, 1), got {tolerance}")
+    s = np.sort(s)[::-1]
+    if s[0] <= 0:
+        raise InputError("all singular values are zero: nothing to plot")
+    rel = s / s[0]
+    above = rel > tolerance
+    r = int(above.sum()) if rank is None else int(rank)
+    floor = min(tolerance, rel[rel > 0].min()) * 1e-2
+    shown = np.maximum(rel, floor)
+    idx = np.arange(1, s.size + 1)
+    fig, (ax,) = _figure(1, width=9.0, min_height=4.5)
+    ax.semilogy(idx[above], shown[above], "o", color=_PRED, ms=4, label=f"above threshold ({r})")
+    if (~above).any():
+        ax.semilogy(
+            idx[~above],
+            shown[~above],
+            "x",
+            color=_VPRED,
+            ms=5,
+            label=f"below threshold ({int((~above).sum())})",
+        )
+    ax.axhline(tolerance, color="k", ls="--", lw=1.0, label=f"rank threshold {tolerance:.2g}")
+    if 0 < r < s.size:
+        ax.axvline(r + 0.5, color="grey", ls=":", lw=1.0, label=f"rank {r} of {s.size}")
+    ax.set_xlabel("index i [-]")
+    ax.set_ylabel(ylabel)
+    ax.set_ylim(floor * 0.5, 2.0)
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(loc="lower left", fontsize=8)
+    ax.set_title(title)
+    return _save(fig, path)
+
+
+def parameter_history(
+    path,
+    t,
+    theta_hat,
+    *,
+    names: Sequence[str],
+    units: Sequence[str] | None = None,
+    theta_true=None,
+    max_parameters: int = 12,
+    title: str = "parameter estimates",
+) -> Figure:
+    """Estimates over time of an online law or adaptive controller, with the truth when known.
+
+    t: [s], shape (K,); theta_hat: shape (K, p); names (and units): length p;
+    theta_true: shape (p,) or None. At most ``max_parameters`` parameters are
+    drawn, one axes each: those whose estimate moved the most relative to its
+    scale (``|theta_hat[-1] - theta_hat[0]| / max(|theta_hat|, |theta_true|)``),
+    ties broken by the initial error relative to the same scale.
+    """
+    t, th = _series(t, theta_hat, "t", "theta_hat")
+    p = th.shape[1]
+    names = _names(names, p, "parameter names", "parameter")
+    units = _units(units if units is not None else [""] * p, p)
+    true = None
+    if theta_true is not None:
+        true = as_float_array(theta_true, "theta_true", ndim=1)
+        if true.shape != (p,):
+            raise InputError(f"theta_true.shape={true.shape} but theta_hat.shape={th.shape}")
+        check_finite(true, "theta_true")
+    if int(max_parameters) < 1:
+        raise InputError(f"max_parameters must be >= 1, got {max_parameters}")
+    scale = np.abs(th).max(axis=0)
+    if true is not None:
+        scale = np.maximum(scale, np.abs(true))
+    scale = np.maximum(scale, 1e-12)
+    moved = np.abs(th[-1] - th[0]) / scale
+    error = np.zeros(p) if true is None else np.abs(th[0] - true) / scale
+    order = np.lexsort((-error, -moved))[: min(int(max_parameters), p)]
+    fig, axes = _figure(len(order), cols=3, width=12.0, row_height=2.2)
+    k = _stride(len(t))
+    for ax, i in zip(axes, order, strict=True):
+        ax.plot(t[::k], th[::k, i], color=_PRED, lw=1.0, label="estimate")
+        if true is not None:
+            ax.axhline(true[i], color=_VPRED, ls="--", lw=1.0, label="true")
+        unit = f" [{units[i]}]" if units[i] else ""
+        ax.set_title(names[i], fontsize=8)
+        ax.set_ylabel(f"value{unit}", fontsize=7)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    for ax in axes[-min(3, len(axes)) :]:
+        ax.set_xlabel("time [s]", fontsize=8)
+    axes[0].legend(fontsize=7)
+    shown = f"{len(order)} of {p} parameters" if len(order) < p else f"{p} parameters"
+    fig.suptitle(f"{title} ({shown})")
+    return _save(fig, path)
+
+
+def tracking_error(
+    path,
+    t,
+    error,
+    *,
+    joint_names: Sequence[str] | None = None,
+    units: str = "rad",
+    baseline=None,
+    labels: tuple[str, str] = ("adaptive", "fixed parameters"),
+    title: str = "tracking error",
+) -> Figure:
+    """Tracking error ``q - q_d`` per joint, and its norm against a baseline run.
+
+    t: [s], shape (K,); error: shape (K, n) [units]; baseline: the error of a
+    comparison run (e.g. fixed parameters) on the same times, shape (K, n), or
+    None. Two axes: per-joint error (top), ``|q - q_d|`` (bottom, log scale).
+    """
+    t, err = _series(t, error, "t", "error")
+    n = err.shape[1]
+    base = None
+    if baseline is not None:
+        _, base = _series(t, baseline, "t", "baseline", width=n)
+    names = _names(joint_names, n, "joint names", "joint")
+    fig, (top, bottom) = _figure(2, width=10.0, row_height=2.6)
+    k = _stride(len(t))
+    for j in range(n):
+        top.plot(t[::k], err[::k, j], lw=0.9, label=names[j])
+    top.set_ylabel(f"q - q_d [{units}]")
+    top.legend(fontsize=7, ncol=min(n, 7), loc="upper right")
+    top.set_title(f"per joint ({labels[0]})", fontsize=9)
+    top.grid(alpha=0.3)
+    floor = 1e-12
+    bottom.semilogy(
+        t[::k], np.maximum(np.linalg.norm(err, axis=1)[::k], floor), color=_PRED, label=labels[0]
+    )
+    if base is not None:
+        bottom.semilogy(
+            t[::k],
+            np.maximum(np.linalg.norm(base, axis=1)[::k], floor),
+            color=_VPRED,
+            ls="--",
+            label=labels[1],
+        )
+    bottom.set_ylabel(f"|q - q_d| [{units}]")
+    bottom.set_xlabel("time [s]")
+    bottom.legend(fontsize=8)
+    bottom.grid(alpha=0.3, which="both")
+    fig.suptitle(title)
+    return _save(fig, path)
+
+
+def trajectory_limits(
+    path,
+    t,
+    q,
+    *,
+    lower,
+    upper,
+    joint_names: Sequence[str] | None = None,
+    units: str | Sequence[str] = "rad",
+    title: str = "excitation trajectory",
+) -> Figure:
+    """Joint positions over time against their limits (shaded outside), one axes per joint.
+
+    t: [s], shape (N,); q: shape (N, n) [units]; lower, upper: shape (n,)
+    (infinite or absurdly wide limits, over 1e3, are not drawn).
+    """
+    t, q = _series(t, q, "t", "q")
+    n = q.shape[1]
+    lo = as_float_array(lower, "lower", ndim=1)
+    hi = as_float_array(upper, "upper", ndim=1)
+    if lo.shape != (n,) or hi.shape != (n,):
+        raise InputError(f"lower.shape={lo.shape}, upper.shape={hi.shape} but q.shape={q.shape}")
+    names, units = _names(joint_names, n, "joint names", "joint"), _units(units, n)
+    cols = 2 if n > 3 else 1
+    fig, axes = _figure(n, cols=cols, width=11.0 if cols == 2 else 9.0, row_height=1.9)
+    k = _stride(len(t))
+    for j, ax in enumerate(axes):
+        ax.plot(t[::k], q[::k, j], color=_PRED, lw=1.0, label="q")
+        bounded = np.isfinite(lo[j]) and np.isfinite(hi[j]) and 0 < hi[j] - lo[j] < 1e3
+        if bounded:
+            span = hi[j] - lo[j]
+            ymin = min(lo[j], q[:, j].min()) - 0.12 * span
+            ymax = max(hi[j], q[:, j].max()) + 0.12 * span
+            ax.axhspan(ymin, lo[j], color=_VPRED, alpha=0.15)
+            ax.axhspan(hi[j], ymax, color=_VPRED, alpha=0.15)
+            ax.axhline(lo[j], color=_VPRED, lw=1.0, label="limits")
+            ax.axhline(hi[j], color=_VPRED, lw=1.0)
+            ax.set_ylim(ymin, ymax)
+            used = (q[:, j].max() - q[:, j].min()) / span
+            ax.set_title(f"{names[j]}: {100 * used:.0f} % of the range used", fontsize=8)
+        else:
+            ax.set_title(f"{names[j]}: no finite limits", fontsize=8)
+        ax.set_ylabel(f"q [{units[j]}]", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    for ax in axes[-cols:]:
+        ax.set_xlabel("time [s]", fontsize=8)
+    axes[0].legend(fontsize=7, loc="upper right")
+    fig.suptitle(title)
+    return _save(fig, path)
+
+
+def png_size(path) -> tuple[int, int]:
+    """(width, height) [px] of a PNG file, read from its header; InputError if not a PNG."""
+    head = Path(path).read_bytes()[:24]
+    if len(head) < 24 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        raise InputError(f"{path} is not a PNG file")
+    return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
