@@ -25,8 +25,6 @@ Raw logs carry no accelerations: see :func:`manip_id.signals.preprocess`.
 from __future__ import annotations
 
 import fnmatch
-import os
-import tempfile
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
@@ -35,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from ._checks import as_float_array, check_finite
+from ._io import atomic_write
 from .errors import DataError
 
 
@@ -411,12 +410,6 @@ def load_panda_gaz2019(folder: str | Path) -> Dataset:
     return ds
 
 
-def _atomic_target(path: Path):
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    return fd, Path(tmp)
-
-
 def save_dataset(dataset: Dataset, path: str | Path, *, format: str | None = None) -> Path:
     """Write ``dataset`` as NPZ (interchange format) or CSV (default header), atomically.
 
@@ -435,9 +428,9 @@ def save_dataset(dataset: Dataset, path: str | Path, *, format: str | None = Non
             "expected .npz or .csv"
         )
     names = dataset.joint_names or tuple(f"j{i}" for i in range(dataset.nv))
-    fd, tmp = _atomic_target(path)
-    try:
-        with os.fdopen(fd, "wb") as fh:
+
+    def write(tmp: Path) -> None:
+        with open(tmp, "wb") as fh:
             if fmt == "npz":
                 arrays = {"t": dataset.t, "q": dataset.q, "dq": dataset.dq, "tau": dataset.tau}
                 if dataset.ddq is not None:
@@ -469,10 +462,8 @@ def save_dataset(dataset: Dataset, path: str | Path, *, format: str | None = Non
                     comments="",
                     fmt="%.17g",
                 )
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+
+    atomic_write(path, write)
     return path
 
 

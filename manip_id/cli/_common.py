@@ -3,13 +3,8 @@
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import tempfile
-from pathlib import Path
 
-import numpy as np
-
+from .._io import write_json  # noqa: F401 (the commands import it from here)
 from ..robot import Robot, load_robot
 
 
@@ -56,32 +51,3 @@ def robot_from_args(args: argparse.Namespace) -> Robot:
         active_joints=joints,
         package_dirs=args.package_dir,
     )
-
-
-def _jsonable(obj):
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, Path):
-        return str(obj)
-    raise TypeError(f"not JSON serializable: {type(obj).__name__}")
-
-
-def atomic_write_text(path: str | Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file and a rename: never a partial file."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def write_json(path: str | Path, obj) -> None:
-    """Write ``obj`` as indented JSON atomically (numpy arrays become lists)."""
-    atomic_write_text(path, json.dumps(obj, indent=2, default=_jsonable) + "\n")

@@ -1,7 +1,7 @@
 """Figures of identification and adaptive-control runs (matplotlib, Agg, PNG, no screen).
 
 Every function takes plain arrays (and names and units), writes one PNG
-atomically (temporary file, then rename: :func:`manip_id.viz._io.atomic_write`)
+atomically (temporary file, then rename: :func:`manip_id._io.atomic_write`)
 and returns the :class:`matplotlib.figure.Figure` it drew, so that callers and
 tests can inspect its axes. Figures are built without ``pyplot`` (no global
 state, no display); the PNG has exactly ``figsize * dpi`` pixels.
@@ -23,8 +23,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from .._checks import as_float_array, check_finite
+from .._io import atomic_write
 from ..errors import InputError
-from ._io import atomic_write
 
 #: Points drawn per line at most (longer signals are strided).
 MAX_POINTS = 4000

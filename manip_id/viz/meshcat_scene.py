@@ -33,9 +33,9 @@ from meshcat.animation import Animation
 from meshcat.servers.tree import SceneTree, find_node, walk
 
 from .._checks import as_float_array, check_finite
+from .._io import atomic_write_text
 from ..errors import InfeasibleTrajectoryError, InputError, ManipIdError
 from ..robot import Robot
-from ._io import atomic_write_text
 
 #: Colors of successive parameter sets (RGBA): nominal, then compared ones.
 SET_COLORS: tuple[tuple[float, float, float, float], ...] = (

@@ -9,7 +9,6 @@ report is complete (the old folder is first renamed aside, then removed).
 from __future__ import annotations
 
 import html as html_lib
-import json
 import os
 import shutil
 import tempfile
@@ -18,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .._io import atomic_write_text, json_text
 from ..errors import InputError
-from ._io import atomic_write_text
 
 INDEX, RESULT, SCENE = "index.html", "result.json", "scene.html"
 
@@ -41,16 +40,6 @@ def check_report_target(directory, force: bool = False) -> Path:
             f"report folder {path} exists and is not empty (use --force / force=True to replace it)"
         )
     return path
-
-
-def _jsonable(obj):
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, Path):
-        return str(obj)
-    raise TypeError(f"not JSON serializable: {type(obj).__name__}")
 
 
 def _cell(value) -> str:
@@ -162,7 +151,7 @@ def write_report(
             if json_result is not None
             else {"title": title, "summary": dict(summary), "parameters": list(parameter_table)}
         )
-        atomic_write_text(tmp / RESULT, json.dumps(payload, indent=2, default=_jsonable) + "\n")
+        atomic_write_text(tmp / RESULT, json_text(payload))
         written = []
         for name, fig in figures.items():
             out = tmp / f"{name}.png"

@@ -1,11 +1,14 @@
-"""Atomic file output for figures, scenes and reports: temporary file, then rename."""
+"""File output shared by the package: atomic writes (temporary file, then rename), JSON."""
 
 from __future__ import annotations
 
+import json
 import os
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
+
+import numpy as np
 
 
 def _umask() -> int:
@@ -38,3 +41,24 @@ def atomic_write(path, write: Callable[[Path], None]) -> Path:
 def atomic_write_text(path, text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` atomically."""
     return atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+
+
+def jsonable(obj):
+    """``json.dumps`` default: numpy arrays and scalars, paths."""
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"not JSON serializable: {type(obj).__name__}")
+
+
+def json_text(obj) -> str:
+    """``obj`` as indented JSON text (numpy arrays become lists)."""
+    return json.dumps(obj, indent=2, default=jsonable) + "\n"
+
+
+def write_json(path, obj) -> Path:
+    """Write ``obj`` as indented JSON atomically."""
+    return atomic_write_text(path, json_text(obj))
