@@ -209,3 +209,19 @@ def test_csv_with_a_column_map(tmp_path, capsys):
     )
     assert status == 2 and report is None
     assert "pattern 'angle*' of 'q' matches no column" in captured.err
+
+
+def test_workers_give_the_serial_figures(tmp_path):
+    serial, parallel = tmp_path / "serial.json", tmp_path / "parallel.json"
+    common = ["identify", "ur5", "--simulate", "--duration", "5", "--split", "0.7"]
+    assert main([*common, "--json", str(serial)]) == 0
+    assert main([*common, "--workers", "2", "--json", str(parallel)]) == 0
+    a, b = json.loads(serial.read_text()), json.loads(parallel.read_text())
+    va = np.array([p["value"] for p in a["base_parameters"]])
+    vb = np.array([p["value"] for p in b["base_parameters"]])
+    np.testing.assert_allclose(vb, va, rtol=0, atol=1e-9 * np.abs(va).max())
+
+
+def test_workers_need_a_least_squares_method(capsys):
+    assert main(["identify", "ur5", "--simulate", "--method", "rls", "--workers", "2"]) == 2
+    assert "--workers applies to ols and wls" in capsys.readouterr().err

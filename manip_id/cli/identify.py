@@ -129,6 +129,12 @@ def register(sub) -> None:
     )
     p.add_argument("--force", action="store_true", help="replace a non-empty --report folder")
     p.add_argument("--chunk", type=int, default=1024, help="samples per regressor chunk")
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        help="processes accumulating parts of the data (ols, wls; default 1)",
+    )
     p.set_defaults(func=run)
 
 
@@ -212,6 +218,10 @@ def _check_args(args) -> None:
         raise InputError(f"--decimate must be >= 1, got {args.decimate}")
     if args.chunk < 1:
         raise InputError(f"--chunk must be >= 1, got {args.chunk}")
+    if args.workers < 1:
+        raise InputError(f"--workers must be >= 1, got {args.workers}")
+    if args.workers > 1 and args.method in ("rls", "gradient"):
+        raise InputError(f"--workers applies to ols and wls; {args.method} runs in sample order")
 
 
 def _simulate(robot, args):
@@ -291,6 +301,7 @@ def run(args: argparse.Namespace) -> int:
         method=args.method,
         validation=None if valid is None else (valid.q, valid.dq, valid.ddq, valid.tau),
         chunk=args.chunk,
+        workers=args.workers,
         progress=_progress(train.n_samples + (0 if valid is None else valid.n_samples)),
     )
     timings.update({k: float(v) for k, v in dict(result.timings).items()})
