@@ -22,6 +22,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.linalg.blas import dsyrk
 
 from ._checks import as_float_array, check_finite
 from .errors import InputError, RankDeficiencyError
@@ -264,12 +265,37 @@ def _check_method(method: str, chunk: int, workers: int) -> None:
         raise InputError(f"workers must be a positive number of processes, got {workers}")
 
 
+def row_supports(robot: Robot, columns, n_states: int = 16, seed: int = 12345) -> list[np.ndarray]:
+    """Per joint, the positions in ``columns`` whose regressor entry is not identically zero.
+
+    Evaluated at ``n_states`` random states within the limits: an entry that is
+    a non-zero function of the state vanishes at random states with probability
+    zero, while the structural zeros (bodies that are not in the joint's
+    subtree, other joints' terms) are exact zeros in Pinocchio's regressor.
+    Returns a list of ``nv`` sorted index arrays.
+    """
+    q, dq, ddq = robot.random_states(n_states, seed=seed)
+    ev = _evaluator(robot)
+    Y = np.stack([ev.regressor(q[k], dq[k], ddq[k]) for k in range(n_states)])
+    nonzero = np.abs(Y[:, :, np.asarray(columns, dtype=np.intp)]).max(axis=0) > 0  # (nv, r)
+    return [np.flatnonzero(row) for row in nonzero]
+
+
 def _accumulate_blocks(
     robot: Robot, blocks, ind: np.ndarray, chunk: int, progress=None, total: int = 0
 ) -> tuple[InformationAccumulator, dict[str, float]]:
-    """Accumulate the base-column information of blocks ``(q, dq, ddq, tau)``, each checked."""
+    """Accumulate the base-column information of blocks ``(q, dq, ddq, tau)``, each checked.
+
+    Row ``j`` of the regressor is accumulated on its non-zero columns only
+    (:func:`row_supports`): in a serial chain that about halves the work of the
+    symmetric rank-k updates.
+    """
     ev = _evaluator(robot)
-    acc = InformationAccumulator(len(ind), robot.nv)
+    nv = robot.nv
+    supports = row_supports(robot, ind)
+    A_c = [np.zeros((sj.size, sj.size)) for sj in supports]
+    b_c = [np.zeros(sj.size) for sj in supports]
+    zz = np.zeros(nv)
     t_reg = t_acc = 0.0
     done = 0
     for block in blocks:
@@ -281,15 +307,21 @@ def _accumulate_blocks(
             robot, bq, bdq, bddq, btau, prefix=f"block at sample {done}: "
         )
         t0 = time.perf_counter()
-        for start, stop, Yt in ev.iter_columns_joint_major(bq, bdq, bddq, ind, chunk):
+        for start, stop, rows in ev.iter_row_supports(bq, bdq, bddq, ind, supports, chunk):
             t1 = time.perf_counter()
             t_reg += t1 - t0
-            acc.add_joint_major(Yt, btau[start:stop])
+            tau = btau[start:stop]
+            for j in range(nv):
+                # lower triangle of A_c[j] (C order) == upper of its Fortran view
+                dsyrk(1.0, rows[j].T, beta=1.0, c=A_c[j].T, trans=0, lower=0, overwrite_c=1)
+                b_c[j] += tau[:, j] @ rows[j]
+            zz += np.einsum("nj,nj->j", tau, tau)
             t0 = time.perf_counter()
             t_acc += t0 - t1
             if progress is not None:
                 progress(done + stop, total)
         done += bq.shape[0]
+    acc = InformationAccumulator(len(ind), nv).add_sums(A_c, b_c, zz, done, supports)
     return acc, {"regressor": t_reg, "accumulate": t_acc}
 
 

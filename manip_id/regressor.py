@@ -177,39 +177,38 @@ class RegressorEvaluator:
             self._fill_joint_terms(Y, q[start:stop], dq[start:stop], ddq[start:stop])
             yield RegressorChunk(start, stop, Y)
 
-    def iter_columns_joint_major(
-        self, q, dq, ddq, columns: np.ndarray, chunk: int
-    ) -> Iterator[tuple[int, int, np.ndarray]]:
-        """Selected columns of Y over a trajectory, joint-major, for accumulation.
+    def iter_row_supports(
+        self, q, dq, ddq, columns: np.ndarray, supports: list[np.ndarray], chunk: int
+    ) -> Iterator[tuple[int, int, list[np.ndarray]]]:
+        """Per joint, only the selected columns that can be non-zero in its row.
 
-        Yields ``(start, stop, Yt)`` with ``Yt`` of shape (nv, stop - start, len(columns)):
-        ``Yt[j, k] = Y(q_k, dq_k, ddq_k)[j, columns]``; each ``Yt[j]`` is C-contiguous.
-        ``columns`` must be sorted ascending. The buffer is reused: copy to keep.
-        This is the hot loop of streaming identification: one contiguous copy of
-        the rigid-body block per sample, one gather per chunk, and the joint-term
-        columns written directly (they are zero except on their own joint's row).
+        ``columns``: sorted column indices (e.g. the base columns), length r;
+        ``supports[j]``: sorted positions in ``columns`` of the entries of row
+        ``j`` that are not identically zero (in a serial chain, joint ``j``'s
+        torque never involves the bodies before it, nor other joints' terms).
+        Yields ``(start, stop, blocks)`` with ``blocks[j]`` of shape
+        (stop - start, len(supports[j])), C-contiguous: ``blocks[j][k] =
+        Y(q_k, dq_k, ddq_k)[j, columns[supports[j]]]``. Buffers are reused.
         """
         n, nv, nr = q.shape[0], self.nv, self.n_rigid
         columns = np.asarray(columns, dtype=np.intp)
-        rigid_cols = columns[columns < nr]
         joint_cols = columns[columns >= nr] - nr
-        n_r = rigid_cols.size
-        size = min(chunk, max(n, 1))
-        jmajor = np.empty((nv, size, nr))
-        picked = np.empty((nv, size, rigid_cols.size))
-        out = np.zeros((nv, size, columns.size))
         nt = len(self.terms)
-        # joint column c = dof * nt + term index
         jc_dof = joint_cols // nt if nt else joint_cols
         jc_term = joint_cols % nt if nt else joint_cols
+        # in the wide buffer, joint-term column i of ``columns`` sits at nr + i
+        wide_index = np.where(columns < nr, columns, 0)
+        wide_index[columns >= nr] = nr + np.arange(joint_cols.size)
+        selections = [wide_index[np.asarray(sj, dtype=np.intp)] for sj in supports]
+        size = min(chunk, max(n, 1))
+        wide = np.zeros((nv, size, nr + joint_cols.size))
+        outs = [np.empty((size, sel.size)) for sel in selections]
         f, m, d = pin.computeJointTorqueRegressor, self.model, self.data
         for start in range(0, n, chunk):
             stop = min(start + chunk, n)
             s = slice(start, stop)
             size_k = stop - start
-            jm = jmajor[:, :size_k]
-            # Pinocchio's arrays are stacked, joint-major, a few dozen at a time: fewer
-            # Python-level copies than one per sample, while the arrays stay in cache
+            jm = wide[:, :size_k, :nr]
             qs, dqs, ddqs = q[s], dq[s], ddq[s]
             for i in range(0, size_k, _STACK):
                 mats = [
@@ -222,16 +221,16 @@ class RegressorEvaluator:
                     np.stack(mats, axis=1, out=jm[:, i : i + len(mats)])
                 else:  # Pinocchio returns a 1-D row for one DoF
                     np.stack(mats, axis=0, out=jm[0, i : i + len(mats)])
-            Yt = out[:, :size_k]
-            # gathers on contiguous memory are several times faster than on a transposed view
-            pk = picked[:, :size_k]
-            np.take(jm, rigid_cols, axis=2, out=pk, mode="clip")
-            Yt[:, :, :n_r] = pk
             if joint_cols.size:
-                vals = self.joint_values(q[start:stop], dq[start:stop], ddq[start:stop])
+                vals = self.joint_values(qs, dqs, ddqs)
                 for i, (j, t) in enumerate(zip(jc_dof, jc_term, strict=True)):
-                    Yt[j, :, n_r + i] = vals[:, j, t]
-            yield start, stop, Yt
+                    wide[j, :size_k, nr + i] = vals[:, j, t]
+            blocks = []
+            for j in range(nv):
+                out = outs[j][:size_k]
+                np.take(wide[j, :size_k], selections[j], axis=1, out=out, mode="clip")
+                blocks.append(out)
+            yield start, stop, blocks
 
     def iter_slotine_li(self, q, dq, v, w, chunk: int) -> Iterator[RegressorChunk]:
         """Chunks of the Slotine-Li regressor over a trajectory (arrays already checked)."""

@@ -17,7 +17,6 @@ from manip_id import (
     regressor,
     slotine_li_regressor,
 )
-from manip_id.regressor import RegressorEvaluator
 
 ALL_TERMS = dict(armature=True, friction=("viscous", "coulomb", "offset"))
 
@@ -220,18 +219,3 @@ def test_bad_chunk():
     q, dq, ddq = robot.random_states(3, seed=0)
     with pytest.raises(InputError, match="chunk"):
         iter_regressor(robot, q, dq, ddq, chunk=0)
-
-
-@pytest.mark.parametrize("name", ["panda", "msd", "kinova"])
-@pytest.mark.parametrize("chunk", [1, 6, 64])
-def test_joint_major_columns_equal_the_regressor(name, chunk):
-    robot = ROBOTS[name]()
-    q, dq, ddq = robot.random_states(40, seed=9)
-    rng = np.random.default_rng(chunk)
-    columns = np.sort(rng.choice(robot.n_parameters, size=robot.n_parameters // 2, replace=False))
-    Y = regressor(robot, q, dq, ddq)
-    ev = RegressorEvaluator(robot)
-    got = np.concatenate(
-        [Yt.copy() for _, _, Yt in ev.iter_columns_joint_major(q, dq, ddq, columns, chunk)], axis=1
-    )
-    np.testing.assert_array_equal(got, Y[:, :, columns].transpose(1, 0, 2))

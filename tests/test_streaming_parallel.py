@@ -92,3 +92,28 @@ def test_bad_sources(ur10_data):
         identify(robot, q, dq, ddq, tau, workers=0)
     with pytest.raises(InputError, match="ols, wls"):
         identify_chunks(robot, [(q, dq, ddq, tau)], method="rls")
+
+
+@pytest.mark.parametrize("name", ["ur10", "baxter", "kinova", "msd"])
+def test_row_supports_give_the_full_information_sums(name):
+    """Accumulating each row on its non-zero columns equals the dense per-joint sums."""
+    from manip_id.estimators import InformationAccumulator
+    from manip_id.identification import _accumulate_blocks, row_supports
+    from manip_id.regressor import regressor
+
+    robot = get_robot(name, friction=("viscous", "coulomb"))
+    q, dq, ddq = robot.random_states(300, seed=5)
+    tau = np.random.default_rng(1).normal(size=(300, robot.nv))
+    ind = np.arange(0, robot.n_parameters, 2)  # any sorted column subset
+    supports = row_supports(robot, ind)
+    Y = regressor(robot, q, dq, ddq)[:, :, ind]
+    for j, sj in enumerate(supports):  # the dropped entries are exact zeros
+        mask = np.ones(ind.size, bool)
+        mask[sj] = False
+        assert not np.any(Y[:, j, mask])
+    dense = InformationAccumulator(ind.size, robot.nv).add(Y, tau)
+    sparse, _ = _accumulate_blocks(robot, [(q, dq, ddq, tau)], ind, chunk=64)
+    np.testing.assert_allclose(sparse.A_joint, dense.A_joint, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(sparse.b_joint, dense.b_joint, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(sparse.zz_joint, dense.zz_joint, rtol=1e-12)
+    assert sparse.n == dense.n == 300

@@ -96,19 +96,23 @@ class InformationAccumulator:
         self.n += n
         return self
 
-    def add_joint_major(self, Yt: np.ndarray, tau: np.ndarray) -> InformationAccumulator:
-        """Accumulate a joint-major block without checks (the streaming hot loop).
+    def add_sums(self, A_joint, b_joint, zz_joint, n: int, supports=None) -> InformationAccumulator:
+        """Add per-joint sums computed elsewhere (e.g. on each joint's non-zero columns).
 
-        ``Yt`` of shape (nv, n, p) with each ``Yt[j]`` C-contiguous (as
-        :meth:`~manip_id.regressor.RegressorEvaluator.iter_columns_joint_major`
-        yields), ``tau`` of shape (n, nv). Same sums as :meth:`add`.
+        ``A_joint[j]`` (r_j, r_j) with a valid lower triangle, ``b_joint[j]`` (r_j,)
+        are the sums over the columns ``supports[j]`` of this accumulator (all
+        columns when ``supports`` is None); ``zz_joint`` (nv,), ``n`` samples.
         """
         for j in range(self.nv):
-            Yj = Yt[j]
-            dsyrk(1.0, Yj.T, beta=1.0, c=self._A[j].T, trans=0, lower=0, overwrite_c=1)
-            self._b[j] += tau[:, j] @ Yj
-        self._zz += np.einsum("nj,nj->j", tau, tau)
-        self.n += Yt.shape[1]
+            if supports is None:
+                self._A[j] += np.tril(A_joint[j])
+                self._b[j] += b_joint[j]
+            else:
+                sj = np.asarray(supports[j], dtype=np.intp)
+                self._A[j][np.ix_(sj, sj)] += np.tril(A_joint[j])
+                self._b[j][sj] += b_joint[j]
+        self._zz += np.asarray(zz_joint, dtype=float)
+        self.n += int(n)
         return self
 
     def merge(self, other: InformationAccumulator) -> InformationAccumulator:
