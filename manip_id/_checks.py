@@ -42,3 +42,52 @@ def check_width(arr: np.ndarray, name: str, width: int, what: str) -> None:
     """Raise unless the last axis of ``arr`` has ``width`` entries."""
     if arr.shape[-1] != width:
         raise InputError(f"{name}.shape={arr.shape} but {what}={width}")
+
+
+def positive_vector(x, name: str, n: int, unit: str = "") -> np.ndarray:
+    """A positive vector of shape (n,) from a scalar or an (n,) array-like."""
+    arr = as_float_array(x, name, ndim=(0, 1))
+    arr = np.broadcast_to(arr, (n,)).copy() if arr.ndim == 0 else arr.copy()
+    if arr.shape != (n,):
+        raise InputError(f"{name} must be a scalar or shape ({n},), got {name}.shape={arr.shape}")
+    check_finite(arr, name)
+    if np.any(arr <= 0):
+        where = f" [{unit}]" if unit else ""
+        raise InputError(
+            f"{name} must be positive{where}, got {arr.min():g} at index {int(np.argmin(arr))}"
+        )
+    return arr
+
+
+def spd_gain(x, name: str, n: int, unit: str = "") -> np.ndarray:
+    """A gain given as a scalar, a vector (n,) or a symmetric positive definite (n, n) matrix.
+
+    Returns the positive diagonal, shape (n,), for a scalar or a vector, and the
+    checked matrix, shape (n, n), otherwise.
+    """
+    arr = as_float_array(x, name, ndim=(0, 1, 2))
+    if arr.ndim < 2:
+        return positive_vector(arr, name, n, unit)
+    if arr.shape != (n, n):
+        raise InputError(
+            f"{name} must be a scalar, shape ({n},) or ({n}, {n}), got {name}.shape={arr.shape}"
+        )
+    check_finite(arr, name)
+    asym = np.abs(arr - arr.T).max()
+    if asym > 1e-12 * max(np.abs(arr).max(), 1e-300):
+        raise InputError(
+            f"{name} must be symmetric positive definite, but it is not symmetric "
+            f"(max |G - G^T| = {asym:.3g})"
+        )
+    low = np.linalg.eigvalsh(arr).min()
+    if low <= 0:
+        raise InputError(
+            f"{name} must be symmetric positive definite, but its smallest eigenvalue is {low:.3g}"
+        )
+    return arr.copy()
+
+
+def spd_matrix(x, name: str, n: int, unit: str = "") -> np.ndarray:
+    """:func:`spd_gain` as a full (n, n) matrix."""
+    g = spd_gain(x, name, n, unit)
+    return np.diag(g) if g.ndim == 1 else g

@@ -57,7 +57,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from ._checks import as_float_array, check_finite
+from ._checks import as_float_array, check_finite, positive_vector, spd_matrix
 from .errors import InputError
 from .regressor import RegressorEvaluator
 from .robot import Robot
@@ -134,42 +134,6 @@ def default_gains(
     )
 
 
-def _positive_vector(x, name: str, n: int, unit: str) -> np.ndarray:
-    arr = as_float_array(x, name, ndim=(0, 1))
-    arr = np.broadcast_to(arr, (n,)).copy() if arr.ndim == 0 else arr
-    if arr.shape != (n,):
-        raise InputError(f"{name} must be a scalar or shape ({n},), got {name}.shape={arr.shape}")
-    check_finite(arr, name)
-    if np.any(arr <= 0):
-        raise InputError(
-            f"{name} must be positive [{unit}], got {arr.min():g} at index {int(np.argmin(arr))}"
-        )
-    return arr
-
-
-def _spd_matrix(x, name: str, p: int, unit: str) -> np.ndarray:
-    arr = as_float_array(x, name, ndim=(0, 1, 2))
-    if arr.ndim < 2:
-        return np.diag(_positive_vector(arr, name, p, unit))
-    if arr.shape != (p, p):
-        raise InputError(
-            f"{name} must be a scalar, shape ({p},) or ({p}, {p}), got {name}.shape={arr.shape}"
-        )
-    check_finite(arr, name)
-    asym = np.abs(arr - arr.T).max()
-    if asym > 1e-12 * max(np.abs(arr).max(), 1e-300):
-        raise InputError(
-            f"{name} must be symmetric positive definite, but it is not symmetric "
-            f"(max |G - G^T| = {asym:.3g})"
-        )
-    low = np.linalg.eigvalsh(arr).min()
-    if low <= 0:
-        raise InputError(
-            f"{name} must be symmetric positive definite, but its smallest eigenvalue is {low:.3g}"
-        )
-    return arr
-
-
 def _nonnegative(x, name: str) -> float:
     try:
         v = float(x)
@@ -207,9 +171,9 @@ class SlotineLiController:
             raise InputError(f"{theta0.shape=} but robot.n_parameters={p}")
         check_finite(theta0, "theta0")
         self.robot = robot
-        self.lam = _positive_vector(gains.lam, "lam (Lambda)", nv, "1/s")
-        self.kd = _spd_matrix(gains.kd, "kd (K_D)", nv, "N m s/rad")
-        self.gamma = _spd_matrix(gains.gamma, "gamma (Gamma)", p, "theta unit^2 / s")
+        self.lam = positive_vector(gains.lam, "lam (Lambda)", nv, "1/s")
+        self.kd = spd_matrix(gains.kd, "kd (K_D)", nv, "N m s/rad")
+        self.gamma = spd_matrix(gains.gamma, "gamma (Gamma)", p, "theta unit^2 / s")
         self.kappa = _nonnegative(gains.composite, "composite (kappa)")
         self.lam_f = _nonnegative(gains.filter_bandwidth, "filter_bandwidth")
         if self.kappa > 0 and self.lam_f <= 0:

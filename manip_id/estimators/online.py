@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg.lapack import dposv
 
-from .._checks import as_float_array, check_finite
+from .._checks import as_float_array, check_finite, spd_gain, spd_matrix
 from ..errors import InputError
 
 
@@ -163,24 +163,8 @@ class GradientEstimator(_OnlineEstimator):
         t0: float = 0.0,
     ):
         super().__init__(theta0, bounds=bounds, record_every=record_every, t0=t0)
-        g = as_float_array(gamma, "gamma", ndim=(0, 1, 2))
-        check_finite(g.reshape(-1), "gamma")
-        if g.ndim == 0:
-            g = np.full(self.p, float(g))
-        if g.ndim == 1:
-            if g.shape != (self.p,):
-                raise InputError(f"gamma.shape={g.shape} but theta0.shape=({self.p},)")
-            if np.any(g <= 0):
-                raise InputError(f"gamma must be positive, got min(gamma)={g.min()}")
-            self._gdiag, self._G = g.copy(), None
-        else:
-            if g.shape != (self.p, self.p):
-                raise InputError(f"gamma.shape={g.shape} but theta0.shape=({self.p},)")
-            if not np.allclose(g, g.T, rtol=1e-12, atol=0):
-                raise InputError("gamma must be symmetric")
-            if np.linalg.eigvalsh(g)[0] <= 0:
-                raise InputError("gamma must be positive definite")
-            self._gdiag, self._G = None, g.copy()
+        g = spd_gain(gamma, "gamma", self.p)
+        self._gdiag, self._G = (g, None) if g.ndim == 1 else (None, g)
         self.normalized = bool(normalized)
         self._g = np.empty(self.p)
 
@@ -248,18 +232,7 @@ class RLSEstimator(_OnlineEstimator):
         t0: float = 0.0,
     ):
         super().__init__(theta0, bounds=bounds, record_every=record_every, t0=t0)
-        P = as_float_array(P0, "P0", ndim=(0, 1, 2))
-        check_finite(P.reshape(-1), "P0")
-        if P.ndim == 0:
-            P = np.full(self.p, float(P))
-        if P.ndim == 1:
-            if P.shape != (self.p,):
-                raise InputError(f"P0.shape={P.shape} but theta0.shape=({self.p},)")
-            P = np.diag(P)
-        if P.shape != (self.p, self.p):
-            raise InputError(f"P0.shape={P.shape} but theta0.shape=({self.p},)")
-        if not np.allclose(P, P.T, rtol=1e-12, atol=0) or np.linalg.eigvalsh(P)[0] <= 0:
-            raise InputError("P0 must be symmetric positive definite")
+        P = spd_matrix(P0, "P0", self.p)
         lam = float(forgetting)
         if not 0.0 < lam <= 1.0:
             raise InputError(f"forgetting must be in (0, 1], got {forgetting}")
