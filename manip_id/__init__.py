@@ -10,109 +10,117 @@ Pinocchio supplies the rigid-body regressor; manip_id adds joint-level terms,
 rank analysis, estimators, adaptive control, data handling and pictures.
 Data flow one way: robot + data -> regressor -> (identifiability) ->
 estimator -> result -> report / figures / meshcat.
+
+Every public name is imported on first use (PEP 562): ``import manip_id`` loads
+no submodule, ``from manip_id import identify`` loads :mod:`manip_id.identification`
+and what it needs. To export a new name, add it to its submodule's tuple in
+``_EXPORTS`` below (or, for a name that differs from the submodule's, to
+``_ALIASES``); ``__all__`` follows.
 """
 
-from .adaptive import AdaptiveGains, SlotineLiController, default_gains, lyapunov_function
-from .closed_loop import ClosedLoopRun, compare_fixed, with_payload
-from .closed_loop import simulate as simulate_adaptive
-from .datasets import Dataset, check_robot, load_dataset, save_dataset
-from .errors import (
-    DataError,
-    InfeasibleTrajectoryError,
-    InputError,
-    ManipIdError,
-    RankDeficiencyError,
-    RobotError,
-)
-from .estimators import (
-    GradientEstimator,
-    InformationAccumulator,
-    LeastSquaresSolution,
-    RLSEstimator,
-    solve_accumulator,
-    solve_stacked,
-)
-from .identifiability import (
-    BaseParameters,
-    RankAnalysis,
-    analyze,
-    analyze_dataset,
-    analyze_information,
-    analyze_trajectory,
-)
-from .identification import IdentificationResult, identify, identify_chunks, identify_dataset
-from .regressor import (
-    iter_regressor,
-    iter_slotine_li_regressor,
-    joint_torques,
-    regressor,
-    slotine_li_regressor,
-)
-from .robot import JointTerms, Robot, available_robots, load_robot
-from .signals import Lowpass, preprocess
-from .simulation import SimulatedData, perturb_parameters, simulate
-from .trajectories import (
-    ExcitationResult,
-    FourierTrajectory,
-    check_limits,
-    optimize_excitation,
-    random_trajectory,
-)
+from __future__ import annotations
+
+import importlib
+import sys
+import types
+from typing import Any
 
 __version__ = "0.1.0"
 
-__all__ = [
-    "AdaptiveGains",
-    "ClosedLoopRun",
-    "SlotineLiController",
-    "compare_fixed",
-    "default_gains",
-    "lyapunov_function",
-    "simulate_adaptive",
-    "with_payload",
-    "BaseParameters",
-    "DataError",
-    "Dataset",
-    "ExcitationResult",
-    "FourierTrajectory",
-    "GradientEstimator",
-    "IdentificationResult",
-    "InfeasibleTrajectoryError",
-    "InformationAccumulator",
-    "InputError",
-    "JointTerms",
-    "LeastSquaresSolution",
-    "Lowpass",
-    "ManipIdError",
-    "RLSEstimator",
-    "RankAnalysis",
-    "RankDeficiencyError",
-    "Robot",
-    "RobotError",
-    "SimulatedData",
-    "analyze",
-    "analyze_dataset",
-    "analyze_information",
-    "analyze_trajectory",
-    "available_robots",
-    "check_limits",
-    "check_robot",
-    "identify",
-    "identify_chunks",
-    "identify_dataset",
-    "iter_regressor",
-    "iter_slotine_li_regressor",
-    "joint_torques",
-    "load_dataset",
-    "load_robot",
-    "optimize_excitation",
-    "perturb_parameters",
-    "preprocess",
-    "random_trajectory",
-    "regressor",
-    "save_dataset",
-    "simulate",
-    "slotine_li_regressor",
-    "solve_accumulator",
-    "solve_stacked",
-]
+#: Public name -> the submodule (relative to this package) that defines it.
+#: Add new exports here; nothing else in this file needs editing.
+_EXPORTS: dict[str, tuple[str, ...]] = {
+    ".adaptive": ("AdaptiveGains", "SlotineLiController", "default_gains", "lyapunov_function"),
+    ".closed_loop": ("ClosedLoopRun", "compare_fixed", "with_payload"),
+    ".datasets": ("Dataset", "check_robot", "load_dataset", "save_dataset"),
+    ".errors": (
+        "DataError",
+        "InfeasibleTrajectoryError",
+        "InputError",
+        "ManipIdError",
+        "RankDeficiencyError",
+        "RobotError",
+    ),
+    ".estimators": (
+        "GradientEstimator",
+        "InformationAccumulator",
+        "LeastSquaresSolution",
+        "RLSEstimator",
+        "solve_accumulator",
+        "solve_stacked",
+    ),
+    ".identifiability": (
+        "BaseParameters",
+        "RankAnalysis",
+        "analyze",
+        "analyze_dataset",
+        "analyze_information",
+        "analyze_trajectory",
+    ),
+    ".identification": ("IdentificationResult", "identify", "identify_chunks", "identify_dataset"),
+    ".regressor": (
+        "iter_regressor",
+        "iter_slotine_li_regressor",
+        "joint_torques",
+        "regressor",
+        "slotine_li_regressor",
+    ),
+    ".robot": ("JointTerms", "Robot", "available_robots", "load_robot"),
+    ".signals": ("Lowpass", "preprocess"),
+    ".simulation": ("SimulatedData", "perturb_parameters", "simulate"),
+    ".trajectories": (
+        "ExcitationResult",
+        "FourierTrajectory",
+        "check_limits",
+        "optimize_excitation",
+        "random_trajectory",
+    ),
+}
+
+#: Public name -> (submodule, attribute) for names exported under another name.
+_ALIASES: dict[str, tuple[str, str]] = {
+    "simulate_adaptive": (".closed_loop", "simulate"),
+}
+
+_WHERE: dict[str, tuple[str, str]] = {
+    name: (module, name) for module, names in _EXPORTS.items() for name in names
+}
+_WHERE.update(_ALIASES)
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str) -> Any:
+    """Import the submodule that defines ``name`` on first access (PEP 562)."""
+    try:
+        module, attr = _WHERE[name]
+    except KeyError:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    value = getattr(importlib.import_module(module, __name__), attr)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
+
+class _Package(types.ModuleType):
+    """This package's module type: an export named like a submodule keeps the export.
+
+    Importing a submodule sets it as an attribute of its package; for
+    ``manip_id.regressor`` (the submodule) that would hide ``regressor`` (the
+    function exported here). The submodule stays in :data:`sys.modules` either way.
+    """
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        if (
+            name in _WHERE
+            and isinstance(value, types.ModuleType)
+            and value.__name__ == f"{__name__}.{name}"
+        ):
+            return
+        super().__setattr__(name, value)
+
+
+sys.modules[__name__].__class__ = _Package

@@ -44,7 +44,6 @@ from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
-from scipy import signal as _signal
 
 from ._checks import as_float_array
 from .datasets import Dataset
@@ -94,6 +93,8 @@ class Lowpass:
     @cached_property
     def sos(self) -> np.ndarray:
         """Second-order sections of the one-way filter, shape (ceil(n/2), 6)."""
+        from scipy import signal as _signal
+
         return _signal.butter(self.order, self.cutoff, btype="low", fs=self.rate, output="sos")
 
     def gain(self, frequency) -> np.ndarray:
@@ -113,6 +114,8 @@ class Lowpass:
         n = int(20 * self.rate / self.cutoff) + 64
         impulse = np.zeros(n)
         impulse[0] = 1.0
+        from scipy import signal as _signal
+
         h = np.abs(_signal.sosfilt(self.sos, impulse))
         above = np.nonzero(h > tol * h.max())[0]
         return int(above[-1]) + 1
@@ -125,6 +128,8 @@ class Lowpass:
                 f"{x.shape[axis]} samples are too few to filter with order {self.order}: "
                 f"need more than {3 * (2 * self.sos.shape[0] + 1)}"
             )
+        from scipy import signal as _signal
+
         return _signal.sosfiltfilt(self.sos, x, axis=axis)
 
 

@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
 from .._io import write_json  # noqa: F401 (the commands import it from here)
-from ..robot import Robot, load_robot
+
+if TYPE_CHECKING:
+    from ..robot import Robot
 
 
 def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
@@ -42,6 +45,8 @@ def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
 
 def robot_from_args(args: argparse.Namespace) -> Robot:
     """Load the robot named by :func:`add_robot_arguments` options."""
+    from ..robot import load_robot
+
     joints = [j for j in args.joints.split(",") if j] if getattr(args, "joints", None) else None
     return load_robot(
         args.robot,

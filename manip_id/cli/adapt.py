@@ -6,14 +6,6 @@ import argparse
 
 import numpy as np
 
-from ..adaptive import default_gains
-from ..closed_loop import (
-    _angles_to_q,
-    compare_fixed,
-    default_reference,
-    with_payload,
-)
-from ..simulation import perturb_parameters
 from ._common import add_robot_arguments, robot_from_args, write_json
 
 
@@ -102,6 +94,10 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..adaptive import default_gains
+    from ..closed_loop import _angles_to_q, compare_fixed, default_reference, with_payload
+    from ..simulation import perturb_parameters
+
     if args.report is not None:  # fail fast, before the long work
         from ..viz.report import check_report_target
 

@@ -6,7 +6,6 @@ import argparse
 
 import numpy as np
 
-from ..identifiability import analyze_dataset, structural_analysis
 from ._common import add_robot_arguments, robot_from_args, write_json
 
 
@@ -54,6 +53,8 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..identifiability import analyze_dataset, structural_analysis
+
     if args.report is not None:  # fail fast, before the long work
         from ..viz.report import check_report_target
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 
 from ..errors import RobotError
-from ..robot import available_robots, load_robot
 
 
 def register(sub) -> None:
@@ -19,6 +18,8 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..robot import available_robots, load_robot
+
     print(f"{'name':28s} {'nq':>4s} {'nv':>4s} {'parameters':>11s}")
     for name in available_robots():
         try:

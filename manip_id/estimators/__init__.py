@@ -25,18 +25,40 @@ Online laws (:class:`GradientEstimator`, :class:`RLSEstimator`) update
 the batch estimate (it *is* the batch estimate, regularized by ``P0^-1``).
 """
 
-from .accumulator import InformationAccumulator
-from .batch import (
-    COND_LIMIT,
-    INFO_RANK_RTOL,
-    STACKED_RANK_RTOL,
-    format_direction,
-    solve_accumulator,
-    solve_normal_equations,
-    solve_stacked,
-)
-from .online import GradientEstimator, OnlineHistory, RLSEstimator
-from .results import LeastSquaresSolution
+import importlib
+from typing import Any
+
+#: Public name -> the submodule that defines it (imported on first use, PEP 562).
+_WHERE: dict[str, str] = {
+    "InformationAccumulator": ".accumulator",
+    "COND_LIMIT": ".batch",
+    "INFO_RANK_RTOL": ".batch",
+    "STACKED_RANK_RTOL": ".batch",
+    "format_direction": ".batch",
+    "solve_accumulator": ".batch",
+    "solve_normal_equations": ".batch",
+    "solve_stacked": ".batch",
+    "GradientEstimator": ".online",
+    "OnlineHistory": ".online",
+    "RLSEstimator": ".online",
+    "LeastSquaresSolution": ".results",
+}
+
+
+def __getattr__(name: str) -> Any:
+    """Import the submodule that defines ``name`` on first access (PEP 562)."""
+    try:
+        module = _WHERE[name]
+    except KeyError:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
 
 __all__ = [
     "COND_LIMIT",

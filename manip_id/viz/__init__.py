@@ -38,17 +38,42 @@ folder, then renamed).
 
 from __future__ import annotations
 
-from . import figures
-from .meshcat_scene import (
-    EquivalentEllipsoid,
-    LinkIdentifiability,
-    RobotScene,
-    check_trajectory,
-    equivalent_ellipsoid,
-    inertia_ellipsoids,
-    link_identifiability,
-)
-from .report import ReportExistsError, check_report_target, write_report
+import importlib
+from typing import Any
+
+#: Public name -> (submodule, attribute; None for the submodule itself), imported on
+#: first use (PEP 562): ``import manip_id.viz`` loads neither matplotlib nor meshcat.
+_WHERE: dict[str, tuple[str, str | None]] = {
+    "figures": (".figures", None),
+    "EquivalentEllipsoid": (".meshcat_scene", "EquivalentEllipsoid"),
+    "LinkIdentifiability": (".meshcat_scene", "LinkIdentifiability"),
+    "RobotScene": (".meshcat_scene", "RobotScene"),
+    "check_trajectory": (".meshcat_scene", "check_trajectory"),
+    "equivalent_ellipsoid": (".meshcat_scene", "equivalent_ellipsoid"),
+    "inertia_ellipsoids": (".meshcat_scene", "inertia_ellipsoids"),
+    "link_identifiability": (".meshcat_scene", "link_identifiability"),
+    "ReportExistsError": (".report", "ReportExistsError"),
+    "check_report_target": (".report", "check_report_target"),
+    "write_report": (".report", "write_report"),
+}
+
+
+def __getattr__(name: str) -> Any:
+    """Import the submodule that defines ``name`` on first access (PEP 562)."""
+    try:
+        module, attr = _WHERE[name]
+    except KeyError:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    value = importlib.import_module(module, __name__)
+    if attr is not None:
+        value = getattr(value, attr)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
 
 __all__ = [
     "EquivalentEllipsoid",
