@@ -23,6 +23,9 @@ covariance is ``sigma^2 A^-1`` with ``sigma^2 = RSS / (n_rows - p)`` and
 Online laws (:class:`GradientEstimator`, :class:`RLSEstimator`) update
 ``theta_hat`` from one sample at a time; RLS with no forgetting converges to
 the batch estimate (it *is* the batch estimate, regularized by ``P0^-1``).
+:class:`DREMEstimator` mixes a filtered extension into one scalar regression per
+parameter (each parameter error non-increasing); :class:`ConcurrentLearningEstimator`
+adds a recorded history stack (convergence without persistent excitation).
 """
 
 import importlib
@@ -42,6 +45,8 @@ _WHERE: dict[str, str] = {
     "OnlineHistory": ".online",
     "RLSEstimator": ".online",
     "LeastSquaresSolution": ".results",
+    "DREMEstimator": ".drem",
+    "ConcurrentLearningEstimator": ".concurrent",
 }
 
 
@@ -64,6 +69,8 @@ __all__ = [
     "COND_LIMIT",
     "INFO_RANK_RTOL",
     "STACKED_RANK_RTOL",
+    "ConcurrentLearningEstimator",
+    "DREMEstimator",
     "GradientEstimator",
     "InformationAccumulator",
     "LeastSquaresSolution",
