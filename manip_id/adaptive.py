@@ -238,8 +238,8 @@ class SlotineLiController:
         self._started = False
         terms = self.robot.terms.enabled
         self._ia_cols = None
-        if "Ia" in terms:
-            self._ia_cols = nr + np.arange(nv) * len(terms) + terms.index("Ia")
+        if self.robot.layout.has_term("Ia"):
+            self._ia_cols = self.robot.layout.joint_columns("Ia")
         self._zero = np.zeros(nv)
         self._rows = np.arange(nv)
         self._nr = nr
@@ -265,7 +265,7 @@ class SlotineLiController:
             dM *= 1.0 / e
             Yh[:, :nr] -= dM
         if self._has_terms:
-            ev._fill_joint_terms(Yh, q, dq, zero)
+            ev.fill_joint_terms(Yh, q, dq, zero)
 
     def _advance_filters(self) -> None:
         """Move the filter states from the previous control instant to this one."""

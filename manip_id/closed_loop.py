@@ -309,28 +309,25 @@ def simulate(
     # plant
     model = robot.with_parameters(theta_true)
     data = model.createData()
-    terms = robot.terms.enabled
-    coef = theta_true[robot.n_rigid :].reshape(nv, len(terms))
-    fv = coef[:, terms.index("fv")].copy() if "fv" in terms else None
-    fc = coef[:, terms.index("fc")].copy() if "fc" in terms else None
-    fo = coef[:, terms.index("fo")].copy() if "fo" in terms else None
-    ks = coef[:, terms.index("k")].copy() if "k" in terms else None
-    ev = RegressorEvaluator(robot)
-    lie = nq != nv
+    # joint terms other than armature (which is in the model's mass matrix)
+    coef = robot.layout.joint_block(theta_true)
+    joint_terms = [
+        (term, coef[:, i].copy())
+        for i, term in enumerate(robot.layout.term_table)
+        if term.name != "Ia"
+    ]
+    needs_angles = any(term.needs_angles for term, _ in joint_terms)
+    fv = coef[:, robot.layout.terms.index("fv")].copy() if robot.layout.has_term("fv") else None
 
     def joint_torque(q, dq):
+        angles = robot.dofs.angles(q) if needs_angles else None
         out = np.zeros(nv)
-        if fv is not None:
-            out += fv * dq
-        if fc is not None:
-            out += fc * np.sign(dq)
-        if fo is not None:
-            out += fo
-        if ks is not None:
-            out += ks * (ev.joint_angles(q) if lie else q)
+        for term, c in joint_terms:
+            out += term.torque(c, angles, dq, None)
         return out
 
-    has_joint = any(x is not None for x in (fv, fc, fo, ks))
+    has_joint = bool(joint_terms)
+    lie = nq != nv
     aba = pin.aba
     h = 1.0 / (rate * substeps)
     dt = 1.0 / rate

@@ -77,63 +77,41 @@ class RegressorEvaluator:
         self.nq = robot.nq
         self.p = robot.n_parameters
         self.n_rigid = robot.n_rigid
+        self.layout = robot.layout
         self.terms = robot.terms.enabled
         nt = len(self.terms)
         self._rows = np.repeat(np.arange(self.nv), nt)
         self._cols = self.n_rigid + np.arange(self.nv * nt)
-        idx = np.array([i for i, _ in robot._spring_q_index], dtype=int)
-        nqj = np.array([n for _, n in robot._spring_q_index], dtype=int)
-        self._q_idx = idx
-        self._continuous = nqj == 2
+        self._dofs = robot.dofs
         self._zero = np.zeros(self.nv)
         # flat indices into a (nv, p) block of the diagonal entries of each term
-        self._flat = {
-            t: np.arange(self.nv) * self.p + self.n_rigid + np.arange(self.nv) * nt + i
-            for i, t in enumerate(self.terms)
-        }
-        self._needs_angles = "k" in self.terms
+        rows = np.arange(self.nv) * self.p
+        self._flat = [(t, rows + self.layout.joint_columns(t.name)) for t in self.layout.term_table]
+        self._needs_angles = any(t.needs_angles for t in self.layout.term_table)
 
     # ------------------------------------------------------------ joint terms
     def joint_angles(self, q: np.ndarray) -> np.ndarray:
         """Joint coordinate per velocity DoF, shape (..., nv) [rad or m]."""
-        out = q[..., self._q_idx]
-        if self._continuous.any():
-            c = self._continuous
-            out[..., c] = np.arctan2(q[..., self._q_idx[c] + 1], q[..., self._q_idx[c]])
-        return out
+        return self._dofs.angles(q)
 
     def joint_values(self, q, vel, acc) -> np.ndarray:
-        """Joint-term regressor entries, shape (..., nv, n_terms)."""
-        cols = []
-        for t in self.terms:
-            if t == "Ia":
-                cols.append(acc)
-            elif t == "fv":
-                cols.append(vel)
-            elif t == "fc":
-                cols.append(np.sign(vel))
-            elif t == "fo":
-                cols.append(np.ones_like(vel))
-            else:  # "k"
-                cols.append(self.joint_angles(q))
-        return np.stack(cols, axis=-1)
+        """Joint-term regressor entries, shape (..., nv, n_terms) (``parameters.JOINT_TERMS``)."""
+        angles = self.joint_angles(q) if self._needs_angles else None
+        return self.layout.joint_values(angles, vel, acc)
 
-    def _fill_joint_terms(self, Y, q, vel, acc) -> None:
+    def fill_joint_terms(self, Y: np.ndarray, q, vel, acc) -> None:
+        """Write the joint-term columns of ``Y`` (nv, p) or (N, nv, p) in place.
+
+        ``vel`` is the velocity the friction terms see and ``acc`` the acceleration
+        of the armature (``dq, ddq`` for Y(q, dq, ddq); ``w, v`` for Slotine-Li).
+        """
         if not self.terms:
             return
-        if Y.ndim == 2:  # one sample: a few flat writes, no temporaries beyond sign()
+        if Y.ndim == 2:  # one sample: a few flat writes into the diagonal entries
             flat = Y.reshape(-1)
-            for t, idx in self._flat.items():
-                if t == "Ia":
-                    flat[idx] = acc
-                elif t == "fv":
-                    flat[idx] = vel
-                elif t == "fc":
-                    flat[idx] = np.sign(vel)
-                elif t == "fo":
-                    flat[idx] = 1.0
-                else:
-                    flat[idx] = self.joint_angles(q)
+            angles = self.joint_angles(q) if self._needs_angles else None
+            for term, idx in self._flat:
+                flat[idx] = term.column(angles, vel, acc)
             return
         vals = self.joint_values(q, vel, acc)
         Y[:, self._rows, self._cols] = vals.reshape(vals.shape[0], -1)
@@ -144,7 +122,7 @@ class RegressorEvaluator:
         if out is None:
             out = np.zeros((self.nv, self.p))
         out[:, : self.n_rigid] = pin.computeJointTorqueRegressor(self.model, self.data, q, dq, ddq)
-        self._fill_joint_terms(out, q, dq, ddq)
+        self.fill_joint_terms(out, q, dq, ddq)
         return out
 
     def slotine_li(self, q, dq, v, w, out: np.ndarray | None = None) -> np.ndarray:
@@ -159,7 +137,7 @@ class RegressorEvaluator:
             f(self.model0, self.data0, q, b, self._zero),
             out=out[:, : self.n_rigid],
         )
-        self._fill_joint_terms(out, q, w, v)
+        self.fill_joint_terms(out, q, w, v)
         return out
 
     # -------------------------------------------------------------- batches
@@ -174,7 +152,7 @@ class RegressorEvaluator:
             for k in range(start, stop):
                 rigid[k - start] = f(m, d, q[k], dq[k], ddq[k])
             Y = buf[: stop - start]
-            self._fill_joint_terms(Y, q[start:stop], dq[start:stop], ddq[start:stop])
+            self.fill_joint_terms(Y, q[start:stop], dq[start:stop], ddq[start:stop])
             yield RegressorChunk(start, stop, Y)
 
     def iter_row_supports(
@@ -193,9 +171,9 @@ class RegressorEvaluator:
         n, nv, nr = q.shape[0], self.nv, self.n_rigid
         columns = np.asarray(columns, dtype=np.intp)
         joint_cols = columns[columns >= nr] - nr
-        nt = len(self.terms)
-        jc_dof = joint_cols // nt if nt else joint_cols
-        jc_term = joint_cols % nt if nt else joint_cols
+        owners = [self.layout.owner(nr + int(c)) for c in joint_cols]
+        jc_dof = [o.index for o in owners]
+        jc_term = [self.terms.index(o.parameter) for o in owners]
         # in the wide buffer, joint-term column i of ``columns`` sits at nr + i
         wide_index = np.where(columns < nr, columns, 0)
         wide_index[columns >= nr] = nr + np.arange(joint_cols.size)
@@ -247,17 +225,13 @@ class RegressorEvaluator:
                 i = k - start
                 np.subtract(f(m, d, q[k], a[i], v[k]), f(m0, d0, q[k], b[i], zero), out=rigid[i])
             Y = buf[: stop - start]
-            self._fill_joint_terms(Y, q[start:stop], w[start:stop], v[start:stop])
+            self.fill_joint_terms(Y, q[start:stop], w[start:stop], v[start:stop])
             yield RegressorChunk(start, stop, Y)
 
 
 # ------------------------------------------------------------------ checking
 def _evaluator(robot: Robot) -> RegressorEvaluator:
-    ev = robot.__dict__.get("_evaluator")
-    if ev is None:
-        ev = RegressorEvaluator(robot)
-        robot.__dict__["_evaluator"] = ev
-    return ev
+    return robot.evaluator
 
 
 def check_states(robot: Robot, **arrays) -> tuple[bool, list[np.ndarray]]:
@@ -393,7 +367,7 @@ def joint_torques(robot: Robot, theta, q, dq, ddq=None) -> np.ndarray:
     if not ev.terms:
         return np.zeros_like(dq)
     vals = ev.joint_values(q, dq, acc)  # (..., nv, nt)
-    coef = theta[robot.n_rigid :].reshape(robot.nv, len(ev.terms))
+    coef = robot.layout.joint_block(theta)
     if ddq is None and "Ia" in ev.terms:
         coef = coef.copy()
         coef[:, ev.terms.index("Ia")] = 0.0

@@ -23,33 +23,46 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
 
 from ._checks import as_float_array
 from .errors import InputError, RobotError
-
-#: Inertial parameter names of one body, in Pinocchio's order.
-INERTIAL_NAMES: tuple[str, ...] = (
-    "m",
-    "mcx",
-    "mcy",
-    "mcz",
-    "Ixx",
-    "Ixy",
-    "Iyy",
-    "Ixz",
-    "Iyz",
-    "Izz",
+from .parameters import (
+    INERTIAL_NAMES,
+    JOINT_TERM_NAMES,
+    UNSET_LIMIT,
+    DofLayout,
+    ParameterLayout,
+    bounded_range,
+    bounded_rate,
 )
-#: Joint-level term names, in the order their columns appear for each joint.
-JOINT_TERM_NAMES: tuple[str, ...] = ("Ia", "fv", "fc", "fo", "k")
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .regressor import RegressorEvaluator
+
+__all__ = [
+    "DEFAULT_LOCKED",
+    "FRICTION_KINDS",
+    "INERTIAL_NAMES",
+    "JOINT_TERM_NAMES",
+    "MANIPULATORS",
+    "OUR_ROBOTS",
+    "UNSET_LIMIT",
+    "JointTerms",
+    "Robot",
+    "available_robots",
+    "load_robot",
+]
+
 FRICTION_KINDS: tuple[str, ...] = ("viscous", "coulomb", "offset")
 
 #: Fixed-base manipulators of example-robot-data listed by ``manip-id robots``.
@@ -84,9 +97,6 @@ DEFAULT_LOCKED: dict[str, tuple[str, ...]] = {
 }
 OUR_ROBOTS: tuple[str, ...] = ("msd",)
 
-_UNITS_REVOLUTE = {"Ia": "kg m^2", "fv": "N m s/rad", "fc": "N m", "fo": "N m", "k": "N m/rad"}
-_UNITS_PRISMATIC = {"Ia": "kg", "fv": "N s/m", "fc": "N", "fo": "N", "k": "N/m"}
-_UNITS_INERTIAL = ("kg", "kg m", "kg m", "kg m", *("kg m^2",) * 6)
 _FLOATING = (
     "JointModelFreeFlyer",
     "JointModelPlanar",
@@ -163,22 +173,17 @@ class Robot:
         self.settings = dict(settings or {})
         self._full_geometry = dict(geometry or {})
         self.joint_names: list[str] = [model.names[i] for i in range(1, model.njoints)]
-        self.dof_names: list[str] = []
-        self._dof_prismatic: list[bool] = []
-        self._spring_q_index: list[tuple[int, int]] = []  # (idx_q, nq of joint) per dof
-        for i in range(1, model.njoints):
-            jm = model.joints[i]
-            kind = jm.shortname()
-            prismatic = "Prismatic" in kind or kind.startswith("JointModelP")
-            for k in range(jm.nv):
-                self.dof_names.append(model.names[i] if jm.nv == 1 else f"{model.names[i]}[{k}]")
-                self._dof_prismatic.append(prismatic)
-                self._spring_q_index.append((jm.idx_q + k, jm.nq))
-            if terms.spring and not (jm.nv == 1 and jm.nq in (1, 2)):
-                raise RobotError(
-                    f"a spring term needs one-DoF joints, but {model.names[i]} is {kind}"
-                )
-        self.dof_names_prismatic = tuple(self._dof_prismatic)
+        self.dofs = DofLayout.from_model(model)
+        self.dof_names: list[str] = list(self.dofs.names)
+        if terms.spring:
+            for i in range(1, model.njoints):
+                jm = model.joints[i]
+                if not (jm.nv == 1 and jm.nq in (1, 2)):
+                    raise RobotError(
+                        f"a spring term needs one-DoF joints, but {model.names[i]} is "
+                        f"{jm.shortname()}"
+                    )
+        self.layout = ParameterLayout(self.joint_names, self.dofs, terms.enabled)
 
     # ----------------------------------------------------------------- sizes
     @property
@@ -204,7 +209,7 @@ class Robot:
     @property
     def n_parameters(self) -> int:
         """Total number of standard parameters (columns of the regressor)."""
-        return self.n_rigid + len(self.terms.enabled) * self.nv
+        return self.layout.n_parameters
 
     # ---------------------------------------------------------------- limits
     @property
@@ -229,25 +234,18 @@ class Robot:
 
     def is_prismatic(self, dof: int) -> bool:
         """Whether velocity coordinate ``dof`` is a translation."""
-        return self._dof_prismatic[dof]
+        return bool(self.dofs.prismatic[dof])
 
     # ------------------------------------------------------------ parameters
     @cached_property
     def parameter_names(self) -> list[str]:
         """One readable name per regressor column, e.g. ``panda_joint3.Ixx``."""
-        names = [f"{j}.{p}" for j in self.joint_names for p in INERTIAL_NAMES]
-        for dof in self.dof_names:
-            names += [f"{dof}.{t}" for t in self.terms.enabled]
-        return names
+        return list(self.layout.names)
 
     @cached_property
     def parameter_units(self) -> list[str]:
         """Unit of each parameter, aligned with :attr:`parameter_names`."""
-        units = list(_UNITS_INERTIAL) * self.n_bodies
-        for dof in range(self.nv):
-            table = _UNITS_PRISMATIC if self._dof_prismatic[dof] else _UNITS_REVOLUTE
-            units += [table[t] for t in self.terms.enabled]
-        return units
+        return list(self.layout.units)
 
     @cached_property
     def nominal_parameters(self) -> np.ndarray:
@@ -272,21 +270,14 @@ class Robot:
 
     def parameter_index(self, name: str) -> int:
         """Column index of a parameter name; the error lists close matches."""
-        try:
-            return self.parameter_names.index(name)
-        except ValueError:
-            joint = name.split(".")[0]
-            close = [n for n in self.parameter_names if n.startswith(joint + ".")]
-            raise InputError(
-                f"unknown parameter {name!r}; parameters of {joint!r}: {close or 'none'}"
-            ) from None
+        return self.layout.index(name)
 
     def rigid_body_parameters(self, theta) -> np.ndarray:
         """The rigid-body block of a parameter vector, shape (n_bodies, 10)."""
         theta = as_float_array(theta, "theta", ndim=1)
         if theta.shape[0] != self.n_parameters:
             raise InputError(f"{theta.shape=} but robot.n_parameters={self.n_parameters}")
-        return theta[: self.n_rigid].reshape(self.n_bodies, 10)
+        return self.layout.rigid_blocks(theta)
 
     def with_parameters(self, theta) -> pin.Model:
         """A copy of the model whose inertias and armature are those of ``theta``.
@@ -299,26 +290,24 @@ class Robot:
         for i, block in enumerate(blocks, start=1):
             model.inertias[i] = pin.Inertia.FromDynamicParameters(np.asarray(block))
         if self.terms.armature:
-            stride = len(self.terms.enabled)
-            col = self.n_rigid + self.terms.enabled.index("Ia")
-            model.armature = np.asarray(theta)[col : col + stride * self.nv : stride].copy()
+            model.armature = np.asarray(theta)[self.layout.joint_columns("Ia")].copy()
         return model
 
     # ------------------------------------------------------------- sampling
     def sampling_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Finite position bounds for sampling, shape (nq,) each.
 
-        Unbounded or absurdly wide limits are replaced by [-pi, pi].
+        Unset limits (:func:`~manip_id.parameters.bounded_range`) are replaced by [-pi, pi].
         """
         lo, hi = self.lower.copy(), self.upper.copy()
-        wide = ~np.isfinite(lo) | ~np.isfinite(hi) | (hi - lo > 1e3) | (hi <= lo)
+        wide = ~bounded_range(lo, hi)
         lo[wide], hi[wide] = -math.pi, math.pi
         return lo, hi
 
     def velocity_bounds(self) -> np.ndarray:
         """Finite velocity bounds for sampling, shape (nv,) (unset limits become 2 [unit/s])."""
         v = self.velocity_limit
-        bad = ~np.isfinite(v) | (v <= 0) | (v > 1e3)
+        bad = ~bounded_rate(v)
         v[bad] = 2.0
         return v
 
@@ -380,6 +369,13 @@ class Robot:
         if self._locked_ids:
             _, geom = pin.buildReducedModel(self._full_model, geom, self._locked_ids, self._qref)
         return geom
+
+    @cached_property
+    def evaluator(self) -> RegressorEvaluator:
+        """The robot's :class:`~manip_id.regressor.RegressorEvaluator` (built on first use)."""
+        from .regressor import RegressorEvaluator
+
+        return RegressorEvaluator(self)
 
     @cached_property
     def gravity_free_model(self) -> pin.Model:
@@ -556,8 +552,19 @@ def _reference_configuration(model: pin.Model, locked, all_joints) -> np.ndarray
 
 
 def _load_erd(name: str):
+    """Model, URDF path, package folders and prebuilt geometry ({}) of an example-robot-data name.
+
+    The kinematic and inertial model only: the URDF is located as the
+    example-robot-data loader does and read by ``pinocchio.buildModelFromUrdf``,
+    then its SRDF (rotor parameters, armature, reference configurations) is
+    applied as the loader applies it. Visual and collision geometry (meshes)
+    are left to :attr:`Robot.visual_model` / :attr:`Robot.collision_model`,
+    built on first use. Loaders with their own ``__init__`` or an SDF model go
+    through the loader itself (geometry included).
+    """
     try:
         from example_robot_data.robots_loader import ROBOTS
+        from example_robot_data.utils import RobotLoader, getModelPath, readParamsFromSrdf
     except ImportError as exc:  # pragma: no cover - dependency of the package
         raise RobotError("example-robot-data-loaders is not installed") from exc
     if name not in ROBOTS:
@@ -565,19 +572,44 @@ def _load_erd(name: str):
             f"unknown robot {name!r}; available: {', '.join(available_robots())} "
             "or a path to a .urdf file"
         )
+    cls = ROBOTS[name]
+    floating = RobotError(
+        f"robot {name!r} is a floating-base model: not supported "
+        "(manip_id identifies fixed-base manipulators)"
+    )
+    if getattr(cls, "free_flyer", False):
+        raise floating
+    if cls.__init__ is not RobotLoader.__init__ or not cls.urdf_filename or cls.sdf_filename:
+        return _load_erd_loader(name, cls, floating)
+    relative = os.path.join(cls.path, cls.urdf_subpath, cls.urdf_filename)
+    try:
+        model_dir = cls.model_path or getModelPath(relative)
+        source = os.path.join(model_dir, relative)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            model = pin.buildModelFromUrdf(source)
+            if cls.srdf_filename:
+                srdf = os.path.join(model_dir, cls.path, cls.srdf_subpath, cls.srdf_filename)
+                readParamsFromSrdf(model, srdf, False, cls.has_rotor_parameters, None)
+    except Exception as exc:
+        raise RobotError(f"cannot load robot {name!r} from example-robot-data: {exc}") from exc
+    if model.njoints > 1 and model.joints[1].shortname() in _FLOATING:
+        raise floating
+    return model, source, [str(Path(model_dir).parent.parent)], {}
+
+
+def _load_erd_loader(name: str, cls, floating: RobotError):
+    """:func:`_load_erd` through the example-robot-data loader (builds the geometry too)."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            loader = ROBOTS[name]()
+            loader = cls()
             wrapper = loader.robot
     except Exception as exc:
         raise RobotError(f"cannot load robot {name!r} from example-robot-data: {exc}") from exc
     model = wrapper.model
     if model.njoints > 1 and model.joints[1].shortname() in _FLOATING:
-        raise RobotError(
-            f"robot {name!r} is a floating-base model: not supported "
-            "(manip_id identifies fixed-base manipulators)"
-        )
+        raise floating
     source = getattr(loader, "df_path", None)
     model_dir = getattr(loader, "model_path", None)
     pkg = [str(Path(model_dir).parent.parent)] if model_dir else []

@@ -157,13 +157,12 @@ def perturb_parameters(robot: Robot, rel: float, seed: int = 0, theta=None) -> n
     if rel == 0.0:
         return theta
     rng = np.random.default_rng(seed)
-    blocks = theta[: robot.n_rigid].reshape(robot.n_bodies, 10)
+    blocks = robot.layout.rigid_blocks(theta)  # views into theta
     for i in range(robot.n_bodies):
         blocks[i] = _perturb_body(blocks[i], rel, rng)
-    n_joint = theta.size - robot.n_rigid
     terms = robot.terms.enabled
-    if n_joint:
-        joint = theta[robot.n_rigid :].reshape(robot.nv, len(terms))
+    if terms:
+        joint = robot.layout.joint_block(theta)
         joint *= np.exp(rel * rng.standard_normal(joint.shape))
         for k, t in enumerate(terms):
             if t in _POSITIVE_TERMS:

@@ -47,6 +47,7 @@ import scipy.optimize
 
 from ._checks import as_float_array, check_finite
 from .errors import InfeasibleTrajectoryError, InputError
+from .parameters import bounded_range, bounded_rate
 from .regressor import iter_regressor
 from .robot import Robot
 
@@ -54,7 +55,6 @@ from .robot import Robot
 DEFAULT_WF = 2.0 * math.pi / 10.0
 #: Default number of time samples per period for limit checks.
 DEFAULT_CHECK_POINTS = 1000
-_UNSET = 1e3  # limits wider than this are treated as unset
 
 
 @dataclass(frozen=True)
@@ -179,22 +179,9 @@ def _dof_layout(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
     Raises :class:`InputError` for joints that are neither one coordinate per
     DoF nor a continuous (cos, sin) joint.
     """
-    idx, continuous = [], []
-    for i in range(1, robot.model.njoints):
-        jm = robot.model.joints[i]
-        if jm.nq == jm.nv:
-            idx += [jm.idx_q + k for k in range(jm.nv)]
-            continuous += [False] * jm.nv
-        elif jm.nq == 2 and jm.nv == 1:
-            idx.append(jm.idx_q)
-            continuous.append(True)
-        else:
-            raise InputError(
-                f"joint {robot.model.names[i]!r} ({jm.shortname()}) has nq={jm.nq}, "
-                f"nv={jm.nv}: Fourier trajectories need one coordinate per DoF "
-                "or continuous (cos, sin) joints"
-            )
-    return np.array(idx, dtype=int), np.array(continuous, dtype=bool)
+    dofs = robot.dofs
+    dofs.require_coordinates("Fourier trajectories")
+    return dofs.q_index, dofs.continuous
 
 
 def trajectory_to_configuration(robot: Robot, angles) -> np.ndarray:
@@ -226,7 +213,7 @@ def _position_limits(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
     """URDF position limits per DoF, NaN where unset (continuous or absurd), shape (nv,) each."""
     idx, cont = _dof_layout(robot)
     lo, hi = robot.lower[idx], robot.upper[idx]
-    unset = cont | ~np.isfinite(lo) | ~np.isfinite(hi) | (hi <= lo) | (hi - lo > _UNSET)
+    unset = cont | ~bounded_range(lo, hi)
     lo[unset], hi[unset] = np.nan, np.nan
     return lo, hi
 
@@ -242,7 +229,7 @@ def _design_position_bounds(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
 
 def _velocity_limits(robot: Robot) -> np.ndarray:
     v = robot.velocity_limit
-    v[~np.isfinite(v) | (v <= 0) | (v > _UNSET)] = np.nan
+    v[~bounded_rate(v)] = np.nan
     return v
 
 
@@ -583,14 +570,12 @@ class ExcitationObjective:
         self.base_rigid = self.base[rigid]
         self._rigid_pos = np.flatnonzero(rigid)
         # analytic joint-term derivatives: (position in base, dof, state kind 0/1/2)
-        terms = robot.terms.enabled
         kind_of = {"k": 0, "fv": 1, "Ia": 2}
         self._joint_derivs = []
         for pos in np.flatnonzero(~rigid):
-            offset = int(self.base[pos]) - robot.n_rigid
-            dof, term = divmod(offset, len(terms))
-            if terms[term] in kind_of:
-                self._joint_derivs.append((int(pos), dof, kind_of[terms[term]]))
+            owner = robot.layout.owner(int(self.base[pos]))
+            if owner.parameter in kind_of:
+                self._joint_derivs.append((int(pos), owner.index, kind_of[owner.parameter]))
         self.evaluations = 0
 
     def states(self, x: np.ndarray):

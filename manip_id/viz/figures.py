@@ -25,6 +25,7 @@ from matplotlib.figure import Figure
 from .._checks import as_float_array, check_finite
 from .._io import atomic_write
 from ..errors import InputError
+from ..parameters import bounded_range
 
 #: Points drawn per line at most (longer signals are strided).
 MAX_POINTS = 4000
@@ -397,7 +398,7 @@ def trajectory_limits(
     k = _stride(len(t))
     for j, ax in enumerate(axes):
         ax.plot(t[::k], q[::k, j], color=_PRED, lw=1.0, label="q")
-        bounded = np.isfinite(lo[j]) and np.isfinite(hi[j]) and 0 < hi[j] - lo[j] < 1e3
+        bounded = bool(bounded_range(lo[j], hi[j]))
         if bounded:
             span = hi[j] - lo[j]
             ymin = min(lo[j], q[:, j].min()) - 0.12 * span

@@ -35,6 +35,7 @@ from meshcat.servers.tree import SceneTree, find_node, walk
 from .._checks import as_float_array, check_finite
 from .._io import atomic_write_text
 from ..errors import InfeasibleTrajectoryError, InputError, ManipIdError
+from ..parameters import bounded_range
 from ..robot import Robot
 
 #: Colors of successive parameter sets (RGBA): nominal, then compared ones.
@@ -203,18 +204,13 @@ def link_identifiability(
             raise InputError(f"threshold must be a positive number, got {threshold}")
         ok &= np.isfinite(rel) & (rel <= threshold)
         parts.append(f"relative std <= {threshold:g}")
-    owner = [_owner_joint(n) for n in robot.parameter_names]
+    owner = robot.layout.owner_joints
     det = np.array(
         [sum(1 for o, k in zip(owner, ok, strict=True) if o == j and k) for j in robot.joint_names]
     )
     tot = np.array([sum(1 for o in owner if o == j) for j in robot.joint_names])
     share = det / np.maximum(tot, 1)
     return LinkIdentifiability(tuple(robot.joint_names), share, det, tot, " and ".join(parts))
-
-
-def _owner_joint(parameter_name: str) -> str:
-    head = parameter_name.rsplit(".", 1)[0]
-    return head.split("[", 1)[0]
 
 
 def share_color(share: float) -> tuple[float, float, float, float]:
@@ -261,7 +257,7 @@ def check_trajectory(robot: Robot, t, q, *, tolerance: float = 1e-6):
         raise InputError(f"time must increase strictly: t[{k}]={t[k]} after t[{k - 1}]={t[k - 1]}")
     lo, hi = robot.lower, robot.upper
     names = _q_names(robot)
-    bounded = np.isfinite(lo) & np.isfinite(hi) & (hi > lo) & (hi - lo < 1e3)
+    bounded = bounded_range(lo, hi)
     for i in np.flatnonzero(bounded):
         below, above = lo[i] - q[:, i].min(), q[:, i].max() - hi[i]
         excess = max(below, above)
