@@ -8,7 +8,11 @@ from .errors import InputError
 
 
 def as_float_array(x, name: str, ndim: int | tuple[int, ...] | None = None) -> np.ndarray:
-    """``x`` as a C-contiguous float64 array, with a clear error otherwise."""
+    """``x`` as a C-contiguous float64 array, with a clear error otherwise (complex refused)."""
+    if np.iscomplexobj(x):
+        raise InputError(
+            f"{name} holds complex numbers (dtype {np.asarray(x).dtype}); expected real values"
+        )
     try:
         arr = np.asarray(x, dtype=np.float64)
         if not arr.flags.c_contiguous:
@@ -36,6 +40,52 @@ def check_finite(arr: np.ndarray, name: str, columns=None) -> None:
     col = int(bad[-1])
     label = columns[col] if columns is not None and col < len(columns) else f"column {col}"
     raise InputError(f"{name} holds {value} at sample {bad[0]}, {label}")
+
+
+#: Sane magnitudes of measured fields: name -> (unit, largest |value|). Beyond them a
+#: value is a unit or scaling mistake (or garbage), not a measurement.
+MEASURED_LIMITS: dict[str, tuple[str, float]] = {
+    "t": ("s", 1e9),  # 30 years
+    "q": ("rad or m", 1e4),
+    "dq": ("rad/s or m/s", 1e4),
+    "ddq": ("rad/s^2 or m/s^2", 1e7),
+    "tau": ("N m or N", 1e6),
+}
+#: Below this, every value of a field is "all tiny": squares underflow double precision.
+TINY = 1e-150
+
+
+def check_magnitude(arr: np.ndarray, name: str, columns=None, offset: int = 0) -> None:
+    """Raise :class:`InputError` unless the finite array ``arr`` has sane magnitudes.
+
+    ``name`` selects the unit and the limit in :data:`MEASURED_LIMITS` (``tau`` is
+    refused beyond 1e6 [N m]); the message names the field, the first sample
+    (``offset + k``) and the column. A field whose largest magnitude is non-zero but
+    below :data:`TINY` (e.g. torques of 1e-300) is refused too: nothing can be
+    estimated from it. Unknown names are not checked.
+    """
+    if name not in MEASURED_LIMITS or arr.size == 0:
+        return
+    unit, limit = MEASURED_LIMITS[name]
+    mag = np.abs(arr)
+    big = mag > limit
+    if big.any():
+        bad = np.argwhere(big)[0]
+        where = f"sample {offset + int(bad[0])}"
+        if arr.ndim > 1:
+            col = int(bad[-1])
+            label = columns[col] if columns is not None and col < len(columns) else f"column {col}"
+            where += f", {label}"
+        raise InputError(
+            f"{name} = {arr[tuple(bad)]:.3g} [{unit}] at {where} is beyond any plausible "
+            f"value (|{name}| <= {limit:g} [{unit}]); check the units and scaling"
+        )
+    top = float(mag.max())
+    if 0.0 < top < TINY:
+        raise InputError(
+            f"{name} is all tiny: max |{name}| = {top:.3g} [{unit}] (below {TINY:g}); "
+            "check the units and scaling"
+        )
 
 
 def check_width(arr: np.ndarray, name: str, width: int, what: str) -> None:

@@ -8,7 +8,10 @@ cause.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
+
+import numpy as np
 
 
 class ManipIdError(Exception):
@@ -21,6 +24,22 @@ class InputError(ManipIdError, ValueError):
 
 class RobotError(ManipIdError):
     """A robot cannot be loaded: unknown name, unreadable URDF, unsupported model."""
+
+
+class OutputError(InputError):
+    """An output path is refused before the work, or cannot be written.
+
+    A missing parent folder, a folder where a file is expected, a special file, one of
+    the inputs, the current directory or an ancestor of an input (for a folder).
+    """
+
+
+class ReportBusyError(OutputError):
+    """Another run has claimed the report folder (of two concurrent runs, one wins)."""
+
+
+class ResourceError(InputError):
+    """A computation would not fit the machine (memory estimated before the work)."""
 
 
 class DataError(ManipIdError):
@@ -47,15 +66,141 @@ class InfeasibleTrajectoryError(ManipIdError):
 class RankDeficiencyError(ManipIdError):
     """The data do not excite every parameter that was asked for.
 
+    The message is built from the fields; the directions are formatted by
+    :func:`format_direction` wherever they come from.
+
     Attributes
     ----------
     rank: numerical rank of the regressor.
     n_columns: number of columns (parameters) asked for.
     directions: the unexcited directions as readable expressions in parameter names.
+    subject: what has the rank, e.g. ``"these data of panda"`` (message only).
+    what: what the columns are, e.g. ``"base parameter directions"`` (message only).
+    hint: what to do about it (message only).
     """
 
-    def __init__(self, message: str, rank: int, n_columns: int, directions: Sequence[str] = ()):
-        super().__init__(message)
-        self.rank = rank
-        self.n_columns = n_columns
-        self.directions = list(directions)
+    #: Directions shown in the message (all are in :attr:`directions`).
+    SHOWN = 5
+
+    def __init__(
+        self,
+        rank: int,
+        n_columns: int,
+        directions: Sequence[str] = (),
+        *,
+        subject: str = "the data",
+        what: str = "parameter directions",
+        hint: str = "",
+    ):
+        self.rank = int(rank)
+        self.n_columns = int(n_columns)
+        self.directions = [str(d) for d in directions]
+        self.subject = subject
+        self.what = what
+        self.hint = hint
+        super().__init__(self._message())
+
+    def _message(self) -> str:
+        dirs = self.directions
+        shown = "; ".join(dirs[: self.SHOWN]) + ("; ..." if len(dirs) > self.SHOWN else "")
+        text = f"{self.subject} excite only {self.rank} of {self.n_columns} {self.what}"
+        if dirs:
+            text += f"; unexcited ({len(dirs)}): {shown}"
+        return text + (f" ({self.hint})" if self.hint else "")
+
+    @classmethod
+    def from_vectors(
+        cls,
+        rank: int,
+        vectors: np.ndarray,
+        names: Sequence[str] | None,
+        *,
+        scale: np.ndarray | None = None,
+        **fields,
+    ) -> RankDeficiencyError:
+        """The error for directions given as the columns of ``vectors``, shape (p, k)."""
+        vectors = np.asarray(vectors, dtype=float).reshape(np.shape(vectors)[0], -1)
+        directions = [
+            format_direction(vectors[:, i], names, scale=scale) for i in range(vectors.shape[1])
+        ]
+        return cls(rank, vectors.shape[0], directions, **fields)
+
+    def __reduce__(self):
+        kwargs = {"subject": self.subject, "what": self.what, "hint": self.hint}
+        return (_rebuild, (type(self), (self.rank, self.n_columns, self.directions), kwargs))
+
+
+class NumericalError(ManipIdError, ArithmeticError):
+    """A computation failed numerically (divergence, a factorization that broke down).
+
+    Distinct from :class:`InputError`: the inputs were valid, the numbers were not.
+
+    Attributes
+    ----------
+    operation: what was being computed, e.g. ``"closed-loop simulation"``.
+    reason: what went wrong, e.g. ``"the state diverged at t=0.1234 s"``.
+    hint: what to try (may be empty).
+    """
+
+    def __init__(self, operation: str, reason: str, *, hint: str = ""):
+        self.operation = operation
+        self.reason = reason
+        self.hint = hint
+        super().__init__(f"{operation}: {reason}" + (f" ({hint})" if hint else ""))
+
+    def __reduce__(self):
+        return (_rebuild, (type(self), (self.operation, self.reason), {"hint": self.hint}))
+
+
+def _rebuild(cls, args, kwargs):
+    return cls(*args, **kwargs)
+
+
+#: Terms of a direction whose scaled coefficient is below this fraction of the lead's are
+#: left out of its text.
+DIRECTION_THRESHOLD = 1e-6
+
+
+def format_direction(
+    vector,
+    names: Sequence[str] | None = None,
+    *,
+    lead: int | None = None,
+    scale=None,
+    threshold: float = DIRECTION_THRESHOLD,
+) -> str:
+    """A direction in parameter space as readable text, e.g. ``"a.m - 0.5*b.mcx"``.
+
+    The one format of directions (unidentifiable, unexcited, regrouped): the
+    ``lead`` term first with coefficient 1 (default: the largest scaled entry),
+    then the others in parameter order; four significant digits; a term whose
+    scaled size ``|v_i| scale_i`` is below ``threshold`` times the lead's is
+    left out.
+
+    Parameters
+    ----------
+    vector: the direction, shape (p,).
+    names: parameter names, length p (default ``theta[i]``).
+    lead: index of the term written first.
+    scale: column scale, shape (p,) (e.g. the regressor's column norms), default ones.
+    threshold: relative size below which a term is not written.
+    """
+    v = np.asarray(vector, dtype=float).ravel()
+    names = list(names) if names is not None else [f"theta[{i}]" for i in range(v.size)]
+    if len(names) != v.size:
+        raise InputError(f"{len(names)} names for a direction of {v.size} entries")
+    s = np.ones(v.size) if scale is None else np.asarray(scale, dtype=float).ravel()
+    size = np.abs(v) * s
+    if not size.any():
+        return "0"
+    k = int(np.argmax(size)) if lead is None else int(lead)
+    c = v / v[k]
+    ref = size[k]
+    order = [k] + [i for i in range(v.size) if i != k and size[i] > threshold * ref]
+    out = ""
+    for n, i in enumerate(order):
+        mag = abs(float(c[i]))
+        coef = "" if math.isclose(mag, 1.0, rel_tol=1e-9) else f"{mag:.4g}*"
+        sign = "-" if c[i] < 0 else "+"
+        out += f"{coef}{names[i]}" if n == 0 else f" {sign} {coef}{names[i]}"
+    return out

@@ -63,7 +63,16 @@ def test_report_folder_contents(tmp_path):
     out = _report(tmp_path / "rep", figures={"residuals": _fig, "copied": existing})
     assert out == tmp_path / "rep"
     names = sorted(p.name for p in out.iterdir())
-    assert names == ["copied.png", "index.html", "residuals.png", "result.json", "scene.html"]
+    assert names == [
+        ".manip-id-report.json",  # the manifest that lets --force replace the folder later
+        "copied.png",
+        "index.html",
+        "residuals.png",
+        "result.json",
+        "scene.html",
+    ]
+    manifest = json.loads((out / ".manip-id-report.json").read_text())
+    assert manifest["files"] == names[1:]
     assert json.loads((out / "result.json").read_text()) == {"answer": 42, "array": [0, 1, 2]}
     assert (out / "copied.png").read_bytes() == existing.read_bytes()
     assert (out / "scene.html").read_text() == "<html><body>scene</body></html>"
@@ -100,10 +109,24 @@ def test_non_empty_folder_needs_force(tmp_path):
     assert isinstance(info.value, ManipIdError)
     assert sorted(p.name for p in rep.iterdir()) == ["mine.txt"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rep"]
-    _report(rep, force=True)
-    assert not (rep / "mine.txt").exists()
-    assert (rep / "index.html").is_file()
+    # --force never removes a folder manip_id did not write (no manifest)
+    with pytest.raises(InputError, match="not written by manip-id"):
+        _report(rep, force=True)
+    assert (rep / "mine.txt").read_text() == "keep me"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rep"]
+
+
+def test_force_replaces_only_our_own_report(tmp_path):
+    rep = tmp_path / "rep"
+    _report(rep)
+    first = (rep / "result.json").read_bytes()
+    _report(rep, force=True, json_result={"second": True})
+    assert (rep / "result.json").read_bytes() != first
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rep"]
+    (rep / "notes.txt").write_text("the user's own file")
+    with pytest.raises(InputError, match="did not write"):
+        _report(rep, force=True)
+    assert (rep / "notes.txt").read_text() == "the user's own file"
 
 
 def test_a_file_in_the_way_is_an_error(tmp_path):
@@ -116,8 +139,8 @@ def test_a_file_in_the_way_is_an_error(tmp_path):
 def test_failure_leaves_no_half_written_report(tmp_path, force):
     rep = tmp_path / "rep"
     if force:
-        rep.mkdir()
-        (rep / "old.txt").write_text("previous report")
+        _report(rep, json_result={"previous": True})
+    before = sorted(p.name for p in rep.iterdir()) if force else None
 
     def broken(path):
         raise InputError("figure failed")
@@ -125,7 +148,8 @@ def test_failure_leaves_no_half_written_report(tmp_path, force):
     with pytest.raises(InputError, match="figure failed"):
         _report(rep, figures={"ok": _fig, "broken": broken}, force=force)
     if force:  # the old report is intact
-        assert sorted(p.name for p in rep.iterdir()) == ["old.txt"]
+        assert sorted(p.name for p in rep.iterdir()) == before
+        assert json.loads((rep / "result.json").read_text()) == {"previous": True}
         assert sorted(p.name for p in tmp_path.iterdir()) == ["rep"]
     else:
         assert not rep.exists()

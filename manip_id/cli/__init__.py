@@ -1,30 +1,79 @@
-"""The ``manip-id`` command.
+"""The ``manip-id`` command, and its one exception boundary.
 
 Each module of this package that defines ``register(subparsers)`` adds one
 subcommand; ``register`` creates its parser and sets ``func`` to a callable
-``func(args) -> int | None``. Bad input (any :class:`~manip_id.errors.ManipIdError`)
-prints one line on stderr and exits with status 2, never a traceback.
+``func(args) -> int | None``. ``args.outputs`` is the command's
+:class:`~manip_id._io.OutputSet`: outputs are reserved there before the work and
+published together at the end.
+
+:func:`main` is the only place that turns exceptions into exit statuses:
+
+=============================================  ======  ==============================
+what happened                                  status  stderr
+=============================================  ======  ==============================
+bad input (:class:`~manip_id.errors.ManipIdError`,  2   ``manip-id: error: ...`` (one line)
+or a bad option)
+Ctrl-C (SIGINT)                                130     ``manip-id: interrupted``
+SIGTERM / SIGHUP                               143/129 ``manip-id: terminated``
+anything else: a bug                           1       ``manip-id: internal error (a bug)
+                                                       ...; rerun with --debug``
+=============================================  ======  ==============================
+
+Whatever happens, unpublished temporaries are removed and the child processes this
+command started are stopped. Warnings (NumPy, SciPy, ours) are printed once each as
+``manip-id: warning: ...``; tracebacks appear only with ``--debug``.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
+import os
 import pkgutil
+import signal
 import sys
+import tempfile
+import traceback
+import warnings
 
 from ..errors import ManipIdError
 
 PROG = "manip-id"
 
 
+class Terminated(BaseException):
+    """Raised in the main thread by the SIGTERM / SIGHUP handler of :func:`main`."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose errors are one line (``manip-id CMD: error: ...``), exit 2."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {_one_line(message)} (see {self.prog} --help)\n")
+
+
+def _one_line(text: str) -> str:
+    parts = [line.strip() for line in str(text).splitlines() if line.strip()]
+    return "; ".join(parts) if parts else ""
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with every subcommand found in this package."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog=PROG,
         description="Identify the dynamic parameters of robot manipulators.",
     )
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    parser.add_argument(
+        "--debug",
+        action="store_true",
+        help="show the traceback of an internal error (also accepted after the command)",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=OneLineParser)
     sub.required = True
     for info in sorted(pkgutil.iter_modules(__path__), key=lambda m: m.name):
         if info.name.startswith("_"):
@@ -33,22 +82,200 @@ def build_parser() -> argparse.ArgumentParser:
         register = getattr(module, "register", None)
         if register is not None:
             register(sub)
+    for command in sub.choices.values():
+        command.add_argument(
+            "--debug", action="store_true", default=argparse.SUPPRESS, help=argparse.SUPPRESS
+        )
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of the console script; returns the exit status."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+# ------------------------------------------------------------------ warnings
+class _WarningPrinter:
+    """``warnings.showwarning`` replacement: ``manip-id: warning: ...`` once per message."""
+
+    def __init__(self):
+        self.seen: set[str] = set()
+
+    def __call__(self, message, category, filename, lineno, file=None, line=None):
+        text = _one_line(str(message))
+        module = (category.__module__ or "").split(".")[0]
+        origin = ""
+        if not filename or "manip_id" not in str(filename).replace(os.sep, "/"):
+            origin = _library(str(filename)) or module
+            origin = "" if origin in ("builtins", "manip_id", "") else f"{origin}: "
+        line_out = f"{PROG}: warning: {origin}{text}"
+        if line_out in self.seen:
+            return
+        self.seen.add(line_out)
+        print(line_out, file=sys.stderr)
+
+
+def _library(filename: str) -> str:
+    """The top-level package a source file belongs to (``numpy``, ``scipy``), if any."""
+    parts = filename.replace(os.sep, "/").split("/")
+    if "site-packages" in parts:
+        i = parts.index("site-packages")
+        if i + 1 < len(parts):
+            return parts[i + 1].removesuffix(".py")
+    return ""
+
+
+def warn(message: str) -> None:
+    """Print ``manip-id: warning: message`` (once; the commands' own warnings)."""
+    warnings.warn(message, UserWarning, stacklevel=2)
+
+
+# ------------------------------------------------------- native stderr (fd 2)
+@contextlib.contextmanager
+def native_stderr_captured(source: str = ""):
+    """Capture what C/C++ code writes to file descriptor 2 (urdfdom, assimp) meanwhile.
+
+    On leaving normally, each captured line becomes one ``manip-id: warning: <source>:
+    ...`` (duplicates once); when the block raises, the captured text is dropped (our
+    own error message says what went wrong). Python's ``sys.stderr`` is untouched.
+    """
     try:
-        status = args.func(args)
-    except ManipIdError as exc:
-        print(f"{PROG}: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"{PROG}: interrupted", file=sys.stderr)
-        return 130
-    return int(status or 0)
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError, AttributeError):  # no real fd 2 (embedded use)
+        yield
+        return
+    captured = tempfile.TemporaryFile()
+    ok = False
+    try:
+        os.dup2(captured.fileno(), 2)
+        try:
+            yield
+            ok = True
+        finally:
+            os.dup2(saved, 2)
+    finally:
+        os.close(saved)
+        captured.seek(0)
+        text = captured.read().decode("utf-8", "replace")
+        captured.close()
+    if ok and text.strip():
+        lines = [" ".join(line.split()) for line in text.splitlines() if line.strip()]
+        prefix = f"{source}: " if source else ""
+        warn(prefix + "; ".join(dict.fromkeys(lines)))
+
+
+# ---------------------------------------------------------- child processes
+def stop_children(timeout: float = 3.0) -> None:
+    """Terminate (then kill) every process this process started, recursively."""
+    try:
+        import psutil
+    except ImportError:  # pragma: no cover - psutil is a dependency
+        return
+    try:
+        children = psutil.Process().children(recursive=True)
+    except psutil.Error:  # pragma: no cover
+        return
+    for child in children:
+        try:
+            child.terminate()
+        except psutil.Error:
+            pass
+    _, alive = psutil.wait_procs(children, timeout=timeout)
+    for child in alive:
+        try:
+            child.kill()
+        except psutil.Error:
+            pass
+
+
+# ----------------------------------------------------------------- the main
+def _install_signal_handlers():
+    """SIGTERM and SIGHUP raise :class:`Terminated` in the main process (not in forks)."""
+    if not hasattr(signal, "SIGTERM"):  # pragma: no cover
+        return {}
+    main_pid = os.getpid()
+
+    def handler(signum, frame):
+        if os.getpid() != main_pid:  # a forked worker: leave the parent's state alone
+            os._exit(128 + signum)
+        raise Terminated(signum)
+
+    old = {}
+    for name in ("SIGTERM", "SIGHUP"):
+        sig = getattr(signal, name, None)
+        if sig is None:
+            continue
+        try:
+            old[sig] = signal.signal(sig, handler)
+        except ValueError:  # not the main thread (main() called from a thread)
+            break
+    return old
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the console script; returns the exit status (see the module docstring)."""
+    from .._io import OutputSet, remove_temporaries
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv[: argv.index("--")] if "--" in argv else "--debug" in argv
+    old_handlers = _install_signal_handlers()
+    outputs = OutputSet()
+    status = 0
+    interrupted = False
+    with warnings.catch_warnings():
+        warnings.simplefilter("default")
+        warnings.filterwarnings("ignore", category=DeprecationWarning)
+        warnings.filterwarnings("ignore", category=PendingDeprecationWarning)
+        warnings.showwarning = _WarningPrinter()
+        try:
+            parser = build_parser()
+            args = parser.parse_args(argv)
+            args.outputs = outputs
+            status = int(args.func(args) or 0)
+        except ManipIdError as exc:
+            if debug:
+                traceback.print_exc()
+            print(f"{PROG}: error: {_one_line(exc)}", file=sys.stderr)
+            status = 2
+        except KeyboardInterrupt:
+            print(f"\n{PROG}: interrupted", file=sys.stderr)
+            status, interrupted = 130, True
+        except Terminated as exc:
+            print(f"{PROG}: terminated", file=sys.stderr)
+            status, interrupted = 128 + exc.signum, True
+        except SystemExit as exc:  # argparse (--help, bad options)
+            code = exc.code
+            status = code if isinstance(code, int) else (0 if code is None else 2)
+        except BrokenPipeError:  # stdout closed early (`manip-id rank panda | head`)
+            try:
+                sys.stdout = open(os.devnull, "w")  # noqa: SIM115 - no flush error at exit
+            except OSError:  # pragma: no cover
+                pass
+            status = 1
+        except MemoryError:
+            if debug:
+                traceback.print_exc()
+            print(
+                f"{PROG}: error: out of memory (this is a bug: manip-id should have refused "
+                "the job up front; rerun with --debug for the traceback)",
+                file=sys.stderr,
+            )
+            status = 1
+        except Exception as exc:
+            if debug:
+                traceback.print_exc()
+            print(
+                f"{PROG}: internal error (a bug): {type(exc).__name__}: {_one_line(exc)}; "
+                "rerun with --debug for the traceback",
+                file=sys.stderr,
+            )
+            status = 1
+        finally:
+            for sig in old_handlers:  # a second signal must not interrupt the cleanup
+                signal.signal(sig, signal.SIG_IGN)
+            outputs.discard()
+            remove_temporaries()
+            if interrupted:
+                stop_children()
+            for sig, old in old_handlers.items():
+                signal.signal(sig, old)
+    return status
 
 
 if __name__ == "__main__":  # pragma: no cover

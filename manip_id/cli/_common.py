@@ -46,13 +46,81 @@ def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
 def robot_from_args(args: argparse.Namespace) -> Robot:
     """Load the robot named by :func:`add_robot_arguments` options."""
     from ..robot import load_robot
+    from . import native_stderr_captured
 
     joints = [j for j in args.joints.split(",") if j] if getattr(args, "joints", None) else None
-    return load_robot(
-        args.robot,
-        armature=args.armature,
-        friction=args.friction,
-        spring=args.spring,
-        active_joints=joints,
-        package_dirs=args.package_dir,
-    )
+    with native_stderr_captured("urdfdom"):  # its C++ messages become one warning line
+        return load_robot(
+            args.robot,
+            armature=args.armature,
+            friction=args.friction,
+            spring=args.spring,
+            active_joints=joints,
+            package_dirs=args.package_dir,
+        )
+
+
+#: Options naming input files or folders (the outputs must not be one of them).
+INPUT_OPTIONS = ("robot", "data", "validate", "urdf", "package_dir")
+#: Options naming output files, and the option naming a report folder.
+FILE_OUTPUT_OPTIONS = ("json", "html", "export_urdf")
+
+
+def input_paths(args: argparse.Namespace) -> list[str]:
+    """Every existing path among the input options of ``args``."""
+    import os
+
+    paths = []
+    for name in INPUT_OPTIONS:
+        value = getattr(args, name, None)
+        for item in value if isinstance(value, list) else [value]:
+            if isinstance(item, str) and item and os.path.exists(item):
+                paths.append(item)
+    return paths
+
+
+def reserve_outputs(args: argparse.Namespace):
+    """Check and reserve every output option of ``args`` before the work; returns the set.
+
+    ``--json``, ``--html``, ``--export-urdf`` (files) and ``--report`` (a folder, claimed
+    atomically, replaced with ``--force`` only when manip-id wrote it) are checked
+    against each other and against the inputs (:mod:`manip_id._io`). The command writes
+    them with ``outputs.write_json(...)`` / ``claim.write(...)`` and publishes them all
+    with ``outputs.publish()`` at the end. Also checks ``--seed`` and caps ``--workers``.
+    """
+    from .._io import OutputSet
+
+    check_seed_and_workers(args)
+    outputs = getattr(args, "outputs", None)
+    if outputs is None:
+        outputs = args.outputs = OutputSet()
+    outputs.add_inputs(input_paths(args))
+    for name in FILE_OUTPUT_OPTIONS:
+        value = getattr(args, name, None)
+        if value:
+            outputs.file(value, "--" + name.replace("_", "-"))
+    args.report_claim = None
+    if getattr(args, "report", None) is not None:
+        args.report_claim = outputs.report(args.report, "--report", force=args.force)
+    return outputs
+
+
+def check_seed_and_workers(args: argparse.Namespace) -> None:
+    """A negative ``--seed`` is an error; ``--workers`` above the core count is capped."""
+    import os
+
+    from ..errors import InputError
+
+    seed = getattr(args, "seed", None)
+    if seed is not None and not 0 <= seed < 2**63:
+        raise InputError(f"--seed must be an integer in [0, 2**63), got {seed}")
+    workers = getattr(args, "workers", None)
+    if workers is not None:
+        if workers < 1:
+            raise InputError(f"--workers must be >= 1, got {workers}")
+        cores = os.cpu_count() or 1
+        if workers > cores:
+            from . import warn
+
+            warn(f"--workers {workers} capped at the {cores} cores of this machine")
+            args.workers = cores

@@ -6,7 +6,7 @@ import argparse
 
 import numpy as np
 
-from ._common import add_robot_arguments, robot_from_args, write_json
+from ._common import add_robot_arguments, reserve_outputs, robot_from_args
 
 
 def register(sub) -> None:
@@ -98,10 +98,7 @@ def run(args: argparse.Namespace) -> int:
     from ..closed_loop import _angles_to_q, compare_fixed, default_reference, with_payload
     from ..simulation import perturb_parameters
 
-    if args.report is not None:  # fail fast, before the long work
-        from ..viz.report import check_report_target
-
-        check_report_target(args.report, args.force)
+    outputs = reserve_outputs(args)  # every output checked (and the report claimed) first
     robot = robot_from_args(args)
     theta0 = robot.nominal_parameters
     theta_true = perturb_parameters(robot, args.perturb, seed=args.seed)
@@ -197,10 +194,13 @@ def run(args: argparse.Namespace) -> int:
         "history": {"t": a.t, "prediction_error": a.prediction_error},
     }
     if args.json:
-        write_json(args.json, out)
-        print(f"wrote {args.json}")
+        outputs.write_json(args.json, out)
     if args.report is not None:
         path = _write_report(robot, cmp, out, law, args)
+    outputs.publish()  # all outputs appear together, once all are complete
+    if args.json:
+        print(f"wrote {args.json}")
+    if args.report is not None:
         print(f"wrote the report to {path}/index.html")
     return 0
 
@@ -270,7 +270,7 @@ def _write_report(robot, cmp, out: dict, law: str, args):
         "torque prediction error, end": a.final_prediction_error,
     }
     return write_report(
-        args.report,
+        args.report_claim,
         title=f"manip-id adapt: {run_name}",
         summary=summary,
         parameter_table=rows,

@@ -19,7 +19,7 @@ import numpy as np
 from ..datasets import Dataset, check_robot, load_dataset
 from ..errors import InputError
 from ..signals import DEFAULT_CUTOFF, DEFAULT_ORDER, preprocess
-from ._common import add_robot_arguments, robot_from_args, write_json
+from ._common import add_robot_arguments, reserve_outputs, robot_from_args
 
 METHODS = ("ols", "wls", "rls", "gradient")
 SIM_DEFAULTS = {"duration": 20.0, "rate": 200.0, "noise": 0.01, "seed": 0}
@@ -251,10 +251,7 @@ def _simulate(robot, args):
 def run(args: argparse.Namespace) -> int:
     t_start = time.perf_counter()
     _check_args(args)
-    if args.report is not None:  # fail fast, before the long work
-        from ..viz.report import check_report_target
-
-        check_report_target(args.report, args.force)
+    outputs = reserve_outputs(args)  # every output checked (and the report claimed) first
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     data = validation = None
@@ -311,10 +308,13 @@ def run(args: argparse.Namespace) -> int:
     print(result.table())
     print(_summary(robot, report))
     if args.json:
-        write_json(args.json, report)
-        print(f"wrote {args.json}")
+        outputs.write_json(args.json, report)
     if args.report is not None:
         path = _write_report(robot, result, full, train, valid, report, args)
+    outputs.publish()  # all outputs appear together, once all are complete
+    if args.json:
+        print(f"wrote {args.json}")
+    if args.report is not None:
         print(f"wrote the report to {path}/index.html")
     return 0
 
@@ -421,7 +421,7 @@ def _write_report(robot, result, full, train, valid, report: dict, args):
         for i, p in enumerate(report["base_parameters"])
     ]
     return write_report(
-        args.report,
+        args.report_claim,
         title=f"manip-id identify: {run_name}",
         summary=summary,
         parameter_table=rows,

@@ -6,7 +6,7 @@ import argparse
 
 import numpy as np
 
-from ._common import add_robot_arguments, robot_from_args, write_json
+from ._common import add_robot_arguments, reserve_outputs, robot_from_args
 
 
 def register(sub) -> None:
@@ -55,10 +55,7 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..identifiability import analyze_dataset, structural_analysis
 
-    if args.report is not None:  # fail fast, before the long work
-        from ..viz.report import check_report_target
-
-        check_report_target(args.report, args.force)
+    outputs = reserve_outputs(args)  # every output checked (and the report claimed) first
     robot = robot_from_args(args)
     dataset = _load_data(robot, args.data) if args.data is not None else None
     structural = structural_analysis(
@@ -73,10 +70,13 @@ def run(args: argparse.Namespace) -> int:
         print(data.report(details=False))
         out["data"] = {"file": str(args.data), **data.to_dict()}
     if args.json is not None:
-        write_json(args.json, out)
-        print(f"\nwrote {args.json}")
+        outputs.write_json(args.json, out)
     if args.report is not None:
         path = _write_report(robot, structural, data, dataset, out, args)
+    outputs.publish()  # all outputs appear together, once all are complete
+    if args.json is not None:
+        print(f"\nwrote {args.json}")
+    if args.report is not None:
         print(f"\nwrote the report to {path}/index.html")
     return 0
 
@@ -152,7 +152,7 @@ def _write_report(robot, structural, data, dataset, out: dict, args):
         summary["data rank"] = data.rank
         summary["unexcited directions"] = len(data.unexcited)
     return write_report(
-        args.report,
+        args.report_claim,
         title=f"manip-id rank {robot.name}",
         summary=summary,
         parameter_table=rows,

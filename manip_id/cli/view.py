@@ -1,10 +1,13 @@
 """``manip-id view``: the robot in meshcat, animated along data or a simulated excitation.
 
 The scene (visual meshes, a time slider, the nominal inertia ellipsoids) is
-written as a standalone HTML file (``--html``, atomically: temporary file, then
-rename) and/or replayed into a live meshcat viewer on 127.0.0.1 (``--serve``,
-until Ctrl-C). A trajectory that does not fit the robot (number of positions,
-position limits) is an error.
+written as a standalone HTML file (``--html``, checked before the work, written to a
+temporary and renamed at the end) and/or replayed into a live meshcat viewer
+(``--serve``, until Ctrl-C or SIGTERM). The viewer's server is ours
+(:mod:`manip_id.viz.meshcat_server`): it listens on 127.0.0.1 unless ``--host`` is
+given (a non-loopback host is reachable from the network: a warning says so) and
+stops when the command ends, whatever the signal. A trajectory that does not fit
+the robot (number of positions, position limits) is an error.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ import sys
 import time
 
 from ..errors import InputError
-from ._common import add_robot_arguments, robot_from_args
+from ._common import add_robot_arguments, reserve_outputs, robot_from_args
 
 
 def register(sub) -> None:
@@ -47,6 +50,12 @@ def register(sub) -> None:
         action="store_true",
         help="open a live meshcat viewer on 127.0.0.1 and wait (Ctrl-C ends)",
     )
+    p.add_argument(
+        "--host",
+        default=None,
+        help="address the --serve web server listens on [default 127.0.0.1]; any other "
+        "than a loopback address makes the viewer reachable from the network",
+    )
     p.set_defaults(func=run)
 
 
@@ -75,6 +84,18 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--duration must be positive, got {args.duration}")
     if not (math.isfinite(args.fps) and args.fps > 0):
         raise InputError(f"--fps must be positive, got {args.fps}")
+    if args.host is not None and not args.serve:
+        raise InputError("--host applies to --serve only")
+    host = "127.0.0.1"
+    if args.host is not None:
+        from ..viz.meshcat_server import check_host, is_loopback
+
+        host = check_host(args.host)
+        if not is_loopback(host):
+            from . import warn
+
+            warn(f"--host {host}: the viewer is reachable from the network, without authentication")
+    outputs = reserve_outputs(args)  # --html checked before the work
     from ..viz.meshcat_scene import RobotScene, check_trajectory
 
     robot = robot_from_args(args)
@@ -92,14 +113,18 @@ def run(args: argparse.Namespace) -> int:
     for note in scene.notes:
         print(f"note: {note}", file=sys.stderr)
     if args.html:
-        path = scene.write_html(args.html)
-        print(f"wrote {path}")
-    if args.serve:  # pragma: no cover - interactive
-        vis = scene.serve()
-        print(f"meshcat viewer at {vis.url()} (Ctrl-C ends)", flush=True)
-        try:
-            while True:
-                time.sleep(1.0)
-        except KeyboardInterrupt:
-            pass
+        outputs.write_text(args.html, scene.html())
+        outputs.publish()
+        print(f"wrote {args.html}")
+    if args.serve:
+        with scene.serve(host=host) as view:  # the server stops on leaving, signal or not
+            print(f"meshcat viewer at {view.url} (Ctrl-C ends)", flush=True)
+            try:
+                while view.server.process.poll() is None:
+                    time.sleep(0.5)
+            except KeyboardInterrupt:
+                return 0
+            raise InputError(
+                f"the meshcat server stopped (exit status {view.server.process.returncode})"
+            )
     return 0

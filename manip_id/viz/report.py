@@ -1,9 +1,17 @@
 """A report folder: result.json, PNG figures, scene.html and an index.html that shows them.
 
-Never half-written: the report is built in a temporary sibling folder
-(``.<name>.tmp-*``) and renamed into place at the end. An existing non-empty
-folder is only replaced with ``force=True``, and then only after the new
-report is complete (the old folder is first renamed aside, then removed).
+Rules (issue 14):
+
+- **Claimed atomically before the work** (:func:`claim_report`): the folder is created
+  if missing and a claim file ``.manip-id-claim`` is created in it with ``O_EXCL``; of
+  two concurrent runs into one folder exactly one gets the claim, the other gets
+  :class:`~manip_id.errors.ReportBusyError`.
+- **Never half-written**: the report is built in a temporary sibling folder
+  (``.<name>.tmp-*``, registered for removal on signals) and renamed into place at the end.
+- **Only our own folders are replaced**: every report folder holds a manifest,
+  ``.manip-id-report.json``, listing the files manip_id wrote. An existing non-empty
+  folder is replaced only with ``force=True``, and only when it has a manifest and holds
+  nothing the manifest does not list; anything else is refused, never deleted.
 """
 
 from __future__ import annotations
@@ -17,29 +25,204 @@ from pathlib import Path
 
 import numpy as np
 
-from .._io import atomic_write_text, json_text
-from ..errors import InputError
+from .. import __name__ as _package
+from .._io import (
+    atomic_write_text,
+    check_output_dir,
+    json_text,
+    register_temporary,
+    unregister_temporary,
+)
+from ..errors import InputError, OutputError, ReportBusyError
 
 INDEX, RESULT, SCENE = "index.html", "result.json", "scene.html"
+#: The manifest that marks a folder written by manip_id, and the claim of a run in progress.
+MANIFEST, CLAIM = ".manip-id-report.json", ".manip-id-claim"
 
 
 class ReportExistsError(InputError):
     """The report folder exists and is not empty, and ``force`` was not given."""
 
 
-def check_report_target(directory, force: bool = False) -> Path:
-    """Raise :class:`ReportExistsError` if ``directory`` would be overwritten without ``force``.
+def _manifest_files(path: Path) -> set[str] | None:
+    """The files a report folder's manifest lists, or None without a (readable) manifest."""
+    import json
 
-    Also refuses a path that is an existing file. Call it before the long work.
+    try:
+        data = json.loads((path / MANIFEST).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    if not isinstance(data, dict) or data.get("written_by") != _package:
+        return None
+    files = data.get("files")
+    if not isinstance(files, list) or not all(isinstance(f, str) for f in files):
+        return None
+    return set(files)
+
+
+def check_report_target(directory, force: bool = False, *, inputs=(), what="report folder") -> Path:
+    """Raise unless ``directory`` may receive a report; call it before the long work.
+
+    Refused (:class:`~manip_id.errors.OutputError`): a file in the way, a missing
+    parent, the current directory or an ancestor of it or of an input. A non-empty
+    folder needs ``force`` (:class:`ReportExistsError`) and, even then, a manifest
+    listing everything it holds (a folder manip_id did not write is never removed).
+    A folder another run has claimed raises :class:`~manip_id.errors.ReportBusyError`.
     """
-    path = Path(directory)
-    if path.exists() and not path.is_dir():
-        raise InputError(f"report folder {path} exists and is not a folder")
-    if path.is_dir() and any(path.iterdir()) and not force:
+    try:
+        path = check_output_dir(directory, inputs=inputs, what=what)
+    except OutputError as exc:
+        if "not a folder" in str(exc):
+            raise OutputError(f"report folder {directory} exists and is not a folder") from exc
+        raise
+    if not path.is_dir():
+        return path
+    try:
+        entries = sorted(p.name for p in path.iterdir())
+    except OSError as exc:
+        raise OutputError(f"cannot read the report folder {path}: {exc.strerror}") from exc
+    if CLAIM in entries:
+        raise ReportBusyError(
+            f"report folder {path} is being written by another manip-id run "
+            f"(if none is running, remove {path / CLAIM})"
+        )
+    if not entries:
+        return path
+    if not force:
         raise ReportExistsError(
             f"report folder {path} exists and is not empty (use --force / force=True to replace it)"
         )
+    listed = _manifest_files(path)
+    if listed is None:
+        raise OutputError(
+            f"report folder {path} was not written by manip-id (no {MANIFEST}); "
+            "--force only replaces folders manip-id wrote: remove it yourself or choose another"
+        )
+    extra = [e for e in entries if e not in listed and e != MANIFEST]
+    if extra:
+        raise OutputError(
+            f"report folder {path} holds files manip-id did not write ({', '.join(extra[:5])}"
+            f"{', ...' if len(extra) > 5 else ''}); --force will not delete them"
+        )
     return path
+
+
+class ReportFolder:
+    """A report folder claimed by this run: built by :meth:`write`, then :meth:`publish`-ed.
+
+    Made by :func:`claim_report`. Until published, the target holds only the claim file
+    (or its old manifest-listed contents); :meth:`discard` gives the folder back as it was.
+    """
+
+    def __init__(self, path: Path, force: bool, created: bool, claim: Path):
+        self.path = path
+        self.force = force
+        self._created = created
+        self._claim = claim
+        self._tmp: Path | None = None
+
+    def write(self, **content) -> Path:
+        """Build the report in a temporary sibling folder (arguments of :func:`write_report`)."""
+        if self._tmp is not None:
+            raise InputError(f"report {self.path} was already written")
+        self._tmp = _build(self.path, **content)
+        return self.path
+
+    def publish(self) -> None:
+        """Rename the built report into place (nothing is built: give the folder back)."""
+        if self._tmp is None:
+            self.discard()
+            return
+        tmp, self._tmp = self._tmp, None
+        try:
+            _swap(tmp, self.path)
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            unregister_temporary(tmp)
+            self.discard()
+            raise
+        unregister_temporary(tmp)
+        unregister_temporary(self._claim)
+        if self._created:
+            unregister_temporary(self.path)
+
+    def discard(self) -> None:
+        """Remove the temporary build and the claim (and the folder if this run created it)."""
+        if self._tmp is not None:
+            shutil.rmtree(self._tmp, ignore_errors=True)
+            unregister_temporary(self._tmp)
+            self._tmp = None
+        if self._claim.exists():
+            self._claim.unlink(missing_ok=True)
+        unregister_temporary(self._claim)
+        if self._created:
+            try:
+                self.path.rmdir()
+            except OSError:
+                pass
+            unregister_temporary(self.path)
+
+
+def claim_report(
+    directory, *, force: bool = False, inputs=(), what="report folder"
+) -> ReportFolder:
+    """Check ``directory`` (:func:`check_report_target`) and claim it for this run.
+
+    The claim is a file created with ``O_CREAT | O_EXCL`` in the folder (created here
+    if missing): of two runs, exactly one succeeds; the other raises
+    :class:`~manip_id.errors.ReportBusyError`.
+    """
+    path = check_report_target(directory, force, inputs=inputs, what=what)
+    created = False
+    try:
+        path.mkdir()
+        created = True
+        register_temporary(path)
+    except FileExistsError:
+        pass
+    except OSError as exc:
+        raise OutputError(f"cannot create the report folder {path}: {exc.strerror}") from exc
+    claim = path / CLAIM
+    try:
+        fd = os.open(claim, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+    except FileExistsError as exc:
+        raise ReportBusyError(
+            f"report folder {path} is being written by another manip-id run "
+            f"(if none is running, remove {claim})"
+        ) from exc
+    except OSError as exc:
+        if created:
+            path.rmdir()
+            unregister_temporary(path)
+        raise OutputError(f"cannot write into the report folder {path}: {exc.strerror}") from exc
+    register_temporary(claim)
+    with os.fdopen(fd, "w") as fh:
+        fh.write(f"{os.getpid()}\n")
+    if not created:  # re-check under the claim: the folder may have changed meanwhile
+        try:
+            check_report_target_claimed(path, force)
+        except BaseException:
+            claim.unlink(missing_ok=True)
+            unregister_temporary(claim)
+            raise
+    return ReportFolder(path, force, created, claim)
+
+
+def check_report_target_claimed(path: Path, force: bool) -> None:
+    """:func:`check_report_target`'s content rules on a folder that holds our claim."""
+    entries = [p.name for p in path.iterdir() if p.name != CLAIM]
+    if not entries:
+        return
+    if not force:
+        raise ReportExistsError(
+            f"report folder {path} exists and is not empty (use --force / force=True to replace it)"
+        )
+    listed = _manifest_files(path)
+    if listed is None or any(e not in listed and e != MANIFEST for e in entries):
+        raise OutputError(
+            f"report folder {path} was not written by manip-id or holds other files; "
+            "--force only replaces folders manip-id wrote"
+        )
 
 
 def _cell(value) -> str:
@@ -122,6 +305,7 @@ def write_report(
     json_result=None,
     notes: Sequence[str] = (),
     force: bool = False,
+    inputs: Sequence = (),
 ) -> Path:
     """Write a report folder and return its path.
 
@@ -132,9 +316,46 @@ def write_report(
         the path of an existing PNG (copied); saved as ``<name>.png``;
     scene: a :class:`~manip_id.viz.meshcat_scene.RobotScene` or its HTML as a string;
     json_result: written to result.json (default: ``{"summary", "parameters"}``);
-    notes: lines shown under the summary.
+    notes: lines shown under the summary;
+    inputs: paths the report must not replace or contain (see :func:`check_report_target`).
+
+    ``directory`` may also be a :class:`ReportFolder` from :func:`claim_report`: the
+    report is then built but left for its :meth:`ReportFolder.publish` (with the other
+    outputs of a command).
     """
-    target = check_report_target(directory, force)
+    content = dict(
+        title=title,
+        summary=summary,
+        parameter_table=parameter_table,
+        figures=figures,
+        scene=scene,
+        json_result=json_result,
+        notes=notes,
+    )
+    if isinstance(directory, ReportFolder):
+        return directory.write(**content)
+    claim = claim_report(directory, force=force, inputs=inputs)
+    try:
+        claim.write(**content)
+        claim.publish()
+    except BaseException:
+        claim.discard()
+        raise
+    return claim.path
+
+
+def _build(
+    target: Path,
+    *,
+    title: str,
+    summary: Mapping,
+    parameter_table: Sequence[Mapping],
+    figures: Mapping[str, Callable[[Path], object] | str | os.PathLike],
+    scene=None,
+    json_result=None,
+    notes: Sequence[str] = (),
+) -> Path:
+    """The complete report in a temporary sibling folder of ``target``; returns that folder."""
     for name in figures:
         if not name or "/" in name or name.startswith(".") or name in ("index", "scene"):
             raise InputError(f"figure names must be plain file stems, got {name!r}")
@@ -142,8 +363,11 @@ def write_report(
         raise InputError(
             f"scene must be a RobotScene or an HTML string, got {type(scene).__name__}"
         )
-    target.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.tmp-"))
+    try:
+        tmp = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.tmp-"))
+    except OSError as exc:
+        raise OutputError(f"cannot create a folder beside {target}: {exc.strerror}") from exc
+    register_temporary(tmp)
     try:
         os.chmod(tmp, 0o755)
         payload = (
@@ -171,11 +395,14 @@ def write_report(
         atomic_write_text(
             tmp / INDEX, _index(title, summary, parameter_table, written, scene is not None, notes)
         )
-        _swap(tmp, target)
+        files = sorted(p.name for p in tmp.iterdir())
+        manifest = {"written_by": _package, "files": files}
+        atomic_write_text(tmp / MANIFEST, json_text(manifest))
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
+        unregister_temporary(tmp)
         raise
-    return target
+    return tmp
 
 
 def _swap(new: Path, target: Path) -> None:
