@@ -548,7 +548,7 @@ class RobotScene:
         drawn = sum(e.physical for e in ellipsoids)
         self._legend.append(
             _Legend(
-                f"inertia ellipsoids: {label}",
+                f"inertia ellipsoids: {html_lib.escape(label)}",
                 [
                     f'<span class="sw" style="background:{_css(color)}"></span> '
                     f"{html_lib.escape(label)}: {drawn} of {len(ellipsoids)} bodies"
@@ -630,22 +630,68 @@ class RobotScene:
         """Write :meth:`html` to ``path`` atomically (temporary file, then rename)."""
         return atomic_write_text(path, self.html())
 
-    def serve(self, open_browser: bool = False) -> meshcat.Visualizer:
-        """Replay the scene into a live meshcat viewer on 127.0.0.1; returns the visualizer.
+    def serve(self, open_browser: bool = False, host: str = "127.0.0.1") -> LiveView:
+        """Replay the scene into a live meshcat viewer; returns the :class:`LiveView`.
 
-        Its URL is ``vis.url()``; the server runs until the visualizer is closed
-        or the Python process ends.
+        The meshcat server is started here (:func:`manip_id.viz.meshcat_server.start_server`)
+        with its web server on ``host`` only (127.0.0.1 by default) and its command
+        socket on 127.0.0.1; it stops with :meth:`LiveView.stop`, or with this process
+        whatever ends it. Its URL is ``view.url``.
         """
-        vis = meshcat.Visualizer()
-        for packed in self.commands():
-            data = umsgpack.unpackb(packed)
-            vis.window.zmq_socket.send_multipart(
-                [data["type"].encode(), data.get("path", "").encode(), packed]
-            )
-            vis.window.zmq_socket.recv()
+        import contextlib
+        import io
+
+        from .meshcat_server import start_server
+
+        server = start_server(host)
+        try:
+            with contextlib.redirect_stdout(io.StringIO()):  # meshcat prints its URL
+                vis = meshcat.Visualizer(zmq_url=server.zmq_url)
+            for packed in self.commands():
+                data = umsgpack.unpackb(packed)
+                vis.window.zmq_socket.send_multipart(
+                    [data["type"].encode(), data.get("path", "").encode(), packed]
+                )
+                vis.window.zmq_socket.recv()
+        except BaseException:
+            server.stop()
+            raise
+        view = LiveView(vis, server)
         if open_browser:
-            vis.open()
-        return vis
+            webbrowser_open(view.url)
+        return view
+
+
+def webbrowser_open(url: str) -> None:  # pragma: no cover - interactive
+    import webbrowser
+
+    webbrowser.open(url, new=2)
+
+
+@dataclass
+class LiveView:
+    """A scene replayed into a running meshcat server (see :meth:`RobotScene.serve`)."""
+
+    visualizer: meshcat.Visualizer
+    server: object  # manip_id.viz.meshcat_server.MeshcatServer
+
+    @property
+    def url(self) -> str:
+        """The viewer's address, on the server's host."""
+        return self.server.web_url  # type: ignore[attr-defined]
+
+    def stop(self) -> None:
+        """Close the connection and stop the server process."""
+        try:
+            self.visualizer.window.zmq_socket.close(linger=0)
+        finally:
+            self.server.stop()  # type: ignore[attr-defined]
+
+    def __enter__(self) -> LiveView:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
 
 
 _PAGE = """<!DOCTYPE html>
