@@ -120,3 +120,61 @@ def test_subpackage_exports_resolve():
         for name in mod.__all__:
             assert getattr(mod, name) is not None, (mod.__name__, name)
     assert viz.figures is sys.modules["manip_id.viz.figures"]
+
+
+def test_robots_command_imports_nothing_heavy():
+    mods = _modules_after(_cli(["robots"]))
+    assert "pinocchio" in mods  # it really built the models
+    assert _heavy(mods) == []
+
+
+def _reference_configurations(model) -> dict:
+    return {e.key(): tuple(e.data()) for e in model.referenceConfigurations}
+
+
+@pytest.mark.parametrize("name", ["panda", "ur10", "talos_arm", "baxter"])
+def test_model_without_geometry_matches_the_loader(name):
+    """The URDF-only model equals the one example-robot-data's loader builds (with meshes)."""
+    import numpy as np
+    from example_robot_data.robots_loader import ROBOTS
+
+    from manip_id.robot import _load_erd, load_robot
+
+    ref = ROBOTS[name]().robot
+    model, source, _, geometry = _load_erd(name)
+    assert geometry == {}
+    assert source == ref.urdf or source.endswith(ref.urdf.split("/robots/")[-1])
+    r = ref.model
+    assert list(model.names) == list(r.names)
+    for i in range(model.njoints):
+        np.testing.assert_array_equal(
+            model.inertias[i].toDynamicParameters(), r.inertias[i].toDynamicParameters()
+        )
+        assert model.jointPlacements[i].isApprox(r.jointPlacements[i], 0.0)
+    for attr in ("lowerPositionLimit", "upperPositionLimit", "velocityLimit", "effortLimit"):
+        np.testing.assert_array_equal(getattr(model, attr), getattr(r, attr))
+    for attr in ("armature", "rotorInertia", "rotorGearRatio", "gravity"):
+        np.testing.assert_array_equal(
+            np.asarray(getattr(model, attr)), np.asarray(getattr(r, attr))
+        )
+    assert _reference_configurations(model) == _reference_configurations(r)
+
+    robot = load_robot(name)
+    assert "visual_model" not in vars(robot)  # geometry only on demand
+    reduced = r
+    if robot.model.njoints != r.njoints:  # locked joints (the panda's fingers)
+        import pinocchio as pin
+
+        ids = [r.getJointId(j) for j in r.names[1:] if j not in robot.joint_names]
+        reduced, (visual, collision) = pin.buildReducedModel(
+            r, [ref.visual_model, ref.collision_model], ids, robot._qref
+        )
+    else:
+        visual, collision = ref.visual_model, ref.collision_model
+    assert reduced.nv == robot.nv
+    for ours, theirs in ((robot.visual_model, visual), (robot.collision_model, collision)):
+        assert [g.name for g in ours.geometryObjects] == [g.name for g in theirs.geometryObjects]
+        for a, b in zip(ours.geometryObjects, theirs.geometryObjects, strict=True):
+            assert a.parentJoint == b.parentJoint
+            assert a.placement.isApprox(b.placement)
+            assert os.path.realpath(a.meshPath) == os.path.realpath(b.meshPath)
