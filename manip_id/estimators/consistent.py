@@ -1,0 +1,641 @@
+"""Physically consistent least squares: standard parameters whose base parameters fit the data.
+
+The data enter only through the streamed information of the base regressor
+``Y_b`` (:class:`~manip_id.estimators.InformationAccumulator`): ``A = Y_b^T W Y_b``
+(r, r), ``b = Y_b^T W tau`` (r,). The base parameters of a standard vector are
+``beta = P theta`` (``P`` the (r, p) base map: identity on the independent
+columns, ``K`` on the dependent ones), so the weighted residual is::
+
+    ||W^1/2 (Y_b P theta - tau)||^2 = theta^T P^T A P theta - 2 b^T P theta + zz
+                                   = (P theta - beta_ls)^T A (P theta - beta_ls) + RSS_min
+
+with ``beta_ls`` the least-squares solution. Measured in standard deviations of
+``beta_ls`` (covariance ``C = s A^-1``, ``s`` the residual variance) the fit is
+``f(theta) = (P theta - beta_ls)^T C^-1 (P theta - beta_ls)``. The estimate solves::
+
+    minimize    f(theta) + w * [ sum_i D(J_i || J0_i) + sum_t ((theta_t - theta0_t) / s_t)^2 ]
+    subject to  J_i(theta) - eps_i 1 >= 0  (each body i),   Ia, fv, fc >= 0
+
+where ``J_i`` is body i's pseudo-inertia (:mod:`manip_id.consistency`),
+``D(J || J0) = tr(J0^-1 J) - log det(J0^-1 J) - 4`` the log-det (Bregman)
+divergence to the prior's pseudo-inertia (Lee, Wensing & Park 2019): zero at
+``J = J0``, invariant to the body frame and to units), ``s_t = sqrt(zz / H_tt)``
+the scale of joint term ``t`` (the value that alone would explain all the
+torque, ``H = P^T A P``: in parameter units, whatever the noise level), and
+``w`` the prior weight (``prior="none"``: ``w = 0``, feasibility alone). The
+margin is ``eps_i = MARGIN * lambda_min(J0_i)`` for a physical prior. With a small
+``w`` the prior only picks, among the standard vectors that fit equally well
+(the null space of ``Y_b P``), the one closest to the prior, and moves the fit by
+a fraction of a standard deviation.
+
+Two solvers (:data:`SOLVERS`):
+
+- ``"sdp"``: the convex problem above (log-det, PSD cones, a quadratic) with cvxpy
+  and Clarabel.
+- ``"logchol"``: each ``J_i - eps_i 1 = U U^T`` in Pinocchio's log-Cholesky
+  parameters (``U = e^alpha [[e^d1, s12, s13, t1], [0, e^d2, s23, t2],
+  [0, 0, e^d3, t3], [0, 0, 0, 1]]``, Rucker & Wensing 2022), the non-negative joint
+  terms as squares: unconstrained, solved by Levenberg-Marquardt on
+  ``f + w * prior`` (Jacobians from ``pinocchio.LogCholeskyParameters.calculateJacobian``).
+  No SDP solver; cost linear in the number of bodies per Jacobian.
+
+Both return the same minimizer within their tolerances (the problem is convex in
+``theta``; the log-Cholesky map is a smooth bijection onto its interior).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._checks import as_float_array
+from ..consistency import (
+    NONNEGATIVE_TERMS,
+    ConsistencyReport,
+    PhysicalConsistencyError,
+    Violation,
+    check_consistency,
+    pseudo_inertia,
+    pseudo_inertia_basis,
+)
+from ..errors import InputError, ManipIdError
+
+SOLVERS: tuple[str, ...] = ("sdp", "logchol")
+PRIORS: tuple[str, ...] = ("nominal", "none")
+#: Default weight of the prior against the fit measured in standard deviations.
+DEFAULT_PRIOR_WEIGHT = 1e-3
+#: Margin of positive definiteness: ``J_i >= MARGIN * lambda_min(J0_i) 1``.
+MARGIN = 1e-3
+#: Relative floor of the residual variance used to measure the fit, ``(FLOOR * rms tau)^2``:
+#: the round-off level of a residual computed from the sums.
+VARIANCE_FLOOR = 1e-8
+
+
+class SolverError(ManipIdError):
+    """The consistent solver failed or the problem is infeasible.
+
+    Attributes
+    ----------
+    solver: "sdp" or "logchol"; status: the solver's own status string.
+    """
+
+    def __init__(self, message: str, solver: str, status: str):
+        super().__init__(f"{solver} solver: {message} (status {status!r})")
+        self.solver = solver
+        self.status = status
+
+
+@dataclass(frozen=True)
+class ConsistentProblem:
+    """The fit and the prior of a consistent estimate (see the module docstring).
+
+    Attributes
+    ----------
+    P: base map, shape (r, p): ``beta = P theta``.
+    beta_ls: unconstrained least-squares base parameters, shape (r,).
+    W: whitening, shape (r, r): ``f(theta) = ||W (P theta - beta_ls)||^2`` (``W^T W = C^-1``).
+    n_bodies: bodies; the first ``10 n_bodies`` entries of theta are theirs.
+    nonnegative: indices of the joint terms constrained ``>= 0``.
+    theta0: the prior's standard parameters (or the reference point when none), (p,).
+    J0: prior pseudo-inertias, shape (n_bodies, 4, 4) (None without a prior).
+    term_scale: ``s_t`` of each joint term, shape (p - 10 n_bodies,).
+    margin: ``eps_i`` per body, shape (n_bodies,).
+    weight: prior weight ``w`` (0 for no prior).
+    independent, dependent: the base parametrization's column indices.
+    names: standard parameter names.
+    """
+
+    P: np.ndarray
+    beta_ls: np.ndarray
+    W: np.ndarray
+    n_bodies: int
+    nonnegative: np.ndarray
+    theta0: np.ndarray
+    J0: np.ndarray | None
+    term_scale: np.ndarray
+    margin: np.ndarray
+    weight: float
+    independent: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+    dependent: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+    names: list[str] = field(default_factory=list)
+
+    @property
+    def p(self) -> int:
+        return int(self.P.shape[1])
+
+    def fit(self, theta: np.ndarray) -> float:
+        """``f(theta)``, the fit excess in squared standard deviations."""
+        e = self.W @ (self.P @ theta - self.beta_ls)
+        return float(e @ e)
+
+    def prior(self, theta: np.ndarray) -> float:
+        """Unweighted prior distance: sum of log-det divergences plus the joint-term squares."""
+        if self.J0 is None:
+            return 0.0
+        nb = self.n_bodies
+        J = pseudo_inertia(theta[: 10 * nb].reshape(nb, 10))
+        total = 0.0
+        for Ji, J0i in zip(J, self.J0, strict=True):
+            M = np.linalg.solve(J0i, Ji)
+            sign, logdet = np.linalg.slogdet(M)
+            total += float(np.trace(M) - logdet - 4.0) if sign > 0 else np.inf
+        dt = (theta[10 * nb :] - self.theta0[10 * nb :]) / self.term_scale
+        return total + float(dt @ dt)
+
+    def objective(self, theta: np.ndarray) -> float:
+        """``f(theta) + w * prior(theta)``."""
+        return self.fit(theta) + (self.weight * self.prior(theta) if self.weight else 0.0)
+
+
+@dataclass(frozen=True)
+class ConsistentSolution:
+    """A physically consistent estimate.
+
+    Attributes
+    ----------
+    theta: standard parameters, shape (p,).
+    beta: base parameters implied, ``P theta``, shape (r,).
+    solver: "sdp" or "logchol"; status: the solver's status; iterations; time [s].
+    fit: ``f(theta)`` [squared standard deviations of the LS base estimate].
+    prior_distance: the unweighted prior term at theta; objective: ``fit + w prior``.
+    consistency: the independent eigenvalue test of theta (not the solver's word).
+    """
+
+    theta: np.ndarray
+    beta: np.ndarray
+    solver: str
+    status: str
+    iterations: int
+    time: float
+    fit: float
+    prior_distance: float
+    objective: float
+    consistency: ConsistencyReport
+
+    @property
+    def physically_consistent(self) -> bool:
+        return self.consistency.consistent
+
+
+# ----------------------------------------------------------------- problem
+def base_map(base, p: int) -> np.ndarray:
+    """The (r, p) matrix ``P`` with ``beta = P theta`` for :class:`BaseParameters` ``base``."""
+    P = np.zeros((base.n_base, p))
+    P[np.arange(base.n_base), base.independent] = 1.0
+    P[:, base.dependent] = base.K
+    return P
+
+
+def build_problem(
+    robot,
+    base,
+    A,
+    b,
+    *,
+    variance: float,
+    prior: str = "nominal",
+    prior_weight: float = DEFAULT_PRIOR_WEIGHT,
+    prior_parameters=None,
+    n_rows: int | None = None,
+    zz: float | None = None,
+) -> ConsistentProblem:
+    """The consistent problem from the base-column information ``A`` (r, r), ``b`` (r,).
+
+    ``variance`` is the residual variance ``s`` that turns ``A`` into ``C^-1 = A / s``
+    (1 for weighted least squares whose weights are inverse variances); it is
+    floored at ``(VARIANCE_FLOOR)^2 zz / n_rows`` when ``zz`` and ``n_rows`` are
+    given. ``prior_parameters`` (p,) replaces the robot's nominal parameters as
+    the prior. Raises :class:`PhysicalConsistencyError` naming the body when the
+    prior itself is not physical.
+    """
+    if prior not in PRIORS:
+        raise InputError(f"prior must be one of {list(PRIORS)}, got {prior!r}")
+    w = float(prior_weight)
+    if not (np.isfinite(w) and w >= 0):
+        raise InputError(f"prior_weight must be a finite number >= 0, got {prior_weight!r}")
+    if prior == "none":
+        w = 0.0
+    p, r = robot.n_parameters, base.n_base
+    if len(base.names) != p:
+        raise InputError(f"base is for {len(base.names)} parameters but robot has {p}")
+    A = as_float_array(A, "A", ndim=2)
+    b = as_float_array(b, "b", ndim=1)
+    if A.shape != (r, r) or b.shape != (r,):
+        raise InputError(f"A.shape={A.shape}, b.shape={b.shape} but the base has r={r}")
+    s = float(variance)
+    if zz is not None and n_rows:
+        s = max(s, VARIANCE_FLOOR**2 * float(zz) / int(n_rows))
+    if not (np.isfinite(s) and s > 0):
+        raise InputError(f"variance must be positive, got {variance}")
+    A = 0.5 * (A + A.T)
+    lam, V = np.linalg.eigh(A)
+    keep = lam > max(float(lam[-1]), 0.0) * 1e-14
+    beta_ls = (V[:, keep] / lam[keep]) @ (V[:, keep].T @ b)
+    W = np.sqrt(lam[keep] / s)[:, None] * V[:, keep].T  # (k, r): W^T W = A / s
+    P = base_map(base, p)
+
+    nb = robot.n_bodies
+    names = list(robot.parameter_names)
+    terms = [n.rsplit(".", 1)[1] for n in names[10 * nb :]]
+    nonneg = np.array(
+        [10 * nb + k for k, t in enumerate(terms) if t in NONNEGATIVE_TERMS], dtype=np.intp
+    )
+    theta0 = (
+        np.array(robot.nominal_parameters, dtype=float)
+        if prior_parameters is None
+        else as_float_array(prior_parameters, "prior_parameters", ndim=1).copy()
+    )
+    if theta0.shape != (p,):
+        raise InputError(f"prior_parameters.shape={theta0.shape} but robot has p={p}")
+    J0 = pseudo_inertia(theta0[: 10 * nb].reshape(nb, 10))
+    lam0 = np.linalg.eigvalsh(J0)
+    if prior == "nominal":
+        report = check_consistency(robot, np.where(np.isin(np.arange(p), nonneg), 0, theta0))
+        bad = [v for v in report.violations if "." not in v.name]
+        neg = [Violation(names[k], ">= 0", float(theta0[k])) for k in nonneg if theta0[k] < 0]
+        if bad or neg:
+            raise PhysicalConsistencyError("the prior (nominal parameters)", bad + neg)
+        margin = MARGIN * lam0[:, 0]
+    else:
+        scale = np.abs(lam0).max(axis=1)
+        fallback = float(scale[scale > 0].mean()) if np.any(scale > 0) else 1.0
+        margin = 1e-8 * np.where(scale > 0, scale, fallback)
+    # joint-term scales: the value that alone would explain all the (weighted) torque,
+    # sqrt(zz / H_tt) with H = P^T A P; in parameter units, so that the prior weighs
+    # the same whatever the noise level
+    H_tt = np.einsum("it,ij,jt->t", P[:, 10 * nb :], A, P[:, 10 * nb :])
+    zz_eff = float(zz) if zz is not None else float(beta_ls @ A @ beta_ls)
+    ref = np.abs(theta0[10 * nb :])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        term_scale = np.sqrt(zz_eff / H_tt)
+    term_scale = np.where(
+        np.isfinite(term_scale) & (term_scale > 0), term_scale, np.where(ref > 0, ref, 1.0)
+    )
+    return ConsistentProblem(
+        P=P,
+        beta_ls=beta_ls,
+        W=W,
+        n_bodies=nb,
+        nonnegative=nonneg,
+        theta0=theta0,
+        J0=J0 if w > 0 else None,
+        term_scale=term_scale,
+        margin=margin,
+        weight=w,
+        independent=np.asarray(base.independent, dtype=np.intp),
+        dependent=np.asarray(base.dependent, dtype=np.intp),
+        names=names,
+    )
+
+
+def solve_consistent(
+    robot, problem: ConsistentProblem, *, solver: str = "sdp", **options
+) -> ConsistentSolution:
+    """Solve ``problem`` with ``solver`` ("sdp" or "logchol"); check the result independently.
+
+    Options: ``sdp``: ``tolerance`` (Clarabel's gap/feasibility tolerances, default
+    1e-10), ``max_iter``; ``logchol``: ``max_iter`` (default 500), ``tolerance``
+    (relative decrease/gradient, default 1e-13), ``theta_start`` (a consistent start).
+    Raises :class:`SolverError` with the solver's status on failure or infeasibility.
+    """
+    if solver not in SOLVERS:
+        raise InputError(f"solver must be one of {list(SOLVERS)}, got {solver!r}")
+    t0 = time.perf_counter()
+    if solver == "sdp":
+        theta, status, iters = _solve_sdp(problem, **options)
+    else:
+        theta, status, iters = _solve_logchol(problem, **options)
+    elapsed = time.perf_counter() - t0
+    if problem.nonnegative.size:  # interior-point round-off: project -1e-12 onto 0
+        k = problem.nonnegative
+        tiny = theta[k] < 0
+        theta[k[tiny]] = 0.0
+    consistency = check_consistency(robot, theta)
+    return ConsistentSolution(
+        theta=theta,
+        beta=problem.P @ theta,
+        solver=solver,
+        status=status,
+        iterations=iters,
+        time=elapsed,
+        fit=problem.fit(theta),
+        prior_distance=problem.prior(theta) if problem.J0 is not None else 0.0,
+        objective=problem.objective(theta),
+        consistency=consistency,
+    )
+
+
+# --------------------------------------------------------------------- SDP
+def _solve_sdp(problem: ConsistentProblem, *, tolerance: float = 1e-10, max_iter: int = 500):
+    import cvxpy as cp
+
+    pr = problem
+    nb, p = pr.n_bodies, pr.p
+    E = pseudo_inertia_basis().reshape(10, 16).T  # vec(J_i) = E @ pi_i (row-major vec)
+    # theta = G (beta_ls + W^+ u + V_0 v) + N z: the fit is ||u||^2 exactly, and the
+    # ill-conditioning of a nearly noise-free fit becomes a column scaling of u that
+    # the solver's equilibration removes (in theta it would be a dense ill-conditioned W P).
+    r = pr.P.shape[0]
+    G, N = _row_and_null_maps(pr)
+    _, sw, Vwt = np.linalg.svd(pr.W, full_matrices=True)
+    k = int(np.sum(sw > 0))
+    Winv = Vwt[:k].T / sw[:k]  # (r, k) so that W (Winv u) = U_k u
+    V0 = Vwt[k:].T  # base directions the data do not see, (r, r - k)
+    u = cp.Variable(k)
+    z = cp.Variable(N.shape[1]) if N.shape[1] else None
+    v = cp.Variable(r - k) if r > k else None
+    theta = G @ pr.beta_ls + (G @ Winv) @ u
+    if v is not None:
+        theta = theta + (G @ V0) @ v
+    if z is not None:
+        theta = theta + N @ z
+    Js = [cp.Variable((4, 4), symmetric=True) for _ in range(nb)]
+    cons = []
+    for i, Ji in enumerate(Js):
+        cons.append(cp.vec(Ji, order="C") == E @ theta[10 * i : 10 * i + 10])
+        cons.append(Ji - pr.margin[i] * np.eye(4) >> 0)
+    if pr.nonnegative.size:
+        cons.append(theta[pr.nonnegative] >= 0)
+    obj = cp.sum_squares(u)
+    if pr.J0 is not None and pr.weight > 0:
+        prior = 0
+        for Ji, J0i in zip(Js, pr.J0, strict=True):
+            prior = prior + cp.trace(np.linalg.inv(J0i) @ Ji) - cp.log_det(Ji)
+        if p > 10 * nb:
+            prior = prior + cp.sum_squares(
+                cp.multiply(1.0 / pr.term_scale, theta[10 * nb :] - pr.theta0[10 * nb :])
+            )
+        obj = obj + pr.weight * prior
+    prob = cp.Problem(cp.Minimize(obj), cons)
+    opts = dict(
+        tol_gap_abs=tolerance,
+        tol_gap_rel=tolerance,
+        tol_feas=tolerance,
+        tol_ktratio=1e-8,
+        max_iter=int(max_iter),
+    )
+    try:
+        prob.solve(solver=cp.CLARABEL, **opts)
+    except cp.error.SolverError as exc:
+        raise SolverError(str(exc).splitlines()[0], "sdp", "solver error") from exc
+    status = str(prob.status)
+    if status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or theta.value is None:
+        what = "the problem is infeasible" if "infeasible" in status else "no solution"
+        raise SolverError(what, "sdp", status)
+    iters = int(getattr(prob.solver_stats, "num_iters", 0) or 0)
+    return np.array(theta.value, dtype=float), status, iters
+
+
+def _row_and_null_maps(pr: ConsistentProblem) -> tuple[np.ndarray, np.ndarray]:
+    """``G`` (p, r) with ``P G = 1`` and ``N`` (p, p - r) with ``P N = 0``.
+
+    ``G`` scatters ``beta`` onto the independent columns; column ``d`` of ``N`` is
+    ``e_d - G K[:, d]``, one unidentifiable direction per dependent parameter.
+    """
+    r, p = pr.P.shape
+    ind, dep = pr.independent, pr.dependent
+    G = np.zeros((p, r))
+    G[ind, np.arange(r)] = 1.0
+    N = np.zeros((p, dep.size))
+    N[dep, np.arange(dep.size)] = 1.0
+    N[ind] -= pr.P[:, dep]
+    return G, N
+
+
+# ------------------------------------------------------------ log-Cholesky
+def _U(eta: np.ndarray) -> np.ndarray:
+    """Upper-triangular ``U`` of log-Cholesky parameters ``eta`` (10,), ``J = U U^T``."""
+    a, d1, d2, d3, s12, s23, s13, t1, t2, t3 = eta
+    return np.exp(a) * np.array(
+        [
+            [np.exp(d1), s12, s13, t1],
+            [0.0, np.exp(d2), s23, t2],
+            [0.0, 0.0, np.exp(d3), t3],
+            [0.0, 0.0, 0.0, 1.0],
+        ]
+    )
+
+
+def _dU(eta: np.ndarray) -> np.ndarray:
+    """``dU/deta_k``, shape (10, 4, 4)."""
+    a, d1, d2, d3 = eta[:4]
+    ea = np.exp(a)
+    out = np.zeros((10, 4, 4))
+    out[0] = _U(eta)
+    out[1, 0, 0] = ea * np.exp(d1)
+    out[2, 1, 1] = ea * np.exp(d2)
+    out[3, 2, 2] = ea * np.exp(d3)
+    for k, (i, j) in enumerate([(0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3)], start=4):
+        out[k, i, j] = ea
+    return out
+
+
+def log_cholesky(J) -> np.ndarray:
+    """Log-Cholesky parameters (10,) of a positive definite pseudo-inertia ``J`` (4, 4).
+
+    ``J = U U^T`` with ``U`` upper triangular (a Cholesky factor of the reversed
+    matrix); the inverse of ``pinocchio.LogCholeskyParameters(eta).toPseudoInertia()``.
+    """
+    J = as_float_array(J, "J", ndim=2)
+    rev = J[::-1, ::-1]
+    try:
+        L = np.linalg.cholesky(0.5 * (rev + rev.T))
+    except np.linalg.LinAlgError as exc:
+        raise InputError("the pseudo-inertia is not positive definite") from exc
+    U = L[::-1, ::-1]
+    ea = U[3, 3]
+    Un = U / ea
+    return np.array(
+        [
+            np.log(ea),
+            np.log(Un[0, 0]),
+            np.log(Un[1, 1]),
+            np.log(Un[2, 2]),
+            Un[0, 1],
+            Un[1, 2],
+            Un[0, 2],
+            Un[0, 3],
+            Un[1, 3],
+            Un[2, 3],
+        ]
+    )
+
+
+_SHIFT = None
+
+
+def _margin_shift() -> np.ndarray:
+    """Body parameters of ``J = 1`` (4x4 identity): ``[1, 0, 0, 0, 2, 0, 2, 0, 0, 2]``."""
+    global _SHIFT
+    if _SHIFT is None:
+        from ..consistency import parameters_from_pseudo_inertia
+
+        _SHIFT = parameters_from_pseudo_inertia(np.eye(4))
+    return _SHIFT
+
+
+class _LogChol:
+    """The log-Cholesky parametrization ``x -> theta`` of a problem, with its Jacobian."""
+
+    def __init__(self, pr: ConsistentProblem):
+        import pinocchio as pin
+
+        self.pin = pin
+        self.pr = pr
+        nb, p = pr.n_bodies, pr.p
+        self.nb = nb
+        self.nonneg = np.zeros(p - 10 * nb, dtype=bool)
+        self.nonneg[pr.nonnegative - 10 * nb] = True
+        self.shift = _margin_shift()
+        self.L0inv = None
+        if pr.J0 is not None:
+            self.L0inv = np.stack([np.linalg.inv(np.linalg.cholesky(J)) for J in pr.J0])
+
+    def start(self, theta: np.ndarray) -> np.ndarray:
+        """Parameters ``x`` of a start ``theta`` (bodies pulled inside the margin if needed)."""
+        pr, nb = self.pr, self.nb
+        x = np.empty(pr.p)
+        J = pseudo_inertia(theta[: 10 * nb].reshape(nb, 10))
+        for i in range(nb):
+            Ji = J[i] - pr.margin[i] * np.eye(4)
+            lam, V = np.linalg.eigh(Ji)
+            floor = max(float(pr.margin[i]), 1e-12 * float(np.abs(lam).max()))
+            Ji = (V * np.maximum(lam, floor)) @ V.T
+            x[10 * i : 10 * i + 10] = log_cholesky(Ji)
+        t = theta[10 * nb :].copy()
+        s = pr.term_scale
+        t[self.nonneg] = np.sqrt(np.maximum(t[self.nonneg], 1e-6 * s[self.nonneg]))
+        x[10 * nb :] = t
+        return x
+
+    def theta(self, x: np.ndarray) -> np.ndarray:
+        pr, nb = self.pr, self.nb
+        out = np.empty(pr.p)
+        for i in range(nb):
+            eta = x[10 * i : 10 * i + 10]
+            lc = self.pin.LogCholeskyParameters(eta)
+            out[10 * i : 10 * i + 10] = lc.toDynamicParameters() + pr.margin[i] * self.shift
+        t = x[10 * nb :].copy()
+        t[self.nonneg] = t[self.nonneg] ** 2
+        out[10 * nb :] = t
+        return out
+
+    def evaluate(self, x: np.ndarray, jacobian: bool = True):
+        """Residuals ``r``, extra (non-squared) objective ``g``, and their derivatives.
+
+        Objective ``F(x) = ||r(x)||^2 + g(x)``; ``g = -w sum_i log det J_i``.
+        """
+        pr, nb = self.pr, self.nb
+        theta = self.theta(x)
+        r_fit = pr.W @ (pr.P @ theta - pr.beta_ls)
+        res = [r_fit]
+        g = 0.0
+        Jt = dg = None
+        if jacobian:
+            Jt = np.zeros((pr.p, pr.p))  # dtheta/dx (block diagonal)
+            for i in range(nb):
+                sl = slice(10 * i, 10 * i + 10)
+                Jt[sl, sl] = self.pin.LogCholeskyParameters(x[sl]).calculateJacobian()
+            d = np.ones(pr.p - 10 * nb)
+            d[self.nonneg] = 2.0 * x[10 * nb :][self.nonneg]
+            Jt[10 * nb :, 10 * nb :] = np.diag(d)
+            jac = [pr.W @ (pr.P @ Jt)]
+            dg = np.zeros(pr.p)
+        if self.L0inv is not None:
+            sw = np.sqrt(pr.weight)
+            for i in range(nb):
+                sl = slice(10 * i, 10 * i + 10)
+                U = _U(x[sl])
+                res.append(sw * (self.L0inv[i] @ U).ravel())
+                S = U @ U.T + pr.margin[i] * np.eye(4)
+                sign, logdet = np.linalg.slogdet(S)
+                g -= pr.weight * logdet
+                if jacobian:
+                    dU = _dU(x[sl])
+                    blk = np.zeros((16, pr.p))
+                    blk[:, sl] = sw * np.einsum("ab,kbc->ack", self.L0inv[i], dU).reshape(16, 10)
+                    jac.append(blk)
+                    G = np.linalg.solve(S, U)  # S^-1 U
+                    dg[sl] = -2.0 * pr.weight * np.einsum("ab,kab->k", G, dU)
+            tdiff = (theta[10 * nb :] - pr.theta0[10 * nb :]) / pr.term_scale
+            res.append(sw * tdiff)
+            if jacobian:
+                jac.append(sw * Jt[10 * nb :] / pr.term_scale[:, None])
+        r = np.concatenate(res)
+        if not jacobian:
+            return theta, r, g
+        return theta, r, g, np.vstack(jac), dg
+
+
+def _solve_logchol(
+    problem: ConsistentProblem,
+    *,
+    max_iter: int = 500,
+    tolerance: float = 1e-13,
+    theta_start=None,
+):
+    import scipy.linalg as sla
+
+    model = _LogChol(problem)
+    pr = problem
+    if theta_start is None:  # the prior moved onto the LS fit along the row space of P
+        G, _ = _row_and_null_maps(pr)
+        start = pr.theta0 + G @ (pr.beta_ls - pr.P @ pr.theta0)
+    else:
+        start = as_float_array(theta_start, "theta_start", ndim=1)
+    x = model.start(start)
+    k_fit = pr.W.shape[0]
+    eye = np.eye(x.size)  # Levenberg damping: Marquardt's column scaling would damp the
+    # null-space moves by the (much stiffer) fit's scale
+    theta, r, g, Jr, dg = model.evaluate(x)
+    F = float(r @ r + g)
+    mu = 1e-3
+    status = "max_iter"
+    iterations = 0
+    small = 0
+    for it in range(1, int(max_iter) + 1):
+        iterations = it
+        grad = Jr.T @ r + 0.5 * dg  # half the gradient of F
+        J_fit = Jr[:k_fit]
+        pinv_fit = np.linalg.pinv(J_fit, rcond=1e-13)
+        accepted = False
+        for _ in range(40):
+            R = sla.qr(np.vstack([Jr, np.sqrt(mu) * eye]), mode="r")[0][: x.size]
+            try:
+                y = sla.solve_triangular(R, -grad, trans="T", check_finite=False)
+                dx = sla.solve_triangular(R, y, check_finite=False)
+            except (ValueError, np.linalg.LinAlgError):
+                mu *= 10.0
+                continue
+            # second-order correction: pull the step back onto the fit's linearization
+            # (the fit can be many orders of magnitude stiffer than the prior)
+            theta_t = model.theta(x + dx)
+            r_fit_t = pr.W @ (pr.P @ theta_t - pr.beta_ls)
+            x_new = x + dx - pinv_fit @ (r_fit_t - r[:k_fit] - J_fit @ dx)
+            theta_n, r_n, g_n = model.evaluate(x_new, jacobian=False)
+            F_new = float(r_n @ r_n + g_n) if np.all(np.isfinite(r_n)) else np.inf
+            if np.isfinite(F_new) and F_new <= F:
+                accepted = True
+                break
+            mu *= 4.0
+        if not accepted:
+            status = "converged (no further decrease)"
+            break
+        decrease = F - F_new
+        step = float(np.linalg.norm(x_new - x) / max(np.linalg.norm(x), 1.0))
+        x = x_new
+        theta, r, g, Jr, dg = model.evaluate(x)
+        F = F_new
+        mu = max(mu / 10.0, 1e-15)
+        if decrease <= tolerance * max(abs(F), 1.0) and step <= 1e-9:
+            small += 1
+            if small >= 2:
+                status = "converged"
+                break
+        else:
+            small = 0
+    if not np.all(np.isfinite(theta)):
+        raise SolverError("the iteration diverged", "logchol", status)
+    return theta, status, iterations
