@@ -76,6 +76,8 @@ class IdentificationResult:
     base: the base parametrization used
     dof_names: joint names, length nv
     history: record of the online law (``rls``/``gradient``), else None
+    per_file: each file's own estimate (:class:`manip_id.fleet.FileEstimate`) when
+        :func:`manip_id.fleet.identify_files` was asked ``per_file=True``, else None
     """
 
     method: str
@@ -97,6 +99,7 @@ class IdentificationResult:
     base: BaseParameters
     dof_names: list[str] = field(default_factory=list)
     history: OnlineHistory | None = None
+    per_file: list | None = None
 
     def predict(self, robot: Robot, q, dq, ddq, *, chunk: int = DEFAULT_CHUNK) -> np.ndarray:
         """Predicted torques ``Y_b(q, dq, ddq) theta_b``, shape (N, nv) [N m or N].
@@ -156,6 +159,7 @@ class IdentificationResult:
             "covariance": [[_f(v) for v in row] for row in self.covariance],
             "timings": {k: round(v, 6) for k, v in self.timings.items()},
             "solver": self.solver,
+            **({} if self.per_file is None else {"per_file": [f.to_dict() for f in self.per_file]}),
         }
 
     def table(self, max_rows: int | None = None) -> str:

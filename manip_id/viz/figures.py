@@ -422,6 +422,78 @@ def trajectory_limits(
     return _save(fig, path)
 
 
+def per_file_parameters(
+    path,
+    estimates,
+    stds,
+    *,
+    pooled,
+    names: Sequence[str],
+    files: Sequence[str],
+    max_parameters: int = 12,
+    title: str = "per-file parameters",
+) -> Figure:
+    """Each file's base parameters with error bars (+-1 std), relative to the pooled fit.
+
+    Parameters
+    ----------
+    estimates: per-file estimates, shape (F, p) [parameter units]; a row of NaN
+        is a file that could not be solved alone (drawn empty)
+    stds: their standard deviations, shape (F, p)
+    pooled: the pooled estimate, shape (p,)
+    names: parameter names (p,); files: file labels (F,)
+    max_parameters: the largest ``|pooled|`` parameters shown (at most this many)
+
+    Each parameter ``i`` of file ``f`` is drawn as ``theta_fi / |theta_i|`` with
+    error bar ``std_fi / |theta_i|`` (dimensionless, so parameters of different
+    units share one axis): files agreeing with the pool sit at +-1; a file that
+    drifted stands off by more than its error bar.
+    """
+    est = as_float_array(estimates, "estimates", ndim=2)
+    std = as_float_array(stds, "stds", ndim=2)
+    ref = as_float_array(pooled, "pooled", ndim=1)
+    n_files, p = est.shape
+    if std.shape != est.shape or ref.shape != (p,):
+        raise InputError(
+            f"estimates.shape={est.shape}, stds.shape={std.shape}, pooled.shape={ref.shape}: "
+            "expected (F, p), (F, p) and (p,)"
+        )
+    names = _names(names, p, "names", "theta")
+    files = _names(files, n_files, "file labels", "file")
+    check_finite(ref, "pooled")
+    if int(max_parameters) < 1:
+        raise InputError(f"max_parameters must be >= 1, got {max_parameters}")
+    shown = np.argsort(-np.abs(ref), kind="stable")[: int(max_parameters)]
+    shown = shown[np.abs(ref[shown]) > 0]
+    if shown.size == 0:
+        raise InputError("every pooled parameter is zero: nothing to normalize by")
+    scale = np.abs(ref[shown])
+    fig, (ax,) = _figure(1, width=max(8.0, 0.6 * shown.size + 3.0), min_height=4.5)
+    x = np.arange(shown.size, dtype=float)
+    offsets = (np.arange(n_files) - (n_files - 1) / 2) * min(0.8 / max(n_files, 1), 0.15)
+    for f in range(n_files):
+        ax.errorbar(
+            x + offsets[f],
+            est[f, shown] / scale,
+            yerr=np.abs(std[f, shown]) / scale,
+            fmt="o",
+            ms=3,
+            capsize=2,
+            lw=1.0,
+            label=files[f],
+        )
+    ax.plot(x, ref[shown] / scale, "k_", ms=14, mew=1.5, label="pooled")
+    ax.axhline(0.0, color="grey", lw=0.8)
+    ax.set_xticks(x)
+    ax.set_xticklabels([names[i] for i in shown], rotation=60, ha="right", fontsize=7)
+    ax.set_ylabel("theta_file / |theta_pooled| [-]")
+    ax.grid(alpha=0.3)
+    if n_files <= 12:
+        ax.legend(loc="best", fontsize=7)
+    ax.set_title(title)
+    return _save(fig, path)
+
+
 def png_size(path) -> tuple[int, int]:
     """(width, height) [px] of a PNG file, read from its header; InputError if not a PNG."""
     head = Path(path).read_bytes()[:24]

@@ -1,0 +1,415 @@
+"""Fleet identification: many files on Dask give the local result, robustly.
+
+The data are made here with Pinocchio's ``rnea`` plus friction written in numpy
+and saved with ``numpy.savez``; the reference is :func:`identify` on the
+concatenated arrays (and on each file's arrays alone for ``per_file``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from conftest import get_robot
+
+from manip_id.errors import DataError, InputError
+from manip_id.fleet import identify_files, parse_scheduler, portable_robot
+from manip_id.identification import identify
+
+VENV_BIN = Path(sys.executable).parent
+N_FILES, N_SAMPLES = 6, 1500
+NOISE = np.array([0.02, 0.08, 0.05, 0.2, 0.01, 0.03])  # [N m] per joint
+FV, FC = 0.3, 0.5  # viscous [N m s/rad], Coulomb [N m]
+
+
+def _close(a, b, rtol=1e-9):
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    scale = np.abs(b).max()
+    assert np.abs(a - b).max() <= rtol * scale, np.abs(a - b).max() / scale
+
+
+def _make_file(robot, path: Path, seed: int, n: int = N_SAMPLES, ddq: bool = True):
+    q, dq, ddq_ = robot.random_states(n, seed=seed)
+    tau = np.array([pin.rnea(robot.model, robot.data, q[k], dq[k], ddq_[k]) for k in range(n)])
+    tau += FV * dq + FC * np.sign(dq)  # [N m]
+    tau += NOISE * np.random.default_rng(100 + seed).standard_normal(tau.shape)
+    arrays = dict(t=np.arange(n) * 1e-3, q=q, dq=dq, tau=tau)
+    if ddq:
+        arrays["ddq"] = ddq_
+    np.savez(path, **arrays)
+    return q, dq, ddq_, tau
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return get_robot("ur10", friction=("viscous", "coulomb"))
+
+
+@pytest.fixture(scope="module")
+def fleet(robot, tmp_path_factory):
+    folder = tmp_path_factory.mktemp("fleet")
+    paths, arrays = [], []
+    for f in range(N_FILES):
+        path = folder / f"arm{f}.npz"
+        arrays.append(_make_file(robot, path, seed=f))
+        paths.append(str(path))
+    concat = [np.concatenate([a[i] for a in arrays]) for i in range(4)]
+    return paths, arrays, concat
+
+
+@pytest.fixture(scope="module")
+def reference(robot, fleet):
+    _, _, (q, dq, ddq, tau) = fleet
+    return {m: identify(robot, q, dq, ddq, tau, method=m) for m in ("ols", "wls")}
+
+
+def _same(res, ref, method="ols"):
+    _close(res.estimate, ref.estimate)
+    _close(res.std, ref.std, rtol=1e-8 if method == "wls" else 1e-9)
+    _close(res.noise_variance, ref.noise_variance, rtol=1e-6)
+    assert res.n_samples == ref.n_samples
+
+
+# ------------------------------------------------------------------- serial
+@pytest.mark.parametrize("method", ["ols", "wls"])
+@pytest.mark.parametrize("block,split_every", [(None, 8), (400, 2), (1, 3), (10**6, 8)])
+def test_serial_any_partition_gives_the_concatenated_result(
+    robot, fleet, reference, method, block, split_every
+):
+    paths = fleet[0]
+    if block == 1:  # one task per sample: only on a short file pair, against its own reference
+        paths = paths[:1]
+        q, dq, ddq, tau = (a[:300] for a in fleet[1][0])
+        np.savez(
+            Path(paths[0]).with_name("short.npz"),
+            t=np.arange(300) * 1e-3,
+            q=q,
+            dq=dq,
+            ddq=ddq,
+            tau=tau,
+        )
+        paths = [str(Path(paths[0]).with_name("short.npz"))]
+        ref = identify(robot, q, dq, ddq, tau, method=method)
+    else:
+        ref = reference[method]
+    res = identify_files(robot, paths, method=method, block=block, split_every=split_every)
+    _same(res, ref, method)
+
+
+def test_wls_noise_variances_are_the_per_file_residual_sums(robot, fleet, reference):
+    """The WLS variances equal the residuals summed file by file, computed sample by sample."""
+    paths, arrays, _ = fleet
+    res = identify_files(robot, paths, method="wls")
+    rss = np.zeros(robot.nv)
+    for q, dq, ddq, tau in arrays:
+        err = tau - res.predict(robot, q, dq, ddq)  # [N m]
+        rss += (err**2).sum(axis=0)
+    n, r = res.n_samples, len(res.estimate)
+    np.testing.assert_allclose(res.noise_variance, rss / (n - r / robot.nv), rtol=1e-6)
+    # and they found the noise that was put in
+    np.testing.assert_allclose(np.sqrt(res.noise_variance), NOISE, rtol=0.1)
+
+
+def test_per_file_estimates_are_each_files_own_identification(robot, fleet):
+    paths, arrays, _ = fleet
+    res = identify_files(robot, paths, per_file=True, block=500)
+    assert [f.path for f in res.per_file] == paths
+    for fe, (q, dq, ddq, tau) in zip(res.per_file, arrays, strict=True):
+        own = identify(robot, q, dq, ddq, tau, base=res.base)
+        assert fe.error is None and fe.n_samples == N_SAMPLES and fe.n_tasks == 3
+        _close(fe.result.estimate, own.estimate)
+        _close(fe.result.std, own.std)
+    d = res.to_dict()
+    json.dumps(d)
+    assert len(d["per_file"]) == N_FILES
+    assert d["per_file"][2]["file"] == paths[2]
+    names = [p["name"] for p in d["per_file"][2]["parameters"]]
+    assert names == res.names
+
+
+def test_a_file_that_excites_too_little_is_reported_not_fatal(robot, fleet, tmp_path):
+    paths, arrays, _ = fleet
+    short = tmp_path / "short.npz"
+    q, dq, ddq, tau = (a[:5] for a in arrays[0])  # 30 equations for 48+ parameters
+    np.savez(short, t=np.arange(5) * 1e-3, q=q, dq=dq, ddq=ddq, tau=tau)
+    res = identify_files(robot, [*paths[:2], str(short)], per_file=True)
+    assert res.per_file[0].result is not None
+    bad = res.per_file[2]
+    assert bad.result is None and bad.n_samples == 5 and bad.error
+    assert res.n_samples == 2 * N_SAMPLES + 5
+
+
+def test_preprocessed_files_any_partition(robot, tmp_path):
+    """Files without ddq are preprocessed each on its own, and blocks cut the result."""
+    from manip_id.datasets import load_dataset
+    from manip_id.signals import preprocess
+
+    paths = []
+    for f in range(2):
+        path = tmp_path / f"raw{f}.npz"
+        _make_file(robot, path, seed=20 + f, n=1200, ddq=False)
+        paths.append(str(path))
+    opts = {"cutoff": 50.0, "trim": 0.02}
+    blocks = []
+    for p in paths:
+        ds = preprocess(load_dataset(p), **opts)
+        blocks.append((ds.q, ds.dq, ds.ddq, ds.tau))
+    ref = identify(robot, *(np.concatenate([b[i] for b in blocks]) for i in range(4)))
+    for block in (None, 250):
+        res = identify_files(robot, paths, preprocess=opts, block=block)
+        _same(res, ref)
+
+
+def test_no_dask_without_a_scheduler(fleet):
+    code = (
+        "import sys; from manip_id import load_robot; from manip_id.fleet import identify_files;"
+        "r = load_robot('ur10', friction='viscous,coulomb');"
+        f"identify_files(r, {fleet[0][:2]!r});"
+        "bad = [m for m in sys.modules if m.split('.')[0] in ('dask', 'distributed')];"
+        "print(bad); sys.exit(1 if bad else 0)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stdout + out.stderr
+
+
+@pytest.mark.parametrize("where", ["corrupt", "joints", "missing"])
+def test_a_bad_file_is_named_serial(robot, fleet, tmp_path, where):
+    paths = list(fleet[0][:3])
+    bad = tmp_path / f"bad_{where}.npz"
+    if where == "corrupt":
+        bad.write_bytes(b"not a zip archive")
+    elif where == "joints":
+        np.savez(bad, t=np.arange(10.0), q=np.zeros((10, 3)), dq=np.zeros((10, 3)),
+                 tau=np.zeros((10, 3)))  # fmt: skip
+    paths.insert(1, str(bad))
+    with pytest.raises(DataError, match=str(bad).replace(".", r"\.")):
+        identify_files(robot, paths)
+
+
+def test_bad_arguments(robot, fleet):
+    paths = fleet[0]
+    with pytest.raises(InputError, match="twice"):
+        identify_files(robot, [paths[0], paths[0]])
+    with pytest.raises(InputError, match="no files"):
+        identify_files(robot, [])
+    with pytest.raises(InputError, match="online laws"):
+        identify_files(robot, paths, method="rls")
+    with pytest.raises(InputError, match="block"):
+        identify_files(robot, paths, block=0)
+    for spec in ("local:0", "local:x", "tcp://nowhere", "http//x", "missing.json"):
+        with pytest.raises(InputError):
+            parse_scheduler(spec)
+    assert parse_scheduler("local") == ("local", 2)
+    assert parse_scheduler("local:3") == ("local", 3)
+    assert parse_scheduler("tcp://127.0.0.1:8786") == ("address", "tcp://127.0.0.1:8786")
+
+
+def test_portable_robot_pickles_small_and_identifies_the_same(robot, fleet, reference):
+    import pickle
+
+    light = portable_robot(robot)
+    blob = pickle.dumps(light)
+    assert len(blob) < 2_000_000
+    res = identify(pickle.loads(blob), *fleet[2])
+    _close(res.estimate, reference["ols"].estimate)
+
+
+def test_accumulator_pickles(robot, fleet):
+    import pickle
+
+    from manip_id.fleet import FilePart, part_sums
+
+    res = identify(robot, *fleet[1][0])
+    ps = part_sums(portable_robot(robot), FilePart(fleet[0][0], 0), res.base.independent)
+    back = pickle.loads(pickle.dumps(ps))
+    np.testing.assert_array_equal(back.acc.A_joint, ps.acc.A_joint)
+    np.testing.assert_array_equal(back.acc.b_joint, ps.acc.b_joint)
+    assert back.acc.n == ps.acc.n == N_SAMPLES
+
+
+# -------------------------------------------------------------- LocalCluster
+@pytest.fixture(scope="module")
+def local_client():
+    from distributed import Client, LocalCluster
+
+    cluster = LocalCluster(
+        n_workers=2,
+        threads_per_worker=1,
+        host="127.0.0.1",
+        scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
+    )
+    client = Client(cluster)
+    yield client
+    client.close()
+    cluster.close()
+
+
+@pytest.mark.parametrize("method", ["ols", "wls"])
+def test_local_cluster_gives_the_local_result(robot, fleet, reference, local_client, method):
+    res = identify_files(
+        robot, fleet[0], scheduler=local_client, method=method, block=700, per_file=True
+    )
+    _same(res, reference[method], method)
+    serial = identify_files(robot, fleet[0], method=method, per_file=True)
+    for a, b in zip(res.per_file, serial.per_file, strict=True):
+        _close(a.result.estimate, b.result.estimate)
+    assert res.timings["distributed"] > 0
+
+
+def test_local_cluster_bad_file_no_result(robot, fleet, local_client, tmp_path):
+    bad = tmp_path / "broken.npz"
+    bad.write_bytes(b"\x00" * 64)
+    with pytest.raises(DataError, match="broken.npz"):
+        identify_files(robot, [*fleet[0], str(bad)], scheduler=local_client, block=500)
+    # the client is still usable afterwards: nothing of the failed run is left running
+    assert not local_client.processing() or all(not v for v in local_client.processing().values())
+
+
+def test_local_spec_starts_and_stops_its_cluster(robot, fleet, reference):
+    import psutil
+
+    before = {p.pid for p in psutil.Process().children(recursive=True)}
+    res = identify_files(robot, fleet[0], scheduler="local:2")
+    _same(res, reference["ols"])
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        left = {p.pid for p in psutil.Process().children(recursive=True)} - before
+        if not left:
+            break
+        time.sleep(0.2)
+    assert not left, f"processes left running: {left}"
+
+
+# ------------------------------------------- dask scheduler / dask worker CLI
+def _start(args, log: Path):
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
+    fh = open(log, "wb")  # noqa: SIM115 (closed in _stop)
+    proc = subprocess.Popen(args, stdout=fh, stderr=subprocess.STDOUT, env=env)
+    proc._log = fh  # type: ignore[attr-defined]
+    return proc
+
+
+def _stop(proc) -> None:
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=20)
+    proc._log.close()
+
+
+def _worker(scheduler_file: Path, name: str, log: Path):
+    return _start(
+        [
+            str(VENV_BIN / "dask"), "worker", "--scheduler-file", str(scheduler_file),
+            "--host", "127.0.0.1", "--nthreads", "1", "--no-nanny", "--no-dashboard",
+            "--name", name,
+        ],
+        log,
+    )  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def dask_cli(tmp_path_factory):
+    """A scheduler and two workers started with the venv's ``dask`` commands, on 127.0.0.1."""
+    from distributed import Client
+
+    folder = tmp_path_factory.mktemp("dask")
+    sched_file = folder / "scheduler.json"
+    procs = []
+    try:
+        procs.append(
+            _start(
+                [
+                    str(VENV_BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port", "0",
+                    "--no-dashboard", "--scheduler-file", str(sched_file),
+                ],
+                folder / "scheduler.log",
+            )
+        )  # fmt: skip
+        deadline = time.monotonic() + 60
+        while not sched_file.is_file() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert sched_file.is_file(), (folder / "scheduler.log").read_text()
+        for i in range(2):
+            procs.append(_worker(sched_file, f"w{i}", folder / f"w{i}.log"))
+        with Client(scheduler_file=str(sched_file), timeout="30s") as c:
+            c.wait_for_workers(2, timeout=60)
+        yield {"file": sched_file, "folder": folder, "procs": procs}
+    finally:
+        for p in reversed(procs):
+            _stop(p)
+
+
+def test_cli_cluster_by_address_and_by_file(robot, fleet, reference, dask_cli):
+    address = json.loads(dask_cli["file"].read_text())["address"]
+    assert address.startswith("tcp://127.0.0.1:")
+    res = identify_files(robot, fleet[0], scheduler=address, method="wls", block=600)
+    _same(res, reference["wls"], "wls")
+    res = identify_files(robot, fleet[0], scheduler=str(dask_cli["file"]))
+    _same(res, reference["ols"])
+
+
+def test_a_worker_killed_mid_run_changes_nothing(robot, fleet, reference, dask_cli):
+    from distributed import Client
+
+    sched = dask_cli["file"]
+    victim = _worker(sched, "victim", dask_cli["folder"] / "victim.log")
+    try:
+        with Client(scheduler_file=str(sched), timeout="30s") as client:
+            client.wait_for_workers(3, timeout=60)
+            addr = next(
+                a for a, w in client.scheduler_info()["workers"].items() if w["name"] == "victim"
+            )
+            with ThreadPoolExecutor(1) as pool:
+                job = pool.submit(
+                    identify_files, robot, fleet[0], scheduler=client, block=60, method="wls"
+                )
+                deadline = time.monotonic() + 120
+                while time.monotonic() < deadline and not job.done():
+                    if client.has_what([addr]).get(addr):  # it holds results: kill it
+                        break
+                    time.sleep(0.01)
+                assert not job.done(), "the run ended before the worker could be killed"
+                victim.send_signal(signal.SIGKILL)
+                victim.wait(timeout=20)
+                res = job.result(timeout=300)
+            assert addr not in client.scheduler_info()["workers"]
+        _same(res, reference["wls"], "wls")
+    finally:
+        _stop(victim)
+
+
+# --------------------------------------------------------------------- figure
+def test_per_file_figure(robot, fleet, tmp_path):
+    from manip_id.viz.figures import per_file_parameters, png_size
+
+    res = identify_files(robot, fleet[0][:3], per_file=True)
+    out = tmp_path / "per_file.png"
+    est = np.array([f.result.estimate for f in res.per_file])
+    std = np.array([f.result.std for f in res.per_file])
+    fig = per_file_parameters(
+        out, est, std, pooled=res.estimate, names=res.names,
+        files=[Path(f.path).name for f in res.per_file], max_parameters=6,
+    )  # fmt: skip
+    assert png_size(out) == tuple(int(v) for v in fig.get_size_inches() * fig.dpi)
+    ax = fig.axes[0]
+    assert len(ax.containers) == 3  # one error-bar series per file
+    shown = np.argsort(-np.abs(res.estimate), kind="stable")[:6]
+    scale = np.abs(res.estimate[shown])
+    for f, cont in enumerate(ax.containers):
+        np.testing.assert_allclose(cont.lines[0].get_ydata(), est[f, shown] / scale)
+    assert [t.get_text() for t in ax.get_xticklabels()] == [res.names[i] for i in shown]
+    with pytest.raises(InputError):
+        per_file_parameters(out, est, std[:2], pooled=res.estimate, names=res.names, files="abc")
