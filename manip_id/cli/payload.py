@@ -1,0 +1,321 @@
+"""``manip-id payload``: the inertial parameters of a payload from unloaded and loaded runs.
+
+Pipeline: read every ``--unloaded`` and ``--loaded`` file (each with its own window,
+``FILE@START:STOP`` or ``--window``, and ``--torque-scale``), preprocess each file on
+its own when it has no accelerations (zero-phase low-pass, central differences,
+edge trimming), then :func:`manip_id.payload.identify_payload`: the robot's base
+parameters and the payload's parameters in one least squares, or, with
+``--known-base RESULT.json`` (the JSON of ``manip-id identify``), the payload alone.
+Prints the payload (mass, centre of mass and inertia about it, in FRAME, with
+standard deviations, and what the torques cannot show) and writes JSON with ``--json``.
+
+The helpers here (reading the runs, the shared options) serve ``manip-id drive-gains`` too.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from pathlib import Path
+
+from ..errors import DataError, InputError
+from ._common import add_robot_arguments, robot_from_args, write_json
+
+
+# ------------------------------------------------------------------ options
+def add_run_arguments(p: argparse.ArgumentParser, *, unloaded_required: bool) -> None:
+    """``--unloaded``, ``--loaded``, ``--frame`` and the data options shared with drive-gains."""
+    p.add_argument(
+        "--unloaded",
+        nargs="+",
+        action="extend",
+        default=[],
+        metavar="FILE",
+        required=unloaded_required,
+        help="runs without the payload (.npz, .csv, ROS 2 bag, Panda log folder); "
+        "FILE@START:STOP or FILE@#A:#B selects a window; repeatable",
+    )
+    p.add_argument(
+        "--loaded",
+        nargs="+",
+        action="extend",
+        default=[],
+        metavar="FILE",
+        required=True,
+        help="runs with the payload mounted (same forms); repeatable",
+    )
+    p.add_argument(
+        "--frame",
+        required=True,
+        help="the frame or link the payload is fixed to (e.g. tool0)",
+    )
+    p.add_argument(
+        "--window",
+        metavar="START:STOP",
+        default=None,
+        help="window of every file without its own: seconds of the file's time, or #A:#B rows",
+    )
+    p.add_argument(
+        "--column",
+        action="append",
+        default=[],
+        metavar="FIELD=COLUMNS",
+        help="CSV column map (see manip-id identify --help); repeatable",
+    )
+    p.add_argument("--topic", default=None, help="ROS 2 bag topic of sensor_msgs/JointState")
+    p.add_argument(
+        "--velocity-deadband",
+        type=float,
+        default=None,
+        metavar="EPS",
+        help="leave out the rows of joint j where |dq_j| < EPS [rad/s] (standstill)",
+    )
+    sig = p.add_argument_group("signal processing (data without ddq, or with --cutoff)")
+    sig.add_argument("--cutoff", type=float, default=None, help="low-pass cut-off [Hz] [default 3]")
+    sig.add_argument("--order", type=int, default=4, help="Butterworth order [default 4]")
+    sig.add_argument(
+        "--trim",
+        type=float,
+        default=None,
+        help="seconds dropped at each end of each file [default: the filter's edge transient]",
+    )
+    sig.add_argument("--decimate", type=int, default=1, help="keep every D-th sample [default 1]")
+    p.add_argument("--chunk", type=int, default=1024, help="samples per regressor chunk")
+    p.add_argument("--json", metavar="OUT", help="write the result as JSON to OUT")
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "payload",
+        help="identify a payload's mass, centre of mass and inertia",
+        description="Identify the inertial parameters of a payload rigidly attached to FRAME "
+        "from runs without it (--unloaded, or --known-base) and with it (--loaded): mass [kg], "
+        "centre of mass [m, in FRAME], inertia about the centre of mass [kg m^2, FRAME axes], "
+        "with standard deviations and the components the torques cannot show.",
+    )
+    add_robot_arguments(p)
+    add_run_arguments(p, unloaded_required=False)
+    p.add_argument(
+        "--known-base",
+        metavar="RESULT.json",
+        default=None,
+        help="base parameters of an earlier 'manip-id identify --json' instead of --unloaded",
+    )
+    p.add_argument(
+        "--consistent",
+        action="store_true",
+        help="keep the payload physically consistent (pseudo-inertia positive definite)",
+    )
+    p.add_argument(
+        "--method", choices=("ols", "wls"), default="ols", help="estimator [default ols]"
+    )
+    p.add_argument(
+        "--torque-scale",
+        default=None,
+        metavar="G[,G...]",
+        help="multiply the torque columns of every file (one value, or one per joint)",
+    )
+    p.set_defaults(func=run)
+
+
+# ------------------------------------------------------------------ reading
+def parse_floats(text: str | None, what: str, n: int | None = None) -> list[float] | None:
+    """``"1,2,3"`` -> [1.0, 2.0, 3.0]; ``n`` values when given; None passes through."""
+    if text is None:
+        return None
+    try:
+        values = [float(v) for v in str(text).split(",") if v.strip()]
+    except ValueError as exc:
+        raise InputError(f"{what} takes comma-separated numbers, got {text!r}") from exc
+    if n is not None and len(values) != n:
+        raise InputError(f"{what} takes {n} comma-separated numbers, got {len(values)}: {text!r}")
+    if not values or not all(math.isfinite(v) for v in values):
+        raise InputError(f"{what} takes finite numbers, got {text!r}")
+    return values
+
+
+def check_run_args(args) -> None:
+    """Option checks that need no data."""
+    if args.cutoff is not None and not (math.isfinite(args.cutoff) and args.cutoff > 0):
+        raise InputError(f"--cutoff must be a positive frequency [Hz], got {args.cutoff}")
+    if args.trim is not None and not (math.isfinite(args.trim) and args.trim >= 0):
+        raise InputError(f"--trim must be >= 0 seconds, got {args.trim}")
+    if args.decimate < 1:
+        raise InputError(f"--decimate must be >= 1, got {args.decimate}")
+    if args.order < 1:
+        raise InputError(f"--order must be >= 1, got {args.order}")
+    if args.chunk < 1:
+        raise InputError(f"--chunk must be >= 1, got {args.chunk}")
+    d = args.velocity_deadband
+    if d is not None and not (math.isfinite(d) and d >= 0):
+        raise InputError(f"--velocity-deadband must be >= 0 [rad/s], got {d}")
+
+
+def _column_map(specs: list[str]):
+    from .identify import _column_map as column_map
+
+    return column_map(specs)
+
+
+def _spec(text: str, args):
+    """A file spec (path and window) of issue 12's readers, or the plain path."""
+    from ..datasets import parse_file_spec
+
+    return parse_file_spec(
+        text, window=args.window, columns=_column_map(args.column), topic=args.topic
+    )
+
+
+def read_run(text: str, args, robot, scale=None):
+    """One file as a Dataset: its window, the torque scale, checked against the robot."""
+    from ..datasets import check_robot
+    from ..datasets.stream import collect, iter_rows, open_source
+
+    spec = _spec(text, args)
+    try:
+        src = open_source(spec, joint_names=list(robot.dof_names))
+        ds = collect(
+            iter_rows(src, spec.window, torque_scale=scale),
+            src.layout,
+            src.joint_names,
+            {"source": spec.label},
+        )
+    except DataError as exc:
+        msg = str(exc)
+        raise DataError(msg if str(spec.path) in msg else f"{spec.label}: {msg}") from exc
+    try:
+        check_robot(ds, robot)
+    except DataError as exc:
+        raise DataError(f"{spec.label}: {exc}") from exc
+    return spec, ds
+
+
+def prepare(ds, args, what: str):
+    """Preprocess when ddq is missing or a cut-off / trim / decimation was asked for."""
+    from ..signals import DEFAULT_CUTOFF, preprocess
+
+    if ds.ddq is not None and args.cutoff is None and args.decimate == 1 and args.trim is None:
+        return ds
+    cutoff = DEFAULT_CUTOFF if args.cutoff is None else args.cutoff
+    try:
+        return preprocess(
+            ds, cutoff=cutoff, order=args.order, decimate=args.decimate, trim=args.trim
+        )
+    except InputError as exc:
+        raise InputError(f"{what}: {exc}") from exc
+
+
+def read_runs(args, robot, scale=None) -> tuple[list, list, dict]:
+    """The unloaded and loaded runs, preprocessed, and a description of their sources."""
+    specs_u = [_spec(t, args) for t in args.unloaded]
+    specs_l = [_spec(t, args) for t in args.loaded]
+    for sl in specs_l:
+        for su in specs_u:
+            same_path = Path(sl.path).resolve() == Path(su.path).resolve()
+            if same_path and sl.window == su.window:
+                raise DataError(
+                    f"{sl.label} is given as both an unloaded and a loaded run: the loaded runs "
+                    "must be recorded with the payload mounted"
+                )
+    runs = {}
+    for what, texts in (("unloaded", args.unloaded), ("loaded", args.loaded)):
+        out = []
+        for text in texts:
+            spec, ds = read_run(text, args, robot, scale)
+            out.append(prepare(ds, args, f"{what} run {spec.label}"))
+        runs[what] = out
+    source = {
+        "unloaded": [s.label for s in specs_u],
+        "loaded": [s.label for s in specs_l],
+    }
+    return runs["unloaded"], runs["loaded"], source
+
+
+def reserve_json(args, inputs: list[str]):
+    """Check the --json output before the work (the command's OutputSet when there is one)."""
+    if not args.json:
+        return None
+    outputs = getattr(args, "outputs", None)
+    if outputs is not None:
+        outputs.add_inputs(inputs)
+        outputs.file(args.json, "--json")
+    else:
+        for i in inputs:
+            if Path(i).exists() and Path(i).resolve() == Path(args.json).resolve():
+                raise InputError(f"--json {args.json} is one of the inputs")
+    return args.json
+
+
+def publish_json(args, doc: dict) -> None:
+    """Write the --json output (through the OutputSet when there is one)."""
+    if not args.json:
+        return
+    outputs = getattr(args, "outputs", None)
+    if outputs is not None:
+        outputs.write_json(args.json, doc)
+        outputs.publish()
+    else:
+        write_json(args.json, doc)
+    print(f"wrote {args.json}")
+
+
+def input_paths(args) -> list[str]:
+    """The input files (paths without their windows), for the output checks."""
+    out = []
+    for t in [*args.unloaded, *args.loaded, getattr(args, "known_base", None)]:
+        if t is None:
+            continue
+        p = Path(t)
+        if not p.exists() and "@" in t:
+            p = Path(t.rpartition("@")[0])
+        out.append(str(p))
+    return out
+
+
+def preprocess_settings(runs: list) -> dict | None:
+    for ds in runs:
+        s = ds.meta.get("preprocess")
+        if s is not None:
+            return {k: getattr(s, k) for k in s.__dataclass_fields__}
+    return None
+
+
+# ---------------------------------------------------------------------- run
+def run(args: argparse.Namespace) -> int:
+    t_start = time.perf_counter()
+    check_run_args(args)
+    if args.known_base is not None and args.unloaded:
+        raise InputError("give --unloaded runs or --known-base RESULT.json, not both")
+    if args.known_base is None and not args.unloaded:
+        raise InputError("give the --unloaded runs (or --known-base RESULT.json)")
+    reserve_json(args, input_paths(args))
+    from ..payload import identify_payload, load_known_base
+
+    known = load_known_base(args.known_base) if args.known_base is not None else None
+    robot = robot_from_args(args)
+    scale = None
+    if args.torque_scale is not None:
+        scale = parse_floats(args.torque_scale, "--torque-scale")
+    unloaded, loaded, source = read_runs(args, robot, scale)
+    if args.known_base is not None:
+        source["known_base"] = str(args.known_base)
+    result = identify_payload(
+        robot,
+        unloaded,
+        loaded,
+        args.frame,
+        known_base=known,
+        method=args.method,
+        consistent=args.consistent,
+        velocity_deadband=args.velocity_deadband,
+        chunk=args.chunk,
+    )
+    doc = result.to_dict()
+    doc["source"] = source
+    doc["torque_scale"] = scale
+    doc["preprocess"] = preprocess_settings(unloaded + loaded)
+    doc["timings"]["command_total"] = round(time.perf_counter() - t_start, 6)
+    print(result.table())
+    publish_json(args, doc)
+    return 0
