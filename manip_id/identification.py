@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.linalg.blas import dsyrk
@@ -34,6 +34,13 @@ from .estimators import (
     RLSEstimator,
     solve_accumulator,
 )
+from .estimators.consistent import (
+    DEFAULT_PRIOR_WEIGHT,
+    StandardEstimate,
+    consistent_estimate,
+    minimum_norm_standard,
+)
+from .estimators.consistent import check_options as check_consistent_options
 from .identifiability import BaseParameters, RankAnalysis, analyze, analyze_information
 from .regressor import DEFAULT_CHUNK, _evaluator, check_states, iter_regressor
 from .robot import Robot
@@ -49,6 +56,8 @@ class RelativeError:
     train_per_joint: np.ndarray
     validation: float | None = None
     validation_per_joint: np.ndarray | None = None
+    #: per validation file ``{"file", "n_samples", "error", "per_joint"}`` when known
+    validation_per_file: list[dict] | None = None
 
 
 @dataclass(frozen=True)
@@ -76,8 +85,19 @@ class IdentificationResult:
     base: the base parametrization used
     dof_names: joint names, length nv
     history: record of the online law (``rls``/``gradient``), else None
+    standard: the standard parameters with their eigenvalue test
+        (:class:`~manip_id.estimators.consistent.StandardEstimate`): the consistent
+        estimate (``consistent=True``; then ``estimate`` holds the base parameters it
+        implies, ``P theta``), or for plain OLS/WLS the minimum-norm standard vector
+    warnings: e.g. the physical-consistency violations of a plain least-squares fit
     per_file: each file's own estimate (:class:`manip_id.fleet.FileEstimate`) when
         :func:`manip_id.fleet.identify_files` was asked ``per_file=True``, else None
+    model: "dynamic" (tau = Y(q, dq, ddq) theta), "energy" or "momentum"
+        (:mod:`manip_id.models`); the training errors, ``sigma2`` and
+        ``noise_variance`` are those of the model's own equation (per output of
+        ``output_names``), the validation error is always the torque error
+    output_names: names of the model's outputs (default ``dof_names``; "energy"
+        for the energy model's one scalar row per window)
     """
 
     method: str
@@ -100,6 +120,20 @@ class IdentificationResult:
     dof_names: list[str] = field(default_factory=list)
     history: OnlineHistory | None = None
     per_file: list | None = None
+    standard: StandardEstimate | None = None
+    warnings: list[str] = field(default_factory=list)
+    model: str = "dynamic"
+    output_names: list[str] = field(default_factory=list)
+
+    @property
+    def standard_parameters(self) -> list[dict]:
+        """``[{"name", "value", "unit", "nominal"}]`` per standard parameter (see ``standard``)."""
+        return [] if self.standard is None else self.standard.to_dict()["standard_parameters"]
+
+    @property
+    def physically_consistent(self) -> bool | None:
+        """The independent eigenvalue test of the standard parameters (None without them)."""
+        return None if self.standard is None else self.standard.physically_consistent
 
     def predict(self, robot: Robot, q, dq, ddq, *, chunk: int = DEFAULT_CHUNK) -> np.ndarray:
         """Predicted torques ``Y_b(q, dq, ddq) theta_b``, shape (N, nv) [N m or N].
@@ -125,6 +159,7 @@ class IdentificationResult:
         re = self.relative_error
         return {
             "method": self.method,
+            "model": self.model,
             "robot": self.robot_name,
             "n_samples": self.n_samples,
             "n_base": len(self.names),
@@ -140,14 +175,20 @@ class IdentificationResult:
                 )
             ],
             "sigma2": _f(self.sigma2),
-            "noise_variance": dict(zip(self.dof_names, map(_f, self.noise_variance), strict=True)),
+            "noise_variance": dict(
+                zip(self.output_names or self.dof_names, map(_f, self.noise_variance), strict=True)
+            ),
             "condition_number": _f(self.condition_number),
             "rank": self.rank_analysis.rank,
             "unexcited": list(self.rank_analysis.unidentifiable),
             "relative_error": {
                 "train": _f(re.train),
                 "train_per_joint": dict(
-                    zip(self.dof_names, map(_f, re.train_per_joint), strict=True)
+                    zip(
+                        self.output_names or self.dof_names,
+                        map(_f, re.train_per_joint),
+                        strict=True,
+                    )
                 ),
                 "validation": _f(re.validation),
                 "validation_per_joint": (
@@ -155,11 +196,18 @@ class IdentificationResult:
                     if re.validation_per_joint is None
                     else dict(zip(self.dof_names, map(_f, re.validation_per_joint), strict=True))
                 ),
+                **(
+                    {}
+                    if re.validation_per_file is None
+                    else {"validation_per_file": re.validation_per_file}
+                ),
             },
             "covariance": [[_f(v) for v in row] for row in self.covariance],
             "timings": {k: round(v, 6) for k, v in self.timings.items()},
             "solver": self.solver,
             **({} if self.per_file is None else {"per_file": [f.to_dict() for f in self.per_file]}),
+            **({} if self.standard is None else self.standard.to_dict()),
+            "warnings": list(self.warnings),
         }
 
     def table(self, max_rows: int | None = None) -> str:
@@ -167,7 +215,8 @@ class IdentificationResult:
         re = self.relative_error
         lines = [
             f"{self.method.upper()} identification of {self.robot_name}: {len(self.names)} base "
-            f"parameters from {self.n_samples} samples",
+            f"parameters from {self.n_samples} samples"
+            + ("" if self.model == "dynamic" else f" ({self.model} model)"),
             f"solver: {self.solver}",
             f"condition number {self.condition_number:.4g}, sigma^2 {self.sigma2:.4g}, "
             f"relative torque error train {re.train:.4g}"
@@ -186,7 +235,8 @@ class IdentificationResult:
         if max_rows is not None and len(rows) > max_rows:
             lines.append(f"... {len(rows) - max_rows} more")
         per = ", ".join(
-            f"{d} {v:.3g}" for d, v in zip(self.dof_names, re.train_per_joint, strict=True)
+            f"{d} {v:.3g}"
+            for d, v in zip(self.output_names or self.dof_names, re.train_per_joint, strict=True)
         )
         lines.append(f"train error per joint: {per}")
         if re.validation_per_joint is not None:
@@ -194,6 +244,9 @@ class IdentificationResult:
                 f"{d} {v:.3g}" for d, v in zip(self.dof_names, re.validation_per_joint, strict=True)
             )
             lines.append(f"validation error per joint: {per}")
+        if self.standard is not None:
+            lines += self.standard.summary_lines()
+        lines += [f"warning: {w}" for w in self.warnings]
         return "\n".join(lines)
 
 
@@ -286,13 +339,22 @@ def row_supports(robot: Robot, columns, n_states: int = 16, seed: int = 12345) -
 
 
 def _accumulate_blocks(
-    robot: Robot, blocks, ind: np.ndarray, chunk: int, progress=None, total: int = 0
+    robot: Robot,
+    blocks,
+    ind: np.ndarray,
+    chunk: int,
+    progress=None,
+    total: int = 0,
+    deadband: np.ndarray | None = None,
 ) -> tuple[InformationAccumulator, dict[str, float]]:
     """Accumulate the base-column information of blocks ``(q, dq, ddq, tau)``, each checked.
 
     Row ``j`` of the regressor is accumulated on its non-zero columns only
     (:func:`row_supports`): in a serial chain that about halves the work of the
-    symmetric rank-k updates.
+    symmetric rank-k updates. ``deadband`` (nv,) [rad/s or m/s]: the rows of
+    joint ``j`` of samples with ``|dq_j| < deadband_j`` are left out of the sums
+    (standstill, where the Coulomb column sign(dq_j) is noise); the sample
+    count ``n`` still counts every sample.
     """
     ev = _evaluator(robot)
     nv = robot.nv
@@ -315,10 +377,14 @@ def _accumulate_blocks(
             t1 = time.perf_counter()
             t_reg += t1 - t0
             tau = btau[start:stop]
+            if deadband is not None:  # per-joint row mask: moving samples only
+                keep = np.abs(bdq[start:stop]) >= deadband
+                tau = np.where(keep, tau, 0.0)
             for j in range(nv):
+                rj = rows[j] if deadband is None else rows[j][keep[:, j]]
                 # lower triangle of A_c[j] (C order) == upper of its Fortran view
-                dsyrk(1.0, rows[j].T, beta=1.0, c=A_c[j].T, trans=0, lower=0, overwrite_c=1)
-                b_c[j] += tau[:, j] @ rows[j]
+                dsyrk(1.0, rj.T, beta=1.0, c=A_c[j].T, trans=0, lower=0, overwrite_c=1)
+                b_c[j] += (tau[:, j] if deadband is None else tau[keep[:, j], j]) @ rj
             zz += np.einsum("nj,nj->j", tau, tau)
             t0 = time.perf_counter()
             t_acc += t0 - t1
@@ -396,6 +462,12 @@ def identify(
     online: dict | None = None,
     dt: float = 1.0,
     workers: int = 1,
+    consistent: bool = False,
+    solver: str = "sdp",
+    prior: str = "nominal",
+    prior_weight: float = DEFAULT_PRIOR_WEIGHT,
+    model: str = "dynamic",
+    window_length: float | None = None,
 ) -> IdentificationResult:
     """Identify the base parameters of ``robot`` from N samples, streamed.
 
@@ -420,10 +492,41 @@ def identify(
     workers: processes for "ols"/"wls": the samples are cut into ``workers``
         contiguous parts accumulated in forked processes and merged by addition
         (the result equals the serial one to round-off)
+    consistent: estimate physically consistent standard parameters ("ols"/"wls"):
+        every body's pseudo-inertia positive definite, ``Ia, fv, fc >= 0``, the
+        same (weighted) residual through the base parameters, the null space filled
+        by the prior (:mod:`manip_id.estimators.consistent`)
+    solver: "sdp" (cvxpy + Clarabel) or "logchol" (log-Cholesky Levenberg-Marquardt)
+    prior: "nominal" (the URDF parameters, log-det divergence) or "none"
+    prior_weight: weight of the prior against the fit in standard deviations
+    model: "dynamic" (needs ``ddq``), or "energy" / "momentum", which need no
+        acceleration (``ddq`` may be None; ``dt`` is then the sample time [s] of
+        uniformly sampled data; see :mod:`manip_id.models`); "ols"/"wls" only
+    window_length: energy interval / momentum row spacing [s] (default
+        :data:`manip_id.models.DEFAULT_WINDOW`); the momentum filter's bandwidth
+        is ``3 / window_length`` [rad/s]
     """
     timings: dict[str, float] = {}
     t_start = time.perf_counter()
     _check_method(method, chunk, workers)
+    if model != "dynamic":
+        return _identify_acceleration_free(
+            robot,
+            q,
+            dq,
+            tau,
+            model=model,
+            dt=dt,
+            window_length=window_length,
+            method=method,
+            validation=validation,
+            base=base,
+            chunk=int(chunk),
+            minimum_norm=minimum_norm,
+            consistent=(consistent, solver, prior, prior_weight),
+            timings=timings,
+            t_start=t_start,
+        )
     q, dq, ddq, tau = _states(robot, q, dq, ddq, tau)
     n = q.shape[0]
     if validation is not None:
@@ -492,7 +595,72 @@ def identify(
         minimum_norm=minimum_norm,
         est=est,
         solver_online=solver_online,
+        consistent=(consistent, solver, prior, prior_weight),
     )
+
+
+def _identify_acceleration_free(
+    robot: Robot,
+    q,
+    dq,
+    tau,
+    *,
+    model: str,
+    dt: float,
+    window_length,
+    method: str,
+    validation,
+    base,
+    chunk: int,
+    minimum_norm: bool,
+    consistent: tuple,
+    timings: dict,
+    t_start: float,
+) -> IdentificationResult:
+    """The energy / momentum path of :func:`identify`: their rows, the usual solve."""
+    from .models import MODELS, accumulate_energy, accumulate_momentum
+
+    if model not in MODELS:
+        raise InputError(f"model must be one of {list(MODELS)}, got {model!r}")
+    if method not in ("ols", "wls"):
+        raise InputError(f"the {model} model is solved by least squares (ols, wls), got {method!r}")
+    batched, (q, dq) = check_states(robot, q=q, dq=dq)
+    if not batched:
+        raise InputError(f"identification takes N samples (2-D arrays), got q.shape={q.shape}")
+    tau = _check_tau(robot, tau, q.shape[0])
+    if validation is not None:
+        try:
+            vq, vdq, vddq, vtau = validation
+        except (TypeError, ValueError) as exc:
+            raise InputError("validation must be a tuple (q, dq, ddq, tau)") from exc
+        validation = [_states(robot, vq, vdq, vddq, vtau, prefix="validation ")]
+    timings["checks"] = time.perf_counter() - t_start
+    base = _resolve_base(robot, base, timings)
+    t0 = time.perf_counter()
+    accumulate = accumulate_energy if model == "energy" else accumulate_momentum
+    acc = accumulate(
+        robot, q, dq, tau, dt=dt, window_length=window_length, columns=base.independent
+    )
+    timings["accumulate"] = time.perf_counter() - t0
+    if acc.n_rows <= base.n_base:
+        raise InputError(
+            f"{acc.n} {model}-model rows ({acc.n_rows} equations) for {base.n_base} base "
+            "parameters: give more samples or a shorter window_length"
+        )
+    res = _finish(
+        robot,
+        acc,
+        base,
+        method,
+        timings,
+        t_start,
+        validation=validation,
+        chunk=chunk,
+        minimum_norm=minimum_norm,
+        consistent=consistent,
+    )
+    outputs = ["energy"] if model == "energy" else list(robot.dof_names)
+    return replace(res, model=model, output_names=outputs, n_samples=q.shape[0])
 
 
 def identify_chunks(
@@ -506,6 +674,11 @@ def identify_chunks(
     progress: Callable[[int, int], None] | None = None,
     minimum_norm: bool = False,
     workers: int = 1,
+    scheduler=None,
+    consistent: bool = False,
+    solver: str = "sdp",
+    prior: str = "nominal",
+    prior_weight: float = DEFAULT_PRIOR_WEIGHT,
 ) -> IdentificationResult:
     """Least-squares identification from data that arrive in blocks (files, logs, streams).
 
@@ -516,7 +689,9 @@ def identify_chunks(
     the accumulators merge by addition. Memory stays O(chunk nv p + nv r^2)
     per process however many samples flow through. ``validation`` is an
     iterable of blocks too. Methods: "ols" and "wls" (the online laws need
-    the samples in order: use :func:`identify`).
+    the samples in order: use :func:`identify`). With ``scheduler`` (a Dask
+    scheduler spec or client, see :func:`manip_id.fleet.identify_files`) each
+    part is one Dask task and the sums are added in a tree on the cluster.
     """
     timings: dict[str, float] = {}
     t_start = time.perf_counter()
@@ -526,15 +701,20 @@ def identify_chunks(
     base = _resolve_base(robot, base, timings)
     ind = base.independent
     t0 = time.perf_counter()
-    if workers > 1:
+    if workers > 1 or scheduler is not None:
         parts = list(source)
         for k, part in enumerate(parts):
             if not (isinstance(part, tuple) and len(part) == 2 and callable(part[0])):
                 raise InputError(
-                    f"with workers > 1, source must be parts (func, args); part {k} is "
-                    f"{type(part).__name__}"
+                    f"with workers > 1 or a scheduler, source must be parts (func, args); "
+                    f"part {k} is {type(part).__name__}"
                 )
-        acc, times = _accumulate_parallel(robot, parts, ind, int(chunk), workers, progress)
+        if scheduler is not None:
+            from .fleet import accumulate_parts
+
+            acc, times = accumulate_parts(robot, parts, ind, int(chunk), scheduler)
+        else:
+            acc, times = _accumulate_parallel(robot, parts, ind, int(chunk), workers, progress)
         timings["accumulate_wall"] = time.perf_counter() - t0
     else:
         acc, times = _accumulate_blocks(robot, source, ind, int(chunk), progress=progress)
@@ -554,6 +734,7 @@ def identify_chunks(
         validation=validation,
         chunk=int(chunk),
         minimum_norm=minimum_norm,
+        consistent=(consistent, solver, prior, prior_weight),
     )
 
 
@@ -570,22 +751,26 @@ def _finish(
     minimum_norm: bool = False,
     est=None,
     solver_online: str = "",
+    consistent: tuple = (False, "sdp", "nominal", DEFAULT_PRIOR_WEIGHT),
 ) -> IdentificationResult:
     """Rank check, solve, errors and the result, from the accumulated information."""
     r, nv, n = base.n_base, robot.nv, acc.n
+    want_consistent, c_solver, c_prior, c_weight = consistent
+    if want_consistent:
+        if method not in ("ols", "wls"):
+            raise InputError(f"consistent=True applies to ols and wls, got method {method!r}")
+        check_consistent_options(c_solver, c_prior, c_weight)
     t0 = time.perf_counter()
     ra = analyze_information(acc.A, base.base_names, n_rows=acc.n_rows)
     timings["rank_analysis"] = time.perf_counter() - t0
     if ra.rank < r and not minimum_norm:
-        dirs = ra.unidentifiable
-        shown = "; ".join(dirs[:5]) + ("; ..." if len(dirs) > 5 else "")
         raise RankDeficiencyError(
-            f"these data excite only {ra.rank} of {r} base parameter directions of "
-            f"{robot.name}; unexcited: {shown} (use a more exciting trajectory, or "
-            "minimum_norm=True)",
             ra.rank,
             r,
-            dirs,
+            ra.unidentifiable,
+            subject=f"these data of {robot.name}",
+            what="base parameter directions",
+            hint="use a more exciting trajectory, or minimum_norm=True",
         )
 
     t0 = time.perf_counter()
@@ -611,6 +796,29 @@ def _finish(
             f"{solver_online}, one pass over {n} samples; covariance sigma^2 (Y^T Y)^-1 "
             f"at the final estimate ({ls.solver})"
         )
+    standard, warnings_ = None, []
+    if want_consistent:  # beta = P theta of consistent standard parameters
+        standard = consistent_estimate(
+            robot, acc, base, ls, solver=c_solver, prior=c_prior, prior_weight=c_weight
+        )
+        estimate = base.to_base(standard.values)
+        rss_j = acc.residual_sum_of_squares(estimate)
+        solver = (
+            f"physically consistent ({c_solver}, {standard.status}, prior {c_prior}) on the "
+            f"{ls_method.upper()} information; covariance of the {ls_method.upper()} fit "
+            f"({ls.solver})"
+        )
+        timings["consistent"] = standard.time
+        if not standard.physically_consistent:
+            warnings_ += [
+                f"consistent estimate fails the check: {m}" for m in standard.consistency.messages()
+            ]
+    elif est is None:  # plain least squares: is its minimum-norm standard vector physical?
+        standard = minimum_norm_standard(robot, base, estimate)
+        warnings_ += [
+            f"least squares gave a non-physical model (minimum-norm standard parameters): {m}"
+            for m in standard.consistency.messages()
+        ]
     timings["solve"] = time.perf_counter() - t0
     zz_j = acc.zz_joint
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -648,6 +856,8 @@ def _finish(
         base=base,
         dof_names=list(robot.dof_names),
         history=est.history if est is not None and est.record_every else None,
+        standard=standard,
+        warnings=warnings_,
     )
 
 

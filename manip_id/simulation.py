@@ -173,7 +173,7 @@ def perturb_parameters(robot: Robot, rel: float, seed: int = 0, theta=None) -> n
 def inverse_dynamics(robot: Robot, theta, q, dq, ddq) -> np.ndarray:
     """Joint torques of the full model with parameters ``theta``, without the regressor.
 
-    ``pinocchio.rnea`` on ``robot.with_parameters(theta)`` (armature set to
+    ``pinocchio.rnea`` on ``robot.with_parameters(theta)`` (whose armature is
     zero unless the robot models it) plus :func:`joint_torques` (friction,
     offset, spring).
 
@@ -187,8 +187,6 @@ def inverse_dynamics(robot: Robot, theta, q, dq, ddq) -> np.ndarray:
     """
     theta = _check_theta(robot, theta)
     model = robot.with_parameters(theta)
-    if not robot.terms.armature:
-        model.armature = np.zeros(robot.nv)
     data = model.createData()
     n = q.shape[0]
     tau = np.empty((n, robot.nv))

@@ -23,7 +23,8 @@ divergence to the prior's pseudo-inertia (Lee, Wensing & Park 2019): zero at
 the scale of joint term ``t`` (the value that alone would explain all the
 torque, ``H = P^T A P``: in parameter units, whatever the noise level), and
 ``w`` the prior weight (``prior="none"``: ``w = 0``, feasibility alone). The
-margin is ``eps_i = MARGIN * lambda_min(J0_i)`` for a physical prior. With a small
+margin is ``eps_i = min(MARGIN lambda_max(J0_i), lambda_min(J0_i) / 2)`` for a physical prior
+(``MARGIN lambda_max`` of ``|J0_i|`` without one). With a small
 ``w`` the prior only picks, among the standard vectors that fit equally well
 (the null space of ``Y_b P``), the one closest to the prior, and moves the fit by
 a fraction of a standard deviation.
@@ -46,6 +47,7 @@ Both return the same minimizer within their tolerances (the problem is convex in
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -66,11 +68,14 @@ SOLVERS: tuple[str, ...] = ("sdp", "logchol")
 PRIORS: tuple[str, ...] = ("nominal", "none")
 #: Default weight of the prior against the fit measured in standard deviations.
 DEFAULT_PRIOR_WEIGHT = 1e-3
-#: Margin of positive definiteness: ``J_i >= MARGIN * lambda_min(J0_i) 1``.
-MARGIN = 1e-3
+#: Margin of positive definiteness: ``J_i >= min(MARGIN lambda_max(J0_i), lambda_min(J0_i) / 2) 1``.
+MARGIN = 1e-6
 #: Relative floor of the residual variance used to measure the fit, ``(FLOOR * rms tau)^2``:
 #: the round-off level of a residual computed from the sums.
 VARIANCE_FLOOR = 1e-8
+_VERBOSE = False
+#: Objective scales the SDP is tried with, in turn, until Clarabel reports "optimal".
+OBJECTIVE_SCALES: tuple[float, ...] = (1.0, 1e2, 1e4, 1e-2)
 
 
 class SolverError(ManipIdError):
@@ -257,11 +262,11 @@ def build_problem(
         neg = [Violation(names[k], ">= 0", float(theta0[k])) for k in nonneg if theta0[k] < 0]
         if bad or neg:
             raise PhysicalConsistencyError("the prior (nominal parameters)", bad + neg)
-        margin = MARGIN * lam0[:, 0]
+        margin = np.minimum(MARGIN * lam0[:, -1], 0.5 * lam0[:, 0])
     else:
         scale = np.abs(lam0).max(axis=1)
         fallback = float(scale[scale > 0].mean()) if np.any(scale > 0) else 1.0
-        margin = 1e-8 * np.where(scale > 0, scale, fallback)
+        margin = MARGIN * np.where(scale > 0, scale, fallback)
     # joint-term scales: the value that alone would explain all the (weighted) torque,
     # sqrt(zz / H_tt) with H = P^T A P; in parameter units, so that the prior weighs
     # the same whatever the noise level
@@ -296,7 +301,7 @@ def solve_consistent(
     """Solve ``problem`` with ``solver`` ("sdp" or "logchol"); check the result independently.
 
     Options: ``sdp``: ``tolerance`` (Clarabel's gap/feasibility tolerances, default
-    1e-10), ``max_iter``; ``logchol``: ``max_iter`` (default 500), ``tolerance``
+    1e-8), ``max_iter``; ``logchol``: ``max_iter`` (default 500), ``tolerance``
     (relative decrease/gradient, default 1e-13), ``theta_start`` (a consistent start).
     Raises :class:`SolverError` with the solver's status on failure or infeasibility.
     """
@@ -328,7 +333,7 @@ def solve_consistent(
 
 
 # --------------------------------------------------------------------- SDP
-def _solve_sdp(problem: ConsistentProblem, *, tolerance: float = 1e-10, max_iter: int = 500):
+def _solve_sdp(problem: ConsistentProblem, *, tolerance: float = 1e-8, max_iter: int = 500):
     import cvxpy as cp
 
     pr = problem
@@ -368,7 +373,6 @@ def _solve_sdp(problem: ConsistentProblem, *, tolerance: float = 1e-10, max_iter
                 cp.multiply(1.0 / pr.term_scale, theta[10 * nb :] - pr.theta0[10 * nb :])
             )
         obj = obj + pr.weight * prior
-    prob = cp.Problem(cp.Minimize(obj), cons)
     opts = dict(
         tol_gap_abs=tolerance,
         tol_gap_rel=tolerance,
@@ -376,16 +380,41 @@ def _solve_sdp(problem: ConsistentProblem, *, tolerance: float = 1e-10, max_iter
         tol_ktratio=1e-8,
         max_iter=int(max_iter),
     )
-    try:
-        prob.solve(solver=cp.CLARABEL, **opts)
-    except cp.error.SolverError as exc:
-        raise SolverError(str(exc).splitlines()[0], "sdp", "solver error") from exc
-    status = str(prob.status)
-    if status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or theta.value is None:
-        what = "the problem is infeasible" if "infeasible" in status else "no solution"
-        raise SolverError(what, "sdp", status)
-    iters = int(getattr(prob.solver_stats, "num_iters", 0) or 0)
-    return np.array(theta.value, dtype=float), status, iters
+    # The interior-point method stalls on badly scaled objectives (a fit of 1e4 squared
+    # standard deviations when least squares is far from physical): retry with the
+    # objective divided by growing scales; the minimizer does not change.
+    statuses = []
+    best = None
+    for scale in OBJECTIVE_SCALES:
+        prob = cp.Problem(cp.Minimize(obj / scale), cons)
+        try:
+            with warnings.catch_warnings():  # "solution may be inaccurate": in the status
+                warnings.simplefilter("ignore")
+                prob.solve(solver=cp.CLARABEL, verbose=_VERBOSE, **opts)
+        except cp.error.SolverError:
+            statuses.append(f"scale {scale:g}: solver error")
+            continue
+        status = str(prob.status)
+        statuses.append(f"scale {scale:g}: {status}")
+        if theta.value is None or status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE):
+            if "infeasible" in status and status == cp.INFEASIBLE:
+                break
+            continue
+        iters = int(getattr(prob.solver_stats, "num_iters", 0) or 0)
+        value = np.array(theta.value, dtype=float)
+        if status == cp.OPTIMAL:
+            return (
+                value,
+                status + (f" (objective scaled by 1/{scale:g})" if scale != 1 else ""),
+                iters,
+            )
+        if best is None:
+            best = (value, status, iters)
+    if best is not None:
+        return best
+    infeasible = any("infeasible" in st for st in statuses)
+    what = "the problem is infeasible" if infeasible else "no solution"
+    raise SolverError(what, "sdp", "; ".join(statuses))
 
 
 def _row_and_null_maps(pr: ConsistentProblem) -> tuple[np.ndarray, np.ndarray]:
@@ -639,3 +668,180 @@ def _solve_logchol(
     if not np.all(np.isfinite(theta)):
         raise SolverError("the iteration diverged", "logchol", status)
     return theta, status, iterations
+
+
+# ------------------------------------------------------- identification glue
+@dataclass(frozen=True)
+class StandardEstimate:
+    """The standard parameters behind an identification, with their physical check.
+
+    Attributes
+    ----------
+    names, units: of each standard parameter, length p.
+    values: the standard parameters, shape (p,): the consistent estimate, or for
+        plain least squares the minimum-norm standard vector with the LS base parameters.
+    nominal: the robot's nominal (URDF) parameters, shape (p,).
+    consistency: the independent eigenvalue test of ``values``.
+    solver, status, time: how the consistent estimate was solved ("" for plain LS) [s].
+    prior, prior_weight: the prior used.
+    base_shift_std: largest ``|beta - beta_ls| / std(beta_ls)`` over the base parameters:
+        how far physical consistency (and the prior) moved the fit [standard deviations].
+    fit, prior_distance: objective terms of the consistent solve (module docstring).
+    """
+
+    names: list[str]
+    units: list[str]
+    values: np.ndarray
+    nominal: np.ndarray
+    consistency: ConsistencyReport
+    solver: str = ""
+    status: str = ""
+    time: float = 0.0
+    prior: str = ""
+    prior_weight: float = 0.0
+    base_shift_std: float = 0.0
+    fit: float = 0.0
+    prior_distance: float = 0.0
+
+    @property
+    def physically_consistent(self) -> bool:
+        return self.consistency.consistent
+
+    def to_dict(self) -> dict:
+        """JSON-ready: ``standard_parameters`` rows, ``physically_consistent``, the check
+        (per-body minimum eigenvalues, violations) and ``consistent_solver`` (None for
+        the minimum-norm vector of plain least squares)."""
+        return {
+            "standard_parameters": [
+                {"name": n, "value": float(v), "unit": u, "nominal": float(x0)}
+                for n, v, u, x0 in zip(
+                    self.names, self.values, self.units, self.nominal, strict=True
+                )
+            ],
+            "standard_parameters_kind": "consistent" if self.solver else "minimum norm",
+            "physically_consistent": bool(self.consistency.consistent),
+            "consistency": self.consistency.to_dict(),
+            "consistent_solver": None
+            if not self.solver
+            else {
+                "solver": self.solver,
+                "status": self.status,
+                "time": round(float(self.time), 6),
+                "prior": self.prior,
+                "prior_weight": float(self.prior_weight),
+                "base_shift_std": float(self.base_shift_std),
+                "fit": float(self.fit),
+                "prior_distance": float(self.prior_distance),
+            },
+        }
+
+    def summary_lines(self) -> list[str]:
+        """Readable lines: the check, the per-body minimum eigenvalues and the solver."""
+        c = self.consistency
+        kind = (
+            f"consistent estimate ({self.solver}, {self.status}, {self.time:.3g} s, prior "
+            f"{self.prior}, weight {self.prior_weight:g}; base fit moved by at most "
+            f"{self.base_shift_std:.3g} std)"
+            if self.solver
+            else "minimum-norm standard parameters of the least-squares fit"
+        )
+        lines = [
+            f"{kind}: physically consistent {'yes' if c.consistent else 'NO'}",
+            "min eigenvalue of each pseudo-inertia J: "
+            + ", ".join(
+                f"{n} {v:.3g}" for n, v in zip(c.body_names, c.min_eigenvalues, strict=True)
+            ),
+        ]
+        return lines
+
+
+def check_options(solver: str, prior: str, prior_weight: float) -> None:
+    """Raise :class:`InputError` for an unknown solver or prior, or a bad prior weight."""
+    if solver not in SOLVERS:
+        raise InputError(f"solver must be one of {list(SOLVERS)}, got {solver!r}")
+    if prior not in PRIORS:
+        raise InputError(f"prior must be one of {list(PRIORS)}, got {prior!r}")
+    try:
+        w = float(prior_weight)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"prior_weight must be a number >= 0, got {prior_weight!r}") from exc
+    if not (np.isfinite(w) and w >= 0):
+        raise InputError(f"prior_weight must be a finite number >= 0, got {prior_weight!r}")
+
+
+def consistent_estimate(
+    robot,
+    acc,
+    base,
+    ls,
+    *,
+    solver: str = "sdp",
+    prior: str = "nominal",
+    prior_weight: float = DEFAULT_PRIOR_WEIGHT,
+    prior_parameters=None,
+) -> StandardEstimate:
+    """Consistent standard parameters from an accumulator of the base columns and its LS fit.
+
+    ``acc`` is the :class:`~manip_id.estimators.InformationAccumulator` of the base
+    regressor, ``ls`` its :class:`~manip_id.estimators.LeastSquaresSolution`: ordinary
+    (fit measured with ``C^-1 = A / sigma^2``) or weighted (``ls.weights``: the
+    weighted sums, ``C^-1 = A_w``). Raises :class:`SolverError` on a solver failure or
+    an infeasible problem, :class:`PhysicalConsistencyError` for a non-physical prior.
+    """
+    check_options(solver, prior, prior_weight)
+    if ls.weights is None:
+        A, b, zz, variance = acc.A, acc.b, acc.zz, ls.sigma2
+    else:
+        A, b, zz = acc.weighted(ls.weights)
+        variance = 1.0
+    problem = build_problem(
+        robot,
+        base,
+        A,
+        b,
+        variance=variance,
+        prior=prior,
+        prior_weight=prior_weight,
+        prior_parameters=prior_parameters,
+        n_rows=acc.n_rows,
+        zz=zz,
+    )
+    sol = solve_consistent(robot, problem, solver=solver)
+    std = np.sqrt(np.maximum(np.diag(ls.covariance), 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        shift = np.abs(sol.beta - ls.estimate) / std
+    shift = shift[np.isfinite(shift)]
+    return StandardEstimate(
+        names=list(robot.parameter_names),
+        units=list(robot.parameter_units),
+        values=sol.theta,
+        nominal=np.array(robot.nominal_parameters, dtype=float),
+        consistency=sol.consistency,
+        solver=solver,
+        status=sol.status,
+        time=sol.time,
+        prior=prior,
+        prior_weight=problem.weight,
+        base_shift_std=float(shift.max()) if shift.size else 0.0,
+        fit=sol.fit,
+        prior_distance=sol.prior_distance,
+    )
+
+
+def minimum_norm_standard(robot, base, beta) -> StandardEstimate:
+    """The minimum-norm standard vector ``P^+ beta`` of base parameters ``beta``, checked.
+
+    Plain least squares identifies only ``beta``; this is the standard vector a
+    user gets by the pseudo-inverse, and its eigenvalue test says whether the fit
+    is physical (the null space may hold a physical one: ``consistent=True`` finds it).
+    """
+    P = base_map(base, robot.n_parameters)
+    theta = np.linalg.lstsq(P, np.asarray(beta, dtype=float), rcond=None)[0]
+    return StandardEstimate(
+        names=list(robot.parameter_names),
+        units=list(robot.parameter_units),
+        values=theta,
+        nominal=np.array(robot.nominal_parameters, dtype=float),
+        consistency=check_consistency(robot, theta),
+        prior="minimum norm",
+    )
