@@ -30,7 +30,7 @@ import pinocchio as pin
 
 from ._checks import as_float_array, check_finite
 from .adaptive import AdaptiveGains, SlotineLiController, default_gains
-from .errors import InputError
+from .errors import InputError, NumericalError
 from .regressor import RegressorEvaluator
 from .robot import Robot
 from .trajectories import FourierTrajectory, check_limits, trajectory_to_configuration
@@ -420,9 +420,10 @@ def simulate(
                         q, dq = _rk4(model, accel, q, dq, tau, h, lie)
                 ctrl.adapt(dt)
                 if not math.isfinite(float(dq @ dq)):
-                    raise InputError(
-                        f"the closed loop diverged at t={k * dt:.4f} s "
-                        "(lower the gains or raise the rate)"
+                    raise NumericalError(
+                        "closed-loop simulation",
+                        f"the state diverged at t={k * dt:.4f} s",
+                        hint="lower the gains or raise the rate",
                     )
     wall = time.perf_counter() - t0
 

@@ -172,7 +172,9 @@ def format_direction(
     """A direction in parameter space as readable text, e.g. ``"a.m - 0.5*b.mcx"``.
 
     The one format of directions (unidentifiable, unexcited, regrouped): the
-    ``lead`` term first with coefficient 1 (default: the largest scaled entry),
+    ``lead`` term first with coefficient 1 (default: the largest scaled entry,
+    the later one of a tie, as the QR analysis of :mod:`manip_id.identifiability` leads
+    with the dependent, later, parameter),
     then the others in parameter order; four significant digits; a term whose
     scaled size ``|v_i| scale_i`` is below ``threshold`` times the lead's is
     left out.
@@ -191,11 +193,17 @@ def format_direction(
         raise InputError(f"{len(names)} names for a direction of {v.size} entries")
     s = np.ones(v.size) if scale is None else np.asarray(scale, dtype=float).ravel()
     size = np.abs(v) * s
-    if not size.any():
+    if lead is None:
+        if not v.any():
+            return "0"
+        w = size if size.any() else np.abs(v)
+        # ties go to the later parameter: the one the QR analysis calls dependent
+        lead = int(np.flatnonzero(w >= (1.0 - 1e-9) * w.max())[-1])
+    k = int(lead)
+    if v[k] == 0:
         return "0"
-    k = int(np.argmax(size)) if lead is None else int(lead)
     c = v / v[k]
-    ref = size[k]
+    ref = max(float(size[k]), 1e-300)  # a lead of zero scale (a zero column) still leads
     order = [k] + [i for i in range(v.size) if i != k and size[i] > threshold * ref]
     out = ""
     for n, i in enumerate(order):

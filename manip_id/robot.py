@@ -282,8 +282,11 @@ class Robot:
     def with_parameters(self, theta) -> pin.Model:
         """A copy of the model whose inertias and armature are those of ``theta``.
 
-        Friction and spring terms are not part of a Pinocchio model: apply them
-        with :func:`manip_id.regressor.joint_torques`.
+        The armature is ``theta``'s ``Ia`` terms when the robot models armature,
+        and zero otherwise: the model then holds exactly the dynamics ``theta``
+        describes (a URDF armature the parameter vector cannot represent is
+        dropped). Friction and spring terms are not part of a Pinocchio model:
+        apply them with :func:`manip_id.regressor.joint_torques`.
         """
         blocks = self.rigid_body_parameters(theta)
         model = self.model.copy()
@@ -291,6 +294,8 @@ class Robot:
             model.inertias[i] = pin.Inertia.FromDynamicParameters(np.asarray(block))
         if self.terms.armature:
             model.armature = np.asarray(theta)[self.layout.joint_columns("Ia")].copy()
+        else:
+            model.armature = np.zeros(self.nv)  # [kg m^2 or kg]
         return model
 
     # ------------------------------------------------------------- sampling

@@ -46,7 +46,7 @@ import pinocchio as pin
 import scipy.optimize
 
 from ._checks import as_float_array, check_finite
-from .errors import InfeasibleTrajectoryError, InputError
+from .errors import InfeasibleTrajectoryError, InputError, NumericalError
 from .parameters import bounded_range, bounded_rate
 from .regressor import iter_regressor
 from .robot import Robot
@@ -711,8 +711,8 @@ def optimize_excitation(
             constraints=[constraint],
             options={"maxiter": int(maxiter), "ftol": 1e-6},
         )
-    except ValueError as exc:  # pragma: no cover - SciPy input errors
-        raise InputError(f"excitation optimization failed: {exc}") from exc
+    except ValueError as exc:  # pragma: no cover - SLSQP breaking down on its own iterates
+        raise NumericalError("excitation optimization (SLSQP)", str(exc)) from exc
     x = res.x if objective.value(res.x) <= f0 else x0
     traj = FourierTrajectory.from_vector(x, nv, L, wf)
     traj = _fit_into_limits(robot, traj, margin, acceleration_limit)

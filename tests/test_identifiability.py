@@ -15,11 +15,11 @@ from conftest import get_robot
 from scipy.integrate import solve_ivp
 
 from manip_id import InputError, RobotError, regressor
+from manip_id.errors import format_direction
 from manip_id.identifiability import (
     BaseParameters,
     RankAnalysis,
     RFactorAccumulator,
-    _format_terms,
     analyze,
     analyze_information,
     analyze_trajectory,
@@ -297,9 +297,13 @@ def test_dependent_column_expression_and_to_base():
     np.testing.assert_allclose(Y @ theta, result.base.regressor(Y) @ result.base.to_base(theta))
 
 
-def test_format_terms():
-    assert _format_terms([(1.0, "a"), (-0.5, "b"), (1.0, "c")]) == "a - 0.5*b + c"
-    assert _format_terms([(-1.0, "a"), (0.0841, "b")]) == "-a + 0.0841*b"
+def test_format_direction_leads_with_one_and_keeps_parameter_order():
+    assert format_direction([1.0, -0.5, 1.0], ["a", "b", "c"], lead=0) == "a - 0.5*b + c"
+    # the lead is scaled to 1: -a + 0.0841 b is the direction a - 0.0841 b
+    assert format_direction([-1.0, 0.0841], ["a", "b"], lead=0) == "a - 0.0841*b"
+    # default lead: the largest scaled entry; terms below 1e-6 of it are left out
+    assert format_direction([0.5, -2.0, 1e-9], ["a", "b", "c"]) == "b - 0.25*a"
+    assert format_direction([1.0, 1.0], ["a", "b"], scale=[1.0, 1e-7]) == "a"
 
 
 def test_to_dict_is_json_ready(panda_structural):

@@ -8,7 +8,9 @@ import pytest
 from conftest import get_robot
 
 from manip_id import InputError, RobotError, available_robots, load_robot
+from manip_id.regressor import regressor
 from manip_id.robot import INERTIAL_NAMES, MANIPULATORS
+from manip_id.simulation import perturb_parameters
 
 REQUIRED = ["panda", "ur3", "ur5", "ur10", "talos_arm", "z1", "xarm7", "kinova", "double_pendulum"]
 
@@ -20,10 +22,37 @@ def test_required_manipulators_load(name):
     assert robot.n_parameters == 10 * robot.n_bodies == len(robot.parameter_names)
     assert robot.nominal_parameters.shape == (robot.n_parameters,)
     assert len(robot.dof_names) == robot.nv
-    # independent: the nominal block of each body is the model inertia
-    for i, block in enumerate(robot.rigid_body_parameters(robot.nominal_parameters), start=1):
-        inertia = pin.Inertia.FromDynamicParameters(block)
-        assert np.isclose(inertia.mass, robot.model.inertias[i].mass)
+    # independent: the nominal parameters, through the regressor, give Pinocchio's rnea on the
+    # URDF inertias (armature, not modelled here, removed from the reference model)
+    reference = robot.model.copy()
+    reference.armature = np.zeros(robot.nv)
+    data = reference.createData()
+    q, dq, ddq = robot.random_states(3, seed=4)
+    Y = regressor(robot, q, dq, ddq)
+    for k in range(3):
+        tau = pin.rnea(reference, data, q[k], dq[k], ddq[k])
+        np.testing.assert_allclose(
+            Y[k] @ robot.nominal_parameters, tau, rtol=1e-9, atol=1e-9 * (1 + abs(tau).max())
+        )
+
+
+@pytest.mark.parametrize(("name", "armature"), [("talos_arm", False), ("talos_arm", True)])
+def test_with_parameters_holds_exactly_the_dynamics_of_theta(name, armature):
+    """talos_arm's URDF carries armature 0.1: a model without armature terms must drop it."""
+    robot = get_robot(name, armature=armature)
+    assert np.asarray(robot.model.armature).max() > 0  # the URDF value this test is about
+    theta = perturb_parameters(robot, 0.2, seed=1)
+    model = robot.with_parameters(theta)
+    if armature:
+        np.testing.assert_array_equal(model.armature, theta[robot.layout.joint_columns("Ia")])
+    else:
+        np.testing.assert_array_equal(model.armature, np.zeros(robot.nv))
+    data = model.createData()
+    q, dq, ddq = robot.random_states(3, seed=2)
+    Y = regressor(robot, q, dq, ddq)
+    for k in range(3):
+        tau = pin.rnea(model, data, q[k], dq[k], ddq[k])
+        np.testing.assert_allclose(Y[k] @ theta, tau, rtol=1e-9, atol=1e-9)
 
 
 def test_every_listed_manipulator_is_fixed_base():

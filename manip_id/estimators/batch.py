@@ -27,6 +27,7 @@ import scipy.linalg as sla
 
 from .._checks import as_float_array
 from ..errors import InputError, RankDeficiencyError
+from ..errors import format_direction as format_direction  # re-exported: the one formatter
 from .accumulator import InformationAccumulator, _check_rows
 from .results import LeastSquaresSolution
 
@@ -41,33 +42,13 @@ COND_LIMIT = 1e6
 WLS_MIN_VARIANCE_RATIO = 1e-6
 
 
-def format_direction(v: np.ndarray, names: Sequence[str] | None, tol: float = 1e-3) -> str:
-    """A null-space direction as readable text, e.g. ``"a.m - 0.5*b.mcx"`` (largest entry 1)."""
-    v = np.asarray(v, dtype=float)
-    names = list(names) if names is not None else [f"theta[{i}]" for i in range(v.size)]
-    k = int(np.argmax(np.abs(v)))
-    v = v / v[k]
-    parts = []
-    for i in np.argsort(-np.abs(v)):
-        c = v[i]
-        if abs(c) < tol:
-            break
-        mag = "" if abs(abs(c) - 1.0) < 1e-9 else f"{abs(c):.4g}*"
-        sign = "-" if c < 0 else "+"
-        parts.append(f"{sign} {mag}{names[i]}")
-    text = " ".join(parts)
-    return text[2:] if text.startswith("+ ") else text
-
-
-def _rank_error(null: np.ndarray, rank: int, p: int, names) -> RankDeficiencyError:
-    directions = [format_direction(null[:, i], names) for i in range(null.shape[1])]
-    shown = "; ".join(directions[:5]) + ("; ..." if len(directions) > 5 else "")
-    return RankDeficiencyError(
-        f"the data excite only {rank} of {p} parameter directions; unexcited: {shown} "
-        "(excite the robot more, or ask for a minimum-norm solution)",
+def _rank_error(null: np.ndarray, rank: int, names, scale: np.ndarray) -> RankDeficiencyError:
+    return RankDeficiencyError.from_vectors(
         rank,
-        p,
-        directions,
+        null,
+        names,
+        scale=scale,
+        hint="excite the robot more, or ask for a minimum-norm solution",
     )
 
 
@@ -120,7 +101,7 @@ def solve_normal_equations(
         null = V[:, ~excited] * d[:, None]  # back to unscaled parameter coordinates
         null /= np.linalg.norm(null, axis=0)
         if not minimum_norm:
-            raise _rank_error(null, rank, p, names)
+            raise _rank_error(null, rank, names, 1.0 / d)
         la, Va = np.linalg.eigh(A)
         keep = la > la[-1] * rank_rtol**2
         Ainv = (Va[:, keep] / la[keep]) @ Va[:, keep].T
@@ -293,7 +274,7 @@ def solve_stacked(
         null = Vt[~excited].T * d[:, None]
         null /= np.linalg.norm(null, axis=0)
         if not minimum_norm:
-            raise _rank_error(null, rank, p, names)
+            raise _rank_error(null, rank, names, 1.0 / d)
         U2, s2, Vt2 = np.linalg.svd(Pw, full_matrices=False)
         keep = s2 > s2[0] * rank_rtol
         theta = Vt2[keep].T @ ((U2[:, keep].T @ zw) / s2[keep])

@@ -47,7 +47,7 @@ import numpy as np
 from scipy.linalg.lapack import dposv
 
 from .._checks import as_float_array, check_finite, spd_gain, spd_matrix
-from ..errors import InputError
+from ..errors import InputError, NumericalError
 
 
 @dataclass(frozen=True)
@@ -110,7 +110,7 @@ class _OnlineEstimator:
         """Recorded times, estimates and prediction-error norms (every ``record_every`` steps)."""
         return OnlineHistory(np.array(self._t), np.array(self._th), np.array(self._err))
 
-    def _bad(self, Y, z, exc: Exception | None = None) -> InputError:
+    def _bad(self, Y, z, exc: Exception | None = None) -> InputError | NumericalError:
         Ya, za = np.asarray(Y), np.asarray(z)
         if Ya.ndim not in (1, 2) or Ya.shape[-1] != self.p:
             msg = (
@@ -121,8 +121,16 @@ class _OnlineEstimator:
             msg = f"Y.shape={Ya.shape} but z.shape={za.shape}; expected z.shape={Ya.shape[:-1]}"
         elif not (np.isfinite(Ya).all() and np.isfinite(za).all()):
             msg = f"Y or z holds NaN or Inf at step {self.steps}"
-        else:
-            msg = f"step {self.steps} failed: {exc}"
+        else:  # valid inputs: the update itself broke down
+            reason = f"step {self.steps} failed" + (f": {exc}" if exc is not None else "")
+            err = NumericalError(
+                f"{type(self).__name__} update",
+                reason + " (the innovation covariance is not positive definite or not finite)",
+                hint="check the forgetting factor and the covariance bounds",
+            )
+            if exc is not None:
+                err.__cause__ = exc
+            return err
         err = InputError(msg)
         if exc is not None:
             err.__cause__ = exc
