@@ -34,6 +34,24 @@ steps while the ``sign(dq)`` column stays sharp, and the fit is biased;
 filtering both keeps them consistent. :func:`preprocess` filters the states and
 torques with one low-pass, which is the right choice whenever its cut-off is
 well above the motion's bandwidth.
+
+Overlapping blocks (streamed logs). Let ``F`` be the forward-backward filter of
+one-way poles ``p_i`` and ``r = max |p_i| < 1``. For a series ``x`` of N samples
+and a block of rows ``[a, b)`` read with ``M`` rows of margin on both sides,
+``W = [max(a - M, 0), min(b + M, N))``, the identity this module relies on is::
+
+    | F[x_W](k) - F[x](k) |  <=  C r^M max|x|        for a <= k < b
+
+because the two filtered series differ only by the responses to their edge
+conditions (start-up state and end padding), which decay like ``r^d`` over
+``d`` samples, and a block that touches an end of the series is padded there
+exactly as the whole series is. With ``M = ceil(log(1e-16) / log(r))`` plus
+safety (:func:`overlap_margin`) the block filter equals the whole-series filter
+at its centre to round-off; central differences and the not-a-knot cubic
+spline of :func:`resample` (whose dependence on a knot ``d`` samples away decays
+like ``(2 - sqrt 3)^d``) are blocked the same way. :func:`iter_overlapping`
+cuts a stream of rows into such windows and :func:`preprocess_blocks` runs the
+whole of :func:`preprocess` on them, in memory O(block + margin) whatever N.
 """
 
 from __future__ import annotations
@@ -409,17 +427,238 @@ def preprocess(
     return replace(out, meta={**dataset.meta, "preprocess": settings})
 
 
+# ------------------------------------------------------- overlapping blocks
+#: Rows of raw samples on each side of a block for the blocked cubic spline:
+#: a knot's influence decays like (2 - sqrt 3)^d, below 1e-36 at d = 64.
+SPLINE_MARGIN = 64
+#: Default rows per block of :func:`preprocess_blocks`.
+DEFAULT_BLOCK = 1 << 15
+
+
+def overlap_margin(filt: Lowpass, tol: float = 1e-16) -> int:
+    """Rows of margin after which a block filter equals the whole-series filter (see top).
+
+    ``ceil(log(tol) / log(r))`` with ``r`` the largest one-way pole radius of
+    ``filt``, times 1.25 for the polynomial factors of clustered poles, plus
+    the padding of ``sosfiltfilt`` and a few rows for the central differences.
+    """
+    from scipy import signal as _signal
+
+    _, poles, _ = _signal.sos2zpk(filt.sos)
+    r = float(np.max(np.abs(poles)))
+    decay = math.ceil(math.log(tol) / math.log(r)) if 0 < r < 1 else 0
+    return int(1.25 * decay) + 3 * (2 * filt.sos.shape[0] + 1) + 8
+
+
+@dataclass(frozen=True)
+class OverlapWindow:
+    """One window of :func:`iter_overlapping`.
+
+    ``rows`` holds series rows ``lo:lo + len(rows)``; the block is ``a:b``
+    (global row indices), ``at_end`` tells whether ``b`` is the series' end.
+    """
+
+    rows: np.ndarray
+    lo: int
+    a: int
+    b: int
+    at_end: bool
+
+    @property
+    def centre(self) -> slice:
+        """The block's rows within ``rows``."""
+        return slice(self.a - self.lo, self.b - self.lo)
+
+
+def iter_overlapping(chunks, block: int, margin: int):
+    """Cut a stream of row chunks (2-D arrays) into blocks with ``margin`` rows each side.
+
+    Yields :class:`OverlapWindow` for consecutive blocks ``[a, b)`` covering
+    every row once; each window holds rows ``[max(a - margin, 0), min(b +
+    margin, N))``. The length N need not be known: the stream is read ahead
+    by ``block + margin`` rows at most, so memory is O(block + 2 margin).
+    """
+    block, margin = max(int(block), 1), max(int(margin), 0)
+    it = iter(chunks)
+    parts: list[np.ndarray] = []
+    buf_lo = buf_hi = 0
+    exhausted = False
+    a = 0
+    while True:
+        while not exhausted and buf_hi < a + block + margin:
+            nxt = next(it, None)
+            if nxt is None:
+                exhausted = True
+            elif nxt.shape[0]:
+                parts.append(nxt)
+                buf_hi += nxt.shape[0]
+        if exhausted:
+            b, hi = min(a + block, buf_hi), buf_hi
+        else:
+            b, hi = a + block, a + block + margin
+        if b <= a:
+            return
+        buf = np.concatenate(parts) if len(parts) > 1 else parts[0]
+        parts = [buf]
+        lo = max(a - margin, 0)
+        at_end = exhausted and b == buf_hi
+        yield OverlapWindow(buf[lo - buf_lo : hi - buf_lo], lo, a, b, at_end)
+        if at_end:
+            return
+        a = b
+        keep = max(a - margin, 0)
+        if keep > buf_lo:
+            parts = [buf[keep - buf_lo :]]
+            buf_lo = keep
+
+
+def _resample_windows(windows, cols: slice, t0: float, rate: float, n_grid: int, kind: str):
+    """Blocked cubic-spline resampling: grid points ``t0 + k / rate`` in each block's span."""
+    from scipy.interpolate import CubicSpline
+
+    k_next = 0
+    for w in windows:
+        t = w.rows[:, 0]
+        t_hi = np.inf if w.at_end else w.rows[w.b - w.lo, 0]
+        k_stop = n_grid
+        if not w.at_end:  # first k with t0 + k / rate >= t_hi
+            k_stop = min(int(math.floor((t_hi - t0) * rate)) + 2, n_grid)
+            while k_stop > k_next and t0 + (k_stop - 1) / rate >= t_hi:
+                k_stop -= 1
+        if k_stop <= k_next:
+            continue
+        t_new = t0 + np.arange(k_next, k_stop) / rate
+        x = w.rows[:, cols]
+        if kind == "cubic":
+            values = CubicSpline(t, x, axis=0)(t_new)
+        else:
+            values = np.stack([np.interp(t_new, t, x[:, j]) for j in range(x.shape[1])], axis=1)
+        yield np.column_stack([t_new, values])
+        k_next = k_stop
+
+
+def preprocess_blocks(
+    chunks,
+    nq: int,
+    nv: int,
+    *,
+    n: int,
+    t_first: float,
+    t_last: float,
+    dt_min: float,
+    dt_max: float,
+    cutoff: float = DEFAULT_CUTOFF,
+    order: int = DEFAULT_ORDER,
+    rate: float | None = None,
+    decimate: int = 1,
+    trim: float | None = None,
+    velocity: str = "measured",
+    filter_torque: bool = True,
+    block: int = DEFAULT_BLOCK,
+):
+    """:func:`preprocess` on a stream of packed rows, block by block; equal to it to round-off.
+
+    Parameters
+    ----------
+    chunks: iterable of packed rows ``t | q (nq) | dq (nv) | tau (nv) [| ddq]``
+        (:class:`manip_id.datasets.Layout`); a ddq column block is ignored.
+    n, t_first, t_last, dt_min, dt_max: number of rows, first and last stamp
+        [s], smallest and largest step [s] of the whole stream (one pass of
+        statistics before this one decides the grid, as :func:`preprocess`
+        decides it from the whole array).
+    cutoff, order, rate, decimate, trim, velocity, filter_torque: as :func:`preprocess`.
+    block: rows per block (memory is O((block + 2 margin) * width)).
+
+    Returns
+    -------
+    ``(settings, blocks)``: the :class:`PreprocessSettings` (known before any
+    row is read) and an iterator of packed rows ``t | q | dq | tau | ddq``
+    after filtering, differentiation, trimming and decimation. Each block is
+    computed on rows with :func:`overlap_margin` rows of margin on both sides
+    (the identity at the top of this module), so the concatenated output equals
+    ``preprocess`` of the whole series to round-off.
+    """
+    if velocity not in ("measured", "differentiate"):
+        raise InputError(f"velocity must be 'measured' or 'differentiate', got {velocity!r}")
+    if n < 2:
+        raise DataError(f"need at least 2 samples to preprocess, got {n}")
+    mean_dt = (t_last - t_first) / (n - 1)
+    uniform = max(dt_max - mean_dt, mean_dt - dt_min) <= JITTER_TOLERANCE * abs(mean_dt)
+    resampled = rate is not None or not uniform
+    fs = float((n - 1) / (t_last - t_first)) if rate is None else float(rate)
+    if int(decimate) != decimate or decimate < 1:
+        raise InputError(f"decimation factor must be a positive integer, got {decimate}")
+    if decimate > 1 and cutoff >= fs / (2 * decimate):
+        raise InputError(
+            f"cut-off {cutoff} Hz is not below the Nyquist frequency {fs / (2 * decimate):g} Hz "
+            f"after decimating {fs:g} Hz by {decimate}: the result would alias"
+        )
+    filt = Lowpass(cutoff, fs, order)
+    n_trim = filt.transient_samples() if trim is None else int(round(float(trim) * fs))
+    width_in = 1 + nq + 2 * nv
+    if resampled:
+        grid = uniform_grid(t_first, t_last, fs)
+        n_uniform = grid.shape[0]
+        cols = slice(1, width_in)
+        stream = (c[:, :width_in] for c in chunks)
+        uniform_rows = _resample_windows(
+            iter_overlapping(stream, block, SPLINE_MARGIN), cols, t_first, fs, n_uniform, "cubic"
+        )
+    else:
+        n_uniform = n
+        uniform_rows = (c[:, :width_in] for c in chunks)
+    if n_trim < 0 or 2 * n_trim > n_uniform - 2:
+        raise DataError(f"trimming {n_trim} + {n_trim} samples leaves fewer than 2 of {n_uniform}")
+    settings = PreprocessSettings(
+        cutoff=filt.cutoff,
+        order=filt.order,
+        rate=fs,
+        resampled=resampled,
+        velocity=velocity,
+        filter_torque=filter_torque,
+        trim=n_trim,
+        decimate=int(decimate),
+    )
+    margin = overlap_margin(filt)
+    sq, sdq, stau = slice(1, 1 + nq), slice(1 + nq, 1 + nq + nv), slice(1 + nq + nv, width_in)
+    stop = n_uniform - n_trim
+    D = int(decimate)
+
+    def blocks():
+        for w in iter_overlapping(uniform_rows, block, margin):
+            lo_keep, hi_keep = max(w.a, n_trim), min(w.b, stop)
+            if hi_keep <= lo_keep:
+                continue
+            rows = w.rows
+            t = rows[:, 0]
+            q = filt(rows[:, sq])
+            dq = derivative(t, q) if velocity == "differentiate" else filt(rows[:, sdq])
+            ddq = derivative(t, dq)
+            tau = filt(rows[:, stau]) if filter_torque else rows[:, stau]
+            first = lo_keep + (-(lo_keep - n_trim)) % D  # first kept global index >= lo_keep
+            idx = np.arange(first, hi_keep, D) - w.lo
+            if idx.size:
+                yield np.column_stack([t[idx], q[idx], dq[idx], tau[idx], ddq[idx]])
+
+    return settings, blocks()
+
+
 __all__ = [
+    "DEFAULT_BLOCK",
     "DEFAULT_CUTOFF",
     "DEFAULT_ORDER",
     "Lowpass",
+    "OverlapWindow",
     "PreprocessSettings",
     "downsample",
     "derivative",
     "filter_regressor",
     "is_uniform",
+    "iter_overlapping",
     "lowpass",
+    "overlap_margin",
     "preprocess",
+    "preprocess_blocks",
     "resample",
     "resample_dataset",
     "sampling_rate",

@@ -16,7 +16,7 @@ from manip_id.datasets import (
     load_panda_gaz2019,
     save_dataset,
 )
-from manip_id.errors import DataError
+from manip_id.errors import DataError, ManipIdError
 
 NAMES = ("j1", "j2", "j3")
 
@@ -206,7 +206,7 @@ def test_save_never_leaves_a_partial_file(tmp_path, monkeypatch):
         raise OSError("disk full")
 
     monkeypatch.setattr(os, "replace", boom)
-    with pytest.raises(OSError, match="disk full"):
+    with pytest.raises((OSError, ManipIdError), match="disk full"):  # OutputError in newer _io
         save_dataset(_dataset(seed=2), path)
     assert path.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["d.npz"]
@@ -246,7 +246,7 @@ def test_panda_log_with_missing_file(tmp_path):
     (tmp_path / "rbt_log_time.txt").write_text("0\n0.001\n")
     with pytest.raises(DataError, match="lacks rbt_log_positions.txt"):
         load_panda_gaz2019(tmp_path)
-    with pytest.raises(DataError, match="not a Panda log"):
+    with pytest.raises(DataError, match="neither a Panda log"):
         load_dataset(tmp_path)
 
 

@@ -1,0 +1,333 @@
+"""CSV datasets: the default header or a column map, read whole or in row chunks.
+
+Default layout (comma-separated, one sample per row)::
+
+    t,q_<joint>...,dq_<joint>...,tau_<joint>...[,ddq_<joint>...]
+
+Columns are found by prefix (``t`` or ``time``; ``q_``, ``dq_``, ``tau_``,
+``ddq_``) in header order, so any column order works; joint names come from
+the ``dq_`` columns. Other layouts load with a column map (field -> header
+names, a glob such as ``"pos*"``, or 0-based indices). Without dq columns, dq is
+the central-difference derivative of q (``numpy.gradient``, second order, also
+at the ends); the streamed reader computes it with one row of overlap between
+chunks, which gives the same values as on the whole file.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import itertools
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DataError
+from .core import Dataset, check_time
+from .layout import FIELDS, Layout
+
+
+@dataclass(frozen=True)
+class CsvColumns:
+    """Where each field sits in a CSV file."""
+
+    delimiter: str | None
+    header: list[str] | None
+    index: dict[str, list[int]]
+    joint_names: tuple[str, ...] | None
+    derive_dq: bool
+
+    @property
+    def layout(self) -> Layout:
+        return Layout(len(self.index["q"]), len(self.index["tau"]), "ddq" in self.index)
+
+
+def _head(path: Path) -> tuple[str | None, list[str] | None]:
+    try:
+        with open(path) as fh:
+            first = fh.readline()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DataError(f"cannot read {path} as CSV: {exc}") from exc
+    delimiter = "," if "," in first else None
+    cells = [c.strip() for c in (first.split(delimiter) if delimiter else first.split())]
+    try:
+        [float(c) for c in cells]
+        header = None
+    except ValueError:
+        header = cells
+    return delimiter, header
+
+
+def _column_index(spec, header: list[str] | None, path: Path, field_name: str) -> int:
+    if isinstance(spec, (int, np.integer)):
+        return int(spec)
+    if header is None:
+        raise DataError(
+            f"{path} has no header row, so column {spec!r} of {field_name!r} must be "
+            "given as a 0-based index"
+        )
+    try:
+        return header.index(str(spec))
+    except ValueError:
+        raise DataError(
+            f"column {spec!r} of {field_name!r} is not in {path} (columns: {', '.join(header)})"
+        ) from None
+
+
+def _columns_for(spec, header, path, field_name) -> list[int]:
+    if isinstance(spec, str) and header is not None and any(ch in spec for ch in "*?["):
+        idx = [i for i, h in enumerate(header) if fnmatch.fnmatchcase(h, spec)]
+        if not idx:
+            raise DataError(
+                f"pattern {spec!r} of {field_name!r} matches no column of {path} "
+                f"(columns: {', '.join(header)})"
+            )
+        return idx
+    specs = [spec] if isinstance(spec, (str, int, np.integer)) else list(spec)
+    return [_column_index(s, header, path, field_name) for s in specs]
+
+
+def resolve_columns(path: Path, columns: Mapping | None, width: int | None = None) -> CsvColumns:
+    """The columns of each field of the CSV file ``path`` (header and column map)."""
+    delimiter, header = _head(path)
+    columns = dict(columns or {})
+    unknown = sorted(set(columns) - {*FIELDS, "joint_names"})
+    if unknown:
+        raise DataError(
+            f"column map has unknown field(s) {', '.join(unknown)}; "
+            f"expected some of {', '.join(FIELDS)}, joint_names"
+        )
+    idx: dict[str, list[int]] = {}
+    for name in FIELDS:
+        if name in columns:
+            idx[name] = _columns_for(columns[name], header, path, name)
+        elif header is not None:
+            if name == "t":
+                found = [i for i, h in enumerate(header) if h.lower() in ("t", "time")]
+            else:
+                found = [i for i, h in enumerate(header) if h.startswith(name + "_")]
+            if found:
+                idx[name] = found
+    missing = [n for n in ("t", "q", "tau") if n not in idx]
+    if missing:
+        layout = (
+            "header t,q_<joint>...,dq_<joint>...,tau_<joint>..."
+            if header is not None
+            else "no header row: give a column map with 0-based indices"
+        )
+        raise DataError(f"{path}: cannot find column(s) for {', '.join(missing)} ({layout})")
+    if len(idx["t"]) != 1:
+        raise DataError(f"{path}: 't' must be one column, got {len(idx['t'])}")
+    if width is None:
+        width = len(header) if header is not None else None
+    if width is not None:
+        for name, cols in idx.items():
+            bad = [c for c in cols if not -width <= c < width]
+            if bad:
+                raise DataError(
+                    f"column map: {name!r} refers to column {bad[0]} but {path} has {width} columns"
+                )
+    names = columns.get("joint_names")
+    if names is None and header is not None and "dq" in idx and "dq" not in columns:
+        names = [header[i][3:] for i in idx["dq"]]
+    elif names is None and header is not None and "tau" not in columns:
+        names = [header[i][4:] for i in idx["tau"]]
+    derive = "dq" not in idx
+    if derive and len(idx["q"]) != len(idx["tau"]):
+        raise DataError(
+            f"{path}: no dq columns, and q ({len(idx['q'])} columns) cannot be "
+            f"differentiated into {len(idx['tau'])} velocities"
+        )
+    for name in ("dq", "ddq"):
+        if name in idx and len(idx[name]) != len(idx["tau"]):
+            raise DataError(
+                f"{path}: {len(idx[name])} {name} columns but {len(idx['tau'])} tau columns"
+            )
+    return CsvColumns(
+        delimiter, header, idx, tuple(str(n) for n in names) if names else None, derive
+    )
+
+
+def _parse(lines: list[str], delimiter, path: Path, first_line: int) -> np.ndarray:
+    try:
+        return np.loadtxt(lines, delimiter=delimiter, ndmin=2, dtype=np.float64)
+    except ValueError:
+        pass
+    rows = []  # slow path: find the bad line, empty cells read as NaN
+    for k, line in enumerate(lines):
+        cells = line.strip().split(delimiter) if delimiter else line.split()
+        try:
+            rows.append([float(c) if c.strip() else np.nan for c in cells])
+        except ValueError as exc:
+            raise DataError(
+                f"cannot read {path} as a numeric CSV table: line {first_line + k + 1}: {exc}"
+            ) from exc
+    widths = {len(r) for r in rows}
+    if len(widths) > 1:
+        k = next(i for i, r in enumerate(rows) if len(r) != len(rows[0]))
+        raise DataError(
+            f"{path}: line {first_line + k + 1} has {len(rows[k])} cells but line "
+            f"{first_line + 1} has {len(rows[0])}"
+        )
+    return np.array(rows, dtype=np.float64).reshape(len(rows), -1)
+
+
+class CsvSource:
+    """Rows of a CSV dataset read ``chunk`` lines at a time (see the module docstring).
+
+    Attributes: ``path``, ``format`` ("csv"), ``layout``, ``joint_names``,
+    ``n_rows`` (None: known after one pass).
+    """
+
+    format = "csv"
+    n_rows = None
+
+    def __init__(self, path: Path, columns: Mapping | None = None):
+        self.path = Path(path)
+        self.columns = resolve_columns(self.path, columns)
+        self.layout = self.columns.layout
+        self.joint_names = self.columns.joint_names
+
+    def _tables(self, chunk: int) -> Iterator[tuple[int, np.ndarray]]:
+        c = self.columns
+        skip = 0 if c.header is None else 1
+        width = None
+        with open(self.path) as fh:
+            for _ in range(skip):
+                fh.readline()
+            line_no = skip
+            while True:
+                lines = [ln for ln in itertools.islice(fh, chunk) if ln.strip()]
+                if not lines:
+                    return
+                table = _parse(lines, c.delimiter, self.path, line_no)
+                line_no += len(lines)
+                if width is None:
+                    width = table.shape[1]
+                    if c.header is not None and width != len(c.header):
+                        raise DataError(
+                            f"{self.path}: the header has {len(c.header)} columns but rows "
+                            f"have {width}"
+                        )
+                    for name, cols in c.index.items():
+                        bad = [i for i in cols if not -width <= i < width]
+                        if bad:
+                            raise DataError(
+                                f"column map: {name!r} refers to column {bad[0]} but "
+                                f"{self.path} has {width} columns"
+                            )
+                elif table.shape[1] != width:
+                    raise DataError(
+                        f"{self.path}: rows near line {line_no} have {table.shape[1]} cells, "
+                        f"earlier rows {width}"
+                    )
+                yield line_no - len(lines), table
+
+    def _pack(self, table: np.ndarray) -> np.ndarray:
+        lay, idx = self.layout, self.columns.index
+        out = np.empty((table.shape[0], lay.width))
+        for name, s in lay.slices.items():
+            if name in idx:
+                out[:, s] = table[:, idx[name]]
+        return out
+
+    def chunks(self, chunk: int, start: int = 0, stop: int | None = None) -> Iterator[np.ndarray]:
+        """Packed float64 rows ``start:stop``, about ``chunk`` at a time."""
+        chunk = max(int(chunk), 3)
+        packed = (self._pack(tab) for _, tab in self._tables(chunk))
+        if self.columns.derive_dq:
+            packed = _derive_dq(packed, self.layout, self.path)
+        row = 0
+        for block in packed:
+            k = block.shape[0]
+            lo, hi = max(start - row, 0), k if stop is None else min(stop - row, k)
+            row += k
+            if hi > lo:
+                yield block[lo:hi]
+            if stop is not None and row >= stop:
+                return
+
+
+def _derive_dq(blocks: Iterator[np.ndarray], layout: Layout, path: Path) -> Iterator[np.ndarray]:
+    """Fill the dq columns with ``numpy.gradient(q, t, edge_order=2)`` across blocks.
+
+    Each block is differentiated with the last row of the previous block and
+    the first row of the next one attached: the central differences inside and
+    the one-sided ones at the two ends of the file are those of the whole file.
+    """
+    sq, sdq = layout.slices["q"], layout.slices["dq"]
+    prev: np.ndarray | None = None  # last row of the previous block
+    offset = 0
+    cur = next(blocks, None)
+    if cur is None:
+        return
+    for nxt in itertools.chain(blocks, [None]):
+        if nxt is not None and nxt.shape[0] < 3:  # keep >= 3 rows for the end formula
+            cur = np.vstack([cur, nxt])
+            continue
+        parts = (
+            ([prev] if prev is not None else []) + [cur] + ([nxt[:1]] if nxt is not None else [])
+        )
+        ext = np.vstack(parts)
+        if ext.shape[0] < 3:
+            raise DataError(
+                f"{path}: need at least 3 samples to differentiate q, got {ext.shape[0]}"
+            )
+        try:
+            check_time(ext[:, 0], offset - (1 if prev is not None else 0))
+        except DataError as exc:
+            raise DataError(f"{path}: {exc}") from exc
+        g = np.gradient(ext[:, sq], ext[:, 0], axis=0, edge_order=2)
+        lo = 1 if prev is not None else 0
+        cur = cur.copy()
+        cur[:, sdq] = g[lo : lo + cur.shape[0]]
+        yield cur
+        offset += cur.shape[0]
+        prev = cur[-1:]
+        if nxt is None:
+            return
+        cur = nxt
+
+
+def load_csv(path: Path, columns: Mapping | None = None) -> Dataset:
+    """The CSV dataset ``path`` in memory (see the module docstring)."""
+    src = CsvSource(path, columns)
+    blocks = list(src.chunks(1 << 16))
+    if not blocks:
+        raise DataError(f"{path} holds no data rows")
+    rows = np.vstack(blocks)
+    f = src.layout.unpack(rows)
+    try:
+        ds = Dataset(
+            t=f["t"],
+            q=f["q"],
+            dq=f["dq"],
+            tau=f["tau"],
+            ddq=f.get("ddq"),
+            joint_names=src.joint_names,
+            meta={"source": str(path)},
+        )
+    except DataError as exc:
+        raise DataError(f"{path}: {exc}") from exc
+    if src.columns.derive_dq:
+        ds.meta["dq"] = "central differences of q"
+    return ds
+
+
+def csv_header(layout: Layout, joint_names) -> list[str]:
+    """The default header for ``layout`` (q columns named by index when nq != nv)."""
+    names = list(joint_names) if joint_names else [f"j{i}" for i in range(layout.nv)]
+    qnames = names if layout.nq == layout.nv else [str(i) for i in range(layout.nq)]
+    head = ["t", *(f"q_{n}" for n in qnames), *(f"dq_{n}" for n in names)]
+    head += [f"tau_{n}" for n in names]
+    if layout.has_ddq:
+        head += [f"ddq_{n}" for n in names]
+    return head
+
+
+def write_csv(fh, blocks, layout: Layout, joint_names=None) -> None:
+    """Write packed row blocks to the open text file ``fh`` with the default header."""
+    fh.write(",".join(csv_header(layout, joint_names)) + "\n")
+    for block in blocks:
+        np.savetxt(fh, block, delimiter=",", fmt="%.17g")

@@ -1,0 +1,150 @@
+"""Whole-file reading and writing: :func:`load_dataset` and :func:`save_dataset`.
+
+Formats: NPZ (:mod:`~.npz`), CSV (:mod:`~.csv`), ROS 2 bags of
+``sensor_msgs/msg/JointState`` (:mod:`~.rosbag`) and the real Panda log folder
+(:mod:`~.panda`). Files are written through a temporary renamed into place, so
+a crash never leaves a partial file. For long logs read in chunks instead
+(:func:`~.stream.open_source`, :func:`manip_id.pipeline.accumulate_file`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+from .._io import atomic_write
+from ..errors import DataError
+from .core import Dataset
+from .layout import Layout
+from .stream import FORMATS, MemorySource, infer_format
+
+#: Default memory budget of a whole-file NPZ read [bytes].
+MEMORY_BUDGET = 8 * 2**30
+
+
+def load_dataset(
+    path: str | Path,
+    *,
+    format: str | None = None,
+    columns: Mapping | None = None,
+    topic: str | None = None,
+    joint_names=None,
+) -> Dataset:
+    """Load measurements from a file or folder, whole.
+
+    Parameters
+    ----------
+    path: an ``.npz`` file (interchange format, :mod:`~.npz`), a ``.csv`` file,
+        a ROS 2 bag (a rosbag2 folder with MCAP or sqlite3 storage, or a bare
+        ``.mcap`` file), or a folder holding the real Panda log
+        (:func:`load_panda_gaz2019`).
+    format: ``"npz"``, ``"csv"``, ``"rosbag"`` or ``"panda_gaz2019"``; default from the path.
+    columns: CSV only, a column map for other layouts: field -> column(s).
+        Fields ``t`` (one column), ``q``, ``dq``, ``tau``, ``ddq`` (lists of
+        columns, or one glob pattern such as ``"pos*"``), optional
+        ``joint_names`` (list of names). Columns are header names or 0-based
+        indices (indices also work on files without a header). Fields left
+        out are looked up by the default prefixes; ``dq`` may be absent, in
+        which case it is computed from ``q`` by central differences.
+    topic: ROS bags only, the ``sensor_msgs/msg/JointState`` topic (default the only one).
+    joint_names: ROS bags only, the joints to read, in order (default those of
+        the first message).
+
+    Raises
+    ------
+    DataError: missing file, unknown format, a column map that does not fit
+        the file, or data failing :class:`Dataset` validation.
+    """
+    path = Path(path).expanduser()
+    if not path.exists():
+        raise DataError(f"no such data file or folder: {path}")
+    fmt = infer_format(path) if format is None else str(format).lower()
+    if fmt not in FORMATS:
+        raise DataError(f"unknown data format {format!r}; expected one of {', '.join(FORMATS)}")
+    if columns is not None and fmt != "csv":
+        raise DataError(f"a column map applies to CSV files only, not to format {fmt!r}")
+    if fmt == "npz":
+        from .npz import load_npz
+
+        return load_npz(path, MEMORY_BUDGET)
+    if fmt == "csv":
+        from .csv import load_csv
+
+        return load_csv(path, columns)
+    if fmt == "rosbag":
+        from .rosbag import BagSource
+        from .stream import collect, iter_rows
+
+        src = BagSource(path, topic, joint_names)
+        try:
+            return collect(
+                iter_rows(src),
+                src.layout,
+                src.joint_names,
+                {"source": str(path), "format": "rosbag"},
+            )
+        except DataError as exc:
+            raise DataError(f"{path}: {exc}") from exc
+    from .panda import load_panda_gaz2019
+
+    return load_panda_gaz2019(path)
+
+
+def save_dataset(dataset: Dataset, path: str | Path, *, format: str | None = None) -> Path:
+    """Write ``dataset`` as NPZ, CSV (default header) or a ROS 2 bag with MCAP storage.
+
+    The data go to a temporary next to ``path``, renamed over it once
+    complete: a crash never leaves a partial file. The format follows the
+    suffix (``.npz``, ``.csv``, ``.mcap``) unless ``format`` is given
+    (``"npz"``, ``"csv"``, ``"mcap"``). An MCAP bag is a rosbag2 folder
+    (``metadata.yaml`` and one ``.mcap``) of ``sensor_msgs/msg/JointState``
+    messages on ``/joint_states``, stamped with ``t`` (it does not carry ddq).
+    Returns the path written.
+    """
+    if not isinstance(dataset, Dataset):
+        raise DataError(f"save_dataset expects a Dataset, got {type(dataset).__name__}")
+    src = MemorySource(dataset)
+    return write_rows(
+        lambda: src.chunks(1 << 15),
+        dataset.n_samples,
+        src.layout,
+        dataset.joint_names,
+        path,
+        format,
+    )
+
+
+def output_format(path: Path, format: str | None) -> str:
+    """``"npz"``, ``"csv"`` or ``"mcap"`` from ``format`` or the suffix of ``path``."""
+    fmt = format or {".npz": "npz", ".csv": "csv", ".mcap": "mcap"}.get(path.suffix.lower())
+    if fmt not in ("npz", "csv", "mcap"):
+        raise DataError(
+            f"cannot save to {path}: unknown format {format or path.suffix!r}; "
+            "expected .npz, .csv or .mcap"
+        )
+    return fmt
+
+
+def write_rows(blocks, n: int, layout: Layout, joint_names, path, format=None) -> Path:
+    """Write packed row blocks (``blocks()`` returns a fresh iterator) to ``path``, atomically."""
+    path = Path(path).expanduser()
+    fmt = output_format(path, format)
+    if fmt == "mcap":
+        from .rosbag import write_bag
+
+        return write_bag(path, blocks, layout, joint_names)
+
+    def write(tmp: Path) -> None:
+        if fmt == "npz":
+            from .npz import write_npz
+
+            with open(tmp, "wb") as fh:
+                write_npz(fh, blocks, n, layout, joint_names)
+        else:
+            from .csv import write_csv
+
+            with open(tmp, "w") as fh:
+                write_csv(fh, blocks(), layout, joint_names)
+
+    atomic_write(path, write)
+    return path

@@ -1,0 +1,282 @@
+"""NPZ datasets: the interchange format, read whole or in row chunks, written in chunks.
+
+Layout (what :func:`~manip_id.datasets.save_dataset` writes)::
+
+    t            float (N,)      time stamps [s]
+    q            float (N, nq)   positions [rad or m]
+    dq           float (N, nv)   velocities [rad/s or m/s]
+    tau          float (N, nv)   torques [N m or N]
+    ddq          float (N, nv)   accelerations, optional
+    joint_names  str   (nv,)     optional
+
+Streaming. An NPZ is a zip of ``.npy`` members. :func:`inspect_npz` reads only
+each member's ``.npy`` header (shape, dtype, order) and checks the shapes
+against each other, the declared sizes against the zip directory (a truncated
+or inconsistent member is refused) and, when asked, the total against a memory
+budget, all before any data is decompressed. :class:`NpzSource` then reads rows
+``start:stop`` of every member side by side, a chunk at a time (compressed
+members decompress as a stream), so memory is O(chunk) whatever N.
+"""
+
+from __future__ import annotations
+
+import zipfile
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DataError
+from .core import Dataset
+from .layout import FIELDS, Layout
+
+REQUIRED = ("t", "q", "dq", "tau")
+
+
+@dataclass(frozen=True)
+class NpyMember:
+    """One ``.npy`` member of an NPZ, from its header alone."""
+
+    name: str
+    shape: tuple[int, ...]
+    dtype: np.dtype
+    fortran_order: bool
+    header_size: int  # bytes before the data
+    data_size: int  # bytes of data, prod(shape) * itemsize
+
+    @property
+    def row_bytes(self) -> int:
+        """Bytes per row (first axis) of a C-order member."""
+        width = int(np.prod(self.shape[1:], dtype=np.int64)) if len(self.shape) > 1 else 1
+        return width * self.dtype.itemsize
+
+
+def _member_header(zf: zipfile.ZipFile, info: zipfile.ZipInfo, path: Path) -> NpyMember:
+    name = info.filename[:-4]
+    try:
+        with zf.open(info) as fh:
+            version = np.lib.format.read_magic(fh)
+            if version == (1, 0):
+                shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
+            elif version in ((2, 0), (3, 0)):
+                shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
+            else:
+                raise ValueError(f"unsupported .npy version {version}")
+            header = fh.tell()
+    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as exc:
+        raise DataError(f"cannot read {path} as NPZ: member {info.filename}: {exc}") from exc
+    dtype = np.dtype(dtype)
+    size = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+    if header + size != info.file_size:
+        raise DataError(
+            f"{path}: member {info.filename} declares shape {shape} of {dtype} "
+            f"({size} bytes) but holds {info.file_size - header} bytes of data: "
+            "the file is truncated or corrupt"
+        )
+    return NpyMember(name, tuple(int(s) for s in shape), dtype, bool(fortran), header, size)
+
+
+def inspect_npz(path: Path, max_bytes: int | None = None) -> tuple[dict[str, NpyMember], Layout]:
+    """Headers of the members of the NPZ dataset ``path``, checked, and its column layout.
+
+    Checks: a zip of ``.npy`` members; t, q, dq, tau present and nothing but
+    t, q, dq, tau, ddq, joint_names; real numeric data (complex, object and
+    string arrays refused; strings only for joint_names); t of shape (N,), the
+    others (N, width) with one row per stamp, dq, tau, ddq of equal width;
+    declared sizes equal to the zip's; with ``max_bytes``, the numeric data as
+    float64 within that budget. Nothing is decompressed beyond the headers.
+    """
+    try:
+        zf = zipfile.ZipFile(path)
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise DataError(f"cannot read {path} as NPZ: {exc}") from exc
+    with zf:
+        infos = zf.infolist()
+        members = {}
+        for info in infos:
+            if not info.filename.endswith(".npy"):
+                raise DataError(
+                    f"{path} holds unexpected member {info.filename!r}; "
+                    "expected .npy arrays t, q, dq, tau, ddq, joint_names"
+                )
+            m = _member_header(zf, info, path)
+            members[m.name] = m
+    missing = [k for k in REQUIRED if k not in members]
+    if missing:
+        raise DataError(
+            f"{path} lacks array(s) {', '.join(missing)}; an NPZ dataset holds t, q, dq, "
+            f"tau and optionally ddq, joint_names (found {', '.join(sorted(members)) or 'none'})"
+        )
+    unknown = sorted(set(members) - {*FIELDS, "joint_names"})
+    if unknown:
+        raise DataError(
+            f"{path} holds unexpected array(s) {', '.join(unknown)}; "
+            "expected t, q, dq, tau, ddq, joint_names"
+        )
+    for name, m in members.items():
+        kind = m.dtype.kind
+        if name == "joint_names":
+            if kind not in "US" or len(m.shape) > 1:
+                raise DataError(
+                    f"{path}: joint_names must be a 1-D string array, got {m.dtype} {m.shape}"
+                )
+            continue
+        if kind == "c":
+            raise DataError(f"{path}: {name} holds complex numbers ({m.dtype}); expected real")
+        if kind not in "fiu":
+            raise DataError(f"{path}: {name} must be numeric, got dtype {m.dtype}")
+        want = 1 if name == "t" else 2
+        if len(m.shape) != want:
+            raise DataError(
+                f"{path}: {name} must have {want} dimension(s), got {name}.shape={m.shape}"
+            )
+    n = members["t"].shape[0]
+    for name in FIELDS:
+        if name in members and members[name].shape[0] != n:
+            raise DataError(
+                f"{path}: t.shape=({n},) but {name}.shape={members[name].shape}: "
+                "every array needs one row per time stamp"
+            )
+    nv = members["dq"].shape[1]
+    for name in ("tau", "ddq"):
+        if name in members and members[name].shape[1] != nv:
+            raise DataError(
+                f"{path}: dq.shape={members['dq'].shape} but {name}.shape={members[name].shape}"
+            )
+    layout = Layout(nq=members["q"].shape[1], nv=nv, has_ddq="ddq" in members)
+    if "joint_names" in members and members["joint_names"].shape != (nv,):
+        raise DataError(
+            f"{path}: {members['joint_names'].shape[0] if members['joint_names'].shape else 1} "
+            f"joint_names for nv={nv} velocity columns"
+        )
+    if max_bytes is not None:
+        need = n * layout.width * 8
+        if need > max_bytes:
+            raise DataError(
+                f"{path}: {n} samples of {layout.width} columns need {need / 2**20:.0f} MiB "
+                f"in memory, more than the budget of {max_bytes / 2**20:.0f} MiB; read it in "
+                "chunks (manip_id.datasets.open_source) instead"
+            )
+    return members, layout
+
+
+def _read_names(zf: zipfile.ZipFile, member: NpyMember, path: Path) -> tuple[str, ...]:
+    with zf.open(member.name + ".npy") as fh:
+        try:
+            arr = np.lib.format.read_array(fh, allow_pickle=False)
+        except ValueError as exc:
+            raise DataError(f"{path}: cannot read joint_names: {exc}") from exc
+    return tuple(str(s) for s in np.atleast_1d(arr))
+
+
+class NpzSource:
+    """Rows of an NPZ dataset read in chunks (see the module docstring).
+
+    Attributes: ``path``, ``format`` ("npz"), ``layout``, ``joint_names``,
+    ``n_rows`` (N, from the headers).
+    """
+
+    format = "npz"
+
+    def __init__(self, path: Path, fortran_budget: int = 256 * 2**20):
+        self.path = Path(path)
+        self.members, self.layout = inspect_npz(self.path)
+        self.n_rows = self.members["t"].shape[0]
+        self.joint_names = None
+        self._whole: dict[str, np.ndarray] = {}
+        with zipfile.ZipFile(self.path) as zf:
+            if "joint_names" in self.members:
+                self.joint_names = _read_names(zf, self.members["joint_names"], self.path)
+            for name, m in self.members.items():  # rare: Fortran order cannot be read by rows
+                if name != "joint_names" and m.fortran_order and len(m.shape) > 1:
+                    if m.data_size > fortran_budget:
+                        raise DataError(
+                            f"{self.path}: {name} is stored in Fortran order "
+                            f"({m.data_size / 2**20:.0f} MiB), which cannot be read by rows "
+                            f"within {fortran_budget / 2**20:.0f} MiB; save it in C order"
+                        )
+                    with zf.open(name + ".npy") as fh:
+                        self._whole[name] = np.lib.format.read_array(fh, allow_pickle=False)
+
+    def chunks(self, chunk: int, start: int = 0, stop: int | None = None) -> Iterator[np.ndarray]:
+        """Packed float64 rows ``start:stop`` (columns of :class:`Layout`), ``chunk`` at a time."""
+        stop = self.n_rows if stop is None else min(stop, self.n_rows)
+        names = [f for f in FIELDS if f in self.members]
+        with zipfile.ZipFile(self.path) as zf:
+            handles = {}
+            try:
+                for name in names:
+                    if name in self._whole:
+                        continue
+                    m = self.members[name]
+                    fh = zf.open(name + ".npy")
+                    handles[name] = fh
+                    fh.seek(m.header_size + start * m.row_bytes)
+                for s in range(start, stop, chunk):
+                    k = min(chunk, stop - s)
+                    out = np.empty((k, self.layout.width))
+                    for name in names:
+                        cols = self.layout.slices[name]
+                        if name in self._whole:
+                            block = self._whole[name][s : s + k]
+                        else:
+                            m = self.members[name]
+                            raw = handles[name].read(k * m.row_bytes)
+                            if len(raw) != k * m.row_bytes:
+                                raise DataError(f"{self.path}: member {name}.npy ends early")
+                            block = np.frombuffer(raw, dtype=m.dtype)
+                        out[:, cols] = np.asarray(block, dtype=np.float64).reshape(k, -1)
+                    yield out
+            except (zipfile.BadZipFile, OSError, EOFError) as exc:
+                raise DataError(f"cannot read {self.path} as NPZ: {exc}") from exc
+            finally:
+                for fh in handles.values():
+                    fh.close()
+
+
+def load_npz(path: Path, max_bytes: int | None = None) -> Dataset:
+    """The NPZ dataset ``path`` in memory (headers checked first, see :func:`inspect_npz`)."""
+    inspect_npz(path, max_bytes)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+    except Exception as exc:
+        raise DataError(f"cannot read {path} as NPZ: {exc}") from exc
+    names = arrays.pop("joint_names", None)
+    if names is not None:
+        names = tuple(str(n) for n in np.atleast_1d(names))
+    try:
+        return Dataset(**arrays, joint_names=names, meta={"source": str(path)})
+    except DataError as exc:
+        raise DataError(f"{path}: {exc}") from exc
+
+
+def write_npz(fh, blocks, n: int, layout: Layout, joint_names=None) -> None:
+    """Write an NPZ dataset to the open binary file ``fh`` from packed row blocks.
+
+    ``blocks`` yields float64 arrays of shape (k, layout.width) totalling ``n``
+    rows; each member's ``.npy`` header is written with the known shape, then
+    the rows as they come (uncompressed, ZIP64), so memory is O(block).
+    Members are written one after the other, so ``blocks`` is a callable
+    returning a fresh iterator (called once per field).
+    """
+    with zipfile.ZipFile(fh, "w", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
+        for name in layout.fields:
+            cols = layout.slices[name]
+            width = cols.stop - cols.start
+            shape = (n,) if name == "t" else (n, width)
+            with zf.open(name + ".npy", "w", force_zip64=True) as out:
+                np.lib.format.write_array_header_1_0(
+                    out, {"descr": "<f8", "fortran_order": False, "shape": shape}
+                )
+                written = 0
+                for block in blocks():
+                    part = np.ascontiguousarray(block[:, cols], dtype="<f8")
+                    out.write(part.tobytes())
+                    written += part.shape[0]
+                if written != n:
+                    raise DataError(f"write_npz: expected {n} rows, got {written}")
+        if joint_names is not None:
+            with zf.open("joint_names.npy", "w") as out:
+                np.lib.format.write_array(out, np.array(joint_names, dtype=str))

@@ -1,0 +1,286 @@
+"""The data-quality summary of one file, accumulated block by block before the fit.
+
+For the rows a fit would see (after the window, bad rows and the torque scale):
+
+- time: duration [s], mean rate [Hz], jitter (std of the step over its mean),
+  gaps (steps longer than ``GAP_FACTOR`` times the median step, from a
+  histogram of log10 steps) and the largest step;
+- rows with NaN/Inf dropped (with ``drop_bad_rows``) and the first of them;
+- positions against the joint limits: a warning per joint outside them, with
+  how far, and a hint when the values look like degrees;
+- velocity consistency per joint: ``||dq_fd - dq_mid|| / ||dq_mid||`` with
+  ``dq_fd = (q_{k+1} - q_k) / (t_{k+1} - t_k)`` and ``dq_mid = (dq_k + dq_{k+1}) / 2``
+  (second order at the midpoints), and the correlation sign;
+- standstill share per joint: samples with ``|dq_j| < eps``;
+- torque saturation per joint: share of samples at ``>= 99 %`` of the effort
+  limit, and share sitting exactly at the largest ``|tau_j|`` (a clipped signal).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .layout import Layout
+
+#: A step longer than this many median steps is a gap.
+GAP_FACTOR = 2.0
+#: Default standstill threshold [rad/s] when no velocity deadband is given.
+STANDSTILL = 1e-2
+#: Relative velocity mismatch above which a warning is issued.
+VELOCITY_MISMATCH = 0.2
+#: Share of samples at the largest |tau| above which a joint looks clipped.
+CLIPPED_SHARE = 1e-3
+_BINS = np.linspace(-9.0, 3.0, 2401)  # log10 of the step [s], 0.005-decade bins
+
+
+@dataclass
+class DataQuality:
+    """Data-quality summary of one file (see the module docstring); ``to_dict`` is its JSON."""
+
+    file: str
+    format: str
+    window: str | None
+    joints: list[str]
+    n_samples: int = 0
+    n_dropped: int = 0
+    first_dropped: int | None = None
+    t_start: float = math.nan
+    t_end: float = math.nan
+    rate: float = math.nan
+    jitter: float = math.nan
+    dt_min: float = math.nan
+    dt_max: float = math.nan
+    n_gaps: int = 0
+    q_min: list[float] = field(default_factory=list)
+    q_max: list[float] = field(default_factory=list)
+    velocity_mismatch: list[float] = field(default_factory=list)
+    standstill_eps: float = STANDSTILL
+    standstill_share: list[float] = field(default_factory=list)
+    tau_max: list[float] = field(default_factory=list)
+    saturated_share: list[float] | None = None
+    clipped_share: list[float] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def duration(self) -> float:
+        """t_end - t_start [s]."""
+        return self.t_end - self.t_start
+
+    def to_dict(self) -> dict:
+        def f(x):
+            return None if x is None or not math.isfinite(x) else float(x)
+
+        def per(values):
+            return None if values is None else dict(zip(self.joints, map(f, values), strict=False))
+
+        return {
+            "file": self.file,
+            "format": self.format,
+            "window": self.window,
+            "n_samples": self.n_samples,
+            "n_dropped": self.n_dropped,
+            "first_dropped": self.first_dropped,
+            "t_start": f(self.t_start),
+            "duration": f(self.duration),
+            "rate": f(self.rate),
+            "jitter": f(self.jitter),
+            "dt_min": f(self.dt_min),
+            "dt_max": f(self.dt_max),
+            "n_gaps": self.n_gaps,
+            "q_min": per(self.q_min),
+            "q_max": per(self.q_max),
+            "velocity_mismatch": per(self.velocity_mismatch),
+            "standstill_eps": self.standstill_eps,
+            "standstill_share": per(self.standstill_share),
+            "tau_max": per(self.tau_max),
+            "saturated_share": per(self.saturated_share),
+            "clipped_share": per(self.clipped_share),
+            "warnings": list(self.warnings),
+        }
+
+    def text(self) -> str:
+        """A few readable lines."""
+        name = self.file + (f"@{self.window}" if self.window else "")
+        still = ", ".join(
+            f"{j} {100 * s:.0f} %" for j, s in zip(self.joints, self.standstill_share, strict=False)
+        )
+        lines = [
+            f"data {name} ({self.format}): {self.n_samples} samples, {self.duration:.3f} s at "
+            f"{self.rate:.6g} Hz (jitter {100 * self.jitter:.2g} %, {self.n_gaps} gaps, "
+            f"largest step {1e3 * self.dt_max:.3g} ms)"
+            + (
+                f", {self.n_dropped} bad rows dropped (first row {self.first_dropped})"
+                if self.n_dropped
+                else ""
+            ),
+            f"  standstill (|dq| < {self.standstill_eps:g}): {still}",
+        ]
+        lines += [f"  warning: {w}" for w in self.warnings]
+        return "\n".join(lines)
+
+
+class QualityAccumulator:
+    """Builds a :class:`DataQuality` from packed row blocks (``add``), then ``finish``."""
+
+    def __init__(
+        self,
+        layout: Layout,
+        joints,
+        *,
+        file: str,
+        format: str,
+        window: str | None = None,
+        lower=None,
+        upper=None,
+        effort_limit=None,
+        standstill_eps: float | None = None,
+    ):
+        self.lay = layout
+        nq, nv = layout.nq, layout.nv
+        self.q_names = list(joints) if nq == nv else [f"q[{i}]" for i in range(nq)]
+        self.out = DataQuality(
+            file=file,
+            format=format,
+            window=window,
+            joints=list(joints),
+            standstill_eps=STANDSTILL if standstill_eps is None else float(standstill_eps),
+        )
+        self.lower = None if lower is None else np.asarray(lower, dtype=float)
+        self.upper = None if upper is None else np.asarray(upper, dtype=float)
+        lim = None if effort_limit is None else np.asarray(effort_limit, dtype=float)
+        self.effort = lim if lim is not None and lim.shape == (nv,) and np.all(lim > 0) else None
+        self.n = 0
+        self.t0 = self.t_last = math.nan
+        self.dt_sum = self.dt_sq = 0.0
+        self.dt_min, self.dt_max = math.inf, -math.inf
+        self.hist = np.zeros(_BINS.size - 1, dtype=np.int64)
+        self.q_min = np.full(nq, np.inf)
+        self.q_max = np.full(nq, -np.inf)
+        self.fd_sq = np.zeros(nv)
+        self.mid_sq = np.zeros(nv)
+        self.cross = np.zeros(nv)
+        self.still = np.zeros(nv, dtype=np.int64)
+        self.tau_max = np.zeros(nv)
+        self.at_max = np.zeros(nv, dtype=np.int64)
+        self.saturated = np.zeros(nv, dtype=np.int64)
+        self.last: np.ndarray | None = None
+
+    def add(self, rows: np.ndarray) -> None:
+        """Accumulate a block of packed rows (consecutive, after any before)."""
+        if not rows.shape[0]:
+            return
+        s = self.lay.slices
+        ext = rows if self.last is None else np.vstack([self.last, rows])
+        t = ext[:, 0]
+        if self.n == 0:
+            self.t0 = float(rows[0, 0])
+        self.t_last = float(rows[-1, 0])
+        dt = np.diff(t)
+        if dt.size:
+            self.dt_sum += float(dt.sum())
+            self.dt_sq += float(dt @ dt)
+            self.dt_min = min(self.dt_min, float(dt.min()))
+            self.dt_max = max(self.dt_max, float(dt.max()))
+            self.hist += np.histogram(np.log10(np.maximum(dt, 1e-9)), _BINS)[0]
+            q, dq = ext[:, s["q"]], ext[:, s["dq"]]
+            if self.lay.nq == self.lay.nv:
+                fd = np.diff(q, axis=0) / dt[:, None]
+                mid = 0.5 * (dq[1:] + dq[:-1])
+                self.fd_sq += np.einsum("kj,kj->j", fd - mid, fd - mid)
+                self.mid_sq += np.einsum("kj,kj->j", mid, mid)
+                self.cross += np.einsum("kj,kj->j", fd, mid)
+        q = rows[:, s["q"]]
+        self.q_min = np.minimum(self.q_min, q.min(axis=0))
+        self.q_max = np.maximum(self.q_max, q.max(axis=0))
+        dq = rows[:, s["dq"]]
+        self.still += (np.abs(dq) < self.out.standstill_eps).sum(axis=0)
+        a = np.abs(rows[:, s["tau"]])
+        m = a.max(axis=0)
+        grew = m > self.tau_max
+        self.at_max[grew] = 0
+        self.tau_max = np.maximum(self.tau_max, m)
+        self.at_max += (a == self.tau_max).sum(axis=0)
+        if self.effort is not None:
+            self.saturated += (a >= 0.99 * self.effort).sum(axis=0)
+        self.n += rows.shape[0]
+        self.last = rows[-1:].copy()
+
+    def finish(self, n_dropped: int = 0, first_dropped: int | None = None) -> DataQuality:
+        """The summary, with its warnings."""
+        out = self.out
+        n = self.n
+        out.n_samples, out.n_dropped, out.first_dropped = n, n_dropped, first_dropped
+        out.t_start, out.t_end = self.t0, self.t_last
+        joints = out.joints
+        if n >= 2:
+            mean = self.dt_sum / (n - 1)
+            var = max(self.dt_sq / (n - 1) - mean * mean, 0.0)
+            out.rate = 1.0 / mean if mean > 0 else math.nan
+            out.jitter = math.sqrt(var) / mean if mean > 0 else math.nan
+            out.dt_min, out.dt_max = self.dt_min, self.dt_max
+            cdf = np.cumsum(self.hist)
+            median = 10 ** _BINS[int(np.searchsorted(cdf, cdf[-1] / 2)) + 1]
+            edge = int(np.searchsorted(_BINS, math.log10(GAP_FACTOR * median)))
+            out.n_gaps = int(self.hist[edge:].sum())
+            if out.n_gaps:
+                out.warnings.append(
+                    f"{out.n_gaps} gaps in time (steps over {GAP_FACTOR:g} x the median "
+                    f"{1e3 * median:.3g} ms; largest {1e3 * self.dt_max:.3g} ms)"
+                )
+        out.q_min, out.q_max = self.q_min.tolist(), self.q_max.tolist()
+        if n and np.abs(np.concatenate([self.q_min, self.q_max])).max() > 8 * math.pi:
+            out.warnings.append(
+                f"positions reach {np.abs(np.concatenate([self.q_min, self.q_max])).max():.1f}: "
+                "are they in degrees? manip_id expects radians (meters for prismatic joints)"
+            )
+        if n and self.lower is not None and self.upper is not None:
+            for i, name in enumerate(self.q_names):
+                lo, hi = self.lower[i], self.upper[i]
+                if np.isfinite(lo) and self.q_min[i] < lo:
+                    out.warnings.append(
+                        f"joint {name}: positions reach {self.q_min[i]:.4g}, "
+                        f"{lo - self.q_min[i]:.3g} below its lower limit {lo:.4g}"
+                    )
+                if np.isfinite(hi) and self.q_max[i] > hi:
+                    out.warnings.append(
+                        f"joint {name}: positions reach {self.q_max[i]:.4g}, "
+                        f"{self.q_max[i] - hi:.3g} above its upper limit {hi:.4g}"
+                    )
+        with np.errstate(divide="ignore", invalid="ignore"):
+            mism = np.sqrt(self.fd_sq / self.mid_sq)
+        out.velocity_mismatch = mism.tolist() if self.lay.nq == self.lay.nv else []
+        if self.lay.nq == self.lay.nv:
+            for j, name in enumerate(joints):
+                if self.mid_sq[j] > 0 and self.cross[j] < 0:
+                    out.warnings.append(
+                        f"joint {name}: dq has the opposite sign of dq/dt (of q): "
+                        "are velocity columns negated or swapped?"
+                    )
+                elif np.isfinite(mism[j]) and mism[j] > VELOCITY_MISMATCH:
+                    out.warnings.append(
+                        f"joint {name}: dq differs from dq/dt of q by {100 * mism[j]:.0f} % "
+                        "(RMS): other units, a lag, or columns of another joint?"
+                    )
+        out.standstill_share = (self.still / max(n, 1)).tolist()
+        out.tau_max = self.tau_max.tolist()
+        clipped = self.at_max / max(n, 1)
+        out.clipped_share = clipped.tolist()
+        for j, name in enumerate(joints):
+            if clipped[j] > CLIPPED_SHARE and self.at_max[j] > 2 and self.tau_max[j] > 0:
+                out.warnings.append(
+                    f"joint {name}: {100 * clipped[j]:.2g} % of the torques sit at the "
+                    f"largest value {self.tau_max[j]:.4g}: saturated or clipped?"
+                )
+        if self.effort is not None:
+            sat = self.saturated / max(n, 1)
+            out.saturated_share = sat.tolist()
+            for j, name in enumerate(joints):
+                if sat[j] > 0:
+                    out.warnings.append(
+                        f"joint {name}: {100 * sat[j]:.2g} % of the torques at >= 99 % of the "
+                        f"effort limit {self.effort[j]:.4g}"
+                    )
+        return out

@@ -1,0 +1,247 @@
+"""ROS 2 bags of ``sensor_msgs/msg/JointState``: read message by message, written as MCAP.
+
+Read with the pure-Python ``rosbags`` package (no ROS installation): a rosbag2
+folder (``metadata.yaml`` with MCAP or sqlite3 storage) or a bare ``.mcap`` /
+``.db3`` file. One topic is read: the one given, else the only JointState topic
+(an error lists them when there are several, or lists every topic when the one
+asked for is missing).
+
+Mapping, per message: ``position``, ``velocity``, ``effort`` -> q, dq, tau,
+matched by joint name to the joints asked for (the robot's, in its order; by
+default those of the first message). Messages may list the joints in any
+order and carry other joints; a message that lacks a joint, or has no
+velocities or efforts, is refused with its index. Time is ``header.stamp``
+[s], or the log time when the stamp is zero.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DataError
+from .layout import Layout
+
+JOINT_STATE = "sensor_msgs/msg/JointState"
+DEFAULT_TOPIC = "/joint_states"
+
+
+def is_bag(path: Path) -> bool:
+    """Whether ``path`` is a rosbag2 folder or a bare ``.mcap`` / ``.db3`` file."""
+    if path.is_dir():
+        return (path / "metadata.yaml").is_file()
+    return path.suffix.lower() in (".mcap", ".db3")
+
+
+def _typestore():
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_HUMBLE)
+
+
+def _open_reader(path: Path):
+    from rosbags.rosbag2 import Reader
+
+    try:
+        reader = Reader(path)
+        reader.open()
+    except Exception as exc:  # rosbags raises its own ReaderError, FileNotFoundError, ...
+        raise DataError(f"cannot read {path} as a ROS 2 bag: {exc}") from exc
+    return reader
+
+
+def _topics_text(reader) -> str:
+    items = sorted({(c.topic, c.msgtype) for c in reader.connections})
+    return ", ".join(f"{t} ({m})" for t, m in items) or "none"
+
+
+class BagSource:
+    """Rows of one JointState topic of a ROS 2 bag (see the module docstring).
+
+    Attributes: ``path``, ``format`` ("rosbag"), ``topic``, ``layout``,
+    ``joint_names``, ``n_rows`` (the topic's message count).
+    """
+
+    format = "rosbag"
+
+    def __init__(self, path: Path, topic: str | None = None, joint_names=None):
+        self.path = Path(path)
+        reader = _open_reader(self.path)
+        try:
+            conns = [c for c in reader.connections if c.msgtype == JOINT_STATE]
+            if topic is not None:
+                chosen = [c for c in reader.connections if c.topic == topic]
+                if not chosen:
+                    raise DataError(
+                        f"{self.path} has no topic {topic!r}; its topics: {_topics_text(reader)}"
+                    )
+                if chosen[0].msgtype != JOINT_STATE:
+                    raise DataError(
+                        f"topic {topic!r} of {self.path} carries {chosen[0].msgtype}, "
+                        f"not {JOINT_STATE}"
+                    )
+            else:
+                topics = sorted({c.topic for c in conns})
+                if not topics:
+                    raise DataError(
+                        f"{self.path} has no {JOINT_STATE} topic; "
+                        f"its topics: {_topics_text(reader)}"
+                    )
+                if len(topics) > 1:
+                    raise DataError(
+                        f"{self.path} has several {JOINT_STATE} topics: {', '.join(topics)}; "
+                        "choose one with --topic (topic=)"
+                    )
+                topic = topics[0]
+                chosen = [c for c in conns if c.topic == topic]
+            self.topic = topic
+            self._connections = chosen
+            self.n_rows = int(sum(c.msgcount for c in chosen))
+            first = None
+            for conn, _stamp, raw in reader.messages(connections=chosen):
+                first = self._decode(raw, conn.msgtype)
+                break
+        finally:
+            reader.close()
+        if first is None:
+            raise DataError(f"topic {topic!r} of {self.path} holds no message")
+        names = [str(n) for n in first.name]
+        if joint_names is None:
+            joint_names = names
+        self.joint_names = tuple(str(j) for j in joint_names)
+        missing = [j for j in self.joint_names if j not in names]
+        if missing:
+            raise DataError(
+                f"the JointState messages of {topic!r} in {self.path} lack joint(s) "
+                f"{', '.join(missing)} (they carry {', '.join(names)})"
+            )
+        nv = len(self.joint_names)
+        self.layout = Layout(nv, nv, False)
+
+    _store = None
+
+    def _decode(self, raw, msgtype):
+        if BagSource._store is None:
+            BagSource._store = _typestore()
+        return BagSource._store.deserialize_cdr(raw, msgtype)
+
+    def chunks(self, chunk: int, start: int = 0, stop: int | None = None) -> Iterator[np.ndarray]:
+        """Packed rows of messages ``start:stop``, ``chunk`` messages at a time."""
+        lay = self.layout
+        nv = lay.nv
+        wanted = self.joint_names
+        sq, sdq, stau = lay.slices["q"], lay.slices["dq"], lay.slices["tau"]
+        order_cache: dict[tuple, np.ndarray] = {}
+        reader = _open_reader(self.path)
+        try:
+            buf = np.empty((chunk, lay.width))
+            k = 0
+            for index, (conn, logtime, raw) in enumerate(
+                reader.messages(connections=self._connections)
+            ):
+                if index < start:
+                    continue
+                if stop is not None and index >= stop:
+                    break
+                msg = self._decode(raw, conn.msgtype)
+                key = tuple(msg.name)
+                idx = order_cache.get(key)
+                if idx is None:
+                    names = [str(n) for n in key]
+                    missing = [j for j in wanted if j not in names]
+                    if missing:
+                        raise DataError(
+                            f"{self.path}: message {index} of {self.topic!r} lists joints "
+                            f"{', '.join(names)}, without {', '.join(missing)}: the joint set "
+                            "changes within the log"
+                        )
+                    idx = np.array([names.index(j) for j in wanted], dtype=np.intp)
+                    order_cache[key] = idx
+                n_names = len(key)
+                for field in ("position", "velocity", "effort"):
+                    values = getattr(msg, field)
+                    if len(values) != n_names:
+                        what = "no" if len(values) == 0 else f"{len(values)} values of"
+                        raise DataError(
+                            f"{self.path}: message {index} of {self.topic!r} has {what} {field} "
+                            f"for its {n_names} joints; q, dq and tau need position, velocity "
+                            "and effort"
+                        )
+                sec, nsec = msg.header.stamp.sec, msg.header.stamp.nanosec
+                row = buf[k]
+                row[0] = sec + 1e-9 * nsec if (sec or nsec) else 1e-9 * logtime
+                row[sq] = np.asarray(msg.position)[idx]
+                row[sdq] = np.asarray(msg.velocity)[idx]
+                row[stau] = np.asarray(msg.effort)[idx]
+                k += 1
+                if k == chunk:
+                    yield buf.copy()
+                    k = 0
+            if k:
+                yield buf[:k].copy()
+        finally:
+            reader.close()
+        del nv
+
+
+def write_bag(path: Path, blocks, layout: Layout, joint_names=None, topic: str = DEFAULT_TOPIC):
+    """Write packed row blocks as JointState messages on ``topic`` with MCAP storage.
+
+    ``path`` ending in ``.mcap`` gives a bare MCAP file, any other a rosbag2
+    folder; either is written to a temporary first and renamed into place.
+    ``blocks()`` returns an iterator of packed rows (ddq is not written).
+    Stamps need ``t >= 0`` [s]: ``header.stamp`` and the log time both carry ``t``.
+    """
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    path = Path(path)
+    if path.exists() and path.is_dir() and not (path / "metadata.yaml").is_file():
+        raise DataError(f"{path} is a folder that is not a ROS 2 bag: refusing to replace it")
+    names = list(joint_names) if joint_names else [f"j{i}" for i in range(layout.nv)]
+    if layout.nq != layout.nv:
+        raise DataError(
+            f"a JointState bag carries one position per joint, but q has {layout.nq} columns "
+            f"for {layout.nv} joints"
+        )
+    store = _typestore()
+    JointState = store.types[JOINT_STATE]
+    Header = store.types["std_msgs/msg/Header"]
+    Time = store.types["builtin_interfaces/msg/Time"]
+    sq, sdq, stau = layout.slices["q"], layout.slices["dq"], layout.slices["tau"]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmpdir = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}."))
+    bag = tmpdir / "bag"
+    try:
+        with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+            conn = writer.add_connection(topic, JOINT_STATE, typestore=store)
+            for block in blocks():
+                if block.shape[0] and block[:, 0].min() < 0:
+                    raise DataError(f"cannot stamp negative times in a ROS bag ({path})")
+                for row in block:
+                    ns = int(round(row[0] * 1e9))
+                    msg = JointState(
+                        header=Header(stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id=""),
+                        name=names,
+                        position=np.ascontiguousarray(row[sq]),
+                        velocity=np.ascontiguousarray(row[sdq]),
+                        effort=np.ascontiguousarray(row[stau]),
+                    )
+                    writer.write(conn, ns, store.serialize_cdr(msg, JOINT_STATE))
+        if path.suffix.lower() == ".mcap":
+            produced = next(bag.glob("*.mcap"))
+            os.chmod(produced, 0o644)
+            os.replace(produced, path)
+        else:
+            old = None
+            if path.exists():
+                old = tmpdir / "old"
+                os.replace(path, old)
+            os.replace(bag, path)
+    finally:
+        shutil.rmtree(tmpdir, ignore_errors=True)
+    return path

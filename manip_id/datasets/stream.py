@@ -1,0 +1,303 @@
+"""Streamed reading: any supported file as packed row blocks, windowed, checked and scaled.
+
+:func:`open_source` opens a file by its :class:`~.spec.FileSpec` as a *source*:
+an object with ``path``, ``format``, ``layout`` (:class:`~.layout.Layout`),
+``joint_names``, ``n_rows`` (None when unknown before a pass) and
+``chunks(chunk, start=0, stop=None)``, which yields float64 packed rows (see
+:mod:`~.layout`) of raw rows ``start:stop``, a chunk at a time.
+:func:`iter_rows` turns a source into the rows a fit sees, in this order:
+
+1. the window: rows ``#A:#B``, or ``START <= t - t_0 < STOP`` [s] with ``t_0``
+   the first stamp;
+2. non-finite rows: refused (the error names the file, field, row and joint)
+   or, with ``drop_bad_rows``, dropped and counted;
+3. the value checks of :func:`~.core.check_values` on every field, and time
+   increasing strictly across blocks;
+4. the torque scale: ``tau_j <- G_j tau_j`` (drive gains [N m / A], gear ratios).
+
+Memory is O(chunk) whatever the file's length.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DataError, InputError
+from .core import Dataset, check_values
+from .layout import Layout
+from .spec import FileSpec, Window
+
+#: Rows per block read from a file.
+READ_CHUNK = 1 << 15
+
+#: Format names :func:`open_source` and :func:`~manip_id.datasets.load_dataset` know.
+FORMATS: tuple[str, ...] = ("npz", "csv", "panda_gaz2019", "rosbag")
+
+
+def infer_format(path: Path) -> str:
+    """The format of ``path`` from its suffix or folder contents."""
+    from .panda import PANDA_FILES, is_panda_log
+    from .rosbag import is_bag
+
+    if path.is_dir():
+        if is_panda_log(path):
+            return "panda_gaz2019"
+        if is_bag(path):
+            return "rosbag"
+        raise DataError(
+            f"{path} is a folder but neither a Panda log (expected "
+            f"{', '.join(PANDA_FILES.values())}) nor a ROS 2 bag (expected metadata.yaml)"
+        )
+    suffix = path.suffix.lower()
+    if suffix == ".npz":
+        return "npz"
+    if suffix in (".csv", ".txt"):
+        return "csv"
+    if suffix in (".mcap", ".db3"):
+        return "rosbag"
+    raise DataError(
+        f"unknown data format of {path} (suffix {suffix!r}); expected one of .npz, .csv, "
+        ".mcap, a ROS 2 bag folder or a Panda log folder, or pass format= one of "
+        + ", ".join(FORMATS)
+    )
+
+
+class MemorySource:
+    """A :class:`~.core.Dataset` in memory as a source (the Panda log, tests)."""
+
+    def __init__(self, dataset: Dataset, path: Path | str = "<memory>", format: str = "memory"):
+        self.dataset = dataset
+        self.path = Path(path)
+        self.format = format
+        self.layout = Layout(dataset.q.shape[1], dataset.nv, dataset.ddq is not None)
+        self.joint_names = dataset.joint_names
+        self.n_rows = dataset.n_samples
+
+    def chunks(self, chunk: int, start: int = 0, stop: int | None = None) -> Iterator[np.ndarray]:
+        d = self.dataset
+        stop = self.n_rows if stop is None else min(stop, self.n_rows)
+        for s in range(start, stop, chunk):
+            e = min(s + chunk, stop)
+            yield self.layout.pack(
+                d.t[s:e], d.q[s:e], d.dq[s:e], d.tau[s:e], None if d.ddq is None else d.ddq[s:e]
+            )
+
+
+def open_source(spec: FileSpec, joint_names=None):
+    """A streamed source for ``spec`` (see the module docstring).
+
+    ``joint_names``: the robot's joints in order; a ROS bag's messages are
+    matched to them by name (other formats keep the file's columns).
+    """
+    spec = spec if isinstance(spec, FileSpec) else FileSpec(Path(spec))
+    path = spec.path
+    if not path.exists():
+        raise DataError(f"no such data file or folder: {path}")
+    fmt = infer_format(path) if spec.format is None else str(spec.format).lower()
+    if fmt not in FORMATS:
+        raise DataError(
+            f"unknown data format {spec.format!r}; expected one of {', '.join(FORMATS)}"
+        )
+    if spec.columns is not None and fmt != "csv":
+        raise DataError(f"a column map applies to CSV files only, not to format {fmt!r} ({path})")
+    if spec.topic is not None and fmt != "rosbag":
+        raise DataError(f"a topic applies to ROS bags only, not to {path} (format {fmt!r})")
+    if fmt == "npz":
+        from .npz import NpzSource
+
+        return NpzSource(path)
+    if fmt == "csv":
+        from .csv import CsvSource
+
+        return CsvSource(path, spec.columns)
+    if fmt == "rosbag":
+        from .rosbag import BagSource
+
+        return BagSource(path, spec.topic, joint_names)
+    from .panda import load_panda_gaz2019
+
+    return MemorySource(load_panda_gaz2019(path), path, "panda_gaz2019")
+
+
+@dataclass
+class RowCounts:
+    """What :func:`iter_rows` saw: rows read in the window, dropped, where the first bad one was."""
+
+    n_read: int = 0
+    n_dropped: int = 0
+    first_dropped: int | None = None
+    dropped_fields: dict[str, int] = field(default_factory=dict)
+    t_file_start: float | None = None
+    n_file_rows: int | None = None
+
+
+def torque_scale_vector(scale, nv: int, what: str = "torque scale") -> np.ndarray | None:
+    """A per-joint torque scale of shape (nv,) from a scalar or nv values (None: no scale)."""
+    if scale is None:
+        return None
+    arr = np.atleast_1d(np.asarray(scale, dtype=float))
+    if arr.ndim != 1 or arr.size not in (1, nv):
+        raise InputError(f"{what} takes one value or one per joint ({nv}), got {arr.size} values")
+    if not np.isfinite(arr).all() or np.any(arr == 0):
+        raise InputError(f"{what} must be finite and non-zero, got {arr.tolist()}")
+    return np.broadcast_to(arr, (nv,)).copy()
+
+
+def _field_of(layout: Layout, col: int) -> tuple[str, int]:
+    for name, s in layout.slices.items():
+        if s.start <= col < s.stop:
+            return name, col - s.start
+    return "?", col
+
+
+def iter_rows(
+    source,
+    window: Window | None = None,
+    *,
+    torque_scale=None,
+    drop_bad_rows: bool = False,
+    chunk: int = READ_CHUNK,
+    counts: RowCounts | None = None,
+) -> Iterator[np.ndarray]:
+    """Packed rows of ``source`` as a fit sees them (see the module docstring).
+
+    ``counts`` (a :class:`RowCounts`) is filled as the rows go by. Errors name
+    the file; raw row indices are 0-based rows of the file.
+    """
+    lay: Layout = source.layout
+    path = source.path
+    names = source.joint_names
+    scale = torque_scale_vector(torque_scale, lay.nv)
+    counts = RowCounts() if counts is None else counts
+    t_col = 0
+    start = stop = None
+    if window is not None and window.unit == "index":
+        start, stop = window.start or 0, window.stop
+    previous_t: float | None = None
+    previous_row = -1
+    row = start or 0  # raw index of the next row
+    t0 = None
+    kept_any = False
+    for block in source.chunks(int(chunk), start or 0, stop):
+        k = block.shape[0]
+        raw = np.arange(row, row + k)
+        row += k
+        finite = np.isfinite(block).all(axis=1)
+        if t0 is None:
+            ft = np.flatnonzero(np.isfinite(block[:, t_col]))
+            if ft.size:
+                t0 = float(block[ft[0], t_col])
+                counts.t_file_start = t0
+        if not finite.all():
+            if not drop_bad_rows:
+                for name, s in lay.slices.items():
+                    cols = names if name != "t" and name != "q" else None
+                    try:
+                        arr = block[:, s] if name != "t" else block[:, 0]
+                        check_values(name, arr, arr.ndim, cols, offset=int(raw[0]))
+                    except DataError as exc:
+                        raise DataError(
+                            f"{path}: {exc} (pass --drop-bad-rows / drop_bad_rows=True to "
+                            "drop such rows)"
+                        ) from exc
+            bad = np.flatnonzero(~finite)
+            if counts.first_dropped is None:
+                counts.first_dropped = int(raw[bad[0]])
+            for b in bad:
+                col = int(np.flatnonzero(~np.isfinite(block[b]))[0])
+                fname, _ = _field_of(lay, col)
+                counts.dropped_fields[fname] = counts.dropped_fields.get(fname, 0) + 1
+            counts.n_dropped += bad.size
+            block, raw = block[finite], raw[finite]
+        if window is not None and window.unit == "s" and block.shape[0]:
+            rel = block[:, t_col] - t0
+            inside = np.ones(rel.shape, dtype=bool)
+            if window.start is not None:
+                inside &= rel >= window.start
+            if window.stop is not None:
+                inside &= rel < window.stop
+            past = window.stop is not None and rel[-1] >= window.stop
+            block, raw = block[inside], raw[inside]
+            if past and not block.shape[0]:
+                break
+        if not block.shape[0]:
+            continue
+        for name, s in lay.slices.items():
+            if name == "t":
+                check_values("t", block[:, 0], 1, offset=int(raw[0]))
+            else:
+                check_values(name, block[:, s], 2, names if name != "q" else None, int(raw[0]))
+        t = block[:, t_col]
+        try:
+            if previous_t is not None and not t[0] > previous_t:
+                raise DataError(
+                    f"time must increase strictly: t[{raw[0]}]={t[0]} after "
+                    f"t[{previous_row}]={previous_t}"
+                )
+            dt = np.diff(t)
+            if np.any(dt <= 0):
+                i = int(np.argmax(dt <= 0)) + 1
+                raise DataError(
+                    f"time must increase strictly: t[{raw[i]}]={t[i]} after "
+                    f"t[{raw[i - 1]}]={t[i - 1]}"
+                )
+        except DataError as exc:
+            raise DataError(f"{path}: {exc}") from exc
+        previous_t, previous_row = float(t[-1]), int(raw[-1])
+        if scale is not None:
+            block = block.copy() if not block.flags.writeable else block
+            block[:, lay.slices["tau"]] *= scale
+        counts.n_read += block.shape[0]
+        kept_any = True
+        yield block
+        if window is not None and window.unit == "s" and window.stop is not None:
+            if block[-1, t_col] - t0 >= window.stop:
+                break
+    counts.n_file_rows = row if window is None or window.unit == "index" else None
+    _check_window(source, window, counts, row, t0, previous_t, kept_any)
+
+
+def _check_window(source, window, counts: RowCounts, rows_seen: int, t0, t_last, kept: bool):
+    path = source.path
+    if window is None:
+        if not kept:
+            raise DataError(f"{path} holds no usable samples")
+        return
+    if window.unit == "index":
+        n = source.n_rows if source.n_rows is not None else rows_seen
+        if (window.start or 0) >= n:
+            raise DataError(
+                f"the window @{window} of {path} starts after its {n} samples (rows 0 .. {n - 1})"
+            )
+        if window.stop is not None and window.stop > n:
+            warnings.warn(
+                f"the window @{window} of {path} ends after its {n} samples: kept rows "
+                f"{window.start or 0} .. {n - 1}",
+                stacklevel=3,
+            )
+    if not kept:
+        span = ""
+        if t0 is not None and window.unit == "s":
+            span = f" (its first stamp is t_0 = {t0:g} s)"
+        raise DataError(f"the window @{window} of {path} holds no sample{span}")
+
+
+def collect(rows: Iterator[np.ndarray], layout: Layout, joint_names, meta=None) -> Dataset:
+    """A :class:`~.core.Dataset` from packed row blocks (everything in memory)."""
+    blocks = list(rows)
+    data = np.vstack(blocks) if blocks else np.empty((0, layout.width))
+    f = layout.unpack(data)
+    return Dataset(
+        t=f["t"],
+        q=f["q"],
+        dq=f["dq"],
+        tau=f["tau"],
+        ddq=f.get("ddq"),
+        joint_names=joint_names,
+        meta=dict(meta or {}),
+    )

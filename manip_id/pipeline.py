@@ -1,0 +1,398 @@
+"""One data file -> its information sums, read in chunks with bounded memory.
+
+The unit of work of offline identification from logs is one file (or one
+window of it), processed on its own: its own filter edges and trimming, its
+own data-quality summary. For a file spec (path and optional window,
+:class:`~manip_id.datasets.FileSpec`) and :class:`PreprocessOptions`,
+:func:`accumulate_file` makes two passes over the file:
+
+1. scan (:func:`scan_file`): the rows a fit sees (window, NaN rows refused or
+   dropped, torque scale ``tau_j <- G_j tau_j``), checked block by block, with
+   the data-quality summary (:class:`~manip_id.datasets.quality.DataQuality`)
+   and the statistics that fix the sampling grid (count, first and last stamp,
+   smallest and largest step);
+2. accumulate: the rows again, preprocessed in overlapping blocks when the file
+   has no accelerations or filtering was asked for
+   (:func:`manip_id.signals.preprocess_blocks`, equal to the in-memory
+   :func:`~manip_id.signals.preprocess` to round-off), the base-column
+   regressor rows and the per-joint sums ``A_j = sum Y_j^T Y_j``,
+   ``b_j = sum Y_j^T tau_j``, ``zz_j = sum tau_j^2`` of the samples where
+   ``|dq_j| >= eps`` (velocity deadband; all samples without one).
+
+Memory is O(block * width + nv r^2) whatever the number of samples. Files
+merge by adding their accumulators (:meth:`InformationAccumulator.merge`), so
+files can be processed anywhere (processes, Dask workers) and summed; the
+validation error of a file for any estimate follows from its sums alone
+(:meth:`FileAccumulation.validation_sums`).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .datasets import FileSpec, Layout, RowCounts, iter_rows, open_source, parse_file_spec
+from .datasets.quality import DataQuality, QualityAccumulator
+from .datasets.stream import READ_CHUNK, torque_scale_vector
+from .errors import DataError, InputError
+from .estimators import InformationAccumulator
+from .regressor import DEFAULT_CHUNK
+from .robot import Robot
+from .signals import DEFAULT_BLOCK, DEFAULT_CUTOFF, DEFAULT_ORDER, PreprocessSettings
+
+
+@dataclass(frozen=True)
+class PreprocessOptions:
+    """How each file is read and preprocessed (one set for every file of a run).
+
+    Attributes
+    ----------
+    cutoff: low-pass cut-off [Hz]; None: :data:`~manip_id.signals.DEFAULT_CUTOFF`
+        when the file has no ddq, no filtering when it has.
+    order: Butterworth order of the one-way filter.
+    trim: seconds dropped at each end of each file (window); None: the filter's
+        edge transient.
+    decimate: keep every D-th sample after filtering.
+    rate: resampling rate [Hz]; None: the file's mean rate when its steps jitter.
+    velocity: "measured" (filter the logged dq) or "differentiate" (dq from q).
+    filter_torque: low-pass the torques too.
+    torque_scale: one gain, or one per joint (nv): ``tau_j <- G_j tau_j``
+        (drive gains [N m/A] from currents, gear ratios); None: 1.
+    velocity_deadband: eps [rad/s or m/s]; the rows of joint j with
+        ``|dq_j| < eps`` are left out of the fit and of the error figures.
+    drop_bad_rows: drop (and count) rows holding NaN/Inf instead of refusing the file.
+    read_chunk: rows per block read from the file.
+    block: rows per block of the blocked preprocessing.
+    """
+
+    cutoff: float | None = None
+    order: int = DEFAULT_ORDER
+    trim: float | None = None
+    decimate: int = 1
+    rate: float | None = None
+    velocity: str = "measured"
+    filter_torque: bool = True
+    torque_scale: float | tuple[float, ...] | None = None
+    velocity_deadband: float | None = None
+    drop_bad_rows: bool = False
+    read_chunk: int = READ_CHUNK
+    block: int = DEFAULT_BLOCK
+
+    def __post_init__(self):
+        ts = self.torque_scale
+        if ts is not None and not np.isscalar(ts):
+            object.__setattr__(self, "torque_scale", tuple(float(g) for g in np.ravel(ts)))
+        eps = self.velocity_deadband
+        if eps is not None and not (np.isfinite(eps) and eps > 0):
+            raise InputError(f"the velocity deadband must be positive [rad/s], got {eps}")
+        if int(self.decimate) != self.decimate or self.decimate < 1:
+            raise InputError(f"decimate must be a positive integer, got {self.decimate}")
+        if self.trim is not None and not self.trim >= 0:
+            raise InputError(f"trim must be >= 0 seconds, got {self.trim}")
+        if self.cutoff is not None and not self.cutoff > 0:
+            raise InputError(f"the cut-off must be positive [Hz], got {self.cutoff}")
+
+    def preprocesses(self, has_ddq: bool) -> bool:
+        """Whether a file with (or without) ddq is filtered and differentiated."""
+        return (
+            not has_ddq
+            or self.cutoff is not None
+            or self.decimate != 1
+            or self.trim is not None
+            or self.rate is not None
+        )
+
+    def to_dict(self) -> dict:
+        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+
+
+@dataclass(frozen=True)
+class FileScan:
+    """The first pass over one file: what it holds, its quality, its time statistics."""
+
+    spec: FileSpec
+    format: str
+    layout: Layout
+    joint_names: tuple[str, ...]
+    quality: DataQuality
+    n: int
+    t_first: float
+    t_last: float
+    dt_min: float
+    dt_max: float
+    counts: RowCounts
+
+
+@dataclass
+class FileAccumulation:
+    """The information of one file: sums, quality summary, preprocessing, rows left out.
+
+    Attributes
+    ----------
+    spec: the file and its window.
+    accumulator: per-joint sums of the base-column regressor rows (r columns).
+    quality: the data-quality summary of the rows read.
+    n_samples: samples accumulated (after preprocessing: trimmed, decimated).
+    excluded: rows left out per joint by the velocity deadband, shape (nv,).
+    settings: the preprocessing applied (None: the file's ddq used as is).
+    torque_scale: the per-joint scale applied, shape (nv,), or None.
+    timings: seconds per stage ("scan", "accumulate", ...).
+    """
+
+    spec: FileSpec
+    accumulator: InformationAccumulator
+    quality: DataQuality
+    n_samples: int
+    excluded: np.ndarray
+    settings: PreprocessSettings | None
+    torque_scale: np.ndarray | None
+    timings: dict = field(default_factory=dict)
+
+    def validation_sums(self, estimate) -> tuple[np.ndarray, np.ndarray]:
+        """Per joint ``||tau_j - Y_j theta||^2`` and ``||tau_j||^2`` on this file, each (nv,).
+
+        From the sums alone (``zz_j - 2 b_j.theta + theta.A_j.theta``): no pass
+        over the data, floor about 1e-8 relative on the error.
+        """
+        acc = self.accumulator
+        return acc.residual_sum_of_squares(estimate), acc.zz_joint
+
+    def relative_error(self, estimate) -> tuple[float, np.ndarray]:
+        """``||tau - tau_hat|| / ||tau||`` over the file and per joint (nv,)."""
+        sse, zz = self.validation_sums(estimate)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            per = np.sqrt(sse / zz)
+        return (float(np.sqrt(sse.sum() / zz.sum())) if zz.sum() > 0 else float("nan")), per
+
+    def summary(self, joints) -> dict:
+        """JSON-ready: file, window, samples, rows left out per joint, preprocessing."""
+        s = self.settings
+        return {
+            "file": str(self.spec.path),
+            "window": None if self.spec.window is None else str(self.spec.window),
+            "n_samples": int(self.n_samples),
+            "excluded_rows": dict(zip(joints, map(int, self.excluded), strict=True)),
+            "preprocess": None if s is None else {k: getattr(s, k) for k in s.__dataclass_fields__},
+            "torque_scale": None if self.torque_scale is None else self.torque_scale.tolist(),
+        }
+
+
+def _check_layout(robot: Robot, src, spec: FileSpec) -> tuple[str, ...]:
+    lay = src.layout
+    if lay.nq != robot.nq or lay.nv != robot.nv:
+        raise DataError(
+            f"{spec.label}: the data have {lay.nv} joints ({lay.nq} positions) but robot "
+            f"{robot.name!r} has nq={robot.nq}, nv={robot.nv}"
+        )
+    names = src.joint_names
+    if names is not None and list(names) != list(robot.dof_names):
+        if set(names) == set(robot.dof_names):
+            raise DataError(
+                f"{spec.label}: the data's joints are in the order {list(names)} but robot "
+                f"{robot.name!r} expects {list(robot.dof_names)}"
+            )
+        extra = [n for n in names if n not in robot.dof_names]
+        raise DataError(
+            f"{spec.label}: the data name joints {extra} that robot {robot.name!r} does not "
+            f"have (its joints: {list(robot.dof_names)})"
+        )
+    return tuple(robot.dof_names)
+
+
+def _open(robot: Robot, spec: FileSpec):
+    try:
+        src = open_source(spec, joint_names=list(robot.dof_names))
+    except DataError as exc:
+        msg = str(exc)
+        raise DataError(msg if str(spec.path) in msg else f"{spec.label}: {msg}") from exc
+    return src, _check_layout(robot, src, spec)
+
+
+def _rows(src, spec: FileSpec, options: PreprocessOptions, counts: RowCounts):
+    scale = torque_scale_vector(options.torque_scale, src.layout.nv, "--torque-scale")
+    return iter_rows(
+        src,
+        spec.window,
+        torque_scale=scale,
+        drop_bad_rows=options.drop_bad_rows,
+        chunk=options.read_chunk,
+        counts=counts,
+    )
+
+
+def scan_file(robot: Robot, spec, options: PreprocessOptions | None = None) -> FileScan:
+    """The first pass over one file: its rows checked, its quality summary (see module)."""
+    spec = parse_file_spec(spec)
+    options = options or PreprocessOptions()
+    src, joints = _open(robot, spec)
+    qa = QualityAccumulator(
+        src.layout,
+        joints,
+        file=str(spec.path),
+        format=src.format,
+        window=None if spec.window is None else str(spec.window),
+        lower=robot.lower,
+        upper=robot.upper,
+        effort_limit=robot.effort_limit,
+        standstill_eps=options.velocity_deadband,
+    )
+    counts = RowCounts()
+    try:
+        for rows in _rows(src, spec, options, counts):
+            qa.add(rows)
+    except DataError as exc:
+        msg = str(exc)
+        raise DataError(msg if str(spec.path) in msg else f"{spec.label}: {msg}") from exc
+    quality = qa.finish(counts.n_dropped, counts.first_dropped)
+    if quality.n_samples < 2:
+        raise DataError(f"{spec.label}: {quality.n_samples} usable sample(s); need at least 2")
+    return FileScan(
+        spec=spec,
+        format=src.format,
+        layout=src.layout,
+        joint_names=joints,
+        quality=quality,
+        n=quality.n_samples,
+        t_first=quality.t_start,
+        t_last=quality.t_end,
+        dt_min=quality.dt_min,
+        dt_max=quality.dt_max,
+        counts=counts,
+    )
+
+
+def iter_processed(
+    robot: Robot, spec, options: PreprocessOptions | None = None, scan: FileScan | None = None
+) -> tuple[PreprocessSettings | None, Iterator[np.ndarray]]:
+    """The rows of one file as the fit sees them: packed ``t | q | dq | tau | ddq`` blocks.
+
+    Returns ``(settings, blocks)``; ``settings`` is None when the file's own
+    ddq is used as is. ``scan`` (from :func:`scan_file`) is made when not given.
+    """
+    spec = parse_file_spec(spec)
+    options = options or PreprocessOptions()
+    scan = scan_file(robot, spec, options) if scan is None else scan
+    src, _ = _open(robot, spec)
+    lay = src.layout
+    rows = _rows(src, spec, options, RowCounts())
+    if not options.preprocesses(lay.has_ddq):
+        return None, rows
+    from .signals import preprocess_blocks
+
+    try:
+        settings, blocks = preprocess_blocks(
+            rows,
+            lay.nq,
+            lay.nv,
+            n=scan.n,
+            t_first=scan.t_first,
+            t_last=scan.t_last,
+            dt_min=scan.dt_min,
+            dt_max=scan.dt_max,
+            cutoff=DEFAULT_CUTOFF if options.cutoff is None else options.cutoff,
+            order=options.order,
+            rate=options.rate,
+            decimate=options.decimate,
+            trim=options.trim,
+            velocity=options.velocity,
+            filter_torque=options.filter_torque,
+            block=options.block,
+        )
+    except (InputError, DataError) as exc:
+        raise type(exc)(f"{spec.label}: {exc}") from exc
+    return settings, blocks
+
+
+def accumulate_file(
+    robot: Robot,
+    spec,
+    options: PreprocessOptions | None = None,
+    base_columns=None,
+    *,
+    chunk: int = DEFAULT_CHUNK,
+    scan: FileScan | None = None,
+    progress=None,
+) -> FileAccumulation:
+    """The information sums of one file (see the module docstring).
+
+    Parameters
+    ----------
+    robot: the robot (its joint terms decide the columns).
+    spec: a :class:`~manip_id.datasets.FileSpec`, or its text ``PATH[@START:STOP|@#A:#B]``.
+    options: :class:`PreprocessOptions` (default: all defaults).
+    base_columns: indices of the regressor columns to accumulate, shape (r,)
+        (``analyze(robot).base.independent``); default the structural base.
+    chunk: samples per regressor chunk.
+    scan: the file's :func:`scan_file`, when already made.
+    progress: called as ``progress(samples_done)`` after each block.
+
+    Returns
+    -------
+    :class:`FileAccumulation`. Raises :class:`DataError` naming the file.
+    """
+    from .identification import _accumulate_blocks
+
+    timings: dict[str, float] = {}
+    spec = parse_file_spec(spec)
+    options = options or PreprocessOptions()
+    if base_columns is None:
+        from .identifiability import analyze
+
+        base_columns = analyze(robot).base.independent
+    ind = np.asarray(base_columns, dtype=np.intp)
+    t0 = time.perf_counter()
+    if scan is None:
+        scan = scan_file(robot, spec, options)
+    timings["scan"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    settings, blocks = iter_processed(robot, spec, options, scan)
+    nv, nq = robot.nv, robot.nq
+    eps = options.velocity_deadband
+    deadband = None if eps is None else np.full(nv, float(eps))
+    excluded = np.zeros(nv, dtype=np.int64)
+    state = {"n": 0}
+
+    def states():
+        for rows in blocks:
+            q = rows[:, 1 : 1 + nq]
+            dq = rows[:, 1 + nq : 1 + nq + nv]
+            tau = rows[:, 1 + nq + nv : 1 + nq + 2 * nv]
+            ddq = rows[:, 1 + nq + 2 * nv : 1 + nq + 3 * nv]
+            if deadband is not None:
+                excluded[:] += (np.abs(dq) < deadband).sum(axis=0)
+            state["n"] += rows.shape[0]
+            yield q, dq, ddq, tau
+            if progress is not None:
+                progress(state["n"])
+
+    try:
+        acc, times = _accumulate_blocks(robot, states(), ind, int(chunk), deadband=deadband)
+    except (InputError, DataError) as exc:
+        msg = str(exc)
+        raise DataError(msg if str(spec.path) in msg else f"{spec.label}: {msg}") from exc
+    timings.update(times)
+    timings["accumulate_total"] = time.perf_counter() - t0
+    scale = torque_scale_vector(options.torque_scale, nv, "--torque-scale")
+    return FileAccumulation(
+        spec=spec,
+        accumulator=acc,
+        quality=scan.quality,
+        n_samples=state["n"],
+        excluded=excluded,
+        settings=settings,
+        torque_scale=scale,
+        timings=timings,
+    )
+
+
+__all__ = [
+    "FileAccumulation",
+    "FileScan",
+    "PreprocessOptions",
+    "accumulate_file",
+    "iter_processed",
+    "scan_file",
+]
