@@ -23,6 +23,9 @@ joint's position is added to the angle before it is stored as (cos, sin).
 The dataset's ``ddq`` is the exact (analytic) acceleration. The torque, the
 position and the velocity noise, and the parameter perturbation, draw from
 independent streams of one seed, so switching one on does not change the others.
+Each stream is drawn per block of :data:`NOISE_BLOCK` samples from its own
+generator, so a record is produced block by block (:class:`SimulationStream`,
+memory ``8 N nv`` bytes plus one block) with the same samples as :func:`simulate`.
 
 Perturbed parameters (:func:`perturb_parameters`) stay physically consistent:
 each body keeps a positive mass and an inertia at the centre of mass that is
@@ -198,6 +201,65 @@ def inverse_dynamics(robot: Robot, theta, q, dq, ddq) -> np.ndarray:
     return tau
 
 
+#: Share of the available memory a simulation may take.
+MEMORY_SHARE = 0.5
+#: Relative eigenvalue tolerance: a body's pseudo-inertia may be singular (a point mass,
+#: a massless frame) but not indefinite (``lambda_min < -tol * max |lambda|``).
+PSD_TOLERANCE = 1e-10
+
+
+def simulation_bytes(robot: Robot, n_samples: int) -> int:
+    """Estimated peak memory [bytes] of :func:`simulate` for ``n_samples`` samples.
+
+    float64 arrays: t (N), angles, dq, ddq, tau_true, tau, the noise draws, dq_meas
+    (about 10 N nv) and q, q_meas (2 N nq), plus a copy of each in the dataset checks.
+    """
+    return int(8 * n_samples * (1 + 10 * robot.nv + 3 * robot.nq) * 2)
+
+
+def check_simulation_memory(robot: Robot, n_samples: int) -> None:
+    """Raise :class:`~manip_id.errors.ResourceError` if the simulation would not fit in memory."""
+    import psutil
+
+    from .errors import ResourceError
+
+    need = simulation_bytes(robot, n_samples)
+    available = psutil.virtual_memory().available
+    if need > MEMORY_SHARE * available:
+        raise ResourceError(
+            f"a simulation of {n_samples:.3g} samples of {robot.nv} joints needs about "
+            f"{need / 2**30:.3g} GiB, more than {MEMORY_SHARE:.0%} of the "
+            f"{available / 2**30:.3g} GiB available; shorten the duration or lower the rate"
+        )
+
+
+def require_physical(robot: Robot, theta) -> None:
+    """Raise unless ``theta`` can be simulated: every body physically realizable.
+
+    A body fails when its pseudo-inertia has a negative eigenvalue (negative mass,
+    inertia not positive semi-definite about the centre of mass, triangle inequalities
+    broken), and a joint when its armature or viscous / Coulomb friction is negative
+    (:func:`manip_id.consistency.check_consistency`); the message names the body.
+    A singular pseudo-inertia (a point mass, a massless frame) is accepted.
+    """
+    from .consistency import PhysicalConsistencyError, check_consistency
+
+    report = check_consistency(robot, theta)
+    if report.consistent:
+        return
+    indefinite = {
+        name
+        for name, low, high in zip(
+            report.body_names, report.min_eigenvalues, report.max_eigenvalues, strict=True
+        )
+        if low < -PSD_TOLERANCE * max(abs(low), abs(high))
+    }
+    bodies = set(report.body_names)
+    violations = [v for v in report.violations if v.name in indefinite or v.name not in bodies]
+    if violations:
+        raise PhysicalConsistencyError(f"robot {robot.name!r} to simulate", violations)
+
+
 def simulate(
     robot: Robot,
     trajectory: FourierTrajectory,
@@ -230,71 +292,255 @@ def simulate(
     -------
     :class:`SimulatedData` with the dataset and ``theta_true``.
     """
-    if not isinstance(trajectory, FourierTrajectory):
-        raise InputError(f"expected a FourierTrajectory, got {type(trajectory).__name__}")
-    if trajectory.nv != robot.nv:
-        raise InputError(f"trajectory.nv={trajectory.nv} but robot.nv={robot.nv}")
-    duration, rate = float(duration), float(rate)
-    if not (math.isfinite(duration) and duration > 0):
-        raise InputError(f"duration must be a positive time [s], got {duration}")
-    if not (math.isfinite(rate) and rate > 0):
-        raise InputError(f"rate must be a positive sampling rate [Hz], got {rate}")
-    n = int(math.floor(duration * rate + 1e-9)) + 1
-    if n < 2:
-        raise InputError(f"duration * rate = {duration * rate:g} gives fewer than 2 samples")
-    perturb = _nonnegative(perturb, "perturb")
-    noise_tau = _nonnegative(noise_tau, "noise_tau")
-    noise_q = _nonnegative(noise_q, "noise_q")
-    noise_dq = _nonnegative(noise_dq, "noise_dq")
-    g_theta, g_tau, g_q, g_dq = _streams(seed)
-
-    base = robot.nominal_parameters if theta is None else _check_theta(robot, theta)
-    theta_true = perturb_parameters(robot, perturb, seed=int(g_theta.integers(2**63)), theta=base)
-
-    t = np.arange(n) / rate
-    angles, dq, ddq = trajectory.sample(t)
-    q = trajectory_to_configuration(robot, angles)
-    tau_true = inverse_dynamics(robot, theta_true, q, dq, ddq)
-
-    tau = tau_true
-    if noise_tau > 0:
-        rms = np.sqrt(np.mean(tau_true**2, axis=0))
-        tau = tau_true + noise_tau * rms * g_tau.standard_normal(tau_true.shape)
-    q_meas = q
-    if noise_q > 0:
-        q_meas = trajectory_to_configuration(
-            robot, angles + noise_q * g_q.standard_normal(angles.shape)
-        )
-    dq_meas = dq + noise_dq * g_dq.standard_normal(dq.shape) if noise_dq > 0 else dq
-    dataset = Dataset(
-        t=t,
-        q=q_meas,
-        dq=dq_meas,
-        tau=tau,
-        ddq=ddq,
-        joint_names=tuple(robot.dof_names),
-        meta={
-            "source": "simulation",
-            "robot": robot.name,
-            "perturb": perturb,
-            "noise_tau": noise_tau,
-            "noise_q": noise_q,
-            "noise_dq": noise_dq,
-            "rate": rate,
-            "seed": int(seed),
-        },
-    )
-    return SimulatedData(
-        dataset=dataset,
-        theta_true=theta_true,
-        tau_true=tau_true,
+    stream = SimulationStream(
+        robot,
+        trajectory,
+        duration=duration,
+        rate=rate,
+        theta=theta,
+        perturb=perturb,
         noise_tau=noise_tau,
         noise_q=noise_q,
         noise_dq=noise_dq,
-        perturb=perturb,
-        rate=rate,
-        seed=int(seed),
+        seed=seed,
     )
+    check_simulation_memory(robot, stream.n_samples)
+    return stream.simulated_data()
 
 
-__all__ = ["SimulatedData", "inverse_dynamics", "perturb_parameters", "simulate"]
+#: Samples per noise block. The noise of sample ``k`` is drawn from generators of
+#: its block ``k // NOISE_BLOCK`` alone, so any range of samples is regenerated
+#: exactly, in any order, in any process (:class:`SimulationStream`).
+NOISE_BLOCK = 65536
+
+
+def _block_generator(seed: int, stream: int, block: int) -> np.random.Generator:
+    """Generator of one noise stream (1 torque, 2 position, 3 velocity) for one block.
+
+    ``SeedSequence(seed, spawn_key=(stream, block))`` is the ``block``-th child of
+    the ``stream``-th child of ``SeedSequence(seed)``: independent of every other
+    (stream, block) pair and of the parameter draw (stream 0).
+    """
+    return np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(stream, block)))
+
+
+class SimulationStream:
+    """A simulated record produced in blocks of samples: memory independent of its length.
+
+    The same measurements as :func:`simulate` (which materializes this stream),
+    generated for any sample range ``[start, stop)`` on demand: the trajectory
+    and the noise are recomputed per block (noise per :data:`NOISE_BLOCK`
+    samples, module docstring); the noise-free torques ``tau_true`` of the
+    whole record are computed once, on first use (the torque noise is relative
+    to their RMS over the record). Memory: ``8 N nv`` bytes for ``tau_true``
+    plus O(NOISE_BLOCK (nq + nv)) per block in flight.
+
+    Parameters are those of :func:`simulate`.
+
+    Attributes
+    ----------
+    robot, trajectory: as given.
+    theta_true: the parameters that produce the torques, shape (p,).
+    n_samples: number of samples ``N = floor(duration rate) + 1``.
+    rate: sampling rate [Hz]; sample ``k`` is at ``t_k = k / rate`` [s].
+    noise_tau, noise_q, noise_dq, perturb, seed: as given (validated).
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        trajectory: FourierTrajectory,
+        *,
+        duration: float,
+        rate: float,
+        theta=None,
+        perturb: float = 0.0,
+        noise_tau: float = 0.0,
+        noise_q: float = 0.0,
+        noise_dq: float = 0.0,
+        seed: int = 0,
+    ):
+        if not isinstance(trajectory, FourierTrajectory):
+            raise InputError(f"expected a FourierTrajectory, got {type(trajectory).__name__}")
+        if trajectory.nv != robot.nv:
+            raise InputError(f"trajectory.nv={trajectory.nv} but robot.nv={robot.nv}")
+        duration, rate = float(duration), float(rate)
+        if not (math.isfinite(duration) and duration > 0):
+            raise InputError(f"duration must be a positive time [s], got {duration}")
+        if not (math.isfinite(rate) and rate > 0):
+            raise InputError(f"rate must be a positive sampling rate [Hz], got {rate}")
+        n = int(math.floor(duration * rate + 1e-9)) + 1
+        if n < 2:
+            raise InputError(f"duration * rate = {duration * rate:g} gives fewer than 2 samples")
+        self.robot = robot
+        self.trajectory = trajectory
+        self.n_samples = n
+        self.rate = rate  # [Hz]
+        self.perturb = _nonnegative(perturb, "perturb")
+        self.noise_tau = _nonnegative(noise_tau, "noise_tau")
+        self.noise_q = _nonnegative(noise_q, "noise_q")  # [rad or m]
+        self.noise_dq = _nonnegative(noise_dq, "noise_dq")  # [rad/s or m/s]
+        self.seed = int(seed)
+        base = robot.nominal_parameters if theta is None else _check_theta(robot, theta)
+        require_physical(robot, base)
+        g_theta = _streams(self.seed)[0]
+        self.theta_true = perturb_parameters(
+            robot, self.perturb, seed=int(g_theta.integers(2**63)), theta=base
+        )
+        self._tau_true: np.ndarray | None = None
+        self._rms: np.ndarray | None = None
+
+    @property
+    def nbytes(self) -> int:
+        """Memory [bytes] the stream keeps: ``tau_true`` (N, nv) float64."""
+        return 8 * self.n_samples * self.robot.nv
+
+    def _noise_free(self, start: int, stop: int):
+        """t [s], angles, q, dq, ddq of samples ``[start, stop)`` without noise."""
+        t = np.arange(start, stop) / self.rate  # [s]
+        angles, dq, ddq = self.trajectory.sample(t)
+        return t, angles, trajectory_to_configuration(self.robot, angles), dq, ddq
+
+    @property
+    def tau_true(self) -> np.ndarray:
+        """Noise-free torques of the whole record [N m or N], shape (N, nv) (computed once)."""
+        if self._tau_true is None:
+            _check_memory(self.nbytes, f"the noise-free torques of {self.n_samples:.3g} samples")
+            tau = np.empty((self.n_samples, self.robot.nv))  # [N m or N]
+            for lo in range(0, self.n_samples, NOISE_BLOCK):
+                hi = min(lo + NOISE_BLOCK, self.n_samples)
+                _, _, q, dq, ddq = self._noise_free(lo, hi)
+                tau[lo:hi] = inverse_dynamics(self.robot, self.theta_true, q, dq, ddq)
+            self._tau_true = tau
+        return self._tau_true
+
+    @property
+    def tau_rms(self) -> np.ndarray:
+        """RMS of each joint's noise-free torque over the record [N m or N], shape (nv,)."""
+        if self._rms is None:
+            self._rms = np.sqrt(np.mean(self.tau_true**2, axis=0))
+        return self._rms
+
+    def _range(self, start: int, stop: int | None) -> tuple[int, int]:
+        stop = self.n_samples if stop is None else int(stop)
+        start = int(start)
+        if not 0 <= start <= stop <= self.n_samples:
+            raise InputError(f"sample range [{start}, {stop}) is not within [0, {self.n_samples}]")
+        return start, stop
+
+    def _noise(self, stream: int, block: int, lo: int, hi: int, width: int) -> np.ndarray:
+        """Standard normal draws of samples ``[lo, hi)`` of ``block``, shape (hi - lo, width)."""
+        first = block * NOISE_BLOCK
+        size = min(NOISE_BLOCK, self.n_samples - first)
+        e = _block_generator(self.seed, stream, block).standard_normal((size, width))
+        return e[lo - first : hi - first]
+
+    def measurements(self, start: int = 0, stop: int | None = None):
+        """Measured samples of ``[start, stop)``, one :data:`NOISE_BLOCK` (or less) at a time.
+
+        Yields
+        ------
+        ``(t, q, dq, ddq, tau)``: t [s] of shape (n,), q (n, nq) [rad or m]
+        (noisy), dq (n, nv) (noisy), ddq (n, nv) (exact), tau (n, nv) [N m or N]
+        (noisy), with ``n <= NOISE_BLOCK``.
+        """
+        start, stop = self._range(start, stop)
+        nv = self.robot.nv
+        if stop <= start:
+            return
+        for block in range(start // NOISE_BLOCK, (stop - 1) // NOISE_BLOCK + 1):
+            lo = max(start, block * NOISE_BLOCK)
+            hi = min(stop, (block + 1) * NOISE_BLOCK)
+            t, angles, q, dq, ddq = self._noise_free(lo, hi)
+            tau = self.tau_true[lo:hi]
+            if self.noise_tau > 0:
+                tau = tau + self.noise_tau * self.tau_rms * self._noise(1, block, lo, hi, nv)
+            if self.noise_q > 0:
+                noisy = angles + self.noise_q * self._noise(2, block, lo, hi, nv)  # [rad or m]
+                q = trajectory_to_configuration(self.robot, noisy)
+            if self.noise_dq > 0:
+                dq = dq + self.noise_dq * self._noise(3, block, lo, hi, nv)  # [rad/s or m/s]
+            yield t, q, dq, ddq, tau
+
+    def blocks(self, start: int = 0, stop: int | None = None):
+        """``(q, dq, ddq, tau)`` blocks of ``[start, stop)``, as
+        :func:`manip_id.identification.identify_chunks` takes them."""
+        for _, q, dq, ddq, tau in self.measurements(start, stop):
+            yield q, dq, ddq, tau
+
+    def parts(self, n_parts: int, start: int = 0, stop: int | None = None) -> list:
+        """``[(self.blocks, (lo, hi)), ...]``: ``[start, stop)`` cut into ``n_parts`` contiguous
+        ranges, for ``identify_chunks(..., workers > 1)`` (each part simulated in its process)."""
+        start, stop = self._range(start, stop)
+        self.tau_true  # noqa: B018 (computed once, before the workers fork)
+        edges = np.linspace(start, stop, max(int(n_parts), 1) + 1).round().astype(int)
+        pairs = zip(edges[:-1], edges[1:], strict=True)
+        return [(self.blocks, (int(a), int(b))) for a, b in pairs if b > a]
+
+    def meta(self) -> dict:
+        """The ``meta`` of the simulated :class:`~manip_id.datasets.Dataset`."""
+        return {
+            "source": "simulation",
+            "robot": self.robot.name,
+            "perturb": self.perturb,
+            "noise_tau": self.noise_tau,
+            "noise_q": self.noise_q,
+            "noise_dq": self.noise_dq,
+            "rate": self.rate,
+            "seed": self.seed,
+        }
+
+    def dataset(self, start: int = 0, stop: int | None = None) -> Dataset:
+        """The samples ``[start, stop)`` as one :class:`~manip_id.datasets.Dataset`."""
+        start, stop = self._range(start, stop)
+        n, robot = stop - start, self.robot
+        t = np.empty(n)
+        q = np.empty((n, robot.nq))
+        dq, ddq, tau = (np.empty((n, robot.nv)) for _ in range(3))
+        at = 0
+        for bt, bq, bdq, bddq, btau in self.measurements(start, stop):
+            k = bt.shape[0]
+            t[at : at + k], q[at : at + k], dq[at : at + k] = bt, bq, bdq
+            ddq[at : at + k], tau[at : at + k] = bddq, btau
+            at += k
+        return Dataset(
+            t=t, q=q, dq=dq, tau=tau, ddq=ddq, joint_names=tuple(robot.dof_names), meta=self.meta()
+        )
+
+    def simulated_data(self) -> SimulatedData:
+        """The whole record as :class:`SimulatedData` (what :func:`simulate` returns)."""
+        return SimulatedData(
+            dataset=self.dataset(),
+            theta_true=self.theta_true,
+            tau_true=self.tau_true,
+            noise_tau=self.noise_tau,
+            noise_q=self.noise_q,
+            noise_dq=self.noise_dq,
+            perturb=self.perturb,
+            rate=self.rate,
+            seed=self.seed,
+        )
+
+
+def _check_memory(need: int, what: str) -> None:
+    """Raise :class:`~manip_id.errors.ResourceError` if ``need`` bytes would not fit."""
+    import psutil
+
+    from .errors import ResourceError
+
+    available = psutil.virtual_memory().available
+    if need > MEMORY_SHARE * available:
+        raise ResourceError(
+            f"{what} need about {need / 2**30:.3g} GiB, more than {MEMORY_SHARE:.0%} of the "
+            f"{available / 2**30:.3g} GiB available; shorten the duration or lower the rate"
+        )
+
+
+__all__ = [
+    "NOISE_BLOCK",
+    "SimulatedData",
+    "SimulationStream",
+    "inverse_dynamics",
+    "perturb_parameters",
+    "simulate",
+]

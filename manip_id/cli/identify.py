@@ -19,6 +19,7 @@ import numpy as np
 from ..datasets import Dataset, check_robot, load_dataset
 from ..errors import InputError
 from ..signals import DEFAULT_CUTOFF, DEFAULT_ORDER, preprocess
+from . import _fleet
 from ._common import add_robot_arguments, reserve_outputs, robot_from_args
 
 METHODS = ("ols", "wls", "rls", "gradient")
@@ -135,6 +136,7 @@ def register(sub) -> None:
         default=1,
         help="processes accumulating parts of the data (ols, wls; default 1)",
     )
+    _fleet.add_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -222,10 +224,12 @@ def _check_args(args) -> None:
         raise InputError(f"--workers must be >= 1, got {args.workers}")
     if args.workers > 1 and args.method in ("rls", "gradient"):
         raise InputError(f"--workers applies to ols and wls; {args.method} runs in sample order")
+    _fleet.check(args)
 
 
-def _simulate(robot, args):
-    from ..simulation import simulate
+def _simulation_stream(robot, args):
+    """The simulated record of the ``--simulate`` options, as a block-wise stream."""
+    from ..simulation import SimulationStream
     from ..trajectories import optimize_excitation, random_trajectory
 
     opts = {
@@ -236,7 +240,7 @@ def _simulate(robot, args):
         traj = getattr(traj, "trajectory", traj)
     else:
         traj = random_trajectory(robot, harmonics=5, seed=opts["seed"])
-    sim = simulate(
+    stream = SimulationStream(
         robot,
         traj,
         duration=opts["duration"],
@@ -244,7 +248,82 @@ def _simulate(robot, args):
         noise_tau=opts["noise"],
         seed=opts["seed"],
     )
-    return sim, opts
+    return stream, opts
+
+
+def _simulate(robot, args):
+    """The simulated record of the ``--simulate`` options, whole (:class:`SimulatedData`)."""
+    from ..simulation import check_simulation_memory
+
+    stream, opts = _simulation_stream(robot, args)
+    check_simulation_memory(robot, stream.n_samples)
+    return stream.simulated_data(), opts
+
+
+def _streams(args) -> bool:
+    """Whether ``--simulate`` runs block by block: least squares, nothing needing whole arrays."""
+    return (
+        args.simulate
+        and args.method in ("ols", "wls")
+        and args.report is None
+        and args.validate is None
+        and args.cutoff is None
+        and args.trim is None
+        and args.decimate == 1
+    )
+
+
+def _run_stream(robot, args, outputs, timings: dict, t_start: float) -> int:
+    """``--simulate`` with least squares, the record simulated and accumulated in blocks.
+
+    Memory O(N nv) for the noise-free torques (:class:`~manip_id.simulation.SimulationStream`)
+    plus one block, instead of the whole record's arrays; same samples, same split
+    (:meth:`~manip_id.datasets.Dataset.split`) and same estimate as the whole-array path.
+    """
+    from types import SimpleNamespace
+
+    from ..identification import identify_chunks
+
+    t0 = time.perf_counter()
+    stream, opts = _simulation_stream(robot, args)
+    stream.tau_true  # noqa: B018 (the noise-free torques, computed once)
+    timings["simulate"] = time.perf_counter() - t0
+    source: dict = {"simulated": opts}
+    n = stream.n_samples
+    k = n
+    if args.split is not None:  # as Dataset.split
+        k = min(max(int(round(args.split * n)), 2), n - 2)
+        source["split"] = args.split
+    report_progress = _progress(n)
+
+    def progress(done: int, total: int) -> None:  # serial: samples of k; workers: parts
+        report_progress(done, total if args.workers > 1 else k)
+
+    train = stream.parts(args.workers, 0, k) if args.workers > 1 else stream.blocks(0, k)
+    result = identify_chunks(
+        robot,
+        train,
+        method=args.method,
+        validation=stream.blocks(k, n) if k < n else None,
+        chunk=args.chunk,
+        workers=args.workers,
+        progress=progress,
+    )
+    timings.update({name: float(v) for name, v in dict(result.timings).items()})
+    timings["total"] = time.perf_counter() - t_start
+    valid = SimpleNamespace(n_samples=n - k) if k < n else None
+    theta_true = np.asarray(stream.theta_true, dtype=float)
+    report = _report(
+        robot, result, SimpleNamespace(n_samples=k), valid, theta_true, timings, args, source, None
+    )
+    print(result.table())
+    print(_summary(robot, report))
+    if args.json:
+        outputs.write_json(args.json, report)
+    outputs.publish()
+    if args.json:
+        print(f"wrote {args.json}")
+    return 0
 
 
 # ----------------------------------------------------------------------- run
@@ -252,6 +331,8 @@ def run(args: argparse.Namespace) -> int:
     t_start = time.perf_counter()
     _check_args(args)
     outputs = reserve_outputs(args)  # every output checked (and the report claimed) first
+    if _fleet.wanted(args):  # many files, one task each (Dask with --scheduler)
+        return _fleet.run(args, outputs, t_start)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     data = validation = None
@@ -261,6 +342,8 @@ def run(args: argparse.Namespace) -> int:
         validation = load_dataset(args.validate, columns=_column_map(args.column))
     timings["load"] = time.perf_counter() - t0
     robot = robot_from_args(args)
+    if _streams(args):  # simulated least squares: block by block, bounded memory
+        return _run_stream(robot, args, outputs, timings, t_start)
 
     theta_true = None
     source: dict = {}
