@@ -260,7 +260,9 @@ class Robot:
             "Ia": np.asarray(self.model.armature, dtype=float),
             "fv": np.asarray(self.model.damping, dtype=float),
             "fc": np.asarray(self.model.friction, dtype=float),
-            "fo": np.zeros(self.nv),
+            "fo": np.broadcast_to(
+                np.asarray(self.settings.get("offset", 0.0), dtype=float), (self.nv,)
+            ),
             "k": np.broadcast_to(
                 np.asarray(self.settings.get("spring", 0.0), dtype=float), (self.nv,)
             ),
@@ -450,6 +452,7 @@ def load_robot(
     active_joints: Sequence[str] | None = None,
     locked_configuration: Mapping[str, float] | Sequence[float] | None = None,
     package_dirs: Sequence[str | Path] = (),
+    identified: bool | str | Path | None = None,
 ) -> Robot:
     """Load a fixed-base robot.
 
@@ -470,6 +473,10 @@ def load_robot(
         vector of the unreduced model (shape (nq,)) or a mapping joint name ->
         position [rad or m]. Default: the neutral configuration clipped to the limits.
     package_dirs: folders where ``package://`` mesh paths of a URDF are resolved.
+    identified: for a URDF written by :func:`manip_id.export.export_urdf`: ``True`` reads
+        its sidecar (``NAME.identified.json`` next to it), or give the sidecar's path.
+        Its joint terms, active joints, armature, offset and spring become the
+        defaults and the nominal parameters (explicit arguments still win).
     """
     spec_str = str(spec)
     settings: dict = {}
@@ -496,6 +503,13 @@ def load_robot(
         model, source, pkg_erd, geometry = _load_erd(spec_str)
         name = spec_str
         pkg = pkg or pkg_erd
+    sidecar = None
+    if identified is not None and identified is not False:
+        from .export import identified_options
+
+        sidecar, armature, friction, spring, active_joints = identified_options(
+            spec_str, identified, armature, friction, spring, active_joints
+        )
     terms = _terms(armature, friction, spring, defaults)
 
     all_joints = [model.names[i] for i in range(1, model.njoints)]
@@ -518,7 +532,7 @@ def load_robot(
         qref = _reference_configuration(model, locked_configuration, all_joints)
         locked_ids = [model.getJointId(j) for j in locked_names]
         model = pin.buildReducedModel(model, locked_ids, qref)
-    return Robot(
+    robot = Robot(
         name,
         model,
         terms,
@@ -530,6 +544,11 @@ def load_robot(
         settings=settings,
         geometry=geometry,
     )
+    if sidecar is not None:
+        from .export import apply_identified
+
+        apply_identified(robot, sidecar)
+    return robot
 
 
 def _reference_configuration(model: pin.Model, locked, all_joints) -> np.ndarray:
