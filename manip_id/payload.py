@@ -1187,15 +1187,14 @@ def identify_payload(
     t0 = time.perf_counter()
     ra = analyze_information(acc.A, names, n_rows=acc.n_rows)
     if ra.rank < acc.p:
-        dirs = ra.unidentifiable
-        shown = "; ".join(dirs[:5]) + ("; ..." if len(dirs) > 5 else "")
         raise RankDeficiencyError(
-            f"these runs excite only {ra.rank} of {acc.p} directions of the joint payload "
-            f"problem; unexcited: {shown} (unloaded runs must excite the robot's base "
-            "parameters, loaded runs the payload's)",
             ra.rank,
             acc.p,
-            dirs,
+            ra.unidentifiable,
+            subject="these runs",
+            what="directions of the joint payload problem",
+            hint="unloaded runs must excite the robot's base parameters, loaded runs the "
+            "payload's",
         )
     ls = solve_accumulator(acc, method=method, names=names, rank_rtol=ra.tolerance)
     f = _dof_factor(acc, ls.rank, left_out)
