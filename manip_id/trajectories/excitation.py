@@ -1,38 +1,8 @@
-"""Excitation trajectories: finite Fourier series per joint (Swevers et al.).
+"""Excitation design: random trajectories within the limits, and the condition-number optimum.
 
-For joint ``j`` with ``L`` harmonics and base pulsation ``wf`` [rad/s]::
-
-    q_j(t)   = q0_j + sum_l [ a_jl/(l wf) sin(l wf t) - b_jl/(l wf) cos(l wf t) ]
-    dq_j(t)  =        sum_l [ a_jl cos(l wf t) + b_jl sin(l wf t) ]
-    ddq_j(t) =        sum_l [ -a_jl l wf sin(l wf t) + b_jl l wf cos(l wf t) ]
-
-The trajectory is periodic with period ``2 pi / wf``; velocity and
-acceleration are exact (analytic), never differentiated numerically. Position,
-velocity and acceleration are linear in the coefficients ``x = (q0, a, b)``,
-so joint limits sampled on a time grid are linear inequalities ``G x <= h``.
-
-A trajectory lives in joint coordinates, one per velocity coordinate (shape
-(N, nv)). For a continuous joint (Pinocchio stores it as ``(cos, sin)``, so
-``nq != nv``) the coordinate is the angle; :func:`trajectory_to_configuration`
-maps angles to configurations of shape (N, nq). Continuous joints have no
-position limit.
-
-Limits (:func:`check_limits`) with a relative ``margin`` ``m``::
-
-    position      lo + m (hi - lo)  <=  q_j(t)  <=  hi - m (hi - lo)   (URDF limits)
-    velocity      |dq_j(t)|   <= (1 - m) robot.velocity_limit_j
-    acceleration  |ddq_j(t)|  <= (1 - m) acceleration_limit_j           (when given)
-
-A limit that the description leaves unset (infinite, zero, inverted or wider
-than 1e3) is not checked. Trajectory design (:func:`random_trajectory`,
-:func:`optimize_excitation`) still needs finite bounds: it uses
-:meth:`Robot.sampling_bounds` ([-pi, pi] for unset positions) and
-:meth:`Robot.velocity_bounds` (2 [unit/s] for unset velocities).
-
-Excitation (:func:`optimize_excitation`) minimizes the condition number of the
-base regressor ``W = [Y(q(t_k), dq(t_k), ddq(t_k))[:, base]]_k`` (stacked,
-shape (n_points nv, n_base)) over the coefficients, subject to the sampled
-limits, with SLSQP (linear constraints, objective ``log cond(W)``).
+:func:`optimize_excitation` minimizes ``log cond(W(x))`` of the stacked base
+regressor over the Fourier coefficients ``x`` subject to the sampled limits
+``G x <= h`` (SLSQP; SciPy's optimizer is imported when it runs).
 """
 
 from __future__ import annotations
@@ -43,354 +13,32 @@ from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
-import scipy.optimize
 
-from ._checks import as_float_array, check_finite
-from .errors import InfeasibleTrajectoryError, InputError, NumericalError
-from .parameters import bounded_range, bounded_rate
-from .regressor import iter_regressor
-from .robot import Robot
-
-#: Default base pulsation [rad/s]: a period of 10 s.
-DEFAULT_WF = 2.0 * math.pi / 10.0
-#: Default number of time samples per period for limit checks.
-DEFAULT_CHECK_POINTS = 1000
-
-
-@dataclass(frozen=True)
-class FourierTrajectory:
-    """A finite Fourier series per joint.
-
-    Attributes
-    ----------
-    q0: offset per joint [rad or m], shape (nv,)
-    a: sine coefficients [rad/s or m/s], shape (nv, L)
-    b: cosine coefficients [rad/s or m/s], shape (nv, L)
-    wf: base pulsation [rad/s]
-    """
-
-    q0: np.ndarray
-    a: np.ndarray
-    b: np.ndarray
-    wf: float
-
-    def __post_init__(self):
-        q0 = as_float_array(self.q0, "q0", ndim=1)
-        a = as_float_array(self.a, "a", ndim=2)
-        b = as_float_array(self.b, "b", ndim=2)
-        if a.shape != b.shape or a.shape[0] != q0.shape[0]:
-            raise InputError(
-                f"expected a and b of shape (nv, L) with nv = q0.shape[0]; "
-                f"got {q0.shape=}, {a.shape=}, {b.shape=}"
-            )
-        for name, arr in (("q0", q0), ("a", a), ("b", b)):
-            check_finite(arr, name)
-        if not np.isfinite(self.wf) or self.wf <= 0:
-            raise InputError(f"wf must be a positive pulsation [rad/s], got {self.wf}")
-        object.__setattr__(self, "q0", q0)
-        object.__setattr__(self, "a", a)
-        object.__setattr__(self, "b", b)
-        object.__setattr__(self, "wf", float(self.wf))
-
-    @property
-    def nv(self) -> int:
-        """Number of joints."""
-        return self.q0.shape[0]
-
-    @property
-    def harmonics(self) -> int:
-        """Number of harmonics L."""
-        return self.a.shape[1]
-
-    @property
-    def period(self) -> float:
-        """Period 2 pi / wf [s]."""
-        return 2.0 * np.pi / self.wf
-
-    def sample(self, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Positions, velocities and accelerations at times ``t`` [s].
-
-        ``t`` scalar gives arrays of shape (nv,); ``t`` of shape (N,) gives (N, nv).
-        Positions are joint coordinates (angles for continuous joints, see
-        :func:`trajectory_to_configuration`).
-        """
-        t_arr = as_float_array(t, "t", ndim=(0, 1))
-        tt = np.atleast_1d(t_arr)
-        l_wf = self.wf * np.arange(1, self.harmonics + 1)  # (L,)
-        phase = np.multiply.outer(tt, l_wf)  # (N, L)
-        s, c = np.sin(phase), np.cos(phase)
-        q = self.q0 + (s / l_wf) @ self.a.T - (c / l_wf) @ self.b.T
-        dq = c @ self.a.T + s @ self.b.T
-        ddq = (-s * l_wf) @ self.a.T + (c * l_wf) @ self.b.T
-        if t_arr.ndim == 0:
-            return q[0], dq[0], ddq[0]
-        return q, dq, ddq
-
-    def __call__(self, t):
-        """Same as :meth:`sample`."""
-        return self.sample(t)
-
-    def scaled(self, factor: float) -> FourierTrajectory:
-        """The same motion about ``q0`` with every coefficient times ``factor``.
-
-        Position excursion, velocity and acceleration all scale by ``factor``.
-        """
-        return FourierTrajectory(self.q0, self.a * factor, self.b * factor, self.wf)
-
-    def to_vector(self) -> np.ndarray:
-        """The coefficients as one vector ``x = [q0 (nv), a_1, b_1, ..., a_nv, b_nv]``.
-
-        Shape (nv + 2 nv L,): ``q0`` first, then per joint its ``L`` sine and
-        ``L`` cosine coefficients (the variables of :func:`optimize_excitation`).
-        """
-        return np.concatenate([self.q0, np.hstack([self.a, self.b]).ravel()])
-
-    @classmethod
-    def from_vector(cls, x, nv: int, harmonics: int, wf: float) -> FourierTrajectory:
-        """Inverse of :meth:`to_vector`."""
-        x = as_float_array(x, "x", ndim=1)
-        if x.shape[0] != nv * (1 + 2 * harmonics):
-            raise InputError(
-                f"{x.shape=} but nv (1 + 2 L) = {nv * (1 + 2 * harmonics)} for {nv=}, L={harmonics}"
-            )
-        ab = x[nv:].reshape(nv, 2 * harmonics)
-        return cls(x[:nv], ab[:, :harmonics], ab[:, harmonics:], wf)
-
-    def basis(self, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Time functions multiplying ``(a, b)``, each of shape (N, 2L).
-
-        ``q_j(t) = q0_j + P(t) @ [a_j, b_j]``, ``dq_j(t) = V(t) @ [a_j, b_j]``,
-        ``ddq_j(t) = A(t) @ [a_j, b_j]``; returns ``(P, V, A)``.
-        """
-        tt = np.atleast_1d(as_float_array(t, "t", ndim=(0, 1)))
-        l_wf = self.wf * np.arange(1, self.harmonics + 1)
-        phase = np.multiply.outer(tt, l_wf)
-        s, c = np.sin(phase), np.cos(phase)
-        P = np.hstack([s / l_wf, -c / l_wf])
-        V = np.hstack([c, s])
-        A = np.hstack([-s * l_wf, c * l_wf])
-        return P, V, A
-
-
-# ------------------------------------------------------------------ joint layout
-def _dof_layout(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
-    """Per velocity coordinate: its index in q, and whether it is a continuous joint.
-
-    Raises :class:`InputError` for joints that are neither one coordinate per
-    DoF nor a continuous (cos, sin) joint.
-    """
-    dofs = robot.dofs
-    dofs.require_coordinates("Fourier trajectories")
-    return dofs.q_index, dofs.continuous
-
-
-def trajectory_to_configuration(robot: Robot, angles) -> np.ndarray:
-    """Joint coordinates (one per DoF) to Pinocchio configurations.
-
-    Parameters
-    ----------
-    angles: joint coordinates [rad or m], shape (nv,) or (N, nv); for a
-        continuous joint the angle, stored as ``(cos, sin)`` in ``q``.
-
-    Returns
-    -------
-    q of shape (nq,) or (N, nq).
-    """
-    x = as_float_array(angles, "angles", ndim=(1, 2))
-    if x.shape[-1] != robot.nv:
-        raise InputError(f"angles.shape={x.shape} but robot.nv={robot.nv}")
-    idx, cont = _dof_layout(robot)
-    q = np.empty((*x.shape[:-1], robot.nq))
-    lin = ~cont
-    q[..., idx[lin]] = x[..., lin]
-    if cont.any():
-        q[..., idx[cont]] = np.cos(x[..., cont])
-        q[..., idx[cont] + 1] = np.sin(x[..., cont])
-    return q
-
-
-def _position_limits(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
-    """URDF position limits per DoF, NaN where unset (continuous or absurd), shape (nv,) each."""
-    idx, cont = _dof_layout(robot)
-    lo, hi = robot.lower[idx], robot.upper[idx]
-    unset = cont | ~bounded_range(lo, hi)
-    lo[unset], hi[unset] = np.nan, np.nan
-    return lo, hi
-
-
-def _design_position_bounds(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
-    """Finite position bounds per DoF for designing trajectories, shape (nv,) each."""
-    idx, cont = _dof_layout(robot)
-    lo, hi = robot.sampling_bounds()
-    lo, hi = lo[idx], hi[idx]
-    lo[cont], hi[cont] = -math.pi, math.pi
-    return lo, hi
-
-
-def _velocity_limits(robot: Robot) -> np.ndarray:
-    v = robot.velocity_limit
-    v[~bounded_rate(v)] = np.nan
-    return v
-
-
-def _acceleration_limits(robot: Robot, acceleration_limit) -> np.ndarray:
-    if acceleration_limit is None:
-        return np.full(robot.nv, np.nan)
-    acc = as_float_array(acceleration_limit, "acceleration_limit", ndim=(0, 1))
-    acc = np.broadcast_to(acc, (robot.nv,)).copy() if acc.ndim == 0 else acc.copy()
-    if acc.shape != (robot.nv,):
-        raise InputError(f"acceleration_limit.shape={acc.shape} but robot.nv={robot.nv}")
-    if np.any(~(acc > 0)):
-        raise InputError(f"acceleration limits must be positive [rad/s^2 or m/s^2], got {acc}")
-    return acc
-
-
-def _check_margin(margin: float) -> float:
-    margin = float(margin)
-    if not 0.0 <= margin < 0.5:
-        raise InputError(f"margin must be a fraction in [0, 0.5), got {margin}")
-    return margin
-
-
-def _check_trajectory(robot: Robot, trajectory: FourierTrajectory) -> None:
-    if not isinstance(trajectory, FourierTrajectory):
-        raise InputError(f"expected a FourierTrajectory, got {type(trajectory).__name__}")
-    if trajectory.nv != robot.nv:
-        raise InputError(f"trajectory.nv={trajectory.nv} but robot.nv={robot.nv}")
-
-
-# ------------------------------------------------------------------------ limits
-@dataclass(frozen=True)
-class LimitUsage:
-    """Peak use of each limit by a trajectory, as a fraction of the allowed range.
-
-    Each array has shape (nv,); 1 means the limit (with its margin) is just
-    reached, NaN means the limit is not set. Position use is the largest
-    distance from the middle of the allowed range over its half-width.
-    """
-
-    position: np.ndarray
-    velocity: np.ndarray
-    acceleration: np.ndarray
-
-    @property
-    def worst(self) -> float:
-        """Largest use over every joint and limit (NaN-free; 0 when nothing is limited)."""
-        vals = np.concatenate([self.position, self.velocity, self.acceleration])
-        vals = vals[np.isfinite(vals)]
-        return float(vals.max()) if vals.size else 0.0
-
-
-def _grid(trajectory: FourierTrajectory, duration: float | None, n_points: int) -> np.ndarray:
-    span = trajectory.period if duration is None else min(float(duration), trajectory.period)
-    return np.linspace(0.0, span, int(n_points))
-
-
-def _usage(trajectory, t, pos_lo, pos_hi, vel, acc):
-    q, dq, ddq = trajectory.sample(t)
-    mid, half = 0.5 * (pos_lo + pos_hi), 0.5 * (pos_hi - pos_lo)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        pos = np.abs(q - mid) / half  # NaN columns stay NaN
-        v = np.abs(dq) / vel
-        a = np.abs(ddq) / acc
-    return (q, dq, ddq), (pos, v, a)
-
-
-def _peak(use: np.ndarray) -> np.ndarray:
-    """Column maxima ignoring NaN; NaN for a column without any limit."""
-    peak = np.max(np.where(np.isfinite(use), use, -np.inf), axis=0)
-    peak[np.isneginf(peak)] = np.nan
-    return peak
-
-
-def check_limits(
-    robot: Robot,
-    trajectory: FourierTrajectory,
-    *,
-    duration: float | None = None,
-    margin: float = 0.05,
-    acceleration_limit=None,
-    n_points: int = DEFAULT_CHECK_POINTS,
-) -> LimitUsage:
-    """Check a trajectory against position, velocity and acceleration limits.
-
-    Parameters
-    ----------
-    robot: the robot whose URDF limits apply.
-    trajectory: a :class:`FourierTrajectory` with ``nv`` joints.
-    duration: time span checked from t = 0 [s]; default (and at most, since
-        the motion is periodic) one period.
-    margin: relative margin, a fraction of each position range and of each
-        velocity and acceleration limit (see module docstring).
-    acceleration_limit: [rad/s^2 or m/s^2], scalar or shape (nv,); None: unchecked.
-    n_points: number of time samples over the checked span.
-
-    Returns
-    -------
-    :class:`LimitUsage` (each entry <= 1) when feasible.
-
-    Raises
-    ------
-    InfeasibleTrajectoryError naming the joint, the limit ("position",
-    "velocity", "acceleration") and the excess [rad, rad/s, rad/s^2 or m...]
-    of the worst violation (largest relative use).
-    """
-    _check_trajectory(robot, trajectory)
-    margin = _check_margin(margin)
-    if duration is not None and not (np.isfinite(duration) and duration > 0):
-        raise InputError(f"duration must be a positive time [s], got {duration}")
-    if int(n_points) < 2:
-        raise InputError(f"n_points must be at least 2, got {n_points}")
-    lo, hi = _position_limits(robot)
-    width = hi - lo
-    lo_m, hi_m = lo + margin * width, hi - margin * width
-    vel = (1.0 - margin) * _velocity_limits(robot)
-    acc = (1.0 - margin) * _acceleration_limits(robot, acceleration_limit)
-    t = _grid(trajectory, duration, n_points)
-    states, uses = _usage(trajectory, t, lo_m, hi_m, vel, acc)
-    usage = LimitUsage(*(_peak(u) for u in uses))
-    kinds = ("position", "velocity", "acceleration")
-    worst = None
-    for kind, use in zip(kinds, uses, strict=True):
-        u = np.where(np.isfinite(use), use, -np.inf)
-        k, j = np.unravel_index(np.argmax(u), u.shape)
-        if u[k, j] > 1.0 + 1e-12 and (worst is None or u[k, j] > worst[0]):
-            worst = (u[k, j], kind, int(k), int(j))
-    if worst is None:
-        return usage
-    _, kind, k, j = worst
-    name = robot.dof_names[j]
-    unit = "m" if robot.is_prismatic(j) else "rad"
-    value = states[kinds.index(kind)][k, j]
-    if kind == "position":
-        bound = hi_m[j] if value > hi_m[j] else lo_m[j]
-        excess = abs(value - bound)
-        allowed = f"[{lo_m[j]:.4g}, {hi_m[j]:.4g}] {unit}"
-        unit_k = unit
-    else:
-        limit = vel[j] if kind == "velocity" else acc[j]
-        excess = abs(value) - limit
-        unit_k = f"{unit}/s" if kind == "velocity" else f"{unit}/s^2"
-        allowed = f"+-{limit:.4g} {unit_k}"
-    others = sum(int(np.any(np.nan_to_num(u) > 1.0 + 1e-12)) for u in uses) - 1
-    also = f" (and {others} other limit kind(s) exceeded)" if others > 0 else ""
-    raise InfeasibleTrajectoryError(
-        f"joint {name!r} exceeds its {kind} limit by {excess:.4g} {unit_k} at t={t[k]:.4g} s: "
-        f"{kind} {value:.4g} {unit_k}, allowed {allowed} with margin {margin:g}{also}",
-        joint=name,
-        limit=kind,
-        excess=float(excess),
-    )
+from ..errors import InfeasibleTrajectoryError, InputError, NumericalError
+from ..regressor import iter_regressor
+from ..robot import Robot
+from .fourier import DEFAULT_WF, FourierTrajectory, trajectory_to_configuration
+from .limits import (
+    DEFAULT_CHECK_POINTS,
+    LimitUsage,
+    acceleration_limits,
+    check_limits,
+    check_margin,
+    check_trajectory,
+    design_position_bounds,
+    limit_usage,
+    sample_grid,
+)
 
 
 # ------------------------------------------------------------- random trajectory
 def _design_limits(robot: Robot, margin: float, acceleration_limit):
     """Finite design bounds per DoF: (lo, hi, vel, acc) with margin; acc NaN when unset."""
-    lo, hi = _design_position_bounds(robot)
+    lo, hi = design_position_bounds(robot)
     width = hi - lo
     lo, hi = lo + margin * width, hi - margin * width
     vel = (1.0 - margin) * robot.velocity_bounds()
-    acc = (1.0 - margin) * _acceleration_limits(robot, acceleration_limit)
+    acc = (1.0 - margin) * acceleration_limits(robot, acceleration_limit)
     return lo, hi, vel, acc
 
 
@@ -422,7 +70,7 @@ def random_trajectory(
     the module docstring.
     """
     harmonics, wf = _check_design_args(harmonics, wf)
-    margin = _check_margin(margin)
+    margin = check_margin(margin)
     if not 0.0 < fill <= 1.0:
         raise InputError(f"fill must be in (0, 1], got {fill}")
     lo, hi, vel, acc = _design_limits(robot, margin, acceleration_limit)
@@ -430,8 +78,8 @@ def random_trajectory(
     a = rng.standard_normal((robot.nv, harmonics))
     b = rng.standard_normal((robot.nv, harmonics))
     traj = FourierTrajectory(0.5 * (lo + hi), a, b, wf)
-    t = _grid(traj, None, 4 * DEFAULT_CHECK_POINTS)
-    _, (pos, v, ac) = _usage(traj, t, lo, hi, vel, acc)
+    t = sample_grid(traj, None, 4 * DEFAULT_CHECK_POINTS)
+    _, (pos, v, ac) = limit_usage(traj, t, lo, hi, vel, acc)
     peak = np.fmax(np.fmax(pos.max(axis=0), v.max(axis=0)), np.nan_to_num(ac.max(axis=0)))
     scale = fill / peak
     traj = FourierTrajectory(traj.q0, a * scale[:, None], b * scale[:, None], wf)
@@ -446,7 +94,7 @@ def base_columns(robot: Robot, seed: int = 0) -> np.ndarray:
     Those of :func:`manip_id.identifiability.analyze` (structural analysis at
     random states drawn with ``seed``).
     """
-    from .identifiability import analyze
+    from ..identifiability import analyze
 
     return np.asarray(analyze(robot, seed=seed).base.independent, dtype=int)
 
@@ -472,7 +120,7 @@ def excitation_condition_number(
 
     ``base``: column indices (default :func:`base_columns`).
     """
-    _check_trajectory(robot, trajectory)
+    check_trajectory(robot, trajectory)
     if int(n_points) < 1:
         raise InputError(f"n_points must be positive, got {n_points}")
     base = base_columns(robot) if base is None else np.asarray(base, dtype=int)
@@ -507,7 +155,7 @@ def _linear_constraints(robot, traj_shape, wf, lo, hi, vel, acc, n_constraint_po
     """G, h with G x <= h for x = [q0 (nv), then per joint (a_j, b_j) (nv * 2L)]."""
     nv, L = traj_shape
     proto = FourierTrajectory(np.zeros(nv), np.zeros((nv, L)), np.zeros((nv, L)), wf)
-    t = _grid(proto, None, n_constraint_points)
+    t = sample_grid(proto, None, n_constraint_points)
     P, V, A = proto.basis(t)  # (M, 2L)
     M = t.size
     n_x = nv + nv * 2 * L
@@ -681,7 +329,7 @@ def optimize_excitation(
     from an SVD of ``W`` (:func:`excitation_condition_number`).
     """
     harmonics, wf = _check_design_args(harmonics, wf)
-    margin = _check_margin(margin)
+    margin = check_margin(margin)
     for name, value, least in (
         ("n_points", n_points, 1),
         ("maxiter", maxiter, 0),
@@ -702,6 +350,8 @@ def optimize_excitation(
     x0 = start.to_vector()
     f0 = objective.value(x0)
     constraint = {"type": "ineq", "fun": lambda x: h - G @ x, "jac": lambda x: -G}
+    import scipy.optimize  # heavy: only when an optimization runs
+
     try:
         res = scipy.optimize.minimize(
             objective.value_and_gradient,
@@ -760,18 +410,3 @@ def _fit_into_limits(robot, traj, margin, acceleration_limit) -> FourierTrajecto
     # q0 itself outside the range cannot be fixed by shrinking: report it
     check_limits(robot, traj, margin=margin, acceleration_limit=acceleration_limit)
     return traj
-
-
-__all__ = [
-    "DEFAULT_WF",
-    "ExcitationObjective",
-    "ExcitationResult",
-    "FourierTrajectory",
-    "LimitUsage",
-    "base_columns",
-    "check_limits",
-    "excitation_condition_number",
-    "optimize_excitation",
-    "random_trajectory",
-    "trajectory_to_configuration",
-]
