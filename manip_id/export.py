@@ -140,14 +140,34 @@ def _owners(root: ET.Element, active: list[str]) -> tuple[dict[str, str], dict[s
     return owner, child_of
 
 
+@dataclass(frozen=True)
+class ExportTexts:
+    """The exported URDF text, the sidecar object and where the composites went."""
+
+    urdf: str
+    sidecar: dict
+    links: dict[str, str]
+    zeroed: list[str]
+
+
 def export_urdf(robot, theta, path, *, force: bool = False, source=None) -> ExportResult:
     """Write ``robot``'s URDF with the identified ``theta`` (shape (p,)), and its sidecar.
 
     Refuses a ``theta`` that is not physically consistent
     (:class:`~manip_id.consistency.PhysicalConsistencyError`) and an existing output
-    unless ``force``. ``source``: the URDF to copy (default ``robot.source``).
+    unless ``force`` (both checked before any work). ``source``: the URDF to copy
+    (default ``robot.source``). The files are written atomically.
     """
     urdf, side = check_output(path, force)
+    texts = export_texts(robot, theta, urdf.name, source=source, target=urdf)
+    atomic_write_text(urdf, texts.urdf)
+    atomic_write_text(side, json_text(texts.sidecar))
+    return ExportResult(urdf=urdf, sidecar=side, links=texts.links, zeroed=texts.zeroed)
+
+
+def export_texts(robot, theta, urdf_name: str, *, source=None, target=None) -> ExportTexts:
+    """The exported URDF text and sidecar of :func:`export_urdf`, without writing them."""
+    urdf = Path(target) if target is not None else None
     theta = as_float_array(theta, "theta", ndim=1)
     if theta.shape != (robot.n_parameters,):
         raise InputError(f"{theta.shape=} but robot.n_parameters={robot.n_parameters}")
@@ -156,7 +176,7 @@ def export_urdf(robot, theta, path, *, force: bool = False, source=None) -> Expo
     src = Path(source if source is not None else (robot.source or ""))
     if not src.is_file():
         raise RobotError(f"robot {robot.name!r} has no URDF file to copy (source {src})")
-    if src.resolve() == urdf.resolve():
+    if urdf is not None and src.resolve() == urdf.resolve():
         raise InputError(f"{urdf} is the robot's own URDF: write the export elsewhere")
     try:
         parser = ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
@@ -201,7 +221,7 @@ def export_urdf(robot, theta, path, *, force: bool = False, source=None) -> Expo
     sidecar = {
         "format": SIDECAR_FORMAT,
         "version": SIDECAR_VERSION,
-        "urdf": urdf.name,
+        "urdf": urdf_name,
         "robot": robot.name,
         "source": str(src),
         "active_joints": active,
@@ -221,9 +241,7 @@ def export_urdf(robot, theta, path, *, force: bool = False, source=None) -> Expo
             for n, v, u in zip(names, theta, robot.parameter_units, strict=True)
         ],
     }
-    atomic_write_text(urdf, head + text + "\n")
-    atomic_write_text(side, json_text(sidecar))
-    return ExportResult(urdf=urdf, sidecar=side, links=holder, zeroed=zeroed)
+    return ExportTexts(urdf=head + text + "\n", sidecar=sidecar, links=holder, zeroed=zeroed)
 
 
 def read_sidecar(path) -> dict:

@@ -42,7 +42,7 @@ from .estimators.consistent import (
 )
 from .estimators.consistent import check_options as check_consistent_options
 from .identifiability import BaseParameters, RankAnalysis, analyze, analyze_information
-from .regressor import DEFAULT_CHUNK, _evaluator, check_states, iter_regressor
+from .regressor import DEFAULT_CHUNK, check_states, iter_regressor
 from .robot import Robot
 
 METHODS: tuple[str, ...] = ("ols", "wls", "rls", "gradient")
@@ -98,6 +98,9 @@ class IdentificationResult:
         ``output_names``), the validation error is always the torque error
     output_names: names of the model's outputs (default ``dof_names``; "energy"
         for the energy model's one scalar row per window)
+    files: :func:`identify_datasets` only: ``{"train": [...], "validation": [...]}``,
+        the :class:`~manip_id.pipeline.FileAccumulation` of each file (its
+        data-quality summary, samples, rows left out by the deadband)
     """
 
     method: str
@@ -124,6 +127,7 @@ class IdentificationResult:
     warnings: list[str] = field(default_factory=list)
     model: str = "dynamic"
     output_names: list[str] = field(default_factory=list)
+    files: dict | None = None
 
     @property
     def standard_parameters(self) -> list[dict]:
@@ -293,8 +297,6 @@ def _online_estimator(method: str, r: int, options: dict):
     return est, what
 
 
-Block = tuple  # (q (n, nq), dq (n, nv), ddq (n, nv), tau (n, nv))
-
 # State handed to forked worker processes (inherited, never pickled).
 _WORK: dict = {}
 
@@ -332,7 +334,7 @@ def row_supports(robot: Robot, columns, n_states: int = 16, seed: int = 12345) -
     Returns a list of ``nv`` sorted index arrays.
     """
     q, dq, ddq = robot.random_states(n_states, seed=seed)
-    ev = _evaluator(robot)
+    ev = robot.evaluator
     Y = np.stack([ev.regressor(q[k], dq[k], ddq[k]) for k in range(n_states)])
     nonzero = np.abs(Y[:, :, np.asarray(columns, dtype=np.intp)]).max(axis=0) > 0  # (nv, r)
     return [np.flatnonzero(row) for row in nonzero]
@@ -356,7 +358,7 @@ def _accumulate_blocks(
     (standstill, where the Coulomb column sign(dq_j) is noise); the sample
     count ``n`` still counts every sample.
     """
-    ev = _evaluator(robot)
+    ev = robot.evaluator
     nv = robot.nv
     supports = row_supports(robot, ind)
     A_c = [np.zeros((sj.size, sj.size)) for sj in supports]
@@ -433,7 +435,7 @@ def _array_part(start: int, stop: int):
 
 
 def _validation_error(robot: Robot, blocks, ind, estimate, chunk: int):
-    ev = _evaluator(robot)
+    ev = robot.evaluator
     sse, zz = np.zeros(robot.nv), np.zeros(robot.nv)
     for block in blocks:
         vq, vdq, vddq, vtau = _states(robot, *block, prefix="validation ")
@@ -810,15 +812,21 @@ def _finish(
         )
         timings["consistent"] = standard.time
         if not standard.physically_consistent:
-            warnings_ += [
-                f"consistent estimate fails the check: {m}" for m in standard.consistency.messages()
-            ]
+            warnings_.append(
+                "the consistent estimate fails the eigenvalue test: "
+                + "; ".join(standard.consistency.messages())
+            )
     elif est is None:  # plain least squares: is its minimum-norm standard vector physical?
         standard = minimum_norm_standard(robot, base, estimate)
-        warnings_ += [
-            f"least squares gave a non-physical model (minimum-norm standard parameters): {m}"
-            for m in standard.consistency.messages()
-        ]
+        msgs = standard.consistency.messages()
+        if msgs:
+            warnings_.append(
+                f"plain least squares is not physical: its minimum-norm standard parameters "
+                f"break {len(msgs)} condition(s): "
+                + "; ".join(msgs[:4])
+                + ("; ..." if len(msgs) > 4 else "")
+                + " (consistent=True, --consistent, estimates a physical model)"
+            )
     timings["solve"] = time.perf_counter() - t0
     zz_j = acc.zz_joint
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -878,4 +886,101 @@ def identify_dataset(
         validation = (validation.q, validation.dq, validation.ddq, validation.tau)
     return identify(
         robot, dataset.q, dataset.dq, acc_arr, dataset.tau, validation=validation, **kwargs
+    )
+
+
+def identify_datasets(
+    robot: Robot,
+    files,
+    *,
+    validation=None,
+    options=None,
+    window=None,
+    method: str = "ols",
+    base: BaseParameters | None = None,
+    chunk: int = DEFAULT_CHUNK,
+    minimum_norm: bool = False,
+    workers: int = 1,
+    progress: Callable[[int, int], None] | None = None,
+    consistent: bool = False,
+    solver: str = "sdp",
+    prior: str = "nominal",
+    prior_weight: float = DEFAULT_PRIOR_WEIGHT,
+) -> IdentificationResult:
+    """Least squares from several log files, each read in chunks and preprocessed on its own.
+
+    Parameters
+    ----------
+    robot: the robot (its joint terms decide the columns)
+    files: file specs (:class:`~manip_id.datasets.FileSpec` or their texts
+        ``PATH``, ``PATH@START:STOP`` [s from the file's first stamp],
+        ``PATH@#A:#B`` [rows]): NPZ, CSV, ROS 2 bags, Panda log folders
+    validation: file specs of validation data (same options), or None
+    options: :class:`~manip_id.pipeline.PreprocessOptions` (filtering, torque
+        scale, velocity deadband, bad rows); default all defaults
+    window: window text applied to every file (training and validation) that has none
+    method: "ols" or "wls"; consistent, solver, prior, prior_weight: as :func:`identify`
+    workers: several files are accumulated in up to ``workers`` forked processes
+
+    Returns
+    -------
+    The :class:`IdentificationResult` of the information summed over the
+    files (``n_samples`` their total): with accelerations in the files, the
+    estimate of their concatenation. ``relative_error.validation`` is pooled
+    over the validation files (every sample weighs the same),
+    ``validation_per_file`` gives each file's; both leave out the deadband's rows.
+    ``files`` holds every file's :class:`~manip_id.pipeline.FileAccumulation`.
+    """
+    from dataclasses import replace
+
+    from .pipeline import accumulate_files, merge_accumulations, validation_errors
+
+    timings: dict[str, float] = {}
+    t_start = time.perf_counter()
+    _check_method(method, chunk, workers)
+    if method not in ("ols", "wls"):
+        raise InputError(f"identify_datasets solves least squares (ols, wls), got {method!r}")
+    base = _resolve_base(robot, base, timings)
+    ind = base.independent
+    t0 = time.perf_counter()
+    train = accumulate_files(
+        robot, files, options, ind, window=window, chunk=chunk, workers=workers, progress=progress
+    )
+    valid = None
+    if validation is not None:
+        valid = accumulate_files(
+            robot, validation, options, ind, window=window, chunk=chunk, workers=workers
+        )
+    timings["accumulate_wall"] = time.perf_counter() - t0
+    for fa in train + (valid or []):
+        for k, v in fa.timings.items():
+            timings[k] = timings.get(k, 0.0) + float(v)
+    acc = merge_accumulations(train)
+    if acc.n * robot.nv <= base.n_base:
+        raise InputError(
+            f"{acc.n} samples give {acc.n * robot.nv} equations for {base.n_base} base "
+            "parameters: need more samples"
+        )
+    result = _finish(
+        robot,
+        acc,
+        base,
+        method,
+        timings,
+        t_start,
+        chunk=int(chunk),
+        minimum_norm=minimum_norm,
+        consistent=(consistent, solver, prior, prior_weight),
+    )
+    re = result.relative_error
+    if valid is not None:
+        t0 = time.perf_counter()
+        v = validation_errors(valid, result.estimate, list(robot.dof_names))
+        re = RelativeError(
+            re.train, re.train_per_joint, v["error"], v["per_joint"], v["per_file"]
+        )
+        timings["validation"] = time.perf_counter() - t0
+    timings["total"] = time.perf_counter() - t_start
+    return replace(
+        result, relative_error=re, timings=timings, files={"train": train, "validation": valid}
     )

@@ -128,13 +128,51 @@ def register(sub) -> None:
         help="write a report folder: result.json, torque fit, residuals, singular values, "
         "trajectory vs limits (--simulate), the robot scene (scene.html) and index.html",
     )
-    p.add_argument("--force", action="store_true", help="replace a non-empty --report folder")
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace a non-empty --report folder or an existing --export-urdf file",
+    )
     p.add_argument("--chunk", type=int, default=1024, help="samples per regressor chunk")
     p.add_argument(
         "--workers",
         type=int,
         default=1,
         help="processes accumulating parts of the data (ols, wls; default 1)",
+    )
+    phys = p.add_argument_group("physically consistent estimation (ols, wls)")
+    phys.add_argument(
+        "--consistent",
+        action="store_true",
+        help="estimate standard parameters that describe a real robot: every body's "
+        "pseudo-inertia positive definite, armature and viscous/Coulomb friction >= 0, the "
+        "same least-squares fit through the base parameters",
+    )
+    phys.add_argument(
+        "--solver",
+        default="sdp",
+        metavar="{sdp,logchol}",
+        help="sdp: semidefinite program (cvxpy + Clarabel); logchol: log-Cholesky "
+        "Levenberg-Marquardt [default sdp]",
+    )
+    phys.add_argument(
+        "--prior",
+        default="nominal",
+        metavar="{nominal,none}",
+        help="what fills the directions the data cannot identify: the URDF's parameters "
+        "(log-det divergence) or none (feasibility alone) [default nominal]",
+    )
+    phys.add_argument(
+        "--prior-weight",
+        type=float,
+        default=None,
+        help="weight of the prior against the fit measured in standard deviations [default 1e-3]",
+    )
+    phys.add_argument(
+        "--export-urdf",
+        metavar="OUT.urdf",
+        help="write the robot's URDF with the identified inertias and friction (needs "
+        "--consistent); armature and offset go to OUT.identified.json next to it",
     )
     _fleet.add_arguments(p)
     p.set_defaults(func=run)
@@ -224,7 +262,56 @@ def _check_args(args) -> None:
         raise InputError(f"--workers must be >= 1, got {args.workers}")
     if args.workers > 1 and args.method in ("rls", "gradient"):
         raise InputError(f"--workers applies to ols and wls; {args.method} runs in sample order")
+    _check_consistent_args(args)
     _fleet.check(args)
+
+
+def _check_consistent_args(args) -> None:
+    """--consistent, --solver, --prior, --prior-weight, --export-urdf (before any work)."""
+    from ..estimators.consistent import DEFAULT_PRIOR_WEIGHT, check_options
+
+    given = [
+        f"--{n.replace('_', '-')}"
+        for n, default in (("solver", "sdp"), ("prior", "nominal"), ("prior_weight", None))
+        if getattr(args, n) != default
+    ]
+    if args.prior_weight is None:
+        args.prior_weight = DEFAULT_PRIOR_WEIGHT
+    check_options(args.solver, args.prior, args.prior_weight)
+    if not args.consistent:
+        if args.export_urdf:
+            raise InputError(
+                "--export-urdf needs a physically consistent estimate: add --consistent"
+            )
+        if given:
+            raise InputError(f"{given[0]} applies to --consistent only")
+        return
+    if args.method not in ("ols", "wls"):
+        raise InputError(f"--consistent applies to --method ols or wls, got {args.method}")
+    if _fleet.wanted(args):
+        raise InputError("--consistent is not available with several data files yet")
+    if args.export_urdf:
+        from ..export import check_output
+
+        check_output(args.export_urdf, force=args.force)
+
+
+def _export(robot, result, args, outputs) -> None:
+    """Stage the exported URDF and its sidecar (published with the other outputs)."""
+    from ..export import export_texts, sidecar_path
+
+    texts = export_texts(robot, result.standard.values, args.export_urdf)
+    outputs.write_text(args.export_urdf, texts.urdf)
+    outputs.write_json(sidecar_path(args.export_urdf), texts.sidecar)
+
+
+def _consistent_kwargs(args) -> dict:
+    return dict(
+        consistent=args.consistent,
+        solver=args.solver,
+        prior=args.prior,
+        prior_weight=args.prior_weight,
+    )
 
 
 def _simulation_stream(robot, args):
@@ -308,6 +395,7 @@ def _run_stream(robot, args, outputs, timings: dict, t_start: float) -> int:
         chunk=args.chunk,
         workers=args.workers,
         progress=progress,
+        **_consistent_kwargs(args),
     )
     timings.update({name: float(v) for name, v in dict(result.timings).items()})
     timings["total"] = time.perf_counter() - t_start
@@ -320,9 +408,13 @@ def _run_stream(robot, args, outputs, timings: dict, t_start: float) -> int:
     print(_summary(robot, report))
     if args.json:
         outputs.write_json(args.json, report)
+    if args.export_urdf:
+        _export(robot, result, args, outputs)
     outputs.publish()
     if args.json:
         print(f"wrote {args.json}")
+    if args.export_urdf:
+        print(f"wrote {args.export_urdf}")
     return 0
 
 
@@ -331,6 +423,10 @@ def run(args: argparse.Namespace) -> int:
     t_start = time.perf_counter()
     _check_args(args)
     outputs = reserve_outputs(args)  # every output checked (and the report claimed) first
+    if args.export_urdf:
+        from ..export import sidecar_path
+
+        outputs.file(sidecar_path(args.export_urdf), "--export-urdf sidecar")
     if _fleet.wanted(args):  # many files, one task each (Dask with --scheduler)
         return _fleet.run(args, outputs, t_start)
     timings: dict[str, float] = {}
@@ -383,6 +479,7 @@ def run(args: argparse.Namespace) -> int:
         chunk=args.chunk,
         workers=args.workers,
         progress=_progress(train.n_samples + (0 if valid is None else valid.n_samples)),
+        **_consistent_kwargs(args),
     )
     timings.update({k: float(v) for k, v in dict(result.timings).items()})
     timings["total"] = time.perf_counter() - t_start
@@ -394,9 +491,13 @@ def run(args: argparse.Namespace) -> int:
         outputs.write_json(args.json, report)
     if args.report is not None:
         path = _write_report(robot, result, full, train, valid, report, args)
+    if args.export_urdf:
+        _export(robot, result, args, outputs)
     outputs.publish()  # all outputs appear together, once all are complete
     if args.json:
         print(f"wrote {args.json}")
+    if args.export_urdf:
+        print(f"wrote {args.export_urdf} and its sidecar")
     if args.report is not None:
         print(f"wrote the report to {path}/index.html")
     return 0
@@ -466,6 +567,8 @@ def _write_report(robot, result, full, train, valid, report: dict, args):
     except InfeasibleTrajectoryError as exc:
         notes.append(f"scene not animated: {exc}")
     scene.add_inertia(robot.nominal_parameters, label="nominal")
+    if result.standard is not None and result.standard.solver:  # --consistent
+        scene.add_inertia(result.standard.values, label="identified (consistent)")
     ind = result.base.independent
     flags = np.zeros(robot.n_parameters, dtype=bool)
     flags[ind] = True
@@ -556,6 +659,8 @@ def _report(robot, result, train, valid, theta_true, timings, args, source, sett
         if settings is None
         else {k: getattr(settings, k) for k in settings.__dataclass_fields__},
         "timings": {k: round(float(v), 6) for k, v in timings.items()},
+        **({} if result.standard is None else result.standard.to_dict()),
+        "warnings": list(getattr(result, "warnings", [])),
     }
     if theta_true is not None:
         beta_true = np.asarray(result.base.to_base(theta_true), dtype=float)
