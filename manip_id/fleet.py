@@ -55,7 +55,7 @@ from .identification import (
     _resolve_base,
     _states,
 )
-from .regressor import DEFAULT_CHUNK, _evaluator
+from .regressor import DEFAULT_CHUNK
 from .robot import Robot
 
 #: Parts added together by one reduction task.
@@ -249,19 +249,61 @@ def _validation_sums(
     chunk: int,
     options: Mapping | None,
 ) -> np.ndarray:
-    """Per joint ``(sum e_j^2, sum tau_j^2)`` of one validation file, shape (2, nv)."""
+    """Per joint ``(sum e_j^2, sum tau_j^2, n)`` of one validation file, shape (3, nv).
+
+    ``e = Y_b theta_b - tau`` [N m]; row 2 holds the sample count (in every column).
+    """
     try:
         ds = _prepared_file(robot, path, options)
         q, dq, ddq, tau = _states(robot, ds.q, ds.dq, ds.ddq, ds.tau, prefix="validation ")
-        out = np.zeros((2, robot.nv))
+        out = np.zeros((3, robot.nv))
+        out[2] = q.shape[0]
         ind = np.asarray(columns, dtype=np.intp)
-        for c in _evaluator(robot).iter_regressor(q, dq, ddq, int(chunk)):
+        for c in robot.evaluator.iter_regressor(q, dq, ddq, int(chunk)):
             err = c.Y[:, :, ind] @ estimate - tau[c.start : c.stop]  # [N m]
             out[0] += np.einsum("nj,nj->j", err, err)
             out[1] += np.einsum("nj,nj->j", tau[c.start : c.stop], tau[c.start : c.stop])
     except Exception as exc:
         raise _named(path, exc) from exc
     return out
+
+
+def _blocks_sums(robot: Robot, func: Callable, args: tuple, columns, chunk: int) -> PartSums:
+    """Task body of a generic part ``(func, args)``: accumulate the blocks ``func(*args)``."""
+    t0 = time.perf_counter()
+    acc, times = _accumulate_blocks(robot, func(*args), np.asarray(columns, np.intp), int(chunk))
+    return PartSums(acc, 1, {**times, "task": time.perf_counter() - t0})
+
+
+def accumulate_parts(
+    robot: Robot,
+    parts: Sequence[tuple[Callable, tuple]],
+    columns,
+    chunk: int = DEFAULT_CHUNK,
+    scheduler=None,
+    split_every: int = SPLIT_EVERY,
+) -> tuple[InformationAccumulator, dict[str, float]]:
+    """The Dask back-end of :func:`manip_id.identification.identify_chunks`.
+
+    ``parts``: ``(func, args)`` pairs, ``func(*args)`` yielding blocks
+    ``(q, dq, ddq, tau)``; ``func`` must be importable on the workers (a
+    module-level function) and ``args`` picklable. Each part is one task; the
+    sums are added in a tree; returns the accumulator and the summed task times.
+    """
+    parts = list(parts)
+    if not parts:
+        raise InputError("no parts to accumulate")
+    light = portable_robot(robot)
+    backend = _Serial() if scheduler is None else _Dask(scheduler)
+    try:
+        leaves = [
+            backend.submit(_blocks_sums, light, func, tuple(args), columns, chunk)
+            for func, args in parts
+        ]
+        (total,) = backend.gather([_tree(backend, leaves, int(split_every))])
+    finally:
+        backend.close()
+    return total.acc, dict(total.timings)
 
 
 def _sum(*parts):
@@ -522,15 +564,26 @@ def identify_files(
             t0 = time.perf_counter()
             est = np.asarray(result.estimate, dtype=float)
             vs = [backend.submit(_validation_sums, light, p, ind, est, chunk, opts) for p in vfiles]
-            tot = np.sum(backend.gather(vs), axis=0)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                val_j = np.sqrt(tot[0] / tot[1])
-            val = float(np.sqrt(tot[0].sum() / tot[1].sum())) if tot[1].sum() > 0 else float("nan")
+            got = backend.gather(vs)
+            val, val_j = _relative(np.sum(got, axis=0))
+            per_vfile = []
+            for path, sums in zip(vfiles, got, strict=True):
+                err, err_j = _relative(sums)
+                per_vfile.append(
+                    {
+                        "file": path,
+                        "n_samples": int(sums[2, 0]),
+                        "error": _finite(err),
+                        "per_joint": dict(zip(robot.dof_names, map(_finite, err_j), strict=True)),
+                    }
+                )
             timings["validation"] = time.perf_counter() - t0
             re = result.relative_error
             result = replace(
                 result,
-                relative_error=RelativeError(re.train, re.train_per_joint, val, val_j),
+                relative_error=RelativeError(
+                    re.train, re.train_per_joint, val, val_j, validation_per_file=per_vfile
+                ),
             )
     finally:
         backend.close()
@@ -542,6 +595,19 @@ def identify_files(
         result = replace(result, per_file=estimates)
     result.timings["total"] = time.perf_counter() - t_start
     return result
+
+
+def _relative(sums: np.ndarray) -> tuple[float, np.ndarray]:
+    """``sqrt(sum e^2 / sum tau^2)`` overall and per joint, from rows 0 and 1 of ``sums``."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        per_joint = np.sqrt(sums[0] / sums[1])
+    total = float(np.sqrt(sums[0].sum() / sums[1].sum())) if sums[1].sum() > 0 else float("nan")
+    return total, per_joint
+
+
+def _finite(x) -> float | None:
+    x = float(x)
+    return x if np.isfinite(x) else None
 
 
 def _file_estimate(robot, path, n_tasks, fs: PartSums, base, method, chunk) -> FileEstimate:
@@ -556,6 +622,7 @@ def _file_estimate(robot, path, n_tasks, fs: PartSums, base, method, chunk) -> F
 
 __all__ = [
     "FileEstimate",
+    "accumulate_parts",
     "FilePart",
     "PartSums",
     "file_length",

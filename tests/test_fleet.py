@@ -148,6 +148,28 @@ def test_a_file_that_excites_too_little_is_reported_not_fatal(robot, fleet, tmp_
     assert res.n_samples == 2 * N_SAMPLES + 5
 
 
+def test_validation_files_pooled_and_per_file(robot, fleet, tmp_path):
+    paths, arrays, _ = fleet
+    vpaths, varrays = [], []
+    for f in range(2):
+        path = tmp_path / f"val{f}.npz"
+        varrays.append(_make_file(robot, path, seed=50 + f, n=700))
+        vpaths.append(str(path))
+    res = identify_files(robot, paths, validation=vpaths)
+    vcat = [np.concatenate([a[i] for a in varrays]) for i in range(4)]
+    tcat = [np.concatenate([a[i] for a in arrays]) for i in range(4)]
+    ref = identify(robot, *tcat, validation=tuple(vcat))
+    re, rr = res.relative_error, ref.relative_error
+    assert re.validation == pytest.approx(rr.validation, rel=1e-9)
+    np.testing.assert_allclose(re.validation_per_joint, rr.validation_per_joint, rtol=1e-9)
+    for entry, (q, dq, ddq, tau) in zip(re.validation_per_file, varrays, strict=True):
+        err = res.predict(robot, q, dq, ddq) - tau
+        assert entry["n_samples"] == 700
+        assert entry["error"] == pytest.approx(np.linalg.norm(err) / np.linalg.norm(tau), 1e-9)
+    d = res.to_dict()["relative_error"]
+    assert [e["file"] for e in d["validation_per_file"]] == vpaths
+
+
 def test_preprocessed_files_any_partition(robot, tmp_path):
     """Files without ddq are preprocessed each on its own, and blocks cut the result."""
     from manip_id.datasets import load_dataset
@@ -265,13 +287,30 @@ def test_local_cluster_gives_the_local_result(robot, fleet, reference, local_cli
     assert res.timings["distributed"] > 0
 
 
+def _npz_block(path: str, start: int, stop: int):
+    """A part of :func:`identify_chunks`: one block of an NPZ file, read with numpy."""
+    with np.load(path) as z:
+        yield tuple(z[k][start:stop] for k in ("q", "dq", "ddq", "tau"))
+
+
+def test_identify_chunks_parts_as_dask_tasks(robot, fleet, reference, local_client):
+    from manip_id.identification import identify_chunks
+
+    parts = [(_npz_block, (p, a, a + 500)) for p in fleet[0] for a in range(0, N_SAMPLES, 500)]
+    res = identify_chunks(robot, parts, method="wls", scheduler=local_client)
+    _same(res, reference["wls"], "wls")
+
+
 def test_local_cluster_bad_file_no_result(robot, fleet, local_client, tmp_path):
     bad = tmp_path / "broken.npz"
     bad.write_bytes(b"\x00" * 64)
     with pytest.raises(DataError, match="broken.npz"):
         identify_files(robot, [*fleet[0], str(bad)], scheduler=local_client, block=500)
-    # the client is still usable afterwards: nothing of the failed run is left running
-    assert not local_client.processing() or all(not v for v in local_client.processing().values())
+    # the rest of the failed run is cancelled: nothing of it is left running
+    deadline = time.monotonic() + 30
+    while any(local_client.processing().values()) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not any(local_client.processing().values())
 
 
 def test_local_spec_starts_and_stops_its_cluster(robot, fleet, reference):
@@ -413,3 +452,83 @@ def test_per_file_figure(robot, fleet, tmp_path):
     assert [t.get_text() for t in ax.get_xticklabels()] == [res.names[i] for i in shown]
     with pytest.raises(InputError):
         per_file_parameters(out, est, std[:2], pooled=res.estimate, names=res.names, files="abc")
+
+
+# ------------------------------------------------------------------------ CLI
+def _cli(args, tmp_path, capsys):
+    from manip_id.cli import main
+
+    out = tmp_path / "out.json"
+    status = main(["identify", "ur10", "--friction", "viscous,coulomb", *args, "--json", str(out)])
+    captured = capsys.readouterr()
+    return status, (json.loads(out.read_text()) if out.exists() else None), captured
+
+
+def test_cli_per_file_validation_and_report(robot, fleet, tmp_path, capsys):
+    paths, arrays, _ = fleet
+    report_dir = tmp_path / "report"
+    status, rep, cap = _cli(
+        ["--data", paths[0], "--validate", paths[1], "--per-file", "--block", "400",
+         "--report", str(report_dir)],
+        tmp_path, capsys,
+    )  # fmt: skip
+    assert status == 0, cap.err
+    own = identify(robot, *arrays[0], validation=tuple(arrays[1]))
+    _close([p["value"] for p in rep["base_parameters"]], own.estimate)
+    (entry,) = rep["per_file"]
+    assert entry["file"] == paths[0] and entry["n_tasks"] == 4
+    _close([p["estimate"] for p in entry["parameters"]], own.estimate)
+    assert rep["relative_error"]["validation"] == pytest.approx(own.relative_error.validation)
+    (ventry,) = rep["relative_error"]["validation_per_file"]
+    assert ventry["file"] == paths[1] and ventry["n_samples"] == N_SAMPLES
+    assert rep["n_validation_samples"] == N_SAMPLES
+    assert (report_dir / "per_file_parameters.png").is_file()
+    assert (report_dir / "index.html").is_file()
+    assert "per file:" in cap.out
+
+
+def test_cli_scheduler_local(robot, fleet, reference, tmp_path, capsys):
+    paths, arrays, _ = fleet
+    status, rep, cap = _cli(
+        ["--data", paths[0], "--scheduler", "local:2", "--block", "500", "--method", "wls"],
+        tmp_path, capsys,
+    )  # fmt: skip
+    assert status == 0, cap.err
+    own = identify(robot, *arrays[0], method="wls")
+    _close([p["value"] for p in rep["base_parameters"]], own.estimate)
+    assert rep["source"]["scheduler"] == "local:2"
+
+
+def test_cli_scheduler_file(robot, fleet, dask_cli, tmp_path, capsys):
+    paths, arrays, _ = fleet
+    status, rep, cap = _cli(
+        ["--data", paths[2], "--scheduler", str(dask_cli["file"])], tmp_path, capsys
+    )
+    assert status == 0, cap.err
+    _close([p["value"] for p in rep["base_parameters"]], identify(robot, *arrays[2]).estimate)
+
+
+@pytest.mark.parametrize(
+    "args,match",
+    [
+        (["--scheduler", "nowhere"], "local"),
+        (["--scheduler", "local:0"], "positive"),
+        (["--per-file", "--method", "rls"], "ols or wls"),
+        (["--per-file", "--split", "0.5"], "--validate"),
+        (["--block", "10"], "--block applies"),
+        (["--scheduler", "local", "--workers", "2"], "local:N"),
+    ],
+)
+def test_cli_bad_fleet_options(fleet, tmp_path, capsys, args, match):
+    status, rep, cap = _cli(["--data", fleet[0][0], *args], tmp_path, capsys)
+    assert status == 2 and rep is None
+    assert match in cap.err and "Traceback" not in cap.err
+    assert len(cap.err.strip().splitlines()) == 1
+
+
+def test_cli_bad_file_on_the_cluster_names_it_and_writes_nothing(tmp_path, capsys):
+    bad = tmp_path / "arm_bad.npz"
+    bad.write_bytes(b"garbage")
+    status, rep, cap = _cli(["--data", str(bad), "--scheduler", "local:1"], tmp_path, capsys)
+    assert status == 2 and rep is None
+    assert "arm_bad.npz" in cap.err and "Traceback" not in cap.err

@@ -1,0 +1,239 @@
+"""``manip-id identify --scheduler SPEC / --per-file``: many files, one task each, on Dask.
+
+Each ``--data`` file (and each ``--block`` of one) is read, preprocessed and
+accumulated by one task (:func:`manip_id.fleet.identify_files`), on a Dask
+cluster with ``--scheduler`` (``local[:N]``, ``tcp://HOST:PORT`` or a
+scheduler JSON file) or in this process without it; the client solves from
+the summed information. ``--per-file`` adds each file's own estimate and
+errors, from the same sums (JSON ``per_file``, and a report figure).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+from ..errors import InputError
+
+FLEET_METHODS = ("ols", "wls")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The fleet options of ``manip-id identify``."""
+    g = parser.add_argument_group("many files (Dask)")
+    g.add_argument(
+        "--scheduler",
+        metavar="SPEC",
+        default=None,
+        help="accumulate on Dask: local[:N] (a local cluster of N workers on 127.0.0.1, default "
+        "2), tcp://HOST:PORT (a running scheduler) or SCHEDULER.json (its scheduler file); each "
+        "file is one task, the sums are added on the cluster and solved here (ols, wls)",
+    )
+    g.add_argument(
+        "--per-file",
+        action="store_true",
+        help="also each file's own estimate and errors (JSON per_file, report figure)",
+    )
+    g.add_argument(
+        "--block",
+        type=int,
+        default=None,
+        metavar="SAMPLES",
+        help="with --scheduler or --per-file: cut longer files into tasks of SAMPLES samples",
+    )
+
+
+def wanted(args: argparse.Namespace) -> bool:
+    """Whether this run goes through :func:`manip_id.fleet.identify_files`."""
+    return getattr(args, "scheduler", None) is not None or bool(getattr(args, "per_file", False))
+
+
+def check(args: argparse.Namespace) -> None:
+    """Refuse what the fleet path does not do, before any work."""
+    if args.block is not None and not wanted(args):
+        raise InputError("--block applies with --scheduler or --per-file")
+    if not wanted(args):
+        return
+    opt = "--scheduler" if args.scheduler is not None else "--per-file"
+    if args.simulate:
+        raise InputError(f"{opt} works on --data files, not on --simulate")
+    if args.method not in FLEET_METHODS:
+        raise InputError(
+            f"{opt} accumulates ols or wls; {args.method} runs in sample order on one process"
+        )
+    if args.split is not None:
+        raise InputError(f"{opt} identifies whole files: give validation files with --validate")
+    if args.column:
+        raise InputError(f"--column is not supported with {opt}; convert the CSV files first")
+    if args.workers > 1:
+        raise InputError("--workers forks local processes; with --scheduler use local:N")
+    if args.block is not None and args.block < 1:
+        raise InputError(f"--block must be >= 1 samples, got {args.block}")
+    if args.scheduler is not None:
+        from ..fleet import parse_scheduler
+
+        parse_scheduler(args.scheduler)
+
+
+def _files(value) -> list[str] | None:
+    if value is None:
+        return None
+    return [str(v) for v in value] if isinstance(value, (list, tuple)) else [str(value)]
+
+
+def _preprocess_options(args) -> dict | None:
+    """None (only files without ddq, default settings) unless an option was given."""
+    from ..signals import DEFAULT_CUTOFF
+
+    if args.cutoff is None and args.decimate == 1 and args.trim is None:
+        return None
+    return {
+        "cutoff": DEFAULT_CUTOFF if args.cutoff is None else args.cutoff,
+        "order": args.order,
+        "decimate": args.decimate,
+        "trim": args.trim,
+    }
+
+
+class _Count:
+    def __init__(self, n: int):
+        self.n_samples = n
+
+
+def run(args: argparse.Namespace, outputs, t_start: float) -> int:
+    """The fleet branch of ``manip-id identify`` (after the outputs were reserved)."""
+    from ..fleet import identify_files
+    from . import identify as cmd
+    from ._common import robot_from_args
+
+    files, vfiles = _files(args.data), _files(args.validate)
+    opts = _preprocess_options(args)
+    robot = robot_from_args(args)
+    result = identify_files(
+        robot,
+        files,
+        scheduler=args.scheduler,
+        method=args.method,
+        per_file=args.per_file,
+        block=args.block,
+        preprocess=opts,
+        validation=vfiles,
+        chunk=args.chunk,
+    )
+    timings = {k: float(v) for k, v in result.timings.items()}
+    timings["total"] = time.perf_counter() - t_start
+    per_vfile = result.relative_error.validation_per_file
+    valid = None if per_vfile is None else _Count(sum(e["n_samples"] for e in per_vfile))
+    source = {"data": files, "scheduler": args.scheduler or "this process"}
+    if vfiles is not None:
+        source["validate"] = vfiles
+    report = cmd._report(robot, result, None, valid, None, timings, args, source, None)
+    report["preprocess"] = opts if opts is not None else "files without ddq: default settings"
+    if per_vfile is not None:
+        report["relative_error"]["validation_per_file"] = per_vfile
+    if result.per_file is not None:
+        report["per_file"] = [f.to_dict() for f in result.per_file]
+    print(result.table())
+    print(cmd._summary(robot, report))
+    if result.per_file is not None:
+        print(_per_file_table(result))
+    if args.json:
+        outputs.write_json(args.json, report)
+    path = None
+    if args.report is not None:
+        path = _write_report(robot, result, report, args)
+    outputs.publish()
+    if args.json:
+        print(f"wrote {args.json}")
+    if path is not None:
+        print(f"wrote the report to {path}/index.html")
+    return 0
+
+
+def _per_file_table(result) -> str:
+    lines = ["per file: samples, relative torque error (train), condition number"]
+    w = max(len(Path(f.path).name) for f in result.per_file)
+    for f in result.per_file:
+        name = Path(f.path).name
+        if f.result is None:
+            lines.append(f"  {name:<{w}}  {f.n_samples:>9}  not solvable alone: {f.error}")
+        else:
+            r = f.result
+            lines.append(
+                f"  {name:<{w}}  {f.n_samples:>9}  {100 * r.relative_error.train:8.3f} %  "
+                f"{r.condition_number:10.4g}"
+            )
+    return "\n".join(lines)
+
+
+def _write_report(robot, result, report: dict, args):
+    """Summary, parameter table, singular values and (``--per-file``) the per-file figure."""
+    import numpy as np
+
+    from ..viz import figures
+    from ..viz.report import write_report
+
+    files = report["source"]["data"]
+    run_name = f"{robot.name}, {args.method}, {len(files)} files, {result.n_samples} samples"
+    ra = result.rank_analysis
+    figs = {
+        "singular_values": lambda path: figures.singular_values(
+            path,
+            ra.singular_values_scaled,
+            tolerance=ra.tolerance,
+            rank=ra.rank,
+            title=f"singular values of the pooled base regressor: {run_name}",
+        )
+    }
+    solved = [f for f in (result.per_file or []) if f.result is not None]
+    if solved:
+        est = np.array([f.result.estimate for f in solved])
+        std = np.array([f.result.std for f in solved])
+        figs["per_file_parameters"] = lambda path: figures.per_file_parameters(
+            path,
+            est,
+            std,
+            pooled=result.estimate,
+            names=result.names,
+            files=[Path(f.path).name for f in solved],
+            title=f"per-file parameters (+-1 std) relative to the pooled fit: {run_name}",
+        )
+    rel = report["relative_error"]
+    summary = {
+        "robot": robot.name,
+        "method": args.method,
+        "files": len(files),
+        "scheduler": report["source"]["scheduler"],
+        "training samples": report["n_samples"],
+        "validation samples": report["n_validation_samples"],
+        "base parameters": f"{report['n_base']} of {report['n_parameters']}",
+        "condition number": report["condition_number"],
+        "relative torque error (train)": rel["train"],
+        "relative torque error (validation)": rel["validation"],
+    }
+    rows = [
+        {
+            "name": p["name"],
+            "expression": p["expression"],
+            "value": p["value"],
+            "std": p["std"],
+            "std [%]": p["std_percent"],
+        }
+        for p in report["base_parameters"]
+    ]
+    notes = [
+        f"{f.path}: not solvable alone ({f.error})"
+        for f in (result.per_file or [])
+        if f.result is None
+    ]
+    return write_report(
+        args.report_claim,
+        title=f"manip-id identify: {run_name}",
+        summary=summary,
+        parameter_table=rows,
+        figures=figs,
+        json_result=report,
+        notes=notes,
+        force=args.force,
+    )
