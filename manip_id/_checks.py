@@ -88,12 +88,6 @@ def check_magnitude(arr: np.ndarray, name: str, columns=None, offset: int = 0) -
         )
 
 
-def check_width(arr: np.ndarray, name: str, width: int, what: str) -> None:
-    """Raise unless the last axis of ``arr`` has ``width`` entries."""
-    if arr.shape[-1] != width:
-        raise InputError(f"{name}.shape={arr.shape} but {what}={width}")
-
-
 def positive_vector(x, name: str, n: int, unit: str = "") -> np.ndarray:
     """A positive vector of shape (n,) from a scalar or an (n,) array-like."""
     arr = as_float_array(x, name, ndim=(0, 1))

@@ -93,7 +93,7 @@ from ._checks import as_float_array, check_finite
 from .errors import DataError, InputError, RankDeficiencyError
 from .estimators import InformationAccumulator, solve_accumulator
 from .identifiability import BaseParameters, RankAnalysis, analyze, analyze_information
-from .regressor import DEFAULT_CHUNK, _evaluator, check_states
+from .regressor import DEFAULT_CHUNK, check_states
 from .robot import INERTIAL_NAMES, Robot
 
 #: The payload's standard parameter names, in Pinocchio's order, expressed in its frame.
@@ -253,7 +253,7 @@ def payload_regressor(robot: Robot, frame: str | PayloadFrame, q, dq, ddq) -> np
     """
     pf = frame if isinstance(frame, PayloadFrame) else payload_frame(robot, frame)
     batched, (q, dq, ddq) = check_states(robot, q=q, dq=dq, ddq=ddq)
-    ev = _evaluator(robot)
+    ev = robot.evaluator
     if not batched:
         return ev.regressor(q, dq, ddq)[:, pf.columns] @ pf.transform
     out = np.empty((q.shape[0], robot.nv, 10))
@@ -773,7 +773,7 @@ def _accumulate(
     zeroed, which removes them from every sum); returns the accumulator and the
     number of rows left out per joint.
     """
-    ev = _evaluator(robot)
+    ev = robot.evaluator
     acc = InformationAccumulator(n_cols, robot.nv)
     left_out = np.zeros(robot.nv, dtype=np.int64)
     start = 0

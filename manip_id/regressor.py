@@ -231,6 +231,7 @@ class RegressorEvaluator:
 
 # ------------------------------------------------------------------ checking
 def _evaluator(robot: Robot) -> RegressorEvaluator:
+    """Deprecated alias of :attr:`Robot.evaluator` (kept for callers not yet moved)."""
     return robot.evaluator
 
 
@@ -283,7 +284,7 @@ def regressor(robot: Robot, q, dq, ddq) -> np.ndarray:
     ``Y.reshape(-1, p)`` is the sample-major stacked regressor.
     """
     batched, (q, dq, ddq) = check_states(robot, q=q, dq=dq, ddq=ddq)
-    ev = _evaluator(robot)
+    ev = robot.evaluator
     if not batched:
         return ev.regressor(q, dq, ddq)
     out = np.empty((q.shape[0], robot.nv, robot.n_parameters))
@@ -311,7 +312,7 @@ def slotine_li_regressor(robot: Robot, q, dq, v, w) -> np.ndarray:
     Y of shape (nv, p) or (N, nv, p).
     """
     batched, (q, dq, v, w) = check_states(robot, q=q, dq=dq, v=v, w=w)
-    ev = _evaluator(robot)
+    ev = robot.evaluator
     if not batched:
         return ev.slotine_li(q, dq, v, w)
     out = np.empty((q.shape[0], robot.nv, robot.n_parameters))
@@ -333,7 +334,7 @@ def iter_regressor(
     batched, (q, dq, ddq) = check_states(robot, q=q, dq=dq, ddq=ddq)
     if not batched:
         raise InputError(f"iter_regressor takes N samples (2-D arrays), got q.shape={q.shape}")
-    return _evaluator(robot).iter_regressor(q, dq, ddq, int(chunk))
+    return robot.evaluator.iter_regressor(q, dq, ddq, int(chunk))
 
 
 def iter_slotine_li_regressor(
@@ -347,7 +348,7 @@ def iter_slotine_li_regressor(
         raise InputError(
             f"iter_slotine_li_regressor takes N samples (2-D arrays), got q.shape={q.shape}"
         )
-    return _evaluator(robot).iter_slotine_li(q, dq, v, w, int(chunk))
+    return robot.evaluator.iter_slotine_li(q, dq, v, w, int(chunk))
 
 
 def joint_torques(robot: Robot, theta, q, dq, ddq=None) -> np.ndarray:
@@ -363,7 +364,7 @@ def joint_torques(robot: Robot, theta, q, dq, ddq=None) -> np.ndarray:
         raise InputError(f"{theta.shape=} but robot.n_parameters={robot.n_parameters}")
     acc = np.zeros_like(np.asarray(dq, dtype=float)) if ddq is None else ddq
     _, (q, dq, acc) = check_states(robot, q=q, dq=dq, ddq=acc)
-    ev = _evaluator(robot)
+    ev = robot.evaluator
     if not ev.terms:
         return np.zeros_like(dq)
     vals = ev.joint_values(q, dq, acc)  # (..., nv, nt)

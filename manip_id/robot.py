@@ -431,7 +431,7 @@ def _our_robot_dir() -> Path:
     return Path(__file__).resolve().parent / "robots"
 
 
-def _load_urdf(path: Path, package_dirs: Sequence[str]) -> pin.Model:
+def _load_urdf(path: Path) -> pin.Model:
     if not path.is_file():
         raise RobotError(f"cannot read URDF {path}: no such file")
     try:
@@ -486,7 +486,7 @@ def load_robot(
     if spec_str in OUR_ROBOTS:
         base = _our_robot_dir()
         path = base / f"{spec_str}.urdf"
-        model = _load_urdf(path, pkg)
+        model = _load_urdf(path)
         settings_file = base / f"{spec_str}.json"
         if settings_file.is_file():
             settings = json.loads(settings_file.read_text())
@@ -495,7 +495,7 @@ def load_robot(
         pkg = pkg or [str(path.parent)]
     elif spec_str.endswith(".urdf") or Path(spec_str).suffix == ".urdf" or "/" in spec_str:
         path = Path(spec_str).expanduser()
-        model = _load_urdf(path, pkg)
+        model = _load_urdf(path)
         name, source = path.stem, str(path)
         # package://NAME/... resolves in any ancestor folder holding NAME
         pkg = pkg or [str(d) for d in path.resolve().parents]

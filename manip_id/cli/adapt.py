@@ -95,18 +95,20 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..adaptive import default_gains
-    from ..closed_loop import _angles_to_q, compare_fixed, default_reference, with_payload
-    from ..simulation import perturb_parameters
+    from ..closed_loop import compare_fixed, default_reference, with_payload
+    from ..simulation import perturb_parameters, require_physical
+    from ..trajectories import trajectory_to_configuration
 
     outputs = reserve_outputs(args)  # every output checked (and the report claimed) first
     robot = robot_from_args(args)
     theta0 = robot.nominal_parameters
+    require_physical(robot, theta0)  # the simulated plant: a message naming the body
     theta_true = perturb_parameters(robot, args.perturb, seed=args.seed)
     theta_true = with_payload(robot, theta_true, args.payload)
     reference = default_reference(
         robot, amplitude=args.amplitude, period=args.period, seed=args.seed
     )
-    q_start = _angles_to_q(robot, reference.sample(0.0)[0][None])[0]
+    q_start = trajectory_to_configuration(robot, reference.sample(0.0)[0])
     gains = default_gains(
         robot,
         theta0,

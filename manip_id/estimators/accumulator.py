@@ -84,8 +84,8 @@ class InformationAccumulator:
                 raise InputError(f"Y.shape={Y.shape} has no column {int(columns.max())}")
             Yt = np.take(Y.transpose(1, 0, 2), columns, axis=2)  # one copy, C order
         if check:
-            _check_rows(Yt, "Y", self.n)
-            _check_rows(tau.T, "tau", self.n)
+            check_finite_rows(Yt, "Y", self.n)
+            check_finite_rows(tau.T, "tau", self.n)
         if n == 0:
             return self
         for j in range(self.nv):
@@ -204,7 +204,7 @@ class InformationAccumulator:
         return f"InformationAccumulator(p={self.p}, nv={self.nv}, n={self.n})"
 
 
-def _check_rows(arr: np.ndarray, name: str, offset: int) -> None:
+def check_finite_rows(arr: np.ndarray, name: str, offset: int) -> None:
     """NaN/Inf check of a (nv, n, ...) block, naming the global sample index."""
     if np.isfinite(arr).all():
         return

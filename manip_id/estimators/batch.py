@@ -28,7 +28,7 @@ import scipy.linalg as sla
 from .._checks import as_float_array
 from ..errors import InputError, RankDeficiencyError
 from ..errors import format_direction as format_direction  # re-exported: the one formatter
-from .accumulator import InformationAccumulator, _check_rows
+from .accumulator import InformationAccumulator, check_finite_rows
 from .results import LeastSquaresSolution
 
 #: Singular values of the scaled regressor below this fraction of the largest
@@ -250,8 +250,8 @@ def solve_stacked(
     if nv < 1 or n_rows % nv:
         raise InputError(f"Phi.shape={Phi.shape} has rows not a multiple of nv={nv}")
     _check_names(names, p)
-    _check_rows(Phi.reshape(-1, nv, p).transpose(1, 0, 2), "Phi", 0)
-    _check_rows(z.reshape(-1, nv).T, "z", 0)
+    check_finite_rows(Phi.reshape(-1, nv, p).transpose(1, 0, 2), "Phi", 0)
+    check_finite_rows(z.reshape(-1, nv).T, "z", 0)
     w_rows = None
     if weights is not None:
         w = as_float_array(weights, "weights", ndim=1)

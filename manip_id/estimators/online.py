@@ -255,7 +255,6 @@ class RLSEstimator(_OnlineEstimator):
         self.p_max = p_max
         self._P = np.array(P, order="C")
         self._tmp = np.empty((self.p, self.p))
-        self._eye_idx = None
 
     @property
     def P(self) -> np.ndarray:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -43,7 +43,6 @@ class LeastSquaresSolution:
     scaled_condition_number: float
     solver: str
     weights: np.ndarray | None = None
-    extra: dict = field(default_factory=dict, compare=False)
 
     @property
     def dof(self) -> int:

@@ -151,7 +151,7 @@ class ExcitationResult:
     usage: LimitUsage
 
 
-def _linear_constraints(robot, traj_shape, wf, lo, hi, vel, acc, n_constraint_points):
+def _linear_constraints(traj_shape, wf, lo, hi, vel, acc, n_constraint_points):
     """G, h with G x <= h for x = [q0 (nv), then per joint (a_j, b_j) (nv * 2L)]."""
     nv, L = traj_shape
     proto = FourierTrajectory(np.zeros(nv), np.zeros((nv, L)), np.zeros((nv, L)), wf)
@@ -342,7 +342,7 @@ def optimize_excitation(
     base = base_columns(robot) if base is None else np.asarray(base, dtype=int)
     nv, L = robot.nv, harmonics
     lo, hi, vel, acc = _design_limits(robot, margin, acceleration_limit)
-    G, h = _linear_constraints(robot, (nv, L), wf, lo, hi, vel, acc, n_constraint_points)
+    G, h = _linear_constraints((nv, L), wf, lo, hi, vel, acc, n_constraint_points)
     start = random_trajectory(
         robot, L, wf, seed, margin=margin, acceleration_limit=acceleration_limit
     )
