@@ -906,6 +906,7 @@ def identify_datasets(
     solver: str = "sdp",
     prior: str = "nominal",
     prior_weight: float = DEFAULT_PRIOR_WEIGHT,
+    scans: dict | None = None,
 ) -> IdentificationResult:
     """Least squares from several log files, each read in chunks and preprocessed on its own.
 
@@ -921,6 +922,7 @@ def identify_datasets(
     window: window text applied to every file (training and validation) that has none
     method: "ols" or "wls"; consistent, solver, prior, prior_weight: as :func:`identify`
     workers: several files are accumulated in up to ``workers`` forked processes
+    scans: FileSpec -> :class:`~manip_id.pipeline.FileScan` of files already scanned
 
     Returns
     -------
@@ -943,14 +945,11 @@ def identify_datasets(
     base = _resolve_base(robot, base, timings)
     ind = base.independent
     t0 = time.perf_counter()
-    train = accumulate_files(
-        robot, files, options, ind, window=window, chunk=chunk, workers=workers, progress=progress
-    )
+    kw = dict(window=window, chunk=chunk, workers=workers, scans=scans)
+    train = accumulate_files(robot, files, options, ind, progress=progress, **kw)
     valid = None
     if validation is not None:
-        valid = accumulate_files(
-            robot, validation, options, ind, window=window, chunk=chunk, workers=workers
-        )
+        valid = accumulate_files(robot, validation, options, ind, **kw)
     timings["accumulate_wall"] = time.perf_counter() - t0
     for fa in train + (valid or []):
         for k, v in fa.timings.items():

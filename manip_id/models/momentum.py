@@ -1,0 +1,246 @@
+"""The filtered momentum model (see the package docstring for the math).
+
+Regressors, exactly (no finite difference)::
+
+    Y_p(q, dq) theta = M(q) dq          (generalized momentum, armature column dq_j)
+    Y_h(q, dq) theta = g(q) - C(q, dq)^T dq + tau_joint(q, dq)
+
+Per body ``i`` with spatial velocity ``v_i`` in its joint frame and spatial
+inertia ``I_i = sum_k theta_ik B_k`` (``B_k`` the 6x6 basis of the ten
+dynamic parameters): ``K_i = 1/2 v_i^T I_i v_i`` gives
+
+    dK/d dq = sum_i J_i^T I_i v_i,      dK/dq = sum_i (d v_i/dq)^T I_i v_i  (= C^T dq)
+
+with ``J_i = d v_i/d dq`` and ``d v_i/dq`` from Pinocchio's kinematic derivatives
+(``getJointVelocityDerivatives``, LOCAL frame), and ``g`` from the torque
+regressor at rest.
+
+Filter. ``F(s) = lambda/(s + lambda)`` is integrated exactly for inputs
+interpolated by the cubic through the last four samples (lower degrees at the
+first steps): ``y_k = a y_{k-1} + sum_j c_j x_{k-j}``, ``a = exp(-lambda dt)``,
+run with :func:`scipy.signal.lfilter` over chunks.
+``F[Y_p]`` starts at ``Y_p(0)``, the other filters at zero, so
+``F[tau] = W theta`` with ``W = lambda (Y_p - F[Y_p]) + F[Y_h]`` holds from
+the first sample on (up to the ``O(dt^4)`` interpolation error).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+from functools import lru_cache
+
+import numpy as np
+import pinocchio as pin
+
+from ..errors import InputError
+from ..estimators import InformationAccumulator
+from ..robot import Robot
+from .energy import _states, window_samples
+
+_CHUNK = 1024
+
+
+@lru_cache(maxsize=1)
+def _inertia_basis() -> np.ndarray:
+    """``B`` of shape (10, 6, 6): ``Inertia.FromDynamicParameters(pi).matrix() = sum pi_k B_k``."""
+    ref = np.array([1.0, 0, 0, 0, 1.0, 0, 1.0, 0, 0, 1.0])
+    m0 = pin.Inertia.FromDynamicParameters(ref).matrix()
+    out = np.empty((10, 6, 6))
+    for k in range(10):
+        e = ref.copy()
+        e[k] += 1.0
+        out[k] = pin.Inertia.FromDynamicParameters(e).matrix() - m0
+    return out
+
+
+def momentum_regressors(robot: Robot, q, dq) -> tuple[np.ndarray, np.ndarray]:
+    """``(Y_p, Y_h)`` at N samples, each of shape (N, nv, p) (module docstring).
+
+    ``q`` [rad or m] (N, nq), ``dq`` [rad/s or m/s] (N, nv).
+    ``Y_p theta = M(q) dq`` [N m s], ``Y_h theta = g(q) - C(q, dq)^T dq + tau_joint`` [N m].
+    """
+    q, dq, _ = _states(robot, q, dq, np.zeros_like(np.asarray(dq, dtype=float)))
+    return _regressors(robot, q, dq)
+
+
+def _regressors(robot: Robot, q: np.ndarray, dq: np.ndarray):
+    m = robot.model
+    d = m.createData()
+    n, nv, p, nb = q.shape[0], robot.nv, robot.n_parameters, robot.n_bodies
+    B = _inertia_basis()
+    Yp = np.zeros((n, nv, p))
+    Yh = np.zeros((n, nv, p))
+    zero = np.zeros(nv)
+    J = np.empty((nb, 6, nv))
+    dV = np.empty((nb, 6, nv))
+    V = np.empty((nb, 6))
+    for k in range(n):
+        pin.computeForwardKinematicsDerivatives(m, d, q[k], dq[k], zero)
+        for i in range(1, nb + 1):
+            dV[i - 1], J[i - 1] = pin.getJointVelocityDerivatives(m, d, i, pin.LOCAL)
+            V[i - 1] = d.v[i].vector
+        H = np.einsum("kab,nb->nka", B, V)  # (nb, 10, 6): I(e_k) v_i
+        Yp[k, :, : 10 * nb] = np.einsum("nai,nka->ink", J, H).reshape(nv, 10 * nb)
+        dK = np.einsum("nai,nka->ink", dV, H).reshape(nv, 10 * nb)  # dK/dq
+        Yh[k, :, : 10 * nb] = pin.computeJointTorqueRegressor(m, d, q[k], zero, zero) - dK
+    if robot.terms.enabled:
+        ev = robot.evaluator
+        zeros = np.zeros_like(dq)
+        T0 = np.zeros((n, nv, p))
+        ev.fill_joint_terms(T0, q, zeros, zeros)
+        Ta = np.zeros((n, nv, p))
+        ev.fill_joint_terms(Ta, q, zeros, dq)
+        Yp += Ta - T0  # armature momentum Ia_j dq_j only
+        Th = np.zeros((n, nv, p))
+        ev.fill_joint_terms(Th, q, dq, zeros)
+        Yh += Th  # friction, offset, spring (armature column: 0)
+    return Yp, Yh
+
+
+#: Degree of the interpolation of the filter inputs (cubic: O(dt^4) per step).
+HOLD_DEGREE = 3
+
+
+def filter_weights(bandwidth: float, dt: float, degree: int) -> tuple[float, np.ndarray]:
+    """``(a, c)`` of the exact first-order filter for a polynomial hold of ``degree``.
+
+    ``y_k = a y_{k-1} + sum_{j=0}^{degree} c_j x_{k-j}`` integrates
+    ``dy/dt = lambda (x - y)`` over one step ``dt`` [s] for ``x`` interpolated by the
+    polynomial through ``x_{k-degree}, ..., x_k``; ``lambda = bandwidth`` [rad/s],
+    ``a = exp(-lambda dt)``. The weights are integrals of the Lagrange basis against
+    ``lambda exp(-lambda (dt - s))``, by 24-point Gauss-Legendre quadrature
+    (exact to round-off for these smooth integrands).
+    """
+    lam, h = float(bandwidth), float(dt)
+    x, w = np.polynomial.legendre.leggauss(24)
+    s = 0.5 * h * (x + 1.0)  # in [0, h], 0 at t_{k-1}
+    kern = 0.5 * h * w * lam * np.exp(-lam * (h - s))
+    nodes = h * (1.0 - np.arange(degree + 1))  # x_k at h, x_{k-1} at 0, ...
+    c = np.empty(degree + 1)
+    for j in range(degree + 1):
+        basis = np.ones_like(s)
+        for m in range(degree + 1):
+            if m != j:
+                basis *= (s - nodes[m]) / (nodes[j] - nodes[m])
+        c[j] = float(kern @ basis)
+    return math.exp(-lam * h), c
+
+
+class _Filter:
+    """The exact first-order filter over chunks of (n, ...) arrays, state carried.
+
+    The first samples use lower-degree holds (as many past samples as there are),
+    then :func:`scipy.signal.lfilter` runs the degree-``HOLD_DEGREE`` recursion.
+    """
+
+    def __init__(self, bandwidth: float, dt: float, y0: np.ndarray):
+        self.weights = [filter_weights(bandwidth, dt, d) for d in range(1, HOLD_DEGREE + 1)]
+        self.a = self.weights[0][0]
+        self.y = np.array(y0, dtype=float)  # last output
+        self.past: list[np.ndarray] = []  # last inputs, newest first
+        self.zi = None
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        from scipy.signal import lfilter
+
+        out = np.empty_like(x)
+        k = 0
+        while k < x.shape[0] and self.zi is None:
+            if not self.past:  # the first sample: the initial condition
+                out[k] = self.y
+            else:
+                _, c = self.weights[len(self.past) - 1]
+                out[k] = self.a * self.y + c[0] * x[k]
+                for j, xp in enumerate(self.past, start=1):
+                    out[k] += c[j] * xp
+                self.y = out[k].copy()
+            self.past = [x[k].copy(), *self.past][:HOLD_DEGREE]
+            k += 1
+            if len(self.past) == HOLD_DEGREE:
+                self._init_state()
+        if k < x.shape[0]:
+            _, b = self.weights[-1]
+            out[k:], self.zi = lfilter(b, [1.0, -self.a], x[k:], axis=0, zi=self.zi)
+        return out
+
+    def _init_state(self) -> None:
+        """Transposed direct-form state after the start-up: z_i = sum_{j>i} b_j x_{s+i-j}."""
+        _, b = self.weights[-1]
+        M = b.size - 1
+        zi = []
+        for i in range(M):
+            z = self.a * self.y if i == 0 else np.zeros_like(self.y)
+            for j in range(i + 1, M + 1):
+                z = z + b[j] * self.past[j - i - 1]
+            zi.append(z)
+        self.zi = np.stack(zi)
+
+
+def momentum_rows(
+    robot: Robot,
+    q,
+    dq,
+    tau,
+    *,
+    dt: float,
+    window_length: float | None = None,
+    bandwidth: float | None = None,
+    chunk: int = _CHUNK,
+) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """Filtered momentum rows ``(W (n_r, nv, p), F[tau] (n_r, nv))``, chunk by chunk.
+
+    Parameters
+    ----------
+    q: positions [rad or m], shape (N, nq); dq [rad/s or m/s] and tau [N m or N], (N, nv)
+    dt: sample time [s] (uniform sampling)
+    window_length: spacing of the rows [s] (default :data:`~manip_id.models.DEFAULT_WINDOW`):
+        samples ``k = s, 2 s, ...`` with ``s = round(window_length / dt)``
+    bandwidth: lambda of the filter [rad/s]; default ``3 / window_length``
+    chunk: samples per regressor chunk
+    """
+    q, dq, tau = _states(robot, q, dq, tau)
+    stride = window_samples(window_length, dt, even=False)
+    lam = 3.0 / (stride * float(dt)) if bandwidth is None else float(bandwidth)
+    if not (math.isfinite(lam) and lam > 0):
+        raise InputError(f"bandwidth must be a positive filter bandwidth [rad/s], got {bandwidth}")
+    n = q.shape[0]
+    if n <= stride:
+        raise InputError(
+            f"{n} samples give no momentum row every {stride} samples: shorten window_length"
+        )
+    fp = fh = ft = None
+    for start in range(0, n, int(chunk)):
+        stop = min(start + int(chunk), n)
+        Yp, Yh = _regressors(robot, q[start:stop], dq[start:stop])
+        if fp is None:
+            fp = _Filter(lam, dt, Yp[0])
+            fh = _Filter(lam, dt, np.zeros_like(Yp[0]))
+            ft = _Filter(lam, dt, np.zeros(robot.nv))
+        Fp, Fh, Ft = fp(Yp), fh(Yh), ft(tau[start:stop])
+        keep = np.arange(start, stop)
+        keep = keep[(keep % stride == 0) & (keep > 0)] - start
+        if keep.size:
+            W = lam * (Yp[keep] - Fp[keep]) + Fh[keep]
+            yield W, Ft[keep]
+
+
+def accumulate_momentum(
+    robot: Robot,
+    q,
+    dq,
+    tau,
+    *,
+    dt: float,
+    window_length: float | None = None,
+    bandwidth: float | None = None,
+    columns=None,
+) -> InformationAccumulator:
+    """The momentum rows' information on ``columns`` (default all), per joint (``nv`` outputs)."""
+    cols = np.arange(robot.n_parameters) if columns is None else np.asarray(columns, np.intp)
+    acc = InformationAccumulator(cols.size, robot.nv)
+    for W, z in momentum_rows(
+        robot, q, dq, tau, dt=dt, window_length=window_length, bandwidth=bandwidth
+    ):
+        acc.add(W, z, columns=cols, check=False)
+    return acc
