@@ -396,3 +396,162 @@ __all__ = [
     "iter_processed",
     "scan_file",
 ]
+
+
+# State handed to forked worker processes (inherited, never pickled).
+_JOB: dict = {}
+
+
+def _job_file(i: int) -> FileAccumulation:
+    robot, specs, options, ind, chunk, scans = _JOB["job"]
+    return accumulate_file(robot, specs[i], options, ind, chunk=chunk, scan=scans.get(specs[i]))
+
+
+def accumulate_files(
+    robot: Robot,
+    files,
+    options: PreprocessOptions | None = None,
+    base_columns=None,
+    *,
+    window=None,
+    chunk: int = DEFAULT_CHUNK,
+    workers: int = 1,
+    progress=None,
+    scans: dict | None = None,
+) -> list[FileAccumulation]:
+    """:func:`accumulate_file` for every file of ``files`` (specs or their texts), in order.
+
+    ``window`` (text or :class:`~manip_id.datasets.Window`) applies to each file
+    that has none. With ``workers > 1`` and several files, the files are
+    accumulated in up to ``workers`` forked processes (one file per task).
+    ``progress(k, n_files)`` is called after each file. Every file is checked
+    against ``robot``: a file of another robot (other joints) fails naming it.
+    ``scans``: :class:`FileSpec` -> :class:`FileScan` of files already scanned.
+    """
+    scans = dict(scans or {})
+    if isinstance(files, (str, FileSpec)) or not hasattr(files, "__iter__"):
+        files = [files]
+    specs = [parse_file_spec(f, window=window) for f in files]
+    if not specs:
+        raise InputError("no data files given")
+    options = options or PreprocessOptions()
+    if base_columns is None:
+        from .identifiability import analyze
+
+        base_columns = analyze(robot).base.independent
+    ind = np.asarray(base_columns, dtype=np.intp)
+    if int(workers) > 1 and len(specs) > 1:
+        import multiprocessing as mp
+
+        _JOB["job"] = (robot, specs, options, ind, int(chunk), scans)
+        try:
+            with mp.get_context("fork").Pool(min(int(workers), len(specs))) as pool:
+                out = []
+                for k, fa in enumerate(pool.imap(_job_file, range(len(specs)))):
+                    out.append(fa)
+                    if progress is not None:
+                        progress(k + 1, len(specs))
+                return out
+        finally:
+            _JOB.pop("job", None)
+    out = []
+    for k, spec in enumerate(specs):
+        out.append(accumulate_file(robot, spec, options, ind, chunk=chunk, scan=scans.get(spec)))
+        if progress is not None:
+            progress(k + 1, len(specs))
+    return out
+
+
+def merge_accumulations(parts: list[FileAccumulation]) -> InformationAccumulator:
+    """The sum of the files' accumulators (the information of their concatenation)."""
+    acc = parts[0].accumulator.copy()
+    for p in parts[1:]:
+        acc.merge(p.accumulator)
+    return acc
+
+
+def validation_errors(parts: list[FileAccumulation], estimate, joints) -> dict:
+    """Pooled and per-file relative torque errors of ``estimate`` on ``parts``.
+
+    Returns ``{"error", "per_joint" (nv,), "per_file": [{"file", "window",
+    "n_samples", "error", "per_joint": {joint: error}}]}``; the pooled error is
+    ``sqrt(sum_files SSE / sum_files ||tau||^2)`` (every sample weighs the same).
+    """
+    sse = np.zeros(len(joints))
+    zz = np.zeros(len(joints))
+    per_file = []
+    for p in parts:
+        s, z = p.validation_sums(estimate)
+        sse += s
+        zz += z
+        err, per = p.relative_error(estimate)
+        per_file.append(
+            {
+                "file": str(p.spec.path),
+                "window": None if p.spec.window is None else str(p.spec.window),
+                "n_samples": int(p.n_samples),
+                "error": _finite(err),
+                "per_joint": dict(zip(joints, map(_finite, per), strict=True)),
+            }
+        )
+    with np.errstate(divide="ignore", invalid="ignore"):
+        per_joint = np.sqrt(sse / zz)
+    pooled = float(np.sqrt(sse.sum() / zz.sum())) if zz.sum() > 0 else float("nan")
+    return {"error": pooled, "per_joint": per_joint, "per_file": per_file}
+
+
+def _finite(x) -> float | None:
+    x = float(x)
+    return x if np.isfinite(x) else None
+
+
+__all__ += ["accumulate_files", "merge_accumulations", "validation_errors"]
+
+
+def split_file(
+    robot: Robot, spec, fraction: float, options: PreprocessOptions | None = None, scan=None
+) -> tuple[FileSpec, FileSpec]:
+    """Two windows of one file: its first ``fraction`` of samples, then the rest.
+
+    As :meth:`~manip_id.datasets.Dataset.split` on the rows a fit sees: ``k =
+    round(fraction N)`` (at least 2 on each side). The windows are in seconds
+    (or rows, for a file cut by rows), so each part is preprocessed on its own.
+    """
+    from .datasets import Window
+
+    spec = parse_file_spec(spec)
+    options = options or PreprocessOptions()
+    if not 0.0 < float(fraction) < 1.0:
+        raise InputError(f"split fraction must be in (0, 1), got {fraction}")
+    scan = scan_file(robot, spec, options) if scan is None else scan
+    n = scan.n
+    if n < 4:
+        raise DataError(f"{spec.label}: {n} samples cannot be split in two parts of 2")
+    k = min(max(int(round(float(fraction) * n)), 2), n - 2)
+    w = spec.window
+    if w is not None and w.unit == "index":
+        if scan.counts.n_dropped:
+            raise InputError(
+                f"{spec.label}: cannot split a row window with dropped bad rows; "
+                "give the two windows explicitly"
+            )
+        a = w.start or 0
+        return (
+            spec.with_window(Window(a, a + k, "index")),
+            spec.with_window(Window(a + k, w.stop, "index")),
+        )
+    src, _ = _open(robot, spec)
+    seen, t_k = 0, None
+    for rows in _rows(src, spec, options, RowCounts()):
+        if seen + rows.shape[0] > k:
+            t_k = float(rows[k - seen, 0])
+            break
+        seen += rows.shape[0]
+    t0 = scan.counts.t_file_start
+    cut = t_k - t0
+    start = None if w is None else w.start
+    stop = None if w is None else w.stop
+    return spec.with_window(Window(start, cut, "s")), spec.with_window(Window(cut, stop, "s"))
+
+
+__all__ += ["split_file"]

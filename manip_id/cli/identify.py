@@ -19,7 +19,7 @@ import numpy as np
 from ..datasets import Dataset, check_robot, load_dataset
 from ..errors import InputError
 from ..signals import DEFAULT_CUTOFF, DEFAULT_ORDER, preprocess
-from . import _fleet
+from . import _files, _fleet
 from ._common import add_robot_arguments, reserve_outputs, robot_from_args
 
 METHODS = ("ols", "wls", "rls", "gradient")
@@ -42,8 +42,12 @@ def register(sub) -> None:
     src.add_argument(
         "--data",
         metavar="FILE",
-        help="measurements: .npz (t, q, dq, tau[, ddq, joint_names]), .csv "
-        "(t,q_<joint>...,dq_<joint>...,tau_<joint>...) or a Panda log folder",
+        nargs="+",
+        action="extend",
+        help="one or more measurement files (--data a b, or --data a --data b; each read in "
+        "chunks and preprocessed on its own): .npz (t, q, dq, tau[, ddq, joint_names]), .csv "
+        "(t,q_<joint>...,dq_<joint>...,tau_<joint>...), a ROS 2 bag (rosbag2 folder or "
+        ".mcap) or a Panda log folder; FILE@START:STOP [s] or FILE@#A:#B [rows] for a window",
     )
     p.add_argument(
         "--column",
@@ -92,7 +96,13 @@ def register(sub) -> None:
     )
     p.add_argument("--method", choices=METHODS, default="ols", help="estimator [default ols]")
     val = p.add_mutually_exclusive_group()
-    val.add_argument("--validate", metavar="FILE", help="validation data (same formats as --data)")
+    val.add_argument(
+        "--validate",
+        metavar="FILE",
+        nargs="+",
+        action="extend",
+        help="one or more validation files (same formats and windows as --data)",
+    )
     val.add_argument(
         "--split",
         type=float,
@@ -175,6 +185,7 @@ def register(sub) -> None:
         "--consistent); armature and offset go to OUT.identified.json next to it",
     )
     _fleet.add_arguments(p)
+    _files.add_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -264,6 +275,7 @@ def _check_args(args) -> None:
         raise InputError(f"--workers applies to ols and wls; {args.method} runs in sample order")
     _check_consistent_args(args)
     _fleet.check(args)
+    _files.check(args)
 
 
 def _check_consistent_args(args) -> None:
@@ -429,13 +441,17 @@ def run(args: argparse.Namespace) -> int:
         outputs.file(sidecar_path(args.export_urdf), "--export-urdf sidecar")
     if _fleet.wanted(args):  # many files, one task each (Dask with --scheduler)
         return _fleet.run(args, outputs, t_start)
+    if not args.simulate:  # log files: read in chunks, each preprocessed alone
+        return _files.run(args, outputs, t_start)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     data = validation = None
     if not args.simulate:  # read the files first: bad data fail before the robot loads
         data = load_dataset(args.data, columns=_column_map(args.column))
     if args.validate is not None:
-        validation = load_dataset(args.validate, columns=_column_map(args.column))
+        if len(args.validate) > 1:
+            raise InputError("--simulate takes one --validate file")
+        validation = load_dataset(args.validate[0], columns=_column_map(args.column))
     timings["load"] = time.perf_counter() - t0
     robot = robot_from_args(args)
     if _streams(args):  # simulated least squares: block by block, bounded memory
