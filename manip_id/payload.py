@@ -67,13 +67,19 @@ centre of mass and inertia) fixes that scale: the known columns move to the righ
 
     [D(i), -Y_b, -Y_pu] [g; beta; psi_u] = Y_pk phi_k
 
-solved by ordinary least squares (``method="ols"``, the default), or by total least
-squares (``"tls"``: the smallest right singular vector of the column-scaled
-``[W, -y]``, normalised to the known scale). A joint whose gain the data do not fix
-(its gain in a direction the data leave unexcited, e.g. a joint whose current never
-moves) is named in a warning and its gain reported as ``None``. The gains feed the
-torque scale of ``manip-id identify --torque-scale-from RESULT.json``
-(:func:`load_torque_scale`).
+solved by ordinary least squares (``method="ols"``; ``"wls"`` weights each joint by its
+residual variance) or total least squares (``"tls"``: the smallest right singular
+vector of the column-scaled ``[W, -y]``, normalised to the known scale). Those put the
+noisy currents in the regressor, an errors-in-variables problem: a gain shrinks by
+about ``sigma_i^2 / mean(i^2)`` (1.3 % on a wrist whose current is 3 times its noise)
+and the standard deviations do not see it. The default ``"ml"`` starts from OLS and
+minimises the residual in current units, ``sum_j ||i_j - (Y_b beta + Y_p phi)_j / g_j||^2
+/ sigma_j^2``, by Gauss-Newton on the same accumulated sums: the maximum-likelihood
+estimate for Gaussian current noise, unbiased with honest standard deviations.
+A joint whose gain the data do not fix (its gain in a direction the data leave
+unexcited, e.g. a joint whose current never moves) is named in a warning and its
+gain reported as ``None``. The gains feed the torque scale of
+``manip-id identify --torque-scale-from RESULT.json`` (:func:`load_torque_scale`).
 """
 
 from __future__ import annotations
@@ -133,7 +139,7 @@ CONSISTENCY_MARGIN = 1e-9
 _EIG_TOL = 1e-10
 #: Methods of :func:`identify_payload` and :func:`identify_drive_gains`.
 PAYLOAD_METHODS: tuple[str, ...] = ("ols", "wls")
-GAIN_METHODS: tuple[str, ...] = ("ols", "tls")
+GAIN_METHODS: tuple[str, ...] = ("ml", "ols", "wls", "tls")
 
 
 class PayloadWarning(UserWarning):
@@ -1193,8 +1199,7 @@ def identify_payload(
             ra.unidentifiable,
             subject="these runs",
             what="directions of the joint payload problem",
-            hint="unloaded runs must excite the robot's base parameters, loaded runs the "
-            "payload's",
+            hint="unloaded runs must excite the robot's base parameters, loaded runs the payload's",
         )
     ls = solve_accumulator(acc, method=method, names=names, rank_rtol=ra.tolerance)
     f = _dof_factor(acc, ls.rank, left_out)
@@ -1337,7 +1342,7 @@ def identify_drive_gains(
     *,
     payload_com=None,
     payload_inertia=None,
-    method: str = "ols",
+    method: str = "ml",
     velocity_deadband: float | None = None,
     chunk: int = DEFAULT_CHUNK,
     base: BaseParameters | None = None,
@@ -1354,8 +1359,13 @@ def identify_drive_gains(
     payload_com: its centre of mass in ``frame`` [m], shape (3,), when known
     payload_inertia: its inertia about the CoM in ``frame`` axes [kg m^2],
         (Ixx, Ixy, Iyy, Ixz, Iyz, Izz), when known (needs ``payload_com``)
-    method: "ols" (ordinary least squares with the known columns on the right-hand
-        side, Gautier & Briot) or "tls" (total least squares of the scaled system)
+    method: "ml" (default: maximum likelihood under current noise, Gauss-Newton from
+        the OLS start, :func:`_ml_gains`), "ols" (ordinary least squares with the known
+        columns on the right-hand side, Gautier & Briot), "wls" (the same, each joint
+        weighted by its residual variance) or "tls" (total least squares of the scaled
+        system). OLS/WLS/TLS hold the noisy currents in the regressor: they shrink a
+        gain by about ``sigma_i^2 / mean(i^2)`` and their standard deviations are
+        optimistic where a joint's current is small against its noise; ML is not.
     velocity_deadband: leave out the rows of joint j where ``|dq_j| <`` this [rad/s]
 
     Returns
@@ -1482,7 +1492,8 @@ def identify_drive_gains(
     ra = analyze_information(acc.A, names, n_rows=acc.n_rows)
     determined = np.ones(nv, dtype=bool)
     if ra.rank < p:
-        d = np.sqrt(np.maximum(np.diag(acc.A), 0.0))
+        d = np.sqrt(np.maximum(np.diag(acc.A), 0.0))  # column norms; a zero column (a
+        d = np.where(d > 0, d, d.max() if d.max() > 0 else 1.0)  # current never seen) counts
         N = ra.null_space * d[:, None]
         N = N / np.maximum(np.linalg.norm(N, axis=0), 1e-300)
         involved = np.abs(N[:nv]).max(axis=1) > 1e-6 if N.size else np.zeros(nv, bool)
@@ -1508,11 +1519,16 @@ def identify_drive_gains(
                 + "; ".join(others[:4]),
             )
     ls = solve_accumulator(
-        acc, method="ols", names=names, minimum_norm=ra.rank < p, rank_rtol=ra.tolerance
+        acc,
+        method="wls" if method == "wls" else "ols",
+        names=names,
+        minimum_norm=ra.rank < p,
+        rank_rtol=ra.tolerance,
     )
     f = _dof_factor(acc, ls.rank, left_out)
     x, cov, sigma2 = ls.estimate, ls.covariance * f, ls.sigma2 * f
-    solver = "OLS with the known payload columns on the right-hand side; " + ls.solver
+    solver = f"{'WLS' if method == 'wls' else 'OLS'} with the known payload columns on the "
+    solver += "right-hand side; " + ls.solver
     if method == "tls":
         if ra.rank < p:
             _warn(messages, "TLS needs a full-rank system: kept the minimum-norm OLS solution")
@@ -1526,6 +1542,12 @@ def identify_drive_gains(
                 "TLS: smallest right singular vector of the column-scaled [W, -y], scaled to "
                 "the known payload; covariance sigma^2 (W^T W)^-1 at the TLS estimate"
             )
+    elif method == "ml":
+        if ra.rank < p:
+            _warn(messages, "ML needs a full-rank system: kept the minimum-norm OLS solution")
+        else:
+            x, cov, sigma2, what = _ml_gains(acc, nv, x, acc.n - left_out)
+            solver = f"{what}, started from OLS ({ls.solver})"
     timings["solve"] = time.perf_counter() - t0
     gains = x[:nv].copy()
     std_all = np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -1611,6 +1633,115 @@ def _known_estimate(pf: PayloadFrame, phi: np.ndarray, ra: RankAnalysis) -> Payl
         min_eigenvalue=float(lam[0]),
         physically_consistent=bool(lam[0] > _EIG_TOL * np.abs(lam).max()),
     )
+
+
+def _ml_gains(
+    acc: InformationAccumulator,
+    nv: int,
+    x0: np.ndarray,
+    n_rows: np.ndarray,
+    *,
+    reweight: int = 3,
+    max_iter: int = 100,
+    tol: float = 1e-13,
+) -> tuple[np.ndarray, np.ndarray, float, str]:
+    """Maximum likelihood under current noise: residuals in current units, from the sums.
+
+    With ``k_j = 1/g_j`` and the torque model ``tau_j = X_j theta + c_j`` (``X`` the
+    base and unknown payload columns, ``c`` the known payload torque), the current
+    residual ``e_j = i_j - k_j (X_j theta + c_j)`` of every joint has, with
+    ``theta~ = [theta; 1]`` and ``X~ = [X, c]``::
+
+        ||e_j||^2 = i_j.i_j - 2 k_j (X~_j^T i_j).theta~ + k_j^2 theta~^T X~_j^T X~_j theta~
+
+    All these sums are blocks of the OLS accumulator of ``[D(i), -X] x = c``, so
+    Gauss-Newton (Levenberg-damped) on ``sum_j w_j ||e_j||^2`` needs no data pass;
+    ``w_j = 1/sigma_j^2`` are re-estimated from the residuals ``reweight`` times.
+    Unlike OLS, whose regressor holds the noisy currents (an errors-in-variables
+    problem: the gains shrink by about ``sigma_i^2 / mean(i^2)``), this is unbiased at
+    low current-to-noise ratios. Returns ``(x = [g, theta], covariance, sigma2 [A^2],
+    description)``; the covariance is ``(J^T W J)^-1`` mapped to ``g`` by ``dg/dk = -g^2``.
+    """
+    A, b, zz = acc.A_joint, acc.b_joint, acc.zz_joint
+    p = acc.p
+    m = p - nv
+    S = np.empty((nv, m + 1, m + 1))
+    s = np.empty((nv, m + 1))
+    ii = np.empty(nv)
+    for j in range(nv):
+        S[j, :m, :m] = A[j, nv:, nv:]
+        S[j, :m, m] = S[j, m, :m] = -b[j, nv:]
+        S[j, m, m] = zz[j]
+        s[j, :m] = -A[j, nv:, j]
+        s[j, m] = b[j, j]
+        ii[j] = A[j, j, j]
+    k = 1.0 / x0[:nv]
+    theta = x0[nv:].copy()
+
+    def rss(k, theta):
+        tt = np.r_[theta, 1.0]
+        St = S @ tt  # (nv, m + 1)
+        return np.maximum(ii - 2.0 * k * (s @ tt) + k**2 * (St @ tt), 0.0)
+
+    def normal(k, theta, w):
+        tt = np.r_[theta, 1.0]
+        St = S @ tt
+        H = np.zeros((p, p))
+        grad = np.zeros(p)
+        for j in range(nv):
+            H[j, j] = w[j] * tt @ St[j]
+            H[j, nv:] = H[nv:, j] = w[j] * k[j] * St[j, :m]
+            H[nv:, nv:] += w[j] * k[j] ** 2 * S[j, :m, :m]
+            grad[j] = -w[j] * (s[j] @ tt - k[j] * (tt @ St[j]))
+            grad[nv:] += -w[j] * k[j] * (s[j, :m] - k[j] * St[j, :m])
+        return H, grad
+
+    dof_j = np.maximum(n_rows - p / nv, 1.0)
+    floor = (1e-9) ** 2 * ii / np.maximum(n_rows, 1)
+    w = np.ones(nv)
+    iters = 0
+    for _ in range(max(int(reweight), 1) + 1):
+        cost = float(w @ rss(k, theta))
+        lam = 1e-6
+        for _ in range(int(max_iter)):
+            iters += 1
+            H, grad = normal(k, theta, w)
+            d = np.sqrt(np.maximum(np.diag(H), 1e-300))
+            Hs = H / np.outer(d, d)
+            step = None
+            while lam < 1e12:
+                try:
+                    step = -np.linalg.solve(Hs + lam * np.eye(p), grad / d) / d
+                except np.linalg.LinAlgError:
+                    lam *= 10.0
+                    continue
+                new = float(w @ rss(k + step[:nv], theta + step[nv:]))
+                if new <= cost:
+                    break
+                lam *= 10.0
+                step = None
+            if step is None:
+                break
+            k, theta = k + step[:nv], theta + step[nv:]
+            done = cost - new <= tol * max(cost, 1e-300)
+            cost = new
+            lam = max(lam / 10.0, 1e-12)
+            if done:
+                break
+        var = np.maximum(rss(k, theta) / dof_j, np.maximum(floor, 1e-300))
+        w = 1.0 / var
+    H, _ = normal(k, theta, w)
+    d = np.sqrt(np.maximum(np.diag(H), 1e-300))
+    cov_xi = np.linalg.pinv(H / np.outer(d, d)) / np.outer(d, d)
+    Jt = np.eye(p)
+    Jt[np.arange(nv), np.arange(nv)] = -1.0 / k**2
+    cov = Jt @ cov_xi @ Jt.T
+    sigma2 = float(rss(k, theta).sum() / max(int(n_rows.sum()) - p, 1))
+    what = (
+        f"ML in current units (Gauss-Newton on sum_j ||i_j - (X_j theta + c_j) / g_j||^2 / "
+        f"sigma_j^2 from the sums, {iters} iterations)"
+    )
+    return np.r_[1.0 / k, theta], 0.5 * (cov + cov.T), sigma2, what
 
 
 def _tls(acc: InformationAccumulator) -> np.ndarray:

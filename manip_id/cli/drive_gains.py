@@ -4,8 +4,9 @@ The files hold motor currents [A] in the torque columns. With unloaded and loade
 runs and the payload's known mass (and, when known, its centre of mass and inertia),
 :func:`manip_id.payload.identify_drive_gains` estimates one gain per joint
 (``tau_j = g_j i_j`` [N m / A]), the robot's base parameters and the payload
-parameters not given (Gautier & Briot), by OLS or, with ``--method tls``, total
-least squares. A warning names any joint whose gain the data do not determine.
+parameters not given (Gautier & Briot), by maximum likelihood in current units
+(default), OLS, WLS or total least squares (``--method``). A warning names any
+joint whose gain the data do not determine.
 The JSON's ``drive_gains`` feed ``manip-id identify --torque-scale-from RESULT.json``.
 """
 
@@ -58,10 +59,12 @@ def register(sub) -> None:
     )
     p.add_argument(
         "--method",
-        choices=("ols", "tls"),
-        default="ols",
-        help="ols: known payload columns on the right-hand side (default); tls: total least "
-        "squares",
+        choices=("ml", "ols", "wls", "tls"),
+        default="ml",
+        help="ml: maximum likelihood in current units, started from OLS (default); ols: known "
+        "payload columns on the right-hand side (Gautier & Briot); wls: the same weighted per "
+        "joint; tls: total least squares. ols/wls/tls shrink the gain of a joint whose current "
+        "is small against its noise",
     )
     p.set_defaults(func=run)
 
