@@ -32,7 +32,8 @@ __version__ = "0.1.0"
 _EXPORTS: dict[str, tuple[str, ...]] = {
     ".adaptive": ("AdaptiveGains", "SlotineLiController", "default_gains", "lyapunov_function"),
     ".closed_loop": ("ClosedLoopRun", "compare_fixed", "with_payload"),
-    ".datasets": ("Dataset", "check_robot", "load_dataset", "save_dataset"),
+    ".datasets": ("Dataset", "FileSpec", "check_robot", "load_dataset", "save_dataset"),
+    ".pipeline": ("PreprocessOptions", "accumulate_file"),
     ".errors": (
         "DataError",
         "InfeasibleTrajectoryError",
@@ -57,7 +58,13 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
         "analyze_information",
         "analyze_trajectory",
     ),
-    ".identification": ("IdentificationResult", "identify", "identify_chunks", "identify_dataset"),
+    ".identification": (
+        "IdentificationResult",
+        "identify",
+        "identify_chunks",
+        "identify_dataset",
+        "identify_datasets",
+    ),
     ".regressor": (
         "iter_regressor",
         "iter_slotine_li_regressor",
