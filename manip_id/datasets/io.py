@@ -9,6 +9,7 @@ a crash never leaves a partial file. For long logs read in chunks instead
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -55,6 +56,8 @@ def load_dataset(
     DataError: missing file, unknown format, a column map that does not fit
         the file, or data failing :class:`Dataset` validation.
     """
+    if not isinstance(path, str | os.PathLike) or not str(path):
+        raise DataError(f"a data path must be a non-empty str or os.PathLike, got {path!r}")
     path = Path(path).expanduser()
     if not path.exists():
         raise DataError(f"no such data file or folder: {path}")
@@ -126,25 +129,39 @@ def output_format(path: Path, format: str | None) -> str:
 
 
 def write_rows(blocks, n: int, layout: Layout, joint_names, path, format=None) -> Path:
-    """Write packed row blocks (``blocks()`` returns a fresh iterator) to ``path``, atomically."""
+    """Write packed row blocks (``blocks()`` returns a fresh iterator) to ``path``, atomically.
+
+    ``format`` "mcap" on a path without the ``.mcap`` suffix writes a rosbag2 folder.
+    """
     path = Path(path).expanduser()
     fmt = output_format(path, format)
-    if fmt == "mcap":
+    if fmt == "mcap" and path.suffix.lower() != ".mcap":
         from .rosbag import write_bag
 
-        return write_bag(path, blocks, layout, joint_names)
-
-    def write(tmp: Path) -> None:
-        if fmt == "npz":
-            from .npz import write_npz
-
-            with open(tmp, "wb") as fh:
-                write_npz(fh, blocks, n, layout, joint_names)
-        else:
-            from .csv import write_csv
-
-            with open(tmp, "w") as fh:
-                write_csv(fh, blocks(), layout, joint_names)
-
-    atomic_write(path, write)
+        return write_bag(path, blocks, layout, joint_names, bare=False)
+    atomic_write(path, lambda tmp: write_rows_to(tmp, fmt, blocks, n, layout, joint_names))
     return path
+
+
+def write_rows_to(tmp: Path, fmt: str, blocks, n: int, layout: Layout, joint_names) -> None:
+    """Write packed row blocks to the file ``tmp`` (replaced) as ``fmt`` ("npz", "csv", "mcap").
+
+    ``n`` rows in total (the NPZ headers need it); ``blocks()`` returns a fresh iterator.
+    """
+    tmp = Path(tmp)
+    if fmt == "npz":
+        from .npz import write_npz
+
+        with open(tmp, "wb") as fh:
+            write_npz(fh, blocks, n, layout, joint_names)
+    elif fmt == "csv":
+        from .csv import write_csv
+
+        with open(tmp, "w") as fh:
+            write_csv(fh, blocks(), layout, joint_names)
+    elif fmt == "mcap":
+        from .rosbag import write_bag
+
+        write_bag(tmp, blocks, layout, joint_names, bare=True)
+    else:
+        raise DataError(f"unknown output format {fmt!r}; expected npz, csv or mcap")

@@ -189,11 +189,18 @@ class BagSource:
         del nv
 
 
-def write_bag(path: Path, blocks, layout: Layout, joint_names=None, topic: str = DEFAULT_TOPIC):
+def write_bag(
+    path: Path,
+    blocks,
+    layout: Layout,
+    joint_names=None,
+    topic: str = DEFAULT_TOPIC,
+    bare: bool | None = None,
+):
     """Write packed row blocks as JointState messages on ``topic`` with MCAP storage.
 
-    ``path`` ending in ``.mcap`` gives a bare MCAP file, any other a rosbag2
-    folder; either is written to a temporary first and renamed into place.
+    ``bare`` (default: ``path`` ends in ``.mcap``) gives one bare MCAP file, else a
+    rosbag2 folder; either is written to a temporary first and renamed into place.
     ``blocks()`` returns an iterator of packed rows (ddq is not written).
     Stamps need ``t >= 0`` [s]: ``header.stamp`` and the log time both carry ``t``.
     """
@@ -232,7 +239,7 @@ def write_bag(path: Path, blocks, layout: Layout, joint_names=None, topic: str =
                         effort=np.ascontiguousarray(row[stau]),
                     )
                     writer.write(conn, ns, store.serialize_cdr(msg, JOINT_STATE))
-        if path.suffix.lower() == ".mcap":
+        if path.suffix.lower() == ".mcap" if bare is None else bare:
             produced = next(bag.glob("*.mcap"))
             os.chmod(produced, 0o644)
             os.replace(produced, path)
