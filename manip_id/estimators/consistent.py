@@ -13,13 +13,16 @@ with ``beta_ls`` the least-squares solution. Measured in standard deviations of
 ``beta_ls`` (covariance ``C = s A^-1``, ``s`` the residual variance) the fit is
 ``f(theta) = (P theta - beta_ls)^T C^-1 (P theta - beta_ls)``. The estimate solves::
 
-    minimize    f(theta) + w * [ sum_i D(J_i || J0_i) + sum_t ((theta_t - theta0_t) / s_t)^2 ]
+    minimize    f(theta) + w * [ sum_i D(J_i - eps_i 1 || J0_i - eps_i 1)
+                                 + sum_t ((theta_t - theta0_t) / s_t)^2 ]
     subject to  J_i(theta) - eps_i 1 >= 0  (each body i),   Ia, fv, fc >= 0
 
 where ``J_i`` is body i's pseudo-inertia (:mod:`manip_id.consistency`),
 ``D(J || J0) = tr(J0^-1 J) - log det(J0^-1 J) - 4`` the log-det (Bregman)
 divergence to the prior's pseudo-inertia (Lee, Wensing & Park 2019): zero at
-``J = J0``, invariant to the body frame and to units), ``s_t = sqrt(zz / H_tt)``
+``J = J0``, invariant to the body frame and to units; taken on the part of each
+pseudo-inertia above its margin, so that it is also the barrier of the margin),
+``s_t = sqrt(zz / H_tt)``
 the scale of joint term ``t`` (the value that alone would explain all the
 torque, ``H = P^T A P``: in parameter units, whatever the noise level), and
 ``w`` the prior weight (``prior="none"``: ``w = 0``, feasibility alone). The
@@ -104,7 +107,8 @@ class ConsistentProblem:
     n_bodies: bodies; the first ``10 n_bodies`` entries of theta are theirs.
     nonnegative: indices of the joint terms constrained ``>= 0``.
     theta0: the prior's standard parameters (or the reference point when none), (p,).
-    J0: prior pseudo-inertias, shape (n_bodies, 4, 4) (None without a prior).
+    J0: prior pseudo-inertias less their margins, ``J0_i - eps_i 1``, shape
+        (n_bodies, 4, 4) (None without a prior).
     term_scale: ``s_t`` of each joint term, shape (p - 10 n_bodies,).
     margin: ``eps_i`` per body, shape (n_bodies,).
     weight: prior weight ``w`` (0 for no prior).
@@ -142,8 +146,8 @@ class ConsistentProblem:
         nb = self.n_bodies
         J = pseudo_inertia(theta[: 10 * nb].reshape(nb, 10))
         total = 0.0
-        for Ji, J0i in zip(J, self.J0, strict=True):
-            M = np.linalg.solve(J0i, Ji)
+        for Ji, J0i, eps in zip(J, self.J0, self.margin, strict=True):
+            M = np.linalg.solve(J0i, Ji - eps * np.eye(4))
             sign, logdet = np.linalg.slogdet(M)
             total += float(np.trace(M) - logdet - 4.0) if sign > 0 else np.inf
         dt = (theta[10 * nb :] - self.theta0[10 * nb :]) / self.term_scale
@@ -285,7 +289,7 @@ def build_problem(
         n_bodies=nb,
         nonnegative=nonneg,
         theta0=theta0,
-        J0=J0 if w > 0 else None,
+        J0=J0 - margin[:, None, None] * np.eye(4) if w > 0 else None,
         term_scale=term_scale,
         margin=margin,
         weight=w,
@@ -339,6 +343,7 @@ def _solve_sdp(problem: ConsistentProblem, *, tolerance: float = 1e-8, max_iter:
     pr = problem
     nb, p = pr.n_bodies, pr.p
     E = pseudo_inertia_basis().reshape(10, 16).T  # vec(J_i) = E @ pi_i (row-major vec)
+    eye_vec = np.eye(4).ravel()
     # theta = G (beta_ls + W^+ u + V_0 v) + N z: the fit is ||u||^2 exactly, and the
     # ill-conditioning of a nearly noise-free fit becomes a column scaling of u that
     # the solver's equilibration removes (in theta it would be a dense ill-conditioned W P).
@@ -359,8 +364,11 @@ def _solve_sdp(problem: ConsistentProblem, *, tolerance: float = 1e-8, max_iter:
     Js = [cp.Variable((4, 4), symmetric=True) for _ in range(nb)]
     cons = []
     for i, Ji in enumerate(Js):
-        cons.append(cp.vec(Ji, order="C") == E @ theta[10 * i : 10 * i + 10])
-        cons.append(Ji - pr.margin[i] * np.eye(4) >> 0)
+        # Ji is the part of body i's pseudo-inertia above its margin: J_i - eps_i 1
+        cons.append(
+            cp.vec(Ji, order="C") == E @ theta[10 * i : 10 * i + 10] - pr.margin[i] * eye_vec
+        )
+        cons.append(Ji >> 0)
     if pr.nonnegative.size:
         cons.append(theta[pr.nonnegative] >= 0)
     obj = cp.sum_squares(u)
@@ -554,7 +562,9 @@ class _LogChol:
     def evaluate(self, x: np.ndarray, jacobian: bool = True):
         """Residuals ``r``, extra (non-squared) objective ``g``, and their derivatives.
 
-        Objective ``F(x) = ||r(x)||^2 + g(x)``; ``g = -w sum_i log det J_i``.
+        Objective ``F(x) = ||r(x)||^2 + g(x)``; ``g = -w sum_i log det(J_i - eps_i 1)
+        = -2 w sum_i (4 alpha_i + d1_i + d2_i + d3_i)``, linear in the log-Cholesky
+        parameters (so Gauss-Newton's Hessian of F is exact in it: zero).
         """
         pr, nb = self.pr, self.nb
         theta = self.theta(x)
@@ -578,16 +588,14 @@ class _LogChol:
                 sl = slice(10 * i, 10 * i + 10)
                 U = _U(x[sl])
                 res.append(sw * (self.L0inv[i] @ U).ravel())
-                S = U @ U.T + pr.margin[i] * np.eye(4)
-                sign, logdet = np.linalg.slogdet(S)
-                g -= pr.weight * logdet
+                eta = x[sl]
+                g -= 2.0 * pr.weight * (4.0 * eta[0] + eta[1] + eta[2] + eta[3])  # log det U U^T
                 if jacobian:
-                    dU = _dU(x[sl])
+                    dU = _dU(eta)
                     blk = np.zeros((16, pr.p))
                     blk[:, sl] = sw * np.einsum("ab,kbc->ack", self.L0inv[i], dU).reshape(16, 10)
                     jac.append(blk)
-                    G = np.linalg.solve(S, U)  # S^-1 U
-                    dg[sl] = -2.0 * pr.weight * np.einsum("ab,kab->k", G, dU)
+                    dg[sl][:4] = -2.0 * pr.weight * np.array([4.0, 1.0, 1.0, 1.0])
             tdiff = (theta[10 * nb :] - pr.theta0[10 * nb :]) / pr.term_scale
             res.append(sw * tdiff)
             if jacobian:
