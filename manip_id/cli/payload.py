@@ -108,7 +108,10 @@ def register(sub) -> None:
         help="keep the payload physically consistent (pseudo-inertia positive definite)",
     )
     p.add_argument(
-        "--method", choices=("ols", "wls"), default="ols", help="estimator [default ols]"
+        "--method",
+        choices=("wls", "ols"),
+        default="wls",
+        help="wls: each joint weighted by its residual variance (default); ols: unweighted",
     )
     p.add_argument(
         "--torque-scale",
