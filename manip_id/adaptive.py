@@ -47,6 +47,23 @@ identity holds at every instant). The prediction error is
 (``kappa dt < 2``) whatever the scale of ``Y_f``. The filters are discretized exactly
 for the zero-order-held torque and with a first-order hold (linear interpolation
 between control instants) for the regressors.
+
+Time-varying gain (``gain="rls"``, Slotine & Li's composite law with an RLS-type
+gain). ``Gamma`` becomes ``P(t)``, started at ``Gamma`` and driven like a
+recursive least-squares covariance by the filtered regressor, with bounded-gain
+forgetting::
+
+    d theta_hat/dt = -P (Y^T s_D + kappa Y_f^T eps / m^2),   m^2 = 1 + tr(Y_f P Y_f^T)
+    d P^-1/dt      = -beta(t) P^-1 + kappa Y_f^T Y_f / m^2,  beta = beta_0 (1 - tr(P)/tr(Gamma))
+
+so the directions the filtered regressor has excited get a gain that shrinks like
+``1/information`` (the parameter error converges direction by direction like
+least squares instead of at the gradient law's fixed rate), ``tr(P) <= tr(Gamma)``
+and, with ``V = 1/2 s^T M s + 1/2 theta_tilde^T P^-1 theta_tilde``,
+``dV/dt = -s^T (K_D + F_v) s - kappa |eps|^2 / (2 m^2) - beta/2 theta_tilde^T P^-1
+theta_tilde <= 0``. Discretely, ``P^-1 += dt kappa Y_f^T Y_f / m^2`` is applied
+with the matrix inversion lemma (``P`` stays symmetric positive definite), then
+``P /= 1 - beta dt``.
 """
 
 from __future__ import annotations
@@ -79,6 +96,9 @@ class AdaptiveGains:
     filter_bandwidth: lambda_f > 0 of the composite filter lambda_f/(s + lambda_f) [rad/s].
     dead_zone: delta >= 0 on each s_j [rad/s].
     lower, upper: optional bounds on theta_hat, shape (p,) (+-inf for none).
+    gain: "constant" (Gamma) or "rls" (the time-varying P(t) of the module
+        docstring; needs ``composite > 0``).
+    forgetting: beta_0 >= 0 of the bounded-gain forgetting with ``gain="rls"`` [1/s].
     """
 
     lam: float | np.ndarray = 10.0
@@ -89,6 +109,8 @@ class AdaptiveGains:
     dead_zone: float = 0.0
     lower: np.ndarray | None = None
     upper: np.ndarray | None = None
+    gain: str = "constant"
+    forgetting: float = 0.0
 
 
 def default_gains(
@@ -102,6 +124,8 @@ def default_gains(
     composite: float = 0.0,
     filter_bandwidth: float = 20.0,
     dead_zone: float = 0.0,
+    gain: str = "constant",
+    forgetting: float = 0.0,
 ) -> AdaptiveGains:
     """Gains scaled to the robot.
 
@@ -111,7 +135,8 @@ def default_gains(
     stiff for the light modes or too soft for the heavy ones of a coupled arm);
     ``Gamma = gamma diag(scale^2)`` with ``scale_i = |theta_i| + floor(unit_i)``
     (floors 1 kg, 0.1 kg m, 0.01 kg m^2, 1 for joint terms, the sizes of an arm's
-    links): each parameter adapts in proportion to its size.
+    links): each parameter adapts in proportion to its size. ``gain`` and
+    ``forgetting`` as in :class:`AdaptiveGains` (with ``gain="rls"``, Gamma is P(0)).
     """
     theta = robot.nominal_parameters if theta is None else as_float_array(theta, "theta", 1)
     q = robot.neutral() if q is None else as_float_array(q, "q", 1)
@@ -131,6 +156,8 @@ def default_gains(
         composite=composite,
         filter_bandwidth=filter_bandwidth,
         dead_zone=dead_zone,
+        gain=gain,
+        forgetting=forgetting,
     )
 
 
@@ -179,6 +206,12 @@ class SlotineLiController:
         if self.kappa > 0 and self.lam_f <= 0:
             raise InputError("filter_bandwidth must be positive [rad/s] for composite adaptation")
         self.dead_zone = _nonnegative(gains.dead_zone, "dead_zone")
+        if gains.gain not in ("constant", "rls"):
+            raise InputError(f"gain must be 'constant' or 'rls', got {gains.gain!r}")
+        if gains.gain == "rls" and self.kappa <= 0:
+            raise InputError("gain='rls' is driven by the composite term: give composite > 0")
+        self.rls = gains.gain == "rls"
+        self.beta0 = _nonnegative(gains.forgetting, "forgetting")
         self.lower, self.upper = self._bounds(gains, theta0)
         self.adapting = bool(adapt)
         self.gains = gains
@@ -195,6 +228,10 @@ class SlotineLiController:
         self.eps = np.zeros(nv)
         self.norm2 = 1.0
         self._grad = np.zeros(p)
+        if self.rls:  # the time-varying gain P(t), from Gamma
+            self.P = self.gamma.copy()
+            self._trace0 = float(np.trace(self.gamma))
+            self._steps = 0
         if self.kappa > 0:
             self._init_composite()
 
@@ -317,7 +354,10 @@ class SlotineLiController:
             Yf += self._Hf
             np.dot(Yf, self.theta_hat, out=self.eps)
             self.eps -= self._tauf
-            if self._diag_gamma:
+            if self.rls:
+                self._PYt = self.P @ Yf.T  # (p, nv)
+                gy = float(np.einsum("ij,ji->", Yf, self._PYt))
+            elif self._diag_gamma:
                 gy = float(np.einsum("ij,ij,j->", Yf, Yf, self._gdiag))
             else:
                 gy = float(np.einsum("ij,jk,ik->", Yf, self.gamma, Yf))
@@ -341,7 +381,10 @@ class SlotineLiController:
         np.dot(s, self.Y, out=g)
         if self.kappa > 0:
             g += (self.kappa / self.norm2) * (self.eps @ self.Yf)
-        if self._diag_gamma:
+        if self.rls:
+            self.theta_hat -= dt * (self.P @ g)
+            self._update_gain(dt)
+        elif self._diag_gamma:
             g *= self._gdiag
             g *= dt
             self.theta_hat -= g
@@ -349,6 +392,22 @@ class SlotineLiController:
             self.theta_hat -= dt * (self.gamma @ g)
         if self.lower is not None:
             np.clip(self.theta_hat, self.lower, self.upper, out=self.theta_hat)
+
+    def _update_gain(self, dt: float) -> None:
+        """``P^-1 += dt kappa Y_f^T Y_f / m^2`` (inversion lemma), then bounded forgetting."""
+        P, PYt = self.P, self._PYt
+        c = dt * self.kappa / self.norm2
+        if c > 0:
+            S = self.Yf @ PYt  # (nv, nv)
+            S.flat[:: S.shape[0] + 1] += 1.0 / c
+            P -= PYt @ np.linalg.solve(S, PYt.T)
+        if self.beta0 > 0:
+            beta = self.beta0 * max(1.0 - float(np.trace(P)) / self._trace0, 0.0)
+            P *= 1.0 / (1.0 - min(beta * dt, 0.5))
+        self._steps += 1
+        if self._steps % 64 == 0:
+            P += P.T
+            P *= 0.5
 
 
 def lyapunov_function(robot: Robot, theta, gamma: np.ndarray, q, s, theta_hat) -> np.ndarray:

@@ -60,6 +60,19 @@ def register(sub) -> None:
         default=20.0,
         help="bandwidth of the composite filter [rad/s] (default 20)",
     )
+    p.add_argument(
+        "--gain",
+        choices=("rls", "constant"),
+        default="rls",
+        help="with --composite: the RLS-type time-varying gain P(t) started at Gamma (default) "
+        "or the constant Gamma",
+    )
+    p.add_argument(
+        "--forgetting",
+        type=float,
+        default=0.0,
+        help="bounded-gain forgetting rate of the RLS gain [1/s] (default 0)",
+    )
     p.add_argument("--lam", type=float, default=20.0, help="Lambda [1/s] (default 20)")
     p.add_argument(
         "--kd-rate", type=float, default=50.0, help="K_D = kd_rate * M(q_d(0)) [1/s] (default 50)"
@@ -119,6 +132,8 @@ def run(args: argparse.Namespace) -> int:
         composite=args.kappa if args.composite else 0.0,
         filter_bandwidth=args.filter,
         dead_zone=args.dead_zone,
+        gain=args.gain if args.composite else "constant",
+        forgetting=args.forgetting,
     )
     record_every = max(int(round(args.rate / 100.0)), 1)
     cmp = compare_fixed(
