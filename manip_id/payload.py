@@ -1550,12 +1550,9 @@ def identify_drive_gains(
                 "TLS: smallest right singular vector of the column-scaled [W, -y], scaled to "
                 "the known payload; covariance sigma^2 (W^T W)^-1 at the TLS estimate"
             )
-    elif method == "ml":
-        if ra.rank < p:
-            _warn(messages, "ML needs a full-rank system: kept the minimum-norm OLS solution")
-        else:
-            x, cov, sigma2, what = _ml_gains(acc, nv, x, acc.n - left_out)
-            solver = f"{what}, started from OLS ({ls.solver})"
+    elif method == "ml":  # damped steps leave the unexcited directions where OLS put them
+        x, cov, sigma2, what = _ml_gains(acc, nv, x, acc.n - left_out, determined)
+        solver = f"{what}, started from OLS ({ls.solver})"
     timings["solve"] = time.perf_counter() - t0
     gains = x[:nv].copy()
     std_all = np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -1648,6 +1645,7 @@ def _ml_gains(
     nv: int,
     x0: np.ndarray,
     n_rows: np.ndarray,
+    active: np.ndarray | None = None,
     *,
     reweight: int = 3,
     max_iter: int = 100,
@@ -1667,9 +1665,13 @@ def _ml_gains(
     ``w_j = 1/sigma_j^2`` are re-estimated from the residuals ``reweight`` times.
     Unlike OLS, whose regressor holds the noisy currents (an errors-in-variables
     problem: the gains shrink by about ``sigma_i^2 / mean(i^2)``), this is unbiased at
-    low current-to-noise ratios. Returns ``(x = [g, theta], covariance, sigma2 [A^2],
-    description)``; the covariance is ``(J^T W J)^-1`` mapped to ``g`` by ``dg/dk = -g^2``.
+    low current-to-noise ratios. Joints not ``active`` (gains the data do not determine)
+    keep their start and their rows stay out of the cost; directions without
+    information do not move (damped steps). Returns ``(x = [g, theta], covariance,
+    sigma2 [A^2], description)``; the covariance is ``(J^T W J)^+`` mapped to ``g`` by
+    ``dg/dk = -g^2``.
     """
+    active = np.ones(nv, dtype=bool) if active is None else np.asarray(active, dtype=bool)
     A, b, zz = acc.A_joint, acc.b_joint, acc.zz_joint
     p = acc.p
     m = p - nv
@@ -1683,8 +1685,9 @@ def _ml_gains(
         s[j, :m] = -A[j, nv:, j]
         s[j, m] = b[j, j]
         ii[j] = A[j, j, j]
-    k = 1.0 / x0[:nv]
+    k = np.where(active, 1.0 / np.where(active, x0[:nv], 1.0), 0.0)
     theta = x0[nv:].copy()
+    free = np.r_[np.flatnonzero(active), nv + np.arange(m)]  # parameters that move
 
     def rss(k, theta):
         tt = np.r_[theta, 1.0]
@@ -1706,7 +1709,18 @@ def _ml_gains(
 
     dof_j = np.maximum(n_rows - p / nv, 1.0)
     floor = (1e-9) ** 2 * ii / np.maximum(n_rows, 1)
-    w = np.ones(nv)
+    w = active.astype(float)
+    q = free.size
+
+    def solve_step(H, grad, lam):
+        Hf, gf = H[np.ix_(free, free)], grad[free]
+        dg = np.diag(Hf)
+        d = np.where(dg > 0, np.sqrt(np.where(dg > 0, dg, 1.0)), 1.0)
+        stepf = -np.linalg.solve(Hf / np.outer(d, d) + lam * np.eye(q), gf / d) / d
+        step = np.zeros(p)
+        step[free] = stepf
+        return step
+
     iters = 0
     for _ in range(max(int(reweight), 1) + 1):
         cost = float(w @ rss(k, theta))
@@ -1714,12 +1728,10 @@ def _ml_gains(
         for _ in range(int(max_iter)):
             iters += 1
             H, grad = normal(k, theta, w)
-            d = np.sqrt(np.maximum(np.diag(H), 1e-300))
-            Hs = H / np.outer(d, d)
             step = None
             while lam < 1e12:
                 try:
-                    step = -np.linalg.solve(Hs + lam * np.eye(p), grad / d) / d
+                    step = solve_step(H, grad, lam)
                 except np.linalg.LinAlgError:
                     lam *= 10.0
                     continue
@@ -1737,19 +1749,27 @@ def _ml_gains(
             if done:
                 break
         var = np.maximum(rss(k, theta) / dof_j, np.maximum(floor, 1e-300))
-        w = 1.0 / var
+        w = np.where(active, 1.0 / var, 0.0)
     H, _ = normal(k, theta, w)
-    d = np.sqrt(np.maximum(np.diag(H), 1e-300))
-    cov_xi = np.linalg.pinv(H / np.outer(d, d)) / np.outer(d, d)
+    Hf = H[np.ix_(free, free)]
+    dg = np.diag(Hf)
+    d = np.where(dg > 0, np.sqrt(np.where(dg > 0, dg, 1.0)), 1.0)
+    cov_xi = np.zeros((p, p))
+    cov_xi[np.ix_(free, free)] = np.linalg.pinv(Hf / np.outer(d, d), hermitian=True) / np.outer(
+        d, d
+    )
     Jt = np.eye(p)
-    Jt[np.arange(nv), np.arange(nv)] = -1.0 / k**2
+    kk = np.where(active, k, 1.0)
+    Jt[np.arange(nv), np.arange(nv)] = -1.0 / kk**2
     cov = Jt @ cov_xi @ Jt.T
-    sigma2 = float(rss(k, theta).sum() / max(int(n_rows.sum()) - p, 1))
+    g = np.where(active, 1.0 / kk, x0[:nv])
+    res = rss(k, theta)[active]
+    sigma2 = float(res.sum() / max(int(n_rows[active].sum()) - q, 1))
     what = (
         f"ML in current units (Gauss-Newton on sum_j ||i_j - (X_j theta + c_j) / g_j||^2 / "
         f"sigma_j^2 from the sums, {iters} iterations)"
     )
-    return np.r_[1.0 / k, theta], 0.5 * (cov + cov.T), sigma2, what
+    return np.r_[g, theta], 0.5 * (cov + cov.T), sigma2, what
 
 
 def _tls(acc: InformationAccumulator) -> np.ndarray:
