@@ -9,19 +9,23 @@ is a monoid). For files ``f`` cut into blocks ``b`` (each one task), per joint `
     zz_j = sum_f sum_b  tau_fbj^T tau_fbj
     theta_b = solve(sum_j A_j, sum_j b_j)              on the client
 
-Each task reads its file, checks it against the robot, preprocesses it (when
-the file lacks ``ddq`` or preprocessing is asked for) and accumulates its block
-of base-regressor rows; the parts are added in a tree (``split_every`` at a
-time: blocks into files, files into the fleet), always in the same grouping,
-so the partition and the number of workers change the sums only by round-off.
-The client receives ``nv`` matrices of ``r x r`` (one per file as well with
-``per_file``), never samples.
+Each task is the real-log pipeline's unit of work
+(:func:`manip_id.pipeline.accumulate_file`): it reads its file in chunks,
+checks it against the robot, preprocesses it in overlapping blocks when the file
+lacks ``ddq`` or filtering is asked for, and accumulates the base-regressor
+rows. A block of a long file (``block`` samples of the preprocessed stream) is
+a task of its own that accumulates only its rows of that same stream, so the
+partition changes the sums only by round-off. The parts are added in a tree
+(``split_every`` at a time: blocks into files, files into the fleet), always in
+the same grouping. The client receives ``nv`` matrices of ``r x r`` (and one
+set per file with ``per_file``), never samples.
 
 Weighted least squares needs no second pass: the per-joint residual sums at an
 estimate are linear in the sums, ``RSS_j(theta) = sum_tasks (zz_j - 2 b_j.theta +
 theta.A_j.theta)``, i.e. the sum of the per-task residual sums, so the variances
 ``sigma_j^2 = RSS_j / (n - r / nv)`` and the re-weighted solve come from the
-reduced sums alone, exactly as in the local run.
+reduced sums alone, exactly as in the local run. Validation files are tasks too;
+their errors for the estimate follow from their sums in the same way.
 
 Back-ends: no scheduler runs the same tasks and the same tree in this process
 (and imports nothing of Dask); ``"local"`` / ``"local:N"`` starts a
@@ -44,6 +48,7 @@ from typing import Any
 
 import numpy as np
 
+from .datasets import FileSpec, parse_file_spec
 from .errors import DataError, InputError, ManipIdError, RankDeficiencyError
 from .estimators import InformationAccumulator
 from .identifiability import BaseParameters
@@ -53,8 +58,8 @@ from .identification import (
     _accumulate_blocks,
     _finish,
     _resolve_base,
-    _states,
 )
+from .pipeline import PreprocessOptions
 from .regressor import DEFAULT_CHUNK
 from .robot import Robot
 
@@ -69,16 +74,61 @@ DEFAULT_LOCAL_WORKERS = 2
 # ------------------------------------------------------------------ the parts
 @dataclass(frozen=True)
 class FilePart:
-    """One task: the samples ``[start, stop)`` of one file after preprocessing.
+    """One task: the samples ``[start, stop)`` of one file's preprocessed stream.
 
     ``stop=None``: to the end of the file. ``file`` is the index of the file
     in the list given to :func:`identify_files`.
     """
 
-    path: str
+    spec: FileSpec
     file: int
     start: int = 0
     stop: int | None = None
+
+
+@dataclass
+class FileInfo:
+    """What the client learns about one file besides its sums (small).
+
+    Attributes
+    ----------
+    label: the file spec as written (``path[@window]``)
+    n_samples: samples accumulated (after preprocessing)
+    excluded: rows left out per joint by the velocity deadband, shape (nv,)
+    quality: its data-quality summary (:class:`~manip_id.datasets.quality.DataQuality`)
+    settings: the preprocessing applied (None: the file's ddq used as is)
+    n_tasks: tasks (blocks) it was cut into
+    """
+
+    label: str
+    n_samples: int
+    excluded: np.ndarray
+    quality: Any = None
+    settings: Any = None
+    n_tasks: int = 1
+
+    def merged(self, other: FileInfo) -> FileInfo:
+        """Two blocks of the same file."""
+        return FileInfo(
+            self.label,
+            self.n_samples + other.n_samples,
+            self.excluded + other.excluded,
+            self.quality,
+            self.settings,
+            self.n_tasks + other.n_tasks,
+        )
+
+    def summary(self, joints: Sequence[str]) -> dict:
+        """JSON-ready: file, samples, rows left out per joint, preprocessing, quality."""
+        s = self.settings
+        return {
+            "file": self.label,
+            "n_samples": int(self.n_samples),
+            "n_tasks": int(self.n_tasks),
+            "excluded_rows": dict(zip(joints, map(int, self.excluded), strict=True)),
+            "preprocess": None if s is None else {k: getattr(s, k) for k in s.__dataclass_fields__},
+            "quality": None if self.quality is None else self.quality.to_dict(),
+        }
 
 
 @dataclass
@@ -88,19 +138,27 @@ class PartSums:
     Attributes
     ----------
     acc: the accumulated base-column information (``acc.n`` samples)
-    n_parts: number of tasks summed
+    files: per file index, what is known of it (:class:`FileInfo`)
     timings: seconds per stage, summed over the tasks [s]
     """
 
     acc: InformationAccumulator
-    n_parts: int = 1
+    files: dict[int, FileInfo] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
 
     def __add__(self, other: PartSums) -> PartSums:
         times = dict(self.timings)
         for k, v in other.timings.items():
             times[k] = times.get(k, 0.0) + v
-        return PartSums(self.acc + other.acc, self.n_parts + other.n_parts, times)
+        files = dict(self.files)
+        for i, info in other.files.items():
+            files[i] = files[i].merged(info) if i in files else info
+        return PartSums(self.acc + other.acc, files, times)
+
+    @property
+    def n_parts(self) -> int:
+        """Number of tasks summed."""
+        return sum(f.n_tasks for f in self.files.values())
 
 
 @dataclass(frozen=True)
@@ -109,12 +167,13 @@ class FileEstimate:
 
     Attributes
     ----------
-    path: the file
+    path: the file (spec label)
     n_samples: samples accumulated from it (after preprocessing)
     n_tasks: tasks (blocks) it was cut into
     result: its identification (same base parameters and method as the pooled
         one), or None when the file alone cannot be solved
     error: why it cannot (e.g. it does not excite every base parameter), else None
+    summary: samples, rows left out, preprocessing and data quality (:meth:`FileInfo.summary`)
     """
 
     path: str
@@ -122,10 +181,13 @@ class FileEstimate:
     n_tasks: int
     result: IdentificationResult | None
     error: str | None = None
+    summary: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
-        """JSON-ready: estimate, std and errors by base parameter name (None if unsolved)."""
+        """JSON-ready: estimate, std and errors by base parameter name (None if unsolved),
+        with the file's summary (rows left out, preprocessing, data quality)."""
         out: dict[str, Any] = {
+            **self.summary,
             "file": self.path,
             "n_samples": int(self.n_samples),
             "n_tasks": int(self.n_tasks),
@@ -155,9 +217,8 @@ class FileEstimate:
 def portable_robot(robot: Robot) -> Robot:
     """A copy of ``robot`` that holds what identification needs and pickles small.
 
-    The Pinocchio model and the joint terms (about 0.2 MB pickled) without the
-    meshes a robot of example-robot-data may carry (hundreds of MB): what is
-    sent to the workers.
+    The Pinocchio model and the joint terms (about 0.2 MB pickled), without any
+    geometry or cached evaluator: what is sent to the workers.
     """
     return Robot(
         robot.name,
@@ -169,35 +230,66 @@ def portable_robot(robot: Robot) -> Robot:
     )
 
 
-def _prepared_file(robot: Robot, path: str, options: Mapping | None):
-    """Read one file, check it against the robot and preprocess it.
-
-    ``options=None``: preprocessed (default settings) only when the file has no
-    ``ddq``; a mapping: always, with these keywords of
-    :func:`manip_id.signals.preprocess`. The one place that reads a file for a
-    task (to be pointed at the chunked per-file reader of the real-log pipeline).
-    """
-    from .datasets import check_robot, load_dataset
-    from .signals import preprocess
-
-    ds = load_dataset(path)
-    check_robot(ds, robot)
-    if options is not None or ds.ddq is None:
-        ds = preprocess(ds, **dict(options or {}))
-    return ds
-
-
-def _named(path: str, exc: BaseException) -> DataError:
+def _named(label: str, exc: BaseException) -> DataError:
     msg = str(exc) if isinstance(exc, ManipIdError) else f"{type(exc).__name__}: {exc}"
-    return DataError(msg if path in msg else f"{path}: {msg}")
+    path = label.partition("@")[0]
+    return DataError(msg if path in msg else f"{label}: {msg}")
 
 
-def file_length(robot: Robot, path: str, options: Mapping | None = None) -> int:
-    """Number of samples of a file after preprocessing (what its blocks partition)."""
+def file_length(robot: Robot, spec: FileSpec, options: PreprocessOptions) -> int:
+    """Samples of a file's preprocessed stream (what its blocks partition)."""
+    from .pipeline import iter_processed, scan_file
+
     try:
-        return int(_prepared_file(robot, path, options).n_samples)
+        scan = scan_file(robot, spec, options)
+        if not options.preprocesses(scan.layout.has_ddq):
+            return int(scan.n)
+        _, blocks = iter_processed(robot, spec, options, scan)
+        return int(sum(b.shape[0] for b in blocks))
     except Exception as exc:
-        raise _named(path, exc) from exc
+        raise _named(spec.label, exc) from exc
+
+
+def _block_accumulation(robot, spec, options, ind, chunk, start: int, stop: int | None):
+    """Rows ``[start, stop)`` of the file's preprocessed stream, accumulated.
+
+    The stream is the one :func:`~manip_id.pipeline.accumulate_file` accumulates
+    (:func:`~manip_id.pipeline.iter_processed`); only the rows of this block
+    enter the sums. Returns (accumulator, samples, excluded rows (nv,), quality,
+    settings, timings).
+    """
+    from .datasets import Layout
+    from .pipeline import iter_processed, scan_file
+
+    t0 = time.perf_counter()
+    scan = scan_file(robot, spec, options)
+    settings, blocks = iter_processed(robot, spec, options, scan)
+    lay = Layout(robot.nq, robot.nv, True)
+    eps = options.velocity_deadband
+    deadband = None if eps is None else np.full(robot.nv, float(eps))
+    excluded = np.zeros(robot.nv, dtype=np.int64)
+    count = {"n": 0}
+
+    def states():
+        pos = 0
+        for rows in blocks:
+            a = max(start - pos, 0)
+            b = rows.shape[0] if stop is None else min(stop - pos, rows.shape[0])
+            pos += rows.shape[0]
+            if a < b:
+                f = lay.unpack(rows[a:b])
+                if deadband is not None:
+                    excluded[:] += (np.abs(f["dq"]) < deadband).sum(axis=0)
+                count["n"] += b - a
+                yield f["q"], f["dq"], f["ddq"], f["tau"]
+            if stop is not None and pos >= stop:
+                return
+
+    acc, times = _accumulate_blocks(robot, states(), ind, int(chunk), deadband=deadband)
+    if count["n"] == 0:
+        raise DataError(f"block [{start}, {stop}) holds no samples of the file")
+    times["accumulate_total"] = time.perf_counter() - t0
+    return acc, count["n"], excluded, scan.quality, settings, times
 
 
 def part_sums(
@@ -205,7 +297,7 @@ def part_sums(
     part: FilePart,
     columns: np.ndarray,
     chunk: int = DEFAULT_CHUNK,
-    options: Mapping | None = None,
+    options: PreprocessOptions | None = None,
 ) -> PartSums:
     """The task body: read, preprocess and accumulate one part of one file.
 
@@ -215,64 +307,36 @@ def part_sums(
     part: the file and the block of its preprocessed samples
     columns: the base parameters' independent columns, shape (r,)
     chunk: samples per regressor chunk
-    options: preprocessing keywords (see :func:`_prepared_file`)
+    options: how files are read and preprocessed (:class:`~manip_id.pipeline.PreprocessOptions`)
 
     Raises
     ------
     DataError: naming the file, whatever went wrong with it.
     """
-    t0 = time.perf_counter()
+    from .pipeline import accumulate_file
+
+    options = options or PreprocessOptions()
+    ind = np.asarray(columns, dtype=np.intp)
     try:
-        ds = _prepared_file(robot, part.path, options)
-        t1 = time.perf_counter()
-        n = ds.n_samples
-        stop = n if part.stop is None else min(int(part.stop), n)
-        if not 0 <= part.start < stop:
-            raise DataError(f"block [{part.start}, {part.stop}) is outside its {n} samples")
-        sl = slice(part.start, stop)
-        acc, times = _accumulate_blocks(
-            robot,
-            [(ds.q[sl], ds.dq[sl], ds.ddq[sl], ds.tau[sl])],
-            np.asarray(columns, dtype=np.intp),
-            int(chunk),
-        )
+        if part.start == 0 and part.stop is None:
+            fa = accumulate_file(robot, part.spec, options, ind, chunk=int(chunk))
+            acc, n, excluded = fa.accumulator, fa.n_samples, fa.excluded
+            quality, settings, times = fa.quality, fa.settings, dict(fa.timings)
+        else:
+            acc, n, excluded, quality, settings, times = _block_accumulation(
+                robot, part.spec, options, ind, chunk, part.start, part.stop
+            )
     except Exception as exc:
-        raise _named(part.path, exc) from exc
-    return PartSums(acc, 1, {"read_preprocess": t1 - t0, **times})
-
-
-def _validation_sums(
-    robot: Robot,
-    path: str,
-    columns: np.ndarray,
-    estimate: np.ndarray,
-    chunk: int,
-    options: Mapping | None,
-) -> np.ndarray:
-    """Per joint ``(sum e_j^2, sum tau_j^2, n)`` of one validation file, shape (3, nv).
-
-    ``e = Y_b theta_b - tau`` [N m]; row 2 holds the sample count (in every column).
-    """
-    try:
-        ds = _prepared_file(robot, path, options)
-        q, dq, ddq, tau = _states(robot, ds.q, ds.dq, ds.ddq, ds.tau, prefix="validation ")
-        out = np.zeros((3, robot.nv))
-        out[2] = q.shape[0]
-        ind = np.asarray(columns, dtype=np.intp)
-        for c in robot.evaluator.iter_regressor(q, dq, ddq, int(chunk)):
-            err = c.Y[:, :, ind] @ estimate - tau[c.start : c.stop]  # [N m]
-            out[0] += np.einsum("nj,nj->j", err, err)
-            out[1] += np.einsum("nj,nj->j", tau[c.start : c.stop], tau[c.start : c.stop])
-    except Exception as exc:
-        raise _named(path, exc) from exc
-    return out
+        raise _named(part.spec.label, exc) from exc
+    info = FileInfo(part.spec.label, int(n), np.asarray(excluded), quality, settings)
+    return PartSums(acc, {part.file: info}, times)
 
 
 def _blocks_sums(robot: Robot, func: Callable, args: tuple, columns, chunk: int) -> PartSums:
     """Task body of a generic part ``(func, args)``: accumulate the blocks ``func(*args)``."""
     t0 = time.perf_counter()
     acc, times = _accumulate_blocks(robot, func(*args), np.asarray(columns, np.intp), int(chunk))
-    return PartSums(acc, 1, {**times, "task": time.perf_counter() - t0})
+    return PartSums(acc, {}, {**times, "task": time.perf_counter() - t0})
 
 
 def accumulate_parts(
@@ -431,31 +495,47 @@ def _tree(backend, items: list, split_every: int):
 
 
 # --------------------------------------------------------------------- entry
-def _check_paths(paths, what: str) -> list[str]:
-    if isinstance(paths, (str, os.PathLike)):
-        paths = [paths]
-    out = [str(p) for p in paths]
-    if not out:
+def _specs(files, what: str, window=None) -> list[FileSpec]:
+    if isinstance(files, (str, os.PathLike, FileSpec)):
+        files = [files]
+    specs = [parse_file_spec(f, window=window) for f in files]
+    if not specs:
         raise InputError(f"{what}: no files given")
-    seen: set[str] = set()
-    for p in out:
-        key = os.path.realpath(p)
+    seen: set[tuple] = set()
+    for s in specs:
+        key = (os.path.realpath(s.path), None if s.window is None else str(s.window))
         if key in seen:
-            raise InputError(f"{what}: {p} is given twice (its samples would count twice)")
+            raise InputError(f"{what}: {s.label} is given twice (its samples would count twice)")
         seen.add(key)
-    return out
+    return specs
+
+
+def _options(options) -> PreprocessOptions:
+    if options is None:
+        return PreprocessOptions()
+    if isinstance(options, PreprocessOptions):
+        return options
+    if isinstance(options, Mapping):
+        try:
+            return PreprocessOptions(**options)
+        except TypeError as exc:
+            raise InputError(f"unknown preprocessing option in {sorted(options)}: {exc}") from exc
+    raise InputError(
+        f"options must be PreprocessOptions or a mapping of its fields, got {type(options)}"
+    )
 
 
 def identify_files(
     robot: Robot,
-    paths: Sequence[str | os.PathLike],
+    paths: Sequence[str | os.PathLike | FileSpec],
     *,
     scheduler=None,
     method: str = "ols",
     per_file: bool = False,
     block: int | None = None,
-    preprocess: Mapping | None = None,
-    validation: Sequence[str | os.PathLike] | None = None,
+    options: PreprocessOptions | Mapping | None = None,
+    window=None,
+    validation: Sequence[str | os.PathLike | FileSpec] | None = None,
     chunk: int = DEFAULT_CHUNK,
     base: BaseParameters | None = None,
     minimum_norm: bool = False,
@@ -466,18 +546,20 @@ def identify_files(
     Parameters
     ----------
     robot: the robot
-    paths: data files (any format of :func:`manip_id.datasets.load_dataset`),
-        each preprocessed on its own
+    paths: data files, as file specs (``PATH``, ``PATH@START:STOP``,
+        ``PATH@#A:#B`` or :class:`~manip_id.datasets.FileSpec`), any format the
+        real-log pipeline reads; each preprocessed on its own
     scheduler: None (this process, no Dask), ``"local[:N]"``, ``"tcp://HOST:PORT"``,
         a scheduler JSON file, or a ``distributed.Client``
     method: ``"ols"`` or ``"wls"``
     per_file: also each file's own estimate and errors
         (``result.per_file``, a list of :class:`FileEstimate`)
-    block: samples (after preprocessing) per task; a longer file is cut into
-        blocks, each one task (default: one task per file)
-    preprocess: keywords of :func:`manip_id.signals.preprocess` applied to every
-        file; default: only files without ``ddq`` are preprocessed, with the
-        default settings
+    block: samples (of the preprocessed stream) per task: a longer file is cut
+        into blocks, each one task (default: one task per file)
+    options: :class:`~manip_id.pipeline.PreprocessOptions` (or a mapping of its
+        fields) for every file; default: files without ``ddq`` are
+        preprocessed with the default settings, the others used as they are
+    window: a window for every file that has none
     validation: files for the validation error (each one task)
     chunk: samples per regressor chunk
     base: base parametrization; default the structural one
@@ -488,8 +570,9 @@ def identify_files(
     -------
     The usual :class:`~manip_id.identification.IdentificationResult`, equal to
     the local run's to round-off whatever the workers or the partition; its
-    timings hold the summed task times and ``distributed`` (the wall time of
-    the map-reduce) [s].
+    ``files`` summaries are in ``result.per_file`` (with ``per_file``), its
+    timings hold the task times summed over the tasks and ``distributed``
+    (the wall time of the map-reduce) [s].
 
     Raises
     ------
@@ -503,17 +586,15 @@ def identify_files(
             f"fleet identification accumulates {list(FLEET_METHODS)}, got {method!r} "
             "(the online laws need the samples in order)"
         )
-    files = _check_paths(paths, "paths")
-    vfiles = None if validation is None else _check_paths(validation, "validation")
+    specs = _specs(paths, "paths", window)
+    vspecs = None if validation is None else _specs(validation, "validation", window)
     if block is not None and int(block) < 1:
         raise InputError(f"block must be a positive number of samples, got {block}")
     if int(chunk) < 1:
         raise InputError(f"chunk must be a positive number of samples, got {chunk}")
     if int(split_every) < 2:
         raise InputError(f"split_every must be >= 2, got {split_every}")
-    if preprocess is not None and not isinstance(preprocess, Mapping):
-        raise InputError(f"preprocess must be a mapping of keywords, got {type(preprocess)}")
-    opts = None if preprocess is None else dict(preprocess)
+    opts = _options(options)
     base = _resolve_base(robot, base, timings)
     ind = np.asarray(base.independent, dtype=np.intp)
     light = portable_robot(robot)
@@ -522,16 +603,16 @@ def identify_files(
     try:
         t0 = time.perf_counter()
         if block is None:
-            layout = [[FilePart(p, i)] for i, p in enumerate(files)]
+            layout = [[FilePart(s, i)] for i, s in enumerate(specs)]
         else:
-            lengths = backend.gather([backend.submit(file_length, light, p, opts) for p in files])
+            lengths = backend.gather([backend.submit(file_length, light, s, opts) for s in specs])
             layout = []
-            for i, (p, n) in enumerate(zip(files, lengths, strict=True)):
+            for i, (s, n) in enumerate(zip(specs, lengths, strict=True)):
                 if n < 1:
-                    raise DataError(f"{p}: no samples left after preprocessing")
+                    raise DataError(f"{s.label}: no samples left after preprocessing")
                 cuts = list(range(0, n, int(block))) + [n]
                 spans = zip(cuts[:-1], cuts[1:], strict=True)
-                layout.append([FilePart(p, i, a, b) for a, b in spans])
+                layout.append([FilePart(s, i, a, b) for a, b in spans])
         per = [
             _tree(
                 backend,
@@ -541,67 +622,81 @@ def identify_files(
             for lp in layout
         ]
         total = _tree(backend, list(per), split_every)
-        fetched = backend.gather([total, *per] if per_file else [total])
-        timings["distributed"] = time.perf_counter() - t0
-        sums: PartSums = fetched[0]
-        timings.update(sums.timings)
-        if sums.acc.n * robot.nv <= base.n_base:
-            raise InputError(
-                f"{sums.acc.n} samples give {sums.acc.n * robot.nv} equations for "
-                f"{base.n_base} base parameters: need more samples"
-            )
-        result = _finish(
-            robot,
-            sums.acc,
-            base,
-            method,
-            timings,
-            t_start,
-            chunk=int(chunk),
-            minimum_norm=minimum_norm,
+        vparts = (
+            []
+            if vspecs is None
+            else [
+                backend.submit(part_sums, light, FilePart(s, i), ind, chunk, opts)
+                for i, s in enumerate(vspecs)
+            ]
         )
-        if vfiles is not None:
-            t0 = time.perf_counter()
-            est = np.asarray(result.estimate, dtype=float)
-            vs = [backend.submit(_validation_sums, light, p, ind, est, chunk, opts) for p in vfiles]
-            got = backend.gather(vs)
-            val, val_j = _relative(np.sum(got, axis=0))
-            per_vfile = []
-            for path, sums in zip(vfiles, got, strict=True):
-                err, err_j = _relative(sums)
-                per_vfile.append(
-                    {
-                        "file": path,
-                        "n_samples": int(sums[2, 0]),
-                        "error": _finite(err),
-                        "per_joint": dict(zip(robot.dof_names, map(_finite, err_j), strict=True)),
-                    }
-                )
-            timings["validation"] = time.perf_counter() - t0
-            re = result.relative_error
-            result = replace(
-                result,
-                relative_error=RelativeError(
-                    re.train, re.train_per_joint, val, val_j, validation_per_file=per_vfile
-                ),
-            )
+        fetched = backend.gather([total, *vparts, *(per if per_file else [])])
+        timings["distributed"] = time.perf_counter() - t0
     finally:
         backend.close()
 
+    sums: PartSums = fetched[0]
+    vsums: list[PartSums] = fetched[1 : 1 + len(vparts)]
+    timings.update(sums.timings)
+    if sums.acc.n * robot.nv <= base.n_base:
+        raise InputError(
+            f"{sums.acc.n} samples give {sums.acc.n * robot.nv} equations for "
+            f"{base.n_base} base parameters: need more samples"
+        )
+    result = _finish(
+        robot, sums.acc, base, method, timings, t_start, chunk=int(chunk), minimum_norm=minimum_norm
+    )
+    files = [sums.files[i] for i in range(len(specs))]
+    if vspecs is not None:
+        result = replace(result, relative_error=_validation(robot, result, vsums))
+    estimates = []
     if per_file:
-        estimates = []
-        for path, lp, fs in zip(files, layout, fetched[1:], strict=True):
-            estimates.append(_file_estimate(robot, path, len(lp), fs, base, method, chunk))
-        result = replace(result, per_file=estimates)
+        for info, fs in zip(files, fetched[1 + len(vparts) :], strict=True):
+            estimates.append(_file_estimate(robot, info, fs, base, method, chunk))
+    result = replace(result, per_file=estimates if per_file else None)
     result.timings["total"] = time.perf_counter() - t_start
     return result
 
 
-def _relative(sums: np.ndarray) -> tuple[float, np.ndarray]:
-    """``sqrt(sum e^2 / sum tau^2)`` overall and per joint, from rows 0 and 1 of ``sums``."""
+def file_summaries(result: IdentificationResult) -> list[dict]:
+    """The per-file summaries (samples, rows left out, preprocessing, quality) of a result
+    of :func:`identify_files` with ``per_file``."""
+    return [] if result.per_file is None else [f.summary for f in result.per_file]
+
+
+def _validation(robot: Robot, result: IdentificationResult, vsums: list[PartSums]):
+    """Pooled and per-file validation errors of the estimate, from the files' sums.
+
+    ``||tau_j - Y_j theta||^2 = zz_j - 2 b_j.theta + theta.A_j.theta`` per file
+    (floor about 1e-8 relative on the error, as for the training error).
+    """
+    est = np.asarray(result.estimate, dtype=float)
+    sse, zz = np.zeros(robot.nv), np.zeros(robot.nv)
+    per_vfile = []
+    for vs in vsums:
+        s, z = vs.acc.residual_sum_of_squares(est), vs.acc.zz_joint
+        sse += s
+        zz += z
+        err, err_j = _relative(s, z)
+        (info,) = vs.files.values()
+        per_vfile.append(
+            {
+                "file": info.label,
+                "n_samples": int(info.n_samples),
+                "error": _finite(err),
+                "per_joint": dict(zip(robot.dof_names, map(_finite, err_j), strict=True)),
+            }
+        )
+    val, val_j = _relative(sse, zz)
+    re = result.relative_error
+    return RelativeError(re.train, re.train_per_joint, val, val_j, validation_per_file=per_vfile)
+
+
+def _relative(sse: np.ndarray, zz: np.ndarray) -> tuple[float, np.ndarray]:
+    """``sqrt(sum e^2 / sum tau^2)`` overall and per joint."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        per_joint = np.sqrt(sums[0] / sums[1])
-    total = float(np.sqrt(sums[0].sum() / sums[1].sum())) if sums[1].sum() > 0 else float("nan")
+        per_joint = np.sqrt(sse / zz)
+    total = float(np.sqrt(sse.sum() / zz.sum())) if zz.sum() > 0 else float("nan")
     return total, per_joint
 
 
@@ -610,22 +705,25 @@ def _finite(x) -> float | None:
     return x if np.isfinite(x) else None
 
 
-def _file_estimate(robot, path, n_tasks, fs: PartSums, base, method, chunk) -> FileEstimate:
+def _file_estimate(robot, info: FileInfo, fs: PartSums, base, method, chunk) -> FileEstimate:
+    summary = info.summary(robot.dof_names)
     try:
         res = _finish(
             robot, fs.acc, base, method, dict(fs.timings), time.perf_counter(), chunk=int(chunk)
         )
-        return FileEstimate(path, fs.acc.n, n_tasks, res)
+        return FileEstimate(info.label, fs.acc.n, info.n_tasks, res, summary=summary)
     except (RankDeficiencyError, InputError) as exc:
-        return FileEstimate(path, fs.acc.n, n_tasks, None, str(exc))
+        return FileEstimate(info.label, fs.acc.n, info.n_tasks, None, str(exc), summary=summary)
 
 
 __all__ = [
     "FileEstimate",
-    "accumulate_parts",
+    "FileInfo",
     "FilePart",
     "PartSums",
+    "accumulate_parts",
     "file_length",
+    "file_summaries",
     "identify_files",
     "parse_scheduler",
     "part_sums",

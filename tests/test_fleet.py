@@ -21,6 +21,7 @@ import pinocchio as pin
 import pytest
 from conftest import get_robot
 
+from manip_id.datasets import parse_file_spec
 from manip_id.errors import DataError, InputError
 from manip_id.fleet import identify_files, parse_scheduler, portable_robot
 from manip_id.identification import identify
@@ -160,12 +161,14 @@ def test_validation_files_pooled_and_per_file(robot, fleet, tmp_path):
     tcat = [np.concatenate([a[i] for a in arrays]) for i in range(4)]
     ref = identify(robot, *tcat, validation=tuple(vcat))
     re, rr = res.relative_error, ref.relative_error
-    assert re.validation == pytest.approx(rr.validation, rel=1e-9)
-    np.testing.assert_allclose(re.validation_per_joint, rr.validation_per_joint, rtol=1e-9)
+    # from each file's sums (zz - 2 b.theta + theta.A.theta), which carry about 1e-8 of
+    # the torque energy as round-off, against residuals sample by sample
+    assert re.validation == pytest.approx(rr.validation, rel=1e-6)
+    np.testing.assert_allclose(re.validation_per_joint, rr.validation_per_joint, rtol=1e-6)
     for entry, (q, dq, ddq, tau) in zip(re.validation_per_file, varrays, strict=True):
         err = res.predict(robot, q, dq, ddq) - tau
         assert entry["n_samples"] == 700
-        assert entry["error"] == pytest.approx(np.linalg.norm(err) / np.linalg.norm(tau), 1e-9)
+        assert entry["error"] == pytest.approx(np.linalg.norm(err) / np.linalg.norm(tau), 1e-6)
     d = res.to_dict()["relative_error"]
     assert [e["file"] for e in d["validation_per_file"]] == vpaths
 
@@ -187,7 +190,7 @@ def test_preprocessed_files_any_partition(robot, tmp_path):
         blocks.append((ds.q, ds.dq, ds.ddq, ds.tau))
     ref = identify(robot, *(np.concatenate([b[i] for b in blocks]) for i in range(4)))
     for block in (None, 250):
-        res = identify_files(robot, paths, preprocess=opts, block=block)
+        res = identify_files(robot, paths, options=opts, block=block)
         _same(res, ref)
 
 
@@ -251,7 +254,8 @@ def test_accumulator_pickles(robot, fleet):
     from manip_id.fleet import FilePart, part_sums
 
     res = identify(robot, *fleet[1][0])
-    ps = part_sums(portable_robot(robot), FilePart(fleet[0][0], 0), res.base.independent)
+    spec = parse_file_spec(fleet[0][0])
+    ps = part_sums(portable_robot(robot), FilePart(spec, 0), res.base.independent)
     back = pickle.loads(pickle.dumps(ps))
     np.testing.assert_array_equal(back.acc.A_joint, ps.acc.A_joint)
     np.testing.assert_array_equal(back.acc.b_joint, ps.acc.b_joint)

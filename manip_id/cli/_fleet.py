@@ -64,8 +64,6 @@ def check(args: argparse.Namespace) -> None:
         )
     if args.split is not None:
         raise InputError(f"{opt} identifies whole files: give validation files with --validate")
-    if args.column:
-        raise InputError(f"--column is not supported with {opt}; convert the CSV files first")
     if args.workers > 1:
         raise InputError("--workers forks local processes; with --scheduler use local:N")
     if args.block is not None and args.block < 1:
@@ -82,18 +80,44 @@ def _files(value) -> list[str] | None:
     return [str(v) for v in value] if isinstance(value, (list, tuple)) else [str(value)]
 
 
-def _preprocess_options(args) -> dict | None:
-    """None (only files without ddq, default settings) unless an option was given."""
-    from ..signals import DEFAULT_CUTOFF
+def _options(args):
+    """The :class:`~manip_id.pipeline.PreprocessOptions` of the command's options.
 
-    if args.cutoff is None and args.decimate == 1 and args.trim is None:
+    Files without ddq are preprocessed (default cut-off), the others used as
+    they are unless a filtering option was given; the real-log options
+    (torque scale, velocity deadband, bad rows) are taken when the command has them.
+    """
+    from ..pipeline import PreprocessOptions
+
+    extra = {}
+    for name in ("velocity_deadband", "drop_bad_rows"):
+        value = getattr(args, name, None)
+        if value is not None:
+            extra[name] = value
+    scale = getattr(args, "torque_scale", None)
+    if isinstance(scale, str):
+        try:
+            scale = tuple(float(g) for g in scale.split(","))
+        except ValueError as exc:
+            raise InputError(f"--torque-scale expects G or G1,...,Gn, got {scale!r}") from exc
+    if scale is not None:
+        extra["torque_scale"] = scale[0] if len(scale) == 1 else scale
+    return PreprocessOptions(
+        cutoff=args.cutoff, order=args.order, trim=args.trim, decimate=args.decimate, **extra
+    )
+
+
+def _specs(args, files):
+    """File specs of ``files`` with the command's window, CSV column map and bag topic."""
+    from ..datasets import parse_file_spec
+    from . import identify as cmd
+
+    if files is None:
         return None
-    return {
-        "cutoff": DEFAULT_CUTOFF if args.cutoff is None else args.cutoff,
-        "order": args.order,
-        "decimate": args.decimate,
-        "trim": args.trim,
-    }
+    kwargs = {"columns": cmd._column_map(args.column)}
+    if getattr(args, "topic", None) is not None:
+        kwargs["topic"] = args.topic
+    return [parse_file_spec(f, window=getattr(args, "window", None), **kwargs) for f in files]
 
 
 class _Count:
@@ -107,17 +131,17 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     from . import identify as cmd
     from ._common import robot_from_args
 
-    files, vfiles = _files(args.data), _files(args.validate)
-    opts = _preprocess_options(args)
+    files, vfiles = _specs(args, _files(args.data)), _specs(args, _files(args.validate))
+    opts = _options(args)
     robot = robot_from_args(args)
     result = identify_files(
         robot,
         files,
         scheduler=args.scheduler,
         method=args.method,
-        per_file=args.per_file,
+        per_file=True,  # the file summaries; the estimates are shown with --per-file
         block=args.block,
-        preprocess=opts,
+        options=opts,
         validation=vfiles,
         chunk=args.chunk,
     )
@@ -125,18 +149,19 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     timings["total"] = time.perf_counter() - t_start
     per_vfile = result.relative_error.validation_per_file
     valid = None if per_vfile is None else _Count(sum(e["n_samples"] for e in per_vfile))
-    source = {"data": files, "scheduler": args.scheduler or "this process"}
+    source = {"data": [f.label for f in files], "scheduler": args.scheduler or "this process"}
     if vfiles is not None:
-        source["validate"] = vfiles
+        source["validate"] = [f.label for f in vfiles]
     report = cmd._report(robot, result, None, valid, None, timings, args, source, None)
-    report["preprocess"] = opts if opts is not None else "files without ddq: default settings"
+    report["preprocess"] = opts.to_dict()
     if per_vfile is not None:
         report["relative_error"]["validation_per_file"] = per_vfile
-    if result.per_file is not None:
+    report["files"] = [f.summary for f in result.per_file]
+    if args.per_file:
         report["per_file"] = [f.to_dict() for f in result.per_file]
     print(result.table())
     print(cmd._summary(robot, report))
-    if result.per_file is not None:
+    if args.per_file:
         print(_per_file_table(result))
     if args.json:
         outputs.write_json(args.json, report)
@@ -186,7 +211,7 @@ def _write_report(robot, result, report: dict, args):
             title=f"singular values of the pooled base regressor: {run_name}",
         )
     }
-    solved = [f for f in (result.per_file or []) if f.result is not None]
+    solved = [f for f in (result.per_file or []) if f.result is not None and args.per_file]
     if solved:
         est = np.array([f.result.estimate for f in solved])
         std = np.array([f.result.std for f in solved])
