@@ -55,20 +55,24 @@ MEASURED_LIMITS: dict[str, tuple[str, float]] = {
 TINY = 1e-150
 
 
-def check_magnitude(arr: np.ndarray, name: str, columns=None, offset: int = 0) -> None:
+def check_magnitude(
+    arr: np.ndarray, name: str, columns=None, offset: int = 0, error: type = InputError
+) -> None:
     """Raise :class:`InputError` unless the finite array ``arr`` has sane magnitudes.
 
     ``name`` selects the unit and the limit in :data:`MEASURED_LIMITS` (``tau`` is
     refused beyond 1e6 [N m]); the message names the field, the first sample
     (``offset + k``) and the column. A field whose largest magnitude is non-zero but
     below :data:`TINY` (e.g. torques of 1e-300) is refused too: nothing can be
-    estimated from it. Unknown names are not checked.
+    estimated from it. Unknown names are not checked. Raises ``error`` (an
+    :class:`InputError` by default; readers pass :class:`~manip_id.errors.DataError`).
     """
     if name not in MEASURED_LIMITS or arr.size == 0:
         return
     unit, limit = MEASURED_LIMITS[name]
-    mag = np.abs(arr)
-    big = mag > limit
+    with np.errstate(invalid="ignore"):
+        mag = np.abs(arr)
+        big = mag > limit  # NaN and Inf are check_finite's business
     if big.any():
         bad = np.argwhere(big)[0]
         where = f"sample {offset + int(bad[0])}"
@@ -76,13 +80,14 @@ def check_magnitude(arr: np.ndarray, name: str, columns=None, offset: int = 0) -
             col = int(bad[-1])
             label = columns[col] if columns is not None and col < len(columns) else f"column {col}"
             where += f", {label}"
-        raise InputError(
+        raise error(
             f"{name} = {arr[tuple(bad)]:.3g} [{unit}] at {where} is beyond any plausible "
             f"value (|{name}| <= {limit:g} [{unit}]); check the units and scaling"
         )
-    top = float(mag.max())
+    finite = mag[np.isfinite(mag)]
+    top = float(finite.max()) if finite.size else 0.0
     if 0.0 < top < TINY:
-        raise InputError(
+        raise error(
             f"{name} is all tiny: max |{name}| = {top:.3g} [{unit}] (below {TINY:g}); "
             "check the units and scaling"
         )

@@ -81,6 +81,8 @@ class SimulatedData:
 
 def _streams(seed: int) -> list[np.random.Generator]:
     """Independent generators for: parameters, torque noise, position noise, velocity noise."""
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise InputError(f"seed must be a non-negative integer, got {seed!r}")
     return [np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(4)]
 
 
@@ -364,7 +366,12 @@ class SimulationStream:
             raise InputError(f"expected a FourierTrajectory, got {type(trajectory).__name__}")
         if trajectory.nv != robot.nv:
             raise InputError(f"trajectory.nv={trajectory.nv} but robot.nv={robot.nv}")
-        duration, rate = float(duration), float(rate)
+        try:
+            duration, rate = float(duration), float(rate)
+        except (TypeError, ValueError) as exc:
+            raise InputError(
+                f"duration [s] and rate [Hz] must be numbers, got {duration!r} and {rate!r}"
+            ) from exc
         if not (math.isfinite(duration) and duration > 0):
             raise InputError(f"duration must be a positive time [s], got {duration}")
         if not (math.isfinite(rate) and rate > 0):

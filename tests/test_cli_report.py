@@ -31,7 +31,8 @@ def _refs(path):
 
 def _check_folder(rep, pngs):
     names = sorted(p.name for p in rep.iterdir())
-    assert names == sorted(["index.html", "result.json", "scene.html", *pngs])
+    manifest = ".manip-id-report.json"  # marks the folder as ours (--force may replace it)
+    assert names == sorted([manifest, "index.html", "result.json", "scene.html", *pngs])
     refs = _refs(rep / "index.html")
     for png in pngs:
         w, h = png_size(rep / png)
@@ -69,8 +70,13 @@ def test_identify_report_refuses_a_non_empty_folder_before_working(tmp_path, cap
     assert len(cap.err.strip().splitlines()) == 1
     assert "not empty" in cap.err and "--force" in cap.err
     assert sorted(p.name for p in rep.iterdir()) == ["keep.txt"]
-    assert main([*argv, "--force"]) == 0
-    assert not (rep / "keep.txt").exists()
+    # --force replaces only folders manip-id wrote (with a manifest): this one is the user's
+    assert main([*argv, "--force"]) == 2
+    assert "not written by manip-id" in capsys.readouterr().err
+    assert sorted(p.name for p in rep.iterdir()) == ["keep.txt"]
+    (rep / "keep.txt").unlink()
+    assert main(argv) == 0  # an empty folder is used
+    assert main([*argv, "--force"]) == 0  # and our own report is replaced
     assert (rep / "index.html").is_file()
 
 

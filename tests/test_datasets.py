@@ -218,7 +218,7 @@ def test_check_robot():
     n = 10
     ok = Dataset(
         t=np.arange(n) * 1e-3,
-        q=np.zeros((n, 7)),
+        q=np.tile((robot.lower + robot.upper) / 2, (n, 1)),  # within the position limits
         dq=np.zeros((n, 7)),
         tau=np.zeros((n, 7)),
         joint_names=tuple(robot.dof_names),

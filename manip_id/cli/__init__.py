@@ -222,6 +222,7 @@ def main(argv: list[str] | None = None) -> int:
         warnings.simplefilter("default")
         warnings.filterwarnings("ignore", category=DeprecationWarning)
         warnings.filterwarnings("ignore", category=PendingDeprecationWarning)
+        warnings.filterwarnings("ignore", category=ResourceWarning)  # libraries' leaks
         warnings.showwarning = _WarningPrinter()
         try:
             parser = build_parser()

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .._checks import as_float_array, check_finite
+from .._checks import as_float_array, check_finite, check_magnitude
 from ..errors import DataError
 
 #: Largest |q| [rad] taken as radians; beyond it positions look like degrees.
@@ -36,7 +36,9 @@ def check_values(name: str, value, ndim: int, columns=None, offset: int = 0) -> 
 
     The one value validator of measured data (whole arrays and streamed blocks):
     refuses non-numeric and complex data, wrong dimensions, NaN and Inf (naming
-    the sample ``offset + k`` and the column). Raises :class:`DataError`.
+    the sample ``offset + k`` and the column), and implausible magnitudes
+    (:func:`manip_id._checks.check_magnitude`; time stamps excepted, which may be
+    seconds since 1970). Raises :class:`DataError`.
     """
     arr = np.asarray(value) if not isinstance(value, np.ndarray) else value
     if np.iscomplexobj(arr):
@@ -54,6 +56,8 @@ def check_values(name: str, value, ndim: int, columns=None, offset: int = 0) -> 
                 k = int(np.argwhere(~np.isfinite(arr))[0][0])
                 msg = msg.replace(f"at sample {k}", f"at sample {offset + k}", 1)
             raise DataError(msg) from exc
+    if name != "t":  # after the finite check; absolute stamps may be epoch seconds (~1.8e9 s)
+        check_magnitude(arr, name, columns, offset, error=DataError)
     return arr
 
 
@@ -194,3 +198,27 @@ def check_robot(dataset: Dataset, robot) -> None:
             f"the data name joints {extra} that robot {robot.name!r} does not have "
             f"(its joints: {list(robot.dof_names)})"
         )
+    check_position_limits(dataset, robot)
+
+
+#: Measured positions may pass a position limit by this share of the joint's range.
+LIMIT_MARGIN = 0.02
+
+
+def check_position_limits(dataset: Dataset, robot, margin: float = LIMIT_MARGIN) -> None:
+    """Raise :class:`DataError` if a position leaves the robot's (set) limits by more than
+    ``margin`` times the joint's range, naming the joint, the sample and the limits."""
+    from ..parameters import bounded_range
+
+    lo, hi = robot.lower, robot.upper  # [rad or m], shape (nq,)
+    q = dataset.q
+    for i in np.flatnonzero(bounded_range(lo, hi)):
+        slack = margin * (hi[i] - lo[i])
+        below, above = lo[i] - slack - q[:, i].min(), q[:, i].max() - hi[i] - slack
+        if max(below, above) > 0:
+            k = int(np.argmin(q[:, i]) if below >= above else np.argmax(q[:, i]))
+            raise DataError(
+                f"q column {i} = {q[k, i]:.4g} at sample {k} (t = {dataset.t[k]:.4g} s) is "
+                f"outside the position limits [{lo[i]:.4g}, {hi[i]:.4g}] of robot "
+                f"{robot.name!r}: wrong robot, units or zero offset?"
+            )

@@ -93,7 +93,31 @@ def _figure(
     return fig, axes
 
 
+def _no_mathtext(fig: Figure) -> None:
+    """Show every title, label, legend and annotation literally: user strings (joint and
+    file names, titles) never go through mathtext, so ``$`` is just a character. Tick
+    labels (matplotlib's own, e.g. ``10^{-2}`` on log axes) keep their formatting."""
+    from matplotlib.text import Text
+
+    texts: list[Text] = []
+    if getattr(fig, "_suptitle", None) is not None:
+        texts.append(fig._suptitle)
+    texts += list(fig.texts)
+    for ax in fig.axes:
+        texts += [ax.title, ax._left_title, ax._right_title, ax.xaxis.label, ax.yaxis.label]
+        texts += list(ax.texts)
+        legend = ax.get_legend()
+        if legend is not None:
+            texts += list(legend.get_texts())
+            texts.append(legend.get_title())
+    for legend in fig.legends:
+        texts += list(legend.get_texts())
+    for text in texts:
+        text.set_parse_math(False)
+
+
 def _save(fig: Figure, path) -> Figure:
+    _no_mathtext(fig)
     fig.tight_layout()
     atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=DPI))
     return fig
