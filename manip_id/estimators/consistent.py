@@ -27,7 +27,11 @@ the scale of joint term ``t`` (the value that alone would explain all the
 torque, ``H = P^T A P``: in parameter units, whatever the noise level), and
 ``w`` the prior weight (``prior="none"``: ``w = 0``, feasibility alone). The
 margin is ``eps_i = min(MARGIN lambda_max(J0_i), lambda_min(J0_i) / 2)`` for a physical prior
-(``MARGIN lambda_max`` of ``|J0_i|`` without one). With a small
+(``MARGIN lambda_max`` of ``|J0_i|`` without one; the SDP then also asks
+``J_i >= MARGIN tr(J_i) 1``, a margin relative to the body's own size, since
+without a prior nothing bounds the unidentifiable directions: the interior-point
+method returns a point inside the optimal set, whose standard parameters may be
+large). With a small
 ``w`` the prior only picks, among the standard vectors that fit equally well
 (the null space of ``Y_b P``), the one closest to the prior, and moves the fit by
 a fraction of a standard deviation.
@@ -369,6 +373,9 @@ def _solve_sdp(problem: ConsistentProblem, *, tolerance: float = 1e-8, max_iter:
             cp.vec(Ji, order="C") == E @ theta[10 * i : 10 * i + 10] - pr.margin[i] * eye_vec
         )
         cons.append(Ji >> 0)
+        if pr.J0 is None:  # no prior: also a margin relative to the body's own size
+            Jfull = Ji + pr.margin[i] * np.eye(4)
+            cons.append(Jfull - MARGIN * cp.trace(Jfull) * np.eye(4) >> 0)
     if pr.nonnegative.size:
         cons.append(theta[pr.nonnegative] >= 0)
     obj = cp.sum_squares(u)
