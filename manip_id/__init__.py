@@ -43,6 +43,8 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
         "RobotError",
     ),
     ".estimators": (
+        "ConcurrentLearningEstimator",
+        "DREMEstimator",
         "GradientEstimator",
         "InformationAccumulator",
         "LeastSquaresSolution",
@@ -65,6 +67,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
         "identify_dataset",
         "identify_datasets",
     ),
+    ".models": ("accumulate_energy", "accumulate_momentum", "check_energy_base"),
     ".regressor": (
         "iter_regressor",
         "iter_slotine_li_regressor",

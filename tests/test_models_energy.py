@@ -212,3 +212,24 @@ def test_real_panda_log_momentum_and_energy(panda_real):
     # the energy model sees only the power dq^T tau: condition number 2.7e3 against
     # the dynamic model's 96 on this 15 s log; measured 8.1 %, target not met
     assert errors["energy"] < 0.12
+
+
+# ------------------------------------------------------------------------ CLI
+def test_cli_model_option(tmp_path, capsys):
+    import json
+
+    from manip_id.cli import main
+
+    out = tmp_path / "energy.json"
+    args = ["identify", "panda", "--simulate", "--duration", "20", "--rate", "500"]
+    assert main([*args, "--model", "energy", "--window-length", "0.05", "--json", str(out)]) == 0
+    report = json.loads(out.read_text())
+    assert report["model"] == "energy" and report["outputs"] == ["energy"]
+    assert report["window_length"] == 0.05
+    assert report["n_base"] == len(report["true_base_parameters"])
+    assert report["parameter_error_in_std"] < 4.5  # 1 % torque noise, within its std
+    assert "relative error: train" in capsys.readouterr().out
+    assert main([*args, "--model", "momentum", "--workers", "2"]) == 2
+    assert "one process" in capsys.readouterr().err
+    assert main([*args, "--model", "energy", "--window-length", "-1"]) == 2
+    assert "--window-length must be a positive time" in capsys.readouterr().err

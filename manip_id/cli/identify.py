@@ -95,6 +95,21 @@ def register(sub) -> None:
         help="optimize the excitation (condition number) instead of a random one",
     )
     p.add_argument("--method", choices=METHODS, default="ols", help="estimator [default ols]")
+    p.add_argument(
+        "--model",
+        choices=("dynamic", "energy", "momentum"),
+        default="dynamic",
+        help="dynamic: tau = Y(q, dq, ddq) theta [default]; energy (over intervals) or "
+        "momentum (filtered): no acceleration, only q and dq filtered (one --data file)",
+    )
+    p.add_argument(
+        "--window-length",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="energy interval / momentum row spacing [s] (default 0.2; momentum filter "
+        "bandwidth 3 / SECONDS rad/s)",
+    )
     val = p.add_mutually_exclusive_group()
     val.add_argument(
         "--validate",
@@ -334,11 +349,13 @@ def _simulation_stream(robot, args):
     opts = {
         k: (SIM_DEFAULTS[k] if getattr(args, k) is None else getattr(args, k)) for k in SIM_DEFAULTS
     }
+    # the robot's profile (robots/NAME.toml [excitation]) sets the design, else 5 harmonics
+    design = {"harmonics": 5, **(robot.profile.excitation.design_kwargs() if robot.profile else {})}
     if args.optimize:
-        traj = optimize_excitation(robot, harmonics=5, seed=opts["seed"])
+        traj = optimize_excitation(robot, seed=opts["seed"], **design)
         traj = getattr(traj, "trajectory", traj)
     else:
-        traj = random_trajectory(robot, harmonics=5, seed=opts["seed"])
+        traj = random_trajectory(robot, seed=opts["seed"], **design)
     stream = SimulationStream(
         robot,
         traj,
@@ -439,6 +456,8 @@ def run(args: argparse.Namespace) -> int:
         from ..export import sidecar_path
 
         outputs.file(sidecar_path(args.export_urdf), "--export-urdf sidecar")
+    if args.model != "dynamic":  # energy / momentum: whole arrays, no ddq
+        return _run_acceleration_free(args, outputs, t_start)
     if _fleet.wanted(args):  # many files, one task each (Dask with --scheduler)
         return _fleet.run(args, outputs, t_start)
     if not args.simulate:  # log files: read in chunks, each preprocessed alone
@@ -510,6 +529,111 @@ def run(args: argparse.Namespace) -> int:
     if args.export_urdf:
         _export(robot, result, args, outputs)
     outputs.publish()  # all outputs appear together, once all are complete
+    if args.json:
+        print(f"wrote {args.json}")
+    if args.export_urdf:
+        print(f"wrote {args.export_urdf} and its sidecar")
+    if args.report is not None:
+        print(f"wrote the report to {path}/index.html")
+    return 0
+
+
+def _run_acceleration_free(args, outputs, t_start: float) -> int:
+    """``--model energy|momentum``: one file or a simulation, whole; q, dq filtered only."""
+    from ..identification import identify
+
+    if args.workers > 1 or _fleet.wanted(args):
+        raise InputError(f"--model {args.model} runs in one process (no --workers, --scheduler)")
+    if args.data is not None and len(args.data) > 1:
+        raise InputError(f"--model {args.model} takes one --data file, got {len(args.data)}")
+    if args.validate is not None and len(args.validate) > 1:
+        raise InputError(f"--model {args.model} takes one --validate file")
+    if args.window_length is not None and not (
+        math.isfinite(args.window_length) and args.window_length > 0
+    ):
+        raise InputError(f"--window-length must be a positive time [s], got {args.window_length}")
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    columns = _column_map(args.column)
+    data = None if args.simulate else load_dataset(args.data[0], columns=columns)
+    validation = None if args.validate is None else load_dataset(args.validate[0], columns=columns)
+    timings["load"] = time.perf_counter() - t0
+    robot = robot_from_args(args)
+    theta_true = None
+    if args.simulate:
+        sim, opts = _simulate(robot, args)
+        data, theta_true = sim.dataset, np.asarray(sim.theta_true, dtype=float)
+        source: dict = {"simulated": opts}
+    else:
+        check_robot(data, robot)
+        source = {"data": str(args.data[0])}
+    if validation is not None:
+        check_robot(validation, robot)
+        source["validate"] = str(args.validate[0])
+    full = data
+    if validation is None and args.split is not None:
+        data, validation = data.split(args.split)
+        source["split"] = args.split
+    t0 = time.perf_counter()
+    if args.simulate and args.cutoff is None and args.decimate == 1 and args.trim is None:
+        train = data  # uniform and noise on tau only: nothing to filter
+    else:  # resampled, q and dq filtered; tau left raw (the models integrate it)
+        cutoff = DEFAULT_CUTOFF if args.cutoff is None else args.cutoff
+        try:
+            train = preprocess(
+                data,
+                cutoff=cutoff,
+                order=args.order,
+                decimate=args.decimate,
+                trim=args.trim,
+                filter_torque=False,
+            )
+        except InputError as exc:
+            raise InputError(f"training data: {exc}") from exc
+    valid = None if validation is None else _prepare(validation, args, "validation data")
+    timings["preprocess"] = time.perf_counter() - t0
+    steps = np.diff(train.t)
+    dt = float(np.mean(steps))
+    if np.ptp(steps) > 1e-6 * dt:
+        raise InputError(
+            f"--model {args.model} needs uniform samples; steps range over "
+            f"[{steps.min():g}, {steps.max():g}] s (give --cutoff to resample)"
+        )
+    result = identify(
+        robot,
+        train.q,
+        train.dq,
+        None,
+        train.tau,
+        method=args.method,
+        validation=None if valid is None else (valid.q, valid.dq, valid.ddq, valid.tau),
+        chunk=args.chunk,
+        model=args.model,
+        dt=dt,
+        window_length=args.window_length,
+        **_consistent_kwargs(args),
+    )
+    timings.update({k: float(v) for k, v in dict(result.timings).items()})
+    timings["total"] = time.perf_counter() - t_start
+    settings = train.meta.get("preprocess")
+    report = _report(robot, result, train, valid, theta_true, timings, args, source, settings)
+    report["model"] = args.model
+    report["window_length"] = args.window_length
+    report["outputs"] = list(result.output_names)
+    print(result.table())
+    rel = report["relative_error"]
+    if rel["per_joint_validation"] is None:  # the model's own outputs, not the joints
+        shown = {**report, "joints": report["outputs"]}
+    else:
+        shown = report
+    print(_summary(robot, shown).replace("relative torque error: train", "relative error: train"))
+    if args.json:
+        outputs.write_json(args.json, report)
+    if args.report is not None:
+        path = _write_report(robot, result, full, train, valid, report, args)
+    if args.export_urdf:
+        _export(robot, result, args, outputs)
+    outputs.publish()
     if args.json:
         print(f"wrote {args.json}")
     if args.export_urdf:
