@@ -316,3 +316,68 @@ def test_unknown_frame_lists_the_valid_ones(files, capsys):
     )
     assert status == 2
     assert "tool0" in cap.err and "wrist_3_link" in cap.err
+
+
+def test_torque_scale_from_drive_gains(files, tmp_path, capsys):
+    """identify on currents with --torque-scale-from the drive-gains JSON equals identify on
+    the torques (the same motion)."""
+    gains_json = tmp_path / "g.json"
+    status, cap = _run(
+        [
+            "drive-gains",
+            "ur5",
+            "--unloaded",
+            files["cu"],
+            "--loaded",
+            files["cl"],
+            "--frame",
+            "tool0",
+            "--payload-mass",
+            str(files["payload"].mass),
+            "--json",
+            str(gains_json),
+        ],
+        capsys,
+    )
+    assert status == 0, cap.err
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    status, cap = _run(
+        [
+            "identify",
+            "ur5",
+            "--data",
+            files["cu"],
+            "--torque-scale-from",
+            str(gains_json),
+            "--json",
+            str(a),
+        ],
+        capsys,
+    )
+    assert status == 0, cap.err
+    torque_file = tmp_path / "t.npz"
+    with np.load(files["cu"]) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["tau"] = arrays["tau"] * GAINS
+    np.savez(torque_file, **arrays)
+    status, cap = _run(["identify", "ur5", "--data", str(torque_file), "--json", str(b)], capsys)
+    assert status == 0, cap.err
+    ra, rb = json.loads(a.read_text()), json.loads(b.read_text())
+    assert ra["torque_scale"] == pytest.approx(GAINS.tolist(), abs=1e-6)
+    va = [p["value"] for p in ra["base_parameters"]]
+    vb = [p["value"] for p in rb["base_parameters"]]
+    assert va == pytest.approx(vb, rel=1e-5, abs=1e-7)
+    status, cap = _run(
+        [
+            "identify",
+            "ur5",
+            "--data",
+            files["cu"],
+            "--torque-scale-from",
+            str(gains_json),
+            "--torque-scale",
+            "2",
+        ],
+        capsys,
+    )
+    assert status == 2 and "--torque-scale-from" in cap.err

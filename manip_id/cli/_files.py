@@ -41,6 +41,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "current [A] to torque [N m], gear ratios); recorded in the JSON",
     )
     g.add_argument(
+        "--torque-scale-from",
+        metavar="RESULT.json",
+        default=None,
+        help="the drive gains of 'manip-id drive-gains --json' as --torque-scale",
+    )
+    g.add_argument(
         "--velocity-deadband",
         type=float,
         metavar="EPS",
@@ -73,6 +79,13 @@ def parse_floats(text: str, what: str) -> list[float]:
 
 def check(args: argparse.Namespace) -> None:
     """Refuse option combinations the file path does not do, before any work."""
+    if getattr(args, "torque_scale_from", None) is not None:  # manip-id drive-gains --json
+        from ..payload import load_torque_scale
+
+        if args.simulate or args.torque_scale is not None:
+            raise InputError("--torque-scale-from applies to --data files, without --torque-scale")
+        gains = load_torque_scale(args.torque_scale_from)
+        args.torque_scale = ",".join(repr(float(g)) for g in gains)
     if args.simulate:
         for name in ("window", "torque_scale", "velocity_deadband", "topic"):
             if getattr(args, name) is not None:
