@@ -45,12 +45,12 @@ from .parameters import (
     bounded_range,
     bounded_rate,
 )
+from .profiles import RobotProfile, find_profile, load_profile, robots_dir
 
 if TYPE_CHECKING:  # pragma: no cover
     from .regressor import RegressorEvaluator
 
 __all__ = [
-    "DEFAULT_LOCKED",
     "FRICTION_KINDS",
     "INERTIAL_NAMES",
     "JOINT_TERM_NAMES",
@@ -91,10 +91,6 @@ MANIPULATORS: tuple[str, ...] = (
     "double_pendulum_simple",
     "double_pendulum_continuous",
 )
-#: Joints removed (locked) by default, per robot name.
-DEFAULT_LOCKED: dict[str, tuple[str, ...]] = {
-    "panda": ("panda_finger_joint1", "panda_finger_joint2"),
-}
 OUR_ROBOTS: tuple[str, ...] = ("msd",)
 
 _FLOATING = (
@@ -151,6 +147,7 @@ class Robot:
         reference_configuration: np.ndarray | None = None,
         settings: Mapping | None = None,
         geometry: Mapping | None = None,
+        profile: RobotProfile | None = None,
     ):
         kinds = [model.joints[i].shortname() for i in range(1, model.njoints)]
         floating = [k for k in kinds if k in _FLOATING]
@@ -171,6 +168,8 @@ class Robot:
         self._locked_ids = list(locked_ids)
         self._qref = reference_configuration
         self.settings = dict(settings or {})
+        #: the identification profile the robot was loaded with (``robots/NAME.toml``), or None
+        self.profile = profile
         self._full_geometry = dict(geometry or {})
         self.joint_names: list[str] = [model.names[i] for i in range(1, model.njoints)]
         self.dofs = DofLayout.from_model(model)
@@ -427,10 +426,6 @@ def _terms(armature, friction, spring, defaults: JointTerms) -> JointTerms:
     )
 
 
-def _our_robot_dir() -> Path:
-    return Path(__file__).resolve().parent / "robots"
-
-
 def _load_urdf(path: Path) -> pin.Model:
     if not path.is_file():
         raise RobotError(f"cannot read URDF {path}: no such file")
@@ -453,22 +448,23 @@ def load_robot(
     locked_configuration: Mapping[str, float] | Sequence[float] | None = None,
     package_dirs: Sequence[str | Path] = (),
     identified: bool | str | Path | None = None,
+    profile: str | Path | RobotProfile | bool | None = None,
 ) -> Robot:
     """Load a fixed-base robot.
 
     Parameters
     ----------
     spec: a name of example-robot-data (``"panda"``, ``"ur5"``, ...), a path to a
-        URDF file, or ``"msd"`` (the one-DoF mass-spring-damper of
-        ``manip_id/robots/msd.urdf``).
-    armature: model a rotor inertia per joint (column ddq_j). Default off.
+        URDF file, or ``"msd"`` (the one-DoF mass-spring-damper of ``robots/msd.urdf``).
+    armature: model a rotor inertia per joint (column ddq_j). Default: the profile's, else off.
     friction: friction kinds per joint, some of ``("viscous", "coulomb",
-        "offset")`` (also a comma-separated string). Default none; ``"msd"``
-        defaults to viscous.
-    spring: model a linear spring per joint (column q_j). Default off; on for ``"msd"``.
+        "offset")`` (also a comma-separated string). Default: the profile's
+        (``"msd"``: viscous), else none.
+    spring: model a linear spring per joint (column q_j). Default: the profile's
+        (on for ``"msd"``), else off.
     active_joints: names of the joints to identify; the others are locked at
-        ``locked_configuration``. Default: every joint (the panda's two finger
-        joints are locked by default).
+        ``locked_configuration``. Default: the profile's (``robots/panda.toml`` locks
+        the two finger joints), else every joint.
     locked_configuration: positions of the locked joints, a full configuration
         vector of the unreduced model (shape (nq,)) or a mapping joint name ->
         position [rad or m]. Default: the neutral configuration clipped to the limits.
@@ -477,26 +473,32 @@ def load_robot(
         its sidecar (``NAME.identified.json`` next to it), or give the sidecar's path.
         Its joint terms, active joints, armature, offset and spring become the
         defaults and the nominal parameters (explicit arguments still win).
+    profile: the identification profile (:mod:`manip_id.profiles`): a robot name or a
+        ``.toml`` path, a :class:`~manip_id.profiles.RobotProfile`, or False for none.
+        Default: ``robots/NAME.toml`` for a robot loaded by name when it exists; a URDF
+        loaded by path takes none (its file name decides nothing). Explicit arguments
+        override the profile.
     """
     spec_str = str(spec)
     settings: dict = {}
     geometry: dict = {}
     defaults = JointTerms()
     pkg = [str(p) for p in package_dirs]
+    by_path = False
     if spec_str in OUR_ROBOTS:
-        base = _our_robot_dir()
+        base = robots_dir()
         path = base / f"{spec_str}.urdf"
         model = _load_urdf(path)
         settings_file = base / f"{spec_str}.json"
         if settings_file.is_file():
             settings = json.loads(settings_file.read_text())
-        defaults = JointTerms(viscous=True, spring=True)
         name, source = spec_str, str(path)
         pkg = pkg or [str(path.parent)]
     elif spec_str.endswith(".urdf") or Path(spec_str).suffix == ".urdf" or "/" in spec_str:
         path = Path(spec_str).expanduser()
         model = _load_urdf(path)
         name, source = path.stem, str(path)
+        by_path = True
         # package://NAME/... resolves in any ancestor folder holding NAME
         pkg = pkg or [str(d) for d in path.resolve().parents]
     else:
@@ -510,11 +512,22 @@ def load_robot(
         sidecar, armature, friction, spring, active_joints = identified_options(
             spec_str, identified, armature, friction, spring, active_joints
         )
+    prof = _profile(profile, name, by_path)
+    if prof is not None:
+        defaults = JointTerms(
+            armature=bool(prof.armature),
+            viscous="viscous" in (prof.friction or ()),
+            coulomb="coulomb" in (prof.friction or ()),
+            offset="offset" in (prof.friction or ()),
+            spring=bool(prof.spring),
+        )
     terms = _terms(armature, friction, spring, defaults)
 
     all_joints = [model.names[i] for i in range(1, model.njoints)]
+    if active_joints is None and prof is not None:
+        active_joints = prof.active_for(all_joints)
     if active_joints is None:
-        locked_names = [j for j in DEFAULT_LOCKED.get(name, ()) if j in all_joints]
+        locked_names: list[str] = []
     else:
         active_joints = list(active_joints)
         unknown = [j for j in active_joints if j not in all_joints]
@@ -543,12 +556,26 @@ def load_robot(
         reference_configuration=qref,
         settings=settings,
         geometry=geometry,
+        profile=prof,
     )
     if sidecar is not None:
         from .export import apply_identified
 
         apply_identified(robot, sidecar)
     return robot
+
+
+def _profile(profile, name: str, by_path: bool) -> RobotProfile | None:
+    """The profile asked for: by name for robots loaded by name, none for a URDF path."""
+    if profile is None:
+        return None if by_path else find_profile(name)
+    if profile is False:
+        return None
+    if profile is True:
+        return load_profile(name)
+    if isinstance(profile, RobotProfile):
+        return profile
+    return load_profile(profile)
 
 
 def _reference_configuration(model: pin.Model, locked, all_joints) -> np.ndarray:

@@ -8,13 +8,15 @@ import sys
 from manip_id.cli import main
 
 
-def test_robots_lists_names(capsys):
-    assert main(["robots"]) == 0
+def test_robots_lists_the_named_rows(capsys):
+    """Published sizes: panda 7 DoF (fingers locked by robots/panda.toml), ur5 6, msd 1."""
+    assert main(["robots", "panda", "ur5", "msd"]) == 0
     out = capsys.readouterr().out
-    rows = {line.split()[0]: line.split()[1:] for line in out.splitlines()[1:] if line.split()}
-    assert rows["panda"][:3] == ["7", "7", "70"]
-    assert rows["ur5"][:3] == ["6", "6", "60"]
-    assert rows["msd"][:3] == ["1", "1", "12"]
+    rows = {line.split()[0]: line.split()[1:] for line in out.splitlines()[1:-1] if line.split()}
+    assert set(rows) == {"panda", "ur5", "msd"}  # only the rows asked for were loaded
+    assert rows["panda"] == ["7", "7", "70", "panda.toml"]
+    assert rows["ur5"] == ["6", "6", "60", "-"]
+    assert rows["msd"] == ["1", "1", "12", "msd.toml"]
 
 
 def test_bad_input_is_one_line_exit_2():

@@ -36,6 +36,12 @@ def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
         "--joints", default=None, help="comma-separated active joints (the others are locked)"
     )
     parser.add_argument(
+        "--profile",
+        default=None,
+        help="identification profile: a robot name or a .toml file, 'none' for none "
+        "[default robots/ROBOT.toml when ROBOT is a name]; options given here override it",
+    )
+    parser.add_argument(
         "--package-dir",
         action="append",
         default=[],
@@ -57,7 +63,29 @@ def robot_from_args(args: argparse.Namespace) -> Robot:
             spring=args.spring,
             active_joints=joints,
             package_dirs=args.package_dir,
+            profile=_profile_option(args),
         )
+
+
+def _profile_option(args: argparse.Namespace):
+    value = getattr(args, "profile", None)
+    return False if value == "none" else value
+
+
+def profile_from_args(args: argparse.Namespace):
+    """The :class:`~manip_id.profiles.RobotProfile` the options select, without loading the robot.
+
+    ``--profile`` when given (``none``: no profile), else ``robots/ROBOT.toml`` for a
+    robot given by name; None when there is none.
+    """
+    from ..profiles import find_profile, load_profile
+
+    value = _profile_option(args)
+    if value is False:
+        return None
+    if value is not None:
+        return load_profile(value)
+    return find_profile(str(getattr(args, "robot", "") or ""))
 
 
 #: Options naming input files or folders (the outputs must not be one of them).

@@ -114,7 +114,7 @@ def check(args: argparse.Namespace) -> None:
         )
 
 
-def _options(args, nv: int):
+def _options(args, nv: int, profile_scale=None):
     from ..datasets.stream import torque_scale_vector
     from ..pipeline import PreprocessOptions
 
@@ -123,6 +123,8 @@ def _options(args, nv: int):
         scale = torque_scale_vector(
             parse_floats(args.torque_scale, "--torque-scale"), nv, "--torque-scale"
         )
+    elif profile_scale is not None:  # the robot profile's [data] torque_scale
+        scale = torque_scale_vector(profile_scale, nv, "the profile's torque_scale")
     return PreprocessOptions(
         cutoff=args.cutoff,
         order=args.order,
@@ -179,14 +181,17 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
     from ..identification import identify, identify_datasets
     from ..pipeline import scan_file, split_file
     from . import identify as cmd
-    from ._common import robot_from_args
+    from ._common import profile_from_args, robot_from_args
 
     timings: dict[str, float] = {}
+    profile = profile_from_args(args)  # robots/ROBOT.toml [data]: defaults of the options
     colmap = cmd._column_map(args.column)
+    if colmap is None and profile is not None and profile.columns:
+        colmap = dict(profile.columns)
     specs = _specs(args.data, args, colmap)
     vspecs = _specs(args.validate, args, colmap) if args.validate is not None else None
     robot = robot or robot_from_args(args)
-    options = _options(args, robot.nv)
+    options = _options(args, robot.nv, None if profile is None else profile.torque_scale)
     t0 = time.perf_counter()
     scans = {s: scan_file(robot, s, options) for s in specs + (vspecs or [])}
     source: dict = {"data": [s.label for s in specs]}
