@@ -31,6 +31,8 @@ from __future__ import annotations
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -124,6 +126,20 @@ class FileScan:
     dt_min: float
     dt_max: float
     counts: RowCounts
+    spill: str | None = None
+
+    def discard(self) -> None:
+        """Remove the spill file (the scanned rows of a slow format), if any."""
+        if self.spill is not None:
+            from ._io import unregister_temporary
+
+            Path(self.spill).unlink(missing_ok=True)
+            unregister_temporary(self.spill)
+
+
+#: Formats whose rows are parsed slowly (text, CDR messages): the scan keeps a binary
+#: copy of the rows it checked in a temporary file, read back by the second pass.
+SPILL_FORMATS = ("csv", "rosbag")
 
 
 @dataclass
@@ -240,12 +256,31 @@ def scan_file(robot: Robot, spec, options: PreprocessOptions | None = None) -> F
         standstill_eps=options.velocity_deadband,
     )
     counts = RowCounts()
+    spill = fh = None
+    if src.format in SPILL_FORMATS:
+        import os
+        import tempfile
+
+        from ._io import register_temporary
+
+        fd, spill = tempfile.mkstemp(prefix="manip_id_rows_", suffix=".f64")
+        register_temporary(spill)
+        fh = os.fdopen(fd, "wb")
     try:
         for rows in _rows(src, spec, options, counts):
             qa.add(rows)
-    except DataError as exc:
-        msg = str(exc)
-        raise DataError(msg if str(spec.path) in msg else f"{spec.label}: {msg}") from exc
+            if fh is not None:
+                fh.write(np.ascontiguousarray(rows, dtype="<f8").tobytes())
+    except BaseException as exc:
+        if fh is not None:
+            fh.close()
+            FileScan.discard(SimpleNamespace(spill=spill))  # type: ignore[arg-type]
+        if isinstance(exc, DataError):
+            msg = str(exc)
+            raise DataError(msg if str(spec.path) in msg else f"{spec.label}: {msg}") from exc
+        raise
+    if fh is not None:
+        fh.close()
     quality = qa.finish(counts.n_dropped, counts.first_dropped)
     if quality.n_samples < 2:
         raise DataError(f"{spec.label}: {quality.n_samples} usable sample(s); need at least 2")
@@ -261,7 +296,18 @@ def scan_file(robot: Robot, spec, options: PreprocessOptions | None = None) -> F
         dt_min=quality.dt_min,
         dt_max=quality.dt_max,
         counts=counts,
+        spill=spill,
     )
+
+
+def _spilled_rows(path: str, width: int, chunk: int) -> Iterator[np.ndarray]:
+    """Packed rows read back from a spill file, ``chunk`` at a time (plain reads)."""
+    with open(path, "rb") as fh:
+        while True:
+            block = np.fromfile(fh, dtype="<f8", count=chunk * width)
+            if not block.size:
+                return
+            yield block.reshape(-1, width)
 
 
 def iter_processed(
@@ -277,7 +323,10 @@ def iter_processed(
     scan = scan_file(robot, spec, options) if scan is None else scan
     src, _ = _open(robot, spec)
     lay = src.layout
-    rows = _rows(src, spec, options, RowCounts())
+    if scan.spill is not None and Path(scan.spill).is_file():
+        rows = _spilled_rows(scan.spill, lay.width, options.read_chunk)
+    else:
+        rows = _rows(src, spec, options, RowCounts())
     if not options.preprocesses(lay.has_ddq):
         return None, rows
     from .signals import preprocess_blocks
@@ -373,6 +422,8 @@ def accumulate_file(
     except (InputError, DataError) as exc:
         msg = str(exc)
         raise DataError(msg if str(spec.path) in msg else f"{spec.label}: {msg}") from exc
+    finally:
+        scan.discard()
     timings.update(times)
     timings["accumulate_total"] = time.perf_counter() - t0
     scale = torque_scale_vector(options.torque_scale, nv, "--torque-scale")

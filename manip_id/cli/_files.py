@@ -197,6 +197,8 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
     source: dict = {"data": [s.label for s in specs]}
     if vspecs is None and args.split is not None:
         train_spec, valid_spec = split_file(robot, specs[0], args.split, options, scans[specs[0]])
+        for old in scans.values():
+            old.discard()
         specs, vspecs = [train_spec], [valid_spec]
         scans = {s: scan_file(robot, s, options) for s in specs + vspecs}
         source["split"] = args.split

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import struct
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -29,6 +30,64 @@ from .layout import Layout
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 DEFAULT_TOPIC = "/joint_states"
+
+
+def parse_joint_state(raw):
+    """A little-endian CDR ``sensor_msgs/msg/JointState`` read without a type system.
+
+    Returns ``(sec, nanosec, names, position, velocity, effort)`` with ``names``
+    the raw bytes of the name sequence (a cache key; :func:`decode_names` reads
+    them) and the values as float64 views of ``raw``; or None for anything but
+    the plain case (big-endian, an empty or short sequence, trailing bytes),
+    which the caller hands to ``rosbags``. Layout (alignment counted from the
+    end of the 4-byte encapsulation header): int32 sec, uint32 nanosec, string
+    frame_id, sequence<string> name, then three sequence<float64>.
+    """
+    buf = memoryview(raw)
+    size = len(buf)
+    if size < 16 or buf[0] != 0 or buf[1] != 1:
+        return None
+    unpack = struct.unpack_from
+    d = 4
+    sec, nsec, n = unpack("<iII", buf, d)
+    o = d + 12 + n
+    o = d + ((o - d + 3) & ~3)
+    (count,) = unpack("<I", buf, o)
+    o += 4
+    start = o
+    for _ in range(count):
+        o = d + ((o - d + 3) & ~3)
+        (n,) = unpack("<I", buf, o)
+        o += 4 + n
+        if o > size:
+            return None
+    names = bytes(buf[start:o])
+    values = []
+    for _ in range(3):
+        o = d + ((o - d + 3) & ~3)
+        (m,) = unpack("<I", buf, o)
+        o += 4
+        if m != count or count == 0:
+            return None
+        o = d + ((o - d + 7) & ~7)
+        if o + 8 * m > size:
+            return None
+        values.append(np.frombuffer(buf, "<f8", m, o))
+        o += 8 * m
+    if o != size:
+        return None
+    return sec, nsec, names, values[0], values[1], values[2]
+
+
+def decode_names(key: bytes) -> list[str]:
+    """The joint names of a name sequence's raw bytes (from :func:`parse_joint_state`)."""
+    out, o = [], 0
+    while o < len(key):
+        o = (o + 3) & ~3
+        (n,) = struct.unpack_from("<I", key, o)
+        out.append(key[o + 4 : o + 4 + n - 1].decode())
+        o += 4 + n
+    return out
 
 
 def is_bag(path: Path) -> bool:
@@ -136,7 +195,8 @@ class BagSource:
         nv = lay.nv
         wanted = self.joint_names
         sq, sdq, stau = lay.slices["q"], lay.slices["dq"], lay.slices["tau"]
-        order_cache: dict[tuple, np.ndarray] = {}
+        order_cache: dict = {}
+        order_names: dict = {}
         reader = _open_reader(self.path)
         try:
             buf = np.empty((chunk, lay.width))
@@ -148,11 +208,17 @@ class BagSource:
                     continue
                 if stop is not None and index >= stop:
                     break
-                msg = self._decode(raw, conn.msgtype)
-                key = tuple(msg.name)
+                fast = parse_joint_state(raw)
+                if fast is not None:
+                    sec, nsec, key, pos, vel, eff = fast
+                else:
+                    msg = self._decode(raw, conn.msgtype)
+                    key = tuple(msg.name)
+                    sec, nsec = msg.header.stamp.sec, msg.header.stamp.nanosec
+                    pos, vel, eff = msg.position, msg.velocity, msg.effort
                 idx = order_cache.get(key)
                 if idx is None:
-                    names = [str(n) for n in key]
+                    names = decode_names(key) if isinstance(key, bytes) else [str(n) for n in key]
                     missing = [j for j in wanted if j not in names]
                     if missing:
                         raise DataError(
@@ -162,9 +228,11 @@ class BagSource:
                         )
                     idx = np.array([names.index(j) for j in wanted], dtype=np.intp)
                     order_cache[key] = idx
-                n_names = len(key)
-                for field in ("position", "velocity", "effort"):
-                    values = getattr(msg, field)
+                    order_names[key] = names
+                n_names = len(order_names[key]) if key in order_names else len(key)
+                for field, values in (("position", pos), ("velocity", vel), ("effort", eff)):
+                    if fast is not None:
+                        break
                     if len(values) != n_names:
                         what = "no" if len(values) == 0 else f"{len(values)} values of"
                         raise DataError(
@@ -172,12 +240,11 @@ class BagSource:
                             f"for its {n_names} joints; q, dq and tau need position, velocity "
                             "and effort"
                         )
-                sec, nsec = msg.header.stamp.sec, msg.header.stamp.nanosec
                 row = buf[k]
                 row[0] = sec + 1e-9 * nsec if (sec or nsec) else 1e-9 * logtime
-                row[sq] = np.asarray(msg.position)[idx]
-                row[sdq] = np.asarray(msg.velocity)[idx]
-                row[stau] = np.asarray(msg.effort)[idx]
+                row[sq] = np.asarray(pos)[idx]
+                row[sdq] = np.asarray(vel)[idx]
+                row[stau] = np.asarray(eff)[idx]
                 k += 1
                 if k == chunk:
                     yield buf.copy()
