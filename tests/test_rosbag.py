@@ -178,7 +178,7 @@ def test_fast_cdr_reader_agrees_with_rosbags():
     rng = np.random.default_rng(3)
     H = STORE.types["std_msgs/msg/Header"]
     T = STORE.types["builtin_interfaces/msg/Time"]
-    for trial in range(200):
+    for _ in range(200):
         n = int(rng.integers(1, 9))
         names = ["j" * int(rng.integers(1, 7)) + str(i) for i in range(n)]
         msg = STORE.types[JS](
