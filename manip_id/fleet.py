@@ -90,44 +90,53 @@ class FilePart:
 class FileInfo:
     """What the client learns about one file besides its sums (small).
 
+    The fields of :class:`~manip_id.pipeline.FileAccumulation` but its sums.
+
     Attributes
     ----------
-    label: the file spec as written (``path[@window]``)
+    spec: the file and its window
     n_samples: samples accumulated (after preprocessing)
     excluded: rows left out per joint by the velocity deadband, shape (nv,)
     quality: its data-quality summary (:class:`~manip_id.datasets.quality.DataQuality`)
     settings: the preprocessing applied (None: the file's ddq used as is)
+    torque_scale: the per-joint torque scale applied, shape (nv,), or None
     n_tasks: tasks (blocks) it was cut into
     """
 
-    label: str
+    spec: FileSpec
     n_samples: int
     excluded: np.ndarray
     quality: Any = None
     settings: Any = None
+    torque_scale: np.ndarray | None = None
     n_tasks: int = 1
+
+    @property
+    def label(self) -> str:
+        """The file spec as written: ``path[@window]``."""
+        return self.spec.label
 
     def merged(self, other: FileInfo) -> FileInfo:
         """Two blocks of the same file."""
-        return FileInfo(
-            self.label,
-            self.n_samples + other.n_samples,
-            self.excluded + other.excluded,
-            self.quality,
-            self.settings,
-            self.n_tasks + other.n_tasks,
+        return replace(
+            self,
+            n_samples=self.n_samples + other.n_samples,
+            excluded=self.excluded + other.excluded,
+            n_tasks=self.n_tasks + other.n_tasks,
         )
 
     def summary(self, joints: Sequence[str]) -> dict:
-        """JSON-ready: file, samples, rows left out per joint, preprocessing, quality."""
+        """JSON-ready, as :meth:`~manip_id.pipeline.FileAccumulation.summary` (file, window,
+        samples, rows left out per joint, preprocessing, torque scale), and the tasks."""
         s = self.settings
         return {
-            "file": self.label,
+            "file": str(self.spec.path),
+            "window": None if self.spec.window is None else str(self.spec.window),
             "n_samples": int(self.n_samples),
-            "n_tasks": int(self.n_tasks),
             "excluded_rows": dict(zip(joints, map(int, self.excluded), strict=True)),
             "preprocess": None if s is None else {k: getattr(s, k) for k in s.__dataclass_fields__},
-            "quality": None if self.quality is None else self.quality.to_dict(),
+            "torque_scale": None if self.torque_scale is None else self.torque_scale.tolist(),
+            "n_tasks": int(self.n_tasks),
         }
 
 
@@ -256,9 +265,10 @@ def _block_accumulation(robot, spec, options, ind, chunk, start: int, stop: int 
     The stream is the one :func:`~manip_id.pipeline.accumulate_file` accumulates
     (:func:`~manip_id.pipeline.iter_processed`); only the rows of this block
     enter the sums. Returns (accumulator, samples, excluded rows (nv,), quality,
-    settings, timings).
+    settings, torque scale, timings).
     """
     from .datasets import Layout
+    from .datasets.stream import torque_scale_vector
     from .pipeline import iter_processed, scan_file
 
     t0 = time.perf_counter()
@@ -289,7 +299,8 @@ def _block_accumulation(robot, spec, options, ind, chunk, start: int, stop: int 
     if count["n"] == 0:
         raise DataError(f"block [{start}, {stop}) holds no samples of the file")
     times["accumulate_total"] = time.perf_counter() - t0
-    return acc, count["n"], excluded, scan.quality, settings, times
+    scale = torque_scale_vector(options.torque_scale, robot.nv, "--torque-scale")
+    return acc, count["n"], excluded, scan.quality, settings, scale, times
 
 
 def part_sums(
@@ -321,14 +332,15 @@ def part_sums(
         if part.start == 0 and part.stop is None:
             fa = accumulate_file(robot, part.spec, options, ind, chunk=int(chunk))
             acc, n, excluded = fa.accumulator, fa.n_samples, fa.excluded
-            quality, settings, times = fa.quality, fa.settings, dict(fa.timings)
+            quality, settings, scale = fa.quality, fa.settings, fa.torque_scale
+            times = dict(fa.timings)
         else:
-            acc, n, excluded, quality, settings, times = _block_accumulation(
+            acc, n, excluded, quality, settings, scale, times = _block_accumulation(
                 robot, part.spec, options, ind, chunk, part.start, part.stop
             )
     except Exception as exc:
         raise _named(part.spec.label, exc) from exc
-    info = FileInfo(part.spec.label, int(n), np.asarray(excluded), quality, settings)
+    info = FileInfo(part.spec, int(n), np.asarray(excluded), quality, settings, scale)
     return PartSums(acc, {part.file: info}, times)
 
 
@@ -540,6 +552,10 @@ def identify_files(
     base: BaseParameters | None = None,
     minimum_norm: bool = False,
     split_every: int = SPLIT_EVERY,
+    consistent: bool = False,
+    solver: str = "sdp",
+    prior: str = "nominal",
+    prior_weight: float | None = None,
 ) -> IdentificationResult:
     """Identify the base parameters of ``robot`` from many files, each file a task.
 
@@ -565,14 +581,19 @@ def identify_files(
     base: base parametrization; default the structural one
     minimum_norm: solve rank-deficient data with the minimum-norm solution
     split_every: parts added by one reduction task (>= 2)
+    consistent, solver, prior, prior_weight: a physically consistent pooled
+        estimate, as :func:`~manip_id.identification.identify` (solved on the
+        client from the reduced sums)
 
     Returns
     -------
     The usual :class:`~manip_id.identification.IdentificationResult`, equal to
-    the local run's to round-off whatever the workers or the partition; its
-    ``files`` summaries are in ``result.per_file`` (with ``per_file``), its
-    timings hold the task times summed over the tasks and ``distributed``
-    (the wall time of the map-reduce) [s].
+    the local run's (:func:`~manip_id.identification.identify_datasets`) to
+    round-off whatever the workers or the partition. ``files`` is
+    ``{"train": [FileInfo], "validation": [FileInfo] or None}`` (samples, rows
+    left out, preprocessing, data quality of each file; no sums), ``per_file``
+    the files' own estimates when asked. Its timings hold the task times summed
+    over the tasks and ``distributed`` (the wall time of the map-reduce) [s].
 
     Raises
     ------
@@ -643,25 +664,35 @@ def identify_files(
             f"{sums.acc.n} samples give {sums.acc.n * robot.nv} equations for "
             f"{base.n_base} base parameters: need more samples"
         )
+    from .identification import DEFAULT_PRIOR_WEIGHT
+
+    weight = DEFAULT_PRIOR_WEIGHT if prior_weight is None else prior_weight
     result = _finish(
-        robot, sums.acc, base, method, timings, t_start, chunk=int(chunk), minimum_norm=minimum_norm
+        robot,
+        sums.acc,
+        base,
+        method,
+        timings,
+        t_start,
+        chunk=int(chunk),
+        minimum_norm=minimum_norm,
+        consistent=(consistent, solver, prior, weight),
     )
     files = [sums.files[i] for i in range(len(specs))]
+    vfiles = None if vspecs is None else [vs.files[i] for i, vs in enumerate(vsums)]
     if vspecs is not None:
         result = replace(result, relative_error=_validation(robot, result, vsums))
     estimates = []
     if per_file:
         for info, fs in zip(files, fetched[1 + len(vparts) :], strict=True):
             estimates.append(_file_estimate(robot, info, fs, base, method, chunk))
-    result = replace(result, per_file=estimates if per_file else None)
+    result = replace(
+        result,
+        per_file=estimates if per_file else None,
+        files={"train": files, "validation": vfiles},
+    )
     result.timings["total"] = time.perf_counter() - t_start
     return result
-
-
-def file_summaries(result: IdentificationResult) -> list[dict]:
-    """The per-file summaries (samples, rows left out, preprocessing, quality) of a result
-    of :func:`identify_files` with ``per_file``."""
-    return [] if result.per_file is None else [f.summary for f in result.per_file]
 
 
 def _validation(robot: Robot, result: IdentificationResult, vsums: list[PartSums]):
@@ -723,7 +754,6 @@ __all__ = [
     "PartSums",
     "accumulate_parts",
     "file_length",
-    "file_summaries",
     "identify_files",
     "parse_scheduler",
     "part_sums",

@@ -472,23 +472,48 @@ def test_cli_per_file_validation_and_report(robot, fleet, tmp_path, capsys):
     paths, arrays, _ = fleet
     report_dir = tmp_path / "report"
     status, rep, cap = _cli(
-        ["--data", paths[0], "--validate", paths[1], "--per-file", "--block", "400",
+        ["--data", paths[0], paths[1], "--validate", paths[2], "--per-file", "--block", "400",
          "--report", str(report_dir)],
         tmp_path, capsys,
     )  # fmt: skip
     assert status == 0, cap.err
-    own = identify(robot, *arrays[0], validation=tuple(arrays[1]))
-    _close([p["value"] for p in rep["base_parameters"]], own.estimate)
-    (entry,) = rep["per_file"]
-    assert entry["file"] == paths[0] and entry["n_tasks"] == 4
-    _close([p["estimate"] for p in entry["parameters"]], own.estimate)
-    assert rep["relative_error"]["validation"] == pytest.approx(own.relative_error.validation)
+    train = [np.concatenate([arrays[0][i], arrays[1][i]]) for i in range(4)]
+    pooled = identify(robot, *train, validation=tuple(arrays[2]))
+    _close([p["value"] for p in rep["base_parameters"]], pooled.estimate)
+    assert rep["n_samples"] == 2 * N_SAMPLES
+    assert [e["file"] for e in rep["per_file"]] == paths[:2]
+    for entry, data in zip(rep["per_file"], arrays[:2], strict=True):
+        assert entry["n_tasks"] == 4 and entry["n_samples"] == N_SAMPLES
+        own = identify(robot, *data, base=pooled.base)
+        _close([p["estimate"] for p in entry["parameters"]], own.estimate)
+    assert rep["relative_error"]["validation"] == pytest.approx(
+        pooled.relative_error.validation, rel=1e-6
+    )
     (ventry,) = rep["relative_error"]["validation_per_file"]
-    assert ventry["file"] == paths[1] and ventry["n_samples"] == N_SAMPLES
+    assert ventry["file"] == paths[2] and ventry["n_samples"] == N_SAMPLES
     assert rep["n_validation_samples"] == N_SAMPLES
+    # the multi-file path's file information, from the tasks
+    assert [q["file"] for q in rep["data_quality"]] == paths[:2]
+    assert [f["n_samples"] for f in rep["files"]] == [N_SAMPLES, N_SAMPLES]
     assert (report_dir / "per_file_parameters.png").is_file()
     assert (report_dir / "index.html").is_file()
     assert "per file:" in cap.out
+
+
+def test_cli_matches_the_multi_file_path(robot, fleet, tmp_path, capsys):
+    """--per-file (in this process) and the local multi-file path give the same JSON numbers."""
+    paths = fleet[0][:3]
+    opts = ["--data", *paths, "--method", "wls", "--velocity-deadband", "0.05"]
+    status, local, cap = _cli(opts, tmp_path, capsys)
+    assert status == 0, cap.err
+    status, fleet_rep, cap = _cli([*opts, "--per-file", "--block", "700"], tmp_path, capsys)
+    assert status == 0, cap.err
+    _close(
+        [p["value"] for p in fleet_rep["base_parameters"]],
+        [p["value"] for p in local["base_parameters"]],
+    )
+    assert fleet_rep["velocity_deadband"] == local["velocity_deadband"]
+    assert [f["n_samples"] for f in fleet_rep["files"]] == [f["n_samples"] for f in local["files"]]
 
 
 def test_cli_scheduler_local(robot, fleet, reference, tmp_path, capsys):

@@ -74,89 +74,66 @@ def check(args: argparse.Namespace) -> None:
         parse_scheduler(args.scheduler)
 
 
-def _files(value) -> list[str] | None:
-    if value is None:
-        return None
-    return [str(v) for v in value] if isinstance(value, (list, tuple)) else [str(value)]
-
-
-def _options(args):
-    """The :class:`~manip_id.pipeline.PreprocessOptions` of the command's options.
-
-    Files without ddq are preprocessed (default cut-off), the others used as
-    they are unless a filtering option was given; the real-log options
-    (torque scale, velocity deadband, bad rows) are taken when the command has them.
-    """
-    from ..pipeline import PreprocessOptions
-
-    extra = {}
-    for name in ("velocity_deadband", "drop_bad_rows"):
-        value = getattr(args, name, None)
-        if value is not None:
-            extra[name] = value
-    scale = getattr(args, "torque_scale", None)
-    if isinstance(scale, str):
-        try:
-            scale = tuple(float(g) for g in scale.split(","))
-        except ValueError as exc:
-            raise InputError(f"--torque-scale expects G or G1,...,Gn, got {scale!r}") from exc
-    if scale is not None:
-        extra["torque_scale"] = scale[0] if len(scale) == 1 else scale
-    return PreprocessOptions(
-        cutoff=args.cutoff, order=args.order, trim=args.trim, decimate=args.decimate, **extra
-    )
-
-
-def _specs(args, files):
-    """File specs of ``files`` with the command's window, CSV column map and bag topic."""
-    from ..datasets import parse_file_spec
-    from . import identify as cmd
-
-    if files is None:
-        return None
-    kwargs = {"columns": cmd._column_map(args.column)}
-    if getattr(args, "topic", None) is not None:
-        kwargs["topic"] = args.topic
-    return [parse_file_spec(f, window=getattr(args, "window", None), **kwargs) for f in files]
-
-
-class _Count:
-    def __init__(self, n: int):
-        self.n_samples = n
-
-
 def run(args: argparse.Namespace, outputs, t_start: float) -> int:
-    """The fleet branch of ``manip-id identify`` (after the outputs were reserved)."""
-    from ..fleet import identify_files
-    from . import identify as cmd
-    from ._common import robot_from_args
+    """The fleet branch of ``manip-id identify`` (after the outputs were reserved).
 
-    files, vfiles = _specs(args, _files(args.data)), _specs(args, _files(args.validate))
-    opts = _options(args)
+    The options, file specs and JSON file information are those of the
+    multi-file path (:mod:`manip_id.cli._files`); the files are scanned and
+    accumulated by the tasks (not here), and their quality summaries come back
+    with the sums.
+    """
+    from types import SimpleNamespace
+
+    from ..fleet import identify_files
+    from . import _files
+    from . import identify as cmd
+    from ._common import profile_from_args, robot_from_args
+
+    profile = profile_from_args(args)
+    colmap = cmd._column_map(args.column)
+    if colmap is None and profile is not None and profile.columns:
+        colmap = dict(profile.columns)
+    specs = _files._specs(args.data, args, colmap)
+    vspecs = _files._specs(args.validate, args, colmap) if args.validate is not None else None
     robot = robot_from_args(args)
+    options = _files._options(args, robot.nv, None if profile is None else profile.torque_scale)
     result = identify_files(
         robot,
-        files,
+        specs,
         scheduler=args.scheduler,
         method=args.method,
-        per_file=True,  # the file summaries; the estimates are shown with --per-file
+        per_file=args.per_file,
         block=args.block,
-        options=opts,
-        validation=vfiles,
+        options=options,
+        validation=vspecs,
         chunk=args.chunk,
+        **cmd._consistent_kwargs(args),
     )
+    files = result.files
+    for info in files["train"]:
+        print(info.quality.text())
+    for info in files["validation"] or []:
+        print("validation " + info.quality.text())
     timings = {k: float(v) for k, v in result.timings.items()}
     timings["total"] = time.perf_counter() - t_start
-    per_vfile = result.relative_error.validation_per_file
-    valid = None if per_vfile is None else _Count(sum(e["n_samples"] for e in per_vfile))
-    source = {"data": [f.label for f in files], "scheduler": args.scheduler or "this process"}
-    if vfiles is not None:
-        source["validate"] = [f.label for f in vfiles]
-    report = cmd._report(robot, result, None, valid, None, timings, args, source, None)
-    report["preprocess"] = opts.to_dict()
-    if per_vfile is not None:
-        report["relative_error"]["validation_per_file"] = per_vfile
-    report["files"] = [f.summary for f in result.per_file]
+    n_valid = None if vspecs is None else sum(f.n_samples for f in files["validation"])
+    source = {"data": [s.label for s in specs], "scheduler": args.scheduler or "this process"}
+    if vspecs is not None:
+        source["validate"] = [s.label for s in vspecs]
+    report = cmd._report(
+        robot,
+        result,
+        SimpleNamespace(n_samples=result.n_samples),
+        None if n_valid is None else SimpleNamespace(n_samples=n_valid),
+        None,
+        timings,
+        args,
+        source,
+        files["train"][0].settings,
+    )
+    infos = files["train"] + (files["validation"] or [])
+    scans = {f.spec: SimpleNamespace(quality=f.quality) for f in infos}
+    _files._add_file_info(report, robot, specs, vspecs, scans, files, options, result)
     if args.per_file:
         report["per_file"] = [f.to_dict() for f in result.per_file]
     print(result.table())
@@ -168,9 +145,13 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     path = None
     if args.report is not None:
         path = _write_report(robot, result, report, args)
+    if getattr(args, "export_urdf", None):
+        cmd._export(robot, result, args, outputs)
     outputs.publish()
     if args.json:
         print(f"wrote {args.json}")
+    if getattr(args, "export_urdf", None):
+        print(f"wrote {args.export_urdf} and its sidecar")
     if path is not None:
         print(f"wrote the report to {path}/index.html")
     return 0
