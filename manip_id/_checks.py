@@ -45,7 +45,7 @@ def check_finite(arr: np.ndarray, name: str, columns=None) -> None:
 #: Sane magnitudes of measured fields: name -> (unit, largest |value|). Beyond them a
 #: value is a unit or scaling mistake (or garbage), not a measurement.
 MEASURED_LIMITS: dict[str, tuple[str, float]] = {
-    "t": ("s", 1e9),  # 30 years
+    "t": ("s", 1e11),  # 3000 years: stamps in seconds since 1970 (1.8e9 s) pass
     "q": ("rad or m", 1e4),
     "dq": ("rad/s or m/s", 1e4),
     "ddq": ("rad/s^2 or m/s^2", 1e7),

@@ -56,8 +56,7 @@ def check_values(name: str, value, ndim: int, columns=None, offset: int = 0) -> 
                 k = int(np.argwhere(~np.isfinite(arr))[0][0])
                 msg = msg.replace(f"at sample {k}", f"at sample {offset + k}", 1)
             raise DataError(msg) from exc
-    if name != "t":  # after the finite check; absolute stamps may be epoch seconds (~1.8e9 s)
-        check_magnitude(arr, name, columns, offset, error=DataError)
+    check_magnitude(arr, name, columns, offset, error=DataError)  # t: epoch seconds pass
     return arr
 
 

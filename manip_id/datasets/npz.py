@@ -21,6 +21,7 @@ members decompress as a stream), so memory is O(chunk) whatever N.
 from __future__ import annotations
 
 import zipfile
+import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -64,7 +65,10 @@ def _member_header(zf: zipfile.ZipFile, info: zipfile.ZipInfo, path: Path) -> Np
             else:
                 raise ValueError(f"unsupported .npy version {version}")
             header = fh.tell()
-    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as exc:
+    except (
+        ValueError, OSError, zipfile.BadZipFile, EOFError, zlib.error, NotImplementedError,
+        RuntimeError,
+    ) as exc:  # fmt: skip
         raise DataError(f"cannot read {path} as NPZ: member {info.filename}: {exc}") from exc
     dtype = np.dtype(dtype)
     size = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
@@ -89,7 +93,7 @@ def inspect_npz(path: Path, max_bytes: int | None = None) -> tuple[dict[str, Npy
     """
     try:
         zf = zipfile.ZipFile(path)
-    except (zipfile.BadZipFile, OSError) as exc:
+    except (zipfile.BadZipFile, OSError, NotImplementedError, RuntimeError, ValueError) as exc:
         raise DataError(f"cannot read {path} as NPZ: {exc}") from exc
     with zf:
         infos = zf.infolist()
@@ -228,7 +232,9 @@ class NpzSource:
                             block = np.frombuffer(raw, dtype=m.dtype)
                         out[:, cols] = np.asarray(block, dtype=np.float64).reshape(k, -1)
                     yield out
-            except (zipfile.BadZipFile, OSError, EOFError) as exc:
+            except (
+                zipfile.BadZipFile, OSError, EOFError, zlib.error, NotImplementedError, RuntimeError
+            ) as exc:  # fmt: skip
                 raise DataError(f"cannot read {self.path} as NPZ: {exc}") from exc
             finally:
                 for fh in handles.values():
