@@ -88,7 +88,7 @@ import json
 import math
 import time
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -683,43 +683,71 @@ class DriveGainResult:
 
 
 # ====================================================================== data blocks
-def _blocks(data, what: str) -> list[tuple]:
-    """``data`` as a list of ``(q, dq, ddq, tau, joint_names)``.
+@dataclass(frozen=True)
+class _Run:
+    """One run: a label, a function giving fresh blocks ``(q, dq, ddq, tau)``, joint names,
+    and its arrays when it is in memory (for the check that loaded runs are not unloaded)."""
 
-    Takes a Dataset (with ``ddq``), a tuple ``(q, dq, ddq, tau)`` of arrays, or a list of
-    those.
+    label: str
+    blocks: Callable[[], Iterable[tuple]]
+    names: tuple | None = None
+    arrays: tuple | None = None
+
+
+def _blocks(data, what: str) -> list[_Run]:
+    """``data`` as a list of runs.
+
+    Takes a Dataset (with ``ddq``), a tuple ``(q, dq, ddq, tau)`` of arrays, a function
+    of no argument returning an iterable of such tuples (a long log read block by block,
+    e.g. from :func:`manip_id.pipeline.iter_processed`), or a list of those.
     """
     if data is None:
         return []
     if (
-        hasattr(data, "tau")
-        and hasattr(data, "q")
+        callable(data)
+        or (hasattr(data, "tau") and hasattr(data, "q"))
         or (isinstance(data, tuple) and len(data) == 4 and np.ndim(data[0]) == 2)
     ):
         data = [data]
     out = []
     for k, item in enumerate(data):
+        label = f"{what} run {k}"
+        if callable(item):
+            out.append(_Run(label, item))
+            continue
         if hasattr(item, "tau") and hasattr(item, "q"):
             if getattr(item, "ddq", None) is None:
                 raise InputError(
                     f"{what} dataset {k} has no accelerations (ddq): preprocess it first "
                     "(manip_id.signals.preprocess)"
                 )
-            out.append((item.q, item.dq, item.ddq, item.tau, getattr(item, "joint_names", None)))
-            continue
-        try:
-            q, dq, ddq, tau = item
-        except (TypeError, ValueError) as exc:
-            raise InputError(
-                f"{what} data: each block must be a Dataset or a tuple (q, dq, ddq, tau); "
-                f"item {k} is {type(item).__name__}"
-            ) from exc
-        out.append((q, dq, ddq, tau, None))
+            arrays = (item.q, item.dq, item.ddq, item.tau)
+            names = getattr(item, "joint_names", None)
+        else:
+            try:
+                q, dq, ddq, tau = item
+            except (TypeError, ValueError) as exc:
+                raise InputError(
+                    f"{what} data: each run must be a Dataset, a tuple (q, dq, ddq, tau) or a "
+                    f"function returning such blocks; item {k} is {type(item).__name__}"
+                ) from exc
+            arrays, names = (q, dq, ddq, tau), None
+        out.append(
+            _Run(
+                label,
+                (lambda a=arrays: [a]),
+                None if names is None else tuple(names),
+                arrays,
+            )
+        )
     return out
 
 
-def _check_block(robot: Robot, block: tuple, where: str):
-    q, dq, ddq, tau, names = block
+def _check_block(robot: Robot, block: tuple, where: str, names=None):
+    try:
+        q, dq, ddq, tau = block
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{where}: each block must be a tuple (q, dq, ddq, tau)") from exc
     if names is not None and list(names) != list(robot.dof_names):
         raise DataError(
             f"{where} names the joints {list(names)} but robot {robot.name!r} has "
@@ -747,16 +775,18 @@ def _check_distinct(unloaded: list, loaded: list) -> None:
     """Loaded runs that are unloaded ones carry no payload information."""
     for i, lb in enumerate(loaded):
         for k, ub in enumerate(unloaded):
+            if lb.arrays is None or ub.arrays is None:
+                continue
             same = all(
                 np.shape(a) == np.shape(b) and np.array_equal(np.asarray(a), np.asarray(b))
-                for a, b in zip(lb[:4], ub[:4], strict=True)
+                for a, b in zip(lb.arrays, ub.arrays, strict=True)
             )
             if same:
                 raise DataError(
                     f"loaded run {i} is the same data as unloaded run {k}: the loaded runs "
                     "carry no payload information (record them with the payload mounted)"
                 )
-    names = {tuple(b[4]) for b in unloaded + loaded if b[4] is not None}
+    names = {tuple(b.names) for b in unloaded + loaded if b.names is not None}
     if len(names) > 1:
         raise DataError(
             "the unloaded and loaded runs name different joints: "
@@ -786,18 +816,17 @@ def _accumulate(
     ev = robot.evaluator
     acc = InformationAccumulator(n_cols, robot.nv)
     left_out = np.zeros(robot.nv, dtype=np.int64)
-    start = 0
-    for k, block in enumerate(blocks):
-        q, dq, ddq, tau = _check_block(robot, block, f"{what} run {k}")
-        for c in ev.iter_regressor(q, dq, ddq, int(chunk)):
-            X, z = design(c.Y, tau[c.start : c.stop])
-            if deadband is not None:
-                keep = np.abs(dq[c.start : c.stop]) >= deadband  # (n, nv)
-                X = X * keep[:, :, None]
-                z = z * keep
-                left_out += (~keep).sum(axis=0)
-            acc.add(X, z, check=False)
-        start += q.shape[0]
+    for run in blocks:
+        for block in run.blocks():
+            q, dq, ddq, tau = _check_block(robot, block, run.label, run.names)
+            for c in ev.iter_regressor(q, dq, ddq, int(chunk)):
+                X, z = design(c.Y, tau[c.start : c.stop])
+                if deadband is not None:
+                    keep = np.abs(dq[c.start : c.stop]) >= deadband  # (n, nv)
+                    X = X * keep[:, :, None]
+                    z = z * keep
+                    left_out += (~keep).sum(axis=0)
+                acc.add(X, z, check=False)
     return acc, left_out
 
 
@@ -1108,8 +1137,9 @@ def identify_payload(
     ----------
     robot: the robot (its joint terms decide the base columns)
     unloaded: runs without the payload: a Dataset (with ddq), a tuple ``(q, dq, ddq,
-        tau)`` of arrays ((N, nq), (N, nv) x 3 [rad, rad/s, rad/s^2, N m]), or a list of
-        those; may be empty/None with ``known_base``
+        tau)`` of arrays ((N, nq), (N, nv) x 3 [rad, rad/s, rad/s^2, N m]), a function of
+        no argument returning an iterable of such tuples (a long log streamed block by
+        block), or a list of those; may be empty/None with ``known_base``
     loaded: runs with the payload mounted, the same forms
     frame: the frame or link the payload is fixed to (e.g. ``"tool0"``)
     known_base: base parameters from an earlier identification

@@ -65,6 +65,11 @@ def add_run_arguments(p: argparse.ArgumentParser, *, unloaded_required: bool) ->
     )
     p.add_argument("--topic", default=None, help="ROS 2 bag topic of sensor_msgs/JointState")
     p.add_argument(
+        "--drop-bad-rows",
+        action="store_true",
+        help="drop (and count) rows holding NaN/Inf instead of refusing the file",
+    )
+    p.add_argument(
         "--velocity-deadband",
         type=float,
         default=None,
@@ -161,58 +166,65 @@ def _column_map(specs: list[str]):
     return column_map(specs)
 
 
-def _spec(text: str, args):
-    """A file spec (path and window) of issue 12's readers, or the plain path."""
+def _spec(text: str, args, colmap=None):
+    """A file spec (path and window) of the real-log readers."""
     from ..datasets import parse_file_spec
 
-    return parse_file_spec(
-        text, window=args.window, columns=_column_map(args.column), topic=args.topic
+    return parse_file_spec(text, window=args.window, columns=colmap, topic=args.topic)
+
+
+def _options(args, scale=None):
+    from ..pipeline import PreprocessOptions
+
+    eps = args.velocity_deadband
+    return PreprocessOptions(
+        cutoff=args.cutoff,
+        order=args.order,
+        trim=args.trim,
+        decimate=args.decimate,
+        torque_scale=None if scale is None else tuple(scale),
+        velocity_deadband=eps if eps else None,
+        drop_bad_rows=args.drop_bad_rows,
     )
 
 
-def read_run(text: str, args, robot, scale=None):
-    """One file as a Dataset: its window, the torque scale, checked against the robot."""
-    from ..datasets import check_robot
-    from ..datasets.stream import collect, iter_rows, open_source
+class StreamedRun:
+    """One file read by the real-log pipeline: scanned once (quality summary, checks),
+    then its preprocessed rows streamed block by block as ``(q, dq, ddq, tau)``."""
 
-    spec = _spec(text, args)
-    try:
-        src = open_source(spec, joint_names=list(robot.dof_names))
-        ds = collect(
-            iter_rows(src, spec.window, torque_scale=scale),
-            src.layout,
-            src.joint_names,
-            {"source": spec.label},
-        )
-    except DataError as exc:
-        msg = str(exc)
-        raise DataError(msg if str(spec.path) in msg else f"{spec.label}: {msg}") from exc
-    try:
-        check_robot(ds, robot)
-    except DataError as exc:
-        raise DataError(f"{spec.label}: {exc}") from exc
-    return spec, ds
+    def __init__(self, robot, spec, options):
+        from ..pipeline import scan_file
 
+        self.robot, self.spec, self.options = robot, spec, options
+        self.scan = scan_file(robot, spec, options)  # bad files fail here, named
+        self.settings = None
 
-def prepare(ds, args, what: str):
-    """Preprocess when ddq is missing or a cut-off / trim / decimation was asked for."""
-    from ..signals import DEFAULT_CUTOFF, preprocess
+    def __call__(self):
+        from ..pipeline import iter_processed
 
-    if ds.ddq is not None and args.cutoff is None and args.decimate == 1 and args.trim is None:
-        return ds
-    cutoff = DEFAULT_CUTOFF if args.cutoff is None else args.cutoff
-    try:
-        return preprocess(
-            ds, cutoff=cutoff, order=args.order, decimate=args.decimate, trim=args.trim
-        )
-    except InputError as exc:
-        raise InputError(f"{what}: {exc}") from exc
+        nq, nv = self.robot.nq, self.robot.nv
+        try:
+            self.settings, rows = iter_processed(self.robot, self.spec, self.options, self.scan)
+            for r in rows:
+                yield (
+                    r[:, 1 : 1 + nq],
+                    r[:, 1 + nq : 1 + nq + nv],
+                    r[:, 1 + nq + 2 * nv : 1 + nq + 3 * nv],
+                    r[:, 1 + nq + nv : 1 + nq + 2 * nv],
+                )
+        finally:
+            self.scan.discard()
 
 
 def read_runs(args, robot, scale=None) -> tuple[list, list, dict]:
-    """The unloaded and loaded runs, preprocessed, and a description of their sources."""
-    specs_u = [_spec(t, args) for t in args.unloaded]
-    specs_l = [_spec(t, args) for t in args.loaded]
+    """The unloaded and loaded runs as streamed runs, and a description of their sources.
+
+    Every file is scanned first (checks and the data-quality summary, printed), so that a
+    bad file fails, named, before the long work.
+    """
+    colmap = _column_map(args.column)
+    specs_u = [_spec(t, args, colmap) for t in args.unloaded]
+    specs_l = [_spec(t, args, colmap) for t in args.loaded]
     for sl in specs_l:
         for su in specs_u:
             same_path = Path(sl.path).resolve() == Path(su.path).resolve()
@@ -221,16 +233,20 @@ def read_runs(args, robot, scale=None) -> tuple[list, list, dict]:
                     f"{sl.label} is given as both an unloaded and a loaded run: the loaded runs "
                     "must be recorded with the payload mounted"
                 )
-    runs = {}
-    for what, texts in (("unloaded", args.unloaded), ("loaded", args.loaded)):
-        out = []
-        for text in texts:
-            spec, ds = read_run(text, args, robot, scale)
-            out.append(prepare(ds, args, f"{what} run {spec.label}"))
-        runs[what] = out
+    options = _options(args, scale)
+    runs: dict[str, list] = {"unloaded": [], "loaded": []}
+    quality: dict[str, list] = {"unloaded": [], "loaded": []}
+    for what, specs in (("unloaded", specs_u), ("loaded", specs_l)):
+        for spec in specs:
+            run = StreamedRun(robot, spec, options)
+            print(f"{what} " + run.scan.quality.text())
+            runs[what].append(run)
+            quality[what].append(run.scan.quality.to_dict())
     source = {
         "unloaded": [s.label for s in specs_u],
         "loaded": [s.label for s in specs_l],
+        "data_quality": quality,
+        "options": options.to_dict(),
     }
     return runs["unloaded"], runs["loaded"], source
 
@@ -276,12 +292,20 @@ def input_paths(args) -> list[str]:
     return out
 
 
-def preprocess_settings(runs: list) -> dict | None:
-    for ds in runs:
-        s = ds.meta.get("preprocess")
-        if s is not None:
-            return {k: getattr(s, k) for k in s.__dataclass_fields__}
-    return None
+def preprocess_settings(runs: list) -> list:
+    """Per run, the preprocessing applied (None: the file's own ddq used as is)."""
+    out = []
+    for run in runs:
+        s = run.settings
+        out.append(
+            {
+                "file": run.spec.label,
+                "preprocess": None
+                if s is None
+                else {k: getattr(s, k) for k in s.__dataclass_fields__},
+            }
+        )
+    return out
 
 
 # ---------------------------------------------------------------------- run
@@ -315,6 +339,7 @@ def run(args: argparse.Namespace) -> int:
         chunk=args.chunk,
     )
     doc = result.to_dict()
+    doc["data_quality"] = source.pop("data_quality")
     doc["source"] = source
     doc["torque_scale"] = scale
     doc["preprocess"] = preprocess_settings(unloaded + loaded)
