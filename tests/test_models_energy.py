@@ -191,7 +191,11 @@ def test_real_panda_log_momentum_and_energy(panda_real):
     )
     # only positions and velocities filtered: no ddq, raw (resampled) torques
     errors = {}
-    for model, cutoff, window in (("momentum", 3.0, 0.05), ("energy", 10.0, 0.01)):
+    for label, model, cutoff, window, consistent in (
+        ("momentum", "momentum", 3.0, 0.05, False),
+        ("energy", "energy", 10.0, 0.01, False),
+        ("energy+sdp", "energy", 10.0, 0.01, True),
+    ):
         states = preprocess(train, cutoff=cutoff, filter_torque=False)
         dt = float(np.mean(np.diff(states.t)))
         res = identify(
@@ -204,14 +208,17 @@ def test_real_panda_log_momentum_and_energy(panda_real):
             dt=dt,
             window_length=window,
             validation=validation,
+            consistent=consistent,
         )
         assert len(res.estimate) == len(dynamic.estimate) == 64
-        errors[model] = res.relative_error.validation
+        errors[label] = res.relative_error.validation
     assert dynamic.relative_error.validation < 0.01  # measured 0.74 %
     assert errors["momentum"] < 0.015  # the target; measured 0.79 %
     # the energy model sees only the power dq^T tau: condition number 2.7e3 against
-    # the dynamic model's 96 on this 15 s log; measured 8.1 %, target not met
+    # the dynamic model's 96 on this 15 s log; measured 8.0 % plain and 2.2 % with
+    # the physically consistent (SDP) estimate: the 1.5 % target is not met
     assert errors["energy"] < 0.12
+    assert errors["energy+sdp"] < 0.03
 
 
 # ------------------------------------------------------------------------ CLI
