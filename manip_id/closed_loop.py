@@ -292,6 +292,9 @@ def simulate(
     if theta_true.shape != (p,):
         raise InputError(f"{theta_true.shape=} but robot.n_parameters={p}")
     check_finite(theta_true, "theta_true")
+    from .simulation import require_physical
+
+    require_physical(robot, theta_true)  # the plant: a message naming the body
     reference = default_reference(robot) if reference is None else reference
     check_reference(robot, reference, duration)
     for name, val in (("noise_q", noise_q), ("noise_dq", noise_dq)):
