@@ -414,10 +414,11 @@ class SimulationStream:
         if self._tau_true is None:
             _check_memory(self.nbytes, f"the noise-free torques of {self.n_samples:.3g} samples")
             tau = np.empty((self.n_samples, self.robot.nv))  # [N m or N]
+            batch = _BatchInverseDynamics(self.robot, self.theta_true)
             for lo in range(0, self.n_samples, NOISE_BLOCK):
                 hi = min(lo + NOISE_BLOCK, self.n_samples)
                 _, _, q, dq, ddq = self._noise_free(lo, hi)
-                tau[lo:hi] = inverse_dynamics(self.robot, self.theta_true, q, dq, ddq)
+                tau[lo:hi] = batch(q, dq, ddq)
             self._tau_true = tau
         return self._tau_true
 
@@ -527,6 +528,32 @@ class SimulationStream:
             rate=self.rate,
             seed=self.seed,
         )
+
+
+class _BatchInverseDynamics:
+    """:func:`inverse_dynamics` of a block of samples in one native call.
+
+    ``pinocchio.rneaInParallel`` (one thread) evaluates RNEA for every column of
+    (nq, n) / (nv, n) arrays without a Python-level call per sample: about half
+    the time of the per-sample loop. Falls back to :func:`inverse_dynamics` where
+    the Pinocchio build lacks it. Joint terms come from :func:`joint_torques`.
+    """
+
+    def __init__(self, robot: Robot, theta: np.ndarray):
+        self.robot, self.theta = robot, theta
+        self.pool = None
+        if hasattr(pin, "rneaInParallel") and hasattr(pin, "ModelPool"):
+            self.pool = pin.ModelPool(robot.with_parameters(theta), 1)
+
+    def __call__(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
+        if self.pool is None:
+            return inverse_dynamics(self.robot, self.theta, q, dq, ddq)
+        out = np.empty((self.robot.nv, q.shape[0]), order="F")  # [N m or N], sample per column
+        pin.rneaInParallel(1, self.pool, q.T, dq.T, ddq.T, out)
+        tau = out.T
+        if self.robot.terms.enabled:  # (armature is in the model's rnea)
+            tau = tau + joint_torques(self.robot, self.theta, q, dq)
+        return tau
 
 
 def _check_memory(need: int, what: str) -> None:
