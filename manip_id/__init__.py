@@ -68,6 +68,13 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
         "identify_datasets",
     ),
     ".models": ("accumulate_energy", "accumulate_momentum", "check_energy_base"),
+    ".payload": (
+        "DriveGainResult",
+        "PayloadResult",
+        "identify_drive_gains",
+        "identify_payload",
+        "load_torque_scale",
+    ),
     ".regressor": (
         "iter_regressor",
         "iter_slotine_li_regressor",
