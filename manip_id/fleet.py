@@ -344,6 +344,69 @@ def part_sums(
     return PartSums(acc, {part.file: info}, times)
 
 
+def _processed_rows(robot: Robot, spec: FileSpec, options: PreprocessOptions):
+    """The whole preprocessed stream of one file in memory, ``(t, q, dq, tau)`` and settings."""
+    from .datasets import Layout
+    from .pipeline import iter_processed, scan_file
+
+    scan = scan_file(robot, spec, options)
+    settings, blocks = iter_processed(robot, spec, options, scan)
+    rows = np.vstack(list(blocks))
+    f = Layout(robot.nq, robot.nv, rows.shape[1] > 1 + robot.nq + 2 * robot.nv).unpack(rows)
+    return f, scan, settings
+
+
+def model_plan(robot: Robot, spec: FileSpec, options: PreprocessOptions) -> tuple[int, float]:
+    """Samples and sample time [s] of a file's preprocessed stream (energy blocks)."""
+    try:
+        f, _, _ = _processed_rows(robot, spec, options)
+        t = f["t"]
+        return int(t.size), float((t[-1] - t[0]) / max(t.size - 1, 1))
+    except Exception as exc:
+        raise _named(spec.label, exc) from exc
+
+
+def model_sums(
+    robot: Robot,
+    part: FilePart,
+    columns,
+    options: PreprocessOptions,
+    model: str,
+    window_length: float | None = None,
+) -> PartSums:
+    """Task body of the acceleration-free models: one file's (or block's) rows, accumulated.
+
+    The file's preprocessed stream is held in memory (as the local energy and
+    momentum paths do); a block ``[start, stop)`` of it holds whole energy
+    windows, its last sample being the next block's first (the windows share
+    their end points), so the blocks' rows are exactly the file's.
+    """
+    from .models import accumulate_energy, accumulate_momentum
+
+    try:
+        f, scan, settings = _processed_rows(robot, part.spec, options)
+        sl = slice(part.start, part.stop)
+        t, q, dq, tau = f["t"][sl], f["q"][sl], f["dq"][sl], f["tau"][sl]
+        if t.size < 2:
+            raise DataError(f"{t.size} sample(s) in block [{part.start}, {part.stop})")
+        steps = np.diff(t)
+        dt = float((t[-1] - t[0]) / (t.size - 1))  # [s]
+        if np.ptp(steps) > 1e-6 * dt:
+            raise DataError(
+                f"the {model} model needs uniform samples; steps range over "
+                f"[{steps.min():g}, {steps.max():g}] s (give a cut-off to resample)"
+            )
+        t0 = time.perf_counter()
+        accumulate = accumulate_energy if model == "energy" else accumulate_momentum
+        acc = accumulate(robot, q, dq, tau, dt=dt, window_length=window_length, columns=columns)
+    except Exception as exc:
+        raise _named(part.spec.label, exc) from exc
+    # a block ends on the next block's first sample (stop=None: the file's last block)
+    n = t.size - (0 if part.stop is None else 1)
+    info = FileInfo(part.spec, int(n), np.zeros(robot.nv, np.int64), scan.quality, settings)
+    return PartSums(acc, {part.file: info}, {"accumulate": time.perf_counter() - t0})
+
+
 def _blocks_sums(robot: Robot, func: Callable, args: tuple, columns, chunk: int) -> PartSums:
     """Task body of a generic part ``(func, args)``: accumulate the blocks ``func(*args)``."""
     t0 = time.perf_counter()
@@ -556,6 +619,8 @@ def identify_files(
     solver: str = "sdp",
     prior: str = "nominal",
     prior_weight: float | None = None,
+    model: str = "dynamic",
+    window_length: float | None = None,
 ) -> IdentificationResult:
     """Identify the base parameters of ``robot`` from many files, each file a task.
 
@@ -584,6 +649,12 @@ def identify_files(
     consistent, solver, prior, prior_weight: a physically consistent pooled
         estimate, as :func:`~manip_id.identification.identify` (solved on the
         client from the reduced sums)
+    model: "dynamic" (``tau = Y(q, dq, ddq) theta``), or "energy" / "momentum"
+        (:mod:`manip_id.models`, no accelerations; the torques are integrated
+        unfiltered); energy blocks hold whole windows, momentum runs one task per
+        file (its filter runs through the file). The validation error is the
+        torque error of the dynamic model on the validation files
+    window_length: energy window / momentum row spacing [s] (default the models')
 
     Returns
     -------
@@ -616,6 +687,13 @@ def identify_files(
     if int(split_every) < 2:
         raise InputError(f"split_every must be >= 2, got {split_every}")
     opts = _options(options)
+    from .models import MODELS
+
+    if model not in MODELS:
+        raise InputError(f"model must be one of {list(MODELS)}, got {model!r}")
+    if model == "momentum" and block is not None:
+        raise InputError("the momentum model's filter runs through each file: no blocks")
+    mopts = replace(opts, filter_torque=False)  # the models integrate the raw torques
     base = _resolve_base(robot, base, timings)
     ind = np.asarray(base.independent, dtype=np.intp)
     light = portable_robot(robot)
@@ -625,6 +703,22 @@ def identify_files(
         t0 = time.perf_counter()
         if block is None:
             layout = [[FilePart(s, i)] for i, s in enumerate(specs)]
+        elif model == "energy":
+            from .models import window_samples
+
+            plans = backend.gather([backend.submit(model_plan, light, s, mopts) for s in specs])
+            layout = []
+            for i, (s, (n, dt)) in enumerate(zip(specs, plans, strict=True)):
+                w = window_samples(window_length, dt)
+                n_win, per = (n - 1) // w, max(1, int(block) // w)  # windows, per task
+                cuts = list(range(0, n_win, per)) + [n_win]
+                spans = list(zip(cuts[:-1], cuts[1:], strict=True)) or [(0, 0)]
+                layout.append(
+                    [
+                        FilePart(s, i, a * w, None if k == len(spans) - 1 else b * w + 1)
+                        for k, (a, b) in enumerate(spans)
+                    ]
+                )
         else:
             lengths = backend.gather([backend.submit(file_length, light, s, opts) for s in specs])
             layout = []
@@ -634,14 +728,13 @@ def identify_files(
                 cuts = list(range(0, n, int(block))) + [n]
                 spans = zip(cuts[:-1], cuts[1:], strict=True)
                 layout.append([FilePart(s, i, a, b) for a, b in spans])
-        per = [
-            _tree(
-                backend,
-                [backend.submit(part_sums, light, pt, ind, chunk, opts) for pt in lp],
-                split_every,
-            )
-            for lp in layout
-        ]
+
+        def leaf(pt: FilePart):
+            if model == "dynamic":
+                return backend.submit(part_sums, light, pt, ind, chunk, opts)
+            return backend.submit(model_sums, light, pt, ind, mopts, model, window_length)
+
+        per = [_tree(backend, [leaf(pt) for pt in lp], split_every) for lp in layout]
         total = _tree(backend, list(per), split_every)
         vparts = (
             []
@@ -659,9 +752,9 @@ def identify_files(
     sums: PartSums = fetched[0]
     vsums: list[PartSums] = fetched[1 : 1 + len(vparts)]
     timings.update(sums.timings)
-    if sums.acc.n * robot.nv <= base.n_base:
+    if sums.acc.n_rows <= base.n_base:
         raise InputError(
-            f"{sums.acc.n} samples give {sums.acc.n * robot.nv} equations for "
+            f"{sums.acc.n} {model}-model samples or rows give {sums.acc.n_rows} equations for "
             f"{base.n_base} base parameters: need more samples"
         )
     from .identification import DEFAULT_PRIOR_WEIGHT
@@ -679,13 +772,14 @@ def identify_files(
         consistent=(consistent, solver, prior, weight),
     )
     files = [sums.files[i] for i in range(len(specs))]
+    result = _as_model(robot, result, model, sum(f.n_samples for f in files))
     vfiles = None if vspecs is None else [vs.files[i] for i, vs in enumerate(vsums)]
     if vspecs is not None:
         result = replace(result, relative_error=_validation(robot, result, vsums))
     estimates = []
     if per_file:
         for info, fs in zip(files, fetched[1 + len(vparts) :], strict=True):
-            estimates.append(_file_estimate(robot, info, fs, base, method, chunk))
+            estimates.append(_file_estimate(robot, info, fs, base, method, chunk, model))
     result = replace(
         result,
         per_file=estimates if per_file else None,
@@ -736,15 +830,25 @@ def _finite(x) -> float | None:
     return x if np.isfinite(x) else None
 
 
-def _file_estimate(robot, info: FileInfo, fs: PartSums, base, method, chunk) -> FileEstimate:
+def _as_model(robot: Robot, result: IdentificationResult, model: str, n_samples: int):
+    """The result of an energy / momentum fit labelled as :func:`identify` labels it."""
+    if model == "dynamic":
+        return result
+    outputs = ["energy"] if model == "energy" else list(robot.dof_names)
+    return replace(result, model=model, output_names=outputs, n_samples=int(n_samples))
+
+
+def _file_estimate(robot, info: FileInfo, fs: PartSums, base, method, chunk, model="dynamic"):
     summary = info.summary(robot.dof_names)
+    n = info.n_samples
     try:
         res = _finish(
             robot, fs.acc, base, method, dict(fs.timings), time.perf_counter(), chunk=int(chunk)
         )
-        return FileEstimate(info.label, fs.acc.n, info.n_tasks, res, summary=summary)
+        res = _as_model(robot, res, model, n)
+        return FileEstimate(info.label, n, info.n_tasks, res, summary=summary)
     except (RankDeficiencyError, InputError) as exc:
-        return FileEstimate(info.label, fs.acc.n, info.n_tasks, None, str(exc), summary=summary)
+        return FileEstimate(info.label, n, info.n_tasks, None, str(exc), summary=summary)
 
 
 __all__ = [

@@ -73,9 +73,11 @@ def reference(robot, fleet):
     return {m: identify(robot, q, dq, ddq, tau, method=m) for m in ("ols", "wls")}
 
 
-def _same(res, ref, method="ols"):
+def _same(res, ref, method="ols", std_rtol=None):
     _close(res.estimate, ref.estimate)
-    _close(res.std, ref.std, rtol=1e-8 if method == "wls" else 1e-9)
+    if std_rtol is None:
+        std_rtol = 1e-8 if method == "wls" else 1e-9
+    _close(res.std, ref.std, rtol=std_rtol)
     _close(res.noise_variance, ref.noise_variance, rtol=1e-6)
     assert res.n_samples == ref.n_samples
 
@@ -171,6 +173,62 @@ def test_validation_files_pooled_and_per_file(robot, fleet, tmp_path):
         assert entry["error"] == pytest.approx(np.linalg.norm(err) / np.linalg.norm(tau), 1e-6)
     d = res.to_dict()["relative_error"]
     assert [e["file"] for e in d["validation_per_file"]] == vpaths
+
+
+def _smooth_file(robot, path: Path, seed: int, n: int = 4001, rate: float = 500.0):
+    """A Fourier motion inside the limits, torques from rnea + friction, saved with numpy."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / rate  # [s]
+    lo, hi = robot.lower, robot.upper
+    mid, amp = 0.5 * (lo + hi), 0.25 * np.minimum(hi - lo, 2.0)
+    w = 2 * np.pi * rng.uniform(0.3, 1.0, (3, robot.nv))  # [rad/s]
+    a = rng.uniform(-1, 1, (3, robot.nv)) / 3
+    ph = rng.uniform(0, 2 * np.pi, (3, robot.nv))
+    arg = w[:, None, :] * t[None, :, None] + ph[:, None, :]
+    q = mid + amp * (a[:, None, :] * np.sin(arg)).sum(axis=0)
+    dq = amp * (a[:, None, :] * w[:, None, :] * np.cos(arg)).sum(axis=0)
+    ddq = -amp * (a[:, None, :] * w[:, None, :] ** 2 * np.sin(arg)).sum(axis=0)
+    tau = np.array([pin.rnea(robot.model, robot.data, q[k], dq[k], ddq[k]) for k in range(n)])
+    tau += FV * dq + FC * np.sign(dq)  # [N m]
+    tau += 0.01 * rng.standard_normal(tau.shape)
+    np.savez(path, t=t, q=q, dq=dq, ddq=ddq, tau=tau)
+    return q, dq, ddq, tau
+
+
+@pytest.mark.parametrize("model", ["energy", "momentum"])
+def test_acceleration_free_models(robot, tmp_path, model):
+    paths, arrays = [], []
+    for f in range(3):
+        path = tmp_path / f"smooth{f}.npz"
+        arrays.append(_smooth_file(robot, path, seed=70 + f))
+        paths.append(str(path))
+    kw = dict(model=model, window_length=0.02 if model == "energy" else 0.1)
+    # one file: the local acceleration-free run of identify()
+    q, dq, ddq, tau = arrays[0]
+    own = identify(robot, q, dq, None, tau, dt=1 / 500.0, **kw)
+    one = identify_files(robot, paths[:1], **kw)
+    _same(one, own)
+    assert one.model == model and one.n_samples == q.shape[0]
+    # several files: any partition of the energy windows gives the same sums
+    whole = identify_files(robot, paths, per_file=True, **kw)
+    if model == "energy":
+        for block in (50, 333):
+            # the energy fit is nearly exact: sigma^2 comes from RSS = zz - 2 b.theta +
+            # theta.A.theta, a difference of sums 1e7 times larger than itself
+            _same(identify_files(robot, paths, block=block, **kw), whole, std_rtol=1e-6)
+    else:
+        with pytest.raises(InputError, match="no blocks"):
+            identify_files(robot, paths, block=100, **kw)
+    assert whole.n_samples == 3 * 4001
+    for fe, (q, dq, _, tau) in zip(whole.per_file, arrays, strict=True):
+        _close(fe.result.estimate, identify(robot, q, dq, None, tau, dt=1 / 500, **kw).estimate)
+    # validation: the torque error of the dynamic model, on the validation files' sums
+    res = identify_files(robot, paths[1:], validation=paths[:1], **kw)
+    err = res.predict(robot, q := arrays[0][0], arrays[0][1], arrays[0][2]) - arrays[0][3]
+    assert res.relative_error.validation == pytest.approx(
+        np.linalg.norm(err) / np.linalg.norm(arrays[0][3]), rel=1e-6
+    )
+    del q
 
 
 def test_preprocessed_files_any_partition(robot, tmp_path):
