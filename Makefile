@@ -40,6 +40,7 @@ demo: $(STAMP)
 lint: $(STAMP)
 	$(VENV)/bin/ruff check manip_id tests experiments
 	$(VENV)/bin/ruff format --check manip_id tests experiments
+	$(VENV)/bin/mypy
 
 format: $(STAMP)
 	$(VENV)/bin/ruff format manip_id tests experiments

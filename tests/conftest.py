@@ -18,6 +18,18 @@ from manip_id import load_robot  # noqa: E402
 
 SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 PANDA_LOG = SHARED_DATA / "panda_gaz2019"
+#: CI (``CI=true`` in the environment) always has ../shared: missing data there fail, not skip.
+IN_CI = os.environ.get("CI", "").strip().lower() in ("true", "1", "yes")
+
+
+def require_shared_data(path: Path, what: str) -> Path:
+    """``path`` when it exists; else skip, or fail on CI (where the shared data must be)."""
+    if path.exists():
+        return path
+    message = f"{what} not found at {path}"
+    if IN_CI:
+        pytest.fail(f"{message} (CI=true: the shared data must be present)")
+    pytest.skip(message)
 
 
 @functools.cache
@@ -34,7 +46,6 @@ def get_robot(spec, *, armature=None, friction=None, spring=None):
 
 @pytest.fixture(scope="session")
 def panda_log() -> Path:
-    """The real Panda log folder; skips when the shared data are absent."""
-    if not (PANDA_LOG / "rbt_log_time.txt").is_file():
-        pytest.skip(f"real Panda log not found at {PANDA_LOG}")
+    """The real Panda log folder; skips when the shared data are absent (fails on CI)."""
+    require_shared_data(PANDA_LOG / "rbt_log_time.txt", "real Panda log")
     return PANDA_LOG

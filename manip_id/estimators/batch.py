@@ -21,6 +21,7 @@ number, so the rank tolerance on singular values is coarser there
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import scipy.linalg as sla
@@ -158,7 +159,9 @@ def solve_accumulator(
         raise InputError(f"method must be 'ols' or 'wls', got {method!r}")
     if acc.n == 0:
         raise InputError("the accumulator holds no samples")
-    kw = dict(names=names, minimum_norm=minimum_norm, cond_limit=cond_limit, rank_rtol=rank_rtol)
+    kw: dict[str, Any] = dict(
+        names=names, minimum_norm=minimum_norm, cond_limit=cond_limit, rank_rtol=rank_rtol
+    )
     theta, Ainv, rank, cond, scond, solver = solve_normal_equations(acc.A, acc.b, **kw)
     rss_j = acc.residual_sum_of_squares(theta)
     dof = acc.n_rows - rank

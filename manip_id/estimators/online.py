@@ -123,14 +123,14 @@ class _OnlineEstimator:
             msg = f"Y or z holds NaN or Inf at step {self.steps}"
         else:  # valid inputs: the update itself broke down
             reason = f"step {self.steps} failed" + (f": {exc}" if exc is not None else "")
-            err = NumericalError(
+            failure = NumericalError(
                 f"{type(self).__name__} update",
                 reason + " (the innovation covariance is not positive definite or not finite)",
                 hint="check the forgetting factor and the covariance bounds",
             )
             if exc is not None:
-                err.__cause__ = exc
-            return err
+                failure.__cause__ = exc
+            return failure
         err = InputError(msg)
         if exc is not None:
             err.__cause__ = exc
@@ -172,7 +172,8 @@ class GradientEstimator(_OnlineEstimator):
     ):
         super().__init__(theta0, bounds=bounds, record_every=record_every, t0=t0)
         g = spd_gain(gamma, "gamma", self.p)
-        self._gdiag, self._G = (g, None) if g.ndim == 1 else (None, g)
+        self._gdiag: np.ndarray = g if g.ndim == 1 else np.diag(g)  # used when _G is None
+        self._G: np.ndarray | None = None if g.ndim == 1 else g
         self.normalized = bool(normalized)
         self._g = np.empty(self.p)
 

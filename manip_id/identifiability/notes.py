@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+if TYPE_CHECKING:  # pragma: no cover
+    from ..robot import Robot
 
-def robot_notes(robot, analysis_zero: Sequence[int]) -> list[str]:
+
+def robot_notes(robot: Robot, analysis_zero: Sequence[int] | np.ndarray) -> list[str]:
     """Why whole blocks of parameters never enter: bodies moved by prismatic joints only."""
     model = robot.model
     notes = []

@@ -165,9 +165,9 @@ def check_limits(
     worst = None
     for kind, use in zip(kinds, uses, strict=True):
         u = np.where(np.isfinite(use), use, -np.inf)
-        k, j = np.unravel_index(np.argmax(u), u.shape)
-        if u[k, j] > 1.0 + 1e-12 and (worst is None or u[k, j] > worst[0]):
-            worst = (u[k, j], kind, int(k), int(j))
+        kk, jj = np.unravel_index(np.argmax(u), u.shape)
+        if u[kk, jj] > 1.0 + 1e-12 and (worst is None or u[kk, jj] > worst[0]):
+            worst = (float(u[kk, jj]), kind, int(kk), int(jj))
     if worst is None:
         return usage
     _, kind, k, j = worst
