@@ -1556,6 +1556,7 @@ def identify_drive_gains(
                 f"these runs leave {len(others)} base/payload direction(s) unexcited: "
                 + "; ".join(others[:4]),
             )
+    _check_payload_present(acc, nv, determined, robot.dof_names)
     ls = solve_accumulator(
         acc,
         method="wls" if method == "wls" else "ols",
@@ -1668,6 +1669,47 @@ def _known_estimate(pf: PayloadFrame, phi: np.ndarray, ra: RankAnalysis) -> Payl
         min_eigenvalue=float(lam[0]),
         physically_consistent=bool(lam[0] > _EIG_TOL * np.abs(lam).max()),
     )
+
+
+def _check_payload_present(
+    acc: InformationAccumulator, nv: int, determined: np.ndarray, dof_names, z_min: float = 5.0
+) -> None:
+    """Refuse loaded runs that show no payload: free its torque's scale ``s`` and test it.
+
+    The homogeneous system ``[D(i), -X, -c] [g; theta; s] = 0`` (``c`` the known payload
+    torque) with the best-informed determined gain fixed to 1 is solved for the rest;
+    the loaded runs carry the payload when ``s`` (``1/g_ref`` in truth) is at least
+    ``z_min`` standard deviations from zero. All sums come from ``acc``.
+    """
+    if not determined.any():
+        return
+    A, b, zz = acc.A, acc.b, acc.zz
+    p = acc.p
+    G = np.zeros((p + 1, p + 1))  # Gram of [D(i), -X, -c]
+    G[:p, :p] = A
+    G[:p, p] = G[p, :p] = -b
+    G[p, p] = zz
+    diag = np.diag(A)[:nv]
+    ref = int(np.flatnonzero(determined)[np.argmax(diag[determined])])
+    rest = np.array([k for k in range(p + 1) if k != ref])
+    Arr = G[np.ix_(rest, rest)]
+    brr = -G[rest, ref]
+    d = np.sqrt(np.maximum(np.diag(Arr), 0.0))
+    d = np.where(d > 0, d, 1.0)
+    Ainv = np.linalg.pinv(Arr / np.outer(d, d), hermitian=True) / np.outer(d, d)
+    x = Ainv @ brr
+    rss = max(G[ref, ref] - 2.0 * brr @ x + x @ Arr @ x, 0.0)
+    dof = max(acc.n_rows - np.linalg.matrix_rank(Arr / np.outer(d, d), hermitian=True), 1)
+    s, s_std = float(x[-1]), float(np.sqrt(max(rss / dof * Ainv[-1, -1], 0.0)))
+    if s_std == 0.0 and s != 0.0:
+        return
+    if not abs(s) > z_min * s_std:
+        raise DataError(
+            "the loaded runs carry no payload information: with the gain of "
+            f"{dof_names[ref]} fixed, the payload's torque scale comes out {s:.3g} +- "
+            f"{s_std:.2g}, not distinguishable from zero; were the loaded runs recorded "
+            "with the payload mounted, and is the payload's frame right?"
+        )
 
 
 def _ml_gains(

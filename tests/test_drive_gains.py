@@ -225,3 +225,12 @@ def test_torque_scale_file(tmp_path, ur5, ur5_base):
     path.write_text("{}")
     with pytest.raises(DataError, match="drive_gains"):
         load_torque_scale(path)
+
+
+def test_loaded_runs_without_the_payload_are_refused(ur5, ur5_base):
+    payload = make_payload()
+    m0, _ = loaded_model(ur5, "tool0", payload)
+    u = rnea_run(ur5, m0, 300, 1, noise=0.01, gains=GAINS_UR5)
+    other = rnea_run(ur5, m0, 300, 2, noise=0.01, gains=GAINS_UR5)  # no payload mounted
+    with pytest.raises(DataError, match="no payload information"):
+        identify_drive_gains(ur5, u, other, "tool0", payload.mass, base=ur5_base)
