@@ -139,7 +139,7 @@ class _Filter:
         self.a = self.weights[0][0]
         self.y = np.array(y0, dtype=float)  # last output
         self.past: list[np.ndarray] = []  # last inputs, newest first
-        self.zi = None
+        self.zi: np.ndarray | None = None
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         from scipy.signal import lfilter
@@ -209,14 +209,18 @@ def momentum_rows(
         raise InputError(
             f"{n} samples give no momentum row every {stride} samples: shorten window_length"
         )
-    fp = fh = ft = None
+    filters: tuple[_Filter, _Filter, _Filter] | None = None
     for start in range(0, n, int(chunk)):
         stop = min(start + int(chunk), n)
         Yp, Yh = _regressors(robot, q[start:stop], dq[start:stop])
-        if fp is None:
-            fp = _Filter(lam, dt, Yp[0])
-            fh = _Filter(lam, dt, np.zeros_like(Yp[0]))
-            ft = _Filter(lam, dt, np.zeros(robot.nv))
+        if filters is None:  # F[Y_p] starts at Y_p(0), the others at zero
+            zero = np.zeros_like(Yp[0])
+            filters = (
+                _Filter(lam, dt, Yp[0]),
+                _Filter(lam, dt, zero),
+                _Filter(lam, dt, zero[:, 0]),
+            )
+        fp, fh, ft = filters
         Fp, Fh, Ft = fp(Yp), fh(Yh), ft(tau[start:stop])
         keep = np.arange(start, stop)
         keep = keep[(keep % stride == 0) & (keep > 0)] - start
