@@ -619,3 +619,20 @@ def test_cli_bad_file_on_the_cluster_names_it_and_writes_nothing(tmp_path, capsy
     status, rep, cap = _cli(["--data", str(bad), "--scheduler", "local:1"], tmp_path, capsys)
     assert status == 2 and rep is None
     assert "arm_bad.npz" in cap.err and "Traceback" not in cap.err
+
+
+def test_cli_energy_model_matches_the_local_energy_path(robot, tmp_path, capsys):
+    path = tmp_path / "smooth.npz"
+    _smooth_file(robot, path, seed=90)
+    opts = ["--data", str(path), "--model", "energy", "--window-length", "0.02"]
+    status, local, cap = _cli(opts, tmp_path, capsys)
+    assert status == 0, cap.err
+    status, rep, cap = _cli([*opts, "--per-file", "--block", "1000"], tmp_path, capsys)
+    assert status == 0, cap.err
+    # the local path filters in memory, the tasks in overlapping blocks (equal to round-off)
+    _close(
+        [p["value"] for p in rep["base_parameters"]],
+        [p["value"] for p in local["base_parameters"]],
+        rtol=1e-6,
+    )
+    assert rep["per_file"][0]["n_tasks"] > 1

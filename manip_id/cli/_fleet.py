@@ -97,6 +97,13 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     vspecs = _files._specs(args.validate, args, colmap) if args.validate is not None else None
     robot = robot_from_args(args)
     options = _files._options(args, robot.nv, None if profile is None else profile.torque_scale)
+    model = getattr(args, "model", "dynamic")
+    if model != "dynamic" and options.cutoff is None:  # as the local path: q, dq filtered
+        from dataclasses import replace
+
+        from ..signals import DEFAULT_CUTOFF
+
+        options = replace(options, cutoff=DEFAULT_CUTOFF)
     result = identify_files(
         robot,
         specs,
@@ -107,6 +114,8 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
         options=options,
         validation=vspecs,
         chunk=args.chunk,
+        model=model,
+        window_length=getattr(args, "window_length", None),
         **cmd._consistent_kwargs(args),
     )
     files = result.files
@@ -137,7 +146,15 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     if args.per_file:
         report["per_file"] = [f.to_dict() for f in result.per_file]
     print(result.table())
-    print(cmd._summary(robot, report))
+    if model == "dynamic":
+        print(cmd._summary(robot, report))
+    else:  # as the local energy / momentum path reports them
+        report.update(model=model, window_length=args.window_length)
+        report["outputs"] = list(result.output_names)
+        rel = report["relative_error"]
+        shown = report if rel["per_joint_validation"] else {**report, "joints": report["outputs"]}
+        text = cmd._summary(robot, shown)
+        print(text.replace("relative torque error: train", "relative error: train"))
     if args.per_file:
         print(_per_file_table(result))
     if args.json:

@@ -456,10 +456,10 @@ def run(args: argparse.Namespace) -> int:
         from ..export import sidecar_path
 
         outputs.file(sidecar_path(args.export_urdf), "--export-urdf sidecar")
-    if args.model != "dynamic":  # energy / momentum: whole arrays, no ddq
-        return _run_acceleration_free(args, outputs, t_start)
     if _fleet.wanted(args):  # many files, one task each (Dask with --scheduler)
         return _fleet.run(args, outputs, t_start)
+    if args.model != "dynamic":  # energy / momentum: whole arrays, no ddq
+        return _run_acceleration_free(args, outputs, t_start)
     if not args.simulate:  # log files: read in chunks, each preprocessed alone
         return _files.run(args, outputs, t_start)
     timings: dict[str, float] = {}
