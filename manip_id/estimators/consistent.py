@@ -520,6 +520,37 @@ def _margin_shift() -> np.ndarray:
     return _SHIFT
 
 
+def _dual_matrix(c: np.ndarray) -> np.ndarray:
+    """The symmetric ``M`` (4, 4) with ``<M, J> = c . pi(J)`` for every pseudo-inertia ``J``.
+
+    ``pi(J) = [m, h, I]`` with ``I = tr(Sigma) 1 - Sigma``: with ``C_I`` the symmetric
+    matrix of the inertia weights, ``M = [[tr(C_I) 1 - C_I, c_h / 2], [c_h^T / 2, c_m]]``.
+    """
+    cm, chx, chy, chz, cxx, cxy, cyy, cxz, cyz, czz = c
+    CI = np.array([[cxx, cxy / 2, cxz / 2], [cxy / 2, cyy, cyz / 2], [cxz / 2, cyz / 2, czz]])
+    M = np.zeros((4, 4))
+    M[:3, :3] = np.trace(CI) * np.eye(3) - CI
+    M[:3, 3] = M[3, :3] = 0.5 * np.array([chx, chy, chz])
+    M[3, 3] = cm
+    return M
+
+
+def _quad_hessian(M: np.ndarray, eta: np.ndarray, dU: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Hessian of ``<M, U U^T>`` in the log-Cholesky parameters, as ``H1 + H2`` (10, 10).
+
+    ``H1_kl = 2 <dU_k, M dU_l>`` (first derivatives of U), ``H2_kl = 2 <M U, d2U_kl>``
+    (second derivatives: ``d2U/dalpha^2 = U``, ``d2U/dalpha deta_k = dU_k``,
+    ``d2U/dd_k^2 = dU/dd_k``, all others zero).
+    """
+    MdU = np.einsum("ac,lcb->lab", M, dU)
+    H1 = 2.0 * np.einsum("kab,lab->kl", dU, MdU)
+    inner = np.einsum("ab,kab->k", M @ _U(eta), dU)  # <M U, dU_k>; dU_0 = U
+    H2 = np.zeros((10, 10))
+    H2[0, :] = H2[:, 0] = 2.0 * inner
+    H2[[1, 2, 3], [1, 2, 3]] += 2.0 * inner[1:4]
+    return H1, H2
+
+
 class _LogChol:
     """The log-Cholesky parametrization ``x -> theta`` of a problem, with its Jacobian."""
 
@@ -565,6 +596,30 @@ class _LogChol:
         t[self.nonneg] = t[self.nonneg] ** 2
         out[10 * nb :] = t
         return out
+
+    def curvature(self, x: np.ndarray, theta: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """``S = sum_k r_k d2 r_k`` (p, p), the part of the Hessian of ``F / 2`` that
+        Gauss-Newton drops (large when the fit's residual is large, as on real data)."""
+        pr, nb = self.pr, self.nb
+        k_fit = pr.W.shape[0]
+        c = pr.P.T @ (pr.W.T @ r[:k_fit])  # d(||r_fit||^2 / 2)/dtheta
+        if self.L0inv is not None:
+            tdiff = (theta[10 * nb :] - pr.theta0[10 * nb :]) / pr.term_scale
+            c = c.copy()
+            c[10 * nb :] += pr.weight * tdiff / pr.term_scale
+        S = np.zeros((pr.p, pr.p))
+        for i in range(nb):
+            sl = slice(10 * i, 10 * i + 10)
+            eta = x[sl]
+            dU = _dU(eta)
+            H1, H2 = _quad_hessian(_dual_matrix(c[sl]), eta, dU)
+            S[sl, sl] = H1 + H2
+            if self.L0inv is not None:  # the prior's residual vec(L0^-1 U): its d2 part
+                J0inv = self.L0inv[i].T @ self.L0inv[i]
+                S[sl, sl] += 0.5 * _quad_hessian(pr.weight * J0inv, eta, dU)[1]
+        t = np.arange(10 * nb, pr.p)[self.nonneg]
+        S[t, t] = 2.0 * c[t]  # theta_t = s^2
+        return S
 
     def evaluate(self, x: np.ndarray, jacobian: bool = True):
         """Residuals ``r``, extra (non-squared) objective ``g``, and their derivatives.
@@ -613,6 +668,15 @@ class _LogChol:
         return theta, r, g, np.vstack(jac), dg
 
 
+def _inside(pr: ConsistentProblem, theta: np.ndarray) -> bool:
+    """Whether ``theta`` meets the problem's constraints (margins and signs)."""
+    nb = pr.n_bodies
+    J = pseudo_inertia(theta[: 10 * nb].reshape(nb, 10)) - pr.margin[:, None, None] * np.eye(4)
+    if np.linalg.eigvalsh(J)[:, 0].min() <= 0:
+        return False
+    return bool(np.all(theta[pr.nonnegative] >= 0))
+
+
 def _solve_logchol(
     problem: ConsistentProblem,
     *,
@@ -620,16 +684,25 @@ def _solve_logchol(
     tolerance: float = 1e-13,
     theta_start=None,
 ):
-    import scipy.linalg as sla
-
     model = _LogChol(problem)
     pr = problem
-    if theta_start is None:  # the prior moved onto the LS fit along the row space of P
+    if theta_start is None:
+        # the prior moved onto the least-squares fit along the row space of P when that
+        # is inside the cone (a nearly exact, physical fit), else the prior itself
         G, _ = _row_and_null_maps(pr)
-        start = pr.theta0 + G @ (pr.beta_ls - pr.P @ pr.theta0)
+        moved = pr.theta0 + G @ (pr.beta_ls - pr.P @ pr.theta0)
+        inside = _inside(pr, moved)
+        x = model.start(moved if inside else pr.theta0)
     else:
-        start = as_float_array(theta_start, "theta_start", ndim=1)
-    x = model.start(start)
+        x = model.start(as_float_array(theta_start, "theta_start", ndim=1))
+    with np.errstate(over="ignore", invalid="ignore"):  # trial steps may overflow exp()
+        return _lm(model, pr, x, max_iter, tolerance)
+
+
+def _lm(model: _LogChol, pr: ConsistentProblem, x: np.ndarray, max_iter: int, tolerance: float):
+    """Levenberg-Marquardt with Newton's clipped curvature and a second-order correction."""
+    import scipy.linalg as sla
+
     k_fit = pr.W.shape[0]
     eye = np.eye(x.size)  # Levenberg damping: Marquardt's column scaling would damp the
     # null-space moves by the (much stiffer) fit's scale
@@ -644,9 +717,15 @@ def _solve_logchol(
         grad = Jr.T @ r + 0.5 * dg  # half the gradient of F
         J_fit = Jr[:k_fit]
         pinv_fit = np.linalg.pinv(J_fit, rcond=1e-13)
+        # Newton's curvature beyond Gauss-Newton, its negative part clipped (modified
+        # Newton), as a square-root factor stacked under the Jacobian: the QR keeps the
+        # accuracy of a nearly noise-free fit (no normal equations formed)
+        lam_s, V_s = np.linalg.eigh(model.curvature(x, theta, r))
+        keep = lam_s > 0
+        S_half = np.sqrt(lam_s[keep])[:, None] * V_s[:, keep].T
         accepted = False
         for _ in range(40):
-            R = sla.qr(np.vstack([Jr, np.sqrt(mu) * eye]), mode="r")[0][: x.size]
+            R = sla.qr(np.vstack([Jr, S_half, np.sqrt(mu) * eye]), mode="r")[0][: x.size]
             try:
                 y = sla.solve_triangular(R, -grad, trans="T", check_finite=False)
                 dx = sla.solve_triangular(R, y, check_finite=False)
