@@ -150,7 +150,8 @@ def _collect(robot, specs, options, scans) -> SimpleNamespace:
     from ..pipeline import iter_processed
 
     nq, nv = robot.nq, robot.nv
-    parts, settings, shift = [], None, 0.0
+    parts: list[np.ndarray] = []
+    settings, shift = None, 0.0
     for spec in specs:
         s, blocks = iter_processed(robot, spec, options, scans[spec])
         settings = settings or s
@@ -243,10 +244,10 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
             progress=cmd._progress(0) if total > 1 else None,
             **cmd._consistent_kwargs(args),
         )
-        files = result.files
+        files = result.files or {}
         settings = files["train"][0].settings
         n_valid = None if vspecs is None else sum(f.n_samples for f in files["validation"])
-        train = valid = None
+        train = valid = None  # type: ignore[assignment]
     timings.update({k: float(v) for k, v in dict(result.timings).items()})
     timings["total"] = time.perf_counter() - t_start
     valid_count = None if n_valid is None else SimpleNamespace(n_samples=n_valid)

@@ -235,7 +235,7 @@ class CsvSource:
     def chunks(self, chunk: int, start: int = 0, stop: int | None = None) -> Iterator[np.ndarray]:
         """Packed float64 rows ``start:stop``, about ``chunk`` at a time."""
         chunk = max(int(chunk), 3)
-        packed = (self._pack(tab) for _, tab in self._tables(chunk))
+        packed: Iterator[np.ndarray] = (self._pack(tab) for _, tab in self._tables(chunk))
         if self.columns.derive_dq:
             packed = _derive_dq(packed, self.layout, self.path)
         row = 0

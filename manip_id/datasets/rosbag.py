@@ -22,6 +22,7 @@ import struct
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -182,7 +183,7 @@ class BagSource:
         nv = len(self.joint_names)
         self.layout = Layout(nv, nv, False)
 
-    _store = None
+    _store: Any = None
 
     def _decode(self, raw, msgtype):
         if BagSource._store is None:

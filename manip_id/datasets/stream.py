@@ -180,10 +180,10 @@ def iter_rows(
         start, stop = window.start or 0, window.stop
     previous_t: float | None = None
     previous_row = -1
-    row = start or 0  # raw index of the next row
+    row = int(start or 0)  # raw index of the next row
     t0 = None
     kept_any = False
-    for block in source.chunks(int(chunk), start or 0, stop):
+    for block in source.chunks(int(chunk), row, None if stop is None else int(stop)):
         k = block.shape[0]
         raw = np.arange(row, row + k)
         row += k
