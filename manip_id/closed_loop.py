@@ -174,8 +174,11 @@ class ClosedLoopRun:
         control step [rad]
     final_prediction_error, initial_prediction_error: prediction error at the end and start
     wall_time: seconds spent in the simulation loop [s]; real_time_factor: duration / wall_time
-    dissipation: integral of ``s^T (K_D + F_v) s + kappa |eps|^2`` over the run [J] (the
-        predicted decrease of the Lyapunov function in a noise-free, Coulomb-free run)
+    dissipation: integral of ``s^T (K_D + F_v) s + kappa |eps|^2 / m^2`` over the run [J] (the
+        predicted decrease of the Lyapunov function in a noise-free, Coulomb-free run;
+        with the RLS gain the composite part is ``kappa |eps|^2 / (2 m^2)`` and the
+        Lyapunov function uses ``P(t)^-1``, see :mod:`manip_id.adaptive`; forgetting not
+        counted)
     """
 
     t: np.ndarray
@@ -397,7 +400,8 @@ def simulate(
                 s = ctrl.s
                 dissipation += dt * float(s @ (diss_k @ s))
                 if kappa > 0:
-                    dissipation += dt * kappa * float(ctrl.eps @ ctrl.eps) / ctrl.norm2
+                    share = 0.5 if ctrl.rls else 1.0
+                    dissipation += dt * share * kappa * float(ctrl.eps @ ctrl.eps) / ctrl.norm2
                 if k == 0:
                     first_err = math.sqrt(e2.sum())
                 if k == next_rec:
