@@ -269,7 +269,11 @@ def payload_regressor(robot: Robot, frame: str | PayloadFrame, q, dq, ddq) -> np
 
 
 def payload_identifiability(
-    robot: Robot, frame: str | PayloadFrame, *, columns: Sequence[int] | None = None, seed: int = 0
+    robot: Robot,
+    frame: str | PayloadFrame,
+    *,
+    columns: Sequence[int] | np.ndarray | None = None,
+    seed: int = 0,
 ) -> RankAnalysis:
     """Structural rank analysis of the payload columns: which combinations enter the torques.
 
@@ -694,6 +698,16 @@ class _Run:
     arrays: tuple | None = None
 
 
+@dataclass(frozen=True)
+class _InMemory:
+    """The blocks of a run held in memory: one block, the arrays themselves."""
+
+    arrays: tuple
+
+    def __call__(self) -> list[tuple]:
+        return [self.arrays]
+
+
 def _blocks(data, what: str) -> list[_Run]:
     """``data`` as a list of runs.
 
@@ -732,14 +746,7 @@ def _blocks(data, what: str) -> list[_Run]:
                     f"function returning such blocks; item {k} is {type(item).__name__}"
                 ) from exc
             arrays, names = (q, dq, ddq, tau), None
-        out.append(
-            _Run(
-                label,
-                (lambda a=arrays: [a]),
-                None if names is None else tuple(names),
-                arrays,
-            )
-        )
+        out.append(_Run(label, _InMemory(arrays), None if names is None else tuple(names), arrays))
     return out
 
 
