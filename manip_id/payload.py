@@ -50,10 +50,13 @@ Physical consistency (``consistent=True``): the payload's pseudo-inertia
 ``J(phi) = [[0.5 tr(I_O) 1 - I_O, h], [h^T, m]]`` must be positive definite. The least
 squares quadratic form restricted to ``psi`` (``(psi - psi_hat)^T Cov(psi)^-1
 (psi - psi_hat)``, the robot's ``beta`` minimised out) is minimised under the single
-4 x 4 linear matrix inequality ``J(R psi + N z) >= eps 1`` with cvxpy and Clarabel
-(``z`` spans the unidentifiable directions ``N``, lightly regularised to zero), and
-``beta`` follows by its conditional least squares. The result carries the
-eigenvalue test of ``J`` computed afterwards with NumPy.
+4 x 4 linear matrix inequality ``J(R psi + N z) >= eps 1`` (``z`` spans the
+unidentifiable directions ``N``, free to make ``J`` feasible): the one-body case of
+the semidefinite program of :mod:`manip_id.estimators.consistent` (cvxpy and
+Clarabel) without a prior. ``beta`` follows by its conditional least squares
+``beta = beta_hat - A_bb^-1 A_bp (psi - psi_hat)``. The result carries the eigenvalue
+test of ``J`` computed afterwards with NumPy; the standard deviations stay those of
+the unconstrained fit.
 
 Drive gains (:func:`identify_drive_gains`, Gautier & Briot 2014, "Global identification
 of joint drive gains and dynamic parameters of robots"). The logs hold motor currents
@@ -593,7 +596,8 @@ class DriveGainResult:
     payload: :class:`PayloadEstimate` (``known`` marks the given quantities)
     base_names, base_expressions, base_estimate, base_std: the robot's base parameters
         [in torque units]
-    sigma2: residual variance [(N m)^2]; condition_number: of the scaled regressor
+    sigma2: residual variance, [A^2] for "ml" (current units), [(N m)^2] otherwise;
+        condition_number: of the homogeneous system with the known columns moved right
     n_samples, relative_error, relative_error_per_joint: as :class:`PayloadResult`, the
         error relative to the torques ``g_j i_j``
     rows_left_out: per joint, rows dropped by the velocity deadband
