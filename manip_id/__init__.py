@@ -42,6 +42,8 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
         "RankDeficiencyError",
         "RobotError",
     ),
+    ".consistency": ("PhysicalConsistencyError", "check_consistency", "pseudo_inertia"),
+    ".export": ("export_urdf",),
     ".estimators": (
         "ConcurrentLearningEstimator",
         "DREMEstimator",
