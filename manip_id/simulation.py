@@ -426,7 +426,12 @@ class SimulationStream:
     def tau_rms(self) -> np.ndarray:
         """RMS of each joint's noise-free torque over the record [N m or N], shape (nv,)."""
         if self._rms is None:
-            self._rms = np.sqrt(np.mean(self.tau_true**2, axis=0))
+            tau = self.tau_true
+            sumsq = np.zeros(self.robot.nv)  # [(N m)^2 or N^2], per block: no (N, nv) temporary
+            for lo in range(0, self.n_samples, NOISE_BLOCK):
+                block = tau[lo : lo + NOISE_BLOCK]
+                sumsq += np.einsum("ij,ij->j", block, block)
+            self._rms = np.sqrt(sumsq / self.n_samples)
         return self._rms
 
     def _range(self, start: int, stop: int | None) -> tuple[int, int]:
