@@ -52,6 +52,12 @@ bench: $(STAMP)
 	$(PY) experiments/bench_online.py
 	$(PY) experiments/bench_adaptive.py
 	$(PY) experiments/bench_identify.py --json experiments/results/bench_identify.json
+	$(PY) experiments/bench_startup.py --json experiments/results/bench_startup.json
+	$(PY) experiments/bench_simulated.py --json experiments/results/bench_simulated.json
+# against FIGAROH when FIGAROH_PYTHON names the interpreter of an environment with figaroh 1.0.2
+	$(PY) experiments/bench_figaroh.py --json experiments/results/bench_figaroh.json
+	$(PY) experiments/bench_floor.py --build --json experiments/results/bench_floor.json
+	$(PY) experiments/profile_identify.py --json experiments/results/profile_identify.json
 
 clean:
 	rm -rf $(VENV) .pytest_cache .ruff_cache
