@@ -474,7 +474,7 @@ class _Dask:
     """Tasks on a ``dask.distributed`` cluster (futures); only sums come back."""
 
     def __init__(self, scheduler):
-        from distributed import Client
+        Client = _distributed().Client
 
         self._own_client = self._cluster = None
         if isinstance(scheduler, Client):
@@ -507,6 +507,17 @@ class _Dask:
                 self._cluster.close()
 
 
+def _distributed():
+    """``dask.distributed``, or an error saying how to install it."""
+    try:
+        import distributed
+    except ImportError as exc:
+        raise InputError(
+            "a Dask scheduler needs dask.distributed: pip install 'manip_id[fleet]'"
+        ) from exc
+    return distributed
+
+
 def parse_scheduler(spec: str) -> tuple[str, Any]:
     """``"local[:N]"`` -> ("local", N); ``"tcp://HOST:PORT"`` -> ("address", spec);
     an existing ``.json`` file -> ("file", path). Raises :class:`InputError` otherwise."""
@@ -535,7 +546,8 @@ def parse_scheduler(spec: str) -> tuple[str, Any]:
 def _connect(spec: str):
     """A client (and the LocalCluster it owns, if any) for a scheduler spec."""
     kind, value = parse_scheduler(spec)
-    from distributed import Client, LocalCluster
+    dist = _distributed()
+    Client, LocalCluster = dist.Client, dist.LocalCluster
 
     try:
         if kind == "local":
@@ -710,8 +722,8 @@ def identify_files(
             layout = []
             for i, (s, (n, dt)) in enumerate(zip(specs, plans, strict=True)):
                 w = window_samples(window_length, dt)
-                n_win, per = (n - 1) // w, max(1, int(block) // w)  # windows, per task
-                cuts = list(range(0, n_win, per)) + [n_win]
+                n_win, per_task = (n - 1) // w, max(1, int(block) // w)  # windows
+                cuts = list(range(0, n_win, per_task)) + [n_win]
                 spans = list(zip(cuts[:-1], cuts[1:], strict=True)) or [(0, 0)]
                 layout.append(
                     [
@@ -726,8 +738,9 @@ def identify_files(
                 if n < 1:
                     raise DataError(f"{s.label}: no samples left after preprocessing")
                 cuts = list(range(0, n, int(block))) + [n]
-                spans = zip(cuts[:-1], cuts[1:], strict=True)
-                layout.append([FilePart(s, i, a, b) for a, b in spans])
+                layout.append(
+                    [FilePart(s, i, a, b) for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+                )
 
         def leaf(pt: FilePart):
             if model == "dynamic":

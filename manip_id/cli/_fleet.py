@@ -118,7 +118,7 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
         window_length=getattr(args, "window_length", None),
         **cmd._consistent_kwargs(args),
     )
-    files = result.files
+    files: dict = result.files or {"train": [], "validation": None}
     for info in files["train"]:
         print(info.quality.text())
     for info in files["validation"] or []:
@@ -144,7 +144,7 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     scans = {f.spec: SimpleNamespace(quality=f.quality) for f in infos}
     _files._add_file_info(report, robot, specs, vspecs, scans, files, options, result)
     if args.per_file:
-        report["per_file"] = [f.to_dict() for f in result.per_file]
+        report["per_file"] = [f.to_dict() for f in result.per_file or []]
     print(result.table())
     if model == "dynamic":
         print(cmd._summary(robot, report))
