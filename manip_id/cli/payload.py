@@ -1,9 +1,12 @@
 """``manip-id payload``: the inertial parameters of a payload from unloaded and loaded runs.
 
-Pipeline: read every ``--unloaded`` and ``--loaded`` file (each with its own window,
-``FILE@START:STOP`` or ``--window``, and ``--torque-scale``), preprocess each file on
-its own when it has no accelerations (zero-phase low-pass, central differences,
-edge trimming), then :func:`manip_id.payload.identify_payload`: the robot's base
+Pipeline: scan every ``--unloaded`` and ``--loaded`` file first with the real-log
+readers (:func:`manip_id.pipeline.scan_file`: its window, ``FILE@START:STOP`` or
+``--window``, ``--torque-scale``, checks and the data-quality summary, printed), then
+stream each file's rows (:func:`manip_id.pipeline.iter_processed`: preprocessed on its
+own in overlapping blocks when it has no accelerations) into
+:func:`manip_id.payload.identify_payload`, memory bounded whatever the files' length:
+the robot's base
 parameters and the payload's parameters in one least squares, or, with
 ``--known-base RESULT.json`` (the JSON of ``manip-id identify``), the payload alone.
 Prints the payload (mass, centre of mass and inertia about it, in FRAME, with
