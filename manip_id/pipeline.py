@@ -37,6 +37,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from .datasets import FileSpec, Layout, RowCounts, iter_rows, open_source, parse_file_spec
+from .datasets.core import check_position_range
 from .datasets.quality import DataQuality, QualityAccumulator
 from .datasets.stream import READ_CHUNK, torque_scale_vector
 from .errors import DataError, InputError
@@ -282,6 +283,13 @@ def scan_file(robot: Robot, spec, options: PreprocessOptions | None = None) -> F
     if fh is not None:
         fh.close()
     quality = qa.finish(counts.n_dropped, counts.first_dropped)
+    if quality.n_samples:  # far outside the joint limits: refused (slightly: a warning)
+        try:
+            check_position_range(robot, quality.q_min, quality.q_max, spec.label)
+        except DataError:
+            if fh is not None:
+                FileScan.discard(SimpleNamespace(spill=spill))  # type: ignore[arg-type]
+            raise
     if quality.n_samples < 2:
         raise DataError(f"{spec.label}: {quality.n_samples} usable sample(s); need at least 2")
     return FileScan(
@@ -364,6 +372,8 @@ def accumulate_file(
     chunk: int = DEFAULT_CHUNK,
     scan: FileScan | None = None,
     progress=None,
+    part: tuple[int, int] | None = None,
+    discard: bool = True,
 ) -> FileAccumulation:
     """The information sums of one file (see the module docstring).
 
@@ -377,6 +387,10 @@ def accumulate_file(
     chunk: samples per regressor chunk.
     scan: the file's :func:`scan_file`, when already made.
     progress: called as ``progress(samples_done)`` after each block.
+    part: ``(k, K)``: accumulate only the k-th of K contiguous parts of the
+        file's preprocessed samples (the file is still preprocessed whole, so
+        the K parts add up to the whole file's sums); for workers sharing a file.
+    discard: remove the scan's spill file afterwards (keep it for other parts).
 
     Returns
     -------
@@ -392,10 +406,10 @@ def accumulate_file(
 
         base_columns = analyze(robot).base.independent
     ind = np.asarray(base_columns, dtype=np.intp)
-    t0 = time.perf_counter()
     if scan is None:
+        t0 = time.perf_counter()
         scan = scan_file(robot, spec, options)
-    timings["scan"] = time.perf_counter() - t0
+        timings["scan"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     settings, blocks = iter_processed(robot, spec, options, scan)
     nv, nq = robot.nv, robot.nq
@@ -404,8 +418,25 @@ def accumulate_file(
     excluded = np.zeros(nv, dtype=np.int64)
     state = {"n": 0}
 
+    lo, hi = 0, None
+    if part is not None:
+        k, parts = int(part[0]), int(part[1])
+        if not 0 <= k < parts:
+            raise InputError(f"part must be (k, K) with 0 <= k < K, got {part}")
+        total = processed_count(scan, settings, options)
+        lo, hi = (k * total) // parts, ((k + 1) * total) // parts
+    seen = [0]
+
     def states():
         for rows in blocks:
+            g0 = seen[0]
+            seen[0] += rows.shape[0]
+            if part is not None:
+                if hi is not None and g0 >= hi:
+                    break
+                rows = rows[max(lo - g0, 0) : hi - g0]
+                if not rows.shape[0]:
+                    continue
             q = rows[:, 1 : 1 + nq]
             dq = rows[:, 1 + nq : 1 + nq + nv]
             tau = rows[:, 1 + nq + nv : 1 + nq + 2 * nv]
@@ -423,7 +454,8 @@ def accumulate_file(
         msg = str(exc)
         raise DataError(msg if str(spec.path) in msg else f"{spec.label}: {msg}") from exc
     finally:
-        scan.discard()
+        if discard:
+            scan.discard()
     timings.update(times)
     timings["accumulate_total"] = time.perf_counter() - t0
     scale = torque_scale_vector(options.torque_scale, nv, "--torque-scale")
@@ -449,6 +481,20 @@ __all__ = [
 ]
 
 
+def processed_count(
+    scan: FileScan, settings: PreprocessSettings | None, options: PreprocessOptions
+) -> int:
+    """Number of samples the preprocessing of a scanned file yields (before any deadband)."""
+    if settings is None:
+        return scan.n
+    n = scan.n
+    if settings.resampled:
+        from .signals import uniform_grid
+
+        n = uniform_grid(scan.t_first, scan.t_last, settings.rate).shape[0]
+    return len(range(settings.trim, n - settings.trim, settings.decimate))
+
+
 # State handed to forked worker processes (inherited, never pickled).
 _JOB: dict = {}
 
@@ -456,6 +502,13 @@ _JOB: dict = {}
 def _job_file(i: int) -> FileAccumulation:
     robot, specs, options, ind, chunk, scans = _JOB["job"]
     return accumulate_file(robot, specs[i], options, ind, chunk=chunk, scan=scans.get(specs[i]))
+
+
+def _job_part(i: int) -> FileAccumulation:
+    robot, spec, options, ind, chunk, scan, parts = _JOB["job"]
+    return accumulate_file(
+        robot, spec, options, ind, chunk=chunk, scan=scan, part=(i, parts), discard=False
+    )
 
 
 def accumulate_files(
@@ -474,7 +527,9 @@ def accumulate_files(
 
     ``window`` (text or :class:`~manip_id.datasets.Window`) applies to each file
     that has none. With ``workers > 1`` and several files, the files are
-    accumulated in up to ``workers`` forked processes (one file per task).
+    accumulated in up to ``workers`` forked processes (one file per task); with
+    one file, each process accumulates one contiguous part of its preprocessed
+    samples (``part=``), the parts merged by addition.
     ``progress(k, n_files)`` is called after each file. Every file is checked
     against ``robot``: a file of another robot (other joints) fails naming it.
     ``scans``: :class:`FileSpec` -> :class:`FileScan` of files already scanned.
@@ -491,6 +546,28 @@ def accumulate_files(
 
         base_columns = analyze(robot).base.independent
     ind = np.asarray(base_columns, dtype=np.intp)
+    if int(workers) > 1 and len(specs) == 1:  # one file: its samples in parts
+        import multiprocessing as mp
+
+        spec = specs[0]
+        scan = scans.get(spec) or scan_file(robot, spec, options)
+        _JOB["job"] = (robot, spec, options, ind, int(chunk), scan, int(workers))
+        try:
+            with mp.get_context("fork").Pool(int(workers)) as pool:
+                parts = pool.map(_job_part, range(int(workers)))
+        finally:
+            _JOB.pop("job", None)
+            scan.discard()
+        first = parts[0]
+        for other in parts[1:]:
+            first.accumulator.merge(other.accumulator)
+            first.excluded += other.excluded
+            first.n_samples += other.n_samples
+            for key, v in other.timings.items():
+                first.timings[key] = first.timings.get(key, 0.0) + v
+        if progress is not None:
+            progress(1, 1)
+        return [first]
     if int(workers) > 1 and len(specs) > 1:
         import multiprocessing as mp
 
@@ -556,7 +633,7 @@ def _finite(x) -> float | None:
     return x if np.isfinite(x) else None
 
 
-__all__ += ["accumulate_files", "merge_accumulations", "validation_errors"]
+__all__ += ["accumulate_files", "merge_accumulations", "processed_count", "validation_errors"]
 
 
 def split_file(

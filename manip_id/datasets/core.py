@@ -201,23 +201,48 @@ def check_robot(dataset: Dataset, robot) -> None:
 
 
 #: Measured positions may pass a position limit by this share of the joint's range.
-LIMIT_MARGIN = 0.02
+LIMIT_MARGIN = 0.05
 
 
 def check_position_limits(dataset: Dataset, robot, margin: float = LIMIT_MARGIN) -> None:
     """Raise :class:`DataError` if a position leaves the robot's (set) limits by more than
     ``margin`` times the joint's range, naming the joint, the sample and the limits."""
+    q = dataset.q
+    bad = _far_outside(robot, q.min(axis=0), q.max(axis=0), margin)
+    if bad is not None:
+        i, lo, hi, low_side = bad
+        k = int(np.argmin(q[:, i]) if low_side else np.argmax(q[:, i]))
+        raise DataError(
+            f"q column {i} = {q[k, i]:.4g} at sample {k} (t = {dataset.t[k]:.4g} s) is "
+            f"outside the position limits [{lo:.4g}, {hi:.4g}] of robot "
+            f"{robot.name!r}: wrong robot, units or zero offset?"
+        )
+
+
+def check_position_range(robot, q_min, q_max, label: str, margin: float = LIMIT_MARGIN) -> None:
+    """:func:`check_position_limits` on the per-column extremes of a streamed file.
+
+    Positions slightly past a limit (within ``margin`` of the range) are left to the
+    quality summary's warnings; farther out the file is refused.
+    """
+    bad = _far_outside(robot, np.asarray(q_min, float), np.asarray(q_max, float), margin)
+    if bad is not None:
+        i, lo, hi, low_side = bad
+        value = q_min[i] if low_side else q_max[i]
+        raise DataError(
+            f"{label}: q column {i} reaches {value:.4g}, outside the position limits "
+            f"[{lo:.4g}, {hi:.4g}] of robot {robot.name!r}: wrong robot, units or zero offset?"
+        )
+
+
+def _far_outside(robot, q_min: np.ndarray, q_max: np.ndarray, margin: float):
+    """``(column, lower, upper, below?)`` of the first column far outside its limits, or None."""
     from ..parameters import bounded_range
 
     lo, hi = robot.lower, robot.upper  # [rad or m], shape (nq,)
-    q = dataset.q
     for i in np.flatnonzero(bounded_range(lo, hi)):
         slack = margin * (hi[i] - lo[i])
-        below, above = lo[i] - slack - q[:, i].min(), q[:, i].max() - hi[i] - slack
+        below, above = lo[i] - slack - q_min[i], q_max[i] - hi[i] - slack
         if max(below, above) > 0:
-            k = int(np.argmin(q[:, i]) if below >= above else np.argmax(q[:, i]))
-            raise DataError(
-                f"q column {i} = {q[k, i]:.4g} at sample {k} (t = {dataset.t[k]:.4g} s) is "
-                f"outside the position limits [{lo[i]:.4g}, {hi[i]:.4g}] of robot "
-                f"{robot.name!r}: wrong robot, units or zero offset?"
-            )
+            return int(i), float(lo[i]), float(hi[i]), bool(below >= above)
+    return None
