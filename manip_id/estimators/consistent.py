@@ -824,8 +824,8 @@ class StandardEstimate:
                 "prior": self.prior,
                 "prior_weight": float(self.prior_weight),
                 "base_shift_std": float(self.base_shift_std),
-                "fit": float(self.fit),
-                "prior_distance": float(self.prior_distance),
+                "fit": _finite(self.fit),
+                "prior_distance": _finite(self.prior_distance),
             },
         }
 
@@ -847,6 +847,11 @@ class StandardEstimate:
             ),
         ]
         return lines
+
+
+def _finite(x: float) -> float | None:
+    x = float(x)
+    return x if np.isfinite(x) else None
 
 
 def check_options(solver: str, prior: str, prior_weight: float) -> None:
