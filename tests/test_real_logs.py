@@ -368,3 +368,20 @@ def test_save_dataset_mcap_round_trip(tmp_path):
         np.testing.assert_array_equal(back.q, ds.q)
         np.testing.assert_array_equal(back.tau, ds.tau)
         assert back.joint_names == ("a", "b")
+
+
+def test_parts_and_workers_add_up_to_the_whole_file(robot, base, tmp_path):
+    t, q, dq, ddq, tau = log(robot, n=3000, rate=500.0, seed=8)
+    path = save_npz(tmp_path / "w.npz", robot, t, q, dq, ddq, tau, with_ddq=False)
+    opts = PreprocessOptions(cutoff=8.0, velocity_deadband=0.02)
+    whole = accumulate_file(robot, path, opts, base.independent)
+    parts = [accumulate_file(robot, path, opts, base.independent, part=(k, 3)) for k in range(3)]
+    assert sum(p.n_samples for p in parts) == whole.n_samples
+    np.testing.assert_array_equal(sum(p.excluded for p in parts), whole.excluded)
+    A = sum(p.accumulator.A for p in parts)
+    np.testing.assert_allclose(A, whole.accumulator.A, rtol=1e-10, atol=1e-8 * np.abs(A).max())
+    serial = identify_datasets(robot, [path], options=opts, base=base)
+    forked = identify_datasets(robot, [path], options=opts, base=base, workers=2)
+    assert forked.n_samples == serial.n_samples
+    scale = np.abs(serial.estimate).max()
+    np.testing.assert_allclose(forked.estimate, serial.estimate, rtol=0, atol=1e-9 * scale)

@@ -248,7 +248,7 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
         settings = files["train"][0].settings
         n_valid = None if vspecs is None else sum(f.n_samples for f in files["validation"])
         train = valid = None  # type: ignore[assignment]
-    timings.update({k: float(v) for k, v in dict(result.timings).items()})
+    timings.update({k: float(v) for k, v in dict(result.timings).items() if k != "scan"})
     timings["total"] = time.perf_counter() - t_start
     valid_count = None if n_valid is None else SimpleNamespace(n_samples=n_valid)
     report = cmd._report(
