@@ -100,3 +100,39 @@ def test_bad_gain_options(ur5_loop):
     with pytest.raises(InputError, match="forgetting"):
         SlotineLiController(robot, theta0, AdaptiveGains(composite=1.0, gain="rls", forgetting=-1))
     assert main(["adapt", "panda", "--composite", "--gain", "fast"]) == 2
+
+
+def test_lyapunov_function_with_the_time_varying_gain(monkeypatch):
+    """V = 1/2 s^T M s + 1/2 theta_tilde^T P(t)^-1 theta_tilde never increases and drops by
+    the integral of s^T (K_D + F_v) s + kappa |eps|^2 / (2 m^2) (armature and viscous
+    friction only: exact cancellation; noise-free)."""
+    import pinocchio as pin
+
+    robot = load_robot("ur5", armature=True, friction="viscous")
+    theta0 = robot.nominal_parameters.copy()
+    theta0[robot.n_rigid :] = 0.05
+    theta = perturb_parameters(robot, 0.3, seed=2, theta=theta0)
+    gains = default_gains(robot, theta0, composite=50.0, gain="rls")
+    Ps: list[np.ndarray] = [np.asarray(gains.gamma, dtype=float).copy()]
+    if Ps[0].ndim == 1:
+        Ps[0] = np.diag(Ps[0])
+    original = SlotineLiController._update_gain
+
+    def recording(self, dt):  # the law itself, then a copy of P for the test
+        original(self, dt)
+        Ps.append(self.P.copy())
+
+    monkeypatch.setattr(SlotineLiController, "_update_gain", recording)
+    run = simulate(robot, theta, theta0, gains=gains, duration=0.4, rate=5000, integrator="rk4")
+    model = robot.with_parameters(theta)
+    data = model.createData()
+    V = np.empty(run.t.shape[0])
+    for k in range(V.size):  # record_every=1: step k holds theta_hat and P before adapt k
+        M = pin.crba(model, data, run.q[k])
+        M = np.triu(M) + np.triu(M, 1).T
+        tilde = run.theta_hat[k] - theta
+        V[k] = 0.5 * run.s[k] @ M @ run.s[k] + 0.5 * tilde @ np.linalg.solve(Ps[k], tilde)
+    assert np.diff(V).max() <= 1e-9 * V[0]
+    drop = V[0] - V[-1]
+    assert drop > 0
+    assert drop == pytest.approx(run.dissipation, rel=5e-3)
