@@ -17,6 +17,17 @@ file) and runs in its own process, so that its peak resident memory
 3. dense: the full stacked regressor in memory, column-pivoted QR for the base
    columns and least squares on them (what the known tools do); skipped when
    its matrices would not fit in the available memory.
+
+The user's path (``--user``, one size, default 10^6): the same log as a user
+has it, t, q, dq, tau without accelerations, written once as NPZ (plain and
+compressed), CSV and a ROS 2 bag (MCAP, one JointState message per sample),
+then ``manip-id identify ur10 --friction viscous,coulomb --data FILE --json OUT``
+run as a whole process per format (reading in chunks, blocked filtering,
+accumulation), its wall time against the floor measured in the same run and its
+peak resident memory from ``os.wait4``; and, for comparison, the whole-array
+path of the previous CLI (``load_dataset`` + ``preprocess`` + ``identify``) on the NPZ.
+
+    python experiments/bench_identify.py --user [--user-size 1000000]
 """
 
 from __future__ import annotations
@@ -177,9 +188,157 @@ def case_dense(folder: Path) -> dict:
     }
 
 
+# ------------------------------------------------------------------ the user's path
+USER_FORMATS = ("npz", "npz_compressed", "csv", "mcap")
+
+
+def user_files(cache: Path, n: int) -> dict[str, Path]:
+    """The log of ``n`` samples without ddq, as the files a user has (written once, streamed)."""
+    from manip_id import load_robot
+    from manip_id.datasets import Layout, write_rows
+
+    folder = make_log(cache, n)
+    robot = load_robot(ROBOT, friction=FRICTION)
+    nv = robot.nv
+    lay = Layout(nv, nv, False)
+    names = list(robot.dof_names)
+
+    def blocks():
+        start = 0
+        for q, dq, _ddq, tau in read_chunks(folder, nv, chunk=32768):
+            t = np.arange(start, start + q.shape[0]) / RATE
+            start += q.shape[0]
+            yield lay.pack(t, q, dq, tau)
+
+    out = {}
+    for fmt in USER_FORMATS:
+        suffix = {"npz": ".npz", "npz_compressed": ".z.npz", "csv": ".csv", "mcap": ".mcap"}[fmt]
+        path = folder / f"user{suffix}"
+        out[fmt] = path
+        if path.exists():
+            continue
+        if (
+            fmt == "npz_compressed"
+        ):  # the NPZ members compressed (zip deflate), as np.savez_compressed
+            import zipfile
+
+            with (
+                zipfile.ZipFile(out["npz"]) as zin,
+                zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED, allowZip64=True) as zout,
+            ):
+                for info in zin.infolist():
+                    with (
+                        zin.open(info) as src,
+                        zout.open(info.filename, "w", force_zip64=True) as dst,
+                    ):
+                        while chunk := src.read(1 << 22):
+                            dst.write(chunk)
+            continue
+        t0 = time.perf_counter()
+        write_rows(blocks, n, lay, names, path, "mcap" if fmt == "mcap" else fmt)
+        print(f"  wrote {path.name} in {time.perf_counter() - t0:.0f} s", flush=True)
+    return out
+
+
+def run_cli(path: Path, out_json: Path) -> dict:
+    """``manip-id identify`` on ``path`` as a whole process: wall time, peak RSS (wait4)."""
+    cmd = [
+        sys.executable,
+        "-m",
+        "manip_id",
+        "identify",
+        ROBOT,
+        "--friction",
+        ",".join(FRICTION),
+        "--data",
+        str(path),
+        "--json",
+        str(out_json),
+    ]
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    err_path = out_json.with_suffix(".stderr")
+    with open(err_path, "wb") as err, open(os.devnull, "wb") as null:
+        t0 = time.perf_counter()
+        proc = subprocess.Popen(cmd, stdout=null, stderr=err, env=env)
+        _, status, usage = os.wait4(proc.pid, 0)  # this child's own rusage
+        seconds = time.perf_counter() - t0
+        proc.returncode = os.waitstatus_to_exitcode(status)
+    if proc.returncode != 0:
+        lines = err_path.read_text().strip().splitlines()
+        return {"error": lines[-1] if lines else f"exit {proc.returncode}"}
+    rep = json.loads(out_json.read_text())
+    return {
+        "seconds": seconds,
+        "peak_rss_mb": usage.ru_maxrss / 1024.0,
+        "n_samples": rep["n_samples"],
+        "relative_error": rep["relative_error"]["train"],
+        "estimate": [p["value"] for p in rep["base_parameters"]],
+    }
+
+
+def case_inmem(path: Path) -> dict:
+    """The previous CLI path: whole arrays loaded, preprocessed and identified."""
+    from manip_id import load_robot
+    from manip_id.datasets import load_dataset
+    from manip_id.identification import identify
+    from manip_id.signals import preprocess
+
+    robot = load_robot(ROBOT, friction=FRICTION)
+    t0 = time.perf_counter()
+    ds = preprocess(load_dataset(path))
+    res = identify(robot, ds.q, ds.dq, ds.ddq, ds.tau)
+    return {"seconds": time.perf_counter() - t0, "n_samples": res.n_samples}
+
+
+def user_main(cache: Path, n: int, json_out: str | None) -> None:
+    print(f"user's path: {n} samples of {ROBOT} ({'+'.join(FRICTION)} friction) without ddq")
+    files = user_files(cache, n)
+    folder = log_dir(cache, n)
+    floor = child("floor", folder)
+    rows = {"floor": floor}
+    print(f"{'case':28s} {'s':>8s} {'x floor':>8s} {'peak MB':>8s}")
+    print(
+        f"{'floor (regressor only)':28s} {floor['seconds']:8.2f} {1.0:8.2f} "
+        f"{floor['peak_rss_mb']:8.0f}"
+    )
+    ref = None
+    for fmt in USER_FORMATS:
+        res = run_cli(files[fmt], folder / f"out_{fmt}.json")
+        rows[fmt] = res
+        if "error" in res:
+            print(f"{'manip-id identify ' + fmt:28s} error: {res['error']}")
+            continue
+        est = np.asarray(res.pop("estimate"))
+        ref = est if ref is None else ref
+        res["max_estimate_difference_vs_npz"] = float(np.abs(est - ref).max() / np.abs(ref).max())
+        print(
+            f"{'manip-id identify ' + fmt:28s} {res['seconds']:8.2f} "
+            f"{res['seconds'] / floor['seconds']:8.2f} {res['peak_rss_mb']:8.0f}"
+            f"   (estimate vs npz {res['max_estimate_difference_vs_npz']:.1e})"
+        )
+    inmem = child("inmem", files["npz"])
+    rows["whole_arrays_npz"] = inmem
+    after = child("floor", folder)  # the machine's load drifts: the floor again, at the end
+    rows["floor_after"] = after
+    print(
+        f"{'floor again (after)':28s} {after['seconds']:8.2f} "
+        f"{after['seconds'] / floor['seconds']:8.2f} {after['peak_rss_mb']:8.0f}"
+    )
+    if "error" not in inmem:
+        print(
+            f"{'whole arrays (previous CLI)':28s} {inmem['seconds']:8.2f} "
+            f"{inmem['seconds'] / floor['seconds']:8.2f} {inmem['peak_rss_mb']:8.0f}"
+        )
+    if json_out:
+        Path(json_out).parent.mkdir(parents=True, exist_ok=True)
+        Path(json_out).write_text(json.dumps({"n": n, "rows": rows}, indent=2))
+
+
 def run_case(args) -> None:
     folder = Path(args.folder)
-    if args.case == "floor":
+    if args.case == "inmem":
+        out = case_inmem(folder)
+    elif args.case == "floor":
         out = case_floor(folder)
     elif args.case == "manip_id":
         out = case_manip_id(folder, args.workers)
@@ -222,11 +381,18 @@ def main() -> None:
     parser.add_argument("--cache", default="/tmp/manip_id_bench")
     parser.add_argument("--json", default=None)
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
-    parser.add_argument("--case", choices=["floor", "manip_id", "dense"], help=argparse.SUPPRESS)
+    parser.add_argument("--user", action="store_true", help="the user's path (see the docstring)")
+    parser.add_argument("--user-size", type=int, default=1_000_000)
+    parser.add_argument(
+        "--case", choices=["floor", "manip_id", "dense", "inmem"], help=argparse.SUPPRESS
+    )
     parser.add_argument("--folder", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.case:
         run_case(args)
+        return
+    if args.user:
+        user_main(Path(args.cache), args.user_size, args.json)
         return
 
     cache = Path(args.cache)
