@@ -20,9 +20,13 @@ Before the clock, every case runs one file once per worker (imports and
 first-call costs, which a long-lived cluster pays once).
 
 Printed per case: wall time of ``identify_files`` [s], throughput [samples/s],
-the ratio to the serial run and the scaling efficiency
-``T(1 worker) / (N T(N workers))``; every estimate is checked against the
-serial one (max relative difference).
+the ratio to the serial run, the scaling efficiency
+``T(1 worker) / (N T(N workers))``, the tasks' own time summed over the tasks
+(scan and accumulation) and ``busy`` = that sum / (N wall): the share of the
+workers' wall time spent in tasks (what is left is Dask, transfers, and other
+processes on a loaded machine); every estimate is checked against the serial
+one (max relative difference). The load average is printed with the table:
+on a shared machine, compare cases of one run only.
 """
 
 from __future__ import annotations
@@ -146,21 +150,29 @@ def main() -> int:
     ref = np.asarray(serial["estimate"])
     t1 = next((r["wall_s"] for r in rows if r["workers"] == 1), None)
     total = serial["n_samples"]
+    load = os.getloadavg()
     print(
         f"{ROBOT}, {args.files} files x {args.samples} samples = {total} samples, "
-        f"task = {'a file' if args.block is None else f'{args.block} samples'}"
+        f"task = {'a file' if args.block is None else f'{args.block} samples'}; "
+        f"load average {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} on {os.cpu_count()} cores"
     )
-    print("| case | start-up s | wall s | samples/s | vs serial | efficiency | max rel diff |")
-    print("|---|---|---|---|---|---|---|")
+    print(
+        "| case | start-up s | wall s | samples/s | vs serial | efficiency | task s (sum) "
+        "| busy | max rel diff |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         w = r["workers"]
         diff = float(np.abs(np.asarray(r["estimate"]) - ref).max() / np.abs(ref).max())
         eff = "" if w == 0 or t1 is None else f"{t1 / (w * r['wall_s']):.2f}"
         name = "serial (no Dask)" if w == 0 else f"Dask, {w} worker{'s' * (w > 1)}"
         start = f"{r['startup_s']:.2f}" if "startup_s" in r else ""
+        ts = r["task_seconds"]
+        busy = ts.get("scan", 0.0) + ts.get("accumulate_total", 0.0)  # summed over tasks
         print(
             f"| {name} | {start} | {r['wall_s']:.2f} | {total / r['wall_s']:,.0f} | "
-            f"{serial['wall_s'] / r['wall_s']:.2f} | {eff} | {diff:.1e} |"
+            f"{serial['wall_s'] / r['wall_s']:.2f} | {eff} | {busy:.2f} | "
+            f"{busy / (max(w, 1) * r['wall_s']):.2f} | {diff:.1e} |"
         )
     if args.json is not None:
         args.json.write_text(json.dumps(rows, indent=1))

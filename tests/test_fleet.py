@@ -256,7 +256,10 @@ def test_no_dask_without_a_scheduler(fleet):
     code = (
         "import sys; from manip_id import load_robot; from manip_id.fleet import identify_files;"
         "r = load_robot('ur10', friction='viscous,coulomb');"
-        f"identify_files(r, {fleet[0][:2]!r});"
+        f"identify_files(r, {fleet[0][:2]!r}, per_file=True, block=700);"
+        "from manip_id.cli import main;"
+        f"assert main(['identify', 'ur10', '--friction', 'viscous,coulomb', '--data', "
+        f"*{fleet[0][:2]!r}, '--per-file']) == 0;"
         "bad = [m for m in sys.modules if m.split('.')[0] in ('dask', 'distributed')];"
         "print(bad); sys.exit(1 if bad else 0)"
     )
