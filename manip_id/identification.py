@@ -907,6 +907,7 @@ def identify_datasets(
     prior: str = "nominal",
     prior_weight: float = DEFAULT_PRIOR_WEIGHT,
     scans: dict | None = None,
+    scheduler=None,
 ) -> IdentificationResult:
     """Least squares from several log files, each read in chunks and preprocessed on its own.
 
@@ -923,6 +924,9 @@ def identify_datasets(
     method: "ols" or "wls"; consistent, solver, prior, prior_weight: as :func:`identify`
     workers: several files are accumulated in up to ``workers`` forked processes
     scans: FileSpec -> :class:`~manip_id.pipeline.FileScan` of files already scanned
+    scheduler: a Dask scheduler spec or client: each file is one task on the cluster
+        and the sums are added there (:func:`manip_id.fleet.identify_files`; ``files``
+        then holds :class:`~manip_id.fleet.FileInfo`, the accumulations without sums)
 
     Returns
     -------
@@ -936,6 +940,26 @@ def identify_datasets(
     from dataclasses import replace
 
     from .pipeline import accumulate_files, merge_accumulations, validation_errors
+
+    if scheduler is not None:
+        from .fleet import identify_files
+
+        return identify_files(
+            robot,
+            files,
+            scheduler=scheduler,
+            validation=validation,
+            options=options,
+            window=window,
+            method=method,
+            base=base,
+            chunk=chunk,
+            minimum_norm=minimum_norm,
+            consistent=consistent,
+            solver=solver,
+            prior=prior,
+            prior_weight=prior_weight,
+        )
 
     timings: dict[str, float] = {}
     t_start = time.perf_counter()

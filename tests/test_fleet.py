@@ -639,3 +639,17 @@ def test_cli_energy_model_matches_the_local_energy_path(robot, tmp_path, capsys)
         rtol=1e-6,
     )
     assert rep["per_file"][0]["n_tasks"] > 1
+
+
+def test_identify_datasets_with_a_scheduler(robot, fleet, local_client):
+    from manip_id.identification import identify_datasets
+
+    local = identify_datasets(robot, fleet[0][:3], validation=fleet[0][3:4], method="wls")
+    res = identify_datasets(
+        robot, fleet[0][:3], validation=fleet[0][3:4], method="wls", scheduler=local_client
+    )
+    _same(res, local, "wls")
+    assert res.relative_error.validation == pytest.approx(local.relative_error.validation, 1e-9)
+    joints = list(robot.dof_names)
+    for a, b in zip(res.files["train"], local.files["train"], strict=True):
+        assert {k: v for k, v in a.summary(joints).items() if k != "n_tasks"} == b.summary(joints)
