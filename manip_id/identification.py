@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.linalg.blas import dsyrk
 
-from ._checks import as_float_array, check_finite
+from ._checks import as_float_array, as_int, check_finite
 from .errors import InputError, RankDeficiencyError
 from .estimators import (
     GradientEstimator,
@@ -318,9 +318,9 @@ def _resolve_base(robot: Robot, base, timings: dict) -> BaseParameters:
 def _check_method(method: str, chunk: int, workers: int) -> None:
     if method not in METHODS:
         raise InputError(f"method must be one of {list(METHODS)}, got {method!r}")
-    if int(chunk) < 1:
+    if as_int(chunk, "chunk") < 1:
         raise InputError(f"chunk must be a positive number of samples, got {chunk}")
-    if int(workers) < 1:
+    if as_int(workers, "workers") < 1:
         raise InputError(f"workers must be a positive number of processes, got {workers}")
 
 
@@ -873,7 +873,19 @@ def identify_dataset(
     robot: Robot, dataset, *, ddq=None, validation=None, **kwargs
 ) -> IdentificationResult:
     """:func:`identify` on a :class:`~manip_id.datasets.Dataset` (``ddq`` from the dataset
-    unless given); ``validation`` may be another Dataset. Other keywords as :func:`identify`."""
+    unless given); ``validation`` may be another Dataset. Other keywords as :func:`identify`.
+    With ``model="energy"`` or ``"momentum"`` no ddq is needed and ``dt`` defaults to the
+    dataset's mean sample time."""
+    if kwargs.get("model", "dynamic") != "dynamic":
+        if "dt" not in kwargs:
+            kwargs["dt"] = float(np.mean(np.diff(dataset.t)))
+        if validation is not None and hasattr(validation, "tau"):
+            if validation.ddq is None:
+                raise InputError("the validation dataset has no accelerations (ddq)")
+            validation = (validation.q, validation.dq, validation.ddq, validation.tau)
+        return identify(
+            robot, dataset.q, dataset.dq, None, dataset.tau, validation=validation, **kwargs
+        )
     acc_arr = dataset.ddq if ddq is None else ddq
     if acc_arr is None:
         raise InputError(

@@ -120,6 +120,21 @@ def test_noise_free_recovery_without_accelerations(panda, trajectory, model):
     assert res.to_dict()["model"] == model
 
 
+def test_identify_dataset_takes_the_models_without_ddq(panda, trajectory):
+    import dataclasses
+
+    from manip_id.identification import identify_dataset
+
+    robot, _ = panda
+    ds = _data(panda, trajectory)
+    no_ddq = dataclasses.replace(ds, ddq=None)
+    res = identify_dataset(robot, no_ddq, model="energy", window_length=0.05)  # dt from ds.t
+    ref = identify(
+        robot, ds.q, ds.dq, None, ds.tau, model="energy", dt=1 / RATE, window_length=0.05
+    )
+    np.testing.assert_allclose(res.estimate, ref.estimate, rtol=1e-9)
+
+
 @pytest.mark.parametrize("model", ["energy", "momentum"])
 def test_noisy_estimates_are_within_their_predicted_std(panda, trajectory, model):
     robot, theta = panda
