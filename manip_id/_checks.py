@@ -42,6 +42,47 @@ def check_finite(arr: np.ndarray, name: str, columns=None) -> None:
     raise InputError(f"{name} holds {value} at sample {bad[0]}, {label}")
 
 
+def as_real(x, name: str, *, minimum: float | None = None, unit: str = "") -> float:
+    """``x`` as a finite float (at least ``minimum``), or :class:`InputError` naming ``name``."""
+    where = f" [{unit}]" if unit else ""
+    if isinstance(x, bool | str | bytes) or np.iscomplexobj(x):
+        raise InputError(f"{name} must be a real number{where}, got {x!r}")
+    try:
+        value = float(x)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{name} must be a real number{where}, got {x!r}") from exc
+    if not np.isfinite(value):
+        raise InputError(f"{name} must be finite{where}, got {value}")
+    if minimum is not None and value < minimum:
+        raise InputError(f"{name} must be >= {minimum:g}{where}, got {value:g}")
+    return value
+
+
+def as_int(x, name: str, *, minimum: int | None = None) -> int:
+    """``x`` as an int (at least ``minimum``); floats only when integral (3.0 but not 3.5)."""
+    if isinstance(x, bool) or not isinstance(x, int | np.integer | float | np.floating):
+        raise InputError(f"{name} must be an integer, got {x!r}")
+    if isinstance(x, float | np.floating) and not (np.isfinite(x) and float(x).is_integer()):
+        raise InputError(f"{name} must be an integer, got {x!r}")
+    value = int(x)
+    if minimum is not None and value < minimum:
+        raise InputError(f"{name} must be >= {minimum}, got {value}")
+    return value
+
+
+def random_generator(seed, name: str = "seed") -> np.random.Generator:
+    """``numpy.random.default_rng(seed)`` for a seed in [0, 2**63), or a :class:`InputError`.
+
+    A :class:`numpy.random.Generator` or ``SeedSequence`` passes through NumPy as is.
+    """
+    if isinstance(seed, np.random.Generator | np.random.SeedSequence):
+        return np.random.default_rng(seed)
+    value = as_int(seed, name, minimum=0)
+    if value >= 2**63:
+        raise InputError(f"{name} must be below 2**63, got {value}")
+    return np.random.default_rng(value)
+
+
 #: Sane magnitudes of measured fields: name -> (unit, largest |value|). Beyond them a
 #: value is a unit or scaling mistake (or garbage), not a measurement.
 MEASURED_LIMITS: dict[str, tuple[str, float]] = {

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from ._checks import as_float_array, check_finite
+from ._checks import as_float_array, check_finite, random_generator
 from .adaptive import AdaptiveGains, SlotineLiController, default_gains
 from .errors import InputError, NumericalError
 from .regressor import RegressorEvaluator
@@ -90,7 +90,7 @@ def default_reference(
     angles_lo, angles_hi = _angle_bounds(robot, lo, hi)
     center = 0.5 * (angles_lo + angles_hi)
     reach = amplitude * np.minimum(0.5 * (angles_hi - angles_lo), 1.0)
-    rng = np.random.default_rng(seed)
+    rng = random_generator(seed)
     L = int(harmonics)
     wf = 2 * math.pi / period
     a = rng.normal(size=(robot.nv, L))
@@ -141,7 +141,7 @@ def validation_states(robot: Robot, reference: FourierTrajectory, n: int = 200, 
     """
     t = np.linspace(0.0, reference.period, 1000, endpoint=False)
     angles, dq, ddq = reference.sample(t)
-    rng = np.random.default_rng(seed)
+    rng = random_generator(seed)
     a = rng.uniform(angles.min(0), angles.max(0), size=(n, robot.nv))
     vmax, amax = np.abs(dq).max(0), np.abs(ddq).max(0)
     v = rng.uniform(-vmax, vmax, size=(n, robot.nv))
@@ -346,7 +346,7 @@ def simulate(
     off = np.broadcast_to(as_float_array(initial_error, "initial_error", (0, 1)), (nv,))
     q = _angles_to_q(robot, (start_angles + off)[None])[0].copy()
     dq = start_dq.copy()
-    rng = np.random.default_rng(seed)
+    rng = random_generator(seed)
     noisy = noise_q > 0 or noise_dq > 0
 
     # recording

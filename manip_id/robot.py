@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pinocchio as pin
 
-from ._checks import as_float_array
+from ._checks import as_float_array, random_generator
 from .errors import InputError, RobotError
 from .parameters import (
     INERTIAL_NAMES,
@@ -325,7 +325,7 @@ class Robot:
         [-pi, pi], stored as cos/sin), velocities uniform within +-velocity
         limit, accelerations uniform within +-``acceleration`` [rad/s^2 or m/s^2].
         """
-        rng = np.random.default_rng(seed)
+        rng = random_generator(seed)
         lo, hi = self.sampling_bounds()
         q = rng.uniform(lo, hi, size=(n, self.nq))
         for i in range(1, self.model.njoints):
@@ -410,6 +410,10 @@ def _terms(armature, friction, spring, defaults: JointTerms) -> JointTerms:
     else:
         if isinstance(friction, str):
             friction = [f for f in friction.replace(",", " ").split() if f]
+        if not isinstance(friction, list | tuple | set | frozenset):
+            raise InputError(
+                f"friction must be a list of kinds or a comma-separated string, got {friction!r}"
+            )
         kinds = set()
         for f in friction:
             if f not in FRICTION_KINDS:

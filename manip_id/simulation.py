@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from ._checks import as_float_array, check_finite
+from ._checks import as_float_array, as_real, check_finite, random_generator
 from .datasets import Dataset
 from .errors import InputError
 from .regressor import joint_torques
@@ -95,10 +95,7 @@ def _check_theta(robot: Robot, theta) -> np.ndarray:
 
 
 def _nonnegative(value: float, name: str) -> float:
-    value = float(value)
-    if not (math.isfinite(value) and value >= 0.0):
-        raise InputError(f"{name} must be a non-negative number, got {value}")
-    return value
+    return as_real(value, name, minimum=0.0)
 
 
 def _perturb_body(block: np.ndarray, rel: float, rng: np.random.Generator) -> np.ndarray:
@@ -161,7 +158,7 @@ def perturb_parameters(robot: Robot, rel: float, seed: int = 0, theta=None) -> n
     theta = robot.nominal_parameters.copy() if theta is None else _check_theta(robot, theta).copy()
     if rel == 0.0:
         return theta
-    rng = np.random.default_rng(seed)
+    rng = random_generator(seed)
     blocks = robot.layout.rigid_blocks(theta)  # views into theta
     for i in range(robot.n_bodies):
         blocks[i] = _perturb_body(blocks[i], rel, rng)

@@ -1105,7 +1105,73 @@ def _api_cases():
         ("report-parent-missing", lambda w: report(w / "no" / "where"), OutputError),
         ("atomic-write-onto-folder", atomic, OutputError),
         ("save-under-a-file", save, ManipIdError),
+        ("robot-friction-int", lambda w: _load_robot_kw(friction=3), InputError),
+        ("trajectory-seed-negative", lambda w: _traj(seed=-1), InputError),
+        ("trajectory-seed-text", lambda w: _traj(seed="a"), InputError),
+        ("trajectory-harmonics-text", lambda w: _traj(harmonics="x"), InputError),
+        ("trajectory-harmonics-zero", lambda w: _traj(harmonics=0), InputError),
+        ("perturb-rel-text", lambda w: _perturb("x"), InputError),
+        ("perturb-seed-negative", lambda w: _perturb(0.1, seed=-1), InputError),
+        ("simulate-noise-text", lambda w: sim(noise_tau="x"), InputError),
+        ("identify-workers-text", lambda w: _identify_kw(workers="x"), InputError),
+        ("identify-chunk-zero", lambda w: _identify_kw(chunk=0), InputError),
+        ("structural-seed-negative", lambda w: _structural(seed=-1), InputError),
+        ("structural-tolerance-text", lambda w: _structural(tolerance="x"), InputError),
+        ("structural-samples-text", lambda w: _structural(n_samples="x"), InputError),
+        ("scene-label-int", lambda w: _scene_label(5), InputError),
+        ("scene-label-slash", lambda w: _scene_label("a/b"), InputError),
+        ("report-figures-text", lambda w: report(w, figures="x"), InputError),
+        ("report-table-of-ints", lambda w: report(w, parameter_table=[1, 2]), InputError),
+        ("report-summary-list", lambda w: report(w, summary=[1]), InputError),
+        ("dataset-split-text", lambda w: dataset().split("a"), DataError),
+        ("dataset-split-out-of-range", lambda w: dataset().split(1.5), DataError),
+        ("dataset-slice-text", lambda w: dataset().slice("a", 3), InputError),
+        ("reference-seed-negative", lambda w: _reference(seed=-1), InputError),
     ]
+
+
+def _load_robot_kw(**kw):
+    from manip_id.robot import load_robot
+
+    return load_robot("msd", **kw)
+
+
+def _traj(**kw):
+    from manip_id.trajectories import random_trajectory
+
+    return random_trajectory(_load_robot_kw(), **kw)
+
+
+def _perturb(rel, **kw):
+    from manip_id.simulation import perturb_parameters
+
+    return perturb_parameters(_load_robot_kw(), rel, **kw)
+
+
+def _identify_kw(**kw):
+    from manip_id.identification import identify
+
+    a = msd_arrays()
+    return identify(_load_robot_kw(), a["q"], a["dq"], a["ddq"], a["tau"], **kw)
+
+
+def _structural(**kw):
+    from manip_id.identifiability import structural_analysis
+
+    return structural_analysis(_load_robot_kw(), **kw)
+
+
+def _scene_label(label):
+    from manip_id.viz.meshcat_scene import RobotScene
+
+    robot = _load_robot_kw()
+    return RobotScene(robot).add_inertia(robot.nominal_parameters, label=label)
+
+
+def _reference(**kw):
+    from manip_id.closed_loop import default_reference
+
+    return default_reference(_load_robot_kw(), **kw)
 
 
 API_CASES = _api_cases()

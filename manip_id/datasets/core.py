@@ -24,8 +24,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .._checks import as_float_array, check_finite, check_magnitude
-from ..errors import DataError
+from .._checks import as_float_array, as_int, as_real, check_finite, check_magnitude
+from ..errors import DataError, InputError
 
 #: Largest |q| [rad] taken as radians; beyond it positions look like degrees.
 DEGREES_THRESHOLD = 8 * np.pi
@@ -156,6 +156,7 @@ class Dataset:
 
     def slice(self, start: int, stop: int) -> Dataset:
         """Samples ``start:stop`` as a new dataset."""
+        start, stop = as_int(start, "start"), as_int(stop, "stop")
         return replace(
             self,
             t=self.t[start:stop],
@@ -167,6 +168,10 @@ class Dataset:
 
     def split(self, fraction: float) -> tuple[Dataset, Dataset]:
         """Split in time: the first ``fraction`` of samples, then the rest (for validation)."""
+        try:
+            fraction = as_real(fraction, "split fraction")
+        except InputError as exc:
+            raise DataError(str(exc)) from exc
         if not 0.0 < fraction < 1.0:
             raise DataError(f"split fraction must be in (0, 1), got {fraction}")
         k = int(round(fraction * self.n_samples))

@@ -13,7 +13,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .._checks import as_float_array
+from .._checks import as_float_array, as_int, as_real
 from ..errors import InputError
 from .accumulator import RFactorAccumulator
 from .notes import robot_notes, zero_columns
@@ -42,7 +42,7 @@ def _check_names(names, p: int) -> list[str]:
 def _check_tolerance(tolerance) -> float | None:
     if tolerance is None:
         return None
-    tol = float(tolerance)
+    tol = as_real(tolerance, "tolerance")
     if not (math.isfinite(tol) and 0.0 < tol < 1.0):
         raise InputError(f"tolerance must be a relative value in (0, 1), got {tolerance}")
     return tol
@@ -72,7 +72,7 @@ def structural_analysis(
     p, nv = robot.n_parameters, robot.nv
     if n_samples is None:
         n_samples = max(MIN_SAMPLES, math.ceil(ROWS_PER_PARAMETER * p / nv))
-    n_samples = int(n_samples)
+    n_samples = as_int(n_samples, "n_samples", minimum=1)
     if n_samples * nv < p:
         raise InputError(
             f"n_samples={n_samples} gives {n_samples * nv} rows for {p} parameters; "

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from .._checks import as_int, as_real, random_generator
 from ..errors import InfeasibleTrajectoryError, InputError, NumericalError
 from ..regressor import iter_regressor
 from ..robot import Robot
@@ -43,8 +44,10 @@ def _design_limits(robot: Robot, margin: float, acceleration_limit):
 
 
 def _check_design_args(harmonics: int, wf: float) -> tuple[int, float]:
-    if int(harmonics) != harmonics or int(harmonics) < 1:
+    harmonics = as_int(harmonics, "harmonics")
+    if harmonics < 1:
         raise InputError(f"harmonics must be a positive integer, got {harmonics}")
+    wf = as_real(wf, "wf", unit="rad/s")
     if not (np.isfinite(wf) and wf > 0):
         raise InputError(f"wf must be a positive pulsation [rad/s], got {wf}")
     return int(harmonics), float(wf)
@@ -74,7 +77,7 @@ def random_trajectory(
     if not 0.0 < fill <= 1.0:
         raise InputError(f"fill must be in (0, 1], got {fill}")
     lo, hi, vel, acc = _design_limits(robot, margin, acceleration_limit)
-    rng = np.random.default_rng(seed)
+    rng = random_generator(seed)
     a = rng.standard_normal((robot.nv, harmonics))
     b = rng.standard_normal((robot.nv, harmonics))
     traj = FourierTrajectory(0.5 * (lo + hi), a, b, wf)

@@ -524,7 +524,7 @@ class RobotScene:
         Bodies whose block is not physically consistent are skipped; the
         returned notes (also in :attr:`notes` and in the HTML legend) say why.
         """
-        if not label or "/" in label:
+        if not isinstance(label, str) or not label or "/" in label:
             raise InputError(f"label must be a non-empty name without '/', got {label!r}")
         if any(lb == label for lb, _, _ in self._sets):
             raise InputError(f"a parameter set labelled {label!r} is already drawn")

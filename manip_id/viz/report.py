@@ -323,6 +323,7 @@ def write_report(
     report is then built but left for its :meth:`ReportFolder.publish` (with the other
     outputs of a command).
     """
+    _check_content(title, summary, parameter_table, figures, notes)
     content = dict(
         title=title,
         summary=summary,
@@ -342,6 +343,27 @@ def write_report(
         claim.discard()
         raise
     return claim.path
+
+
+def _check_content(title, summary, parameter_table, figures, notes) -> None:
+    """Types of :func:`write_report`'s arguments, as :class:`InputError` (before any work)."""
+    if not isinstance(title, str):
+        raise InputError(f"title must be a str, got {type(title).__name__}")
+    if not isinstance(summary, Mapping):
+        raise InputError(f"summary must be a mapping name -> value, got {type(summary).__name__}")
+    if not isinstance(figures, Mapping):
+        raise InputError(
+            f"figures must be a mapping name -> callable or PNG path, got {type(figures).__name__}"
+        )
+    if isinstance(parameter_table, str | bytes) or not isinstance(parameter_table, Sequence):
+        raise InputError(
+            f"parameter_table must be a sequence of mappings, got {type(parameter_table).__name__}"
+        )
+    for i, row in enumerate(parameter_table):
+        if not isinstance(row, Mapping):
+            raise InputError(f"parameter_table[{i}] must be a mapping, got {type(row).__name__}")
+    if isinstance(notes, str | bytes) or not isinstance(notes, Sequence):
+        raise InputError(f"notes must be a sequence of lines, got {type(notes).__name__}")
 
 
 def _build(
