@@ -400,8 +400,10 @@ def _solve_sdp(problem: ConsistentProblem, *, tolerance: float = 1e-8, max_iter:
     # objective divided by growing scales; the minimizer does not change.
     statuses = []
     best = None
+    inv_scale = cp.Parameter(nonneg=True)  # a parameter: compiled once for every scale
+    prob = cp.Problem(cp.Minimize(inv_scale * obj), cons)
     for scale in OBJECTIVE_SCALES:
-        prob = cp.Problem(cp.Minimize(obj / scale), cons)
+        inv_scale.value = 1.0 / scale
         try:
             with warnings.catch_warnings():  # "solution may be inaccurate": in the status
                 warnings.simplefilter("ignore")
