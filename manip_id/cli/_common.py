@@ -123,13 +123,13 @@ def reserve_outputs(args: argparse.Namespace):
     if outputs is None:
         outputs = args.outputs = OutputSet()
     outputs.add_inputs(input_paths(args))
+    args.report_claim = None
+    if getattr(args, "report", None) is not None:  # first: a file inside it then collides
+        args.report_claim = outputs.report(args.report, "--report", force=args.force)
     for name in FILE_OUTPUT_OPTIONS:
         value = getattr(args, name, None)
-        if value:
+        if value is not None:
             outputs.file(value, "--" + name.replace("_", "-"))
-    args.report_claim = None
-    if getattr(args, "report", None) is not None:
-        args.report_claim = outputs.report(args.report, "--report", force=args.force)
     return outputs
 
 
