@@ -97,7 +97,8 @@ class AdaptiveGains:
     dead_zone: delta >= 0 on each s_j [rad/s].
     lower, upper: optional bounds on theta_hat, shape (p,) (+-inf for none).
     gain: "constant" (Gamma) or "rls" (the time-varying P(t) of the module
-        docstring; needs ``composite > 0``).
+        docstring; needs ``composite > 0``). With bounds, the box clip is not the
+        P-weighted projection once P is not diagonal: V may then increase at a clip.
     forgetting: beta_0 >= 0 of the bounded-gain forgetting with ``gain="rls"`` [1/s].
     """
 
