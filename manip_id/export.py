@@ -101,12 +101,13 @@ def _set_inertial(link: ET.Element, m: float, c, I_c) -> None:
     inertial = link.find("inertial")
     if inertial is None:
         inertial = ET.SubElement(link, "inertial")
+    el: dict[str, ET.Element] = {}
     for tag in ("origin", "mass", "inertia"):
-        if inertial.find(tag) is None:
-            ET.SubElement(inertial, tag)
-    inertial.find("origin").attrib.update(xyz=" ".join(_fmt(v) for v in c), rpy="0 0 0")
-    inertial.find("mass").attrib.update(value=_fmt(m))
-    inertial.find("inertia").attrib.update(
+        found = inertial.find(tag)
+        el[tag] = found if found is not None else ET.SubElement(inertial, tag)
+    el["origin"].attrib.update(xyz=" ".join(_fmt(v) for v in c), rpy="0 0 0")
+    el["mass"].attrib.update(value=_fmt(m))
+    el["inertia"].attrib.update(
         ixx=_fmt(I_c[0, 0]),
         ixy=_fmt(I_c[0, 1]),
         ixz=_fmt(I_c[0, 2]),
@@ -124,11 +125,11 @@ def _owners(root: ET.Element, active: list[str]) -> tuple[dict[str, str], dict[s
         child, parent = joint.find("child"), joint.find("parent")
         if child is None or parent is None:
             continue
-        parent_of[child.get("link")] = (joint.get("name"), parent.get("link"))
-        child_of[joint.get("name")] = child.get("link")
+        parent_of[str(child.get("link"))] = (str(joint.get("name")), str(parent.get("link")))
+        child_of[str(joint.get("name"))] = str(child.get("link"))
     owner: dict[str, str] = {}
     active_set = set(active)
-    for link in (lk.get("name") for lk in root.findall("link")):
+    for link in (str(lk.get("name")) for lk in root.findall("link")):
         cur, seen = link, set()
         while cur in parent_of and cur not in seen:
             seen.add(cur)

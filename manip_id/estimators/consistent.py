@@ -659,10 +659,11 @@ class _LogChol:
                     blk = np.zeros((16, pr.p))
                     blk[:, sl] = sw * np.einsum("ab,kbc->ack", self.L0inv[i], dU).reshape(16, 10)
                     jac.append(blk)
-                    dg[sl][:4] = -2.0 * pr.weight * np.array([4.0, 1.0, 1.0, 1.0])
+                    assert dg is not None
+                    dg[10 * i : 10 * i + 4] = -2.0 * pr.weight * np.array([4.0, 1.0, 1.0, 1.0])
             tdiff = (theta[10 * nb :] - pr.theta0[10 * nb :]) / pr.term_scale
             res.append(sw * tdiff)
-            if jacobian:
+            if Jt is not None:
                 jac.append(sw * Jt[10 * nb :] / pr.term_scale[:, None])
         r = np.concatenate(res)
         if not jacobian:
@@ -749,7 +750,7 @@ def _lm(model: _LogChol, pr: ConsistentProblem, x: np.ndarray, max_iter: int, to
             status = "converged (no further decrease)"
             break
         decrease = F - F_new
-        step = float(np.linalg.norm(x_new - x) / max(np.linalg.norm(x), 1.0))
+        step = float(np.linalg.norm(x_new - x)) / max(float(np.linalg.norm(x)), 1.0)
         x = x_new
         theta, r, g, Jr, dg = model.evaluate(x)
         F = F_new
