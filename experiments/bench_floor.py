@@ -113,6 +113,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=100000)
     parser.add_argument("--build", action="store_true", help="build the native loop if needed")
+    parser.add_argument("--repeat", type=int, default=3, help="alternating runs; best kept")
     parser.add_argument("--json", type=Path, help="write the figures as JSON")
     args = parser.parse_args(argv)
     n = args.samples
@@ -134,19 +135,45 @@ def main(argv: list[str] | None = None) -> int:
             f(model, data, q[k], dq[k], ddq[k])
         return 1e6 * (time.perf_counter() - t0) / n
 
-    reg_py = loop(pin.computeJointTorqueRegressor)
-    rnea_py = loop(pin.rnea)
-    rows.append(("python loop (one call per sample)", reg_py, rnea_py, "the floor"))
+    exe, why = native_binary(args.build)
+    model_file = CACHE / "ur10_model.txt"
+    if exe is not None:
+        model.saveToText(str(model_file))
+    has_batch = hasattr(pin, "rneaInParallel")
+    pool = pin.ModelPool(model, 1) if has_batch else None
+    out = np.empty((model.nv, n), order="F")
+    best: dict[str, float] = {}
+    native_error = ""
 
-    if hasattr(pin, "rneaInParallel"):
-        pool = pin.ModelPool(model, 1)
-        out = np.empty((model.nv, n), order="F")
-        t0 = time.perf_counter()
-        pin.rneaInParallel(1, pool, q.T, dq.T, ddq.T, out)
-        rnea_batch = 1e6 * (time.perf_counter() - t0) / n
+    def keep(key: str, value: float) -> None:
+        best[key] = min(best.get(key, float("inf")), value)
+
+    # the paths alternate, best of --repeat each: a change of the machine's load hits all
+    for _ in range(args.repeat):
+        keep("reg_py", loop(pin.computeJointTorqueRegressor))
+        keep("rnea_py", loop(pin.rnea))
+        if has_batch:
+            t0 = time.perf_counter()
+            pin.rneaInParallel(1, pool, q.T, dq.T, ddq.T, out)
+            keep("rnea_batch", 1e6 * (time.perf_counter() - t0) / n)
+        if exe is not None:
+            res = subprocess.run(
+                [str(exe), str(model_file), str(n)], capture_output=True, text=True
+            )
+            if res.returncode == 0:
+                nat = json.loads(res.stdout)
+                keep("reg_native", nat["regressor_us"])
+                keep("rnea_native", nat["rnea_us"])
+            else:
+                native_error = res.stderr.strip()[-200:]
+    reg_py, rnea_py = best["reg_py"], best["rnea_py"]
+    rows.append(("python loop (one call per sample)", reg_py, rnea_py, "the floor"))
+    if has_batch:
         ref = np.stack([pin.rnea(model, data, q[k], dq[k], ddq[k]) for k in range(min(n, 1000))])
         diff = float(np.abs(out.T[: len(ref)] - ref).max())
-        rows.append(("pinocchio.rneaInParallel (1 thread)", None, rnea_batch, f"max diff {diff:g}"))
+        rows.append(
+            ("pinocchio.rneaInParallel (1 thread)", None, best["rnea_batch"], f"max diff {diff:g}")
+        )
     for mod in ("pinocchio.casadi", "pinocchio.cppadcg"):
         try:
             __import__(mod)
@@ -154,23 +181,17 @@ def main(argv: list[str] | None = None) -> int:
         except ImportError:
             note = "not in the installed wheel"
         rows.append((mod, None, None, note))
-
-    exe, why = native_binary(args.build)
-    if exe is not None:
-        model_file = CACHE / "ur10_model.txt"
-        model.saveToText(str(model_file))
-        res = subprocess.run([str(exe), str(model_file), str(n)], capture_output=True, text=True)
-        if res.returncode == 0:
-            nat = json.loads(res.stdout)
-            rows.append(
-                ("native C++ loop (one call per block)", nat["regressor_us"], nat["rnea_us"], why)
-            )
-        else:
-            rows.append(("native C++ loop", None, None, f"failed: {res.stderr.strip()[-200:]}"))
+    if "reg_native" in best:
+        rows.append(
+            ("native C++ loop (one call per block)", best["reg_native"], best["rnea_native"], why)
+        )
     else:
-        rows.append(("native C++ loop", None, None, why))
+        rows.append(("native C++ loop", None, None, native_error or why))
 
-    print(f"floor, ur10 (nv = {model.nv}), {n:,} random states, pinocchio {pin.__version__}")
+    print(
+        f"floor, ur10 (nv = {model.nv}), {n:,} random states, pinocchio {pin.__version__}, "
+        f"best of {args.repeat} alternating runs"
+    )
     print(
         f"{'path':38s} {'regressor [us]':>15s} {'ratio':>6s} {'rnea [us]':>10s} {'ratio':>6s}  note"
     )
