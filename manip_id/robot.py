@@ -35,6 +35,7 @@ import numpy as np
 import pinocchio as pin
 
 from ._checks import as_float_array, random_generator
+from ._native import native_stderr_captured
 from .errors import InputError, RobotError
 from .parameters import (
     INERTIAL_NAMES,
@@ -367,9 +368,10 @@ class Robot:
             if self.source is None:
                 raise RobotError(f"robot {self.name!r} has no URDF to read geometry from")
             try:
-                geom = pin.buildGeomFromUrdf(
-                    self._full_model, self.source, kind, package_dirs=self.package_dirs
-                )
+                with native_stderr_captured("pinocchio"):  # urdfdom / assimp C++ messages
+                    geom = pin.buildGeomFromUrdf(
+                        self._full_model, self.source, kind, package_dirs=self.package_dirs
+                    )
             except Exception as exc:  # Pinocchio raises plain RuntimeError / ValueError
                 raise RobotError(f"cannot load the geometry of {self.source}: {exc}") from exc
         if self._locked_ids:
@@ -434,7 +436,7 @@ def _load_urdf(path: Path) -> pin.Model:
     if not path.is_file():
         raise RobotError(f"cannot read URDF {path}: no such file")
     try:
-        with warnings.catch_warnings():
+        with native_stderr_captured("urdfdom"), warnings.catch_warnings():
             warnings.simplefilter("ignore")
             return pin.buildModelFromUrdf(str(path))
     except Exception as exc:
@@ -640,7 +642,7 @@ def _load_erd(name: str):
     try:
         model_dir = cls.model_path or getModelPath(relative)
         source = os.path.join(model_dir, relative)
-        with warnings.catch_warnings():
+        with native_stderr_captured("urdfdom"), warnings.catch_warnings():
             warnings.simplefilter("ignore")
             model = pin.buildModelFromUrdf(source)
             if cls.srdf_filename:

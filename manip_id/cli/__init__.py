@@ -27,13 +27,11 @@ command started are stopped. Warnings (NumPy, SciPy, ours) are printed once each
 from __future__ import annotations
 
 import argparse
-import contextlib
 import importlib
 import os
 import pkgutil
 import signal
 import sys
-import tempfile
 import traceback
 import warnings
 
@@ -126,38 +124,7 @@ def warn(message: str) -> None:
 
 
 # ------------------------------------------------------- native stderr (fd 2)
-@contextlib.contextmanager
-def native_stderr_captured(source: str = ""):
-    """Capture what C/C++ code writes to file descriptor 2 (urdfdom, assimp) meanwhile.
-
-    On leaving normally, each captured line becomes one ``manip-id: warning: <source>:
-    ...`` (duplicates once); when the block raises, the captured text is dropped (our
-    own error message says what went wrong). Python's ``sys.stderr`` is untouched.
-    """
-    try:
-        sys.stderr.flush()
-        saved = os.dup(2)
-    except (OSError, ValueError, AttributeError):  # no real fd 2 (embedded use)
-        yield
-        return
-    captured = tempfile.TemporaryFile()
-    ok = False
-    try:
-        os.dup2(captured.fileno(), 2)
-        try:
-            yield
-            ok = True
-        finally:
-            os.dup2(saved, 2)
-    finally:
-        os.close(saved)
-        captured.seek(0)
-        text = captured.read().decode("utf-8", "replace")
-        captured.close()
-    if ok and text.strip():
-        lines = [" ".join(line.split()) for line in text.splitlines() if line.strip()]
-        prefix = f"{source}: " if source else ""
-        warn(prefix + "; ".join(dict.fromkeys(lines)))
+from .._native import native_stderr_captured  # noqa: E402, F401 (re-exported for commands)
 
 
 # ---------------------------------------------------------- child processes
