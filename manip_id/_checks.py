@@ -83,6 +83,14 @@ def random_generator(seed, name: str = "seed") -> np.random.Generator:
     return np.random.default_rng(value)
 
 
+def memory_budget(share: float = 0.5, cap: int | None = None) -> int:
+    """``share`` of the memory available now [bytes] (at most ``cap``): what one job may take."""
+    import psutil
+
+    budget = int(share * psutil.virtual_memory().available)
+    return budget if cap is None else min(budget, int(cap))
+
+
 #: Sane magnitudes of measured fields: name -> (unit, largest |value|). Beyond them a
 #: value is a unit or scaling mistake (or garbage), not a measurement.
 MEASURED_LIMITS: dict[str, tuple[str, float]] = {

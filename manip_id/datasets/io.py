@@ -13,13 +13,14 @@ import os
 from collections.abc import Mapping
 from pathlib import Path
 
+from .._checks import memory_budget
 from .._io import atomic_write
 from ..errors import DataError
 from .core import Dataset
 from .layout import Layout
 from .stream import FORMATS, MemorySource, infer_format
 
-#: Default memory budget of a whole-file NPZ read [bytes].
+#: Largest memory budget of a whole-file NPZ read [bytes] (also at most half the free memory).
 MEMORY_BUDGET = 8 * 2**30
 
 
@@ -69,7 +70,7 @@ def load_dataset(
     if fmt == "npz":
         from .npz import load_npz
 
-        return load_npz(path, MEMORY_BUDGET)
+        return load_npz(path, memory_budget(cap=MEMORY_BUDGET))  # and half the free memory
     if fmt == "csv":
         from .csv import load_csv
 
