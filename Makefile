@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 export OPENBLAS_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
 
-.PHONY: demo test lint format system-deps bench clean
+.PHONY: demo test lint format system-deps bench clean docs
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -45,6 +45,11 @@ lint: $(STAMP)
 format: $(STAMP)
 	$(VENV)/bin/ruff format manip_id tests experiments
 	$(VENV)/bin/ruff check --fix manip_id tests experiments
+
+# The documentation (Sphinx, numpydoc, MyST): API reference and worked examples.
+docs: $(STAMP)
+	$(PY) -m pip install --quiet -e '.[docs]'
+	$(PY) -m sphinx -b html docs docs/_build/html
 
 # Benchmarks of the README's Performance section (minutes; prints tables).
 bench: $(STAMP)

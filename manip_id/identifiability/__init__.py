@@ -2,7 +2,7 @@
 
 Start with :func:`analyze`: ``analyze(robot)`` tells what no data of the robot
 can identify (structural), ``analyze(Y, robot=robot)`` or ``analyze(dataset,
-robot=robot)`` what these data excite. The members of the package:
+robot=robot)`` what these data excite. The members of the package::
 
     results.py      BaseParameters, RankAnalysis (and its text report)
     accumulator.py  RFactorAccumulator: the (p, p) factor R streamed over chunks
