@@ -152,3 +152,13 @@ def test_cli_consistent_export_and_bad_input(tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and message in err[0], err
     assert main([*base, "--consistent", "--export-urdf", str(out), "--force"]) == 0
+
+
+def test_report_draws_the_consistent_ellipsoids_beside_the_nominal_ones(tmp_path, capsys):
+    rep = tmp_path / "rep"
+    argv = ["identify", "ur5", "--friction", "viscous,coulomb", "--simulate", "--duration", "4"]
+    assert main([*argv, "--rate", "100", "--consistent", "--report", str(rep)]) == 0
+    capsys.readouterr()
+    scene = (rep / "scene.html").read_text()
+    assert "nominal: 6 of 6 bodies" in scene
+    assert "identified (consistent): 6 of 6 bodies" in scene

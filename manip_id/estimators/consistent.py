@@ -321,10 +321,9 @@ def solve_consistent(
     else:
         theta, status, iters = _solve_logchol(problem, **options)
     elapsed = time.perf_counter() - t0
-    if problem.nonnegative.size:  # interior-point round-off: project -1e-12 onto 0
-        k = problem.nonnegative
-        tiny = theta[k] < 0
-        theta[k[tiny]] = 0.0
+    theta, moved = _project(problem, theta)
+    if moved > 0:
+        status += f"; projected onto the margins (largest change {moved:.2g})"
     consistency = check_consistency(robot, theta)
     return ConsistentSolution(
         theta=theta,
@@ -341,6 +340,31 @@ def solve_consistent(
 
 
 # --------------------------------------------------------------------- SDP
+def _project(pr: ConsistentProblem, theta: np.ndarray) -> tuple[np.ndarray, float]:
+    """Project an interior-point result onto the constraints it misses by round-off.
+
+    Each body whose ``J_i`` has an eigenvalue below ``eps_i`` gets those eigenvalues
+    raised to ``eps_i`` (the nearest matrix with ``J >= eps 1`` in the Frobenius norm);
+    negative ``Ia, fv, fc`` become 0. Returns the vector and the largest change of a
+    parameter; the result is still checked independently afterwards.
+    """
+    from ..consistency import parameters_from_pseudo_inertia
+
+    theta = theta.copy()
+    before = theta.copy()
+    nb = pr.n_bodies
+    J = pseudo_inertia(theta[: 10 * nb].reshape(nb, 10))
+    for i in range(nb):
+        lam, V = np.linalg.eigh(J[i])
+        if lam[0] < pr.margin[i]:
+            Jc = (V * np.maximum(lam, pr.margin[i])) @ V.T
+            theta[10 * i : 10 * i + 10] = parameters_from_pseudo_inertia(Jc)
+    k = pr.nonnegative
+    if k.size:
+        theta[k] = np.maximum(theta[k], 0.0)
+    return theta, float(np.abs(theta - before).max())
+
+
 def _solve_sdp(problem: ConsistentProblem, *, tolerance: float = 1e-8, max_iter: int = 500):
     import cvxpy as cp
 
