@@ -110,6 +110,7 @@ def main(argv: list[str] | None = None) -> int:
             )
         ]
         theirs = None
+        phases = {"manip_id": rep["timings"]}
         if fig_exe is None:
             print(f"FIGAROH skipped: {fig_version} (see this script's docstring)")
         else:
@@ -123,6 +124,7 @@ def main(argv: list[str] | None = None) -> int:
                 theirs = None
             else:
                 frep = json.loads(fig_json.read_text())
+                phases["FIGAROH"] = frep["timings"]
                 rows.append(
                     (f"FIGAROH {fig_version}", theirs, frep["n_base"], frep["relative_error"])
                 )
@@ -130,7 +132,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'tool':32s} {'time [s]':>9s} {'peak [MiB]':>11s} {'base':>5s} {'rel. error':>11s}")
     for name, r, n_base, rel in rows:
         print(f"{name:32s} {r.seconds:9.2f} {r.peak_mib:11.1f} {n_base:5d} {100 * rel:10.3f}%")
-    out = {"machine": machine(), "samples": n, "manip_id": ours.__dict__}
+    for tool, tm in phases.items():  # each process's own account of its time [s]
+        print(f"  {tool} phases: " + ", ".join(f"{k} {v:.2f}" for k, v in tm.items()))
+    out = {"machine": machine(), "samples": n, "manip_id": ours.__dict__, "phases": phases}
     if theirs is not None:
         t_ratio, m_ratio = theirs.seconds / ours.seconds, theirs.peak_mib / ours.peak_mib
         ok_t = "ok" if t_ratio >= TARGET_TIME else "MISSED"
