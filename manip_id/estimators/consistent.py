@@ -17,38 +17,45 @@ with ``beta_ls`` the least-squares solution. Measured in standard deviations of
                                  + sum_t ((theta_t - theta0_t) / s_t)^2 ]
     subject to  J_i(theta) - eps_i 1 >= 0  (each body i),   Ia, fv, fc >= 0
 
-where ``J_i`` is body i's pseudo-inertia (:mod:`manip_id.consistency`),
-``D(J || J0) = tr(J0^-1 J) - log det(J0^-1 J) - 4`` the log-det (Bregman)
-divergence to the prior's pseudo-inertia (Lee, Wensing & Park 2019): zero at
-``J = J0``, invariant to the body frame and to units; taken on the part of each
-pseudo-inertia above its margin, so that it is also the barrier of the margin),
-``s_t = sqrt(zz / H_tt)``
-the scale of joint term ``t`` (the value that alone would explain all the
-torque, ``H = P^T A P``: in parameter units, whatever the noise level), and
-``w`` the prior weight (``prior="none"``: ``w = 0``, feasibility alone). The
-margin is ``eps_i = min(MARGIN lambda_max(J0_i), lambda_min(J0_i) / 2)`` for a physical prior
-(``MARGIN lambda_max`` of ``|J0_i|`` without one; the SDP then also asks
-``J_i >= MARGIN tr(J_i) 1``, a margin relative to the body's own size, since
-without a prior nothing bounds the unidentifiable directions: the interior-point
-method returns a point inside the optimal set, whose standard parameters may be
-large). With a small
-``w`` the prior only picks, among the standard vectors that fit equally well
-(the null space of ``Y_b P``), the one closest to the prior, and moves the fit by
-a fraction of a standard deviation.
+where ``J_i`` is body i's pseudo-inertia (:mod:`manip_id.consistency`) and
 
-Two solvers (:data:`SOLVERS`):
+- ``D(J || J0) = tr(J0^-1 J) - log det(J0^-1 J) - 4`` is the log-det (Bregman)
+  divergence (Lee, Wensing & Park 2019): zero at ``J = J0``, invariant to the body
+  frame and to units. It is taken on the part of each pseudo-inertia above its
+  margin, so that it is also the barrier of the margin;
+- ``eps_i = min(MARGIN lambda_max(J0_i), lambda_min(J0_i) / 2)`` is the margin of
+  body i (``MARGIN lambda_max(|J0_i|)`` without a prior);
+- ``s_t = sqrt(zz / H_tt)``, ``H = P^T A P``, is the scale of joint term ``t``: the
+  value that alone would explain all the torque (parameter units, whatever the
+  noise level);
+- ``w`` is the prior weight. With a small ``w`` the prior only picks, among the
+  standard vectors that fit equally well (the null space of ``Y_b P``), the one
+  closest to the prior, and moves a physical fit by a fraction of a standard
+  deviation. ``prior="none"``: ``w = 0``, feasibility alone; the SDP then also asks
+  ``J_i >= MARGIN tr(J_i) 1`` (a margin relative to the body's own size), and
+  nothing bounds the unidentifiable directions: the interior-point method returns a
+  point inside the optimal set, whose standard parameters may be large.
+
+Two solvers (:data:`SOLVERS`) return the same minimizer within their tolerances
+(the problem is convex in ``theta``; the log-Cholesky map is a smooth bijection
+onto the interior of the cone):
 
 - ``"sdp"``: the convex problem above (log-det, PSD cones, a quadratic) with cvxpy
-  and Clarabel.
+  and Clarabel, in the variables ``theta = G (beta_ls + W^+ u) + N z`` (``G`` onto
+  the independent columns, ``N`` the null space) so that the fit is ``||u||^2``
+  exactly and a nearly noise-free fit stays well conditioned. A stalled solve is
+  retried with the objective scaled (:data:`OBJECTIVE_SCALES`); eigenvalues an
+  interior-point result misses by round-off are raised onto the margin.
 - ``"logchol"``: each ``J_i - eps_i 1 = U U^T`` in Pinocchio's log-Cholesky
   parameters (``U = e^alpha [[e^d1, s12, s13, t1], [0, e^d2, s23, t2],
   [0, 0, e^d3, t3], [0, 0, 0, 1]]``, Rucker & Wensing 2022), the non-negative joint
-  terms as squares: unconstrained, solved by Levenberg-Marquardt on
-  ``f + w * prior`` (Jacobians from ``pinocchio.LogCholeskyParameters.calculateJacobian``).
-  No SDP solver; cost linear in the number of bodies per Jacobian.
-
-Both return the same minimizer within their tolerances (the problem is convex in
-``theta``; the log-Cholesky map is a smooth bijection onto its interior).
+  terms as squares: unconstrained, so no SDP solver. In these parameters
+  ``-log det(U U^T)`` is linear and ``tr(J0^-1 U U^T)`` a sum of squares, so the
+  objective is ``||r(x)||^2 + g^T x``; Levenberg-Marquardt on it, with Jacobians from
+  ``pinocchio.LogCholeskyParameters.calculateJacobian``, Newton's curvature of the
+  residuals (clipped to its positive part; large on real data whose fit residual
+  is large), a second-order correction that keeps steps on the stiff fit, and QR
+  solves (no normal equations). Cost per iteration: O(p^3) for p parameters.
 """
 
 from __future__ import annotations
@@ -80,7 +87,6 @@ MARGIN = 1e-6
 #: Relative floor of the residual variance used to measure the fit, ``(FLOOR * rms tau)^2``:
 #: the round-off level of a residual computed from the sums.
 VARIANCE_FLOOR = 1e-8
-_VERBOSE = False
 #: Objective scales the SDP is tried with, in turn, until Clarabel reports "optimal".
 OBJECTIVE_SCALES: tuple[float, ...] = (1.0, 1e2, 1e4, 1e-2)
 
@@ -214,14 +220,27 @@ def build_problem(
     n_rows: int | None = None,
     zz: float | None = None,
 ) -> ConsistentProblem:
-    """The consistent problem from the base-column information ``A`` (r, r), ``b`` (r,).
+    """The consistent problem of ``robot`` from the information of its base regressor.
 
-    ``variance`` is the residual variance ``s`` that turns ``A`` into ``C^-1 = A / s``
-    (1 for weighted least squares whose weights are inverse variances); it is
-    floored at ``(VARIANCE_FLOOR)^2 zz / n_rows`` when ``zz`` and ``n_rows`` are
-    given. ``prior_parameters`` (p,) replaces the robot's nominal parameters as
-    the prior. Raises :class:`PhysicalConsistencyError` naming the body when the
-    prior itself is not physical.
+    Parameters
+    ----------
+    robot: the robot (its parameter layout and nominal parameters).
+    base: :class:`~manip_id.identifiability.BaseParameters` of the accumulated columns.
+    A: ``Y_b^T W Y_b``, shape (r, r) [(N m)^2 / units of beta^2]; may be singular
+        (directions the data do not excite are then left to the prior).
+    b: ``Y_b^T W tau``, shape (r,).
+    variance: the residual variance ``s`` with ``C^-1 = A / s`` (1 for weighted least
+        squares whose weights are inverse variances) [(N m)^2]; floored at
+        ``VARIANCE_FLOOR^2 zz / n_rows`` when ``zz`` and ``n_rows`` are given.
+    prior: "nominal" or "none"; prior_weight: ``w`` >= 0.
+    prior_parameters: standard parameters (p,) to use as the prior instead of the
+        robot's nominal ones.
+    n_rows: number of stacked equations; zz: ``tau^T W tau`` [(N m)^2].
+
+    Raises
+    ------
+    InputError: unknown prior, bad weight or shapes.
+    PhysicalConsistencyError: the prior itself is not physical (names the body).
     """
     if prior not in PRIORS:
         raise InputError(f"prior must be one of {list(PRIORS)}, got {prior!r}")
@@ -431,7 +450,7 @@ def _solve_sdp(problem: ConsistentProblem, *, tolerance: float = 1e-8, max_iter:
         try:
             with warnings.catch_warnings():  # "solution may be inaccurate": in the status
                 warnings.simplefilter("ignore")
-                prob.solve(solver=cp.CLARABEL, verbose=_VERBOSE, **opts)
+                prob.solve(solver=cp.CLARABEL, **opts)
         except cp.error.SolverError:
             statuses.append(f"scale {scale:g}: solver error")
             continue
