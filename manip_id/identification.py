@@ -58,6 +58,11 @@ class RelativeError:
     validation_per_joint: np.ndarray | None = None
     #: per validation file ``{"file", "n_samples", "error", "per_joint"}`` when known
     validation_per_file: list[dict] | None = None
+    #: the same errors of the nominal (URDF) model, ``Y_b theta_b_nominal``, when known
+    nominal_train: float | None = None
+    nominal_train_per_joint: np.ndarray | None = None
+    nominal_validation: float | None = None
+    nominal_validation_per_joint: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -128,16 +133,24 @@ class IdentificationResult:
     model: str = "dynamic"
     output_names: list[str] = field(default_factory=list)
     files: dict | None = None
+    units: list[str] = field(default_factory=list)
+    nominal: np.ndarray | None = None
+    convergence: dict | None = None
+    context: dict = field(default_factory=dict)
 
     @property
     def standard_parameters(self) -> list[dict]:
         """``[{"name", "value", "unit", "nominal"}]`` per standard parameter (see ``standard``)."""
-        return [] if self.standard is None else self.standard.to_dict()["standard_parameters"]
+        if self.standard is None:
+            return list(self.context.get("standard_parameters", []))
+        return self.standard.to_dict()["standard_parameters"]
 
     @property
     def physically_consistent(self) -> bool | None:
         """The independent eigenvalue test of the standard parameters (None without them)."""
-        return None if self.standard is None else self.standard.physically_consistent
+        if self.standard is None:
+            return self.context.get("physically_consistent")
+        return self.standard.physically_consistent
 
     def predict(self, robot: Robot, q, dq, ddq, *, chunk: int = DEFAULT_CHUNK) -> np.ndarray:
         """Predicted torques ``Y_b(q, dq, ddq) theta_b``, shape (N, nv) [N m or N].
@@ -158,61 +171,30 @@ class IdentificationResult:
             out[c.start : c.stop] = c.Y[:, :, ind] @ self.estimate
         return out if batched else out[0]
 
-    def to_dict(self) -> dict:
-        """A JSON-ready dictionary (lists and floats; inf/NaN as None)."""
-        re = self.relative_error
-        return {
-            "method": self.method,
-            "model": self.model,
-            "robot": self.robot_name,
-            "n_samples": self.n_samples,
-            "n_base": len(self.names),
-            "parameters": [
-                {"name": n, "expression": e, "estimate": _f(x), "std": _f(s), "std_percent": _f(sp)}
-                for n, e, x, s, sp in zip(
-                    self.names,
-                    self.expressions,
-                    self.estimate,
-                    self.std,
-                    self.std_percent,
-                    strict=True,
-                )
-            ],
-            "sigma2": _f(self.sigma2),
-            "noise_variance": dict(
-                zip(self.output_names or self.dof_names, map(_f, self.noise_variance), strict=True)
-            ),
-            "condition_number": _f(self.condition_number),
-            "rank": self.rank_analysis.rank,
-            "unexcited": list(self.rank_analysis.unidentifiable),
-            "relative_error": {
-                "train": _f(re.train),
-                "train_per_joint": dict(
-                    zip(
-                        self.output_names or self.dof_names,
-                        map(_f, re.train_per_joint),
-                        strict=True,
-                    )
-                ),
-                "validation": _f(re.validation),
-                "validation_per_joint": (
-                    None
-                    if re.validation_per_joint is None
-                    else dict(zip(self.dof_names, map(_f, re.validation_per_joint), strict=True))
-                ),
-                **(
-                    {}
-                    if re.validation_per_file is None
-                    else {"validation_per_file": re.validation_per_file}
-                ),
-            },
-            "covariance": [[_f(v) for v in row] for row in self.covariance],
-            "timings": {k: round(v, 6) for k, v in self.timings.items()},
-            "solver": self.solver,
-            **({} if self.per_file is None else {"per_file": [f.to_dict() for f in self.per_file]}),
-            **({} if self.standard is None else self.standard.to_dict()),
-            "warnings": list(self.warnings),
-        }
+    def to_dict(
+        self,
+        *,
+        poorly_identified: float | None = None,
+        condition_limit: float | None = None,
+        convergence_limit: float | None = None,
+    ) -> dict:
+        """The one JSON schema of a result (CLI ``--json``, a report's result.json,
+        :func:`manip_id.results.load_result`); see :mod:`manip_id.results`.
+
+        poorly_identified: std above this [%] flags a base parameter "poorly identified"
+        (default 10); condition_limit: a condition number above it is a warning (default
+        100); convergence_limit: an online estimate whose prediction moved by more than
+        this fraction of the torque over the last 10 % of the data is "not converged"
+        (default 0.01).
+        """
+        from .results import result_to_dict
+
+        return result_to_dict(
+            self,
+            poorly_identified=poorly_identified,
+            condition_limit=condition_limit,
+            convergence_limit=convergence_limit,
+        )
 
     def table(self, max_rows: int | None = None) -> str:
         """A readable text table: one row per base parameter, then the fit statistics."""
@@ -434,18 +416,29 @@ def _array_part(start: int, stop: int):
     yield q[start:stop], dq[start:stop], ddq[start:stop], tau[start:stop]
 
 
-def _validation_error(robot: Robot, blocks, ind, estimate, chunk: int):
+def _validation_error(robot: Robot, blocks, ind, estimate, chunk: int, nominal=None):
+    """Relative torque error of ``estimate`` (and of ``nominal``, same pass) on ``blocks``:
+    ``(error, per_joint)``, or with ``nominal`` ``((error, per_joint), (error, per_joint))``."""
     ev = robot.evaluator
-    sse, zz = np.zeros(robot.nv), np.zeros(robot.nv)
+    thetas = [estimate] if nominal is None else [estimate, nominal]
+    sse = [np.zeros(robot.nv) for _ in thetas]
+    zz = np.zeros(robot.nv)
     for block in blocks:
         vq, vdq, vddq, vtau = _states(robot, *block, prefix="validation ")
         for c in ev.iter_regressor(vq, vdq, vddq, chunk):
-            err = c.Y[:, :, ind] @ estimate - vtau[c.start : c.stop]
-            sse += np.einsum("nj,nj->j", err, err)
+            Yb = c.Y[:, :, ind]
+            for k, theta in enumerate(thetas):
+                err = Yb @ theta - vtau[c.start : c.stop]  # [N m]
+                sse[k] += np.einsum("nj,nj->j", err, err)
             zz += np.einsum("nj,nj->j", vtau[c.start : c.stop], vtau[c.start : c.stop])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        per_joint = np.sqrt(sse / zz)
-    return (float(np.sqrt(sse.sum() / zz.sum())) if zz.sum() > 0 else float("nan")), per_joint
+    out = []
+    for s in sse:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            per_joint = np.sqrt(s / zz)
+        out.append(
+            ((float(np.sqrt(s.sum() / zz.sum())) if zz.sum() > 0 else float("nan")), per_joint)
+        )
+    return out[0] if nominal is None else tuple(out)
 
 
 def identify(
@@ -550,7 +543,9 @@ def identify(
     solver_online = ""
     t0 = time.perf_counter()
     if method in ("rls", "gradient"):
-        est, solver_online = _online_estimator(method, r, online or {})
+        opts = dict(online or {})
+        opts.setdefault("record_every", max(1, n // 1000))  # the convergence check's record
+        est, solver_online = _online_estimator(method, r, opts)
         acc = InformationAccumulator(r, nv)
         t_reg = t_acc = t_onl = 0.0
         for c in iter_regressor(robot, q, dq, ddq, chunk=int(chunk)):
@@ -833,11 +828,35 @@ def _finish(
         train_j = np.sqrt(rss_j / zz_j)
     train = float(np.sqrt(rss_j.sum() / zz_j.sum())) if zz_j.sum() > 0 else float("nan")
 
-    val = val_j = None
+    # the nominal (URDF) model's errors on the same data, from the same sums
+    nominal_b = np.asarray(base.to_base(robot.nominal_parameters), dtype=float)
+    rss_nom = acc.residual_sum_of_squares(nominal_b)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        nom_j = np.sqrt(rss_nom / zz_j)
+    nom = float(np.sqrt(rss_nom.sum() / zz_j.sum())) if zz_j.sum() > 0 else float("nan")
+    val = val_j = nval = nval_j = None
     if validation is not None:
         t0 = time.perf_counter()
-        val, val_j = _validation_error(robot, validation, base.independent, estimate, chunk)
+        (val, val_j), (nval, nval_j) = _validation_error(
+            robot, validation, base.independent, estimate, chunk, nominal=nominal_b
+        )
         timings["validation"] = time.perf_counter() - t0
+    convergence = None
+    if est is not None and est.record_every and zz_j.sum() > 0:
+        h = est.history
+        steps = np.arange(len(h.t)) * est.record_every  # samples seen at each record
+        k = int(np.searchsorted(steps, 0.9 * n))
+        k = min(k, len(h.t) - 1)
+        delta = estimate - h.theta[k]  # change over the last 10 % of the samples
+        moved = float(np.sqrt(max(delta @ acc.A @ delta, 0.0) / zz_j.sum()))
+        convergence = {
+            "window": 0.1,
+            "from_sample": int(steps[k]),
+            "prediction_change": moved,
+            "parameter_change": float(
+                np.linalg.norm(delta) / max(float(np.linalg.norm(estimate)), 1e-300)
+            ),
+        }
     timings["total"] = time.perf_counter() - t_start
 
     std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
@@ -857,7 +876,16 @@ def _finish(
         noise_variance=noise_var,
         condition_number=float(ra.condition_number),
         rank_analysis=ra,
-        relative_error=RelativeError(train, train_j, val, val_j),
+        relative_error=RelativeError(
+            train,
+            train_j,
+            val,
+            val_j,
+            nominal_train=nom,
+            nominal_train_per_joint=nom_j,
+            nominal_validation=nval,
+            nominal_validation_per_joint=nval_j,
+        ),
         n_samples=n,
         timings=timings,
         solver=solver,
@@ -866,6 +894,9 @@ def _finish(
         history=est.history if est is not None and est.record_every else None,
         standard=standard,
         warnings=warnings_,
+        units=[robot.parameter_units[i] for i in base.independent],
+        nominal=nominal_b,
+        convergence=convergence,
     )
 
 
@@ -936,6 +967,7 @@ def identify_datasets(
     method: "ols" or "wls"; consistent, solver, prior, prior_weight: as :func:`identify`
     workers: several files are accumulated in up to ``workers`` forked processes
     scans: FileSpec -> :class:`~manip_id.pipeline.FileScan` of files already scanned
+    progress: called as ``progress(done, total)`` [samples of the training files]
     scheduler: a Dask scheduler spec or client: each file is one task on the cluster
         and the sums are added there (:func:`manip_id.fleet.identify_files`; ``files``
         then holds :class:`~manip_id.fleet.FileInfo`, the accumulations without sums)
@@ -1011,8 +1043,17 @@ def identify_datasets(
     if valid is not None:
         t0 = time.perf_counter()
         v = validation_errors(valid, result.estimate, list(robot.dof_names))
-        re = RelativeError(
-            re.train, re.train_per_joint, v["error"], v["per_joint"], v["per_file"]
+        vn = validation_errors(valid, result.nominal, list(robot.dof_names))
+        for entry, nominal_entry in zip(v["per_file"], vn["per_file"], strict=True):
+            entry["nominal_error"] = nominal_entry["error"]
+            entry["nominal_per_joint"] = nominal_entry["per_joint"]
+        re = replace(
+            re,
+            validation=v["error"],
+            validation_per_joint=v["per_joint"],
+            validation_per_file=v["per_file"],
+            nominal_validation=vn["error"],
+            nominal_validation_per_joint=vn["per_joint"],
         )
         timings["validation"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_start

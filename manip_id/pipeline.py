@@ -530,8 +530,10 @@ def accumulate_files(
     accumulated in up to ``workers`` forked processes (one file per task); with
     one file, each process accumulates one contiguous part of its preprocessed
     samples (``part=``), the parts merged by addition.
-    ``progress(k, n_files)`` is called after each file. Every file is checked
-    against ``robot``: a file of another robot (other joints) fails naming it.
+    Every file is scanned (checked against ``robot``, its quality summary made)
+    before any is accumulated, so a bad file fails first, naming it (a file of
+    another robot, other joints, NaN rows, a window outside it). ``progress(done,
+    total)`` is called as samples go by (total: the rows the scans counted).
     ``scans``: :class:`FileSpec` -> :class:`FileScan` of files already scanned.
     """
     scans = dict(scans or {})
@@ -546,6 +548,10 @@ def accumulate_files(
 
         base_columns = analyze(robot).base.independent
     ind = np.asarray(base_columns, dtype=np.intp)
+    for spec in specs:
+        if spec not in scans:
+            scans[spec] = scan_file(robot, spec, options)
+    total = sum(scans[s].n for s in specs)
     if int(workers) > 1 and len(specs) == 1:  # one file: its samples in parts
         import multiprocessing as mp
 
@@ -566,7 +572,7 @@ def accumulate_files(
             for key, v in other.timings.items():
                 first.timings[key] = first.timings.get(key, 0.0) + v
         if progress is not None:
-            progress(1, 1)
+            progress(total, total)
         return [first]
     if int(workers) > 1 and len(specs) > 1:
         import multiprocessing as mp
@@ -578,15 +584,29 @@ def accumulate_files(
                 for k, fa in enumerate(pool.imap(_job_file, range(len(specs)))):
                     out.append(fa)
                     if progress is not None:
-                        progress(k + 1, len(specs))
+                        progress(sum(scans[s].n for s in specs[: k + 1]), total)
                 return out
         finally:
             _JOB.pop("job", None)
-    out = []
-    for k, spec in enumerate(specs):
-        out.append(accumulate_file(robot, spec, options, ind, chunk=chunk, scan=scans.get(spec)))
-        if progress is not None:
-            progress(k + 1, len(specs))
+    out: list[FileAccumulation] = []
+    done = 0
+    last = [0]
+
+    def report_samples(n: int, before: int) -> None:
+        last[0] = min(before + n, total)
+        if last[0] < total:  # the end is reported once, below
+            progress(last[0], total)
+
+    for spec in specs:
+        report = None if progress is None else (lambda n, d=done: report_samples(n, d))
+        out.append(
+            accumulate_file(
+                robot, spec, options, ind, chunk=chunk, scan=scans[spec], progress=report
+            )
+        )
+        done += scans[spec].n
+    if progress is not None:
+        progress(total, total)
     return out
 
 

@@ -231,7 +231,6 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
         settings = train.settings
         n_valid = None if valid is None else valid.n_samples
     else:
-        total = len(specs)
         result = identify_datasets(
             robot,
             specs,
@@ -241,7 +240,7 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
             chunk=args.chunk,
             workers=args.workers,
             scans=scans,
-            progress=cmd._progress(0) if total > 1 else None,
+            progress=cmd._progress(sum(scans[s].n for s in specs)),
             **cmd._consistent_kwargs(args),
         )
         files = result.files or {}
@@ -251,7 +250,7 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
     timings.update({k: float(v) for k, v in dict(result.timings).items() if k != "scan"})
     timings["total"] = time.perf_counter() - t_start
     valid_count = None if n_valid is None else SimpleNamespace(n_samples=n_valid)
-    report = cmd._report(
+    report = cmd._result_document(
         robot,
         result,
         SimpleNamespace(n_samples=result.n_samples),
