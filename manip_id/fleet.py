@@ -69,6 +69,14 @@ SPLIT_EVERY = 8
 FLEET_METHODS: tuple[str, ...] = ("ols", "wls")
 #: Worker processes of ``scheduler="local"``.
 DEFAULT_LOCAL_WORKERS = 2
+#: Environment of the LocalCluster's workers: one BLAS thread (the tasks' matrices are
+#: small), and no statistical profiler (it samples the task thread's Python stack every
+#: 10 ms, which slowed the regressor loop by about 20 % in ``experiments/bench_fleet.py``).
+WORKER_ENV = {
+    "OPENBLAS_NUM_THREADS": "1",
+    "OMP_NUM_THREADS": "1",
+    "DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED": "False",
+}
 
 
 # ------------------------------------------------------------------ the parts
@@ -208,8 +216,8 @@ class FileEstimate:
         d = res.to_dict()
         out.update(
             parameters=[
-                {k: p[k] for k in ("name", "estimate", "std", "std_percent")}
-                for p in d["parameters"]
+                {k: p[k] for k in ("name", "value", "std", "std_percent")}
+                for p in d["base_parameters"]
             ],
             sigma2=d["sigma2"],
             noise_variance=d["noise_variance"],
@@ -557,7 +565,7 @@ def _connect(spec: str):
                 processes=True,
                 host="127.0.0.1",
                 scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
-                env={"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"},
+                env=WORKER_ENV,
             )
             try:
                 return Client(cluster), cluster

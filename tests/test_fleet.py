@@ -546,7 +546,7 @@ def test_cli_per_file_validation_and_report(robot, fleet, tmp_path, capsys):
     for entry, data in zip(rep["per_file"], arrays[:2], strict=True):
         assert entry["n_tasks"] == 4 and entry["n_samples"] == N_SAMPLES
         own = identify(robot, *data, base=pooled.base)
-        _close([p["estimate"] for p in entry["parameters"]], own.estimate)
+        _close([p["value"] for p in entry["parameters"]], own.estimate)
     assert rep["relative_error"]["validation"] == pytest.approx(
         pooled.relative_error.validation, rel=1e-6
     )

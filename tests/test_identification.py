@@ -72,9 +72,9 @@ def test_result_is_reported(noise_free):
     robot, _, data, val = noise_free
     res = identify(robot, *data, validation=val)
     d = json.loads(json.dumps(res.to_dict()))
-    assert d["n_base"] == res.base.n_base == len(d["parameters"])
-    assert d["parameters"][0]["expression"] == res.expressions[0]
-    assert set(d["relative_error"]["validation_per_joint"]) == set(robot.dof_names)
+    assert d["n_base"] == res.base.n_base == len(d["base_parameters"])
+    assert d["base_parameters"][0]["expression"] == res.expressions[0]
+    assert len(d["relative_error"]["per_joint_validation"]) == robot.nv == len(d["joints"])
     text = res.table(max_rows=3)
     assert res.names[0] in text and f"... {res.base.n_base - 3} more" in text
 

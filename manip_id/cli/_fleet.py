@@ -129,7 +129,7 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     source = {"data": [s.label for s in specs], "scheduler": args.scheduler or "this process"}
     if vspecs is not None:
         source["validate"] = [s.label for s in vspecs]
-    report = cmd._report(
+    report = cmd._result_document(
         robot,
         result,
         SimpleNamespace(n_samples=result.n_samples),

@@ -356,6 +356,7 @@ def _simulation_stream(robot, args):
         traj = getattr(traj, "trajectory", traj)
     else:
         traj = random_trajectory(robot, seed=opts["seed"], **design)
+    opts["period"] = float(traj.period)  # [s] the excitation repeats after it
     stream = SimulationStream(
         robot,
         traj,
@@ -430,7 +431,7 @@ def _run_stream(robot, args, outputs, timings: dict, t_start: float) -> int:
     timings["total"] = time.perf_counter() - t_start
     valid = SimpleNamespace(n_samples=n - k) if k < n else None
     theta_true = np.asarray(stream.theta_true, dtype=float)
-    report = _report(
+    report = _result_document(
         robot, result, SimpleNamespace(n_samples=k), valid, theta_true, timings, args, source, None
     )
     print(result.table())
@@ -519,7 +520,9 @@ def run(args: argparse.Namespace) -> int:
     timings.update({k: float(v) for k, v in dict(result.timings).items()})
     timings["total"] = time.perf_counter() - t_start
 
-    report = _report(robot, result, train, valid, theta_true, timings, args, source, settings)
+    report = _result_document(
+        robot, result, train, valid, theta_true, timings, args, source, settings
+    )
     print(result.table())
     print(_summary(robot, report))
     if args.json:
@@ -616,7 +619,9 @@ def _run_acceleration_free(args, outputs, t_start: float) -> int:
     timings.update({k: float(v) for k, v in dict(result.timings).items()})
     timings["total"] = time.perf_counter() - t_start
     settings = train.meta.get("preprocess")
-    report = _report(robot, result, train, valid, theta_true, timings, args, source, settings)
+    report = _result_document(
+        robot, result, train, valid, theta_true, timings, args, source, settings
+    )
     report["model"] = args.model
     report["window_length"] = args.window_length
     report["outputs"] = list(result.output_names)
@@ -759,58 +764,70 @@ def _write_report(robot, result, full, train, valid, report: dict, args):
     )
 
 
-def _report(robot, result, train, valid, theta_true, timings, args, source, settings) -> dict:
-    rel = result.relative_error
-    estimate = np.asarray(result.estimate, dtype=float)
-    std = np.asarray(result.std, dtype=float)
-    std_percent = np.asarray(result.std_percent, dtype=float)
-    report = {
-        "robot": robot.name,
-        "n_samples": int(result.n_samples),
+def _result_document(
+    robot, result, train, valid, theta_true, timings, args, source, settings
+) -> dict:
+    """The run's JSON: the result's one schema (:meth:`IdentificationResult.to_dict`,
+    :mod:`manip_id.results`) with what only the command knows (source, preprocessing,
+    the reference torques, validation samples, the truth of a simulation)."""
+    from dataclasses import replace
+
+    ctx: dict = {
         "n_validation_samples": 0 if valid is None else int(valid.n_samples),
-        "n_parameters": int(robot.n_parameters),
-        "n_base": int(len(estimate)),
-        "method": args.method,
         "joint_terms": list(robot.terms.enabled),
-        "condition_number": _finite(result.condition_number),
-        "relative_error": {
-            "train": _finite(rel.train),
-            "train_per_joint": [_finite(x) for x in np.atleast_1d(rel.train_per_joint)],
-            "validation": None if valid is None else _finite(rel.validation),
-            "per_joint_validation": None
-            if valid is None
-            else [_finite(x) for x in np.atleast_1d(rel.validation_per_joint)],
-        },
-        "joints": list(robot.dof_names),
-        "base_parameters": [
-            {
-                "name": str(n),
-                "expression": str(e),
-                "value": float(v),
-                "std": _finite(s),
-                "std_percent": _finite(sp),
-            }
-            for n, e, v, s, sp in zip(
-                result.names, result.expressions, estimate, std, std_percent, strict=True
-            )
-        ],
         "source": source,
         "preprocess": None
         if settings is None
         else {k: getattr(settings, k) for k in settings.__dataclass_fields__},
-        "timings": {k: round(float(v), 6) for k, v in timings.items()},
-        **({} if result.standard is None else result.standard.to_dict()),
-        "warnings": list(getattr(result, "warnings", [])),
+        "reference_torques": _reference_torques(settings),
     }
+    warnings_ = []
+    if settings is not None and settings.filter_torque:
+        warnings_.append(
+            f"the reference torques were low-pass filtered at {settings.cutoff:g} Hz "
+            f"(zero-phase Butterworth, order {settings.order}): the errors and figures "
+            "compare the models with the filtered torques, not the raw ones"
+        )
+    sim = source.get("simulated") if isinstance(source, dict) else None
+    if sim and source.get("split") is not None and sim.get("period"):
+        trained = float(source["split"]) * float(sim["duration"])  # [s]
+        if trained >= float(sim["period"]):
+            warnings_.append(
+                f"the validation data repeat the training motion: the excitation is periodic "
+                f"({sim['period']:g} s) and --split {source['split']:g} trains on "
+                f"{trained:g} s, more than one period; the validation error then measures "
+                "noise, not prediction on new motion (use --validate with another trajectory)"
+            )
+    ctx["warnings"] = warnings_
     if theta_true is not None:
+        estimate = np.asarray(result.estimate, dtype=float)
+        std = np.asarray(result.std, dtype=float)
         beta_true = np.asarray(result.base.to_base(theta_true), dtype=float)
         err = estimate - beta_true
-        report["parameter_error"] = _finite(np.linalg.norm(err) / np.linalg.norm(beta_true))
-        report["parameter_error_in_std"] = _finite(
+        ctx["parameter_error"] = _finite(np.linalg.norm(err) / np.linalg.norm(beta_true))
+        ctx["parameter_error_in_std"] = _finite(
             np.max(np.abs(err) / np.where(std > 0, std, np.inf))
         )
-        report["true_base_parameters"] = beta_true.tolist()
-    return report
+        ctx["true_base_parameters"] = beta_true.tolist()
+    result = replace(
+        result,
+        method=args.method,
+        timings={k: float(v) for k, v in timings.items()},
+        context={**result.context, **ctx},
+    )
+    return result.to_dict(
+        poorly_identified=getattr(args, "poorly_identified", None),
+        condition_limit=getattr(args, "condition_limit", None),
+    )
+
+
+def _reference_torques(settings) -> str:
+    """Which torques the errors are measured against, in words."""
+    if settings is None or not settings.filter_torque:
+        return "raw (as measured, not filtered)"
+    return (
+        f"filtered at {settings.cutoff:g} Hz (zero-phase Butterworth, order {settings.order})"
+    )
 
 
 def _summary(robot, report: dict) -> str:
@@ -826,7 +843,11 @@ def _summary(robot, report: dict) -> str:
         if report["condition_number"]
         else "condition number n/a",
         f"relative torque error: train {pct(rel['train'])}, validation {pct(rel['validation'])}",
+        f"nominal model (URDF): train {pct(rel.get('nominal_train'))}, validation "
+        f"{pct(rel.get('nominal_validation'))}",
     ]
+    if report.get("reference_torques"):
+        lines.append(f"reference torques: {report['reference_torques']}")
     per_joint = rel["per_joint_validation"] or rel["train_per_joint"]
     label = "validation" if rel["per_joint_validation"] else "train"
     lines.append(
