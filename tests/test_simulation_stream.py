@@ -143,3 +143,16 @@ def test_cli_streamed_simulation_equals_whole_array_identification(ur10, tmp_pat
     assert got["relative_error"]["validation"] == pytest.approx(
         ref.relative_error.validation, rel=1e-8
     )
+
+
+def test_cli_streamed_simulation_with_workers(tmp_path):
+    outs = []
+    for workers in ("1", "2"):
+        out = tmp_path / f"w{workers}.json"
+        argv = ["identify", "ur10", "--simulate", "--friction", "viscous", "--duration", "20"]
+        argv += ["--rate", "40", "--split", "0.6", "--workers", workers, "--json", str(out)]
+        assert main(argv) == 0
+        outs.append(json.loads(out.read_text()))
+    a, b = ([p["value"] for p in o["base_parameters"]] for o in outs)
+    np.testing.assert_allclose(b, a, rtol=1e-9, atol=1e-12)
+    assert outs[0]["n_samples"] == outs[1]["n_samples"] == 481
