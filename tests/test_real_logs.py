@@ -199,7 +199,18 @@ def test_quality_summary(robot, tmp_path):
     assert "1 gaps in time" in text
     assert "joint elbow_joint: positions reach 3.4, 0.258 above its upper limit 3.142" in text
     assert "joint shoulder_lift_joint:" in text and "sit at the largest value 5" in text
-    assert "joint wrist_2_joint: dq differs from dq/dt of q" in text
+    assert "joint wrist_2_joint: the integral of dq differs from the motion of q" in text
+    # the velocity check, recomputed with scipy: q increments over 20 ms windows
+    from scipy.integrate import cumulative_trapezoid
+
+    m = int(round(0.02 / np.median(np.diff(t))))
+    integral = cumulative_trapezoid(dq_bad, t, axis=0, initial=0)
+    dqw, diw = np.diff(q[::m], axis=0), np.diff(integral[::m], axis=0)
+    want = np.linalg.norm(dqw - diw, axis=0) / np.linalg.norm(diw, axis=0)
+    np.testing.assert_allclose(qual.velocity_mismatch, want, rtol=1e-9)
+    clean = save_npz(tmp_path / "clean.npz", robot, *log(robot, n=2000, seed=6))
+    good = scan_file(robot, clean).quality
+    assert max(good.velocity_mismatch) < 1e-3 and not good.warnings
     share = np.mean(np.abs(dq_bad) < 0.05, axis=0)
     np.testing.assert_allclose(qual.standstill_share, share)
     d = qual.to_dict()

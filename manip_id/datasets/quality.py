@@ -8,9 +8,12 @@ For the rows a fit would see (after the window, bad rows and the torque scale):
 - rows with NaN/Inf dropped (with ``drop_bad_rows``) and the first of them;
 - positions against the joint limits: a warning per joint outside them, with
   how far, and a hint when the values look like degrees;
-- velocity consistency per joint: ``||dq_fd - dq_mid|| / ||dq_mid||`` with
-  ``dq_fd = (q_{k+1} - q_k) / (t_{k+1} - t_k)`` and ``dq_mid = (dq_k + dq_{k+1}) / 2``
-  (second order at the midpoints), and the correlation sign;
+- velocity consistency per joint, over windows of about ``VELOCITY_WINDOW``
+  seconds (m samples): ``||Delta q - Delta I|| / ||Delta I||`` with ``Delta q =
+  q_{k+m} - q_k`` and ``Delta I`` the trapezoid integral of dq over the same
+  samples (``q(t) = int dq dt``; over a window, sensor noise in q enters only
+  at its two ends and noise in dq averages out, so the figure reflects units,
+  lags or swapped columns rather than noise), and the sign of their correlation;
 - standstill share per joint: samples with ``|dq_j| < eps``;
 - torque saturation per joint: share of samples at ``>= 99 %`` of the effort
   limit, and share sitting exactly at the largest ``|tau_j|`` (a clipped signal).
@@ -31,6 +34,8 @@ GAP_FACTOR = 2.0
 STANDSTILL = 1e-2
 #: Relative velocity mismatch above which a warning is issued.
 VELOCITY_MISMATCH = 0.2
+#: Length [s] of the windows over which q increments are compared with the integral of dq.
+VELOCITY_WINDOW = 0.02
 #: Share of samples at the largest |tau| above which a joint looks clipped.
 CLIPPED_SHARE = 1e-3
 _BINS = np.linspace(-9.0, 3.0, 2401)  # log10 of the step [s], 0.005-decade bins
@@ -159,9 +164,14 @@ class QualityAccumulator:
         self.hist = np.zeros(_BINS.size - 1, dtype=np.int64)
         self.q_min = np.full(nq, np.inf)
         self.q_max = np.full(nq, -np.inf)
-        self.fd_sq = np.zeros(nv)
-        self.mid_sq = np.zeros(nv)
-        self.cross = np.zeros(nv)
+        self.fd_sq = np.zeros(nv)  # sum of (Delta q - Delta I)^2
+        self.mid_sq = np.zeros(nv)  # sum of Delta I^2
+        self.cross = np.zeros(nv)  # sum of Delta q Delta I
+        self.m: int | None = None  # samples per velocity window
+        self.integral = np.zeros(nv)  # trapezoid integral of dq up to the last row
+        self.mark: tuple[int, np.ndarray, np.ndarray] | None = (
+            None  # (index, q, I) at a window start
+        )
         self.still = np.zeros(nv, dtype=np.int64)
         self.tau_max = np.zeros(nv)
         self.at_max = np.zeros(nv, dtype=np.int64)
@@ -185,13 +195,8 @@ class QualityAccumulator:
             self.dt_min = min(self.dt_min, float(dt.min()))
             self.dt_max = max(self.dt_max, float(dt.max()))
             self.hist += np.histogram(np.log10(np.maximum(dt, 1e-9)), _BINS)[0]
-            q, dq = ext[:, s["q"]], ext[:, s["dq"]]
             if self.lay.nq == self.lay.nv:
-                fd = np.diff(q, axis=0) / dt[:, None]
-                mid = 0.5 * (dq[1:] + dq[:-1])
-                self.fd_sq += np.einsum("kj,kj->j", fd - mid, fd - mid)
-                self.mid_sq += np.einsum("kj,kj->j", mid, mid)
-                self.cross += np.einsum("kj,kj->j", fd, mid)
+                self._velocity(ext, dt)
         q = rows[:, s["q"]]
         self.q_min = np.minimum(self.q_min, q.min(axis=0))
         self.q_max = np.maximum(self.q_max, q.max(axis=0))
@@ -207,6 +212,35 @@ class QualityAccumulator:
             self.saturated += (a >= 0.99 * self.effort).sum(axis=0)
         self.n += rows.shape[0]
         self.last = rows[-1:].copy()
+
+    def _velocity(self, ext: np.ndarray, dt: np.ndarray) -> None:
+        """Windowed q increments against the integral of dq (see the module docstring).
+
+        ``ext`` holds the previous block's last row (when there is one) and the new
+        rows; ``dt`` its steps. Called before ``self.n`` counts the new rows.
+        """
+        s = self.lay.slices
+        q, dq = ext[:, s["q"]], ext[:, s["dq"]]
+        if self.m is None:
+            self.m = max(1, int(round(VELOCITY_WINDOW / float(np.median(dt)))))
+        carried = self.last is not None
+        first = self.n - 1 if carried else 0  # global index of ext[0]
+        steps = 0.5 * (dq[1:] + dq[:-1]) * dt[:, None]
+        integ = self.integral + np.vstack([np.zeros((1, dq.shape[1])), np.cumsum(steps, axis=0)])
+        idx = first + np.arange(ext.shape[0])
+        pick = np.flatnonzero((idx % self.m == 0) & (np.arange(ext.shape[0]) >= int(carried)))
+        if self.mark is None and pick.size:
+            self.mark = (int(idx[pick[0]]), q[pick[0]].copy(), integ[pick[0]].copy())
+            pick = pick[1:]
+        if pick.size and self.mark is not None:
+            qs = np.vstack([self.mark[1], q[pick]])
+            Is = np.vstack([self.mark[2], integ[pick]])
+            dqw, diw = np.diff(qs, axis=0), np.diff(Is, axis=0)
+            self.fd_sq += np.einsum("kj,kj->j", dqw - diw, dqw - diw)
+            self.mid_sq += np.einsum("kj,kj->j", diw, diw)
+            self.cross += np.einsum("kj,kj->j", dqw, diw)
+            self.mark = (int(idx[pick[-1]]), q[pick[-1]].copy(), integ[pick[-1]].copy())
+        self.integral = integ[-1].copy()
 
     def finish(self, n_dropped: int = 0, first_dropped: int | None = None) -> DataQuality:
         """The summary, with its warnings."""
@@ -256,13 +290,14 @@ class QualityAccumulator:
             for j, name in enumerate(joints):
                 if self.mid_sq[j] > 0 and self.cross[j] < 0:
                     out.warnings.append(
-                        f"joint {name}: dq has the opposite sign of dq/dt (of q): "
+                        f"joint {name}: dq has the opposite sign of the motion of q: "
                         "are velocity columns negated or swapped?"
                     )
                 elif np.isfinite(mism[j]) and mism[j] > VELOCITY_MISMATCH:
                     out.warnings.append(
-                        f"joint {name}: dq differs from dq/dt of q by {100 * mism[j]:.0f} % "
-                        "(RMS): other units, a lag, or columns of another joint?"
+                        f"joint {name}: the integral of dq differs from the motion of q by "
+                        f"{100 * mism[j]:.0f} % (RMS over {1e3 * VELOCITY_WINDOW:g} ms windows): "
+                        "other units, a lag, or columns of another joint?"
                     )
         out.standstill_share = (self.still / max(n, 1)).tolist()
         out.tau_max = self.tau_max.tolist()
