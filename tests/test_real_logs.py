@@ -396,3 +396,30 @@ def test_parts_and_workers_add_up_to_the_whole_file(robot, base, tmp_path):
     assert forked.n_samples == serial.n_samples
     scale = np.abs(serial.estimate).max()
     np.testing.assert_allclose(forked.estimate, serial.estimate, rtol=0, atol=1e-9 * scale)
+
+
+def test_cli_drop_bad_rows(robot, tmp_path, capsys):
+    t, q, dq, ddq, tau = log(robot, n=900, seed=9)
+    tau = tau.copy()
+    tau[77, 4] = np.nan
+    path = save_dataset(
+        Dataset(
+            t=t, q=q, dq=dq, tau=np.nan_to_num(tau, nan=0.0), ddq=ddq, joint_names=robot.dof_names
+        ),
+        tmp_path / "bad.csv",
+    )
+    text = path.read_text().splitlines()
+    cells = text[78].split(",")
+    cells[1 + 2 * robot.nv + 4] = "nan"  # tau of wrist_2_joint at row 77
+    text[78] = ",".join(cells)
+    path.write_text("\n".join(text) + "\n")
+    status, rep, cap = _cli(["--data", str(path)], tmp_path, capsys)
+    assert status == 2 and rep is None
+    assert "bad.csv: tau holds nan at sample 77, wrist_2_joint" in cap.err
+    assert "--drop-bad-rows" in cap.err
+    status, rep, cap = _cli(["--data", str(path), "--drop-bad-rows"], tmp_path, capsys)
+    assert status == 0
+    assert rep["n_samples"] == 899
+    assert (
+        rep["data_quality"][0]["n_dropped"] == 1 and rep["data_quality"][0]["first_dropped"] == 77
+    )
