@@ -291,6 +291,7 @@ def scan_file(robot: Robot, spec, options: PreprocessOptions | None = None) -> F
                 FileScan.discard(SimpleNamespace(spill=spill))  # type: ignore[arg-type]
             raise
     if quality.n_samples < 2:
+        FileScan.discard(SimpleNamespace(spill=spill))  # type: ignore[arg-type]
         raise DataError(f"{spec.label}: {quality.n_samples} usable sample(s); need at least 2")
     return FileScan(
         spec=spec,
