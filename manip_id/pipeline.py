@@ -138,8 +138,8 @@ class FileScan:
             unregister_temporary(self.spill)
 
 
-#: Formats whose rows are parsed slowly (text, CDR messages): the scan keeps a binary
-#: copy of the rows it checked in a temporary file, read back by the second pass.
+#: Formats whose rows are parsed slowly (text, CDR messages; also compressed NPZ): the scan
+#: keeps a binary copy of the rows it checked in a temporary file, read back by the second pass.
 SPILL_FORMATS = ("csv", "rosbag")
 
 
@@ -258,7 +258,7 @@ def scan_file(robot: Robot, spec, options: PreprocessOptions | None = None) -> F
     )
     counts = RowCounts()
     spill = fh = None
-    if src.format in SPILL_FORMATS:
+    if src.format in SPILL_FORMATS or getattr(src, "compressed", False):
         import os
         import tempfile
 

@@ -423,3 +423,24 @@ def test_cli_drop_bad_rows(robot, tmp_path, capsys):
     assert (
         rep["data_quality"][0]["n_dropped"] == 1 and rep["data_quality"][0]["first_dropped"] == 77
     )
+
+
+def test_every_format_gives_the_same_sums(robot, base, tmp_path):
+    """NPZ (read twice), compressed NPZ and CSV (read once, then from the scan's copy)."""
+    t, q, dq, ddq, tau = log(robot, n=2500, rate=500.0, seed=10)
+    plain = save_npz(tmp_path / "p.npz", robot, t, q, dq, ddq, tau, with_ddq=False)
+    packed = tmp_path / "z.npz"
+    np.savez_compressed(packed, t=t, q=q, dq=dq, tau=tau, joint_names=np.array(robot.dof_names))
+    ds = Dataset(t=t, q=q, dq=dq, tau=tau, joint_names=robot.dof_names)
+    text = save_dataset(ds, tmp_path / "c.csv")
+    opts = PreprocessOptions(cutoff=8.0)
+    ref = accumulate_file(robot, plain, opts, base.independent).accumulator
+    for path in (packed, text):
+        scan = scan_file(robot, path, opts)
+        assert scan.spill is not None
+        acc = accumulate_file(robot, path, opts, base.independent, scan=scan).accumulator
+        np.testing.assert_allclose(acc.A, ref.A, rtol=1e-12, atol=1e-12 * np.abs(ref.A).max())
+        np.testing.assert_allclose(acc.b, ref.b, rtol=1e-12, atol=1e-12 * np.abs(ref.b).max())
+        from pathlib import Path
+
+        assert not Path(scan.spill).exists()  # removed once used

@@ -178,7 +178,7 @@ class NpzSource:
     """Rows of an NPZ dataset read in chunks (see the module docstring).
 
     Attributes: ``path``, ``format`` ("npz"), ``layout``, ``joint_names``,
-    ``n_rows`` (N, from the headers).
+    ``n_rows`` (N, from the headers), ``compressed`` (any member deflated).
     """
 
     format = "npz"
@@ -188,6 +188,8 @@ class NpzSource:
         self.members, self.layout = inspect_npz(self.path)
         self.n_rows = self.members["t"].shape[0]
         self.joint_names = None
+        with zipfile.ZipFile(self.path) as zf:  # deflated members cost a decompression per pass
+            self.compressed = any(i.compress_type != zipfile.ZIP_STORED for i in zf.infolist())
         self._whole: dict[str, np.ndarray] = {}
         with zipfile.ZipFile(self.path) as zf:
             if "joint_names" in self.members:
