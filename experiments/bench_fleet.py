@@ -77,7 +77,7 @@ def _warm_worker() -> None:
 def run_case(paths: list[str], workers: int, block: int | None) -> dict:
     """One case in this process: 0 workers = serial (no Dask)."""
     from manip_id import load_robot
-    from manip_id.fleet import identify_files
+    from manip_id.fleet import WORKER_ENV, identify_files
 
     robot = load_robot(ROBOT, friction=FRICTION)
     out: dict = {"workers": workers}
@@ -91,7 +91,7 @@ def run_case(paths: list[str], workers: int, block: int | None) -> dict:
             threads_per_worker=1,
             host="127.0.0.1",
             scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
-            env={"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"},
+            env=WORKER_ENV,
         )
         client = Client(cluster)
         out["startup_s"] = time.perf_counter() - t0
