@@ -108,8 +108,9 @@ def test_check_consistency_names_bodies_and_joints():
 
 # ---------------------------------------------------------------- recovery
 @pytest.mark.parametrize("solver", ["sdp", "logchol"])
-def test_noise_free_data_recover_the_base_parameters_exactly(solver):
-    robot = get_robot("panda", friction=FRICTION)
+@pytest.mark.parametrize("friction, armature", [(FRICTION, None), ("viscous,coulomb,offset", True)])
+def test_noise_free_data_recover_the_base_parameters_exactly(solver, friction, armature):
+    robot = get_robot("panda", friction=friction, armature=armature)
     truth = _truth(robot)
     q, dq, ddq, tau = _data(robot, truth, 1500, 0.0, seed=1)
     res = identify(robot, q, dq, ddq, tau, consistent=True, solver=solver)

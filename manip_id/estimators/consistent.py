@@ -626,7 +626,8 @@ class _LogChol:
             x[10 * i : 10 * i + 10] = log_cholesky(Ji)
         t = theta[10 * nb :].copy()
         s = pr.term_scale
-        t[self.nonneg] = np.sqrt(np.maximum(t[self.nonneg], 1e-6 * s[self.nonneg]))
+        tn, sn = t[self.nonneg], s[self.nonneg]  # non-positive starts: a small positive value
+        t[self.nonneg] = np.sqrt(np.where(tn > 0, tn, 1e-2 * sn))
         x[10 * nb :] = t
         return x
 
@@ -734,11 +735,26 @@ def _solve_logchol(
     pr = problem
     if theta_start is None:
         # the prior moved onto the least-squares fit along the row space of P when that
-        # is inside the cone (a nearly exact, physical fit), else the prior itself
+        # is inside the cone (a nearly exact, physical fit); else the prior's bodies
+        # (well inside the cone) with the moved joint terms (their LS values, mostly)
+        # (two ways of moving: onto the independent columns, or the correction of least
+        # scaled size, which shares it with the dependent parameters)
         G, _ = _row_and_null_maps(pr)
-        moved = pr.theta0 + G @ (pr.beta_ls - pr.P @ pr.theta0)
-        inside = _inside(pr, moved)
-        x = model.start(moved if inside else pr.theta0)
+        gap = pr.beta_ls - pr.P @ pr.theta0
+        nb10 = 10 * pr.n_bodies
+        scale = np.abs(pr.theta0).copy()
+        for i in range(pr.n_bodies):
+            blk = scale[10 * i : 10 * i + 10]
+            blk[:] = np.maximum(blk, 1e-3 * max(float(blk.max()), 1e-12))
+        scale[nb10:] = pr.term_scale
+        D2P = (scale**2)[:, None] * pr.P.T
+        shared = pr.theta0 + D2P @ np.linalg.lstsq(pr.P @ D2P, gap, rcond=None)[0]
+        candidates = [pr.theta0 + G @ gap, shared]
+        moved = next((c for c in candidates if _inside(pr, c)), None)
+        if moved is None:
+            moved = candidates[0]
+            moved[:nb10] = pr.theta0[:nb10]
+        x = model.start(moved)
     else:
         x = model.start(as_float_array(theta_start, "theta_start", ndim=1))
     with np.errstate(over="ignore", invalid="ignore"):  # trial steps may overflow exp()
@@ -798,10 +814,13 @@ def _lm(model: _LogChol, pr: ConsistentProblem, x: np.ndarray, max_iter: int, to
         theta, r, g, Jr, dg = model.evaluate(x)
         F = F_new
         mu = max(mu / 10.0, 1e-15)
-        if decrease <= tolerance * max(abs(F), 1.0) and step <= 1e-9:
+        if decrease <= tolerance * max(abs(F), 1.0):
             small += 1
-            if small >= 2:
+            if small >= 2 and step <= 1e-9:
                 status = "converged"
+                break
+            if small >= 10:  # steps along directions that no longer change the objective
+                status = "converged (objective stalled)"
                 break
         else:
             small = 0
