@@ -114,6 +114,10 @@ def _no_mathtext(fig: Figure) -> None:
         texts += list(legend.get_texts())
     for text in texts:
         text.set_parse_math(False)
+        raw = text.get_text()
+        safe = raw.encode("utf-8", "backslashreplace").decode("utf-8")  # undecodable file names
+        if safe != raw:
+            text.set_text(safe)
 
 
 def _save(fig: Figure, path) -> Figure:
