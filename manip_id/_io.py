@@ -138,7 +138,16 @@ def check_output_file(path, *, inputs: Iterable = (), what: str = "output") -> P
     parent that is missing or not a folder, and any of ``inputs`` (same resolved path,
     or same device and inode). Writability is proved by :class:`OutputSet`, which creates
     the temporary at once.
+    Operating-system errors (a name too long, a loop of links) are OutputErrors too.
     """
+    try:
+        return _check_output_file(path, inputs=inputs, what=what)
+    except OSError as exc:
+        raise OutputError(f"{what} {path}: {exc.strerror or exc}") from exc
+
+
+def _check_output_file(path, *, inputs: Iterable = (), what: str = "output") -> Path:
+    """The checks of :func:`check_output_file` (operating-system errors pass up)."""
     p = _as_path(path, what)
     st = _stat(p)
     if st is not None:
@@ -156,7 +165,16 @@ def check_output_dir(path, *, inputs: Iterable = (), what: str = "output folder"
 
     Refused: an existing file, a missing parent, the current directory or an ancestor
     of it, and a folder that is or contains one of ``inputs``.
+    Operating-system errors (a name too long, a loop of links) are OutputErrors too.
     """
+    try:
+        return _check_output_dir(path, inputs=inputs, what=what)
+    except OSError as exc:
+        raise OutputError(f"{what} {path}: {exc.strerror or exc}") from exc
+
+
+def _check_output_dir(path, *, inputs: Iterable = (), what: str = "output folder") -> Path:
+    """The checks of :func:`check_output_dir` (operating-system errors pass up)."""
     p = _as_path(path, what)
     if p.exists() and not p.is_dir():
         raise OutputError(f"{what} {p} exists and is not a folder")
@@ -213,7 +231,8 @@ class StagedFile:
         self.written = True
 
     def write_text(self, text: str) -> None:
-        self.write(lambda tmp: tmp.write_text(text, encoding="utf-8"))
+        """UTF-8; undecodable bytes of file names (surrogates) are written as ``\udcff``."""
+        self.write(lambda tmp: tmp.write_text(text, encoding="utf-8", errors="backslashreplace"))
 
     def publish(self) -> None:
         if not self.written:
@@ -356,7 +375,9 @@ def atomic_write(path, write: Callable[[Path], None]) -> Path:
 
 def atomic_write_text(path, text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` atomically."""
-    return atomic_write(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+    return atomic_write(
+        path, lambda tmp: tmp.write_text(text, encoding="utf-8", errors="backslashreplace")
+    )
 
 
 def jsonable(obj):

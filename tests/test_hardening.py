@@ -115,6 +115,8 @@ def snapshot(root: Path) -> dict[str, str]:
             out[rel] = "link:" + os.readlink(p)
         elif p.is_dir():
             out[rel] = "dir"
+        elif not p.is_file():  # a FIFO: never read it (it would block)
+            out[rel] = "special"
         else:
             out[rel] = hashlib.sha256(p.read_bytes()).hexdigest()
     return out
@@ -207,10 +209,18 @@ def _bad_data(w: Path) -> None:
     (w / "notalog" / "readme.txt").write_text("no data here\n")
 
 
+def _special(w: Path) -> None:
+    os.mkfifo(w / "fifo.npz")
+    os.mkfifo(w / "fifo.urdf")
+    os.symlink("data", w / "datalink")
+    write_npz(w / os.fsdecode(b"\xff\xfe-latin.npz"))  # not UTF-8: a surrogate-escaped name
+
+
 def _all(w: Path) -> None:
     _bad_urdfs(w)
     _bad_data(w)
     _weird_names(w)
+    _special(w)
 
 
 def _escaped_report(w: Path) -> None:
@@ -496,6 +506,42 @@ CASES = [
         status=0,
         outputs=("rep/index.html", "rep/singular_values.png"),
         check=_escaped_names_report,
+    ),
+    # --- special files and names
+    Case("data-is-a-fifo", ["identify", "msd", "--data", "fifo.npz"], match="regular file"),
+    Case(
+        "view-data-is-a-fifo",
+        ["view", "msd", "--data", "fifo.npz", "--html", "o.html"],
+        match="regular file",
+    ),
+    Case("urdf-is-a-fifo", ["rank", "fifo.urdf"], match="fifo.urdf"),
+    Case("data-is-dev-zero", ["identify", "msd", "--data", "/dev/zero"]),
+    Case("json-name-too-long", ["rank", "msd", "--json", "a" * 300], match="too long"),
+    Case("report-name-too-long", ["rank", "msd", "--report", "a" * 300], match="too long"),
+    Case(
+        "report-symlink-to-input-folder",
+        ["identify", "msd", "--data", "data/inner.npz", "--report", "datalink", "--force"],
+        match="holds the input",
+    ),
+    Case(
+        "json-onto-input-through-folder-link",
+        ["identify", "msd", "--data", "data/inner.npz", "--json", "datalink/inner.npz"],
+        match="one of the inputs",
+    ),
+    Case(
+        "non-utf8-data-name",
+        [
+            "identify",
+            "msd",
+            "--data",
+            os.fsdecode(b"\xff\xfe-latin.npz"),
+            "--report",
+            "rep",
+            "--json",
+            "o.json",
+        ],
+        status=0,
+        outputs=("rep/index.html", "o.json"),
     ),
     # --- the commands still work
     Case(

@@ -62,6 +62,8 @@ def load_dataset(
     path = Path(path).expanduser()
     if not path.exists():
         raise DataError(f"no such data file or folder: {path}")
+    if not (path.is_file() or path.is_dir()):  # a FIFO or a device would block or never end
+        raise DataError(f"{path} is neither a regular file nor a folder")
     fmt = infer_format(path) if format is None else str(format).lower()
     if fmt not in FORMATS:
         raise DataError(f"unknown data format {format!r}; expected one of {', '.join(FORMATS)}")

@@ -98,6 +98,8 @@ def open_source(spec: FileSpec, joint_names=None):
     path = spec.path
     if not path.exists():
         raise DataError(f"no such data file or folder: {path}")
+    if not (path.is_file() or path.is_dir()):  # a FIFO or a device would block or never end
+        raise DataError(f"{path} is neither a regular file nor a folder")
     fmt = infer_format(path) if spec.format is None else str(spec.format).lower()
     if fmt not in FORMATS:
         raise DataError(
