@@ -348,7 +348,7 @@ class OutputSet:
 
 
 # ---------------------------------------------------------- atomic writers
-def atomic_write(path, write: Callable[[Path], None]) -> Path:
+def atomic_write(path, write: Callable[[Path], object]) -> Path:
     """Call ``write(tmp)`` on a temporary file next to ``path``, then rename it to ``path``.
 
     The file gets the usual permissions (0666 minus the umask); on any error

@@ -51,7 +51,7 @@ class Terminated(BaseException):
 class OneLineParser(argparse.ArgumentParser):
     """An ``ArgumentParser`` whose errors are one line (``manip-id CMD: error: ...``), exit 2."""
 
-    def error(self, message: str):  # type: ignore[override]
+    def error(self, message: str):
         self.exit(2, f"{self.prog}: error: {_one_line(message)} (see {self.prog} --help)\n")
 
 
@@ -199,7 +199,7 @@ def main(argv: list[str] | None = None) -> int:
         except ManipIdError as exc:
             if debug:
                 traceback.print_exc()
-            print(f"{PROG}: error: {_one_line(exc)}", file=sys.stderr)
+            print(f"{PROG}: error: {_one_line(str(exc))}", file=sys.stderr)
             status = 2
         except KeyboardInterrupt:
             print(f"\n{PROG}: interrupted", file=sys.stderr)
@@ -229,7 +229,7 @@ def main(argv: list[str] | None = None) -> int:
             if debug:
                 traceback.print_exc()
             print(
-                f"{PROG}: internal error (a bug): {type(exc).__name__}: {_one_line(exc)}; "
+                f"{PROG}: internal error (a bug): {type(exc).__name__}: {_one_line(str(exc))}; "
                 "rerun with --debug for the traceback",
                 file=sys.stderr,
             )

@@ -37,6 +37,7 @@ from .._io import atomic_write_text
 from ..errors import InfeasibleTrajectoryError, InputError, ManipIdError
 from ..parameters import bounded_range
 from ..robot import Robot
+from .meshcat_server import MeshcatServer
 
 #: Colors of successive parameter sets (RGBA): nominal, then compared ones.
 SET_COLORS: tuple[tuple[float, float, float, float], ...] = (
@@ -673,19 +674,19 @@ class LiveView:
     """A scene replayed into a running meshcat server (see :meth:`RobotScene.serve`)."""
 
     visualizer: meshcat.Visualizer
-    server: object  # manip_id.viz.meshcat_server.MeshcatServer
+    server: MeshcatServer
 
     @property
     def url(self) -> str:
         """The viewer's address, on the server's host."""
-        return self.server.web_url  # type: ignore[attr-defined]
+        return self.server.web_url
 
     def stop(self) -> None:
         """Close the connection and stop the server process."""
         try:
             self.visualizer.window.zmq_socket.close(linger=0)
         finally:
-            self.server.stop()  # type: ignore[attr-defined]
+            self.server.stop()
 
     def __enter__(self) -> LiveView:
         return self
