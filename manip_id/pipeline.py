@@ -435,7 +435,7 @@ def accumulate_file(
             if part is not None:
                 if hi is not None and g0 >= hi:
                     break
-                rows = rows[max(lo - g0, 0) : hi - g0]
+                rows = rows[max(lo - g0, 0) : (hi if hi is not None else g0 + len(rows)) - g0]
                 if not rows.shape[0]:
                     continue
             q = rows[:, 1 : 1 + nq]
@@ -581,12 +581,12 @@ def accumulate_files(
         _JOB["job"] = (robot, specs, options, ind, int(chunk), scans)
         try:
             with mp.get_context("fork").Pool(min(int(workers), len(specs))) as pool:
-                out = []
+                forked: list[FileAccumulation] = []
                 for k, fa in enumerate(pool.imap(_job_file, range(len(specs)))):
-                    out.append(fa)
+                    forked.append(fa)
                     if progress is not None:
                         progress(sum(scans[s].n for s in specs[: k + 1]), total)
-                return out
+                return forked
         finally:
             _JOB.pop("job", None)
     out: list[FileAccumulation] = []

@@ -286,7 +286,7 @@ def resample_dataset(dataset: Dataset, rate: float | None = None, kind: str = "c
     """The dataset interpolated on the grid ``t[0] + k / rate`` (rate default: the mean rate)."""
     rate = sampling_rate(dataset.t) if rate is None else float(rate)
     t_new = uniform_grid(dataset.t[0], dataset.t[-1], rate)
-    fields = {
+    fields: dict = {
         name: resample(dataset.t, getattr(dataset, name), t_new, kind)
         for name in ("q", "dq", "tau", "ddq")
         if getattr(dataset, name) is not None
