@@ -486,31 +486,8 @@ def load_robot(
         override the profile.
     """
     spec_str = str(spec)
-    settings: dict = {}
-    geometry: dict = {}
-    defaults = JointTerms()
-    pkg = [str(p) for p in package_dirs]
-    by_path = False
-    if spec_str in OUR_ROBOTS:
-        base = robots_dir()
-        path = base / f"{spec_str}.urdf"
-        model = _load_urdf(path)
-        settings_file = base / f"{spec_str}.json"
-        if settings_file.is_file():
-            settings = json.loads(settings_file.read_text())
-        name, source = spec_str, str(path)
-        pkg = pkg or [str(path.parent)]
-    elif spec_str.endswith(".urdf") or Path(spec_str).suffix == ".urdf" or "/" in spec_str:
-        path = Path(spec_str).expanduser()
-        model = _load_urdf(path)
-        name, source = path.stem, str(path)
-        by_path = True
-        # package://NAME/... resolves in any ancestor folder holding NAME
-        pkg = pkg or [str(d) for d in path.resolve().parents]
-    else:
-        model, source, pkg_erd, geometry = _load_erd(spec_str)
-        name = spec_str
-        pkg = pkg or pkg_erd
+    src = _load_source(spec_str, [str(p) for p in package_dirs])
+    model, name = src.model, src.name
     sidecar = None
     if identified is not None and identified is not False:
         from .export import identified_options
@@ -518,32 +495,13 @@ def load_robot(
         sidecar, armature, friction, spring, active_joints = identified_options(
             spec_str, identified, armature, friction, spring, active_joints
         )
-    prof = _profile(profile, name, by_path)
-    if prof is not None:
-        defaults = JointTerms(
-            armature=bool(prof.armature),
-            viscous="viscous" in (prof.friction or ()),
-            coulomb="coulomb" in (prof.friction or ()),
-            offset="offset" in (prof.friction or ()),
-            spring=bool(prof.spring),
-        )
-    terms = _terms(armature, friction, spring, defaults)
+    prof = _profile(profile, name, src.by_path)
+    terms = _terms(armature, friction, spring, _profile_terms(prof))
 
     all_joints = [model.names[i] for i in range(1, model.njoints)]
     if active_joints is None and prof is not None:
         active_joints = prof.active_for(all_joints)
-    if active_joints is None:
-        locked_names: list[str] = []
-    else:
-        active_joints = list(active_joints)
-        unknown = [j for j in active_joints if j not in all_joints]
-        if unknown:
-            raise InputError(
-                f"unknown joint {unknown[0]!r} for robot {name!r}; valid joints: {all_joints}"
-            )
-        if not active_joints:
-            raise InputError("active_joints is empty: at least one joint must move")
-        locked_names = [j for j in all_joints if j not in active_joints]
+    locked_names = _locked_names(name, all_joints, active_joints)
     full_model = model
     locked_ids: list[int] = []
     qref = None
@@ -555,13 +513,13 @@ def load_robot(
         name,
         model,
         terms,
-        source=source,
-        package_dirs=pkg,
+        source=src.source,
+        package_dirs=src.package_dirs,
         full_model=full_model,
         locked_ids=locked_ids,
         reference_configuration=qref,
-        settings=settings,
-        geometry=geometry,
+        settings=src.settings,
+        geometry=src.geometry,
         profile=prof,
     )
     if sidecar is not None:
@@ -569,6 +527,68 @@ def load_robot(
 
         apply_identified(robot, sidecar)
     return robot
+
+
+@dataclass(frozen=True)
+class _Source:
+    """A loaded (unreduced) model and where it came from."""
+
+    model: pin.Model
+    name: str
+    source: str | None
+    package_dirs: list[str]
+    settings: dict
+    geometry: dict
+    by_path: bool
+
+
+def _load_source(spec: str, pkg: list[str]) -> _Source:
+    """Our robot (``robots/NAME.urdf`` and its ``.json`` settings), a URDF path, or a name
+    of example-robot-data."""
+    if spec in OUR_ROBOTS:
+        base = robots_dir()
+        path = base / f"{spec}.urdf"
+        model = _load_urdf(path)
+        settings_file = base / f"{spec}.json"
+        settings = json.loads(settings_file.read_text()) if settings_file.is_file() else {}
+        return _Source(model, spec, str(path), pkg or [str(path.parent)], settings, {}, False)
+    if spec.endswith(".urdf") or Path(spec).suffix == ".urdf" or "/" in spec:
+        path = Path(spec).expanduser()
+        model = _load_urdf(path)
+        # package://NAME/... resolves in any ancestor folder holding NAME
+        pkg = pkg or [str(d) for d in path.resolve().parents]
+        return _Source(model, path.stem, str(path), pkg, {}, {}, True)
+    model, source, pkg_erd, geometry = _load_erd(spec)
+    return _Source(model, spec, source, pkg or pkg_erd, {}, geometry, False)
+
+
+def _profile_terms(prof: RobotProfile | None) -> JointTerms:
+    """The joint-term defaults of a profile (none without one)."""
+    if prof is None:
+        return JointTerms()
+    friction = prof.friction or ()
+    return JointTerms(
+        armature=bool(prof.armature),
+        viscous="viscous" in friction,
+        coulomb="coulomb" in friction,
+        offset="offset" in friction,
+        spring=bool(prof.spring),
+    )
+
+
+def _locked_names(name: str, all_joints: list[str], active_joints) -> list[str]:
+    """The joints to lock for ``active_joints`` (None: none), checked against the model."""
+    if active_joints is None:
+        return []
+    active_joints = list(active_joints)
+    unknown = [j for j in active_joints if j not in all_joints]
+    if unknown:
+        raise InputError(
+            f"unknown joint {unknown[0]!r} for robot {name!r}; valid joints: {all_joints}"
+        )
+    if not active_joints:
+        raise InputError("active_joints is empty: at least one joint must move")
+    return [j for j in all_joints if j not in active_joints]
 
 
 def _profile(profile, name: str, by_path: bool) -> RobotProfile | None:

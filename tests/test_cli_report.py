@@ -42,6 +42,7 @@ def _check_folder(rep, pngs):
     assert not [p for p in rep.parent.iterdir() if p.name.startswith(".")]
 
 
+@pytest.mark.slow
 def test_identify_report(tmp_path, capsys):
     rep, js = tmp_path / "rep", tmp_path / "r.json"
     argv = ["identify", "ur5", *SIM, "--split", "0.7", "--json", str(js), "--report", str(rep)]
@@ -59,6 +60,7 @@ def test_identify_report(tmp_path, capsys):
     assert "identifiability" in scene and "nominal" in scene
 
 
+@pytest.mark.slow
 def test_identify_report_refuses_a_non_empty_folder_before_working(tmp_path, capsys):
     rep = tmp_path / "rep"
     rep.mkdir()

@@ -13,6 +13,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from manip_id.cli import main
 
 PANDA_ARGS = [
@@ -46,6 +48,7 @@ def test_cli_identifies_the_real_log(panda_log, tmp_path, capsys):
     assert "condition number" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_experiment_script_runs(panda_log):
     proc = subprocess.run(
         [sys.executable, str(EXPERIMENT), "--data", str(panda_log), "--quick"],
@@ -58,6 +61,7 @@ def test_experiment_script_runs(panda_log):
     assert "validation" in proc.stdout
 
 
+@pytest.mark.slow
 def test_cutoffs_outside_the_flat_band_fit_worse(panda_log, tmp_path, capsys):
     """The default (3 Hz) sits in the flat band: far lower or higher cut-offs validate worse.
 

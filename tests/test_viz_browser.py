@@ -20,11 +20,14 @@ from manip_id.viz import RobotScene
 
 WIDTH, HEIGHT = 640, 480
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-pytestmark = pytest.mark.skipif(
-    CHROMIUM is None,
-    reason="headless Chromium not found (Debian package 'chromium'; "
-    "'make system-deps' installs it)",
-)
+pytestmark = [
+    pytest.mark.skipif(
+        CHROMIUM is None,
+        reason="headless Chromium not found (Debian package 'chromium'; "
+        "'make system-deps' installs it)",
+    ),
+    pytest.mark.slow,
+]
 
 
 def screenshot(html, png, tmp_path, hash_: str = "") -> np.ndarray:
