@@ -457,6 +457,18 @@ class ParameterLayout:
         """Joint-term regressor entries, shape (..., nv, nt) (see :data:`JOINT_TERMS`)."""
         return np.stack([t.column(angles, vel, acc) for t in self.term_table], axis=-1)
 
+    # ------------------------------------------------------- physical consistency
+    def pseudo_inertias(self, theta: ArrayLike) -> np.ndarray:
+        """Each body's pseudo-inertia ``J = [[0.5 tr(I) 1 - I, h], [h^T, m]]``, shape (nb, 4, 4).
+
+        ``I`` about the joint frame origin [kg m^2], ``h = m c`` [kg m], ``m`` [kg]
+        (:func:`manip_id.consistency.pseudo_inertia`); ``J`` is positive definite for a
+        physically realizable body.
+        """
+        from .consistency import pseudo_inertia
+
+        return pseudo_inertia(self.rigid_blocks(theta))
+
     # ------------------------------------------------------- standard <-> base
     def to_base(self, theta: ArrayLike, base: BaseParameters) -> np.ndarray:
         """Base parameters ``theta[I] + K theta[D]``, (..., p) -> (..., r)."""

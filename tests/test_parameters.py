@@ -203,3 +203,21 @@ def test_consistency_checks_are_reexported():
     import manip_id.parameters as parameters
 
     assert parameters.check_consistency is consistency.check_consistency
+
+
+def test_pseudo_inertias_against_the_textbook_formula(panda_all):
+    pytest.importorskip("manip_id.consistency")
+    robot = panda_all
+    J = robot.layout.pseudo_inertias(robot.nominal_parameters)
+    assert J.shape == (robot.n_bodies, 4, 4)
+    for i in range(1, robot.model.njoints):
+        inertia = robot.model.inertias[i]
+        m, c = inertia.mass, np.asarray(inertia.lever)
+        # inertia about the joint frame origin: parallel-axis theorem from the CoM inertia
+        I_o = np.asarray(inertia.inertia) + m * (c @ c * np.eye(3) - np.outer(c, c))
+        expected = np.zeros((4, 4))
+        expected[:3, :3] = 0.5 * np.trace(I_o) * np.eye(3) - I_o
+        expected[:3, 3] = expected[3, :3] = m * c
+        expected[3, 3] = m
+        np.testing.assert_allclose(J[i - 1], expected, rtol=1e-12, atol=1e-12)
+        assert np.linalg.eigvalsh(expected).min() > 0  # the URDF bodies are physical
