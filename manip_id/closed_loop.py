@@ -103,16 +103,9 @@ def default_reference(
 
 def _angle_bounds(robot: Robot, lo: np.ndarray, hi: np.ndarray):
     """Per-DoF position bounds (angles of continuous joints: [-pi, pi])."""
-    out_lo, out_hi = np.empty(robot.nv), np.empty(robot.nv)
-    model = robot.model
-    for i in range(1, model.njoints):
-        jm = model.joints[i]
-        if jm.nq == jm.nv:
-            out_lo[jm.idx_v : jm.idx_v + jm.nv] = lo[jm.idx_q : jm.idx_q + jm.nq]
-            out_hi[jm.idx_v : jm.idx_v + jm.nv] = hi[jm.idx_q : jm.idx_q + jm.nq]
-        else:
-            out_lo[jm.idx_v : jm.idx_v + jm.nv] = -math.pi
-            out_hi[jm.idx_v : jm.idx_v + jm.nv] = math.pi
+    dofs = robot.dofs
+    out_lo = np.where(dofs.continuous, -math.pi, lo[dofs.q_index])
+    out_hi = np.where(dofs.continuous, math.pi, hi[dofs.q_index])
     return out_lo, out_hi
 
 
