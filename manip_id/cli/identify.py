@@ -648,41 +648,220 @@ def _run_acceleration_free(args, outputs, t_start: float) -> int:
     return 0
 
 
+def _pct(x) -> str:
+    return "n/a" if x is None else f"{100 * float(x):.3g} %"
+
+
+def report_summary(report: dict, source: str) -> dict:
+    """The report's summary rows: errors in percent as the CLI prints them, the nominal
+    model beside the identified one, and the preprocessing stated."""
+    rel = report["relative_error"]
+    pre = report.get("preprocess") or {}
+    summary = {
+        "robot": report["robot"],
+        "method": report["method"]
+        + ("" if report.get("model", "dynamic") == "dynamic" else f" ({report['model']} model)"),
+        "source": source,
+        "training samples": report["n_samples"],
+        "validation samples": report.get("n_validation_samples"),
+        "base parameters": f"{report['n_base']} of {report['n_parameters']}",
+        "condition number": report["condition_number"],
+        "relative torque error, train": f"{_pct(rel['train'])} (nominal URDF model "
+        f"{_pct(rel.get('nominal_train'))})",
+        "relative torque error, validation": f"{_pct(rel['validation'])} (nominal URDF model "
+        f"{_pct(rel.get('nominal_validation'))})",
+        "reference torques": report.get("reference_torques", "raw"),
+    }
+    if pre:
+        rate = pre.get("rate")
+        summary["preprocessing"] = (
+            f"low-pass {pre['cutoff']:g} Hz (Butterworth order {pre['order']}, zero-phase) on "
+            f"q, dq{', tau' if pre.get('filter_torque') else ''}; ddq by central differences; "
+            f"{pre.get('trim', 0)} samples trimmed at each end of each part (filter edges)"
+            + ("" if pre.get("decimate", 1) == 1 else f"; every {pre['decimate']}th sample")
+            + (f"; resampled at {rate:g} Hz" if pre.get("resampled") and rate else "")
+        )
+    else:
+        summary["preprocessing"] = "none (the data's own accelerations, unfiltered)"
+    src = report.get("source") or {}
+    if src.get("split") is not None:
+        summary["validation"] = f"the last {100 * (1 - src['split']):.0f} % of the record"
+    windows = [f.get("window") for f in report.get("files", []) if f.get("window")]
+    if windows:
+        summary["windows"] = ", ".join(windows)
+    band = report.get("velocity_deadband")
+    if band:
+        summary["velocity deadband"] = f"{band['eps']:g} rad/s; rows left out: " + ", ".join(
+            f"{j} {n}" for j, n in band["excluded_rows"].items()
+        )
+    if "parameter_error" in report:
+        summary["base parameter error vs truth"] = _pct(report["parameter_error"])
+    n_bad = sum(bool(p["flags"]) for p in report["base_parameters"])
+    summary["flagged parameters"] = f"{n_bad} of {report['n_base']}"
+    return summary
+
+
+def report_parameter_rows(report: dict) -> list[dict]:
+    """The parameter table, trustworthy rows first (no flag, smallest std), flagged rows
+    after (non-physical ones last) and highlighted."""
+    truth = report.get("true_base_parameters")
+    rows = []
+    for i, p in enumerate(report["base_parameters"]):
+        flags = list(p["flags"])
+        sp = p["std_percent"]
+        rank = (2 if "non-physical" in flags else 1 if flags else 0, np.inf if sp is None else sp)
+        rows.append(
+            (
+                rank,
+                {
+                    "name": p["name"],
+                    "unit": p["unit"],
+                    "identified": p["value"],
+                    "nominal": p["nominal"],
+                    **({"true": truth[i]} if truth is not None else {}),
+                    "std": p["std"],
+                    "std [%]": sp,
+                    "flags": ", ".join(flags) or "ok",
+                    "expression": p["expression"],
+                    "_class": "bad" if "non-physical" in flags else "warn" if flags else "",
+                },
+            )
+        )
+    return [row for _, row in sorted(rows, key=lambda x: x[0])]
+
+
+def report_quality_rows(report: dict) -> list[dict]:
+    """The data-quality section: one row per file (training and validation)."""
+    rows = []
+    for kind, key in (("training", "data_quality"), ("validation", "validation_data_quality")):
+        for q in report.get(key) or []:
+            row = {"part": kind}
+            for k, v in q.items():
+                if isinstance(v, str | int | float | bool) or v is None:
+                    row[k] = v
+                elif isinstance(v, list) and all(isinstance(x, str) for x in v):
+                    row[k] = "; ".join(v) or "none"
+            rows.append(row)
+    return rows
+
+
+def _history_figure(robot, result, train, report):
+    """parameter_history.png of an online method, or None without a record."""
+    from ..viz import figures
+
+    h = result.history
+    if h is None or len(h.t) < 2:
+        return None
+    samples = np.minimum(np.arange(len(h.t)) * max(result.n_samples // 1000, 1), len(train.t) - 1)
+    t = train.t[samples]
+    truth = report.get("true_base_parameters")  # a simulation's
+    if truth is not None:
+        ref, label = np.asarray(truth, dtype=float), "truth"
+    else:
+        ref, label = np.asarray(result.estimate, dtype=float), "final estimate"
+    rms = float(np.sqrt(np.mean(np.asarray(train.tau) ** 2)) * np.sqrt(robot.nv))
+    return lambda path: figures.online_history(
+        path,
+        t,
+        h.theta,
+        names=result.names,
+        reference=ref,
+        reference_label=label,
+        prediction_error=h.error,
+        torque_rms=rms,
+        title=f"{report['method']} on {robot.name}: convergence of the base parameters",
+    )
+
+
+def build_scene(robot, result, full, title: str, notes: list, assets: str = "inline"):
+    """The report's scene, or None (with a note) when it cannot be drawn: never fatal."""
+    from ..errors import InfeasibleTrajectoryError
+    from ..viz.meshcat_scene import RobotScene, link_identifiability
+
+    try:
+        scene = RobotScene(robot, title=title)
+        scene.assets = assets
+        if full is not None:
+            try:
+                scene.animate(full.t, full.q)
+            except InfeasibleTrajectoryError as exc:
+                notes.append(f"scene not animated: {exc}")
+        scene.add_inertia(robot.nominal_parameters, label="nominal")
+        if result.standard is not None and result.standard.solver:  # --consistent
+            scene.add_inertia(result.standard.values, label="identified (consistent)")
+        ind = result.base.independent
+        flags = np.zeros(robot.n_parameters, dtype=bool)
+        flags[ind] = True
+        rel = np.full(robot.n_parameters, np.inf)
+        est = np.asarray(result.estimate, dtype=float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rel[ind] = np.asarray(result.std, dtype=float) / np.abs(est)
+        scene.color_by_identifiability(
+            link_identifiability(robot, identifiable=flags, relative_std=rel, threshold=0.1)
+        )
+    except Exception as exc:  # a picture never fails the finished identification
+        notes.append(f"3-D scene not drawn: {type(exc).__name__}: {exc}")
+        return None
+    notes += list(scene.notes)
+    return scene
+
+
 def _write_report(robot, result, full, train, valid, report: dict, args):
     """The report folder of an identification (see :func:`manip_id.viz.report.write_report`)."""
-    from ..errors import InfeasibleTrajectoryError
+    from dataclasses import replace
+
     from ..viz import figures
-    from ..viz.meshcat_scene import RobotScene, link_identifiability
     from ..viz.report import write_report
 
-    run_name = (
-        f"{robot.name}, {report['method']}, "
-        + ("simulated" if args.simulate else f"data {args.data}")
-        + f", {train.n_samples} training samples"
-    )
+    source = "simulated" if args.simulate else ", ".join(map(str, args.data))
+    run_name = f"{robot.name}, {report['method']}, {source}, {train.n_samples} training samples"
+    nominal = replace(result, estimate=result.nominal)
     pred = result.predict(robot, train.q, train.dq, train.ddq, chunk=args.chunk)
-    val_kw, res_kw = {}, {}
+    npred = nominal.predict(robot, train.q, train.dq, train.ddq, chunk=args.chunk)
+    t, tau, val_start = train.t, train.tau, None
+    res_kw: dict = {}
     if valid is not None:
         vpred = result.predict(robot, valid.q, valid.dq, valid.ddq, chunk=args.chunk)
-        val_kw = dict(t_validation=valid.t, tau_validation=valid.tau, tau_validation_pred=vpred)
+        vnom = nominal.predict(robot, valid.q, valid.dq, valid.ddq, chunk=args.chunk)
+        tv = valid.t
+        if tv[0] <= t[-1]:  # separate validation files: drawn after the training record
+            step = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
+            tv = tv - tv[0] + t[-1] + step
+        val_start = float(tv[0])
+        t = np.concatenate([t, tv])
+        tau = np.vstack([tau, valid.tau])
+        pred, npred = np.vstack([pred, vpred]), np.vstack([npred, vnom])
         res_kw = dict(t_validation=valid.t, residual_validation=valid.tau - vpred)
     joints = list(robot.dof_names)
+    rel = report["relative_error"]
+    use_val = rel.get("per_joint_validation") is not None
+    e_id = rel["per_joint_validation"] if use_val else rel["train_per_joint"]
+    e_nom = rel.get("nominal_per_joint_validation" if use_val else "nominal_train_per_joint")
+    errors = list(zip(e_id, e_nom or [None] * len(joints), strict=True))
+    units = ["N" if robot.is_prismatic(j) else "N m" for j in range(robot.nv)]
+    part = "validation" if use_val else "train"
     ra = result.rank_analysis
     figs = {
-        "torque_fit": lambda path: figures.torque_fit(
+        "torque_fit": lambda path: figures.torque_comparison(
             path,
-            train.t,
-            train.tau,
+            t,
+            tau,
             pred,
+            npred,
+            validation_start=val_start,
             joint_names=joints,
-            title=f"torque fit: {run_name}",
-            **val_kw,
+            units=units,
+            errors=errors,
+            reference=report.get("reference_torques", "raw"),
+            title=f"measured, identified and nominal torques ({part} errors in the titles): "
+            f"{run_name}",
         ),
         "residuals": lambda path: figures.residuals(
             path,
             train.t,
-            train.tau - pred,
+            train.tau - result.predict(robot, train.q, train.dq, train.ddq, chunk=args.chunk),
             joint_names=joints,
+            units=units,
             title=f"residuals tau - Y_b theta_b: {run_name}",
             **res_kw,
         ),
@@ -695,6 +874,9 @@ def _write_report(robot, result, full, train, valid, report: dict, args):
             f"{ra.n_rows} rows, rank {ra.rank} of {ra.n_parameters}",
         ),
     }
+    history = _history_figure(robot, result, train, report)
+    if history is not None:
+        figs["parameter_history"] = history
     if args.simulate:
         figs["trajectory"] = lambda path: figures.trajectory_limits(
             path,
@@ -705,62 +887,27 @@ def _write_report(robot, result, full, train, valid, report: dict, args):
             joint_names=joints,
             title=f"simulated excitation of {robot.name} against its position limits",
         )
-    notes = []
-    scene = RobotScene(robot, title=f"manip-id identify: {run_name}")
-    try:
-        scene.animate(full.t, full.q)
-    except InfeasibleTrajectoryError as exc:
-        notes.append(f"scene not animated: {exc}")
-    scene.add_inertia(robot.nominal_parameters, label="nominal")
-    if result.standard is not None and result.standard.solver:  # --consistent
-        scene.add_inertia(result.standard.values, label="identified (consistent)")
-    ind = result.base.independent
-    flags = np.zeros(robot.n_parameters, dtype=bool)
-    flags[ind] = True
-    rel = np.full(robot.n_parameters, np.inf)
-    est = np.asarray(result.estimate, dtype=float)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        rel[ind] = np.asarray(result.std, dtype=float) / np.abs(est)
-    scene.color_by_identifiability(
-        link_identifiability(robot, identifiable=flags, relative_std=rel, threshold=0.1)
+    notes = list(report["warnings"])
+    scene = build_scene(
+        robot,
+        result,
+        full,
+        f"manip-id identify: {run_name}",
+        notes,
+        getattr(args, "scene_assets", "inline"),
     )
-    notes += list(scene.notes)
-    rel_err = report["relative_error"]
-    summary = {
-        "robot": robot.name,
-        "method": report["method"],
-        "source": "simulated" if args.simulate else str(args.data),
-        "training samples": report["n_samples"],
-        "validation samples": report["n_validation_samples"],
-        "base parameters": f"{report['n_base']} of {report['n_parameters']}",
-        "condition number": report["condition_number"],
-        "relative torque error (train)": rel_err["train"],
-        "relative torque error (validation)": rel_err["validation"],
-    }
-    if "parameter_error" in report:
-        summary["base parameter error vs truth"] = report["parameter_error"]
-    truth = report.get("true_base_parameters")
-    rows = [
-        {
-            "name": p["name"],
-            "expression": p["expression"],
-            "value": p["value"],
-            "std": p["std"],
-            "std [%]": p["std_percent"],
-            **({"true": truth[i]} if truth is not None else {}),
-        }
-        for i, p in enumerate(report["base_parameters"])
-    ]
+    quality = report_quality_rows(report)
     return write_report(
         args.report_claim,
         title=f"manip-id identify: {run_name}",
-        summary=summary,
-        parameter_table=rows,
+        summary=report_summary(report, source),
+        parameter_table=report_parameter_rows(report),
         figures=figs,
         scene=scene,
         json_result=report,
         notes=notes,
         force=args.force,
+        tables={"Data quality": quality} if quality else None,
     )
 
 
@@ -825,9 +972,7 @@ def _reference_torques(settings) -> str:
     """Which torques the errors are measured against, in words."""
     if settings is None or not settings.filter_torque:
         return "raw (as measured, not filtered)"
-    return (
-        f"filtered at {settings.cutoff:g} Hz (zero-phase Butterworth, order {settings.order})"
-    )
+    return f"filtered at {settings.cutoff:g} Hz (zero-phase Butterworth, order {settings.order})"
 
 
 def _summary(robot, report: dict) -> str:

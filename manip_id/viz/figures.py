@@ -95,8 +95,9 @@ def _figure(
 
 def _no_mathtext(fig: Figure) -> None:
     """Show every title, label, legend and annotation literally: user strings (joint and
-    file names, titles) never go through mathtext, so ``$`` is just a character. Tick
-    labels (matplotlib's own, e.g. ``10^{-2}`` on log axes) keep their formatting."""
+    file names, titles) never go through mathtext, so ``$`` is just a character, and bytes
+    of a file name that are not UTF-8 show as ``\udcff``. Tick labels (matplotlib's own,
+    e.g. ``10^{-2}`` on log axes) keep their formatting."""
     from matplotlib.text import Text
 
     texts: list[Text] = []
@@ -528,3 +529,242 @@ def png_size(path) -> tuple[int, int]:
     if len(head) < 24 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
         raise InputError(f"{path} is not a PNG file")
     return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+
+
+# ------------------------------------------------------- the report's questions
+_NOM = "#2ca02c"
+
+
+def _zoom_window(t: np.ndarray, errors: np.ndarray, span: float) -> tuple[float, float]:
+    """A window of ``span`` [s] where the identified and nominal curves differ most
+    (the largest moving RMS of ``errors``, shape (N,)), inside ``t``."""
+    if t[-1] - t[0] <= span or len(t) < 3:
+        return float(t[0]), float(t[-1])
+    dt = float(np.median(np.diff(t)))
+    w = max(int(span / max(dt, 1e-12)), 2)
+    c = np.concatenate([[0.0], np.cumsum(errors**2)])
+    k = int(np.argmax(c[w:] - c[:-w]))
+    return float(t[k]), float(t[min(k + w, len(t) - 1)])
+
+
+def torque_comparison(
+    path,
+    t,
+    tau,
+    tau_pred,
+    tau_nominal,
+    *,
+    validation_start: float | None = None,
+    joint_names: Sequence[str] | None = None,
+    units: str | Sequence[str] = "N m",
+    zoom: float = 2.0,
+    errors: Sequence[tuple[float | None, float | None]] | None = None,
+    reference: str = "measured",
+    title: str = "torques",
+    bins: int = 60,
+) -> Figure:
+    """Per joint: measured, identified and nominal torques over time, a zoom, the residuals.
+
+    One row per joint, three panels: (1) the whole record with the validation part
+    shaded (samples from ``validation_start`` [s] on; gaps are samples left out by
+    trimming or windows, drawn as breaks); (2) a ``zoom`` [s] window, in the
+    validation part when there is one, where the identified and nominal
+    predictions differ most, so the curves can be told apart; (3) histograms of
+    the residuals ``tau - tau_pred`` and ``tau - tau_nominal`` [units].
+
+    t: [s], shape (N,); tau, tau_pred, tau_nominal: shape (N, n) [units];
+    errors: per joint ``(identified, nominal)`` relative errors shown in the
+    titles (fractions); reference: what "measured" is (e.g. "filtered at 3 Hz").
+    """
+    t, tau = _series(t, tau, "t", "tau")
+    n = tau.shape[1]
+    _, pred = _series(t, tau_pred, "t", "tau_pred", width=n)
+    _, nom = _series(t, tau_nominal, "t", "tau_nominal", width=n)
+    names, units = _names(joint_names, n, "joint names", "joint"), _units(units, n)
+    if errors is not None and len(errors) != n:
+        raise InputError(f"{len(errors)} error pairs given for {n} joints")
+    if not (np.isfinite(zoom) and zoom > 0):
+        raise InputError(f"zoom must be a positive time [s], got {zoom}")
+    fig = Figure(figsize=(14.0, max(3.2, 2.1 * n + 1.2)), dpi=DPI)
+    FigureCanvasAgg(fig)
+    grid = fig.add_gridspec(n, 3, width_ratios=(3.2, 1.6, 1.2))
+    step = np.diff(t)
+    gap = np.flatnonzero(step > 5.0 * np.median(step)) if len(t) > 2 else np.array([], int)
+
+    def broken(x, y):  # NaN at the gaps, so lines do not bridge left-out samples
+        if gap.size == 0 or len(x) < 3:
+            return x, y
+        dx = np.diff(x)
+        at = np.flatnonzero(dx > 5.0 * np.median(dx)) + 1
+        return np.insert(x, at, np.nan), np.insert(y, at, np.nan)
+
+    k = _stride(len(t))
+    in_val = t >= validation_start if validation_start is not None else np.zeros(len(t), bool)
+    pick = in_val if in_val.any() else np.ones(len(t), bool)
+    for j in range(n):
+        ax = fig.add_subplot(grid[j, 0])
+        for y, color, lw, label in (
+            (tau[:, j], _TRAIN, 2.2, f"measured ({reference})"),
+            (nom[:, j], _NOM, 0.9, "nominal model (URDF)"),
+            (pred[:, j], _PRED, 0.9, "identified model"),
+        ):
+            ax.plot(
+                *broken(t[::k], y[::k]),
+                color=color,
+                lw=lw,
+                alpha=0.55 if lw > 2 else 1.0,
+                label=label,
+            )
+        if validation_start is not None and in_val.any():
+            ax.axvspan(
+                validation_start, t[-1], color=_VAL, alpha=0.12, lw=0, label="validation part"
+            )
+        for m, g in enumerate(gap):
+            ax.axvspan(
+                t[g],
+                t[g + 1],
+                color="k",
+                alpha=0.07,
+                lw=0,
+                label="left out (trimmed filter edges, windows)" if m == 0 else None,
+            )
+        head = names[j]
+        if errors is not None:
+            e_id, e_nom = errors[j]
+            head += "   error: identified " + ("n/a" if e_id is None else f"{100 * e_id:.2f} %")
+            head += ", nominal " + ("n/a" if e_nom is None else f"{100 * e_nom:.1f} %")
+        ax.set_title(head, fontsize=8, loc="left")
+        ax.set_ylabel(f"[{units[j]}]", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+        a, b = _zoom_window(t[pick], (pred - nom)[pick, j], zoom)
+        ax.axvspan(a, b, fill=False, ec="k", lw=0.6, ls=":")
+        zx = fig.add_subplot(grid[j, 1])
+        sel = (t >= a) & (t <= b)
+        zx.plot(t[sel], tau[sel, j], color=_TRAIN, lw=2.2, alpha=0.55)
+        zx.plot(t[sel], nom[sel, j], color=_NOM, lw=1.0)
+        zx.plot(t[sel], pred[sel, j], color=_PRED, lw=1.0)
+        zx.set_title(f"zoom {a:.1f}-{b:.1f} s", fontsize=8)
+        zx.tick_params(labelsize=7)
+        zx.grid(alpha=0.3)
+        hx = fig.add_subplot(grid[j, 2])
+        r_id, r_nom = tau[:, j] - pred[:, j], tau[:, j] - nom[:, j]
+        lim = float(np.percentile(np.abs(np.concatenate([r_id, r_nom])), 99.5)) or 1.0
+        edges = np.linspace(-lim, lim, int(bins) + 1)
+        hx.hist(r_nom, bins=edges, color=_NOM, alpha=0.5, label="nominal")
+        hx.hist(r_id, bins=edges, color=_PRED, alpha=0.7, label="identified")
+        hx.set_title(f"residual [{units[j]}]", fontsize=8)
+        hx.tick_params(labelsize=7)
+        hx.set_yticks([])
+        if j == 0:
+            handles, labels = ax.get_legend_handles_labels()
+            hx.legend(fontsize=7)
+    fig.axes[-3].set_xlabel("time [s]")
+    height = fig.get_figheight()
+    fig.legend(
+        handles,
+        labels,
+        loc="upper center",
+        ncol=5,
+        fontsize=8,
+        bbox_to_anchor=(0.5, 1.0 - 0.42 / height),
+    )
+    fig.suptitle(title, y=1.0 - 0.08 / height)
+    _no_mathtext(fig)
+    fig.tight_layout(rect=(0, 0, 1, 1.0 - 0.75 / height))
+    atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=DPI))
+    return fig
+
+
+def online_history(
+    path,
+    t,
+    theta_hat,
+    *,
+    names: Sequence[str],
+    reference,
+    reference_label: str = "final estimate",
+    prediction_error=None,
+    torque_rms: float | None = None,
+    max_lines: int = 12,
+    title: str = "online estimate",
+) -> Figure:
+    """Convergence of an online law: base-parameter relative errors and prediction error.
+
+    Top: ``|theta_hat_i(t) - ref_i| / max(|ref_i|, 1e-3 max|ref|)`` [-] on a log scale for
+    the ``max_lines`` parameters that end farthest from ``reference`` (plus the median
+    over all of them, black); the last 10 % of the time is shaded, where a converged
+    estimate no longer moves. Bottom: the prediction-error norm ``|eps(t)|`` [N m]
+    (its moving median), relative to ``torque_rms`` when given.
+
+    t: [s], shape (K,); theta_hat: shape (K, r); reference: shape (r,) (the truth of
+    a simulation, or the batch / final estimate); prediction_error: shape (K,).
+    """
+    t, th = _series(t, theta_hat, "t", "theta_hat")
+    r = th.shape[1]
+    names = _names(names, r, "parameter names", "parameter")
+    ref = as_float_array(reference, "reference", ndim=1)
+    if ref.shape != (r,):
+        raise InputError(f"reference.shape={ref.shape} but theta_hat.shape={th.shape}")
+    check_finite(ref, "reference")
+    scale = np.maximum(np.abs(ref), 1e-3 * max(float(np.abs(ref).max()), 1e-300))
+    rel = np.abs(th - ref) / scale  # (K, r)
+    order = np.argsort(-rel[-1])[: min(int(max_lines), r)]
+    n_axes = 2 if prediction_error is not None else 1
+    fig, axes = _figure(n_axes, width=11.0, row_height=3.0)
+    ax = axes[0]
+    k = _stride(len(t))
+    floor = 1e-6
+    for i in order:
+        ax.semilogy(t[::k], np.maximum(rel[::k, i], floor), lw=0.8, label=names[i])
+    ax.semilogy(
+        t[::k],
+        np.maximum(np.median(rel[::k], axis=1), floor),
+        color="k",
+        lw=1.8,
+        label=f"median of {r}",
+    )
+    tail = t[0] + 0.9 * (t[-1] - t[0])
+    for a in axes:
+        a.axvspan(tail, t[-1], color=_VAL, alpha=0.15, lw=0)
+        a.grid(alpha=0.3, which="both")
+        a.tick_params(labelsize=7)
+    ax.set_ylabel(f"relative error vs {reference_label} [-]", fontsize=8)
+    ax.legend(fontsize=6, ncol=4, loc="lower left")
+    ax.set_title(
+        f"base-parameter estimates: the {len(order)} farthest from the {reference_label} at "
+        "the end, and the median (last 10 % of the data shaded)",
+        fontsize=9,
+    )
+    if prediction_error is not None:
+        e = as_float_array(prediction_error, "prediction_error", ndim=1)
+        if e.shape != t.shape:
+            raise InputError(f"prediction_error.shape={e.shape} but t.shape={t.shape}")
+        ok = np.isfinite(e)
+        w = max(len(t) // 100, 1)
+        ee = e[ok]
+        smooth = np.array([np.median(ee[max(0, i - w) : i + 1]) for i in range(len(ee))])
+        unit = "[N m]"
+        if torque_rms:
+            ee, smooth, unit = (
+                ee / torque_rms,
+                smooth / torque_rms,
+                "relative to the torque RMS [-]",
+            )
+        bx = axes[1]
+        bx.semilogy(
+            t[ok][::k],
+            np.maximum(ee[::k], 1e-12),
+            color=_PRED,
+            lw=0.4,
+            alpha=0.5,
+            label="|eps| per sample",
+        )
+        bx.semilogy(
+            t[ok][::k], np.maximum(smooth[::k], 1e-12), color=_VPRED, lw=1.4, label="moving median"
+        )
+        bx.set_ylabel(f"prediction error {unit}", fontsize=8)
+        bx.legend(fontsize=7)
+    axes[-1].set_xlabel("time [s]")
+    fig.suptitle(title)
+    return _save(fig, path)

@@ -48,6 +48,70 @@ SET_COLORS: tuple[tuple[float, float, float, float], ...] = (
 )
 GREY = (0.6, 0.6, 0.6, 1.0)
 _ROBOT_ROOT = "robot"
+#: Triangles kept per mesh at most (vertex clustering); meshes are sent as binary arrays.
+MAX_TRIANGLES = 3000
+#: A parameter set is hidden at first when one of its ellipsoids is wider than this
+#: fraction of the robot's size (the diagonal of its bounding box); a toggle shows it.
+HIDE_WIDER_THAN = 0.5
+_MESH_CACHE: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def decimate_mesh(vertices, faces, max_triangles: int = MAX_TRIANGLES):
+    """Fewer triangles by vertex clustering: ``(vertices (n, 3), faces (m, 3))``.
+
+    Vertices are merged per cell of a regular grid (each cell's mean), faces that
+    collapse are dropped; the cell is halved until at most ``max_triangles`` remain
+    (or kept as is when the mesh is already small). The shape stays within one cell
+    of the original everywhere.
+    """
+    V = np.asarray(vertices, dtype=float)
+    F = np.asarray(faces, dtype=np.int64)
+    if len(F) <= max_triangles or len(V) == 0:
+        return V, F
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    size = float(np.linalg.norm(hi - lo)) or 1.0
+    best = None
+    for cells in (12, 17, 24, 34, 48, 68, 96, 136, 192):
+        h = size / cells  # [m] cell edge
+        ijk = np.floor((V - lo) / h).astype(np.int64)  # grid cell of each vertex
+        key = (ijk[:, 0] * (cells + 2) + ijk[:, 1]) * (cells + 2) + ijk[:, 2]
+        _, cell, counts = np.unique(key, return_inverse=True, return_counts=True)
+        cell = cell.ravel()
+        merged = np.zeros((counts.size, 3))
+        np.add.at(merged, cell, V)
+        merged /= counts[:, None]
+        f = cell[F]
+        f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])]
+        srt = np.sort(f, axis=1)
+        n = np.int64(counts.size)
+        first = np.unique((srt[:, 0] * n + srt[:, 1]) * n + srt[:, 2], return_index=True)[1]
+        f = f[np.sort(first)]  # each merged triangle once, its orientation kept
+        if len(f) > max_triangles:
+            break
+        best = (merged, f)
+    if best is None:
+        return V, F
+    used, inv = np.unique(best[1], return_inverse=True)
+    return best[0][used], inv.reshape(-1, 3)
+
+
+def _mesh_arrays(obj, max_triangles: int):
+    """``(vertices, faces)`` of a geometry object's mesh, unscaled and decimated, or None
+    for primitives (box, cylinder, sphere) and empty meshes."""
+    geom = obj.geometry
+    if not hasattr(geom, "num_tris") or geom.num_tris == 0:
+        return None
+    key = (obj.meshPath, geom.num_tris, geom.num_vertices, max_triangles)
+    if key not in _MESH_CACHE:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DeprecationWarning)
+            V = np.asarray(geom.vertices(), dtype=float).reshape(-1, 3)
+            tri = geom.tri_indices
+            F = np.array([[t[0], t[1], t[2]] for t in map(tri, range(geom.num_tris))])
+        scale = np.asarray(obj.meshScale, dtype=float)
+        V = V / np.where(scale != 0, scale, 1.0)  # the BVH holds scaled vertices
+        _MESH_CACHE[key] = decimate_mesh(V, F, max_triangles)
+    return _MESH_CACHE[key]
 
 
 # ------------------------------------------------------------------ ellipsoids
@@ -226,6 +290,17 @@ def share_color(share: float) -> tuple[float, float, float, float]:
     return (*map(float, rgb), 1.0)
 
 
+def _rotation_y_to(axis: np.ndarray) -> np.ndarray:
+    """A rotation matrix taking the y axis to the unit vector ``axis``, shape (3, 3)."""
+    y = np.array([0.0, 1.0, 0.0])
+    v = np.cross(y, axis)
+    c = float(y @ axis)
+    if np.linalg.norm(v) < 1e-12:
+        return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
+    vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + vx + vx @ vx / (1.0 + c)
+
+
 def _hex(color) -> int:
     r, g, b = (int(round(255 * float(np.clip(x, 0, 1)))) for x in color[:3])
     return r * 256**2 + g * 256 + b
@@ -373,23 +448,52 @@ class RobotScene:
         uses it for a background reference).
     """
 
-    def __init__(self, robot: Robot, *, q=None, title: str = "", show_robot: bool = True):
+    def __init__(
+        self,
+        robot: Robot,
+        *,
+        q=None,
+        title: str = "",
+        show_robot: bool = True,
+        max_triangles: int = MAX_TRIANGLES,
+    ):
         self.robot = robot
         self.title = title or f"{robot.name}"
+        self.max_triangles = int(max_triangles)
         self._window = _RecordingWindow()
         self._vis = _OfflineVisualizer(window=self._window)
         self._model = robot.model
         self._data = robot.model.createData()
-        self._geom = robot.visual_model.copy() if show_robot else pin.GeometryModel()
+        self.notes: list[str] = []
+        #: "meshes", "capsules" (no mesh could be loaded: simple link geometry) or "none"
+        self.geometry = "none"
+        self._geom = pin.GeometryModel()
+        if show_robot:
+            try:
+                self._geom = robot.visual_model.copy()
+                self.geometry = "meshes"
+            except ManipIdError as exc:
+                self.notes.append(
+                    f"the robot's meshes could not be loaded ({exc}); the links are drawn as "
+                    "capsules between the joint frames"
+                )
+            if self.geometry == "meshes" and self._geom.ngeoms == 0:
+                self.notes.append(
+                    "the URDF has no visual geometry; the links are drawn as capsules between "
+                    "the joint frames"
+                )
+            if self._geom.ngeoms == 0:
+                self.geometry = "capsules"
         self._geom_data = self._geom.createData()
+        self._capsules: list[tuple[str, int, np.ndarray]] = []
         self._sets: list[tuple[str, list[EquivalentEllipsoid], tuple]] = []
         self._legend: list[_Legend] = []
-        self.notes: list[str] = []
         self._t: np.ndarray | None = None
         self._q: np.ndarray | None = None
         self._link_colors: dict[int, tuple] | None = None
         q0 = robot.neutral() if q is None else check_trajectory(robot, [0.0], q)[1][0]
         self._q_static = q0
+        self._size = self._joint_box_size(q0)
         self._load_meshes()
         self._place_all(q0, self._vis)
         self._set_camera(q0)
@@ -403,25 +507,71 @@ class RobotScene:
         self._viz.viewerRootNodeName = _ROBOT_ROOT
         self._viz.viewerVisualGroupName = f"{_ROBOT_ROOT}/visuals"
         self._viz.viewerCollisionGroupName = f"{_ROBOT_ROOT}/collisions"
+        self._boxes: dict[str, np.ndarray] = {}
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             for obj in self._geom.geometryObjects:
                 if self._link_colors is None:
-                    self._viz.loadViewerGeometryObject(obj, pin.GeometryType.VISUAL)
-                    continue
-                color = self._link_colors.get(obj.parentJoint, GREY)
-                suffix = Path(obj.meshPath).suffix.lower() if obj.meshPath else ""
-                if suffix == ".dae":  # Collada files keep their own materials: load the geometry
-                    material = mg.MeshPhongMaterial(color=_hex(color))
-                    self._vis[self._node(obj)].set_object(
-                        mg.DaeMeshGeometry.from_file(obj.meshPath), material
-                    )
+                    color = tuple(float(c) for c in obj.meshColor)
+                    if not any(color[:3]) or obj.meshPath.lower().endswith(".dae"):
+                        color = GREY  # Collada materials are not read from the decimated mesh
                 else:
+                    color = self._link_colors.get(obj.parentJoint, GREY)
+                mesh = _mesh_arrays(obj, self.max_triangles)
+                if mesh is None:  # primitives: Pinocchio's loader (small objects)
                     self._viz.loadViewerGeometryObject(
                         obj, pin.GeometryType.VISUAL, np.array(color)
                     )
+                    continue
+                V, F = mesh
+                material = mg.MeshLambertMaterial(
+                    color=_hex(color), opacity=float(color[3]), transparent=float(color[3]) < 1.0
+                )
+                self._vis[self._node(obj)].set_object(
+                    mg.TriangularMeshGeometry(V.astype(np.float32), F.astype(np.uint32)), material
+                )
+                self._boxes[self._node(obj)] = np.array([V.min(axis=0), V.max(axis=0)])
         for w in caught:
             self.notes.append(f"mesh: {w.message}")
+        if self.geometry == "capsules":
+            self._load_capsules()
+
+    def _joint_box_size(self, q) -> float:
+        pin.forwardKinematics(self._model, self._data, q)
+        pts = np.array([self._data.oMi[i].translation for i in range(self._model.njoints)])
+        return max(float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0))), 0.1)  # [m]
+
+    def _load_capsules(self) -> None:
+        """Simple link geometry: a cylinder from each joint to its children's joints (or to
+        the body's centre of mass for a last body) and a sphere at each joint."""
+        model = self._model
+        radius = 0.025 * max(self._size, 0.2)  # [m]
+        self._capsules = []
+        children: dict[int, list[int]] = {}
+        for i in range(1, model.njoints):
+            children.setdefault(int(model.parents[i]), []).append(i)
+        for body in range(1, model.njoints):
+            color = (self._link_colors or {}).get(body, GREY)
+            material = mg.MeshLambertMaterial(color=_hex(color))
+            name = model.names[body]
+            ends = [model.jointPlacements[c].translation for c in children.get(body, [])]
+            if not ends:
+                ends = [np.asarray(model.inertias[body].lever, dtype=float)]
+            for k, end in enumerate(ends):
+                length = float(np.linalg.norm(end))
+                if length < 1e-4:
+                    continue
+                axis = np.asarray(end, dtype=float) / length
+                T = np.eye(4)
+                T[:3, :3] = _rotation_y_to(axis)  # meshcat cylinders lie along y
+                T[:3, 3] = 0.5 * np.asarray(end, dtype=float)
+                path = f"{_ROBOT_ROOT}/links/{name}/segment{k}"
+                self._vis[path].set_object(mg.Cylinder(length, radius), material)
+                self._capsules.append((path, body, T))
+                self._boxes[path] = np.array([np.minimum(0, end), np.maximum(0, end)])
+            path = f"{_ROBOT_ROOT}/links/{name}/joint"
+            self._vis[path].set_object(mg.Sphere(1.5 * radius), material)
+            self._capsules.append((path, body, np.eye(4)))
 
     def _node(self, obj) -> str:
         return f"{_ROBOT_ROOT}/visuals/{obj.name}"
@@ -437,6 +587,8 @@ class RobotScene:
             for k, obj in enumerate(self._geom.geometryObjects):
                 T = self._geom_data.oMg[k].homogeneous
                 out[self._node(obj)] = applyScalingOnHomegeneousTransform(T, obj.meshScale)
+        for path, body, T_local in self._capsules:
+            out[path] = self._data.oMi[body].homogeneous @ T_local
         for label, ellipsoids, _ in self._sets:
             for body, ell in enumerate(ellipsoids, start=1):
                 if ell.physical:
@@ -450,13 +602,21 @@ class RobotScene:
             vis[path].set_transform(T)
 
     def _set_camera(self, qs) -> None:
-        """Aim the camera at the box around every joint origin over configurations ``qs``."""
+        """Aim the camera at the robot's bounding box over configurations ``qs``: every
+        joint origin and the placed box of every mesh (or capsule)."""
         qs = np.atleast_2d(qs)
         qs = qs[np.linspace(0, len(qs) - 1, min(len(qs), 60)).astype(int)]
         pts = []
+        corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
         for q in qs:
             pin.forwardKinematics(self._model, self._data, q)
             pts += [self._data.oMi[i].translation.copy() for i in range(self._model.njoints)]
+            for path, T in self._transforms(q).items():  # every mesh's box, placed
+                box = self._boxes.get(path)
+                if box is None:
+                    continue
+                local = np.where(corners == 0, box[0], box[1])  # (8, 3) [m]
+                pts += list(local @ T[:3, :3].T + T[:3, 3])  # T carries the mesh scale
         pts = np.array(pts)
         lo, hi = pts.min(axis=0), pts.max(axis=0)
         center = 0.5 * (lo + hi)
@@ -469,7 +629,7 @@ class RobotScene:
             self._vis[node].set_transform(shift)
         self._vis["/Grid"].set_property("visible", False)
         # camera offset in the viewer's y-up camera frame: world (dx, dy, dz) -> (dx, dz, -dy)
-        d = 0.7 * size * np.array([1.0, 0.7, 0.45])
+        d = 0.6 * size * np.array([1.0, 0.7, 0.45])
         self._vis["/Cameras/default/rotated/<object>"].set_property(
             "position", [float(d[0]), float(d[2]), float(-d[1])]
         )
@@ -519,11 +679,16 @@ class RobotScene:
         self._vis.set_animation(anim, play=play, repetitions=1)
         self.duration = (n_frames - 1) / fps
 
-    def add_inertia(self, theta, *, label: str = "nominal", color=None) -> list[str]:
+    def add_inertia(
+        self, theta, *, label: str = "nominal", color=None, visible: bool | None = None
+    ) -> list[str]:
         """Draw the equivalent inertia ellipsoid of each body of ``theta`` (shape (p,)).
 
         Bodies whose block is not physically consistent are skipped; the
         returned notes (also in :attr:`notes` and in the HTML legend) say why.
+        visible: shown at first; default: unless one of its ellipsoids is wider
+        than :data:`HIDE_WIDER_THAN` times the robot's size (it would hide the arm).
+        The page's legend has a check box per set that shows or hides it.
         """
         if not isinstance(label, str) or not label or "/" in label:
             raise InputError(f"label must be a non-empty name without '/', got {label!r}")
@@ -547,12 +712,31 @@ class RobotScene:
         self._sets.append((label, ellipsoids, color))
         self.notes.extend(notes)
         drawn = sum(e.physical for e in ellipsoids)
+        widest = max(
+            (2.0 * float(np.max(e.semi_axes)) for e in ellipsoids if e.physical), default=0.0
+        )  # [m]
+        too_wide = widest > HIDE_WIDER_THAN * self._size
+        shown = (not too_wide) if visible is None else bool(visible)
+        self._vis[f"inertia/{label}"].set_property("visible", shown)
+        why = (
+            f" (hidden at first: {widest:.2f} m wide, more than {HIDE_WIDER_THAN:g} of the "
+            f"robot's {self._size:.2f} m)"
+            if too_wide and visible is None
+            else ""
+        )
+        path = json.dumps(["meshcat", "inertia", label])
+        box = (
+            f'<input type="checkbox" {"checked " if shown else ""}'
+            f'onchange=\'viewer.set_property({html_lib.escape(path)}, "visible", '
+            "this.checked); viewer.set_dirty()'>"
+        )
         self._legend.append(
             _Legend(
                 f"inertia ellipsoids: {html_lib.escape(label)}",
                 [
+                    f"<label>{box}"
                     f'<span class="sw" style="background:{_css(color)}"></span> '
-                    f"{html_lib.escape(label)}: {drawn} of {len(ellipsoids)} bodies"
+                    f"{html_lib.escape(label)}: {drawn} of {len(ellipsoids)} bodies{why}</label>"
                 ],
                 notes,
             )
@@ -573,6 +757,7 @@ class RobotScene:
             colors[body] = share_color(s)
         self._link_colors = colors
         self._vis[f"{_ROBOT_ROOT}/visuals"].delete()
+        self._vis[f"{_ROBOT_ROOT}/links"].delete()
         self._geom = self._geom.copy()
         self._load_meshes()
         self._place_all(self._q_static, self._vis)
@@ -602,17 +787,46 @@ class RobotScene:
         """The scene as msgpack-packed meshcat commands, in replay order."""
         return self._window.commands()
 
+    #: "inline" (one standalone page) or "external": the viewer script and the scene's
+    #: commands in files beside the page (:meth:`asset_files`), written once
+    assets: str = "inline"
+    #: file names of the external assets
+    VIEWER_JS, DATA_JS = "meshcat.min.js", "scene-data.js"
+
     def html(self) -> str:
         """A standalone HTML page of the scene (three.js embedded, no network needed).
 
         Open it with ``#t=<seconds>`` appended to the URL to start paused at that time.
+        With ``assets = "external"`` the page loads :attr:`VIEWER_JS` and :attr:`DATA_JS`
+        from its folder instead (:meth:`asset_files`).
         """
-        js = (Path(meshcat.__file__).parent / "viewer" / "dist" / "main.min.js").read_text()
-        payload = json.dumps([base64.b64encode(c).decode("ascii") for c in self.commands()])
+        if self.assets not in ("inline", "external"):
+            raise InputError(f"assets must be 'inline' or 'external', got {self.assets!r}")
         legend = self._legend_html()
+        title = html_lib.escape(self.title)
+        if self.assets == "external":
+            return _PAGE.format(
+                title=title,
+                viewer=f'<script src="{self.VIEWER_JS}"></script>',
+                data=f'<script src="{self.DATA_JS}"></script>',
+                legend=legend,
+            )
         return _PAGE.format(
-            title=html_lib.escape(self.title), mainjs=js, commands=payload, legend=legend
+            title=title,
+            viewer=f"<script>\n{_viewer_js()}\n</script>",
+            data=f"<script>\n{self._data_js()}\n</script>",
+            legend=legend,
         )
+
+    def _data_js(self) -> str:
+        payload = json.dumps([base64.b64encode(c).decode("ascii") for c in self.commands()])
+        return f"var commands = {payload};"
+
+    def asset_files(self) -> dict[str, str]:
+        """The files an ``assets = "external"`` page loads: name -> text (empty inline)."""
+        if self.assets != "external":
+            return {}
+        return {self.VIEWER_JS: _viewer_js(), self.DATA_JS: self._data_js()}
 
     def _legend_html(self) -> str:
         parts = [f"<b>{html_lib.escape(self.title)}</b>"]
@@ -628,7 +842,11 @@ class RobotScene:
         return "<br>".join(parts)
 
     def write_html(self, path) -> Path:
-        """Write :meth:`html` to ``path`` atomically (temporary file, then rename)."""
+        """Write :meth:`html` to ``path`` atomically (temporary file, then rename), and the
+        external assets (:meth:`asset_files`) beside it."""
+        path = Path(path)
+        for name, text in self.asset_files().items():
+            atomic_write_text(path.parent / name, text)
         return atomic_write_text(path, self.html())
 
     def serve(self, open_browser: bool = False, host: str = "127.0.0.1") -> LiveView:
@@ -695,6 +913,11 @@ class LiveView:
         self.stop()
 
 
+def _viewer_js() -> str:
+    """meshcat's viewer (three.js included), as the meshcat package ships it."""
+    return (Path(meshcat.__file__).parent / "viewer" / "dist" / "main.min.js").read_text()
+
+
 _PAGE = """<!DOCTYPE html>
 <html>
 <head><meta charset="utf-8"><title>{title}</title>
@@ -711,12 +934,10 @@ body {{ margin: 0; }}
 <body>
 <div id="meshcat-pane"></div>
 <div id="legend">{legend}</div>
-<script>
-{mainjs}
-</script>
+{viewer}
+{data}
 <script>
 var viewer = new MeshCat.Viewer(document.getElementById("meshcat-pane"));
-var commands = {commands};
 for (const b64 of commands) {{
   const raw = atob(b64);
   const bytes = new Uint8Array(raw.length);

@@ -233,15 +233,20 @@ def _cell(value) -> str:
     return html_lib.escape(str(value))
 
 
-def _table(rows: Sequence[Mapping]) -> str:
+def _table(rows: Sequence[Mapping], empty: str = "(no parameters)") -> str:
+    """An HTML table; keys starting with ``_`` are not columns: ``_class`` is the row's
+    CSS class (``"bad"`` rows are highlighted)."""
     if not rows:
-        return "<p>(no parameters)</p>"
+        return f"<p>{html_lib.escape(empty)}</p>"
     cols: list[str] = []
     for row in rows:
-        cols += [c for c in row if c not in cols]
+        cols += [c for c in row if c not in cols and not str(c).startswith("_")]
     head = "".join(f"<th>{html_lib.escape(str(c))}</th>" for c in cols)
     body = "\n".join(
-        "<tr>" + "".join(f"<td>{_cell(row.get(c))}</td>" for c in cols) + "</tr>" for row in rows
+        (f'<tr class="{html_lib.escape(str(row["_class"]))}">' if row.get("_class") else "<tr>")
+        + "".join(f"<td>{_cell(row.get(c))}</td>" for c in cols)
+        + "</tr>"
+        for row in rows
     )
     return f"<table>\n<tr>{head}</tr>\n{body}\n</table>"
 
@@ -254,7 +259,9 @@ def _summary(summary: Mapping) -> str:
     return f'<table class="summary">\n{items}\n</table>'
 
 
-def _index(title: str, summary: Mapping, rows, figures: list[str], scene: bool, notes) -> str:
+def _index(
+    title: str, summary: Mapping, rows, figures: list[str], scene: bool, notes, tables=None
+) -> str:
     figs = "\n".join(
         f'<figure><img src="{html_lib.escape(f)}" alt="{html_lib.escape(Path(f).stem)}">'
         f"<figcaption>{html_lib.escape(Path(f).stem.replace('_', ' '))}</figcaption></figure>"
@@ -268,6 +275,10 @@ def _index(title: str, summary: Mapping, rows, figures: list[str], scene: bool, 
         else ""
     )
     note_html = "".join(f"<li>{html_lib.escape(str(n))}</li>" for n in notes)
+    extra = "\n".join(
+        f"<h2>{html_lib.escape(str(name))}</h2>\n{_table(t, '(none)')}"
+        for name, t in (tables or {}).items()
+    )
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8">
 <title>{html_lib.escape(title)}</title>
@@ -278,6 +289,8 @@ th, td {{ border: 1px solid #ccc; padding: 2px 6px; text-align: left; }}
 table.summary th {{ background: #f3f3f3; }}
 figure {{ margin: 0 0 1.5em 0; }} img {{ max-width: 100%; border: 1px solid #ddd; }}
 iframe {{ width: 100%; height: 600px; border: 1px solid #ddd; }}
+tr.bad td {{ background: #fde2dd; }} tr.warn td {{ background: #fff4cc; }}
+td {{ white-space: nowrap; }} td:last-child {{ white-space: normal; }}
 </style></head>
 <body>
 <h1>{html_lib.escape(title)}</h1>
@@ -289,6 +302,7 @@ iframe {{ width: 100%; height: 600px; border: 1px solid #ddd; }}
 {figs or "<p>(no figures)</p>"}
 <h2>Parameters</h2>
 {_table(rows)}
+{extra}
 <p><a href="{RESULT}">{RESULT}</a>: the full result.</p>
 </body></html>
 """
@@ -306,6 +320,7 @@ def write_report(
     notes: Sequence[str] = (),
     force: bool = False,
     inputs: Sequence = (),
+    tables: Mapping[str, Sequence[Mapping]] | None = None,
 ) -> Path:
     """Write a report folder and return its path.
 
@@ -317,6 +332,8 @@ def write_report(
     scene: a :class:`~manip_id.viz.meshcat_scene.RobotScene` or its HTML as a string;
     json_result: written to result.json (default: ``{"summary", "parameters"}``);
     notes: lines shown under the summary;
+    tables: more sections after the parameters, title -> rows (as ``parameter_table``;
+        a row's ``_class`` key, e.g. ``"bad"``, highlights it);
     inputs: paths the report must not replace or contain (see :func:`check_report_target`).
 
     ``directory`` may also be a :class:`ReportFolder` from :func:`claim_report`: the
@@ -332,6 +349,7 @@ def write_report(
         scene=scene,
         json_result=json_result,
         notes=notes,
+        tables=tables,
     )
     if isinstance(directory, ReportFolder):
         return directory.write(**content)
@@ -376,6 +394,7 @@ def _build(
     scene=None,
     json_result=None,
     notes: Sequence[str] = (),
+    tables=None,
 ) -> Path:
     """The complete report in a temporary sibling folder of ``target``; returns that folder."""
     for name in figures:
@@ -414,8 +433,12 @@ def _build(
         if scene is not None:
             text = scene if isinstance(scene, str) else scene.html()
             atomic_write_text(tmp / SCENE, text)
+            assets = {} if isinstance(scene, str) else getattr(scene, "asset_files", dict)()
+            for name, asset in assets.items():  # a scene's external assets, written once
+                atomic_write_text(tmp / name, asset)
         atomic_write_text(
-            tmp / INDEX, _index(title, summary, parameter_table, written, scene is not None, notes)
+            tmp / INDEX,
+            _index(title, summary, parameter_table, written, scene is not None, notes, tables),
         )
         files = sorted(p.name for p in tmp.iterdir())
         manifest = {"written_by": _package, "files": files}
