@@ -13,24 +13,38 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import sys
 import tempfile
 import threading
 import warnings
+from collections.abc import Callable
 
-_LOCK = threading.Lock()  # fd 2 is process-wide: one capture at a time
+_LOCK = threading.RLock()  # fd 2 is process-wide: one thread at a time (nesting is fine)
 
 
 class LibraryOutputWarning(UserWarning):
     """Text a C/C++ library printed on standard error while manip_id called it."""
 
 
+#: Where a C++ library says where in its own sources it printed from: not for users.
+_SOURCE_LOCATION = re.compile(r"\s*at line \d+ in \S+")
+
+
+def _clean(text: str) -> list[str]:
+    lines = [" ".join(_SOURCE_LOCATION.sub("", line).split()) for line in text.splitlines()]
+    return list(dict.fromkeys(line for line in lines if line))
+
+
 @contextlib.contextmanager
-def native_stderr_captured(source: str = ""):
-    """Capture fd-level stderr in the block (see the module docstring); re-entrant."""
-    if not _LOCK.acquire(blocking=False):  # nested or concurrent: the outer one captures
-        yield
-        return
+def native_stderr_captured(source: str = "", error: Callable[[str], Exception] | None = None):
+    """Capture fd-level stderr in the block (see the module docstring); re-entrant.
+
+    With ``error``, a block that succeeds although the library printed ``Error`` lines
+    (urdfdom skips an unparsable inertial element and goes on: a body without mass)
+    raises ``error(message)`` instead of warning.
+    """
+    _LOCK.acquire()
     try:
         try:
             sys.stderr.flush()
@@ -55,6 +69,9 @@ def native_stderr_captured(source: str = ""):
     finally:
         _LOCK.release()
     if ok and text.strip():
-        lines = [" ".join(line.split()) for line in text.splitlines() if line.strip()]
+        lines = _clean(text)
         prefix = f"{source}: " if source else ""
-        warnings.warn(prefix + "; ".join(dict.fromkeys(lines)), LibraryOutputWarning, stacklevel=3)
+        errors = [line.removeprefix("Error:").strip() for line in lines if "Error" in line]
+        if error is not None and errors:
+            raise error(prefix + "; ".join(errors))
+        warnings.warn(prefix + "; ".join(lines), LibraryOutputWarning, stacklevel=3)

@@ -436,8 +436,8 @@ def _load_urdf(path: Path) -> pin.Model:
     if not path.is_file():
         raise RobotError(f"cannot read URDF {path}: no such file")
     try:
-        with native_stderr_captured("urdfdom"), warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+        with native_stderr_captured("urdfdom", error=RobotError), warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # urdfdom's errors: refused, not a massless body
             return pin.buildModelFromUrdf(str(path))
     except Exception as exc:
         cause = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__

@@ -181,6 +181,7 @@ def _bad_urdfs(w: Path) -> None:
     (w / "notxml.urdf").write_text("this is not XML at all\n")
     (w / "binary.urdf").write_bytes(bytes(range(256)) * 4)
     (w / "empty.urdf").write_bytes(b"")
+    arm_urdf(w / "nomass.urdf", m1="")  # urdfdom skips the inertial: a massless body
 
 
 def _bad_data(w: Path) -> None:
@@ -456,6 +457,7 @@ CASES = [
     Case("urdf-binary", ["rank", "binary.urdf"], match="binary.urdf"),
     Case("urdf-empty", ["rank", "empty.urdf"], match="empty.urdf"),
     Case("urdf-missing", ["rank", "missing.urdf"], match="missing.urdf"),
+    Case("urdf-unparsable-mass", ["rank", "nomass.urdf"], match="mass .* is not a float"),
     Case("simulate-negative-mass", ["identify", "negmass.urdf", *SIM], match=r"l1|j1"),
     Case("simulate-non-pd-inertia", ["identify", "nonpd.urdf", *SIM], match=r"j1|l1"),
     Case(
