@@ -230,11 +230,6 @@ class RegressorEvaluator:
 
 
 # ------------------------------------------------------------------ checking
-def _evaluator(robot: Robot) -> RegressorEvaluator:
-    """Deprecated alias of :attr:`Robot.evaluator` (kept for callers not yet moved)."""
-    return robot.evaluator
-
-
 def check_states(robot: Robot, **arrays) -> tuple[bool, list[np.ndarray]]:
     """Validate state arrays: the first is positions (nq wide), the others nv wide.
 
