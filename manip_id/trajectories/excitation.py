@@ -333,14 +333,8 @@ def optimize_excitation(
     """
     harmonics, wf = _check_design_args(harmonics, wf)
     margin = check_margin(margin)
-    for name, value, least in (
-        ("n_points", n_points, 1),
-        ("maxiter", maxiter, 0),
-        ("n_constraint_points", n_constraint_points, 2),
-        ("n_random", n_random, 0),
-    ):
-        if int(value) != value or value < least:
-            raise InputError(f"{name} must be an integer >= {least}, got {value}")
+    _check_counts(n_points=(n_points, 1), maxiter=(maxiter, 0), n_random=(n_random, 0))
+    _check_counts(n_constraint_points=(n_constraint_points, 2))
     t0 = time.perf_counter()
     base = base_columns(robot) if base is None else np.asarray(base, dtype=int)
     nv, L = robot.nv, harmonics
@@ -352,37 +346,23 @@ def optimize_excitation(
     objective = ExcitationObjective(robot, base, L, wf, n_points)
     x0 = start.to_vector()
     f0 = objective.value(x0)
-    constraint = {"type": "ineq", "fun": lambda x: h - G @ x, "jac": lambda x: -G}
-    import scipy.optimize  # heavy: only when an optimization runs
-
-    try:
-        res = scipy.optimize.minimize(
-            objective.value_and_gradient,
-            x0,
-            jac=True,
-            method="SLSQP",
-            constraints=[constraint],
-            options={"maxiter": int(maxiter), "ftol": 1e-6},
-        )
-    except ValueError as exc:  # pragma: no cover - SLSQP breaking down on its own iterates
-        raise NumericalError("excitation optimization (SLSQP)", str(exc)) from exc
+    res = _slsqp(objective, x0, G, h, int(maxiter))
     x = res.x if objective.value(res.x) <= f0 else x0
     traj = FourierTrajectory.from_vector(x, nv, L, wf)
     traj = _fit_into_limits(robot, traj, margin, acceleration_limit)
     usage = check_limits(robot, traj, margin=margin, acceleration_limit=acceleration_limit)
     cond0 = excitation_condition_number(robot, start, n_points, base)
     cond = excitation_condition_number(robot, traj, n_points, base)
+    limits = {"margin": margin, "acceleration_limit": acceleration_limit}
     randoms = np.array(
         [
             excitation_condition_number(
                 robot,
-                random_trajectory(
-                    robot, L, wf, seed + 1 + i, margin=margin, acceleration_limit=acceleration_limit
-                ),
+                random_trajectory(robot, L, wf, s, **limits),
                 n_points,
                 base,
             )
-            for i in range(int(n_random))
+            for s in range(seed + 1, seed + 1 + int(n_random))
         ]
     )
     return ExcitationResult(
@@ -400,6 +380,31 @@ def optimize_excitation(
         message=str(res.message),
         usage=usage,
     )
+
+
+def _check_counts(**counts: tuple) -> None:
+    """Each ``name=(value, least)`` must be an integer >= least."""
+    for name, (value, least) in counts.items():
+        if int(value) != value or value < least:
+            raise InputError(f"{name} must be an integer >= {least}, got {value}")
+
+
+def _slsqp(objective: ExcitationObjective, x0: np.ndarray, G, h, maxiter: int):
+    """SLSQP on ``log cond(W(x))`` with the linear limits ``G x <= h``."""
+    import scipy.optimize  # heavy: only when an optimization runs
+
+    constraint = {"type": "ineq", "fun": lambda x: h - G @ x, "jac": lambda _x: -G}
+    try:
+        return scipy.optimize.minimize(
+            objective.value_and_gradient,
+            x0,
+            jac=True,
+            method="SLSQP",
+            constraints=[constraint],
+            options={"maxiter": maxiter, "ftol": 1e-6},
+        )
+    except ValueError as exc:  # pragma: no cover - SLSQP breaking down on its own iterates
+        raise NumericalError("excitation optimization (SLSQP)", str(exc)) from exc
 
 
 def _fit_into_limits(robot, traj, margin, acceleration_limit) -> FourierTrajectory:
