@@ -1086,7 +1086,7 @@ def consistent_payload(
     the unidentifiable directions of ``phi`` only have to make ``J`` feasible. The
     default margin is ``1e-8 max|eig J(phi_hat)|``. Returns ``(phi, status)``.
     """
-    from .estimators.consistent import ConsistentProblem, _solve_sdp, base_map
+    from .estimators.consistent import ConsistentProblem, base_map, solve_sdp
 
     psi_hat = as_float_array(psi_hat, "psi_hat", ndim=1)
     k = psi_hat.size
@@ -1125,7 +1125,7 @@ def consistent_payload(
         dependent=np.asarray(payload_base.dependent, dtype=np.intp),
         names=list(PAYLOAD_NAMES),
     )
-    phi, status, iters = _solve_sdp(problem)
+    phi, status, iters = solve_sdp(problem)
     return phi, f"Clarabel SDP ({status}, {iters} iterations, margin {float(margin):.3g})"
 
 

@@ -336,7 +336,7 @@ def solve_consistent(
         raise InputError(f"solver must be one of {list(SOLVERS)}, got {solver!r}")
     t0 = time.perf_counter()
     if solver == "sdp":
-        theta, status, iters = _solve_sdp(problem, **options)
+        theta, status, iters = solve_sdp(problem, **options)
     else:
         theta, status, iters = _solve_logchol(problem, **options)
     elapsed = time.perf_counter() - t0
@@ -384,7 +384,14 @@ def _project(pr: ConsistentProblem, theta: np.ndarray) -> tuple[np.ndarray, floa
     return theta, float(np.abs(theta - before).max())
 
 
-def _solve_sdp(problem: ConsistentProblem, *, tolerance: float = 1e-8, max_iter: int = 500):
+def solve_sdp(problem: ConsistentProblem, *, tolerance: float = 1e-8, max_iter: int = 500):
+    """Solve ``problem`` as a semidefinite program (cvxpy with Clarabel), unchecked.
+
+    Every body's pseudo-inertia is constrained to ``J_i >= margin_i 1`` (one 4 x 4 LMI
+    each), the joint terms in ``problem.nonnegative`` to ``>= 0``. Returns
+    ``(theta, status, iterations)``; :func:`solve_consistent` adds the independent
+    check. Also the one-body payload solve of :mod:`manip_id.payload`.
+    """
     import cvxpy as cp
 
     pr = problem
