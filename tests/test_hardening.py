@@ -262,6 +262,16 @@ CASES = [
         setup=_hardlink_to_log,
     ),
     Case(
+        "json-onto-windowed-input",
+        ["identify", "msd", "--data", "log.npz@0:2", "--json", "log.npz"],
+        match="one of the inputs",
+    ),
+    Case(
+        "export-urdf-onto-the-urdf",
+        ["identify", "arm.urdf", *SIM, "--consistent", "--export-urdf", "arm.urdf", "--force"],
+        match="one of the inputs",
+    ),
+    Case(
         "json-onto-validation-input",
         ["identify", "msd", "--data", "log.npz", "--validate", "valid.npz", "--json", "valid.npz"],
         match="one of the inputs",

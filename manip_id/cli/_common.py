@@ -95,14 +95,18 @@ FILE_OUTPUT_OPTIONS = ("json", "html", "export_urdf")
 
 
 def input_paths(args: argparse.Namespace) -> list[str]:
-    """Every existing path among the input options of ``args``."""
+    """Every existing path among the input options of ``args`` (``FILE@WINDOW``: FILE)."""
     import os
 
     paths = []
-    for name in INPUT_OPTIONS:
+    for name in INPUT_OPTIONS + ("torque_scale_from", "known_base", "input"):
         value = getattr(args, name, None)
         for item in value if isinstance(value, list) else [value]:
-            if isinstance(item, str) and item and os.path.exists(item):
+            if not isinstance(item, str) or not item:
+                continue
+            if not os.path.exists(item) and "@" in item:  # a window of a file
+                item = item.rsplit("@", 1)[0]
+            if os.path.exists(item):
                 paths.append(item)
     return paths
 
