@@ -17,6 +17,7 @@ Three mechanisms, used by every command and by the API writers:
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -321,15 +322,20 @@ class OutputSet:
         self._staged(path).write_text(json_text(obj))
 
     def publish(self) -> None:
-        """Rename every complete output into place (in the order they were reserved)."""
-        try:
-            for item in self._items:
-                item.publish()
-        except BaseException:
-            self.discard()
-            raise
-        self.published = True
-        self._items = []
+        """Rename every complete output into place (in the order they were reserved).
+
+        SIGINT, SIGTERM and SIGHUP are held back during the renames (they take effect
+        right after), so an interrupt never publishes half of the outputs.
+        """
+        with _signals_held():
+            try:
+                for item in self._items:
+                    item.publish()
+            except BaseException:
+                self.discard()
+                raise
+            self.published = True
+            self._items = []
 
     def discard(self) -> None:
         """Remove every temporary not yet published."""
@@ -345,6 +351,22 @@ class OutputSet:
 
     def __exit__(self, exc_type, exc, tb) -> None:
         self.discard()
+
+
+@contextlib.contextmanager
+def _signals_held():
+    """Block SIGINT, SIGTERM and SIGHUP in this thread meanwhile (POSIX; else nothing)."""
+    import signal
+
+    held = {getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n)}
+    if not hasattr(signal, "pthread_sigmask"):  # pragma: no cover - not POSIX
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 # ---------------------------------------------------------- atomic writers
