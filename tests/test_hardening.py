@@ -166,7 +166,12 @@ def _own_report(w: Path) -> None:
 
 def _busy_report(w: Path) -> None:
     (w / "rep").mkdir()
-    (w / "rep" / ".manip-id-claim").write_text("12345\n")
+    (w / "rep" / ".manip-id-claim").write_text(f"{os.getpid()}\n")  # a live process
+
+
+def _stale_claim(w: Path) -> None:
+    (w / "rep").mkdir()
+    (w / "rep" / ".manip-id-claim").write_text("99999999\n")  # above any pid_max: dead
 
 
 def _weird_names(w: Path) -> None:
@@ -369,6 +374,12 @@ CASES = [
         ["rank", "msd", "--report", "rep"],
         match="another manip-id run",
         setup=_busy_report,
+    ),
+    Case(
+        "report-claim-of-a-killed-run",
+        ["rank", "msd", "--report", "rep"],
+        match="no longer running",
+        setup=_stale_claim,
     ),
     Case(
         "json-inside-report",

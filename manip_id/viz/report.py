@@ -82,10 +82,7 @@ def check_report_target(directory, force: bool = False, *, inputs=(), what="repo
     except OSError as exc:
         raise OutputError(f"cannot read the report folder {path}: {exc.strerror}") from exc
     if CLAIM in entries:
-        raise ReportBusyError(
-            f"report folder {path} is being written by another manip-id run "
-            f"(if none is running, remove {path / CLAIM})"
-        )
+        raise ReportBusyError(_busy_message(path))
     if not entries:
         return path
     if not force:
@@ -105,6 +102,28 @@ def check_report_target(directory, force: bool = False, *, inputs=(), what="repo
             f"{', ...' if len(extra) > 5 else ''}); --force will not delete them"
         )
     return path
+
+
+def _busy_message(path: Path) -> str:
+    """Who holds the claim of ``path``: a running process, or a dead one (then: remove it)."""
+    claim = path / CLAIM
+    try:
+        pid = int(claim.read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        pid = None
+    if pid is not None:
+        import psutil
+
+        if not psutil.pid_exists(pid):
+            return (
+                f"report folder {path} was claimed by manip-id process {pid}, which is no "
+                f"longer running (killed?): remove {claim} and run again"
+            )
+        return f"report folder {path} is being written by another manip-id run (process {pid})"
+    return (
+        f"report folder {path} is being written by another manip-id run "
+        f"(if none is running, remove {claim})"
+    )
 
 
 class ReportFolder:
@@ -186,10 +205,7 @@ def claim_report(
     try:
         fd = os.open(claim, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
     except FileExistsError as exc:
-        raise ReportBusyError(
-            f"report folder {path} is being written by another manip-id run "
-            f"(if none is running, remove {claim})"
-        ) from exc
+        raise ReportBusyError(_busy_message(path)) from exc
     except OSError as exc:
         if created:
             path.rmdir()
