@@ -222,34 +222,19 @@ def _write_report(robot, result, report: dict, args):
             files=[Path(f.path).name for f in solved],
             title=f"per-file parameters (+-1 std) relative to the pooled fit: {run_name}",
         )
-    rel = report["relative_error"]
+    from .identify import report_parameter_rows, report_quality_rows, report_summary
+
     summary = {
-        "robot": robot.name,
-        "method": args.method,
-        "files": len(files),
+        **report_summary(report, f"{len(files)} files"),
         "scheduler": report["source"]["scheduler"],
-        "training samples": report["n_samples"],
-        "validation samples": report["n_validation_samples"],
-        "base parameters": f"{report['n_base']} of {report['n_parameters']}",
-        "condition number": report["condition_number"],
-        "relative torque error (train)": rel["train"],
-        "relative torque error (validation)": rel["validation"],
     }
-    rows = [
-        {
-            "name": p["name"],
-            "expression": p["expression"],
-            "value": p["value"],
-            "std": p["std"],
-            "std [%]": p["std_percent"],
-        }
-        for p in report["base_parameters"]
-    ]
-    notes = [
+    rows = report_parameter_rows(report)
+    notes = list(report["warnings"]) + [
         f"{f.path}: not solvable alone ({f.error})"
         for f in (result.per_file or [])
         if f.result is None
     ]
+    quality = report_quality_rows(report)
     return write_report(
         args.report_claim,
         title=f"manip-id identify: {run_name}",
@@ -259,4 +244,5 @@ def _write_report(robot, result, report: dict, args):
         json_result=report,
         notes=notes,
         force=args.force,
+        tables={"Data quality": quality} if quality else None,
     )

@@ -235,15 +235,20 @@ def _write_report(robot, cmp, out: dict, law: str, args):
         f"perturb {args.perturb:g}" + (f", payload {args.payload:g} kg" if args.payload else "")
     )
     joints = list(robot.dof_names)
+    from ..identifiability import analyze
+
+    base = analyze(robot).base  # the combinations adaptation can converge to
     figs = {
-        "parameter_estimates": lambda path: figures.parameter_history(
+        "parameter_estimates": lambda path: figures.online_history(
             path,
             a.t,
-            a.theta_hat,
-            names=robot.parameter_names,
-            units=robot.parameter_units,
-            theta_true=a.theta_true,
-            title=f"parameter estimates: {run_name}",
+            base.to_base(a.theta_hat),
+            names=base.base_names,
+            reference=base.to_base(a.theta_true),
+            reference_label="truth",
+            prediction_error=a.prediction_error,
+            error_label="torque prediction error on new states [-]",
+            title=f"base-parameter error and prediction error over time: {run_name}",
         ),
         "tracking_error": lambda path: figures.tracking_error(
             path,
@@ -283,9 +288,14 @@ def _write_report(robot, cmp, out: dict, law: str, args):
         "rms tracking error, fixed parameters [rad]": f.rms_tracking_error,
         "final tracking error, adaptive [rad]": a.final_tracking_error,
         "final tracking error, fixed parameters [rad]": f.final_tracking_error,
-        "torque prediction error, start": a.initial_prediction_error,
-        "torque prediction error, end": a.final_prediction_error,
+        "torque prediction error, start": f"{100 * a.initial_prediction_error:.3g} %",
+        "torque prediction error, end": f"{100 * a.final_prediction_error:.3g} %",
     }
+    notes.append(
+        f"the estimates are shown as the {base.n_base} base parameters (the combinations the "
+        f"regressor can determine); the {robot.n_parameters} standard parameters in the table "
+        "need not converge"
+    )
     return write_report(
         args.report_claim,
         title=f"manip-id adapt: {run_name}",

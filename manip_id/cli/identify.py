@@ -24,8 +24,10 @@ from ._common import add_robot_arguments, reserve_outputs, robot_from_args
 
 METHODS = ("ols", "wls", "rls", "gradient")
 SIM_DEFAULTS = {"duration": 20.0, "rate": 200.0, "noise": 0.01, "seed": 0}
-#: Runs with more samples than this show progress on stderr.
-PROGRESS_SAMPLES = 20000
+#: A progress bar appears on stderr (a terminal, without --quiet) once a run passes this [s].
+PROGRESS_DELAY = 2.0
+#: Set by ``run`` from ``--quiet``: no progress bar.
+_QUIET = [False]
 
 
 def register(sub) -> None:
@@ -158,6 +160,33 @@ def register(sub) -> None:
         action="store_true",
         help="replace a non-empty --report folder or an existing --export-urdf file",
     )
+    p.add_argument(
+        "--quiet",
+        action="store_true",
+        help="print nothing but errors and warnings (no progress bar, no tables)",
+    )
+    rep = p.add_argument_group("report and flags")
+    rep.add_argument(
+        "--scene-assets",
+        choices=("inline", "external"),
+        default="inline",
+        help="inline: scene.html stands alone; external: the viewer script and the scene data "
+        "are written once beside it (meshcat.min.js, scene-data.js) [default inline]",
+    )
+    rep.add_argument(
+        "--poorly-identified",
+        type=float,
+        default=None,
+        metavar="PERCENT",
+        help="flag a base parameter 'poorly identified' above this std [%%] [default 10]",
+    )
+    rep.add_argument(
+        "--condition-limit",
+        type=float,
+        default=None,
+        metavar="C",
+        help="warn when the condition number exceeds C [default 100]",
+    )
     p.add_argument("--chunk", type=int, default=1024, help="samples per regressor chunk")
     p.add_argument(
         "--workers",
@@ -205,23 +234,36 @@ def register(sub) -> None:
 
 
 # ------------------------------------------------------------------- helpers
-def _progress(total_hint: int):
-    """A callable(done, total) that prints a progress line on stderr at most every 0.5 s."""
-    state = {"last": 0.0, "shown": False}
-    tty = sys.stderr.isatty()
+def _progress(total_hint: int = 0):
+    """A callable(done, total) drawing a tqdm bar on stderr, or None.
+
+    The bar shows when stderr is a terminal and ``--quiet`` was not given, and only
+    once the run has taken :data:`PROGRESS_DELAY` seconds; otherwise nothing is
+    printed (logs and pipes stay clean).
+    """
+    if _QUIET[0] or not sys.stderr.isatty():
+        return None
+    state: dict = {"bar": None}
 
     def report(done: int, total: int) -> None:
-        if total < PROGRESS_SAMPLES and total_hint < PROGRESS_SAMPLES:
-            return
-        now = time.perf_counter()
-        if done < total and now - state["last"] < (0.5 if tty else 5.0):
-            return
-        state["last"] = now
-        state["shown"] = True
-        pct = 100.0 * done / max(total, 1)
-        end = "" if tty and done < total else "\n"
-        lead = "\r" if tty else ""
-        print(f"{lead}identify: {pct:5.1f}% ({done}/{total})", end=end, file=sys.stderr, flush=True)
+        bar = state["bar"]
+        if bar is None:
+            from tqdm import tqdm
+
+            bar = state["bar"] = tqdm(
+                total=max(total, total_hint, 1),
+                desc="identify",
+                unit=" samples",
+                file=sys.stderr,
+                delay=PROGRESS_DELAY,
+                leave=False,
+                dynamic_ncols=True,
+            )
+        if total > bar.total:
+            bar.total = total
+        bar.update(max(done - bar.n, 0))
+        if done >= total:
+            bar.close()
 
     return report
 
@@ -284,6 +326,10 @@ def _check_args(args) -> None:
         raise InputError(f"--decimate must be >= 1, got {args.decimate}")
     if args.chunk < 1:
         raise InputError(f"--chunk must be >= 1, got {args.chunk}")
+    for name in ("poorly_identified", "condition_limit"):
+        value = getattr(args, name, None)
+        if value is not None and not (math.isfinite(value) and value > 0):
+            raise InputError(f"--{name.replace('_', '-')} must be positive, got {value}")
     if args.workers < 1:
         raise InputError(f"--workers must be >= 1, got {args.workers}")
     if args.workers > 1 and args.method in ("rls", "gradient"):
@@ -414,7 +460,8 @@ def _run_stream(robot, args, outputs, timings: dict, t_start: float) -> int:
     report_progress = _progress(n)
 
     def progress(done: int, total: int) -> None:  # serial: samples of k; workers: parts
-        report_progress(done, total if args.workers > 1 else k)
+        if report_progress is not None:
+            report_progress(done, total if args.workers > 1 else k)
 
     train = stream.parts(args.workers, 0, k) if args.workers > 1 else stream.blocks(0, k)
     result = identify_chunks(
@@ -450,6 +497,20 @@ def _run_stream(robot, args, outputs, timings: dict, t_start: float) -> int:
 
 # ----------------------------------------------------------------------- run
 def run(args: argparse.Namespace) -> int:
+    if not getattr(args, "quiet", False):
+        return _run(args)
+    import contextlib
+    import io
+
+    _QUIET[0] = True
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):
+            return _run(args)
+    finally:
+        _QUIET[0] = False
+
+
+def _run(args: argparse.Namespace) -> int:
     t_start = time.perf_counter()
     _check_args(args)
     outputs = reserve_outputs(args)  # every output checked (and the report claimed) first

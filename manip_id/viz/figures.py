@@ -686,6 +686,7 @@ def online_history(
     reference_label: str = "final estimate",
     prediction_error=None,
     torque_rms: float | None = None,
+    error_label: str = "prediction error [N m]",
     max_lines: int = 12,
     title: str = "online estimate",
 ) -> Figure:
@@ -695,7 +696,8 @@ def online_history(
     the ``max_lines`` parameters that end farthest from ``reference`` (plus the median
     over all of them, black); the last 10 % of the time is shaded, where a converged
     estimate no longer moves. Bottom: the prediction-error norm ``|eps(t)|`` [N m]
-    (its moving median), relative to ``torque_rms`` when given.
+    (its moving median), relative to ``torque_rms`` when given (``error_label`` names it
+    otherwise, e.g. an error that is already relative).
 
     t: [s], shape (K,); theta_hat: shape (K, r); reference: shape (r,) (the truth of
     a simulation, or the batch / final estimate); prediction_error: shape (K,).
@@ -730,7 +732,7 @@ def online_history(
         a.grid(alpha=0.3, which="both")
         a.tick_params(labelsize=7)
     ax.set_ylabel(f"relative error vs {reference_label} [-]", fontsize=8)
-    ax.legend(fontsize=6, ncol=4, loc="lower left")
+    ax.legend(fontsize=6, ncol=1, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     ax.set_title(
         f"base-parameter estimates: the {len(order)} farthest from the {reference_label} at "
         "the end, and the median (last 10 % of the data shaded)",
@@ -744,13 +746,10 @@ def online_history(
         w = max(len(t) // 100, 1)
         ee = e[ok]
         smooth = np.array([np.median(ee[max(0, i - w) : i + 1]) for i in range(len(ee))])
-        unit = "[N m]"
+        label = error_label
         if torque_rms:
-            ee, smooth, unit = (
-                ee / torque_rms,
-                smooth / torque_rms,
-                "relative to the torque RMS [-]",
-            )
+            ee, smooth = ee / torque_rms, smooth / torque_rms
+            label = "prediction error relative to the torque RMS [-]"
         bx = axes[1]
         bx.semilogy(
             t[ok][::k],
@@ -763,7 +762,7 @@ def online_history(
         bx.semilogy(
             t[ok][::k], np.maximum(smooth[::k], 1e-12), color=_VPRED, lw=1.4, label="moving median"
         )
-        bx.set_ylabel(f"prediction error {unit}", fontsize=8)
+        bx.set_ylabel(label, fontsize=8)
         bx.legend(fontsize=7)
     axes[-1].set_xlabel("time [s]")
     fig.suptitle(title)
