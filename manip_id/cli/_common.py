@@ -150,7 +150,8 @@ def check_seed_and_workers(args: argparse.Namespace) -> None:
     if workers is not None:
         if workers < 1:
             raise InputError(f"--workers must be >= 1, got {workers}")
-        cores = os.cpu_count() or 1
+        affinity = getattr(os, "sched_getaffinity", None)  # the cores this process may use
+        cores = len(affinity(0)) if affinity is not None else (os.cpu_count() or 1)
         if workers > cores:
             from . import warn
 
