@@ -17,6 +17,12 @@ control rate and held (zero-order hold) over the ``substeps`` physics steps.
 The controller sees ``q``, ``dq`` plus optional Gaussian measurement noise.
 Recorded every ``record_every`` control steps: t, q, dq, q_d, tau, s, theta_hat
 (and, for composite adaptation, the filtered prediction error).
+
+Pieces. :class:`Plant` (forward dynamics with joint terms, and the integrator),
+:class:`SensorNoise` (what the controller sees), :class:`Recorder` (what is logged, at
+which stride, and the running sums) and :func:`step` (one control step: measure, torque,
+record, plant over one period, adapt). :func:`simulate` checks its inputs and runs
+``step`` over the reference.
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
+from numpy.typing import ArrayLike
 
 from ._checks import as_float_array, check_finite, random_generator
 from .adaptive import AdaptiveGains, SlotineLiController, default_gains
@@ -213,6 +220,271 @@ class ClosedLoopRun:
         return float(self.t[above[-1] + 1])
 
 
+# ---------------------------------------------------------------------- plant
+class Plant:
+    """The true robot: forward dynamics with its joint terms, and the integrator.
+
+    ``ddq = aba(model(theta), q, dq, tau - tau_joint(q, dq))`` (see the module docstring),
+    integrated over one control period ``dt = 1 / rate`` [s] in ``substeps`` fixed steps
+    ``h = 1 / (rate * substeps)`` [s] with the torque held.
+
+    Parameters
+    ----------
+    robot: the robot; its joint terms are the plant's.
+    theta_true: parameters of the plant, shape (p,), physically consistent.
+    rate: control rate [Hz].
+    substeps: physics steps per control period.
+    integrator: ``"euler"`` (semi-implicit) or ``"rk4"``.
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        theta_true: ArrayLike,
+        *,
+        rate: float,
+        substeps: int = 1,
+        integrator: str = "euler",
+    ) -> None:
+        if integrator not in ("euler", "rk4"):
+            raise InputError(f"integrator must be 'euler' or 'rk4', got {integrator!r}")
+        if not (math.isfinite(rate) and rate > 0):
+            raise InputError(f"rate must be positive [Hz], got {rate}")
+        if int(substeps) != substeps or int(substeps) < 1:
+            raise InputError(f"substeps must be a positive integer, got {substeps}")
+        p = robot.n_parameters
+        theta = as_float_array(theta_true, "theta_true", 1)
+        if theta.shape != (p,):
+            raise InputError(f"{theta.shape=} but robot.n_parameters={p}")
+        check_finite(theta, "theta_true")
+        from .simulation import require_physical
+
+        require_physical(robot, theta)  # a message naming the body
+        self.robot = robot
+        self.theta = theta
+        self.integrator = integrator
+        self.substeps = int(substeps)
+        self.dt = 1.0 / rate  # control period [s]
+        self.h = 1.0 / (rate * self.substeps)  # physics step [s]
+        self.model = robot.with_parameters(theta)
+        self._data = self.model.createData()
+        self._lie = robot.nq != robot.nv
+        # joint terms other than armature (which is in the model's mass matrix)
+        coef = robot.layout.joint_block(theta)
+        self._joint_terms = [
+            (term, coef[:, i].copy())
+            for i, term in enumerate(robot.layout.term_table)
+            if term.name != "Ia"
+        ]
+        self._needs_angles = any(term.needs_angles for term, _ in self._joint_terms)
+        #: viscous friction coefficients [N m s/rad], shape (nv,), or None when not modelled
+        self.viscous: np.ndarray | None = (
+            coef[:, robot.layout.terms.index("fv")].copy() if robot.layout.has_term("fv") else None
+        )
+
+    def integrate(self, q: np.ndarray, dv: np.ndarray) -> np.ndarray:
+        """``q`` moved by the tangent vector ``dv`` (``pinocchio.integrate``), shape (nq,)."""
+        return pin.integrate(self.model, q, dv) if self._lie else q + dv
+
+    def joint_torque(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
+        """Friction, offset and spring torques ``tau_joint(q, dq)`` [N m], shape (nv,)."""
+        angles = self.robot.dofs.angles(q) if self._needs_angles else None
+        out = np.zeros(self.robot.nv)
+        for term, c in self._joint_terms:
+            out += term.torque(c, angles, dq, None)
+        return out
+
+    def acceleration(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray) -> np.ndarray:
+        """Forward dynamics ``ddq`` [rad/s^2] under the applied torque ``tau`` [N m]."""
+        u = tau - self.joint_torque(q, dq) if self._joint_terms else tau
+        return pin.aba(self.model, self._data, q, dq, u)
+
+    def advance(
+        self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The state ``(q, dq)`` one control period later, the torque ``tau`` held."""
+        h, lie, model = self.h, self._lie, self.model
+        for _ in range(self.substeps):
+            if self.integrator == "euler":
+                dq = dq + h * self.acceleration(q, dq, tau)
+                q = pin.integrate(model, q, h * dq) if lie else q + h * dq
+            else:
+                q, dq = _rk4(model, self.acceleration, q, dq, tau, h, lie)
+        return q, dq
+
+
+@dataclass(frozen=True)
+class SensorNoise:
+    """Gaussian measurement noise on what the controller sees.
+
+    Attributes
+    ----------
+    std_q: standard deviation on positions [rad] (applied in the tangent space).
+    std_dq: standard deviation on velocities [rad/s].
+    rng: the generator; ``q`` is drawn before ``dq`` at every step.
+    """
+
+    std_q: float
+    std_dq: float
+    rng: np.random.Generator
+
+    def measure(self, plant: Plant, q: np.ndarray, dq: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Measured ``(q, dq)`` of the true state."""
+        nv = int(dq.shape[0])
+        qm = plant.integrate(q, self.std_q * self.rng.standard_normal(size=nv))
+        dqm = dq + self.std_dq * self.rng.standard_normal(size=nv)
+        return qm, dqm
+
+
+# ------------------------------------------------------------------- recorder
+class Recorder:
+    """What a run logs, and at which stride.
+
+    Control step ``k`` is recorded in full when ``k`` is a multiple of ``record_every`` and
+    at the last step (:attr:`indices`): t, q, q_d, dq, tau, s, theta_hat and the composite
+    law's ``|eps|``. At every step it sums the tracking error ``q_tilde^2`` (whole run and
+    tail) and the dissipation ``dt (s^T D s + share kappa |eps|^2 / m^2)`` with the damping
+    ``D = K_D + diag(f_v)`` and ``share = 1/2`` for the RLS gain, 1 otherwise.
+
+    Parameters
+    ----------
+    robot: the robot (sizes nq, nv, p).
+    n_steps: control steps of the run.
+    dt: control period [s].
+    record_every: stride of the full records.
+    tail: fraction of the run at its end for :meth:`rms_tail`, in (0, 1].
+    damping: ``D`` [N m s/rad], shape (nv, nv).
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        n_steps: int,
+        dt: float,
+        *,
+        record_every: int = 1,
+        tail: float = 0.25,
+        damping: np.ndarray,
+    ) -> None:
+        nq, nv, p = robot.nq, robot.nv, robot.n_parameters
+        idx = np.arange(0, n_steps, record_every)
+        if idx[-1] != n_steps - 1:
+            idx = np.append(idx, n_steps - 1)
+        self.indices = idx
+        K = idx.shape[0]
+        self.n_steps, self.nv, self.dt = n_steps, nv, dt
+        self.t = np.empty(K)  # [s]
+        self.q = np.empty((K, nq))
+        self.q_d = np.empty((K, nq))
+        self.dq = np.empty((K, nv))
+        self.tau = np.empty((K, nv))
+        self.s = np.empty((K, nv))
+        self.theta_hat = np.empty((K, p))
+        self.eps = np.zeros(K)  # [N m]
+        self._next, self._r = idx[0], 0
+        self.sq_sum = np.zeros(nv)  # [rad^2]
+        self.tail_start = n_steps - max(int(round(tail * n_steps)), 1)
+        self.tail_sum = 0.0  # [rad^2]
+        self.damping = damping
+        self.dissipation = 0.0  # [J]
+        self.first_error = self.last_error = 0.0  # [rad]
+
+    def observe(
+        self,
+        k: int,
+        q: np.ndarray,
+        q_d: np.ndarray,
+        dq: np.ndarray,
+        tau: np.ndarray,
+        ctrl: SlotineLiController,
+    ) -> None:
+        """Log control step ``k`` after the controller's torque, before its adaptation."""
+        dt = self.dt
+        e = ctrl.q_tilde
+        e2 = e * e
+        self.sq_sum += e2
+        if k >= self.tail_start:
+            self.tail_sum += e2.sum()
+        s = ctrl.s
+        self.dissipation += dt * float(s @ (self.damping @ s))
+        kappa = ctrl.kappa
+        if kappa > 0:
+            share = 0.5 if ctrl.rls else 1.0
+            self.dissipation += dt * share * kappa * float(ctrl.eps @ ctrl.eps) / ctrl.norm2
+        if k == 0:
+            self.first_error = math.sqrt(e2.sum())
+        if k == self._next:
+            r = self._r
+            self.t[r] = k * dt
+            self.q[r] = q
+            self.q_d[r] = q_d
+            self.dq[r] = dq
+            self.tau[r] = tau
+            self.s[r] = s
+            self.theta_hat[r] = ctrl.theta_hat
+            if ctrl.kappa > 0:
+                self.eps[r] = math.sqrt(float(ctrl.eps @ ctrl.eps))
+            self._r = r + 1
+            self._next = self.indices[r + 1] if r + 1 < self.indices.shape[0] else -1
+        if k == self.n_steps - 1:
+            self.last_error = math.sqrt(e2.sum())
+
+    def rms_per_joint(self) -> np.ndarray:
+        """RMS tracking error per joint over all control steps [rad], shape (nv,)."""
+        return np.sqrt(self.sq_sum / self.n_steps)
+
+    def rms(self) -> float:
+        """RMS tracking error over all control steps and joints [rad]."""
+        return float(np.sqrt(self.sq_sum.sum() / (self.n_steps * self.nv)))
+
+    def rms_tail(self) -> float:
+        """RMS tracking error over the tail of the run [rad]."""
+        return float(np.sqrt(self.tail_sum / ((self.n_steps - self.tail_start) * self.nv)))
+
+
+# ----------------------------------------------------------------------- step
+def step(
+    plant: Plant,
+    ctrl: SlotineLiController,
+    recorder: Recorder,
+    k: int,
+    q: np.ndarray,
+    dq: np.ndarray,
+    q_d: np.ndarray,
+    dq_d: np.ndarray,
+    ddq_d: np.ndarray,
+    noise: SensorNoise | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Control step ``k``: measure, torque, record, plant over one period, adapt.
+
+    Parameters
+    ----------
+    q, dq: the true state at ``t = k dt``, shapes (nq,), (nv,).
+    q_d, dq_d, ddq_d: the reference at ``t``, shapes (nq,), (nv,), (nv,).
+    noise: measurement noise of what the controller sees (None: exact state).
+
+    Returns
+    -------
+    The true state ``(q, dq)`` at ``t + dt``.
+
+    Raises
+    ------
+    NumericalError: the state diverged.
+    """
+    qm, dqm = (q, dq) if noise is None else noise.measure(plant, q, dq)
+    tau = ctrl.torque(qm, dqm, q_d, dq_d, ddq_d)
+    recorder.observe(k, q, q_d, dq, tau, ctrl)
+    q, dq = plant.advance(q, dq, tau)
+    ctrl.adapt(plant.dt)
+    if not math.isfinite(float(dq @ dq)):
+        raise NumericalError(
+            "closed-loop simulation",
+            f"the state diverged at t={k * plant.dt:.4f} s",
+            hint="lower the gains or raise the rate",
+        )
+    return q, dq
+
+
 # ----------------------------------------------------------------- simulation
 def _check_timing(duration, rate, substeps, record_every) -> tuple[float, float, int, int, int]:
     try:
@@ -281,16 +553,8 @@ def simulate(
     duration, rate, n_steps, substeps, record_every = _check_timing(
         duration, rate, substeps, record_every
     )
-    if integrator not in ("euler", "rk4"):
-        raise InputError(f"integrator must be 'euler' or 'rk4', got {integrator!r}")
-    p, nv, nq = robot.n_parameters, robot.nv, robot.nq
-    theta_true = as_float_array(theta_true, "theta_true", 1)
-    if theta_true.shape != (p,):
-        raise InputError(f"{theta_true.shape=} but robot.n_parameters={p}")
-    check_finite(theta_true, "theta_true")
-    from .simulation import require_physical
-
-    require_physical(robot, theta_true)  # the plant: a message naming the body
+    plant = Plant(robot, theta_true, rate=rate, substeps=substeps, integrator=integrator)
+    theta_true = plant.theta
     reference = default_reference(robot) if reference is None else reference
     check_reference(robot, reference, duration)
     for name, val in (("noise_q", noise_q), ("noise_dq", noise_dq)):
@@ -305,150 +569,51 @@ def simulate(
         gains = default_gains(robot, theta0, q_start_ref)
     ctrl = SlotineLiController(robot, theta0, gains, adapt=adapt)
 
-    # plant
-    model = robot.with_parameters(theta_true)
-    data = model.createData()
-    # joint terms other than armature (which is in the model's mass matrix)
-    coef = robot.layout.joint_block(theta_true)
-    joint_terms = [
-        (term, coef[:, i].copy())
-        for i, term in enumerate(robot.layout.term_table)
-        if term.name != "Ia"
-    ]
-    needs_angles = any(term.needs_angles for term, _ in joint_terms)
-    fv = coef[:, robot.layout.terms.index("fv")].copy() if robot.layout.has_term("fv") else None
-
-    def joint_torque(q, dq):
-        angles = robot.dofs.angles(q) if needs_angles else None
-        out = np.zeros(nv)
-        for term, c in joint_terms:
-            out += term.torque(c, angles, dq, None)
-        return out
-
-    has_joint = bool(joint_terms)
-    lie = nq != nv
-    aba = pin.aba
-    h = 1.0 / (rate * substeps)
-    dt = 1.0 / rate
-
-    def accel(q, dq, tau):
-        u = tau - joint_torque(q, dq) if has_joint else tau
-        return aba(model, data, q, dq, u)
-
     # initial state
-    off = np.broadcast_to(as_float_array(initial_error, "initial_error", (0, 1)), (nv,))
+    off = np.broadcast_to(as_float_array(initial_error, "initial_error", (0, 1)), (robot.nv,))
     q = _angles_to_q(robot, (start_angles + off)[None])[0].copy()
     dq = start_dq.copy()
-    rng = random_generator(seed)
-    noisy = noise_q > 0 or noise_dq > 0
-
-    # recording
-    rec_idx = np.arange(0, n_steps, record_every)
-    if rec_idx[-1] != n_steps - 1:
-        rec_idx = np.append(rec_idx, n_steps - 1)
-    K = rec_idx.shape[0]
-    R = {
-        "t": np.empty(K),
-        "q": np.empty((K, nq)),
-        "q_d": np.empty((K, nq)),
-        "dq": np.empty((K, nv)),
-        "tau": np.empty((K, nv)),
-        "s": np.empty((K, nv)),
-        "theta_hat": np.empty((K, p)),
-        "eps": np.zeros(K),
-    }
-    next_rec, r = rec_idx[0], 0
-    sq_sum = np.zeros(nv)
-    tail_start = n_steps - max(int(round(tail * n_steps)), 1)
-    tail_sum = 0.0
-    diss_k = ctrl.kd + (np.diag(fv) if fv is not None else 0.0)
-    kappa = ctrl.kappa
-    dissipation = 0.0
-    first_err = last_err = 0.0
+    noise = (
+        SensorNoise(noise_q, noise_dq, random_generator(seed))
+        if noise_q > 0 or noise_dq > 0
+        else None
+    )
+    fv = plant.viscous
+    damping = ctrl.kd + (np.diag(fv) if fv is not None else 0.0)  # [N m s/rad]
+    rec = Recorder(robot, n_steps, plant.dt, record_every=record_every, tail=tail, damping=damping)
 
     t0 = time.perf_counter()
     with np.errstate(over="ignore", invalid="ignore"):
         for c0 in range(0, n_steps, _REFERENCE_CHUNK):
             c1 = min(c0 + _REFERENCE_CHUNK, n_steps)
-            ang_d, dq_d_all, ddq_d_all = reference.sample(np.arange(c0, c1) * dt)
-            q_d_all = _angles_to_q(robot, ang_d)
+            ang_d, dq_d, ddq_d = reference.sample(np.arange(c0, c1) * plant.dt)
+            q_d = _angles_to_q(robot, ang_d)
             for k in range(c0, c1):
                 i = k - c0
-                q_d = q_d_all[i]
-                if noisy:
-                    qm = (
-                        pin.integrate(model, q, noise_q * rng.standard_normal(nv))
-                        if lie
-                        else (q + noise_q * rng.standard_normal(nv))
-                    )
-                    dqm = dq + noise_dq * rng.standard_normal(nv)
-                    tau = ctrl.torque(qm, dqm, q_d, dq_d_all[i], ddq_d_all[i])
-                else:
-                    tau = ctrl.torque(q, dq, q_d, dq_d_all[i], ddq_d_all[i])
-                e = ctrl.q_tilde
-                e2 = e * e
-                sq_sum += e2
-                if k >= tail_start:
-                    tail_sum += e2.sum()
-                s = ctrl.s
-                dissipation += dt * float(s @ (diss_k @ s))
-                if kappa > 0:
-                    share = 0.5 if ctrl.rls else 1.0
-                    dissipation += dt * share * kappa * float(ctrl.eps @ ctrl.eps) / ctrl.norm2
-                if k == 0:
-                    first_err = math.sqrt(e2.sum())
-                if k == next_rec:
-                    R["t"][r] = k * dt
-                    R["q"][r] = q
-                    R["q_d"][r] = q_d
-                    R["dq"][r] = dq
-                    R["tau"][r] = tau
-                    R["s"][r] = s
-                    R["theta_hat"][r] = ctrl.theta_hat
-                    if ctrl.kappa > 0:
-                        R["eps"][r] = math.sqrt(float(ctrl.eps @ ctrl.eps))
-                    r += 1
-                    next_rec = rec_idx[r] if r < K else -1
-                if k == n_steps - 1:
-                    last_err = math.sqrt(e2.sum())
-                # plant over one control period with the torque held
-                for _ in range(substeps):
-                    if integrator == "euler":
-                        dq = dq + h * accel(q, dq, tau)
-                        q = pin.integrate(model, q, h * dq) if lie else q + h * dq
-                    else:
-                        q, dq = _rk4(model, accel, q, dq, tau, h, lie)
-                ctrl.adapt(dt)
-                if not math.isfinite(float(dq @ dq)):
-                    raise NumericalError(
-                        "closed-loop simulation",
-                        f"the state diverged at t={k * dt:.4f} s",
-                        hint="lower the gains or raise the rate",
-                    )
+                q, dq = step(plant, ctrl, rec, k, q, dq, q_d[i], dq_d[i], ddq_d[i], noise)
     wall = time.perf_counter() - t0
 
     q_val, dq_val, ddq_val = (
         validation_states(robot, reference) if validation is None else validation
     )
-    pred = _prediction_error(robot, R["theta_hat"], theta_true, q_val, dq_val, ddq_val)
-    per_joint = np.sqrt(sq_sum / n_steps)
+    pred = _prediction_error(robot, rec.theta_hat, theta_true, q_val, dq_val, ddq_val)
     return ClosedLoopRun(
-        t=R["t"],
-        q=R["q"],
-        q_d=R["q_d"],
-        dq=R["dq"],
-        tau=R["tau"],
-        s=R["s"],
-        theta_hat=R["theta_hat"],
+        t=rec.t,
+        q=rec.q,
+        q_d=rec.q_d,
+        dq=rec.dq,
+        tau=rec.tau,
+        s=rec.s,
+        theta_hat=rec.theta_hat,
         prediction_error=pred,
-        filtered_prediction_error=R["eps"],
+        filtered_prediction_error=rec.eps,
         theta_true=theta_true.copy(),
         theta0=np.array(theta0, dtype=float),
-        rms_tracking_error=float(np.sqrt(sq_sum.sum() / (n_steps * nv))),
-        rms_tracking_error_per_joint=per_joint,
-        rms_tracking_error_tail=float(np.sqrt(tail_sum / ((n_steps - tail_start) * nv))),
-        initial_tracking_error=first_err,
-        final_tracking_error=last_err,
+        rms_tracking_error=rec.rms(),
+        rms_tracking_error_per_joint=rec.rms_per_joint(),
+        rms_tracking_error_tail=rec.rms_tail(),
+        initial_tracking_error=rec.first_error,
+        final_tracking_error=rec.last_error,
         initial_prediction_error=float(pred[0]),
         final_prediction_error=float(pred[-1]),
         duration=duration,
@@ -458,7 +623,7 @@ def simulate(
         composite=ctrl.kappa > 0,
         wall_time=wall,
         real_time_factor=duration / wall,
-        dissipation=dissipation,
+        dissipation=rec.dissipation,
         gamma=ctrl.gamma,
     )
 
