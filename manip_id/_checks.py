@@ -105,7 +105,12 @@ TINY = 1e-150
 
 
 def check_magnitude(
-    arr: np.ndarray, name: str, columns=None, offset: int = 0, error: type = InputError
+    arr: np.ndarray,
+    name: str,
+    columns=None,
+    offset: int = 0,
+    error: type = InputError,
+    kind: str | None = None,
 ) -> None:
     """Raise :class:`InputError` unless the finite array ``arr`` has sane magnitudes.
 
@@ -113,12 +118,14 @@ def check_magnitude(
     refused beyond 1e6 [N m]); the message names the field, the first sample
     (``offset + k``) and the column. A field whose largest magnitude is non-zero but
     below :data:`TINY` (e.g. torques of 1e-300) is refused too: nothing can be
-    estimated from it. Unknown names are not checked. Raises ``error`` (an
+    estimated from it. ``kind`` names the field when ``name`` is a longer label
+    (``"validation tau"``). Unknown fields are not checked. Raises ``error`` (an
     :class:`InputError` by default; readers pass :class:`~manip_id.errors.DataError`).
     """
-    if name not in MEASURED_LIMITS or arr.size == 0:
+    kind = name if kind is None else kind  # the field whose limits apply
+    if kind not in MEASURED_LIMITS or arr.size == 0:
         return
-    unit, limit = MEASURED_LIMITS[name]
+    unit, limit = MEASURED_LIMITS[kind]
     with np.errstate(invalid="ignore"):
         mag = np.abs(arr)
         big = mag > limit  # NaN and Inf are check_finite's business

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.linalg.blas import dsyrk
 
-from ._checks import as_float_array, as_int, check_finite
+from ._checks import as_float_array, as_int, check_finite, check_magnitude
 from .errors import InputError, RankDeficiencyError
 from .estimators import (
     GradientEstimator,
@@ -250,6 +250,7 @@ def _check_tau(robot: Robot, tau, n: int, name: str = "tau") -> np.ndarray:
             f"{name}.shape={tau.shape} but expected ({n}, robot.nv={robot.nv}) to match the states"
         )
     check_finite(tau, name, robot.dof_names)
+    check_magnitude(tau, name, robot.dof_names, kind="tau")  # |tau| <= 1e6, not all tiny
     return tau
 
 

@@ -1170,6 +1170,8 @@ def _api_cases():
         ("simulate-negative-seed", lambda w: sim(seed=-1), InputError),
         ("identify-wrong-shape", lambda w: identify(q=np.zeros((5, 3))), InputError),
         ("identify-complex-tau", lambda w: identify(tau=msd_arrays()["tau"] * 1j), InputError),
+        ("identify-tau-1e300", lambda w: identify(tau=msd_arrays()["tau"] * 1e300), InputError),
+        ("identify-tau-1e-300", lambda w: identify(tau=msd_arrays()["tau"] * 1e-300), InputError),
         ("report-force-foreign-folder", foreign, OutputError),
         ("report-parent-missing", lambda w: report(w / "no" / "where"), OutputError),
         ("atomic-write-onto-folder", atomic, OutputError),
