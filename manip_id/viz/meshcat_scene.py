@@ -830,6 +830,11 @@ class RobotScene:
 
     def _legend_html(self) -> str:
         parts = [f"<b>{html_lib.escape(self.title)}</b>"]
+        if self.geometry == "capsules":
+            parts.append(
+                '<span class="note">simple link geometry: capsules between the joint frames '
+                "(no mesh could be loaded)</span>"
+            )
         if self._t is not None:
             parts.append(
                 f"motion: {len(self._t)} samples over {self._t[-1] - self._t[0]:.3g} s "
