@@ -64,6 +64,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     ),
     ".identification": (
         "IdentificationResult",
+        "OnlineOptions",
         "identify",
         "identify_chunks",
         "identify_dataset",

@@ -19,9 +19,11 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
+from typing import ClassVar
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.linalg.blas import dsyrk
 
 from ._checks import as_float_array, as_int, check_finite, check_magnitude
@@ -264,24 +266,95 @@ def _states(robot: Robot, q, dq, ddq, tau, prefix: str = ""):
     return q, dq, ddq, tau
 
 
-def _online_estimator(method: str, r: int, options: dict):
-    opts = dict(options)
-    theta0 = opts.pop("theta0", np.zeros(r))
-    record = opts.pop("record_every", 0)
+@dataclass(frozen=True)
+class OnlineOptions:
+    """Options of the online laws of :func:`identify` (``method="rls"`` or ``"gradient"``).
+
+    ``None`` means the default. The RLS-only options (``P0``, ``forgetting``, ``p_min``,
+    ``p_max``) are refused with the gradient law, and the gradient-only ones (``gamma``,
+    ``normalized``) with RLS (:class:`~manip_id.estimators.RLSEstimator`,
+    :class:`~manip_id.estimators.GradientEstimator`).
+
+    Attributes
+    ----------
+    theta0: initial estimate, shape (r,) [units of the base parameters]; default zeros
+    record_every: keep every k-th estimate in the history (0: none); default
+        ``max(1, N // 1000)``, the record the convergence check reads
+    bounds: ``(lower, upper)`` box on the estimate, shapes (r,); default none
+    t0: time of the first sample [s]
+    P0: RLS initial covariance: scalar (times I), (r,) or (r, r); default 1e6
+    forgetting: RLS forgetting factor lambda in (0, 1]; default 1 (none)
+    p_min, p_max: RLS bounds on trace(P)
+    gamma: gradient gain: scalar, (r,) or (r, r) SPD; default 1
+    normalized: normalized gradient law; default True
+    """
+
+    theta0: ArrayLike | None = None
+    record_every: int | None = None
+    bounds: tuple[ArrayLike, ArrayLike] | None = None
+    t0: float = 0.0
+    P0: ArrayLike | None = None
+    forgetting: float | None = None
+    p_min: float | None = None
+    p_max: float | None = None
+    gamma: ArrayLike | None = None
+    normalized: bool | None = None
+
+    #: options that only one law takes
+    RLS_ONLY: ClassVar[tuple[str, ...]] = ("P0", "forgetting", "p_min", "p_max")
+    GRADIENT_ONLY: ClassVar[tuple[str, ...]] = ("gamma", "normalized")
+
+    @classmethod
+    def from_value(cls, online: OnlineOptions | dict | None) -> OnlineOptions:
+        """``online`` as options: None (the defaults), OnlineOptions, or a dict of its fields.
+
+        Raises
+        ------
+        InputError: a key that is not a field, or a value that is neither.
+        """
+        if online is None:
+            return cls()
+        if isinstance(online, cls):
+            return online
+        if not isinstance(online, dict):
+            raise InputError(
+                f"online must be OnlineOptions, a dict of its fields or None, "
+                f"got {type(online).__name__}"
+            )
+        known = [f.name for f in fields(cls)]
+        unknown = [k for k in online if k not in known]
+        if unknown:
+            raise InputError(f"unknown online option(s) {unknown}: expected some of {known}")
+        return cls(**online)
+
+    def check_method(self, method: str) -> None:
+        """Raise :class:`InputError` for an option the law ``method`` does not take."""
+        other = self.GRADIENT_ONLY if method == "rls" else self.RLS_ONLY
+        given = [k for k in other if getattr(self, k) is not None]
+        if given:
+            law = "RLS" if method == "rls" else "the gradient law"
+            raise InputError(f"online option(s) {given} do not apply to {law} (method={method!r})")
+
+
+def _online_estimator(method: str, r: int, options: OnlineOptions, n: int):
+    """The online law of ``method`` over ``n`` samples, and a text naming it."""
+    options.check_method(method)
+    theta0 = np.zeros(r) if options.theta0 is None else options.theta0
+    record = max(1, n // 1000) if options.record_every is None else options.record_every
+    common = dict(bounds=options.bounds, record_every=record, t0=options.t0)
     if method == "rls":
-        P0 = opts.pop("P0", 1e6)
-        est = RLSEstimator(theta0, P0, record_every=record, **opts)
+        P0 = 1e6 if options.P0 is None else options.P0
+        forgetting = 1.0 if options.forgetting is None else options.forgetting
+        est = RLSEstimator(
+            theta0, P0, forgetting=forgetting, p_min=options.p_min, p_max=options.p_max, **common
+        )
         what = f"RLS (P0={P0 if np.ndim(P0) == 0 else 'given'}, forgetting {est.forgetting:g})"
     else:
-        gamma = opts.pop("gamma", 1.0)
-        normalized = opts.pop("normalized", True)
-        est = GradientEstimator(theta0, gamma, normalized=normalized, record_every=record, **opts)
+        gamma = 1.0 if options.gamma is None else options.gamma
+        normalized = True if options.normalized is None else options.normalized
+        est = GradientEstimator(theta0, gamma, normalized=normalized, **common)
         what = ("normalized " if normalized else "") + "gradient law"
     return est, what
-
-
-# State handed to forked worker processes (inherited, never pickled).
-_WORK: dict = {}
 
 
 def _resolve_base(robot: Robot, base, timings: dict) -> BaseParameters:
@@ -380,8 +453,19 @@ def _accumulate_blocks(
     return acc, {"regressor": t_reg, "accumulate": t_acc}
 
 
+#: The job of a forked worker process, set by :func:`_init_worker` in the worker only.
+_worker_job: tuple | None = None
+
+
+def _init_worker(robot: Robot, ind: np.ndarray, chunk: int, parts: list) -> None:
+    """Pool initializer: the job, inherited through fork (never pickled)."""
+    global _worker_job
+    _worker_job = (robot, ind, chunk, parts)
+
+
 def _worker_accumulate(i: int):
-    robot, ind, chunk, parts = _WORK["job"]
+    assert _worker_job is not None, "_init_worker did not run in this process"
+    robot, ind, chunk, parts = _worker_job
     func, args = parts[i]
     return _accumulate_blocks(robot, func(*args), ind, chunk)
 
@@ -391,17 +475,15 @@ def _accumulate_parallel(robot: Robot, parts, ind, chunk: int, workers: int, pro
     ``workers`` forked processes; the accumulators merge by addition in part order."""
     import multiprocessing as mp
 
-    _WORK["job"] = (robot, ind, chunk, list(parts))
-    try:
-        ctx = mp.get_context("fork")
-        with ctx.Pool(min(workers, len(parts))) as pool:
-            results = []
-            for k, res in enumerate(pool.imap(_worker_accumulate, range(len(parts)))):
-                results.append(res)
-                if progress is not None:
-                    progress(k + 1, len(parts))
-    finally:
-        _WORK.pop("job", None)
+    parts = list(parts)
+    ctx = mp.get_context("fork")
+    job = (robot, ind, chunk, parts)
+    with ctx.Pool(min(workers, len(parts)), initializer=_init_worker, initargs=job) as pool:
+        results = []
+        for k, res in enumerate(pool.imap(_worker_accumulate, range(len(parts)))):
+            results.append(res)
+            if progress is not None:
+                progress(k + 1, len(parts))
     acc = results[0][0].copy()
     for other, _ in results[1:]:
         acc.merge(other)
@@ -412,9 +494,57 @@ def _accumulate_parallel(robot: Robot, parts, ind, chunk: int, workers: int, pro
     return acc, times
 
 
-def _array_part(start: int, stop: int):
-    q, dq, ddq, tau = _WORK["arrays"]
+def _array_part(q, dq, ddq, tau, start: int, stop: int):
+    """The one block of samples ``start:stop`` (the arrays reach the workers by fork)."""
     yield q[start:stop], dq[start:stop], ddq[start:stop], tau[start:stop]
+
+
+def _accumulate_serial(robot: Robot, q, dq, ddq, tau, ind, chunk: int, progress=None):
+    """Serial back-end: the samples' information in this process."""
+    return _accumulate_blocks(
+        robot, [(q, dq, ddq, tau)], ind, chunk, progress=progress, total=q.shape[0]
+    )
+
+
+def _accumulate_forked(robot: Robot, q, dq, ddq, tau, ind, chunk: int, workers: int):
+    """Forked back-end: ``workers`` contiguous parts of the samples in forked processes,
+    merged by addition (equal to the serial sums to round-off)."""
+    t0 = time.perf_counter()
+    n = q.shape[0]
+    bounds = np.linspace(0, n, workers + 1).astype(int)
+    parts = [
+        (_array_part, (q, dq, ddq, tau, int(a), int(b)))
+        for a, b in zip(bounds[:-1], bounds[1:], strict=True)
+    ]
+    acc, times = _accumulate_parallel(robot, parts, ind, chunk, workers)
+    times["accumulate_wall"] = time.perf_counter() - t0
+    return acc, times
+
+
+def _accumulate_online(
+    robot: Robot, q, dq, ddq, tau, ind, chunk: int, est, dt: float, progress=None
+):
+    """Online back-end: one pass of the law ``est`` over the samples in order, with the
+    information accumulated in the same pass (for the covariance and the errors)."""
+    n, nv = q.shape[0], robot.nv
+    acc = InformationAccumulator(len(ind), nv)
+    t_reg = t_acc = t_onl = 0.0
+    t0 = time.perf_counter()
+    for c in iter_regressor(robot, q, dq, ddq, chunk=chunk):
+        t1 = time.perf_counter()
+        t_reg += t1 - t0
+        Yb = np.ascontiguousarray(c.Y[:, :, ind])
+        acc.add(Yb, tau[c.start : c.stop], check=False)
+        t2 = time.perf_counter()
+        t_acc += t2 - t1
+        step = est.step
+        for i in range(c.stop - c.start):
+            step(Yb[i], tau[c.start + i], dt)
+        t_onl += time.perf_counter() - t2
+        if progress is not None:
+            progress(c.stop, n)
+        t0 = time.perf_counter()
+    return acc, {"regressor": t_reg, "accumulate": t_acc, "online": t_onl}
 
 
 def _validation_error(robot: Robot, blocks, ind, estimate, chunk: int, nominal=None):
@@ -455,7 +585,7 @@ def identify(
     base: BaseParameters | None = None,
     progress: Callable[[int, int], None] | None = None,
     minimum_norm: bool = False,
-    online: dict | None = None,
+    online: OnlineOptions | dict | None = None,
     dt: float = 1.0,
     workers: int = 1,
     consistent: bool = False,
@@ -480,9 +610,10 @@ def identify(
     progress: called as ``progress(done, total)`` after every chunk
     minimum_norm: solve rank-deficient data with the minimum-norm solution
         instead of raising :class:`RankDeficiencyError`
-    online: options of the online law (``theta0``, ``P0``, ``forgetting``,
-        ``p_min``, ``p_max``, ``gamma``, ``normalized``, ``bounds``,
-        ``record_every``); defaults ``theta0 = 0``, ``P0 = 1e6``, ``gamma = 1``,
+    online: options of the online law, :class:`OnlineOptions` or a dict of its fields
+        (``theta0``, ``P0``, ``forgetting``, ``p_min``, ``p_max``, ``gamma``,
+        ``normalized``, ``bounds``, ``record_every``, ``t0``; an unknown key is an
+        :class:`InputError`); defaults ``theta0 = 0``, ``P0 = 1e6``, ``gamma = 1``,
         normalized
     dt: sample time [s] given to the online law (the gradient law's Euler step)
     workers: processes for "ols"/"wls": the samples are cut into ``workers``
@@ -505,6 +636,7 @@ def identify(
     timings: dict[str, float] = {}
     t_start = time.perf_counter()
     _check_method(method, chunk, workers)
+    online_options = OnlineOptions.from_value(online)
     if model != "dynamic":
         return _identify_acceleration_free(
             robot,
@@ -542,45 +674,15 @@ def identify(
 
     est = None
     solver_online = ""
-    t0 = time.perf_counter()
+    chunk = int(chunk)
     if method in ("rls", "gradient"):
-        opts = dict(online or {})
-        opts.setdefault("record_every", max(1, n // 1000))  # the convergence check's record
-        est, solver_online = _online_estimator(method, r, opts)
-        acc = InformationAccumulator(r, nv)
-        t_reg = t_acc = t_onl = 0.0
-        for c in iter_regressor(robot, q, dq, ddq, chunk=int(chunk)):
-            t1 = time.perf_counter()
-            t_reg += t1 - t0
-            Yb = np.ascontiguousarray(c.Y[:, :, ind])
-            acc.add(Yb, tau[c.start : c.stop], check=False)
-            t2 = time.perf_counter()
-            t_acc += t2 - t1
-            step = est.step
-            for i in range(c.stop - c.start):
-                step(Yb[i], tau[c.start + i], dt)
-            t_onl += time.perf_counter() - t2
-            if progress is not None:
-                progress(c.stop, n)
-            t0 = time.perf_counter()
-        timings.update(regressor=t_reg, accumulate=t_acc, online=t_onl)
+        est, solver_online = _online_estimator(method, r, online_options, n)
+        acc, times = _accumulate_online(robot, q, dq, ddq, tau, ind, chunk, est, dt, progress)
     elif workers > 1 and n >= 2 * workers:
-        bounds = np.linspace(0, n, workers + 1).astype(int)
-        parts = [
-            (_array_part, (int(a), int(b))) for a, b in zip(bounds[:-1], bounds[1:], strict=True)
-        ]
-        _WORK["arrays"] = (q, dq, ddq, tau)
-        try:
-            acc, times = _accumulate_parallel(robot, parts, ind, int(chunk), workers)
-        finally:
-            _WORK.pop("arrays", None)
-        timings.update(times)
-        timings["accumulate_wall"] = time.perf_counter() - t0
+        acc, times = _accumulate_forked(robot, q, dq, ddq, tau, ind, chunk, workers)
     else:
-        acc, times = _accumulate_blocks(
-            robot, [(q, dq, ddq, tau)], ind, int(chunk), progress=progress, total=n
-        )
-        timings.update(times)
+        acc, times = _accumulate_serial(robot, q, dq, ddq, tau, ind, chunk, progress)
+    timings.update(times)
     return _finish(
         robot,
         acc,
