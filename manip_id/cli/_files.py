@@ -262,6 +262,13 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
         settings,
     )
     _add_file_info(report, robot, specs, vspecs, scans, files, options, result)
+    if args.report is not None or train is not None:  # the samples are in memory anyway
+        if train is None:
+            train = _collect(robot, specs, options, scans)
+            valid = None if vspecs is None else _collect(robot, vspecs, options, scans)
+        cmd.add_raw_reference(
+            report, robot, result, _raw_parts(specs, vspecs, train, valid, options), args.chunk
+        )
     print(result.table())
     print(cmd._summary(robot, report))
     if files is not None and args.velocity_deadband is not None:
@@ -294,6 +301,31 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
     if path is not None:
         print(f"wrote the report to {path}/index.html")
     return 0
+
+
+def _raw_parts(specs, vspecs, train, valid, options) -> list:
+    """``(name, processed, t_raw, tau_raw)`` of one training (and one validation) file for
+    :func:`manip_id.cli.identify.add_raw_reference`; [] for several files."""
+    from ..datasets import load_dataset
+
+    if len(specs) != 1 or (vspecs is not None and len(vspecs) != 1):
+        return []
+    parts, raws = [], {}
+    for name, spec, proc in (
+        ("train", specs[0], train),
+        ("validation", (vspecs or [None])[0], valid),
+    ):
+        if spec is None:
+            continue
+        key = (str(spec.path), spec.topic)
+        if key not in raws:
+            raws[key] = load_dataset(
+                spec.path, format=spec.format, columns=spec.columns, topic=spec.topic
+            )
+        raw = raws[key]
+        scale = 1.0 if options.torque_scale is None else np.asarray(options.torque_scale)
+        parts.append((name, proc, raw.t, raw.tau * scale))
+    return parts
 
 
 def _add_file_info(report, robot, specs, vspecs, scans, files, options, result) -> None:

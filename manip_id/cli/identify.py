@@ -584,6 +584,10 @@ def _run(args: argparse.Namespace) -> int:
     report = _result_document(
         robot, result, train, valid, theta_true, timings, args, source, settings
     )
+    parts = [("train", train, data.t, data.tau)]
+    if valid is not None:
+        parts.append(("validation", valid, validation.t, validation.tau))
+    add_raw_reference(report, robot, result, parts, args.chunk)
     print(result.table())
     print(_summary(robot, report))
     if args.json:
@@ -901,6 +905,8 @@ def _write_report(robot, result, full, train, valid, report: dict, args):
     errors = list(zip(e_id, e_nom or [None] * len(joints), strict=True))
     units = ["N" if robot.is_prismatic(j) else "N m" for j in range(robot.nv)]
     part = "validation" if use_val else "train"
+    pre = report.get("preprocess") or {}
+    reference = f"filtered at {pre['cutoff']:g} Hz" if pre.get("filter_torque") else "raw"
     ra = result.rank_analysis
     figs = {
         "torque_fit": lambda path: figures.torque_comparison(
@@ -913,7 +919,7 @@ def _write_report(robot, result, full, train, valid, report: dict, args):
             joint_names=joints,
             units=units,
             errors=errors,
-            reference=report.get("reference_torques", "raw"),
+            reference=reference,
             title=f"measured, identified and nominal torques ({part} errors in the titles): "
             f"{run_name}",
         ),
@@ -1026,6 +1032,48 @@ def _result_document(
     return result.to_dict(
         poorly_identified=getattr(args, "poorly_identified", None),
         condition_limit=getattr(args, "condition_limit", None),
+    )
+
+
+def add_raw_reference(report: dict, robot, result, parts, chunk: int) -> None:
+    """When the reference torques were filtered, the errors against the raw ones too.
+
+    parts: ``(name, processed, t_raw, tau_raw)`` with name "train" or "validation",
+    ``processed`` holding t, q, dq, ddq, tau (the filtered samples) and the raw torques
+    of the same record [N m] (scaled as the processed ones) at times ``t_raw`` [s]; the raw
+    torques are interpolated linearly at the processed times (the processed samples
+    are the raw ones, trimmed, or resampled on a uniform grid).
+    Adds ``relative_error_raw`` {train, validation, nominal_train, nominal_validation}
+    and states both references in ``reference_torques``.
+    """
+    from dataclasses import replace
+
+    pre = report.get("preprocess") or {}
+    if not pre.get("filter_torque"):
+        return
+    nominal = replace(result, estimate=result.nominal)
+    out: dict = {}
+    for name, proc, t_raw, tau_raw in parts:
+        t_raw = np.asarray(t_raw, dtype=float)
+        if proc is None or proc.t[0] < t_raw[0] - 1e-9 or proc.t[-1] > t_raw[-1] + 1e-9:
+            return  # the processed times are not on the raw record's clock: not comparable
+        raw = np.column_stack(
+            [np.interp(proc.t, t_raw, np.asarray(tau_raw)[:, j]) for j in range(robot.nv)]
+        )
+        for key, model in (("", result), ("nominal_", nominal)):
+            pred = model.predict(robot, proc.q, proc.dq, proc.ddq, chunk=chunk)
+            out[f"{key}{name}"] = _finite(np.linalg.norm(raw - pred) / np.linalg.norm(raw))
+    if not out:
+        return
+    report["relative_error_raw"] = out
+    pct = {k: "n/a" if v is None else f"{100 * v:.3g} %" for k, v in out.items()}
+    report["reference_torques"] += (
+        f"; against the raw torques at the same samples: identified model train "
+        f"{pct.get('train', 'n/a')}"
+        + (f", validation {pct['validation']}" if "validation" in pct else "")
+        + f" (nominal model train {pct.get('nominal_train', 'n/a')}"
+        + (f", validation {pct['nominal_validation']}" if "nominal_validation" in pct else "")
+        + ")"
     )
 
 
