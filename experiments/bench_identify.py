@@ -27,7 +27,11 @@ accumulation), its wall time against the floor measured in the same run and its
 peak resident memory from ``os.wait4``; and, for comparison, the whole-array
 path of the previous CLI (``load_dataset`` + ``preprocess`` + ``identify``) on the NPZ.
 
-    python experiments/bench_identify.py --user [--user-size 1000000]
+    python experiments/bench_identify.py --user [--user-size 1000000] [--repeat 3]
+        [--formats npz csv ...] [--no-inmem]
+
+With ``--repeat R`` the floor and the formats run in R interleaved rounds, each
+ratio against the floor of its own round, and the table prints the medians.
 """
 
 from __future__ import annotations
@@ -122,11 +126,11 @@ def case_floor(folder: Path) -> dict:
     robot = load_robot(ROBOT, friction=FRICTION)
     model, data = robot.model, robot.model.createData()
     f = pin.computeJointTorqueRegressor
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     for q, dq, ddq, _ in read_chunks(folder, robot.nv):
         for k in range(q.shape[0]):
             f(model, data, q[k], dq[k], ddq[k])
-    return {"seconds": time.perf_counter() - t0}
+    return {"seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - c0}
 
 
 def case_manip_id(folder: Path, workers: int) -> dict:
@@ -269,6 +273,7 @@ def run_cli(path: Path, out_json: Path) -> dict:
     rep = json.loads(out_json.read_text())
     return {
         "seconds": seconds,
+        "cpu_seconds": usage.ru_utime + usage.ru_stime,  # the whole process, start-up included
         "peak_rss_mb": usage.ru_maxrss / 1024.0,
         "n_samples": rep["n_samples"],
         "relative_error": rep["relative_error"]["train"],
@@ -290,45 +295,99 @@ def case_inmem(path: Path) -> dict:
     return {"seconds": time.perf_counter() - t0, "n_samples": res.n_samples}
 
 
-def user_main(cache: Path, n: int, json_out: str | None) -> None:
+def _median(values: list[float]) -> float:
+    return float(np.median(values)) if values else float("nan")
+
+
+def user_main(
+    cache: Path,
+    n: int,
+    json_out: str | None,
+    formats: tuple[str, ...] = USER_FORMATS,
+    repeat: int = 1,
+    inmem: bool = True,
+) -> None:
+    """The user's path: per round, the floor then each format's CLI run, interleaved.
+
+    The machine is shared: each of ``repeat`` rounds measures the floor and every
+    format back to back, each format's ratio is taken against the floor of its own
+    round, and the table gives the medians over the rounds (time, ratio, peak).
+    """
     print(f"user's path: {n} samples of {ROBOT} ({'+'.join(FRICTION)} friction) without ddq")
     files = user_files(cache, n)
     folder = log_dir(cache, n)
-    floor = child("floor", folder)
-    rows = {"floor": floor}
-    print(f"{'case':28s} {'s':>8s} {'x floor':>8s} {'peak MB':>8s}")
-    print(
-        f"{'floor (regressor only)':28s} {floor['seconds']:8.2f} {1.0:8.2f} "
-        f"{floor['peak_rss_mb']:8.0f}"
-    )
+    runs: dict[str, list[dict]] = {"floor": []}
     ref = None
-    for fmt in USER_FORMATS:
-        res = run_cli(files[fmt], folder / f"out_{fmt}.json")
-        rows[fmt] = res
-        if "error" in res:
-            print(f"{'manip-id identify ' + fmt:28s} error: {res['error']}")
-            continue
-        est = np.asarray(res.pop("estimate"))
-        ref = est if ref is None else ref
-        res["max_estimate_difference_vs_npz"] = float(np.abs(est - ref).max() / np.abs(ref).max())
+    for r in range(int(repeat)):
+        floor = child("floor", folder)
+        runs["floor"].append(floor)
+        for fmt in formats:
+            res = run_cli(files[fmt], folder / f"out_{fmt}.json")
+            if "error" not in res:
+                est = np.asarray(res.pop("estimate"))
+                ref = est if ref is None else ref
+                res["max_estimate_difference_vs_first"] = float(
+                    np.abs(est - ref).max() / np.abs(ref).max()
+                )
+                if "seconds" in floor:
+                    res["x_floor"] = res["seconds"] / floor["seconds"]
+                    res["cpu_x_floor"] = res["cpu_seconds"] / floor["cpu_seconds"]
+            runs.setdefault(fmt, []).append(res)
         print(
-            f"{'manip-id identify ' + fmt:28s} {res['seconds']:8.2f} "
-            f"{res['seconds'] / floor['seconds']:8.2f} {res['peak_rss_mb']:8.0f}"
-            f"   (estimate vs npz {res['max_estimate_difference_vs_npz']:.1e})"
+            f"  round {r + 1}/{repeat}: floor {floor.get('seconds', float('nan')):.1f} s; "
+            + ", ".join(
+                f"{fmt} {runs[fmt][-1].get('x_floor', float('nan')):.2f}x wall, "
+                f"{runs[fmt][-1].get('cpu_x_floor', float('nan')):.2f}x CPU"
+                for fmt in formats
+            ),
+            flush=True,
         )
-    inmem = child("inmem", files["npz"])
-    rows["whole_arrays_npz"] = inmem
-    after = child("floor", folder)  # the machine's load drifts: the floor again, at the end
-    rows["floor_after"] = after
+    rows: dict = {"runs": runs}
+    fl = [x["seconds"] for x in runs["floor"] if "seconds" in x]
+    fl_cpu = [x["cpu_seconds"] for x in runs["floor"] if "cpu_seconds" in x]
+    fl_mb = [x["peak_rss_mb"] for x in runs["floor"] if "peak_rss_mb" in x]
+    print(f"medians over {repeat} interleaved round(s); wall and CPU (user + system) time")
     print(
-        f"{'floor again (after)':28s} {after['seconds']:8.2f} "
-        f"{after['seconds'] / floor['seconds']:8.2f} {after['peak_rss_mb']:8.0f}"
+        f"{'case':28s} {'wall s':>8s} {'x floor':>8s} {'CPU s':>8s} {'x floor':>8s} {'peak MB':>8s}"
     )
-    if "error" not in inmem:
-        print(
-            f"{'whole arrays (previous CLI)':28s} {inmem['seconds']:8.2f} "
-            f"{inmem['seconds'] / floor['seconds']:8.2f} {inmem['peak_rss_mb']:8.0f}"
+    print(
+        f"{'floor (regressor only)':28s} {_median(fl):8.2f} {1.0:8.2f} {_median(fl_cpu):8.2f} "
+        f"{1.0:8.2f} {_median(fl_mb):8.0f}"
+    )
+    rows["floor"] = {
+        "seconds": _median(fl),
+        "cpu_seconds": _median(fl_cpu),
+        "peak_rss_mb": _median(fl_mb),
+    }
+    for fmt in formats:
+        ok = [x for x in runs[fmt] if "error" not in x]
+        if not ok:
+            print(f"{'manip-id identify ' + fmt:28s} error: {runs[fmt][-1]['error']}")
+            continue
+        med = {
+            key: _median([x[key] for x in ok if key in x])
+            for key in ("seconds", "x_floor", "cpu_seconds", "cpu_x_floor", "peak_rss_mb")
+        }
+        med["max_peak_rss_mb"] = max(x["peak_rss_mb"] for x in ok)
+        med["max_estimate_difference_vs_first"] = max(
+            x["max_estimate_difference_vs_first"] for x in ok
         )
+        rows[fmt] = med
+        print(
+            f"{'manip-id identify ' + fmt:28s} {med['seconds']:8.2f} {med['x_floor']:8.2f} "
+            f"{med['cpu_seconds']:8.2f} {med['cpu_x_floor']:8.2f} "
+            f"{med['peak_rss_mb']:8.0f}   (max peak {med['max_peak_rss_mb']:.0f} MB; "
+            f"estimate vs first run {med['max_estimate_difference_vs_first']:.1e})"
+        )
+    if inmem:
+        whole = child("inmem", files["npz"])
+        rows["whole_arrays_npz"] = whole
+        if "error" not in whole:
+            print(
+                f"{'whole arrays (previous CLI)':28s} {whole['seconds']:8.2f} "
+                f"{whole['seconds'] / _median(fl):8.2f} {'':8s} {'':8s} "
+                f"{whole['peak_rss_mb']:8.0f}   (loading and preprocessing timed, no start-up)"
+            )
     if json_out:
         Path(json_out).parent.mkdir(parents=True, exist_ok=True)
         Path(json_out).write_text(json.dumps({"n": n, "rows": rows}, indent=2))
@@ -384,6 +443,16 @@ def main() -> None:
     parser.add_argument("--user", action="store_true", help="the user's path (see the docstring)")
     parser.add_argument("--user-size", type=int, default=1_000_000)
     parser.add_argument(
+        "--formats", nargs="+", choices=USER_FORMATS, default=list(USER_FORMATS),
+        help="the user's path: the file formats to run",
+    )  # fmt: skip
+    parser.add_argument(
+        "--repeat", type=int, default=1, help="the user's path: interleaved rounds (medians)"
+    )
+    parser.add_argument(
+        "--no-inmem", action="store_true", help="the user's path: skip the whole-array case"
+    )
+    parser.add_argument(
         "--case", choices=["floor", "manip_id", "dense", "inmem"], help=argparse.SUPPRESS
     )
     parser.add_argument("--folder", help=argparse.SUPPRESS)
@@ -392,7 +461,14 @@ def main() -> None:
         run_case(args)
         return
     if args.user:
-        user_main(Path(args.cache), args.user_size, args.json)
+        user_main(
+            Path(args.cache),
+            args.user_size,
+            args.json,
+            tuple(args.formats),
+            args.repeat,
+            not args.no_inmem,
+        )
         return
 
     cache = Path(args.cache)

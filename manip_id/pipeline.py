@@ -228,7 +228,9 @@ def _open(robot: Robot, spec: FileSpec):
     return src, _check_layout(robot, src, spec)
 
 
-def _rows(src, spec: FileSpec, options: PreprocessOptions, counts: RowCounts):
+def _rows(
+    src, spec: FileSpec, options: PreprocessOptions, counts: RowCounts, checked: bool = False
+):
     scale = torque_scale_vector(options.torque_scale, src.layout.nv, "--torque-scale")
     return iter_rows(
         src,
@@ -237,6 +239,7 @@ def _rows(src, spec: FileSpec, options: PreprocessOptions, counts: RowCounts):
         drop_bad_rows=options.drop_bad_rows,
         chunk=options.read_chunk,
         counts=counts,
+        checked=checked,
     )
 
 
@@ -334,8 +337,8 @@ def iter_processed(
     lay = src.layout
     if scan.spill is not None and Path(scan.spill).is_file():
         rows = _spilled_rows(scan.spill, lay.width, options.read_chunk)
-    else:
-        rows = _rows(src, spec, options, RowCounts())
+    else:  # the scan checked these rows' values: only window, drops, order and scale again
+        rows = _rows(src, spec, options, RowCounts(), checked=True)
     if not options.preprocesses(lay.has_ddq):
         return None, rows
     from .signals import preprocess_blocks

@@ -179,14 +179,16 @@ class RegressorEvaluator:
         wide_index[columns >= nr] = nr + np.arange(joint_cols.size)
         selections = [wide_index[np.asarray(sj, dtype=np.intp)] for sj in supports]
         size = min(chunk, max(n, 1))
-        wide = np.zeros((nv, size, nr + joint_cols.size))
+        # sample-major: the (nv, nr) matrices of consecutive samples are consecutive rows of
+        # ``flat``, so one concatenate per group copies them (cheaper than stacking per joint)
+        wide = np.zeros((size, nv, nr + joint_cols.size))
+        flat = wide.reshape(size * nv, nr + joint_cols.size)
         outs = [np.empty((size, sel.size)) for sel in selections]
         f, m, d = pin.computeJointTorqueRegressor, self.model, self.data
         for start in range(0, n, chunk):
             stop = min(start + chunk, n)
             s = slice(start, stop)
             size_k = stop - start
-            jm = wide[:, :size_k, :nr]
             qs, dqs, ddqs = q[s], dq[s], ddq[s]
             for i in range(0, size_k, _STACK):
                 mats = [
@@ -195,18 +197,19 @@ class RegressorEvaluator:
                         qs[i : i + _STACK], dqs[i : i + _STACK], ddqs[i : i + _STACK], strict=True
                     )
                 ]
+                rows = flat[i * nv : (i + len(mats)) * nv, :nr]
                 if nv > 1:
-                    np.stack(mats, axis=1, out=jm[:, i : i + len(mats)])
+                    np.concatenate(mats, axis=0, out=rows)
                 else:  # Pinocchio returns a 1-D row for one DoF
-                    np.stack(mats, axis=0, out=jm[0, i : i + len(mats)])
+                    np.stack(mats, axis=0, out=rows)
             if joint_cols.size:
                 vals = self.joint_values(qs, dqs, ddqs)
                 for i, (j, t) in enumerate(zip(jc_dof, jc_term, strict=True)):
-                    wide[j, :size_k, nr + i] = vals[:, j, t]
+                    wide[:size_k, j, nr + i] = vals[:, j, t]
             blocks = []
             for j in range(nv):
                 out = outs[j][:size_k]
-                np.take(wide[j, :size_k], selections[j], axis=1, out=out, mode="clip")
+                np.take(wide[:size_k, j], selections[j], axis=1, out=out, mode="clip")
                 blocks.append(out)
             yield start, stop, blocks
 

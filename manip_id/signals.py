@@ -623,6 +623,10 @@ def preprocess_blocks(
     sq, sdq, stau = slice(1, 1 + nq), slice(1 + nq, 1 + nq + nv), slice(1 + nq + nv, width_in)
     stop = n_uniform - n_trim
     D = int(decimate)
+    # the filtered columns in one contiguous run: q, dq (when measured, or to reach tau), tau
+    # (when filtered); a column filtered but unused costs less than a second filter call
+    hi_f = stau.stop if filter_torque else (sdq.stop if velocity == "measured" else sq.stop)
+    fq, fdq, ftau = (slice(s.start - sq.start, s.stop - sq.start) for s in (sq, sdq, stau))
 
     def blocks():
         for w in iter_overlapping(uniform_rows, block, margin):
@@ -631,10 +635,12 @@ def preprocess_blocks(
                 continue
             rows = w.rows
             t = rows[:, 0]
-            q = filt(rows[:, sq])
-            dq = derivative(t, q) if velocity == "differentiate" else filt(rows[:, sdq])
+            # one filter call on every filtered column (each column is filtered on its own)
+            y = filt(rows[:, sq.start : hi_f])
+            q = y[:, fq]
+            dq = derivative(t, q) if velocity == "differentiate" else y[:, fdq]
+            tau = y[:, ftau] if filter_torque else rows[:, stau]
             ddq = derivative(t, dq)
-            tau = filt(rows[:, stau]) if filter_torque else rows[:, stau]
             first = lo_keep + (-(lo_keep - n_trim)) % D  # first kept global index >= lo_keep
             idx = np.arange(first, hi_keep, D) - w.lo
             if idx.size:

@@ -174,6 +174,30 @@ def _read_names(zf: zipfile.ZipFile, member: NpyMember, path: Path) -> tuple[str
     return tuple(str(s) for s in np.atleast_1d(arr))
 
 
+def _stored_offsets(zf: zipfile.ZipFile, infos, path: Path) -> dict[str, int]:
+    """Byte offset in the file of each stored (uncompressed, unencrypted) member's data.
+
+    Such a member is read with plain file reads, without the zip layer's buffering
+    and CRC pass (the scan and the accumulation read every byte once each).
+    """
+    import struct
+
+    out = {}
+    fp = zf.fp
+    if fp is None:
+        return out
+    for info in infos:
+        if info.compress_type != zipfile.ZIP_STORED or info.flag_bits & 0x1:
+            continue
+        fp.seek(info.header_offset)
+        local = fp.read(30)
+        if len(local) != 30 or local[:4] != b"PK\x03\x04":
+            raise DataError(f"cannot read {path} as NPZ: bad local header of {info.filename}")
+        name_len, extra_len = struct.unpack("<HH", local[26:30])
+        out[info.filename[:-4]] = info.header_offset + 30 + name_len + extra_len
+    return out
+
+
 class NpzSource:
     """Rows of an NPZ dataset read in chunks (see the module docstring).
 
@@ -189,7 +213,9 @@ class NpzSource:
         self.n_rows = self.members["t"].shape[0]
         self.joint_names = None
         with zipfile.ZipFile(self.path) as zf:  # deflated members cost a decompression per pass
-            self.compressed = any(i.compress_type != zipfile.ZIP_STORED for i in zf.infolist())
+            infos = zf.infolist()
+            self.compressed = any(i.compress_type != zipfile.ZIP_STORED for i in infos)
+            self._offsets = _stored_offsets(zf, infos, self.path)
         self._whole: dict[str, np.ndarray] = {}
         with zipfile.ZipFile(self.path) as zf:
             if "joint_names" in self.members:
@@ -216,6 +242,11 @@ class NpzSource:
                     if name in self._whole:
                         continue
                     m = self.members[name]
+                    if name in self._offsets:  # stored: plain reads at the member's offset
+                        fh = open(self.path, "rb")  # noqa: SIM115 (closed in finally)
+                        handles[name] = fh
+                        fh.seek(self._offsets[name] + m.header_size + start * m.row_bytes)
+                        continue
                     fh = zf.open(name + ".npy")
                     handles[name] = fh
                     fh.seek(m.header_size + start * m.row_bytes)

@@ -165,11 +165,15 @@ def iter_rows(
     drop_bad_rows: bool = False,
     chunk: int = READ_CHUNK,
     counts: RowCounts | None = None,
+    checked: bool = False,
 ) -> Iterator[np.ndarray]:
     """Packed rows of ``source`` as a fit sees them (see the module docstring).
 
     ``counts`` (a :class:`RowCounts`) is filled as the rows go by. Errors name
-    the file; raw row indices are 0-based rows of the file.
+    the file; raw row indices are 0-based rows of the file. ``checked``: the
+    same rows already passed these checks (a first pass over the same file):
+    step 3's value checks are skipped, the window, the dropping of non-finite
+    rows, the time order and the scale still apply.
     """
     lay: Layout = source.layout
     path = source.path
@@ -229,7 +233,7 @@ def iter_rows(
                 break
         if not block.shape[0]:
             continue
-        for name, s in lay.slices.items():
+        for name, s in () if checked else lay.slices.items():
             if name == "t":
                 check_values("t", block[:, 0], 1, offset=int(raw[0]))
             else:
