@@ -92,7 +92,7 @@ import math
 import time
 import warnings
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -100,7 +100,7 @@ import pinocchio as pin
 
 from ._checks import as_float_array, check_finite
 from .errors import DataError, InputError, RankDeficiencyError
-from .estimators import InformationAccumulator, solve_accumulator
+from .estimators import InformationAccumulator, LeastSquaresSolution, solve_accumulator
 from .identifiability import BaseParameters, RankAnalysis, analyze, analyze_information
 from .regressor import DEFAULT_CHUNK, check_states
 from .robot import INERTIAL_NAMES, Robot
@@ -873,9 +873,11 @@ def _check_deadband(deadband) -> float | None:
     return d if d > 0 else None
 
 
-def _warn(messages: list[str], text: str) -> None:
+def _warn(messages: list[str], text: str, stacklevel: int = 3) -> None:
+    """Record ``text`` and warn; ``stacklevel`` 3 points at the caller of the function that
+    calls this one (4 from a step of it), i.e. at the user's call."""
     messages.append(text)
-    warnings.warn(text, PayloadWarning, stacklevel=3)
+    warnings.warn(text, PayloadWarning, stacklevel=stacklevel)
 
 
 def _relative_errors(accs: dict, x: np.ndarray) -> tuple[dict, dict]:
@@ -1129,6 +1131,242 @@ def consistent_payload(
     return phi, f"Clarabel SDP ({status}, {iters} iterations, margin {float(margin):.3g})"
 
 
+@dataclass(frozen=True)
+class _PayloadProblem:
+    """The checked inputs of :func:`identify_payload` and the payload's structure."""
+
+    pf: PayloadFrame
+    base: BaseParameters
+    pra: RankAnalysis  # structural analysis of the payload's 10 columns
+    unloaded: list[_Run]
+    loaded: list[_Run]
+    known: KnownBase | None
+    deadband: float | None
+    T: np.ndarray  # payload base columns in the frame of the parent joint, (10, k)
+
+    @property
+    def r(self) -> int:
+        return self.base.n_base
+
+    @property
+    def k(self) -> int:
+        return int(self.pra.base.independent.size)
+
+
+@dataclass(frozen=True)
+class _PayloadSums:
+    """The accumulated information of the payload problem."""
+
+    acc: InformationAccumulator  # the system solved: [beta, psi], or psi with known beta
+    acc_u: InformationAccumulator | None  # unloaded runs (None with a known base)
+    acc_l: InformationAccumulator  # loaded runs (with a known base: the system solved)
+    full: InformationAccumulator | None  # known base: loaded sums over [psi, beta]
+    left_out: np.ndarray  # rows left out by the deadband per joint, (nv,)
+    names: list[str]
+
+
+@dataclass(frozen=True)
+class _PayloadFit:
+    """The least-squares fit of the payload problem (then, optionally, made consistent)."""
+
+    ls: LeastSquaresSolution
+    ra: RankAnalysis
+    f: float  # covariance correction for the rows left out
+    x: np.ndarray
+    beta: np.ndarray
+    psi: np.ndarray
+    cov_psi: np.ndarray
+    cov_beta: np.ndarray
+    solver: str
+    phi_override: np.ndarray | None = None
+
+
+def _payload_inputs(
+    robot: Robot,
+    unloaded,
+    loaded,
+    frame: str,
+    *,
+    known_base,
+    method: str,
+    velocity_deadband,
+    base: BaseParameters | None,
+    timings: dict[str, float],
+) -> _PayloadProblem:
+    """Read and check the inputs of :func:`identify_payload`, with the structural analysis."""
+    if method not in PAYLOAD_METHODS:
+        raise InputError(f"method must be one of {list(PAYLOAD_METHODS)}, got {method!r}")
+    deadband = _check_deadband(velocity_deadband)
+    pf = payload_frame(robot, frame)
+    t0 = time.perf_counter()
+    if base is None:
+        base = analyze(robot).base
+    pra = payload_identifiability(robot, pf)
+    timings["structural_analysis"] = time.perf_counter() - t0
+    if pra.rank == 0:
+        raise InputError(
+            f"a payload at {frame!r} (on {pf.joint_name}) enters no joint torque of {robot.name!r}"
+        )
+    ub, lb = _blocks(unloaded, "unloaded"), _blocks(loaded, "loaded")
+    if not lb:
+        raise InputError("no loaded runs: give the runs recorded with the payload mounted")
+    if known_base is None and not ub:
+        raise InputError("no unloaded runs: give them, or the base parameters (known_base)")
+    _check_distinct(ub, lb)
+    known = None if known_base is None else _check_known_base(robot, base, known_base)
+    T = pf.transform[:, pra.base.independent]
+    return _PayloadProblem(pf, base, pra, ub, lb, known, deadband, T)
+
+
+def _payload_accumulate(robot: Robot, prob: _PayloadProblem, chunk: int) -> _PayloadSums:
+    """Accumulate the joint payload problem over the runs (see the module docstring)."""
+    ind, T, cols_b = prob.base.independent, prob.T, prob.pf.columns
+    r, k, nv = prob.r, prob.k, robot.nv
+    db = prob.deadband
+    if prob.known is None:
+
+        def design_u(Y, tau):
+            X = np.zeros((Y.shape[0], nv, r + k))
+            X[:, :, :r] = Y[:, :, ind]
+            return X, tau
+
+        def design_l(Y, tau):
+            return np.concatenate([Y[:, :, ind], Y[:, :, cols_b] @ T], axis=2), tau
+
+        acc_u, out_u = _accumulate(
+            robot, prob.unloaded, r + k, design_u, chunk=chunk, deadband=db, what="unloaded"
+        )
+        acc_l, out_l = _accumulate(
+            robot, prob.loaded, r + k, design_l, chunk=chunk, deadband=db, what="loaded"
+        )
+        names = [*prob.base.base_names, *prob.pra.base.base_names]
+        return _PayloadSums(acc_u + acc_l, acc_u, acc_l, None, out_u + out_l, names)
+
+    def design_k(Y, tau):
+        return np.concatenate([Y[:, :, cols_b] @ T, Y[:, :, ind]], axis=2), tau
+
+    full, left_out = _accumulate(
+        robot, prob.loaded, k + r, design_k, chunk=chunk, deadband=db, what="loaded"
+    )
+    known = prob.known.estimate
+    acc = _sub_accumulator(full, np.arange(k), offset=np.arange(k, k + r), known=known)
+    return _PayloadSums(acc, None, acc, full, left_out, list(prob.pra.base.base_names))
+
+
+def _payload_solve(prob: _PayloadProblem, sums: _PayloadSums, method: str, nv: int):
+    """Rank check and least squares; the covariance of ``psi`` (with a known base's)."""
+    acc, r, k = sums.acc, prob.r, prob.k
+    if acc.n_rows <= acc.p:
+        raise InputError(f"{acc.n_rows} equations for {acc.p} parameters: give more samples")
+    ra = analyze_information(acc.A, sums.names, n_rows=acc.n_rows)
+    if ra.rank < acc.p:
+        raise RankDeficiencyError(
+            ra.rank,
+            acc.p,
+            ra.unidentifiable,
+            subject="these runs",
+            what="directions of the joint payload problem",
+            hint="unloaded runs must excite the robot's base parameters, loaded runs the payload's",
+        )
+    ls = solve_accumulator(acc, method=method, names=sums.names, rank_rtol=ra.tolerance)
+    f = _dof_factor(acc, ls.rank, sums.left_out)
+    x = ls.estimate
+    cov = ls.covariance * f
+    if prob.known is None:
+        beta, psi = x[:r], x[r:]
+        cov_psi = cov[r:, r:]
+        cov_beta = cov[:r, :r]
+    else:
+        assert sums.full is not None
+        psi, beta = x, prob.known.estimate
+        cov_psi = cov
+        # propagate the known base's covariance: psi = A_pp^-1 (b_p - A_pb beta)
+        Aw = sums.full.A_joint
+        wts = ls.weights if ls.weights is not None else np.ones(nv)
+        A_all = np.einsum("j,jab->ab", wts, Aw)
+        G = np.linalg.solve(A_all[:k, :k], A_all[:k, k:])
+        cov_psi = cov_psi + G @ prob.known.covariance @ G.T
+        cov_beta = prob.known.covariance
+    return _PayloadFit(ls, ra, f, x, beta, psi, cov_psi, cov_beta, ls.solver)
+
+
+def _payload_shown(prob: _PayloadProblem, sums: _PayloadSums, fit: _PayloadFit) -> dict:
+    """The test that the loaded data show a payload at all (DataError when they do not)."""
+    if prob.known is None:
+        test = _payload_test(fit.psi, fit.cov_psi, sums.acc_l.A[prob.r :, prob.r :], sums.acc_l.zz)
+    else:
+        assert sums.full is not None
+        test = _payload_test(fit.psi, fit.cov_psi, sums.acc.A, sums.full.zz)
+    if not test["significant"]:
+        raise DataError(
+            f"the loaded runs carry no payload information: the payload's torques are not "
+            f"distinguishable from zero (Wald statistic {test['statistic']:.3g} for "
+            f"{test['dof']} parameters, p-value {test['p_value']:.3g}, payload share of the "
+            f"loaded torques {test['share']:.2e}); were the loaded runs recorded with the "
+            "payload mounted, and are they other runs than the unloaded ones?"
+        )
+    return test
+
+
+def _payload_consistent_fit(
+    prob: _PayloadProblem, sums: _PayloadSums, fit: _PayloadFit
+) -> _PayloadFit:
+    """The fit with the payload's pseudo-inertia positive definite (``beta`` follows)."""
+    pb, r = prob.pra.base, prob.r
+    phi_c, status = consistent_payload(fit.psi, fit.cov_psi, pb)
+    psi_c = phi_c[pb.independent] + (pb.K @ phi_c[pb.dependent] if pb.dependent.size else 0.0)
+    beta = fit.beta
+    if prob.known is None:  # beta follows by its conditional least squares
+        acc, ls = sums.acc, fit.ls
+        A = acc.A if ls.weights is None else acc.weighted(ls.weights)[0]
+        beta = beta - np.linalg.solve(A[:r, :r], A[:r, r:] @ (psi_c - fit.psi))
+        x = np.r_[beta, psi_c]
+    else:
+        x = psi_c
+    solver = f"{fit.solver}; payload pseudo-inertia positive definite by {status}"
+    return replace(fit, x=x, beta=beta, psi=psi_c, solver=solver, phi_override=phi_c)
+
+
+def _payload_warnings(robot: Robot, pf: PayloadFrame, est: PayloadEstimate, messages) -> None:
+    """Warn of a non-positive mass, a non-physical payload, and what does not show."""
+    if est.identifiable[0] and est.mass <= 0:
+        _warn(
+            messages,
+            f"the identified payload mass is {est.mass:.4g} kg (not positive): are the "
+            "unloaded and loaded runs swapped? (or use consistent=True / --consistent)",
+            stacklevel=4,
+        )
+    elif est.physically_consistent is False:
+        _warn(
+            messages,
+            f"the identified payload is not physically consistent (smallest pseudo-inertia "
+            f"eigenvalue {est.min_eigenvalue:.3g}); use consistent=True (--consistent)",
+            stacklevel=4,
+        )
+    missing = [n for n, ok in zip(QUANTITY_NAMES, est.identifiable, strict=True) if not ok]
+    if missing:
+        _warn(
+            messages,
+            f"a payload at {pf.name} (on {pf.joint_name}) does not show "
+            f"{', '.join(missing)} in the joint torques of {robot.name}: not identifiable",
+            stacklevel=4,
+        )
+
+
+def _payload_errors(prob: _PayloadProblem, sums: _PayloadSums, x: np.ndarray):
+    """Relative torque errors ``(rel, rel_per_joint)`` per kind of run."""
+    if prob.known is None:
+        return _relative_errors({"unloaded": sums.acc_u, "loaded": sums.acc_l}, x)
+    # residual of tau - Y_b beta - Y_p psi, relative to the loaded torques
+    assert sums.full is not None
+    rss = sums.acc.residual_sum_of_squares(x)
+    zz = sums.full.zz_joint
+    rel = {"loaded": float(np.sqrt(rss.sum() / zz.sum())) if zz.sum() > 0 else math.nan}
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel_j = {"loaded": np.sqrt(rss / zz)}
+    return rel, rel_j
+
+
 def identify_payload(
     robot: Robot,
     unloaded,
@@ -1175,181 +1413,59 @@ def identify_payload(
     """
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
-    if method not in PAYLOAD_METHODS:
-        raise InputError(f"method must be one of {list(PAYLOAD_METHODS)}, got {method!r}")
-    deadband = _check_deadband(velocity_deadband)
-    pf = payload_frame(robot, frame)
+    prob = _payload_inputs(
+        robot,
+        unloaded,
+        loaded,
+        frame,
+        known_base=known_base,
+        method=method,
+        velocity_deadband=velocity_deadband,
+        base=base,
+        timings=timings,
+    )
     t0 = time.perf_counter()
-    if base is None:
-        base = analyze(robot).base
-    pra = payload_identifiability(robot, pf)
-    timings["structural_analysis"] = time.perf_counter() - t0
-    if pra.rank == 0:
-        raise InputError(
-            f"a payload at {frame!r} (on {pf.joint_name}) enters no joint torque of {robot.name!r}"
-        )
-    ub, lb = _blocks(unloaded, "unloaded"), _blocks(loaded, "loaded")
-    if not lb:
-        raise InputError("no loaded runs: give the runs recorded with the payload mounted")
-    if known_base is None and not ub:
-        raise InputError("no unloaded runs: give them, or the base parameters (known_base)")
-    _check_distinct(ub, lb)
-    known = None if known_base is None else _check_known_base(robot, base, known_base)
-    ind = base.independent
-    pind = pra.base.independent  # payload base columns among the 10
-    T = pf.transform[:, pind]
-    r, k, nv = base.n_base, pind.size, robot.nv
-    cols_b = pf.columns
-    messages: list[str] = []
-
-    t0 = time.perf_counter()
-    if known is None:
-
-        def design_u(Y, tau):
-            X = np.zeros((Y.shape[0], nv, r + k))
-            X[:, :, :r] = Y[:, :, ind]
-            return X, tau
-
-        def design_l(Y, tau):
-            return np.concatenate([Y[:, :, ind], Y[:, :, cols_b] @ T], axis=2), tau
-
-        acc_u, out_u = _accumulate(
-            robot, ub, r + k, design_u, chunk=chunk, deadband=deadband, what="unloaded"
-        )
-        acc_l, out_l = _accumulate(
-            robot, lb, r + k, design_l, chunk=chunk, deadband=deadband, what="loaded"
-        )
-        acc = acc_u + acc_l
-        left_out = out_u + out_l
-        names = [*base.base_names, *pra.base.base_names]
-    else:
-
-        def design_k(Y, tau):
-            return np.concatenate([Y[:, :, cols_b] @ T, Y[:, :, ind]], axis=2), tau
-
-        full, left_out = _accumulate(
-            robot, lb, k + r, design_k, chunk=chunk, deadband=deadband, what="loaded"
-        )
-        acc = _sub_accumulator(full, np.arange(k), offset=np.arange(k, k + r), known=known.estimate)
-        acc_u, acc_l = None, acc
-        names = list(pra.base.base_names)
+    sums = _payload_accumulate(robot, prob, chunk)
     timings["accumulate"] = time.perf_counter() - t0
-    n_u = 0 if acc_u is None else acc_u.n
-    n_l = acc_l.n
-    if acc.n_rows <= acc.p:
-        raise InputError(f"{acc.n_rows} equations for {acc.p} parameters: give more samples")
-
     t0 = time.perf_counter()
-    ra = analyze_information(acc.A, names, n_rows=acc.n_rows)
-    if ra.rank < acc.p:
-        raise RankDeficiencyError(
-            ra.rank,
-            acc.p,
-            ra.unidentifiable,
-            subject="these runs",
-            what="directions of the joint payload problem",
-            hint="unloaded runs must excite the robot's base parameters, loaded runs the payload's",
-        )
-    ls = solve_accumulator(acc, method=method, names=names, rank_rtol=ra.tolerance)
-    f = _dof_factor(acc, ls.rank, left_out)
-    x = ls.estimate
-    cov = ls.covariance * f
-    if known is None:
-        beta, psi = x[:r], x[r:]
-        cov_psi = cov[r:, r:]
-        cov_beta = cov[:r, :r]
-    else:
-        psi, beta = x, known.estimate
-        cov_psi = cov
-        # propagate the known base's covariance: psi = A_pp^-1 (b_p - A_pb beta)
-        Aw = full.A_joint
-        wts = ls.weights if ls.weights is not None else np.ones(nv)
-        A_all = np.einsum("j,jab->ab", wts, Aw)
-        G = np.linalg.solve(A_all[:k, :k], A_all[:k, k:])
-        cov_psi = cov_psi + G @ known.covariance @ G.T
-        cov_beta = known.covariance
+    fit = _payload_solve(prob, sums, method, robot.nv)
     timings["solve"] = time.perf_counter() - t0
-
-    # --- does the loaded data show a payload at all?
-    if known is None:
-        test = _payload_test(psi, cov_psi, acc_l.A[r:, r:], acc_l.zz)
-    else:
-        test = _payload_test(psi, cov_psi, acc.A, full.zz)
-    if not test["significant"]:
-        raise DataError(
-            f"the loaded runs carry no payload information: the payload's torques are not "
-            f"distinguishable from zero (Wald statistic {test['statistic']:.3g} for "
-            f"{test['dof']} parameters, p-value {test['p_value']:.3g}, payload share of the "
-            f"loaded torques {test['share']:.2e}); were the loaded runs recorded with the "
-            "payload mounted, and are they other runs than the unloaded ones?"
-        )
-
-    solver = ls.solver
-    phi_override = None
+    test = _payload_shown(prob, sums, fit)
     if consistent:
         t0 = time.perf_counter()
-        phi_c, status = consistent_payload(psi, cov_psi, pra.base)
-        psi_c = phi_c[pind] + (
-            pra.base.K @ phi_c[pra.base.dependent] if pra.base.dependent.size else 0.0
-        )
-        if known is None:  # beta follows by its conditional least squares
-            A = acc.A if ls.weights is None else acc.weighted(ls.weights)[0]
-            beta = beta - np.linalg.solve(A[:r, :r], A[:r, r:] @ (psi_c - psi))
-            x = np.r_[beta, psi_c]
-        else:
-            x = psi_c
-        psi = psi_c
-        phi_override = phi_c
-        solver = f"{solver}; payload pseudo-inertia positive definite by {status}"
+        fit = _payload_consistent_fit(prob, sums, fit)
         timings["consistent"] = time.perf_counter() - t0
-    est = _payload_estimate(pf, pra, np.arange(10), psi, cov_psi, phi_override=phi_override)
-    if est.identifiable[0] and est.mass <= 0:
-        _warn(
-            messages,
-            f"the identified payload mass is {est.mass:.4g} kg (not positive): are the "
-            "unloaded and loaded runs swapped? (or use consistent=True / --consistent)",
-        )
-    elif est.physically_consistent is False:
-        _warn(
-            messages,
-            f"the identified payload is not physically consistent (smallest pseudo-inertia "
-            f"eigenvalue {est.min_eigenvalue:.3g}); use consistent=True (--consistent)",
-        )
-    missing = [n for n, ok in zip(QUANTITY_NAMES, est.identifiable, strict=True) if not ok]
-    if missing:
-        _warn(
-            messages,
-            f"a payload at {pf.name} (on {pf.joint_name}) does not show "
-            f"{', '.join(missing)} in the joint torques of {robot.name}: not identifiable",
-        )
-    if known is None:
-        rel, rel_j = _relative_errors({"unloaded": acc_u, "loaded": acc_l}, x)
-    else:  # residual of tau - Y_b beta - Y_p psi, relative to the loaded torques
-        rss = acc.residual_sum_of_squares(x)
-        zz = full.zz_joint
-        rel = {"loaded": float(np.sqrt(rss.sum() / zz.sum())) if zz.sum() > 0 else math.nan}
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rel_j = {"loaded": np.sqrt(rss / zz)}
-    beta_std = np.sqrt(np.maximum(np.diag(cov_beta), 0.0))
+
+    # uncertainty: the payload's quantities and the base parameters' standard deviations
+    est = _payload_estimate(
+        prob.pf, prob.pra, np.arange(10), fit.psi, fit.cov_psi, phi_override=fit.phi_override
+    )
+    messages: list[str] = []
+    _payload_warnings(robot, prob.pf, est, messages)
+    rel, rel_j = _payload_errors(prob, sums, fit.x)
+    beta_std = np.sqrt(np.maximum(np.diag(fit.cov_beta), 0.0))
     timings["total"] = time.perf_counter() - t_start
     return PayloadResult(
         robot_name=robot.name,
         method=method,
         payload=est,
-        base_names=list(base.base_names),
-        base_expressions=list(base.expressions),
-        base_estimate=np.asarray(beta, dtype=float),
+        base_names=list(prob.base.base_names),
+        base_expressions=list(prob.base.expressions),
+        base_estimate=np.asarray(fit.beta, dtype=float),
         base_std=beta_std,
-        known_base=known is not None,
+        known_base=prob.known is not None,
         consistent=bool(consistent),
-        sigma2=float(ls.sigma2 * f),
-        condition_number=float(ra.condition_number),
-        n_samples={"unloaded": int(n_u), "loaded": int(n_l)},
+        sigma2=float(fit.ls.sigma2 * fit.f),
+        condition_number=float(fit.ra.condition_number),
+        n_samples={
+            "unloaded": int(0 if sums.acc_u is None else sums.acc_u.n),
+            "loaded": int(sums.acc_l.n),
+        },
         relative_error=rel,
         relative_error_per_joint=rel_j,
-        rows_left_out=left_out,
+        rows_left_out=sums.left_out,
         payload_test={k2: v for k2, v in test.items() if k2 != "significant"},
-        solver=solver,
+        solver=fit.solver,
         dof_names=list(robot.dof_names),
         warnings=messages,
         timings=timings,
@@ -1382,6 +1498,280 @@ def _payload_test(psi, cov_psi, A_pp: np.ndarray, zz: float) -> dict:
 
 
 # ====================================================================== drive gains
+@dataclass(frozen=True)
+class _GainProblem:
+    """The checked inputs of :func:`identify_drive_gains` and the payload's structure.
+
+    The unknowns are ``[g (nv), beta (r), psi_u (k)]``: the gains, the robot's base
+    parameters and the base parameters of the payload's unknown columns.
+    """
+
+    pf: PayloadFrame
+    base: BaseParameters
+    all_ra: RankAnalysis  # structural analysis of all 10 payload columns
+    pra: RankAnalysis | None  # ... of the unknown ones (None: every one is known)
+    unloaded: list[_Run]
+    loaded: list[_Run]
+    deadband: float | None
+    known_cols: np.ndarray  # known payload columns among the 10
+    unknown_cols: np.ndarray
+    phi_k: np.ndarray  # their known values
+    nv: int
+
+    @property
+    def r(self) -> int:
+        return self.base.n_base
+
+    @property
+    def pind(self) -> np.ndarray:
+        """Unknown payload base columns among the 10."""
+        if self.pra is None:
+            return np.zeros(0, dtype=np.intp)
+        return self.unknown_cols[self.pra.base.independent]
+
+    @property
+    def p(self) -> int:
+        return self.nv + self.r + int(self.pind.size)
+
+
+@dataclass(frozen=True)
+class _GainSums:
+    """The accumulated information of ``[D(i), -Y_b, -Y_pu] x = Y_pk phi_k``."""
+
+    acc: InformationAccumulator
+    acc_u: InformationAccumulator
+    acc_l: InformationAccumulator
+    left_out: np.ndarray  # rows left out by the deadband per joint, (nv,)
+    names: list[str]
+
+
+def _known_payload(payload_mass, payload_com, payload_inertia):
+    """The payload's known mass [kg], centre of mass [m] and inertia [kg m^2], checked."""
+    try:
+        mass = float(payload_mass)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"payload_mass must be a number [kg], got {payload_mass!r}") from exc
+    if not (math.isfinite(mass) and mass > 0):
+        raise InputError(f"the payload mass must be > 0 [kg], got {payload_mass}")
+    if payload_inertia is not None and payload_com is None:
+        raise InputError(
+            "a known payload inertia (about its centre of mass) needs its centre of mass too"
+        )
+    com = None
+    if payload_com is not None:
+        com = as_float_array(payload_com, "payload_com", ndim=1)
+        if com.shape != (3,) or not np.isfinite(com).all():
+            raise InputError(f"payload_com must be 3 finite numbers [m], got {com.tolist()}")
+    inertia = None
+    if payload_inertia is not None:
+        inertia = as_float_array(payload_inertia, "payload_inertia", ndim=1)
+        if inertia.shape != (6,) or not np.isfinite(inertia).all():
+            raise InputError(
+                "payload_inertia must be 6 finite numbers (Ixx, Ixy, Iyy, Ixz, Iyz, Izz) "
+                f"[kg m^2], got {inertia.tolist()}"
+            )
+    return mass, com, inertia
+
+
+def _gain_inputs(
+    robot: Robot,
+    unloaded,
+    loaded,
+    frame: str,
+    payload_mass,
+    *,
+    payload_com,
+    payload_inertia,
+    method: str,
+    velocity_deadband,
+    base: BaseParameters | None,
+    timings: dict[str, float],
+) -> _GainProblem:
+    """Read and check the inputs of :func:`identify_drive_gains`, with the structure."""
+    if method not in GAIN_METHODS:
+        raise InputError(f"method must be one of {list(GAIN_METHODS)}, got {method!r}")
+    mass, com, inertia = _known_payload(payload_mass, payload_com, payload_inertia)
+    deadband = _check_deadband(velocity_deadband)
+    pf = payload_frame(robot, frame)
+    known_cols = (
+        [0]
+        + ([1, 2, 3] if com is not None else [])
+        + (list(range(4, 10)) if inertia is not None else [])
+    )
+    unknown_cols = np.array([i for i in range(10) if i not in known_cols], dtype=np.intp)
+    known_cols_a = np.array(known_cols, dtype=np.intp)
+    phi_full = standard_from_quantities(mass, com, inertia)
+    phi_k = phi_full[known_cols_a]
+
+    t0 = time.perf_counter()
+    if base is None:
+        base = analyze(robot).base
+    all_ra = payload_identifiability(robot, pf)
+    if unknown_cols.size:
+        pra = payload_identifiability(robot, pf, columns=unknown_cols)
+    else:
+        pra = None
+    timings["structural_analysis"] = time.perf_counter() - t0
+    rank_u = 0 if pra is None else pra.rank
+    if all_ra.rank <= rank_u:
+        raise InputError(
+            f"the known payload parameters ({', '.join(PAYLOAD_NAMES[i] for i in known_cols)}) "
+            f"at {frame!r} do not enter the torques of {robot.name!r} apart from the unknown "
+            "ones, so they cannot fix the scale of the gains (give more of the payload, e.g. "
+            "its centre of mass, or attach it elsewhere)"
+        )
+    ub, lb = _blocks(unloaded, "unloaded"), _blocks(loaded, "loaded")
+    if not lb or not ub:
+        raise InputError("drive gains need both unloaded and loaded runs")
+    _check_distinct(ub, lb)
+    return _GainProblem(
+        pf, base, all_ra, pra, ub, lb, deadband, known_cols_a, unknown_cols, phi_k, robot.nv
+    )
+
+
+def _gain_accumulate(robot: Robot, prob: _GainProblem, chunk: int) -> _GainSums:
+    """Accumulate ``[D(i), -Y_b, -Y_pu] [g; beta; psi_u] = Y_pk phi_k`` over the runs."""
+    ind, cols_b = prob.base.independent, prob.pf.columns
+    nv, r, p = prob.nv, prob.r, prob.p
+    T_u = prob.pf.transform[:, prob.pind]
+    T_k = prob.pf.transform[:, prob.known_cols] @ prob.phi_k
+    diag = np.arange(nv)
+
+    def design(Y, cur, loaded_run: bool):
+        n = Y.shape[0]
+        X = np.zeros((n, nv, p))
+        X[:, diag, diag] = cur
+        X[:, :, nv : nv + r] = -Y[:, :, ind]
+        if loaded_run:
+            X[:, :, nv + r :] = -(Y[:, :, cols_b] @ T_u)
+            z = Y[:, :, cols_b] @ T_k
+        else:
+            z = np.zeros((n, nv))
+        return X, z
+
+    acc_u, out_u = _accumulate(
+        robot,
+        prob.unloaded,
+        p,
+        lambda Y, c: design(Y, c, False),
+        chunk=chunk,
+        deadband=prob.deadband,
+        what="unloaded",
+    )
+    acc_l, out_l = _accumulate(
+        robot,
+        prob.loaded,
+        p,
+        lambda Y, c: design(Y, c, True),
+        chunk=chunk,
+        deadband=prob.deadband,
+        what="loaded",
+    )
+    gain_names = [f"{d}.gain" for d in robot.dof_names]
+    pnames = [] if prob.pra is None else prob.pra.base.base_names
+    names = [*gain_names, *prob.base.base_names, *pnames]
+    return _GainSums(acc_u + acc_l, acc_u, acc_l, out_u + out_l, names)
+
+
+def _gains_determined(
+    robot: Robot, acc: InformationAccumulator, ra: RankAnalysis, p: int, messages: list[str]
+) -> np.ndarray:
+    """Which gains the data fix, shape (nv,) bool; warns of the others and of unexcited
+    base/payload directions."""
+    nv = robot.nv
+    determined = np.ones(nv, dtype=bool)
+    if ra.rank < p:
+        d = np.sqrt(np.maximum(np.diag(acc.A), 0.0))  # column norms; a zero column (a
+        d = np.where(d > 0, d, d.max() if d.max() > 0 else 1.0)  # current never seen) counts
+        N = ra.null_space * d[:, None]
+        N = N / np.maximum(np.linalg.norm(N, axis=0), 1e-300)
+        involved = np.abs(N[:nv]).max(axis=1) > 1e-6 if N.size else np.zeros(nv, bool)
+        determined = ~involved
+        others = [
+            e
+            for e, col in zip(ra.unidentifiable, N.T, strict=True)
+            if np.abs(col[:nv]).max() <= 1e-6
+        ]
+        if involved.any():
+            bad = [robot.dof_names[j] for j in np.flatnonzero(involved)]
+            _warn(
+                messages,
+                f"the data do not determine the drive gain of {', '.join(bad)}: its current "
+                "is not tied to the payload's known torque (e.g. a vertical axis the payload's "
+                "gravity never loads, or a joint that never moves); excite that joint with "
+                "the payload mounted",
+                stacklevel=4,
+            )
+        if others:
+            _warn(
+                messages,
+                f"these runs leave {len(others)} base/payload direction(s) unexcited: "
+                + "; ".join(others[:4]),
+                stacklevel=4,
+            )
+    return determined
+
+
+def _gains_solve(
+    sums: _GainSums,
+    ra: RankAnalysis,
+    method: str,
+    nv: int,
+    p: int,
+    determined: np.ndarray,
+    messages: list[str],
+) -> tuple[np.ndarray, np.ndarray, float, str]:
+    """OLS/WLS with the known columns on the right, then TLS or ML from it:
+    ``(x, covariance, sigma2, solver)``."""
+    acc, left_out = sums.acc, sums.left_out
+    ls = solve_accumulator(
+        acc,
+        method="wls" if method == "wls" else "ols",
+        names=sums.names,
+        minimum_norm=ra.rank < p,
+        rank_rtol=ra.tolerance,
+    )
+    f = _dof_factor(acc, ls.rank, left_out)
+    x, cov, sigma2 = ls.estimate, ls.covariance * f, ls.sigma2 * f
+    solver = f"{'WLS' if method == 'wls' else 'OLS'} with the known payload columns on the "
+    solver += "right-hand side; " + ls.solver
+    if method == "tls":
+        if ra.rank < p:
+            _warn(
+                messages,
+                "TLS needs a full-rank system: kept the minimum-norm OLS solution",
+                stacklevel=4,
+            )
+        else:
+            x = _tls(acc)
+            rss = acc.residual_sum_of_squares(x)
+            sigma2_t = float(rss.sum() / max(acc.n_rows - int(left_out.sum()) - p, 1))
+            cov = cov * (sigma2_t / sigma2) if sigma2 > 0 else cov
+            sigma2 = sigma2_t
+            solver = (
+                "TLS: smallest right singular vector of the column-scaled [W, -y], scaled to "
+                "the known payload; covariance sigma^2 (W^T W)^-1 at the TLS estimate"
+            )
+    elif method == "ml":  # damped steps leave the unexcited directions where OLS put them
+        x, cov, sigma2, what = _ml_gains(acc, nv, x, acc.n - left_out, determined)
+        solver = f"{what}, started from OLS ({ls.solver})"
+    return x, cov, sigma2, solver
+
+
+def _gain_errors(sums: _GainSums, x: np.ndarray, nv: int, p: int) -> tuple[dict, dict]:
+    """Relative errors in torque units: residuals over ``||g i||``, per kind of run."""
+    rel, rel_j = {}, {}
+    for key, a in (("unloaded", sums.acc_u), ("loaded", sums.acc_l)):
+        rss = a.residual_sum_of_squares(x)
+        xg = np.zeros(p)
+        xg[:nv] = x[:nv]
+        tt = np.maximum(np.einsum("a,jab,b->j", xg, a.A_joint, xg), 0.0)  # ||g_j i_j||^2
+        rel[key] = float(np.sqrt(rss.sum() / tt.sum())) if tt.sum() > 0 else float("nan")
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rel_j[key] = np.sqrt(rss / tt)
+    return rel, rel_j
+
+
 def identify_drive_gains(
     robot: Robot,
     unloaded,
@@ -1424,110 +1814,24 @@ def identify_drive_gains(
     """
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
-    if method not in GAIN_METHODS:
-        raise InputError(f"method must be one of {list(GAIN_METHODS)}, got {method!r}")
-    try:
-        mass = float(payload_mass)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"payload_mass must be a number [kg], got {payload_mass!r}") from exc
-    if not (math.isfinite(mass) and mass > 0):
-        raise InputError(f"the payload mass must be > 0 [kg], got {payload_mass}")
-    if payload_inertia is not None and payload_com is None:
-        raise InputError(
-            "a known payload inertia (about its centre of mass) needs its centre of mass too"
-        )
-    com = None
-    if payload_com is not None:
-        com = as_float_array(payload_com, "payload_com", ndim=1)
-        if com.shape != (3,) or not np.isfinite(com).all():
-            raise InputError(f"payload_com must be 3 finite numbers [m], got {com.tolist()}")
-    inertia = None
-    if payload_inertia is not None:
-        inertia = as_float_array(payload_inertia, "payload_inertia", ndim=1)
-        if inertia.shape != (6,) or not np.isfinite(inertia).all():
-            raise InputError(
-                "payload_inertia must be 6 finite numbers (Ixx, Ixy, Iyy, Ixz, Iyz, Izz) "
-                f"[kg m^2], got {inertia.tolist()}"
-            )
-    deadband = _check_deadband(velocity_deadband)
-    pf = payload_frame(robot, frame)
-    known_cols = (
-        [0]
-        + ([1, 2, 3] if com is not None else [])
-        + (list(range(4, 10)) if inertia is not None else [])
-    )
-    unknown_cols = np.array([i for i in range(10) if i not in known_cols], dtype=np.intp)
-    known_cols_a = np.array(known_cols, dtype=np.intp)
-    phi_full = standard_from_quantities(mass, com, inertia)
-    phi_k = phi_full[known_cols_a]
-
-    t0 = time.perf_counter()
-    if base is None:
-        base = analyze(robot).base
-    all_ra = payload_identifiability(robot, pf)
-    if unknown_cols.size:
-        pra = payload_identifiability(robot, pf, columns=unknown_cols)
-    else:
-        pra = None
-    timings["structural_analysis"] = time.perf_counter() - t0
-    rank_u = 0 if pra is None else pra.rank
-    if all_ra.rank <= rank_u:
-        raise InputError(
-            f"the known payload parameters ({', '.join(PAYLOAD_NAMES[i] for i in known_cols)}) "
-            f"at {frame!r} do not enter the torques of {robot.name!r} apart from the unknown "
-            "ones, so they cannot fix the scale of the gains (give more of the payload, e.g. "
-            "its centre of mass, or attach it elsewhere)"
-        )
-    ub, lb = _blocks(unloaded, "unloaded"), _blocks(loaded, "loaded")
-    if not lb or not ub:
-        raise InputError("drive gains need both unloaded and loaded runs")
-    _check_distinct(ub, lb)
-    ind = base.independent
-    r, nv = base.n_base, robot.nv
-    pind = np.zeros(0, dtype=np.intp) if pra is None else unknown_cols[pra.base.independent]
-    k = pind.size
-    T_u = pf.transform[:, pind]
-    T_k = pf.transform[:, known_cols_a] @ phi_k
-    cols_b = pf.columns
-    p = nv + r + k
-    diag = np.arange(nv)
-
-    def design(Y, cur, loaded_run: bool):
-        n = Y.shape[0]
-        X = np.zeros((n, nv, p))
-        X[:, diag, diag] = cur
-        X[:, :, nv : nv + r] = -Y[:, :, ind]
-        if loaded_run:
-            X[:, :, nv + r :] = -(Y[:, :, cols_b] @ T_u)
-            z = Y[:, :, cols_b] @ T_k
-        else:
-            z = np.zeros((n, nv))
-        return X, z
-
-    t0 = time.perf_counter()
-    acc_u, out_u = _accumulate(
+    prob = _gain_inputs(
         robot,
-        ub,
-        p,
-        lambda Y, c: design(Y, c, False),
-        chunk=chunk,
-        deadband=deadband,
-        what="unloaded",
+        unloaded,
+        loaded,
+        frame,
+        payload_mass,
+        payload_com=payload_com,
+        payload_inertia=payload_inertia,
+        method=method,
+        velocity_deadband=velocity_deadband,
+        base=base,
+        timings=timings,
     )
-    acc_l, out_l = _accumulate(
-        robot,
-        lb,
-        p,
-        lambda Y, c: design(Y, c, True),
-        chunk=chunk,
-        deadband=deadband,
-        what="loaded",
-    )
-    acc = acc_u + acc_l
-    left_out = out_u + out_l
+    nv, r, p = prob.nv, prob.r, prob.p
+    t0 = time.perf_counter()
+    sums = _gain_accumulate(robot, prob, chunk)
     timings["accumulate"] = time.perf_counter() - t0
-    gain_names = [f"{d}.gain" for d in robot.dof_names]
-    names = [*gain_names, *base.base_names, *([] if pra is None else pra.base.base_names)]
+    acc = sums.acc
     if acc.n_rows <= p:
         raise InputError(f"{acc.n_rows} equations for {p} parameters: give more samples")
     if acc.zz == 0:
@@ -1538,64 +1842,13 @@ def identify_drive_gains(
 
     t0 = time.perf_counter()
     messages: list[str] = []
-    ra = analyze_information(acc.A, names, n_rows=acc.n_rows)
-    determined = np.ones(nv, dtype=bool)
-    if ra.rank < p:
-        d = np.sqrt(np.maximum(np.diag(acc.A), 0.0))  # column norms; a zero column (a
-        d = np.where(d > 0, d, d.max() if d.max() > 0 else 1.0)  # current never seen) counts
-        N = ra.null_space * d[:, None]
-        N = N / np.maximum(np.linalg.norm(N, axis=0), 1e-300)
-        involved = np.abs(N[:nv]).max(axis=1) > 1e-6 if N.size else np.zeros(nv, bool)
-        determined = ~involved
-        others = [
-            e
-            for e, col in zip(ra.unidentifiable, N.T, strict=True)
-            if np.abs(col[:nv]).max() <= 1e-6
-        ]
-        if involved.any():
-            bad = [robot.dof_names[j] for j in np.flatnonzero(involved)]
-            _warn(
-                messages,
-                f"the data do not determine the drive gain of {', '.join(bad)}: its current "
-                "is not tied to the payload's known torque (e.g. a vertical axis the payload's "
-                "gravity never loads, or a joint that never moves); excite that joint with "
-                "the payload mounted",
-            )
-        if others:
-            _warn(
-                messages,
-                f"these runs leave {len(others)} base/payload direction(s) unexcited: "
-                + "; ".join(others[:4]),
-            )
+    ra = analyze_information(acc.A, sums.names, n_rows=acc.n_rows)
+    determined = _gains_determined(robot, acc, ra, p, messages)
     _check_payload_present(acc, nv, determined, robot.dof_names)
-    ls = solve_accumulator(
-        acc,
-        method="wls" if method == "wls" else "ols",
-        names=names,
-        minimum_norm=ra.rank < p,
-        rank_rtol=ra.tolerance,
-    )
-    f = _dof_factor(acc, ls.rank, left_out)
-    x, cov, sigma2 = ls.estimate, ls.covariance * f, ls.sigma2 * f
-    solver = f"{'WLS' if method == 'wls' else 'OLS'} with the known payload columns on the "
-    solver += "right-hand side; " + ls.solver
-    if method == "tls":
-        if ra.rank < p:
-            _warn(messages, "TLS needs a full-rank system: kept the minimum-norm OLS solution")
-        else:
-            x = _tls(acc)
-            rss = acc.residual_sum_of_squares(x)
-            sigma2_t = float(rss.sum() / max(acc.n_rows - int(left_out.sum()) - p, 1))
-            cov = cov * (sigma2_t / sigma2) if sigma2 > 0 else cov
-            sigma2 = sigma2_t
-            solver = (
-                "TLS: smallest right singular vector of the column-scaled [W, -y], scaled to "
-                "the known payload; covariance sigma^2 (W^T W)^-1 at the TLS estimate"
-            )
-    elif method == "ml":  # damped steps leave the unexcited directions where OLS put them
-        x, cov, sigma2, what = _ml_gains(acc, nv, x, acc.n - left_out, determined)
-        solver = f"{what}, started from OLS ({ls.solver})"
+    x, cov, sigma2, solver = _gains_solve(sums, ra, method, nv, p, determined, messages)
     timings["solve"] = time.perf_counter() - t0
+
+    # uncertainty: gains, base and payload parameters with their standard deviations
     gains = x[:nv].copy()
     std_all = np.sqrt(np.maximum(np.diag(cov), 0.0))
     gains_std = std_all[:nv].copy()
@@ -1608,34 +1861,21 @@ def identify_drive_gains(
             f"the drive gain of {', '.join(neg)} came out <= 0: check the current's sign "
             "convention of that joint",
         )
-    beta = x[nv : nv + r]
-    beta_std = std_all[nv : nv + r]
-    psi = x[nv + r :]
-    cov_psi = cov[nv + r :, nv + r :]
     phi_known = np.zeros(10)
-    phi_known[known_cols_a] = phi_k
-    if pra is None:
-        est = _known_estimate(pf, phi_known, all_ra)
+    phi_known[prob.known_cols] = prob.phi_k
+    if prob.pra is None:
+        est = _known_estimate(prob.pf, phi_known, prob.all_ra)
     else:
         est = _payload_estimate(
-            pf,
-            pra,
-            unknown_cols,
-            psi,
-            cov_psi,
+            prob.pf,
+            prob.pra,
+            prob.unknown_cols,
+            x[nv + r :],
+            cov[nv + r :, nv + r :],
             phi_known=phi_known,
-            known_cols=known_cols_a,
+            known_cols=prob.known_cols,
         )
-    # relative errors in torque units: residuals over ||g i||
-    rel, rel_j = {}, {}
-    for key, a in (("unloaded", acc_u), ("loaded", acc_l)):
-        rss = a.residual_sum_of_squares(x)
-        xg = np.zeros(p)
-        xg[:nv] = x[:nv]
-        tt = np.maximum(np.einsum("a,jab,b->j", xg, a.A_joint, xg), 0.0)  # ||g_j i_j||^2
-        rel[key] = float(np.sqrt(rss.sum() / tt.sum())) if tt.sum() > 0 else float("nan")
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rel_j[key] = np.sqrt(rss / tt)
+    rel, rel_j = _gain_errors(sums, x, nv, p)
     timings["total"] = time.perf_counter() - t_start
     return DriveGainResult(
         robot_name=robot.name,
@@ -1645,16 +1885,16 @@ def identify_drive_gains(
         gains_std=gains_std,
         determined=determined,
         payload=est,
-        base_names=list(base.base_names),
-        base_expressions=list(base.expressions),
-        base_estimate=beta,
-        base_std=beta_std,
+        base_names=list(prob.base.base_names),
+        base_expressions=list(prob.base.expressions),
+        base_estimate=x[nv : nv + r],
+        base_std=std_all[nv : nv + r],
         sigma2=float(sigma2),
         condition_number=float(ra.condition_number),
-        n_samples={"unloaded": int(acc_u.n), "loaded": int(acc_l.n)},
+        n_samples={"unloaded": int(sums.acc_u.n), "loaded": int(sums.acc_l.n)},
         relative_error=rel,
         relative_error_per_joint=rel_j,
-        rows_left_out=left_out,
+        rows_left_out=sums.left_out,
         solver=solver,
         warnings=messages,
         timings=timings,
