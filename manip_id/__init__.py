@@ -85,6 +85,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
         "regressor",
         "slotine_li_regressor",
     ),
+    ".results": ("load_result",),
     ".robot": ("JointTerms", "Robot", "available_robots", "load_robot"),
     ".signals": ("Lowpass", "preprocess"),
     ".simulation": ("SimulatedData", "perturb_parameters", "simulate"),

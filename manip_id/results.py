@@ -39,10 +39,14 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .errors import DataError, InputError
+
+if TYPE_CHECKING:
+    from .identification import IdentificationResult
 
 #: std above this [%] flags a base parameter "poorly identified".
 POORLY_IDENTIFIED = 10.0
@@ -341,7 +345,7 @@ def result_to_dict(
     return doc
 
 
-def result_from_dict(doc: dict):
+def result_from_dict(doc: dict) -> IdentificationResult:
     """An :class:`~manip_id.identification.IdentificationResult` from :func:`result_to_dict`'s
     dictionary. What the schema does not model (standard parameters, files, per-file
     results, the caller's keys) is kept in ``context`` and written back by ``to_dict``."""
@@ -470,7 +474,7 @@ def _recomputed_warnings(doc: dict) -> set[str]:
     }
 
 
-def load_result(path) -> object:
+def load_result(path) -> IdentificationResult:
     """Read a saved identification result (``manip-id identify --json``, a report's
     result.json) back into an :class:`~manip_id.identification.IdentificationResult`.
 

@@ -650,7 +650,7 @@ def torque_comparison(
         hx = fig.add_subplot(grid[j, 2])
         r_id, r_nom = tau[:, j] - pred[:, j], tau[:, j] - nom[:, j]
         lim = float(np.percentile(np.abs(np.concatenate([r_id, r_nom])), 99.5)) or 1.0
-        edges = np.linspace(-lim, lim, int(bins) + 1)
+        edges = np.linspace(-lim, lim, int(bins) + 1).tolist()
         hx.hist(r_nom, bins=edges, color=_NOM, alpha=0.5, label="nominal")
         hx.hist(r_id, bins=edges, color=_PRED, alpha=0.7, label="identified")
         hx.set_title(f"residual [{units[j]}]", fontsize=8)

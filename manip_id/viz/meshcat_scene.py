@@ -606,18 +606,18 @@ class RobotScene:
         joint origin and the placed box of every mesh (or capsule)."""
         qs = np.atleast_2d(qs)
         qs = qs[np.linspace(0, len(qs) - 1, min(len(qs), 60)).astype(int)]
-        pts = []
+        found: list = []
         corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
         for q in qs:
             pin.forwardKinematics(self._model, self._data, q)
-            pts += [self._data.oMi[i].translation.copy() for i in range(self._model.njoints)]
+            found += [self._data.oMi[i].translation.copy() for i in range(self._model.njoints)]
             for path, T in self._transforms(q).items():  # every mesh's box, placed
                 box = self._boxes.get(path)
                 if box is None:
                     continue
                 local = np.where(corners == 0, box[0], box[1])  # (8, 3) [m]
-                pts += list(local @ T[:3, :3].T + T[:3, 3])  # T carries the mesh scale
-        pts = np.array(pts)
+                found += list(local @ T[:3, :3].T + T[:3, 3])  # T carries the mesh scale
+        pts = np.array(found)
         lo, hi = pts.min(axis=0), pts.max(axis=0)
         center = 0.5 * (lo + hi)
         size = max(float(np.linalg.norm(hi - lo)), 0.25)

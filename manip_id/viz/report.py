@@ -449,7 +449,7 @@ def _build(
         if scene is not None:
             text = scene if isinstance(scene, str) else scene.html()
             atomic_write_text(tmp / SCENE, text)
-            assets = {} if isinstance(scene, str) else getattr(scene, "asset_files", dict)()
+            assets: dict = {} if isinstance(scene, str) else getattr(scene, "asset_files", dict)()
             for name, asset in assets.items():  # a scene's external assets, written once
                 atomic_write_text(tmp / name, asset)
         atomic_write_text(
