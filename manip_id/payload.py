@@ -1758,6 +1758,46 @@ def _gains_solve(
     return x, cov, sigma2, solver
 
 
+def _gains_uncertainty(
+    robot: Robot, x: np.ndarray, cov: np.ndarray, determined: np.ndarray, messages: list[str]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(gains, gains_std, std)``: the gains and their standard deviations (NaN where the
+    data do not fix them), and every parameter's; warns of gains that came out <= 0."""
+    nv = robot.nv
+    gains = x[:nv].copy()
+    std_all = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    gains_std = std_all[:nv].copy()
+    gains[~determined] = np.nan
+    gains_std[~determined] = np.nan
+    neg = [robot.dof_names[j] for j in range(nv) if determined[j] and gains[j] <= 0]
+    if neg:
+        _warn(
+            messages,
+            f"the drive gain of {', '.join(neg)} came out <= 0: check the current's sign "
+            "convention of that joint",
+            stacklevel=4,
+        )
+    return gains, gains_std, std_all
+
+
+def _gain_payload(prob: _GainProblem, x: np.ndarray, cov: np.ndarray) -> PayloadEstimate:
+    """The payload: its known part and, when some is unknown, the estimate of the rest."""
+    nv, r = prob.nv, prob.r
+    phi_known = np.zeros(10)
+    phi_known[prob.known_cols] = prob.phi_k
+    if prob.pra is None:
+        return _known_estimate(prob.pf, phi_known, prob.all_ra)
+    return _payload_estimate(
+        prob.pf,
+        prob.pra,
+        prob.unknown_cols,
+        x[nv + r :],
+        cov[nv + r :, nv + r :],
+        phi_known=phi_known,
+        known_cols=prob.known_cols,
+    )
+
+
 def _gain_errors(sums: _GainSums, x: np.ndarray, nv: int, p: int) -> tuple[dict, dict]:
     """Relative errors in torque units: residuals over ``||g i||``, per kind of run."""
     rel, rel_j = {}, {}
@@ -1848,33 +1888,8 @@ def identify_drive_gains(
     x, cov, sigma2, solver = _gains_solve(sums, ra, method, nv, p, determined, messages)
     timings["solve"] = time.perf_counter() - t0
 
-    # uncertainty: gains, base and payload parameters with their standard deviations
-    gains = x[:nv].copy()
-    std_all = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    gains_std = std_all[:nv].copy()
-    gains[~determined] = np.nan
-    gains_std[~determined] = np.nan
-    neg = [robot.dof_names[j] for j in range(nv) if determined[j] and gains[j] <= 0]
-    if neg:
-        _warn(
-            messages,
-            f"the drive gain of {', '.join(neg)} came out <= 0: check the current's sign "
-            "convention of that joint",
-        )
-    phi_known = np.zeros(10)
-    phi_known[prob.known_cols] = prob.phi_k
-    if prob.pra is None:
-        est = _known_estimate(prob.pf, phi_known, prob.all_ra)
-    else:
-        est = _payload_estimate(
-            prob.pf,
-            prob.pra,
-            prob.unknown_cols,
-            x[nv + r :],
-            cov[nv + r :, nv + r :],
-            phi_known=phi_known,
-            known_cols=prob.known_cols,
-        )
+    gains, gains_std, std_all = _gains_uncertainty(robot, x, cov, determined, messages)
+    est = _gain_payload(prob, x, cov)
     rel, rel_j = _gain_errors(sums, x, nv, p)
     timings["total"] = time.perf_counter() - t_start
     return DriveGainResult(

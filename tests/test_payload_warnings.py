@@ -34,3 +34,13 @@ def test_drive_gain_warnings_point_at_the_caller():
     texts = [str(w.message) for w in caught]
     assert any("unexcited" in t for t in texts) and any("TLS needs" in t for t in texts)
     assert all(w.filename == __file__ for w in caught), [w.filename for w in caught]
+
+
+def test_negative_gain_warning_points_at_the_caller():
+    ur5 = get_robot("ur5")
+    gains = np.array([-0.45, 0.8, 1.1, 1.4, 1.7, 2.3])  # [N m / A]: joint 0's sign flipped
+    u, ld = make_runs(ur5, "tool0", make_payload(), n=300, gains=gains, seed=4)
+    caught = _caught(lambda: identify_drive_gains(ur5, u, ld, "tool0", 1.3, method="ols"))
+    neg = [w for w in caught if "came out <= 0" in str(w.message)]
+    assert len(neg) == 1 and ur5.dof_names[0] in str(neg[0].message)
+    assert neg[0].filename == __file__, neg[0].filename
