@@ -250,3 +250,23 @@ def test_filtered_reference_torques_are_stated_with_the_raw_errors(tmp_path, cap
     assert raw["nominal_train"] < 1e-4 and raw["nominal_validation"] < 1e-4  # the truth
     assert any("low-pass filtered at 40 Hz" in w for w in d["warnings"])
     capsys.readouterr()
+
+
+def test_not_excited_flags_the_columns_these_data_leave_zero():
+    """At standstill only gravity acts: the base columns that vanish on these states
+    (computed here from the regressor) are the ones flagged "not excited by this data"."""
+    robot = get_robot("double_pendulum")
+    q, _, _ = robot.random_states(200, seed=4)
+    dq = ddq = np.zeros((200, robot.nv))
+    model = robot.with_parameters(robot.nominal_parameters)
+    data = model.createData()
+    tau = np.array([pin.rnea(model, data, q[k], dq[k], ddq[k]) for k in range(200)])
+    res = identify(robot, q, dq, ddq, tau, minimum_norm=True)
+    assert res.rank_analysis.rank < res.base.n_base
+    Y = np.stack([robot.evaluator.regressor(q[k], dq[k], ddq[k]) for k in range(200)])
+    zero = np.abs(Y[:, :, res.base.independent]).max(axis=(0, 1)) == 0
+    d = res.to_dict()
+    flagged = np.array(["not excited by this data" in p["flags"] for p in d["base_parameters"]])
+    assert zero.any() and np.all(flagged[zero])
+    assert d["unexcited"] == list(res.rank_analysis.unidentifiable)
+    assert len(d["unexcited"]) == res.base.n_base - res.rank_analysis.rank
