@@ -853,7 +853,8 @@ def build_scene(robot, result, full, title: str, notes: list, assets: str = "inl
                 notes.append(f"scene not animated: {exc}")
         scene.add_inertia(robot.nominal_parameters, label="nominal")
         if result.standard is not None and result.standard.solver:  # --consistent
-            scene.add_inertia(result.standard.values, label="identified (consistent)")
+            # the estimate the user asked for: shown at first (the nominal set may be hidden)
+            scene.add_inertia(result.standard.values, label="identified (consistent)", visible=True)
         ind = result.base.independent
         flags = np.zeros(robot.n_parameters, dtype=bool)
         flags[ind] = True
