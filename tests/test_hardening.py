@@ -756,6 +756,13 @@ def _wait_for(predicate, timeout: float, proc=None) -> bool:
     return False
 
 
+def _interactive_signals() -> None:
+    """In the child: SIGINT handled as in a terminal, even when pytest itself runs in the
+    background (a non-interactive shell starts background jobs with SIGINT ignored, and an
+    ignored signal stays ignored across exec)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 @pytest.mark.parametrize(
     "sig, status", [(signal.SIGTERM, 143), (signal.SIGINT, 130)], ids=["sigterm", "sigint"]
 )
@@ -776,7 +783,12 @@ def test_signal_while_the_report_is_built(work, sig, status):
         "rep",
     ]
     proc = subprocess.Popen(
-        cmd, cwd=work, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+        cmd,
+        cwd=work,
+        env=ENV,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        preexec_fn=_interactive_signals,
     )
     try:
         building = _wait_for(lambda: any(work.glob(".rep.tmp-*")), 120, proc)
@@ -852,7 +864,14 @@ def test_view_serve_binds_loopback_and_stops_its_server(work, sig, status):
     import psutil
 
     cmd = [sys.executable, "-m", "manip_id", "view", "msd", "--serve", "--no-inertia"]
-    proc = subprocess.Popen(cmd, cwd=work, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        cmd,
+        cwd=work,
+        env=ENV,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        preexec_fn=_interactive_signals,
+    )
     parent = psutil.Process(proc.pid)
     family: list = []
     try:
