@@ -15,7 +15,12 @@ friction. Printed:
 - the solve time of each consistent solver (the accumulation is shared and
   done once; each solver works from the same information matrix);
 - the standard parameters of the last two bodies beside the nominal (URDF) ones;
-- the validation error and the link masses for a few prior weights;
+- the fit scale ``k`` (the feasibility fit against its expected chi-square) beside
+  two independent estimates of how much the OLS variance understates the honest one
+  (batch means over contiguous blocks of the training residuals, and the sample rate
+  over twice the low-pass cut-off), and the link masses at the default prior weight;
+- the validation error, the link masses and the prior's move of the fit for a sweep
+  of prior weights (in honest standard deviations, the default among them);
 - the solve time against the number of samples (simulated, 10^3 and 10^5): the
   solvers see only the (r, r) information, so it does not grow with N.
 """
@@ -28,11 +33,31 @@ from pathlib import Path
 
 import numpy as np
 
-from manip_id import identify, load_robot
+from manip_id import identify, load_robot, regressor
 from manip_id.datasets import load_dataset
+from manip_id.estimators.consistent import DEFAULT_PRIOR_WEIGHT
 from manip_id.signals import preprocess
 
 DATA = Path(sys.argv[1]) if len(sys.argv) > 1 else Path("/work/shared/data/panda_gaz2019")
+
+
+def _batch_means(Y: np.ndarray, tau: np.ndarray, nv: int, blocks: int) -> float:
+    """OLS variance inflation by batch means: ``sum_b g_b^T (s A)^-1 g_b / r * B/(B-1)``.
+
+    ``g_b = Y_b^T e_b``, the score of contiguous block b at the OLS fit (about 1 for
+    white residuals; the honest-to-OLS variance ratio when blocks outlast the
+    residuals' correlation).
+    """
+    A = Y.T @ Y
+    beta = np.linalg.solve(A, Y.T @ tau)
+    e = tau - Y @ beta  # [N m]
+    s = float(e @ e) / (e.size - A.shape[0])  # [(N m)^2]
+    edges = np.linspace(0, e.size // nv, blocks + 1).astype(int) * nv
+    total = sum(
+        float(g @ np.linalg.solve(A, g))
+        for g in (Y[i:j].T @ e[i:j] for i, j in zip(edges[:-1], edges[1:], strict=True))
+    )
+    return total / (s * A.shape[0]) * blocks / (blocks - 1)
 
 
 def main() -> None:
@@ -110,18 +135,46 @@ def main() -> None:
                 f"{theta_l[k]:11.5g}"
             )
 
-    print("\nprior weight: validation error and link masses [kg] (sdp)")
-    print("nominal masses: " + " ".join(f"{m:7.3f}" for m in nominal[: robot.n_rigid : 10]))
-    for weight in (1e-3, 1e-1, 1.0, 10.0):
+    print("\nhow much the OLS covariance understates the honest one (variance ratio)")
+    st = a.standard
+    print(f"  fit scale k = f_feas / r (used by the solver):      {st.fit_scale:8.1f}")
+    Y = regressor(robot, train.q, train.dq, train.ddq)
+    Y = Y.reshape(-1, Y.shape[-1])[:, a.base.independent]
+    tau = np.asarray(train.tau, dtype=float).reshape(-1)
+    for blocks in (8, 16, 32):
+        bm = _batch_means(Y, tau, robot.nv, blocks)
+        n_blk = train.n_samples // blocks
+        print(f"  batch means, {blocks:>2} blocks of {n_blk:>5} samples:         {bm:8.1f}")
+    rate = 1.0 / float(np.median(np.diff(np.asarray(load_dataset(DATA).t, dtype=float))))
+    print(f"  bandwidth, rate / (2 cut-off) = {rate:.0f} / (2 x 3 Hz):    {rate / 6.0:8.1f}")
+
+    nom_m = nominal[: robot.n_rigid : 10]
+    print("\nlink masses [kg] at the default prior weight")
+    print(f"{'':<10} " + " ".join(f"{j[-6:]:>7}" for j in robot.joint_names) + "    total")
+    print(f"{'nominal':<10} " + " ".join(f"{m:7.3f}" for m in nom_m) + f"  {nom_m.sum():7.2f}")
+    for label in ("consistent sdp", "consistent logchol"):
+        m = runs[label][0].standard.values[: robot.n_rigid : 10]
+        print(f"{label[11:]:<10} " + " ".join(f"{x:7.3f}" for x in m) + f"  {m.sum():7.2f}")
+
+    print(
+        f"\nprior weight sweep (sdp; default {DEFAULT_PRIOR_WEIGHT:g}, in honest std, the fit "
+        f"scaled by k = {st.fit_scale:.1f}): validation error, how far the prior moved the "
+        "fit beyond feasibility [honest std], largest mass ratio to nominal, masses [kg]"
+    )
+    for weight in (1e-3 / st.fit_scale, 1e-2, 3e-2, DEFAULT_PRIOR_WEIGHT, 0.3, 1.0):
         res = identify(*args, validation=v, consistent=True, prior_weight=weight)
         masses = res.standard.values[: robot.n_rigid : 10]
+        worst = float(np.max(np.maximum(masses / nom_m, nom_m / masses)))
         print(
-            f"  weight {weight:<6g} validation {100 * res.relative_error.validation:.3f} %, "
-            f"consistent {res.physically_consistent}, masses "
+            f"  weight {weight:<8.3g} validation {100 * res.relative_error.validation:.3f} %, "
+            f"prior moved {res.standard.prior_shift_std:5.2f} std, "
+            f"consistent {res.physically_consistent}, ratio {worst:6.1f}, masses "
             + " ".join(f"{m:7.3f}" for m in masses)
+            + f"  total {masses.sum():.2f}"
         )
+    print(f"  (weight {1e-3 / st.fit_scale:.3g} is the former default 1e-3 in OLS std)")
     print("\nsolve time [s] against the number of samples (simulated panda, 2 % noise)")
-    from manip_id import analyze, regressor
+    from manip_id import analyze
     from manip_id.estimators import InformationAccumulator, solve_accumulator
     from manip_id.estimators.consistent import build_problem, solve_consistent
 

@@ -914,6 +914,14 @@ def _finish(
                 "the consistent estimate fails the eigenvalue test: "
                 + "; ".join(standard.consistency.messages())
             )
+        if standard.fit_scale > 10.0:  # f_feas / r: a chi-square of <= r dof would be ~1
+            warnings_.append(
+                f"the residuals are not white noise: the best physical model's fit is "
+                f"{standard.fit_scale:.3g} times its expected chi-square, so the reported "
+                f"(OLS) standard deviations are likely about {np.sqrt(standard.fit_scale):.2g} "
+                "times too small (correlated residuals, filtered torques, model error); the "
+                "prior was weighed against the fit in these inflated units"
+            )
     elif est is None:  # plain least squares: is its minimum-norm standard vector physical?
         standard = minimum_norm_standard(robot, base, estimate)
         msgs = standard.consistency.messages()

@@ -220,7 +220,9 @@ def register(sub) -> None:
         "--prior-weight",
         type=float,
         default=None,
-        help="weight of the prior against the fit measured in standard deviations [default 1e-3]",
+        help="weight of the prior against the fit measured in standard deviations, the OLS "
+        "ones inflated by the feasibility fit's chi-square over its expected value when the "
+        "residuals are not white [default 0.1]",
     )
     phys.add_argument(
         "--export-urdf",

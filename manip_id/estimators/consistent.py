@@ -31,7 +31,16 @@ where ``J_i`` is body i's pseudo-inertia (:mod:`manip_id.consistency`) and
 - ``w`` is the prior weight. With a small ``w`` the prior only picks, among the
   standard vectors that fit equally well (the null space of ``Y_b P``), the one
   closest to the prior, and moves a physical fit by a fraction of a standard
-  deviation. ``prior="none"``: ``w = 0``, feasibility alone; the SDP then also asks
+  deviation. :func:`consistent_estimate` measures the fit in honest standard
+  deviations: ``C`` inflated by the scale ``k = max(1, f_feas / r)``, the fit of the
+  feasibility solve against its expected value (the reduced chi-square, or Birge
+  ratio, of the physical model), so it solves with ``w k`` in place of ``w``. On
+  white noise ``f_feas << r`` and ``k = 1``; on filtered real data, whose residuals
+  are correlated over hundreds of samples, ``sigma^2 (Y^T Y)^-1`` is too small by
+  about the correlation time and ``k`` measures by how much (the real Panda log:
+  ``k = 247``; batch means over 8-16 contiguous blocks give 260-300, a 3 Hz
+  low-pass at 1 kHz leaves ``fs / (2 fc) = 167`` samples per independent one).
+  ``prior="none"``: ``w = 0``, feasibility alone; the SDP then also asks
   ``J_i >= MARGIN tr(J_i) 1`` (a margin relative to the body's own size), and
   nothing bounds the unidentifiable directions: the interior-point method returns a
   point inside the optimal set, whose standard parameters may be large.
@@ -62,7 +71,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -80,8 +89,14 @@ from ..errors import InputError, ManipIdError
 
 SOLVERS: tuple[str, ...] = ("sdp", "logchol")
 PRIORS: tuple[str, ...] = ("nominal", "none")
-#: Default weight of the prior against the fit measured in standard deviations.
-DEFAULT_PRIOR_WEIGHT = 1e-3
+#: Default weight of the prior against the fit measured in honest standard deviations
+#: (the OLS ones times ``sqrt(fit_scale)``, see :func:`consistent_estimate`): the prior
+#: moves the fit by less than one of them beyond what physical consistency needs
+#: (0.04-0.8 on simulated white noise of 1-5 %, 0.37 on the real Panda log).
+DEFAULT_PRIOR_WEIGHT = 0.1
+#: Weight of the scale solve (in OLS standard deviations): small enough that its fit
+#: is the feasibility minimum, large enough that the problem stays bounded.
+SCALE_WEIGHT = 1e-3
 #: Margin of positive definiteness: ``J_i >= min(MARGIN lambda_max(J0_i), lambda_min(J0_i) / 2) 1``.
 MARGIN = 1e-6
 #: Relative floor of the residual variance used to measure the fit, ``(FLOOR * rms tau)^2``:
@@ -851,8 +866,15 @@ class StandardEstimate:
     solver, status, time: how the consistent estimate was solved ("" for plain LS) [s].
     prior, prior_weight: the prior used.
     base_shift_std: largest ``|beta - beta_ls| / std(beta_ls)`` over the base parameters:
-        how far physical consistency (and the prior) moved the fit [standard deviations].
-    fit, prior_distance: objective terms of the consistent solve (module docstring).
+        how far physical consistency (and the prior) moved the fit [OLS standard deviations].
+    fit, prior_distance: objective terms of the consistent solve (module docstring);
+        ``fit`` in squared OLS standard deviations.
+    fit_scale: ``k = max(1, f_feas / r)``: the fit of the feasibility solve against its
+        expected value; the prior weight applies to the fit divided by ``k`` (1 on white
+        noise; large when the residuals are correlated and the OLS covariance too small).
+    prior_shift_std: largest ``|beta - beta_feas| / (sqrt(k) std(beta_ls))``: how far the
+        prior moved the fit beyond what physical consistency needs [honest standard
+        deviations]; the default weight keeps it below 1.
     """
 
     names: list[str]
@@ -868,6 +890,8 @@ class StandardEstimate:
     base_shift_std: float = 0.0
     fit: float = 0.0
     prior_distance: float = 0.0
+    fit_scale: float = 1.0
+    prior_shift_std: float = 0.0
 
     @property
     def physically_consistent(self) -> bool:
@@ -898,6 +922,8 @@ class StandardEstimate:
                 "base_shift_std": float(self.base_shift_std),
                 "fit": _finite(self.fit),
                 "prior_distance": _finite(self.prior_distance),
+                "fit_scale": _finite(self.fit_scale),
+                "prior_shift_std": _finite(self.prior_shift_std),
             },
         }
 
@@ -906,8 +932,10 @@ class StandardEstimate:
         c = self.consistency
         kind = (
             f"consistent estimate ({self.solver}, {self.status}, {self.time:.3g} s, prior "
-            f"{self.prior}, weight {self.prior_weight:g}; base fit moved by at most "
-            f"{self.base_shift_std:.3g} std)"
+            f"{self.prior}, weight {self.prior_weight:g} against the fit in units of "
+            f"{self.fit_scale:.3g} x the OLS covariance; base fit moved by at most "
+            f"{self.base_shift_std:.3g} OLS std, by the prior {self.prior_shift_std:.3g} "
+            "of these std)"
             if self.solver
             else "minimum-norm standard parameters of the least-squares fit"
         )
@@ -958,6 +986,16 @@ def consistent_estimate(
     (fit measured with ``C^-1 = A / sigma^2``) or weighted (``ls.weights``: the
     weighted sums, ``C^-1 = A_w``). Raises :class:`SolverError` on a solver failure or
     an infeasible problem, :class:`PhysicalConsistencyError` for a non-physical prior.
+
+    Two solves with ``solver``. The scale solve (prior at :data:`SCALE_WEIGHT`, nearly
+    feasibility alone) gives the least fit ``f_feas`` any physical model reaches and
+    its base parameters ``beta_feas``; the fit scale is ``k = max(1, f_feas / r)`` for
+    the ``r`` identified base directions. ``f_feas`` is a chi-square with at most ``r``
+    degrees of freedom when the covariance is honest and the robot physical (it is
+    near 0 on white noise); far above ``r`` it says by how much ``C`` is too small at
+    least. The estimate then solves with the prior weight ``w k``: the prior counts
+    ``w`` against the fit in honest standard deviations, whatever the residuals'
+    correlation. ``prior="none"``: one solve, ``k`` reported only.
     """
     check_options(solver, prior, prior_weight)
     if ls.weights is None:
@@ -965,6 +1003,7 @@ def consistent_estimate(
     else:
         A, b, zz = acc.weighted(ls.weights)
         variance = 1.0
+    w = float(prior_weight)
     problem = build_problem(
         robot,
         base,
@@ -972,16 +1011,24 @@ def consistent_estimate(
         b,
         variance=variance,
         prior=prior,
-        prior_weight=prior_weight,
+        prior_weight=SCALE_WEIGHT if prior != "none" else 0.0,
         prior_parameters=prior_parameters,
         n_rows=acc.n_rows,
         zz=zz,
     )
-    sol = solve_consistent(robot, problem, solver=solver)
+    feas = solve_consistent(robot, problem, solver=solver)
+    scale = max(1.0, feas.fit / max(int(problem.W.shape[0]), 1))  # k = max(1, f_feas / r)
+    sol, elapsed = feas, feas.time
+    if prior != "none":
+        problem = replace(problem, weight=w * scale)
+        sol = solve_consistent(robot, problem, solver=solver)
+        elapsed += sol.time
     std = np.sqrt(np.maximum(np.diag(ls.covariance), 0.0))
     with np.errstate(divide="ignore", invalid="ignore"):
         shift = np.abs(sol.beta - ls.estimate) / std
+        moved = np.abs(sol.beta - feas.beta) / (np.sqrt(scale) * std)
     shift = shift[np.isfinite(shift)]
+    moved = moved[np.isfinite(moved)]
     return StandardEstimate(
         names=list(robot.parameter_names),
         units=list(robot.parameter_units),
@@ -990,12 +1037,14 @@ def consistent_estimate(
         consistency=sol.consistency,
         solver=solver,
         status=sol.status,
-        time=sol.time,
+        time=elapsed,
         prior=prior,
-        prior_weight=problem.weight,
+        prior_weight=w if prior != "none" else 0.0,
         base_shift_std=float(shift.max()) if shift.size else 0.0,
         fit=sol.fit,
         prior_distance=sol.prior_distance,
+        fit_scale=scale,
+        prior_shift_std=float(moved.max()) if moved.size else 0.0,
     )
 
 
