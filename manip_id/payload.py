@@ -506,6 +506,9 @@ class PayloadResult:
     payload_test: the Wald statistic that the loaded runs show a payload, its degrees
         of freedom and p-value
     solver: how it was solved; warnings: what the user should know; timings [s]
+    runs: {"unloaded": [...], "loaded": [...]}, per run what its source reported
+        (:attr:`RunSums.runs`: a file's data quality and preprocessing, read where the
+        run was accumulated; None for arrays)
     """
 
     robot_name: str
@@ -528,6 +531,7 @@ class PayloadResult:
     dof_names: list[str]
     warnings: list[str] = field(default_factory=list)
     timings: dict = field(default_factory=dict)
+    runs: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         """JSON-ready: ``payload`` and the fit (lists, floats, None)."""
@@ -601,7 +605,7 @@ class DriveGainResult:
     n_samples, relative_error, relative_error_per_joint: as :class:`PayloadResult`, the
         error relative to the torques ``g_j i_j``
     rows_left_out: per joint, rows dropped by the velocity deadband
-    solver, warnings, timings
+    solver, warnings, timings, runs (as :class:`PayloadResult`)
     """
 
     robot_name: str
@@ -624,6 +628,7 @@ class DriveGainResult:
     solver: str
     warnings: list[str] = field(default_factory=list)
     timings: dict = field(default_factory=dict)
+    runs: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         """JSON-ready: ``drive_gains`` (one per joint, in joint order) and ``torque_scale``."""
@@ -731,7 +736,8 @@ def _blocks(data, what: str) -> list[_Run]:
     for k, item in enumerate(data):
         label = f"{what} run {k}"
         if callable(item):
-            out.append(_Run(label, item))
+            source = getattr(item, "label", None)  # e.g. a file read block by block
+            out.append(_Run(label if not isinstance(source, str) else f"{label} ({source})", item))
             continue
         if hasattr(item, "tau") and hasattr(item, "q"):
             if getattr(item, "ddq", None) is None:
@@ -808,26 +814,119 @@ def _check_distinct(unloaded: list, loaded: list) -> None:
 Design = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
-def _accumulate(
-    robot: Robot,
-    blocks: list,
-    n_cols: int,
-    design: Design,
-    *,
-    chunk: int,
-    deadband: float | None,
-    what: str,
-) -> tuple[InformationAccumulator, np.ndarray]:
-    """Information of ``design(Y, tau) -> (X (n, nv, n_cols), z (n, nv))`` over blocks.
+@dataclass(frozen=True, eq=False)
+class _PayloadDesign:
+    """Rows of one chunk of the payload problem (picklable: a Dask task's argument).
 
-    Rows of joint ``j`` with ``|dq_j| < deadband`` are left out (their row of X and z
-    zeroed, which removes them from every sum); returns the accumulator and the
-    number of rows left out per joint.
+    ``kind``: "unloaded" ``[Y_b, 0]``, "loaded" ``[Y_b, Y_p T]`` (unknowns ``[beta, psi]``)
+    or "known" ``[Y_p T, Y_b]`` (loaded runs with a known base, unknowns ``[psi, beta]``);
+    the right-hand side is the torque.
     """
+
+    kind: str
+    ind: np.ndarray  # the robot's base columns, (r,)
+    cols: slice  # the payload's 10 columns of the parent joint
+    T: np.ndarray  # payload base columns in those, (10, k)
+
+    @property
+    def n_cols(self) -> int:
+        return int(self.ind.size + self.T.shape[1])
+
+    def __call__(self, Y: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self.kind == "unloaded":
+            X = np.zeros((Y.shape[0], Y.shape[1], self.n_cols))
+            X[:, :, : self.ind.size] = Y[:, :, self.ind]
+            return X, tau
+        Yp = Y[:, :, self.cols] @ self.T
+        if self.kind == "loaded":
+            return np.concatenate([Y[:, :, self.ind], Yp], axis=2), tau
+        return np.concatenate([Yp, Y[:, :, self.ind]], axis=2), tau
+
+
+@dataclass(frozen=True, eq=False)
+class _GainDesign:
+    """Rows ``[D(i), -Y_b, -Y_pu] [g; beta; psi_u] = Y_pk phi_k`` of one chunk (picklable).
+
+    The "torque" columns of the run hold the motor currents ``i`` [A]; unloaded runs
+    have no payload columns and a zero right-hand side.
+    """
+
+    loaded: bool
+    ind: np.ndarray  # the robot's base columns, (r,)
+    cols: slice  # the payload's 10 columns of the parent joint
+    T_u: np.ndarray  # unknown payload base columns in those, (10, k_u)
+    T_k: np.ndarray  # the known payload's torque direction, (10,)
+    nv: int
+
+    @property
+    def n_cols(self) -> int:
+        return int(self.nv + self.ind.size + self.T_u.shape[1])
+
+    def __call__(self, Y: np.ndarray, cur: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        n, nv, r = Y.shape[0], self.nv, self.ind.size
+        diag = np.arange(nv)
+        X = np.zeros((n, nv, self.n_cols))
+        X[:, diag, diag] = cur
+        X[:, :, nv : nv + r] = -Y[:, :, self.ind]
+        if not self.loaded:
+            return X, np.zeros((n, nv))
+        X[:, :, nv + r :] = -(Y[:, :, self.cols] @ self.T_u)
+        return X, Y[:, :, self.cols] @ self.T_k
+
+
+@dataclass
+class RunSums:
+    """The information sums of some runs (what a Dask task returns; they add).
+
+    Attributes
+    ----------
+    acc: the accumulated rows of the runs' design
+    left_out: rows left out by the velocity deadband per joint, shape (nv,)
+    runs: per run, in order, what its source reports (``summary()`` of a run given as
+        a callable object that has one, e.g. a file's data quality and preprocessing;
+        else None)
+    """
+
+    acc: InformationAccumulator
+    left_out: np.ndarray
+    runs: list = field(default_factory=list)
+
+    def __add__(self, other: RunSums) -> RunSums:
+        return RunSums(self.acc + other.acc, self.left_out + other.left_out, self.runs + other.runs)
+
+
+def run_sums(
+    robot: Robot,
+    run: _Run,
+    design: Design,
+    chunk: int = DEFAULT_CHUNK,
+    deadband: float | None = None,
+) -> RunSums:
+    """One run's information sums: the body of the local loop and of a Dask task.
+
+    Reads the run's blocks (a file is read on the worker when the run's blocks come
+    from a callable object that reads it), checks each against the robot and
+    accumulates ``design(Y, tau) -> (X (n, nv, p), z (n, nv))`` over chunks of
+    ``chunk`` samples. Rows of joint ``j`` with ``|dq_j| < deadband`` [rad/s] are left
+    out (their row of X and z zeroed, which removes them from every sum).
+
+    Parameters
+    ----------
+    robot: the robot (:func:`manip_id.fleet.portable_robot` for a worker)
+    run: the run (its label, blocks and joint names); picklable for a worker
+    design: the rows of the problem, a picklable callable with ``n_cols``
+    chunk: samples per regressor chunk; deadband: see above
+
+    Raises
+    ------
+    InputError / DataError: naming the run (its file for a file), whatever went wrong.
+    """
+    from .errors import ManipIdError
+
     ev = robot.evaluator
-    acc = InformationAccumulator(n_cols, robot.nv)
+    acc = InformationAccumulator(int(design.n_cols), robot.nv)  # type: ignore[attr-defined]
     left_out = np.zeros(robot.nv, dtype=np.int64)
-    for run in blocks:
+    try:
         for block in run.blocks():
             q, dq, ddq, tau = _check_block(robot, block, run.label, run.names)
             for c in ev.iter_regressor(q, dq, ddq, int(chunk)):
@@ -838,7 +937,47 @@ def _accumulate(
                     z = z * keep
                     left_out += (~keep).sum(axis=0)
                 acc.add(X, z, check=False)
-    return acc, left_out
+    except ManipIdError as exc:
+        if run.label in str(exc):
+            raise
+        cls = InputError if isinstance(exc, InputError) else DataError
+        raise cls(f"{run.label}: {exc}") from exc
+    except Exception as exc:
+        raise DataError(f"{run.label}: {type(exc).__name__}: {exc}") from exc
+    summary = getattr(run.blocks, "summary", None)
+    return RunSums(acc, left_out, [summary() if callable(summary) else None])
+
+
+def _accumulate_runs(
+    robot: Robot,
+    groups: Sequence[tuple[list[_Run], Design]],
+    *,
+    chunk: int,
+    deadband: float | None,
+    scheduler=None,
+) -> list[RunSums]:
+    """Each group's runs summed, one :func:`run_sums` task per run, added in a tree.
+
+    ``scheduler``: None (this process, nothing of Dask imported) or any scheduler of
+    :func:`manip_id.fleet.identify_files` (``"local[:N]"``, ``"tcp://HOST:PORT"``, a
+    scheduler JSON file, a ``distributed.Client``). The same tasks and the same tree
+    either way; a failing run fails the whole call (no partial sums).
+    """
+    from .fleet import SPLIT_EVERY, _Dask, _Serial, _tree, portable_robot
+
+    backend = _Serial() if scheduler is None else _Dask(scheduler)
+    worker_robot = robot if scheduler is None else portable_robot(robot)
+    try:
+        roots = []
+        for runs, design in groups:
+            leaves = [
+                backend.submit(run_sums, worker_robot, run, design, int(chunk), deadband)
+                for run in runs
+            ]
+            roots.append(_tree(backend, leaves, SPLIT_EVERY))
+        return list(backend.gather(roots))
+    finally:
+        backend.close()
 
 
 def _sub_accumulator(acc: InformationAccumulator, cols: np.ndarray, offset=None, known=None):
@@ -1163,6 +1302,7 @@ class _PayloadSums:
     full: InformationAccumulator | None  # known base: loaded sums over [psi, beta]
     left_out: np.ndarray  # rows left out by the deadband per joint, (nv,)
     names: list[str]
+    runs: dict = field(default_factory=dict)  # per kind, the runs' summaries (RunSums.runs)
 
 
 @dataclass(frozen=True)
@@ -1218,39 +1358,44 @@ def _payload_inputs(
     return _PayloadProblem(pf, base, pra, ub, lb, known, deadband, T)
 
 
-def _payload_accumulate(robot: Robot, prob: _PayloadProblem, chunk: int) -> _PayloadSums:
-    """Accumulate the joint payload problem over the runs (see the module docstring)."""
-    ind, T, cols_b = prob.base.independent, prob.T, prob.pf.columns
-    r, k, nv = prob.r, prob.k, robot.nv
+def _payload_accumulate(
+    robot: Robot, prob: _PayloadProblem, chunk: int, scheduler=None
+) -> _PayloadSums:
+    """Accumulate the joint payload problem over the runs (see the module docstring),
+    one :func:`run_sums` task per run (on Dask with ``scheduler``)."""
+    ind, T, cols_b = np.asarray(prob.base.independent, dtype=np.intp), prob.T, prob.pf.columns
+    r = prob.r
     db = prob.deadband
     if prob.known is None:
-
-        def design_u(Y, tau):
-            X = np.zeros((Y.shape[0], nv, r + k))
-            X[:, :, :r] = Y[:, :, ind]
-            return X, tau
-
-        def design_l(Y, tau):
-            return np.concatenate([Y[:, :, ind], Y[:, :, cols_b] @ T], axis=2), tau
-
-        acc_u, out_u = _accumulate(
-            robot, prob.unloaded, r + k, design_u, chunk=chunk, deadband=db, what="unloaded"
-        )
-        acc_l, out_l = _accumulate(
-            robot, prob.loaded, r + k, design_l, chunk=chunk, deadband=db, what="loaded"
+        su, sl = _accumulate_runs(
+            robot,
+            [
+                (prob.unloaded, _PayloadDesign("unloaded", ind, cols_b, T)),
+                (prob.loaded, _PayloadDesign("loaded", ind, cols_b, T)),
+            ],
+            chunk=chunk,
+            deadband=db,
+            scheduler=scheduler,
         )
         names = [*prob.base.base_names, *prob.pra.base.base_names]
-        return _PayloadSums(acc_u + acc_l, acc_u, acc_l, None, out_u + out_l, names)
+        info = {"unloaded": su.runs, "loaded": sl.runs}
+        return _PayloadSums(
+            su.acc + sl.acc, su.acc, sl.acc, None, su.left_out + sl.left_out, names, info
+        )
 
-    def design_k(Y, tau):
-        return np.concatenate([Y[:, :, cols_b] @ T, Y[:, :, ind]], axis=2), tau
-
-    full, left_out = _accumulate(
-        robot, prob.loaded, k + r, design_k, chunk=chunk, deadband=db, what="loaded"
+    (sk,) = _accumulate_runs(
+        robot,
+        [(prob.loaded, _PayloadDesign("known", ind, cols_b, T))],
+        chunk=chunk,
+        deadband=db,
+        scheduler=scheduler,
     )
+    full, k = sk.acc, prob.k
     known = prob.known.estimate
     acc = _sub_accumulator(full, np.arange(k), offset=np.arange(k, k + r), known=known)
-    return _PayloadSums(acc, None, acc, full, left_out, list(prob.pra.base.base_names))
+    names = list(prob.pra.base.base_names)
+    info = {"unloaded": [], "loaded": sk.runs}
+    return _PayloadSums(acc, None, acc, full, sk.left_out, names, info)
 
 
 def _payload_solve(prob: _PayloadProblem, sums: _PayloadSums, method: str, nv: int):
@@ -1379,6 +1524,7 @@ def identify_payload(
     velocity_deadband: float | None = None,
     chunk: int = DEFAULT_CHUNK,
     base: BaseParameters | None = None,
+    scheduler=None,
 ) -> PayloadResult:
     """Identify a payload rigidly attached to ``frame`` from unloaded and loaded runs.
 
@@ -1402,6 +1548,12 @@ def identify_payload(
     consistent: constrain the payload's pseudo-inertia to be positive definite
     velocity_deadband: leave out the rows of joint j where ``|dq_j| <`` this [rad/s]
     chunk: samples per regressor chunk; base: the robot's base parametrization
+    scheduler: None (accumulate in this process; nothing of Dask is imported), or a Dask
+        scheduler as in :func:`manip_id.fleet.identify_files` (``"local[:N]"``,
+        ``"tcp://HOST:PORT"``, a scheduler JSON file, a ``distributed.Client``): each run
+        is one task (:func:`run_sums`, runs and their blocks must pickle), the sums are
+        added in a tree on the cluster and the solve happens here; the result equals the
+        local one to round-off
 
     Returns
     -------
@@ -1425,7 +1577,7 @@ def identify_payload(
         timings=timings,
     )
     t0 = time.perf_counter()
-    sums = _payload_accumulate(robot, prob, chunk)
+    sums = _payload_accumulate(robot, prob, chunk, scheduler)
     timings["accumulate"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     fit = _payload_solve(prob, sums, method, robot.nv)
@@ -1469,6 +1621,7 @@ def identify_payload(
         dof_names=list(robot.dof_names),
         warnings=messages,
         timings=timings,
+        runs=sums.runs,
     )
 
 
@@ -1543,6 +1696,7 @@ class _GainSums:
     acc_l: InformationAccumulator
     left_out: np.ndarray  # rows left out by the deadband per joint, (nv,)
     names: list[str]
+    runs: dict = field(default_factory=dict)  # per kind, the runs' summaries (RunSums.runs)
 
 
 def _known_payload(payload_mass, payload_com, payload_inertia):
@@ -1629,48 +1783,27 @@ def _gain_inputs(
     )
 
 
-def _gain_accumulate(robot: Robot, prob: _GainProblem, chunk: int) -> _GainSums:
-    """Accumulate ``[D(i), -Y_b, -Y_pu] [g; beta; psi_u] = Y_pk phi_k`` over the runs."""
-    ind, cols_b = prob.base.independent, prob.pf.columns
-    nv, r, p = prob.nv, prob.r, prob.p
+def _gain_accumulate(robot: Robot, prob: _GainProblem, chunk: int, scheduler=None) -> _GainSums:
+    """Accumulate ``[D(i), -Y_b, -Y_pu] [g; beta; psi_u] = Y_pk phi_k`` over the runs,
+    one :func:`run_sums` task per run (on Dask with ``scheduler``)."""
+    ind, cols_b = np.asarray(prob.base.independent, dtype=np.intp), prob.pf.columns
     T_u = prob.pf.transform[:, prob.pind]
     T_k = prob.pf.transform[:, prob.known_cols] @ prob.phi_k
-    diag = np.arange(nv)
-
-    def design(Y, cur, loaded_run: bool):
-        n = Y.shape[0]
-        X = np.zeros((n, nv, p))
-        X[:, diag, diag] = cur
-        X[:, :, nv : nv + r] = -Y[:, :, ind]
-        if loaded_run:
-            X[:, :, nv + r :] = -(Y[:, :, cols_b] @ T_u)
-            z = Y[:, :, cols_b] @ T_k
-        else:
-            z = np.zeros((n, nv))
-        return X, z
-
-    acc_u, out_u = _accumulate(
+    su, sl = _accumulate_runs(
         robot,
-        prob.unloaded,
-        p,
-        lambda Y, c: design(Y, c, False),
+        [
+            (prob.unloaded, _GainDesign(False, ind, cols_b, T_u, T_k, prob.nv)),
+            (prob.loaded, _GainDesign(True, ind, cols_b, T_u, T_k, prob.nv)),
+        ],
         chunk=chunk,
         deadband=prob.deadband,
-        what="unloaded",
-    )
-    acc_l, out_l = _accumulate(
-        robot,
-        prob.loaded,
-        p,
-        lambda Y, c: design(Y, c, True),
-        chunk=chunk,
-        deadband=prob.deadband,
-        what="loaded",
+        scheduler=scheduler,
     )
     gain_names = [f"{d}.gain" for d in robot.dof_names]
     pnames = [] if prob.pra is None else prob.pra.base.base_names
     names = [*gain_names, *prob.base.base_names, *pnames]
-    return _GainSums(acc_u + acc_l, acc_u, acc_l, out_u + out_l, names)
+    info = {"unloaded": su.runs, "loaded": sl.runs}
+    return _GainSums(su.acc + sl.acc, su.acc, sl.acc, su.left_out + sl.left_out, names, info)
 
 
 def _gains_determined(
@@ -1825,6 +1958,7 @@ def identify_drive_gains(
     velocity_deadband: float | None = None,
     chunk: int = DEFAULT_CHUNK,
     base: BaseParameters | None = None,
+    scheduler=None,
 ) -> DriveGainResult:
     """Drive gains ``g`` (``tau_j = g_j i_j``), base and payload parameters from currents.
 
@@ -1846,6 +1980,7 @@ def identify_drive_gains(
         gain by about ``sigma_i^2 / mean(i^2)`` and their standard deviations are
         optimistic where a joint's current is small against its noise; ML is not.
     velocity_deadband: leave out the rows of joint j where ``|dq_j| <`` this [rad/s]
+    scheduler: None (this process) or a Dask scheduler, as in :func:`identify_payload`
 
     Returns
     -------
@@ -1869,7 +2004,7 @@ def identify_drive_gains(
     )
     nv, r, p = prob.nv, prob.r, prob.p
     t0 = time.perf_counter()
-    sums = _gain_accumulate(robot, prob, chunk)
+    sums = _gain_accumulate(robot, prob, chunk, scheduler)
     timings["accumulate"] = time.perf_counter() - t0
     acc = sums.acc
     if acc.n_rows <= p:
@@ -1913,6 +2048,7 @@ def identify_drive_gains(
         solver=solver,
         warnings=messages,
         timings=timings,
+        runs=sums.runs,
     )
 
 

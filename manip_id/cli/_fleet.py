@@ -19,16 +19,31 @@ from ..errors import InputError
 FLEET_METHODS = ("ols", "wls")
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The fleet options of ``manip-id identify``."""
-    g = parser.add_argument_group("many files (Dask)")
-    g.add_argument(
+def add_scheduler_argument(parser, what: str) -> None:
+    """``--scheduler SPEC`` (shared by the commands that accumulate on Dask); ``what``
+    ends the help: what one task is and where the solve happens."""
+    parser.add_argument(
         "--scheduler",
         metavar="SPEC",
         default=None,
         help="accumulate on Dask: local[:N] (a local cluster of N workers on 127.0.0.1, default "
-        "2), tcp://HOST:PORT (a running scheduler) or SCHEDULER.json (its scheduler file); each "
-        "file is one task, the sums are added on the cluster and solved here (ols, wls)",
+        "2), tcp://HOST:PORT (a running scheduler) or SCHEDULER.json (its scheduler file); " + what,
+    )
+
+
+def check_scheduler(args: argparse.Namespace) -> None:
+    """Refuse a malformed ``--scheduler`` before any work (nothing of Dask imported)."""
+    if getattr(args, "scheduler", None) is not None:
+        from ..fleet import parse_scheduler
+
+        parse_scheduler(args.scheduler)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The fleet options of ``manip-id identify``."""
+    g = parser.add_argument_group("many files (Dask)")
+    add_scheduler_argument(
+        g, "each file is one task, the sums are added on the cluster and solved here (ols, wls)"
     )
     g.add_argument(
         "--per-file",
@@ -68,10 +83,7 @@ def check(args: argparse.Namespace) -> None:
         raise InputError("--workers forks local processes; with --scheduler use local:N")
     if args.block is not None and args.block < 1:
         raise InputError(f"--block must be >= 1 samples, got {args.block}")
-    if args.scheduler is not None:
-        from ..fleet import parse_scheduler
-
-        parse_scheduler(args.scheduler)
+    check_scheduler(args)
 
 
 def run(args: argparse.Namespace, outputs, t_start: float) -> int:

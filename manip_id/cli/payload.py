@@ -127,6 +127,13 @@ def register(sub) -> None:
         metavar="G[,G...]",
         help="multiply the torque columns of every file (one value, or one per joint)",
     )
+    from ._fleet import add_scheduler_argument
+
+    add_scheduler_argument(
+        p,
+        "each file is one task (read, preprocessed and accumulated on a worker), the sums "
+        "are added on the cluster and the payload is solved here",
+    )
     p.set_defaults(func=run)
 
 
@@ -193,19 +200,41 @@ def _options(args, scale=None):
 
 class StreamedRun:
     """One file read by the real-log pipeline: scanned once (quality summary, checks),
-    then its preprocessed rows streamed block by block as ``(q, dq, ddq, tau)``."""
+    then its preprocessed rows streamed block by block as ``(q, dq, ddq, tau)``.
 
-    def __init__(self, robot, spec, options):
+    ``scan=False``: the file is scanned when the blocks are first asked for, where the
+    run is accumulated (a Dask worker with ``--scheduler``: give a light robot,
+    :func:`manip_id.fleet.portable_robot`, so the run pickles small); its quality and
+    preprocessing come back through :meth:`summary`.
+    """
+
+    def __init__(self, robot, spec, options, scan: bool = True):
         from ..pipeline import scan_file
 
         self.robot, self.spec, self.options = robot, spec, options
-        self.scan = scan_file(robot, spec, options)  # bad files fail here, named
+        # bad files fail here, named
+        self.scan = scan_file(robot, spec, options) if scan else None
         self.settings = None
 
+    @property
+    def label(self) -> str:
+        """The file spec as written: ``path[@window]``."""
+        return self.spec.label
+
+    def summary(self) -> dict:
+        """The file, its data quality and the preprocessing applied (after the blocks)."""
+        return {
+            "file": self.spec.label,
+            "quality": None if self.scan is None else self.scan.quality,
+            "settings": self.settings,
+        }
+
     def __call__(self):
-        from ..pipeline import iter_processed
+        from ..pipeline import iter_processed, scan_file
 
         nq, nv = self.robot.nq, self.robot.nv
+        if self.scan is None:
+            self.scan = scan_file(self.robot, self.spec, self.options)
         try:
             self.settings, rows = iter_processed(self.robot, self.spec, self.options, self.scan)
             for r in rows:
@@ -219,11 +248,12 @@ class StreamedRun:
             self.scan.discard()
 
 
-def read_runs(args, robot, scale=None) -> tuple[list, list, dict]:
+def read_runs(args, robot, scale=None, scan: bool = True) -> tuple[list, list, dict]:
     """The unloaded and loaded runs as streamed runs, and a description of their sources.
 
     Every file is scanned first (checks and the data-quality summary, printed), so that a
-    bad file fails, named, before the long work.
+    bad file fails, named, before the long work; ``scan=False`` (``--scheduler``): the
+    files are scanned by the tasks that accumulate them (quality: :func:`run_quality`).
     """
     colmap = _column_map(args.column)
     specs_u = [_spec(t, args, colmap) for t in args.unloaded]
@@ -241,10 +271,11 @@ def read_runs(args, robot, scale=None) -> tuple[list, list, dict]:
     quality: dict[str, list] = {"unloaded": [], "loaded": []}
     for what, specs in (("unloaded", specs_u), ("loaded", specs_l)):
         for spec in specs:
-            run = StreamedRun(robot, spec, options)
-            print(f"{what} " + run.scan.quality.text())
+            run = StreamedRun(robot, spec, options, scan=scan)
+            if run.scan is not None:
+                print(f"{what} " + run.scan.quality.text())
+                quality[what].append(run.scan.quality.to_dict())
             runs[what].append(run)
-            quality[what].append(run.scan.quality.to_dict())
     source = {
         "unloaded": [s.label for s in specs_u],
         "loaded": [s.label for s in specs_l],
@@ -295,6 +326,27 @@ def input_paths(args) -> list[str]:
     return out
 
 
+def run_quality(result) -> tuple[dict, list]:
+    """From the runs' summaries a result brings back (files scanned on the workers): the
+    data quality per kind of run (printed) and the preprocessing per run."""
+    quality: dict[str, list] = {"unloaded": [], "loaded": []}
+    settings = []
+    for what in ("unloaded", "loaded"):
+        for info in result.runs.get(what, []):
+            q, s = info["quality"], info["settings"]
+            print(f"{what} " + q.text())
+            quality[what].append(q.to_dict())
+            settings.append(
+                {
+                    "file": info["file"],
+                    "preprocess": None
+                    if s is None
+                    else {k: getattr(s, k) for k in s.__dataclass_fields__},
+                }
+            )
+    return quality, settings
+
+
 def preprocess_settings(runs: list) -> list:
     """Per run, the preprocessing applied (None: the file's own ddq used as is)."""
     out = []
@@ -319,6 +371,9 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("give --unloaded runs or --known-base RESULT.json, not both")
     if args.known_base is None and not args.unloaded:
         raise InputError("give the --unloaded runs (or --known-base RESULT.json)")
+    from ._fleet import check_scheduler
+
+    check_scheduler(args)
     reserve_json(args, input_paths(args))
     from ..payload import identify_payload, load_known_base
 
@@ -327,9 +382,16 @@ def run(args: argparse.Namespace) -> int:
     scale = None
     if args.torque_scale is not None:
         scale = parse_floats(args.torque_scale, "--torque-scale")
-    unloaded, loaded, source = read_runs(args, robot, scale)
+    distributed = args.scheduler is not None
+    if distributed:  # the tasks read the files: send them a light robot
+        from ..fleet import portable_robot
+
+        unloaded, loaded, source = read_runs(args, portable_robot(robot), scale, scan=False)
+    else:
+        unloaded, loaded, source = read_runs(args, robot, scale)
     if args.known_base is not None:
         source["known_base"] = str(args.known_base)
+    source["scheduler"] = args.scheduler or "this process"
     result = identify_payload(
         robot,
         unloaded,
@@ -340,12 +402,17 @@ def run(args: argparse.Namespace) -> int:
         consistent=args.consistent,
         velocity_deadband=args.velocity_deadband,
         chunk=args.chunk,
+        scheduler=args.scheduler,
     )
     doc = result.to_dict()
-    doc["data_quality"] = source.pop("data_quality")
+    quality = source.pop("data_quality")
+    settings = None
+    if distributed:
+        quality, settings = run_quality(result)
+    doc["data_quality"] = quality
     doc["source"] = source
     doc["torque_scale"] = scale
-    doc["preprocess"] = preprocess_settings(unloaded + loaded)
+    doc["preprocess"] = settings if distributed else preprocess_settings(unloaded + loaded)
     doc["timings"]["command_total"] = round(time.perf_counter() - t_start, 6)
     print(result.table())
     publish_json(args, doc)
