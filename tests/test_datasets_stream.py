@@ -169,3 +169,34 @@ def test_file_specs_and_windows(tmp_path):
     with pytest.raises(InputError, match="empty"):
         parse_file_spec("a.csv@5:5")
     assert str(Window(10, None, "index")) == "#10:" and str(Window(1.5, 3.0)) == "1.5:3"
+
+
+def test_npz_stored_members_read_at_their_offsets(tmp_path):
+    """Stored members are read by plain reads at their data offset (local headers with
+    ZIP64 extra fields, as ``save_dataset`` writes, and archives mixing stored and
+    deflated members): the rows equal ``numpy.load``'s arrays."""
+    a = _arrays(n=777)
+    ref = np.column_stack([a[k] for k in ("t", "q", "dq", "tau", "ddq")])
+    written = tmp_path / "w.npz"
+    save_dataset(load_dataset(_npz(tmp_path / "src.npz", a)), written)
+    with zipfile.ZipFile(written) as zf:  # the writer's local headers carry extra fields
+        assert all(i.compress_type == zipfile.ZIP_STORED for i in zf.infolist())
+    mixed = tmp_path / "mixed.npz"
+    with zipfile.ZipFile(written) as zin, zipfile.ZipFile(mixed, "w") as zout:
+        for k, info in enumerate(zin.infolist()):
+            kind = zipfile.ZIP_STORED if k % 2 else zipfile.ZIP_DEFLATED
+            zout.writestr(info.filename, zin.read(info), compress_type=kind)
+    for path in (written, mixed):
+        src = open_source(FileSpec(path))
+        assert src._offsets  # some members take the plain-read path
+        with np.load(path) as z:
+            np.testing.assert_array_equal(
+                np.column_stack([z[k] for k in ("t", "q", "dq", "tau", "ddq")]), ref
+            )
+        np.testing.assert_array_equal(np.vstack(list(src.chunks(100))), ref)
+        np.testing.assert_array_equal(np.vstack(list(src.chunks(64, 33, 500))), ref[33:500])
+
+
+def _npz(path, arrays):
+    np.savez(path, **arrays)
+    return path

@@ -25,6 +25,7 @@ import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import IO
 
 import numpy as np
 
@@ -182,7 +183,7 @@ def _stored_offsets(zf: zipfile.ZipFile, infos, path: Path) -> dict[str, int]:
     """
     import struct
 
-    out = {}
+    out: dict[str, int] = {}
     fp = zf.fp
     if fp is None:
         return out
@@ -236,16 +237,16 @@ class NpzSource:
         stop = self.n_rows if stop is None else min(stop, self.n_rows)
         names = [f for f in FIELDS if f in self.members]
         with zipfile.ZipFile(self.path) as zf:
-            handles = {}
+            handles: dict[str, IO[bytes]] = {}
             try:
                 for name in names:
                     if name in self._whole:
                         continue
                     m = self.members[name]
                     if name in self._offsets:  # stored: plain reads at the member's offset
-                        fh = open(self.path, "rb")  # noqa: SIM115 (closed in finally)
-                        handles[name] = fh
-                        fh.seek(self._offsets[name] + m.header_size + start * m.row_bytes)
+                        plain = open(self.path, "rb")  # noqa: SIM115 (closed in finally)
+                        handles[name] = plain
+                        plain.seek(self._offsets[name] + m.header_size + start * m.row_bytes)
                         continue
                     fh = zf.open(name + ".npy")
                     handles[name] = fh
