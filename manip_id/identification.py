@@ -554,8 +554,8 @@ def _validation_error(robot: Robot, blocks, ind, estimate, chunk: int, nominal=N
     thetas = [estimate] if nominal is None else [estimate, nominal]
     sse = [np.zeros(robot.nv) for _ in thetas]
     zz = np.zeros(robot.nv)
-    for block in blocks:
-        vq, vdq, vddq, vtau = _states(robot, *block, prefix="validation ")
+    for bq, bdq, bddq, btau in blocks:
+        vq, vdq, vddq, vtau = _states(robot, bq, bdq, bddq, btau, prefix="validation ")
         for c in ev.iter_regressor(vq, vdq, vddq, chunk):
             Yb = c.Y[:, :, ind]
             for k, theta in enumerate(thetas):
@@ -657,12 +657,13 @@ def identify(
         )
     q, dq, ddq, tau = _states(robot, q, dq, ddq, tau)
     n = q.shape[0]
+    blocks = None  # the checked validation arrays, one (q, dq, ddq, tau) block
     if validation is not None:
         try:
             vq, vdq, vddq, vtau = validation
         except (TypeError, ValueError) as exc:
             raise InputError("validation must be a tuple (q, dq, ddq, tau)") from exc
-        validation = [_states(robot, vq, vdq, vddq, vtau, prefix="validation ")]
+        blocks = [_states(robot, vq, vdq, vddq, vtau, prefix="validation ")]
     timings["checks"] = time.perf_counter() - t_start
     base = _resolve_base(robot, base, timings)
     ind = base.independent
@@ -690,7 +691,7 @@ def identify(
         method,
         timings,
         t_start,
-        validation=validation,
+        validation=blocks,
         chunk=int(chunk),
         minimum_norm=minimum_norm,
         est=est,

@@ -297,8 +297,8 @@ def _column_map(specs: list[str]) -> dict | None:
         field, sep, cols = spec.partition("=")
         if not sep or not field.strip() or not cols.strip():
             raise InputError(f"--column expects FIELD=COLUMNS, e.g. q='pos*', got {spec!r}")
-        items = [c.strip() for c in cols.split(",") if c.strip()]
-        items = [int(c) if c.lstrip("-").isdigit() else c for c in items]
+        names = [c.strip() for c in cols.split(",") if c.strip()]
+        items: list[int | str] = [int(c) if c.lstrip("-").isdigit() else c for c in names]
         field = field.strip()
         out[field] = items if field in ("joint_names",) or len(items) > 1 else items[0]
     return out
@@ -399,11 +399,11 @@ def _simulation_stream(robot, args):
     }
     # the robot's profile (robots/NAME.toml [excitation]) sets the design, else 5 harmonics
     design = {"harmonics": 5, **(robot.profile.excitation.design_kwargs() if robot.profile else {})}
+    seed = int(opts["seed"])  # --seed is parsed as an int, its default is 0
     if args.optimize:
-        traj = optimize_excitation(robot, seed=opts["seed"], **design)
-        traj = getattr(traj, "trajectory", traj)
+        traj = optimize_excitation(robot, seed=seed, **design).trajectory
     else:
-        traj = random_trajectory(robot, seed=opts["seed"], **design)
+        traj = random_trajectory(robot, seed=seed, **design)
     opts["period"] = float(traj.period)  # [s] the excitation repeats after it
     stream = SimulationStream(
         robot,
@@ -411,7 +411,7 @@ def _simulation_stream(robot, args):
         duration=opts["duration"],
         rate=opts["rate"],
         noise_tau=opts["noise"],
-        seed=opts["seed"],
+        seed=seed,
     )
     return stream, opts
 
@@ -526,12 +526,11 @@ def _run(args: argparse.Namespace) -> int:
         return _run_acceleration_free(args, outputs, t_start)
     if not args.simulate:  # log files: read in chunks, each preprocessed alone
         return _files.run(args, outputs, t_start)
+    # from here on --simulate: the log files (--data) went to _files.run above
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    data = validation = None
-    if not args.simulate:  # read the files first: bad data fail before the robot loads
-        data = load_dataset(args.data, columns=_column_map(args.column))
-    if args.validate is not None:
+    validation = None
+    if args.validate is not None:  # read the file first: bad data fail before the robot loads
         if len(args.validate) > 1:
             raise InputError("--simulate takes one --validate file")
         validation = load_dataset(args.validate[0], columns=_column_map(args.column))
@@ -540,17 +539,11 @@ def _run(args: argparse.Namespace) -> int:
     if _streams(args):  # simulated least squares: block by block, bounded memory
         return _run_stream(robot, args, outputs, timings, t_start)
 
-    theta_true = None
-    source: dict = {}
-    if args.simulate:
-        t0 = time.perf_counter()
-        sim, opts = _simulate(robot, args)
-        data, theta_true = sim.dataset, np.asarray(sim.theta_true, dtype=float)
-        source = {"simulated": opts}
-        timings["simulate"] = time.perf_counter() - t0
-    else:
-        check_robot(data, robot)
-        source = {"data": str(args.data)}
+    t0 = time.perf_counter()
+    sim, opts = _simulate(robot, args)
+    data, theta_true = sim.dataset, np.asarray(sim.theta_true, dtype=float)
+    source: dict = {"simulated": opts}
+    timings["simulate"] = time.perf_counter() - t0
     if validation is not None:
         check_robot(validation, robot)
         source["validate"] = str(args.validate)
@@ -587,7 +580,7 @@ def _run(args: argparse.Namespace) -> int:
         robot, result, train, valid, theta_true, timings, args, source, settings
     )
     parts = [("train", train, data.t, data.tau)]
-    if valid is not None:
+    if valid is not None and validation is not None:  # valid is validation preprocessed
         parts.append(("validation", valid, validation.t, validation.tau))
     add_raw_reference(report, robot, result, parts, args.chunk)
     print(result.table())
@@ -630,7 +623,7 @@ def _run_acceleration_free(args, outputs, t_start: float) -> int:
     timings["load"] = time.perf_counter() - t0
     robot = robot_from_args(args)
     theta_true = None
-    if args.simulate:
+    if data is None:  # --simulate
         sim, opts = _simulate(robot, args)
         data, theta_true = sim.dataset, np.asarray(sim.theta_true, dtype=float)
         source: dict = {"simulated": opts}
@@ -802,7 +795,7 @@ def report_quality_rows(report: dict) -> list[dict]:
     rows = []
     for kind, key in (("training", "data_quality"), ("validation", "validation_data_quality")):
         for q in report.get(key) or []:
-            row = {"part": kind}
+            row: dict[str, str | int | float | None] = {"part": kind}
             for k, v in q.items():
                 if isinstance(v, str | int | float | bool) or v is None:
                     row[k] = v

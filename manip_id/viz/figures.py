@@ -100,13 +100,11 @@ def _no_mathtext(fig: Figure) -> None:
     e.g. ``10^{-2}`` on log axes) keep their formatting."""
     from matplotlib.text import Text
 
-    texts: list[Text] = []
-    if getattr(fig, "_suptitle", None) is not None:
-        texts.append(fig._suptitle)
-    texts += list(fig.texts)
+    texts: list[Text] = list(fig.texts)  # suptitle, supxlabel, supylabel and fig.text's
     for ax in fig.axes:
-        texts += [ax.title, ax._left_title, ax._right_title, ax.xaxis.label, ax.yaxis.label]
-        texts += list(ax.texts)
+        # the axes' Text children: its three titles (center, left, right) and ax.texts
+        texts += [a for a in ax.get_children() if isinstance(a, Text)]
+        texts += [ax.xaxis.label, ax.yaxis.label]
         legend = ax.get_legend()
         if legend is not None:
             texts += list(legend.get_texts())

@@ -287,7 +287,7 @@ def share_color(share: float) -> tuple[float, float, float, float]:
         np.array([0.15, 0.7, 0.2]),
     )
     rgb = red + (yellow - red) * (2 * s) if s <= 0.5 else yellow + (green - yellow) * (2 * s - 1)
-    return (*map(float, rgb), 1.0)
+    return (float(rgb[0]), float(rgb[1]), float(rgb[2]), 1.0)
 
 
 def _rotation_y_to(axis: np.ndarray) -> np.ndarray:
@@ -654,7 +654,7 @@ class RobotScene:
         return self
 
     def _build_animation(self) -> None:
-        if self._t is None:
+        if self._t is None or self._q is None:  # set together by animate
             return
         t, q = self._t, self._q
         fps, max_frames, play = self._anim_options
