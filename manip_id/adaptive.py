@@ -286,7 +286,12 @@ class SlotineLiController:
     def _composite_regressors(self, q, dq) -> None:
         """Fill Y_p(q, dq) and Y_h(q, dq) (see the module docstring)."""
         ev, nr = self.ev, self._nr
-        f = pin.computeJointTorqueRegressor
+        shape = (self.robot.nv, nr)
+
+        def f(model, data, q, v, a) -> np.ndarray:
+            # (nv, nr) always: eigenpy returns a 1-DoF model's 1 x nr regressor as (nr,)
+            return np.reshape(pin.computeJointTorqueRegressor(model, data, q, v, a), shape)
+
         zero = self._zero
         Yp, Yh = self._Yp, self._Yh
         Yp[:, :nr] = f(ev.model0, ev.data0, q, zero, dq)
