@@ -572,6 +572,25 @@ def _validation_error(robot: Robot, blocks, ind, estimate, chunk: int, nominal=N
     return out[0] if nominal is None else tuple(out)
 
 
+def _validation_blocks(robot: Robot, validation) -> list | None:
+    """``validation = (q, dq, ddq, tau)`` checked as one validation block, or None."""
+    if validation is None:
+        return None
+    try:
+        vq, vdq, vddq, vtau = validation
+    except (TypeError, ValueError) as exc:
+        raise InputError("validation must be a tuple (q, dq, ddq, tau)") from exc
+    return [_states(robot, vq, vdq, vddq, vtau, prefix="validation ")]
+
+
+def _check_equations(n: int, nv: int, r: int) -> None:
+    """Raise unless ``n`` samples of ``nv`` joints give more equations than ``r`` unknowns."""
+    if n * nv <= r:
+        raise InputError(
+            f"{n} samples give {n * nv} equations for {r} base parameters: need more samples"
+        )
+
+
 def identify(
     robot: Robot,
     q,
@@ -657,21 +676,12 @@ def identify(
         )
     q, dq, ddq, tau = _states(robot, q, dq, ddq, tau)
     n = q.shape[0]
-    blocks = None  # the checked validation arrays, one (q, dq, ddq, tau) block
-    if validation is not None:
-        try:
-            vq, vdq, vddq, vtau = validation
-        except (TypeError, ValueError) as exc:
-            raise InputError("validation must be a tuple (q, dq, ddq, tau)") from exc
-        blocks = [_states(robot, vq, vdq, vddq, vtau, prefix="validation ")]
+    blocks = _validation_blocks(robot, validation)
     timings["checks"] = time.perf_counter() - t_start
     base = _resolve_base(robot, base, timings)
     ind = base.independent
     r, nv = base.n_base, robot.nv
-    if n * nv <= r:
-        raise InputError(
-            f"{n} samples give {n * nv} equations for {r} base parameters: need more samples"
-        )
+    _check_equations(n, nv, r)
 
     est = None
     solver_online = ""
@@ -729,12 +739,7 @@ def _identify_acceleration_free(
     if not batched:
         raise InputError(f"identification takes N samples (2-D arrays), got q.shape={q.shape}")
     tau = _check_tau(robot, tau, q.shape[0])
-    if validation is not None:
-        try:
-            vq, vdq, vddq, vtau = validation
-        except (TypeError, ValueError) as exc:
-            raise InputError("validation must be a tuple (q, dq, ddq, tau)") from exc
-        validation = [_states(robot, vq, vdq, vddq, vtau, prefix="validation ")]
+    validation = _validation_blocks(robot, validation)
     timings["checks"] = time.perf_counter() - t_start
     base = _resolve_base(robot, base, timings)
     t0 = time.perf_counter()
@@ -820,11 +825,7 @@ def identify_chunks(
     else:
         acc, times = _accumulate_blocks(robot, source, ind, int(chunk), progress=progress)
     timings.update(times)
-    if acc.n * robot.nv <= base.n_base:
-        raise InputError(
-            f"{acc.n} samples give {acc.n * robot.nv} equations for {base.n_base} base "
-            "parameters: need more samples"
-        )
+    _check_equations(acc.n, robot.nv, base.n_base)
     return _finish(
         robot,
         acc,
@@ -1135,11 +1136,7 @@ def identify_datasets(
         for k, v in fa.timings.items():
             timings[k] = timings.get(k, 0.0) + float(v)
     acc = merge_accumulations(train)
-    if acc.n * robot.nv <= base.n_base:
-        raise InputError(
-            f"{acc.n} samples give {acc.n * robot.nv} equations for {base.n_base} base "
-            "parameters: need more samples"
-        )
+    _check_equations(acc.n, robot.nv, base.n_base)
     result = _finish(
         robot,
         acc,
