@@ -337,6 +337,41 @@ class PreprocessSettings:
     decimate: int
 
 
+def _plan(
+    fs: float,
+    *,
+    resampled: bool,
+    cutoff: float,
+    order: int,
+    decimate: int,
+    trim: float | None,
+    velocity: str,
+    filter_torque: bool,
+) -> tuple[Lowpass, PreprocessSettings]:
+    """The checked decimation, the filter and the settings of :func:`preprocess` and
+    :func:`preprocess_blocks` at the rate ``fs`` [Hz] of the (resampled) data."""
+    if int(decimate) != decimate or decimate < 1:
+        raise InputError(f"decimation factor must be a positive integer, got {decimate}")
+    if decimate > 1 and cutoff >= fs / (2 * decimate):
+        raise InputError(
+            f"cut-off {cutoff} Hz is not below the Nyquist frequency {fs / (2 * decimate):g} Hz "
+            f"after decimating {fs:g} Hz by {decimate}: the result would alias"
+        )
+    filt = Lowpass(cutoff, fs, order)
+    n_trim = filt.transient_samples() if trim is None else int(round(float(trim) * fs))
+    settings = PreprocessSettings(
+        cutoff=filt.cutoff,
+        order=filt.order,
+        rate=fs,
+        resampled=resampled,
+        velocity=velocity,
+        filter_torque=filter_torque,
+        trim=n_trim,
+        decimate=int(decimate),
+    )
+    return filt, settings
+
+
 def preprocess(
     dataset: Dataset,
     *,
@@ -393,14 +428,17 @@ def preprocess(
     resampled = rate is not None or not uniform
     data = resample_dataset(dataset, rate) if resampled else dataset
     fs = sampling_rate(data.t) if not resampled else float(data.meta["rate"])
-    if int(decimate) != decimate or decimate < 1:
-        raise InputError(f"decimation factor must be a positive integer, got {decimate}")
-    if decimate > 1 and cutoff >= fs / (2 * decimate):
-        raise InputError(
-            f"cut-off {cutoff} Hz is not below the Nyquist frequency {fs / (2 * decimate):g} Hz "
-            f"after decimating {fs:g} Hz by {decimate}: the result would alias"
-        )
-    filt = Lowpass(cutoff, fs, order)
+    filt, settings = _plan(
+        fs,
+        resampled=resampled,
+        cutoff=cutoff,
+        order=order,
+        decimate=decimate,
+        trim=trim,
+        velocity=velocity,
+        filter_torque=filter_torque,
+    )
+    n_trim = settings.trim
     q = filt(data.q)
     if velocity == "differentiate":
         dq = derivative(data.t, q)
@@ -408,22 +446,11 @@ def preprocess(
         dq = filt(data.dq)
     ddq = derivative(data.t, dq)
     tau = filt(data.tau) if filter_torque else data.tau
-    n_trim = filt.transient_samples() if trim is None else int(round(float(trim) * fs))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the degrees check already ran on the input
         out = replace(data, q=q, dq=dq, ddq=ddq, tau=tau)
     out = trim_samples(out, n_trim)
     out = downsample(out, decimate)
-    settings = PreprocessSettings(
-        cutoff=filt.cutoff,
-        order=filt.order,
-        rate=fs,
-        resampled=resampled,
-        velocity=velocity,
-        filter_torque=filter_torque,
-        trim=n_trim,
-        decimate=int(decimate),
-    )
     return replace(out, meta={**dataset.meta, "preprocess": settings})
 
 
@@ -586,15 +613,17 @@ def preprocess_blocks(
     uniform = max(dt_max - mean_dt, mean_dt - dt_min) <= JITTER_TOLERANCE * abs(mean_dt)
     resampled = rate is not None or not uniform
     fs = float((n - 1) / (t_last - t_first)) if rate is None else float(rate)
-    if int(decimate) != decimate or decimate < 1:
-        raise InputError(f"decimation factor must be a positive integer, got {decimate}")
-    if decimate > 1 and cutoff >= fs / (2 * decimate):
-        raise InputError(
-            f"cut-off {cutoff} Hz is not below the Nyquist frequency {fs / (2 * decimate):g} Hz "
-            f"after decimating {fs:g} Hz by {decimate}: the result would alias"
-        )
-    filt = Lowpass(cutoff, fs, order)
-    n_trim = filt.transient_samples() if trim is None else int(round(float(trim) * fs))
+    filt, settings = _plan(
+        fs,
+        resampled=resampled,
+        cutoff=cutoff,
+        order=order,
+        decimate=decimate,
+        trim=trim,
+        velocity=velocity,
+        filter_torque=filter_torque,
+    )
+    n_trim = settings.trim
     width_in = 1 + nq + 2 * nv
     if resampled:
         grid = uniform_grid(t_first, t_last, fs)
@@ -609,16 +638,6 @@ def preprocess_blocks(
         uniform_rows = (c[:, :width_in] for c in chunks)
     if n_trim < 0 or 2 * n_trim > n_uniform - 2:
         raise DataError(f"trimming {n_trim} + {n_trim} samples leaves fewer than 2 of {n_uniform}")
-    settings = PreprocessSettings(
-        cutoff=filt.cutoff,
-        order=filt.order,
-        rate=fs,
-        resampled=resampled,
-        velocity=velocity,
-        filter_torque=filter_torque,
-        trim=n_trim,
-        decimate=int(decimate),
-    )
     margin = overlap_margin(filt)
     sq, sdq, stau = slice(1, 1 + nq), slice(1 + nq, 1 + nq + nv), slice(1 + nq + nv, width_in)
     stop = n_uniform - n_trim
