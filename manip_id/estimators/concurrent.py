@@ -145,11 +145,7 @@ class ConcurrentLearningEstimator(_OnlineEstimator):
         """One Euler step of length ``dt`` [s]; returns the estimate (a view: do not modify)."""
         th = self._theta
         try:
-            Ya = np.asarray(Y, dtype=float)
-            za = np.asarray(z, dtype=float)
-            e = Ya @ th - za
-            if np.shape(e) != za.shape:
-                raise ValueError("output shape")
+            Ya, za, e = self._prediction_error(Y, z)
             g = Ya * float(e) if Ya.ndim == 1 else e @ Ya
         except (ValueError, TypeError) as exc:
             raise self._bad(Y, z, exc) from exc

@@ -114,11 +114,7 @@ class DREMEstimator(_OnlineEstimator):
         """One step of length ``dt`` [s]; returns the estimate (a view: do not modify)."""
         th = self._theta
         try:
-            Ya = np.asarray(Y, dtype=float)
-            za = np.asarray(z, dtype=float)
-            e = Ya @ th - za
-            if np.shape(e) != za.shape:
-                raise ValueError("output shape")
+            Ya, za, e = self._prediction_error(Y, z)
             if Ya.ndim == 1:
                 YY, Yz = np.multiply.outer(Ya, Ya), Ya * float(za)
             else:

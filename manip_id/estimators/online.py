@@ -110,6 +110,17 @@ class _OnlineEstimator:
         """Recorded times, estimates and prediction-error norms (every ``record_every`` steps)."""
         return OnlineHistory(np.array(self._t), np.array(self._th), np.array(self._err))
 
+    def _prediction_error(self, Y, z) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(Y, z, e)``: ``Y`` and ``z`` as float arrays and the prediction error
+        ``e = Y theta_hat - z``, shape (m,) (scalar for ``phi`` (p,)). Mismatched shapes raise
+        ValueError or TypeError, which ``step`` turns into :meth:`_bad`."""
+        Ya = np.asarray(Y, dtype=float)
+        za = np.asarray(z, dtype=float)
+        e = Ya @ self._theta - za
+        if np.shape(e) != za.shape:
+            raise ValueError("output shape")
+        return Ya, za, e
+
     def _bad(self, Y, z, exc: Exception | None = None) -> InputError | NumericalError:
         Ya, za = np.asarray(Y), np.asarray(z)
         if Ya.ndim not in (1, 2) or Ya.shape[-1] != self.p:
