@@ -75,6 +75,26 @@ def check_time(t: np.ndarray, offset: int = 0, previous: float | None = None) ->
         )
 
 
+def check_shapes(shapes: dict[str, tuple[int, ...]], prefix: str = "") -> None:
+    """Raise :class:`DataError` unless the arrays agree: one row per time stamp, and tau
+    (and ddq) as many columns as dq.
+
+    ``shapes`` maps names (``t`` of shape (N,), ``q``, ``dq``, ``tau``, optionally ``ddq``,
+    each 2-D) to shapes, checked in that order; ``prefix`` starts every message (a file name).
+    """
+    n = shapes["t"][0]
+    for name, shape in shapes.items():
+        if shape[0] != n:
+            raise DataError(
+                f"{prefix}t.shape=({n},) but {name}.shape={shape}: "
+                "every array needs one row per time stamp"
+            )
+    nv = shapes["dq"][1]
+    for name in ("tau", "ddq"):
+        if name in shapes and shapes[name][1] != nv:
+            raise DataError(f"{prefix}dq.shape={shapes['dq']} but {name}.shape={shapes[name]}")
+
+
 @dataclass(frozen=True)
 class Dataset:
     """Joint-space measurements, validated on construction (see module docstring)."""
@@ -105,18 +125,8 @@ class Dataset:
         n = clean["t"].shape[0]
         if n < 2:
             raise DataError(f"a dataset needs at least 2 samples, got t.shape={clean['t'].shape}")
-        for name, arr in clean.items():
-            if arr.shape[0] != n:
-                raise DataError(
-                    f"t.shape={clean['t'].shape} but {name}.shape={arr.shape}: "
-                    "every array needs one row per time stamp"
-                )
+        check_shapes({name: arr.shape for name, arr in clean.items()})
         nv = clean["dq"].shape[1]
-        for name in ("tau", "ddq"):
-            if name in clean and clean[name].shape[1] != nv:
-                raise DataError(
-                    f"dq.shape={clean['dq'].shape} but {name}.shape={clean[name].shape}"
-                )
         if clean["q"].shape[1] < nv:
             raise DataError(
                 f"q.shape={clean['q'].shape} has fewer columns than dq.shape={clean['dq'].shape}"

@@ -30,7 +30,7 @@ from typing import IO
 import numpy as np
 
 from ..errors import DataError
-from .core import Dataset
+from .core import Dataset, check_shapes
 from .layout import FIELDS, Layout
 
 REQUIRED = ("t", "q", "dq", "tau")
@@ -136,19 +136,8 @@ def inspect_npz(path: Path, max_bytes: int | None = None) -> tuple[dict[str, Npy
             raise DataError(
                 f"{path}: {name} must have {want} dimension(s), got {name}.shape={m.shape}"
             )
-    n = members["t"].shape[0]
-    for name in FIELDS:
-        if name in members and members[name].shape[0] != n:
-            raise DataError(
-                f"{path}: t.shape=({n},) but {name}.shape={members[name].shape}: "
-                "every array needs one row per time stamp"
-            )
-    nv = members["dq"].shape[1]
-    for name in ("tau", "ddq"):
-        if name in members and members[name].shape[1] != nv:
-            raise DataError(
-                f"{path}: dq.shape={members['dq'].shape} but {name}.shape={members[name].shape}"
-            )
+    check_shapes({name: members[name].shape for name in FIELDS if name in members}, f"{path}: ")
+    n, nv = members["t"].shape[0], members["dq"].shape[1]
     layout = Layout(nq=members["q"].shape[1], nv=nv, has_ddq="ddq" in members)
     if "joint_names" in members and members["joint_names"].shape != (nv,):
         raise DataError(
