@@ -60,18 +60,31 @@ def check_values(name: str, value, ndim: int, columns=None, offset: int = 0) -> 
     return arr
 
 
-def check_time(t: np.ndarray, offset: int = 0, previous: float | None = None) -> None:
-    """Raise :class:`DataError` unless ``t`` increases strictly (after ``previous``, if given)."""
+def check_time(
+    t: np.ndarray,
+    offset: int = 0,
+    previous: float | None = None,
+    *,
+    rows=None,
+    previous_row: int | None = None,
+) -> None:
+    """Raise :class:`DataError` unless ``t`` increases strictly (after ``previous``, if given).
+
+    The messages name stamp ``k`` as row ``offset + k``, or ``rows[k]`` when the row numbers
+    are given (rows dropped in between), and ``previous`` as row ``previous_row`` (default
+    the row before the first).
+    """
+    row = (lambda k: offset + k) if rows is None else (lambda k: rows[k])
     if previous is not None and t.size and not t[0] > previous:
+        before = row(0) - 1 if previous_row is None else previous_row
         raise DataError(
-            f"time must increase strictly: t[{offset}]={t[0]} after t[{offset - 1}]={previous}"
+            f"time must increase strictly: t[{row(0)}]={t[0]} after t[{before}]={previous}"
         )
     dt = np.diff(t)
     if np.any(dt <= 0):
         k = int(np.argmax(dt <= 0)) + 1
         raise DataError(
-            f"time must increase strictly: t[{offset + k}]={t[k]} "
-            f"after t[{offset + k - 1}]={t[k - 1]}"
+            f"time must increase strictly: t[{row(k)}]={t[k]} after t[{row(k - 1)}]={t[k - 1]}"
         )
 
 

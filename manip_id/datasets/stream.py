@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError, InputError
-from .core import Dataset, check_values
+from .core import Dataset, check_time, check_values
 from .layout import Layout
 from .spec import FileSpec, Window
 
@@ -240,18 +240,7 @@ def iter_rows(
                 check_values(name, block[:, s], 2, names if name != "q" else None, int(raw[0]))
         t = block[:, t_col]
         try:
-            if previous_t is not None and not t[0] > previous_t:
-                raise DataError(
-                    f"time must increase strictly: t[{raw[0]}]={t[0]} after "
-                    f"t[{previous_row}]={previous_t}"
-                )
-            dt = np.diff(t)
-            if np.any(dt <= 0):
-                i = int(np.argmax(dt <= 0)) + 1
-                raise DataError(
-                    f"time must increase strictly: t[{raw[i]}]={t[i]} after "
-                    f"t[{raw[i - 1]}]={t[i - 1]}"
-                )
+            check_time(t, previous=previous_t, rows=raw, previous_row=previous_row)
         except DataError as exc:
             raise DataError(f"{path}: {exc}") from exc
         previous_t, previous_row = float(t[-1]), int(raw[-1])
