@@ -132,6 +132,14 @@ def _check_not_input(p: Path, inputs: Iterable, what: str) -> None:
             raise OutputError(f"{what} {p} is one of the inputs ({src}); choose another path")
 
 
+def _without_os_errors(check: Callable[..., Path], path, inputs: Iterable, what: str) -> Path:
+    """``check(path, inputs=inputs, what=what)`` with operating-system errors as OutputErrors."""
+    try:
+        return check(path, inputs=inputs, what=what)
+    except OSError as exc:
+        raise OutputError(f"{what} {path}: {exc.strerror or exc}") from exc
+
+
 def check_output_file(path, *, inputs: Iterable = (), what: str = "output") -> Path:
     """Raise :class:`~manip_id.errors.OutputError` unless a file can be written at ``path``.
 
@@ -141,10 +149,7 @@ def check_output_file(path, *, inputs: Iterable = (), what: str = "output") -> P
     the temporary at once.
     Operating-system errors (a name too long, a loop of links) are OutputErrors too.
     """
-    try:
-        return _check_output_file(path, inputs=inputs, what=what)
-    except OSError as exc:
-        raise OutputError(f"{what} {path}: {exc.strerror or exc}") from exc
+    return _without_os_errors(_check_output_file, path, inputs, what)
 
 
 def _check_output_file(path, *, inputs: Iterable = (), what: str = "output") -> Path:
@@ -168,10 +173,7 @@ def check_output_dir(path, *, inputs: Iterable = (), what: str = "output folder"
     of it, and a folder that is or contains one of ``inputs``.
     Operating-system errors (a name too long, a loop of links) are OutputErrors too.
     """
-    try:
-        return _check_output_dir(path, inputs=inputs, what=what)
-    except OSError as exc:
-        raise OutputError(f"{what} {path}: {exc.strerror or exc}") from exc
+    return _without_os_errors(_check_output_dir, path, inputs, what)
 
 
 def _check_output_dir(path, *, inputs: Iterable = (), what: str = "output folder") -> Path:
