@@ -9,6 +9,8 @@ with ``numpy.savez``. The reference is the same call without a scheduler (this p
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 import time
 from dataclasses import dataclass
 
@@ -299,3 +301,17 @@ def test_cli_bad_scheduler_is_refused_before_the_work(runs, tmp_path, capsys, sp
     status, cap = _cli(_payload_argv(runs, out, "--scheduler", spec), capsys)
     assert status == 2 and "scheduler" in cap.err
     assert "quality" not in cap.out and not out.exists()
+
+
+def test_no_dask_without_a_scheduler(runs):
+    """The local path (API and command) runs the same tasks without importing Dask."""
+    fu, fl = runs["files"]["u"], runs["files"]["l"]
+    code = (
+        "import sys; from manip_id.cli import main;"
+        f"assert main(['payload', 'ur5', '--unloaded', *{fu!r}, '--loaded', *{fl!r}, "
+        "'--frame', 'tool0']) == 0;"
+        "bad = [m for m in sys.modules if m.split('.')[0] in ('dask', 'distributed')];"
+        "print(bad); sys.exit(1 if bad else 0)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stdout + out.stderr
