@@ -1,6 +1,7 @@
 """DREM and concurrent learning on the lesson's mass-spring-damper, beside the gradient law.
 
-The plant, input and regression are those of ``experiments/msd_gradient.py``
+The plant, input and regression are the lesson's, shared with ``experiments/msd_gradient.py``
+through ``experiments/_lesson.py``
 (``y'' = phi^T theta``, ``phi = [-y, -y', u]``, ``theta = [k/m, c/m, b/m] =
 [2.5, 0.4, 0.75]``, dt = 0.002 s, theta_hat(0) = [0.4, 0.1, 0.2]; gradient law
 Gamma = diag(8, 8, 4)). Two experiments:
@@ -28,6 +29,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from _lesson import DT, GAMMA, THETA, THETA0, run, time_to  # noqa: E402
 
 from manip_id._io import atomic_write, write_json  # noqa: E402
 from manip_id.estimators import (  # noqa: E402
@@ -36,43 +40,8 @@ from manip_id.estimators import (  # noqa: E402
     GradientEstimator,
 )
 
-M, C, K, B = 2.0, 0.8, 5.0, 1.5
-THETA = np.array([K / M, C / M, B / M])
-THETA0 = np.array([0.4, 0.1, 0.2])
-GAMMA = np.array([8.0, 8.0, 4.0])
-DT = 0.002
-HOLD = 5.0
+HOLD = 5.0  # [s]
 NAMES = ("k/m", "c/m", "b/m")
-
-
-def u_of(t: float, hold: float | None) -> float:
-    """The lesson's multisine, held at its value at ``hold`` [s] afterwards (None: never)."""
-    if hold is not None:
-        t = min(t, hold)
-    return 1.2 * np.sin(1.1 * t) + 0.7 * np.sin(2.3 * t)
-
-
-def run(estimators, n_steps: int, hold: float | None = None) -> None:
-    """The lesson's loop (true y'' from the state, estimator updates, explicit Euler)."""
-    y, dy = 0.4, -0.2
-    phi = np.empty(3)
-    for k in range(n_steps):
-        phi[0], phi[1], phi[2] = -y, -dy, u_of(k * DT, hold)
-        ddy = float(phi @ THETA)
-        for est in estimators:
-            est.step(phi, ddy, DT)
-        y, dy = y + DT * dy, dy + DT * ddy
-
-
-def time_to(history, threshold: float = 0.01) -> float | None:
-    """First time after which ``||theta_hat - theta|| / ||theta||`` stays below ``threshold``."""
-    rel = np.linalg.norm(history.theta - THETA, axis=1) / np.linalg.norm(THETA)
-    above = np.nonzero(rel > threshold)[0]
-    if above.size == 0:
-        return float(history.t[0])
-    if above[-1] == rel.size - 1:
-        return None
-    return float(history.t[above[-1] + 1])
 
 
 def figure(path: Path, title: str, runs: dict, vline: float | None = None) -> None:

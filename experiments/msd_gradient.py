@@ -32,6 +32,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from _lesson import DT, GAMMA, THETA, THETA0, run, time_to  # noqa: E402
 
 from manip_id.cli._common import write_json  # noqa: E402
 from manip_id.estimators import (  # noqa: E402
@@ -42,54 +45,8 @@ from manip_id.estimators import (  # noqa: E402
     solve_stacked,
 )
 
-M, C, K, B = 2.0, 0.8, 5.0, 1.5
-THETA = np.array([K / M, C / M, B / M])
-THETA0 = np.array([0.4, 0.1, 0.2])
-GAMMA = np.array([8.0, 8.0, 4.0])
-DT = 0.002
-DURATION = 25.0
-Y0, DY0 = 0.4, -0.2
+DURATION = 25.0  # [s]
 EXPECTED = np.array([2.40306, 0.38472, 0.72280])
-
-
-def u_of(t: float) -> float:
-    """Input u(t) of the example."""
-    return 1.2 * np.sin(1.1 * t) + 0.7 * np.sin(2.3 * t)
-
-
-def run(estimators, n_steps: int, dt: float = DT):
-    """The example's loop driving every estimator on the same plant.
-
-    Returns ``(phi, z, errors)``: regressors (n_steps, 3), accelerations (n_steps,),
-    and per estimator the absolute prediction errors |eps| (n_steps,) before each update.
-    """
-    y, dy = Y0, DY0
-    phi_all = np.empty((n_steps, 3))
-    z_all = np.empty(n_steps)
-    errors = [np.empty(n_steps) for _ in estimators]
-    phi = np.empty(3)
-    for k in range(n_steps):
-        t = k * dt
-        phi[0], phi[1], phi[2] = -y, -dy, u_of(t)
-        ddy = float(phi @ THETA)
-        for est, err in zip(estimators, errors, strict=True):
-            est.step(phi, ddy, dt)
-            err[k] = abs(est.last_error)
-        phi_all[k] = phi
-        z_all[k] = ddy
-        y, dy = y + dt * dy, dy + dt * ddy
-    return phi_all, z_all, errors
-
-
-def time_to(history, threshold: float) -> float | None:
-    """First time after which ``||theta_hat - theta|| / ||theta||`` stays below ``threshold``."""
-    rel = np.linalg.norm(history.theta - THETA, axis=1) / np.linalg.norm(THETA)
-    above = np.nonzero(rel > threshold)[0]
-    if above.size == 0:
-        return float(history.t[0])
-    if above[-1] == rel.size - 1:
-        return None
-    return float(history.t[above[-1] + 1])
 
 
 def main(argv=None) -> int:
@@ -107,7 +64,8 @@ def main(argv=None) -> int:
     n = round(DURATION / DT)  # 12,500 updates, 12,501 time points
     grad = GradientEstimator(THETA0, GAMMA)
     rls = RLSEstimator(THETA0, args.p0)
-    phi, z, (e_grad, e_rls) = run([grad, rls], n)
+    lesson = run([grad, rls], n)
+    phi, z, e_grad = lesson.phi, lesson.z, lesson.errors[0]
     theta_hat = grad.theta
     tail = e_grad[int(0.8 * n) :]
     mae = float(tail.mean())
