@@ -121,9 +121,19 @@ def local_client():
 
 
 def _children() -> set[int]:
+    """Processes below this one, but multiprocessing's resource tracker (started with the
+    first spawned process, it lives as long as this interpreter, and stops with it)."""
     import psutil
 
-    return {p.pid for p in psutil.Process().children(recursive=True)}
+    out = set()
+    for p in psutil.Process().children(recursive=True):
+        try:
+            if "multiprocessing.resource_tracker" in " ".join(p.cmdline()):
+                continue
+        except psutil.Error:  # gone meanwhile
+            continue
+        out.add(p.pid)
+    return out
 
 
 def _wait_gone(before: set[int]) -> set[int]:

@@ -21,6 +21,7 @@ import argparse
 import math
 import time
 from pathlib import Path
+from typing import Any
 
 from ..errors import DataError, InputError
 from ._common import add_robot_arguments, robot_from_args, write_json
@@ -214,7 +215,7 @@ class StreamedRun:
         self.robot, self.spec, self.options = robot, spec, options
         # bad files fail here, named
         self.scan = scan_file(robot, spec, options) if scan else None
-        self.settings = None
+        self.settings: Any = None  # PreprocessSettings once streamed (None: ddq as is)
 
     @property
     def label(self) -> str:
