@@ -351,6 +351,31 @@ def pseudo_inertia_eigenvalues(phi) -> np.ndarray:
 
 
 # ====================================================================== results
+def _fit_dict(r) -> dict:
+    """The JSON of what a payload and a drive-gain result share: the payload, the sample
+    counts, the errors, the rows left out, the base parameters, solver, warnings, timings."""
+    return {
+        "payload": r.payload.to_dict(),
+        "n_samples": dict(r.n_samples),
+        "relative_error": {k: _f(v) for k, v in r.relative_error.items()},
+        "relative_error_per_joint": {
+            k: [_f(x) for x in v] for k, v in r.relative_error_per_joint.items()
+        },
+        "rows_left_out": dict(zip(r.dof_names, (int(x) for x in r.rows_left_out), strict=True)),
+        "sigma2": _f(r.sigma2),
+        "condition_number": _f(r.condition_number),
+        "base_parameters": [
+            {"name": n, "expression": e, "value": _f(x), "std": _f(s)}
+            for n, e, x, s in zip(
+                r.base_names, r.base_expressions, r.base_estimate, r.base_std, strict=True
+            )
+        ],
+        "solver": r.solver,
+        "warnings": list(r.warnings),
+        "timings": {k: round(float(v), 6) for k, v in r.timings.items()},
+    }
+
+
 def _f(x):
     if x is None:
         return None
@@ -542,33 +567,10 @@ class PayloadResult:
             "method": self.method,
             "consistent": self.consistent,
             "known_base": self.known_base,
-            "payload": self.payload.to_dict(),
-            "n_samples": dict(self.n_samples),
-            "relative_error": {k: _f(v) for k, v in self.relative_error.items()},
-            "relative_error_per_joint": {
-                k: [_f(x) for x in v] for k, v in self.relative_error_per_joint.items()
-            },
-            "rows_left_out": dict(
-                zip(self.dof_names, (int(x) for x in self.rows_left_out), strict=True)
-            ),
-            "sigma2": _f(self.sigma2),
-            "condition_number": _f(self.condition_number),
+            **_fit_dict(self),
             "payload_test": {
                 k: _f(v) if k != "dof" else int(v) for k, v in self.payload_test.items()
             },
-            "base_parameters": [
-                {"name": n, "expression": e, "value": _f(x), "std": _f(s)}
-                for n, e, x, s in zip(
-                    self.base_names,
-                    self.base_expressions,
-                    self.base_estimate,
-                    self.base_std,
-                    strict=True,
-                )
-            ],
-            "solver": self.solver,
-            "warnings": list(self.warnings),
-            "timings": {k: round(float(v), 6) for k, v in self.timings.items()},
         }
 
     def table(self) -> str:
@@ -648,30 +650,7 @@ class DriveGainResult:
             "drive_gains": gains,
             "torque_scale": [g["gain"] for g in gains],
             "units": "N m / A (N / A for prismatic joints): torque = gain * current",
-            "payload": self.payload.to_dict(),
-            "n_samples": dict(self.n_samples),
-            "relative_error": {k: _f(v) for k, v in self.relative_error.items()},
-            "relative_error_per_joint": {
-                k: [_f(x) for x in v] for k, v in self.relative_error_per_joint.items()
-            },
-            "rows_left_out": dict(
-                zip(self.dof_names, (int(x) for x in self.rows_left_out), strict=True)
-            ),
-            "sigma2": _f(self.sigma2),
-            "condition_number": _f(self.condition_number),
-            "base_parameters": [
-                {"name": n, "expression": e, "value": _f(x), "std": _f(s)}
-                for n, e, x, s in zip(
-                    self.base_names,
-                    self.base_expressions,
-                    self.base_estimate,
-                    self.base_std,
-                    strict=True,
-                )
-            ],
-            "solver": self.solver,
-            "warnings": list(self.warnings),
-            "timings": {k: round(float(v), 6) for k, v in self.timings.items()},
+            **_fit_dict(self),
         }
 
     def table(self) -> str:
