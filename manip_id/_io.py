@@ -130,6 +130,11 @@ def _check_not_input(p: Path, inputs: Iterable, what: str) -> None:
         src = Path(item)
         if _same_file(p, src):
             raise OutputError(f"{what} {p} is one of the inputs ({src}); choose another path")
+        if src.is_dir() and _is_ancestor(src, p):
+            # an input folder (a log of several files) owns every file in it
+            raise OutputError(
+                f"{what} {p} is inside the input folder {src}; choose a path outside it"
+            )
 
 
 def _without_os_errors(check: Callable[..., Path], path, inputs: Iterable, what: str) -> Path:

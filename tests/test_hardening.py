@@ -150,6 +150,16 @@ def _hardlink_to_log(w: Path) -> None:
     os.link(w / "log.npz", w / "hard.npz")
 
 
+def _panda_log_folder(w: Path) -> None:
+    """A log folder in the Panda format: one value per line in four files."""
+    folder = w / "pandalog"
+    folder.mkdir()
+    n = 50
+    (folder / "rbt_log_time.txt").write_text("".join(f"{k * 1e-3}\n" for k in range(n)))
+    for name in ("positions", "velocity", "torques"):
+        (folder / f"rbt_log_{name}.txt").write_text("0.1\n" * (7 * n))
+
+
 def _foreign_report(w: Path) -> None:
     (w / "rep").mkdir()
     (w / "rep" / "thesis.tex").write_text("years of work\n")
@@ -280,6 +290,12 @@ CASES = [
         "json-onto-validation-input",
         ["identify", "msd", "--data", "log.npz", "--validate", "valid.npz", "--json", "valid.npz"],
         match="one of the inputs",
+    ),
+    Case(
+        "json-onto-a-file-of-an-input-folder",
+        ["identify", "panda", "--data", "pandalog", "--json", "pandalog/rbt_log_time.txt"],
+        match="inside the input folder",
+        setup=_panda_log_folder,
     ),
     Case(
         "json-onto-input-by-other-spelling",
