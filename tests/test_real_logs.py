@@ -18,8 +18,14 @@ from manip_id.cli import main
 from manip_id.datasets import Dataset, save_dataset
 from manip_id.errors import DataError, InputError
 from manip_id.identifiability import analyze
-from manip_id.identification import identify, identify_datasets
-from manip_id.pipeline import PreprocessOptions, accumulate_file, scan_file
+from manip_id.identification import (
+    PreprocessOptions,
+    RunOptions,
+    accumulate_file,
+    identify,
+    identify_datasets,
+    scan_file,
+)
 from manip_id.signals import preprocess
 
 ROBOT = ["ur5", "--friction", "viscous,coulomb"]
@@ -392,7 +398,7 @@ def test_parts_and_workers_add_up_to_the_whole_file(robot, base, tmp_path):
     A = sum(p.accumulator.A for p in parts)
     np.testing.assert_allclose(A, whole.accumulator.A, rtol=1e-10, atol=1e-8 * np.abs(A).max())
     serial = identify_datasets(robot, [path], options=opts, base=base)
-    forked = identify_datasets(robot, [path], options=opts, base=base, workers=2)
+    forked = identify_datasets(robot, [path], options=opts, base=base, run=RunOptions(workers=2))
     assert forked.n_samples == serial.n_samples
     scale = np.abs(serial.estimate).max()
     np.testing.assert_allclose(forked.estimate, serial.estimate, rtol=0, atol=1e-9 * scale)
