@@ -703,7 +703,9 @@ def test_identify_files_equals_identify_datasets_nominal_errors_included(tmp_pat
     paths, arrays = [], []
     for f in range(3):
         q, dq, ddq = robot.random_states(800, seed=40 + f)
-        tau0 = np.array([pin.rnea(robot.model, robot.data, *x) for x in zip(q, dq, ddq)])
+        tau0 = np.array(
+            [pin.rnea(robot.model, robot.data, *x) for x in zip(q, dq, ddq, strict=True)]
+        )
         tau = tau0 + FV * dq + FC * np.sign(dq)  # [N m]
         tau += 0.05 * np.random.default_rng(f).standard_normal(tau.shape)
         np.savez(tmp_path / f"dp{f}.npz", t=np.arange(800) * 1e-3, q=q, dq=dq, ddq=ddq, tau=tau)

@@ -52,6 +52,18 @@ class BaseParameters:
             raise InputError(f"theta.shape={theta.shape} but n_parameters={len(self.names)}")
         return theta[..., self.independent] + theta[..., self.dependent] @ self.K.T
 
+    def from_base(self, theta_base) -> np.ndarray:
+        """A standard vector with these base parameters, zero on the dependent columns.
+
+        (..., r) -> (..., p); ``to_base(from_base(b)) == b``.
+        """
+        arr = as_float_array(theta_base, "theta_base")
+        if arr.ndim == 0 or arr.shape[-1] != self.n_base:
+            raise InputError(f"theta_base.shape={arr.shape} but the base has {self.n_base}")
+        out = np.zeros((*arr.shape[:-1], len(self.names)))
+        out[..., self.independent] = arr
+        return out
+
     def regressor(self, Y) -> np.ndarray:
         """The base regressor ``Y[..., independent]``: ``Y theta == Y_base theta_base``."""
         Y = np.asarray(Y)
