@@ -242,6 +242,7 @@ def load_erd(name: str):
     through the loader itself (geometry included).
     """
     try:
+        # heavy (its package index): imported only to load a robot by name
         from example_robot_data.robots_loader import ROBOTS
         from example_robot_data.utils import RobotLoader, getModelPath, readParamsFromSrdf
     except ImportError as exc:  # pragma: no cover - dependency of the package
