@@ -166,7 +166,7 @@ class ModelMismatchError(InputError):
         self.what = what
         self.expected = expected
         self.got = got
-        super().__init__(f"{what} do not fit this robot: expected {expected}, got {got}")
+        super().__init__(f"{what}: not for this robot: expected {expected}, got {got}")
 
     def __reduce__(self):
         return (_rebuild, (type(self), (self.what, self.expected, self.got), {}))

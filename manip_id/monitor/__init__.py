@@ -21,6 +21,7 @@ from .observer import (
     MonitorModel,
     MonitorStep,
     check_parameters,
+    load_model,
     model_from_result,
     model_from_robot,
 )
@@ -41,6 +42,7 @@ __all__ = [
     "as_logs",
     "calibrate_thresholds",
     "check_parameters",
+    "load_model",
     "model_from_result",
     "model_from_robot",
     "read_log",

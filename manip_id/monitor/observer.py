@@ -46,7 +46,8 @@ from numpy.typing import ArrayLike
 
 from .._checks import as_float_array, check_finite, positive_vector
 from ..errors import InputError, ModelMismatchError
-from ..robot import Robot
+from ..results import load_result
+from ..robot import Robot, available_robots
 from .detections import MonitorRun
 
 #: Default observer gain [1/s]: a 25 rad/s bandwidth (time constant 40 ms).
@@ -101,10 +102,17 @@ def model_from_result(robot: Robot, result, source: str = "") -> MonitorModel:
     which is too small when the residuals are correlated; a result that says which kind it
     carries (``context["covariance_kind"]``) is taken at its word.
 
-    Raises :class:`ModelMismatchError` when the result was identified for another robot or
-    other joint terms (its base parameters name other standard parameters).
+    Raises :class:`ModelMismatchError` when the result was identified for another robot
+    (two different robots known by name, e.g. ``ur10`` for ``ur5``; a robot loaded from a
+    URDF file is checked by its parameter names only) or other joint terms (its base
+    parameters name other standard parameters).
     """
     base = result.base
+    known = set(available_robots())
+    if result.robot_name != robot.name and {result.robot_name, robot.name} <= known:
+        raise ModelMismatchError(
+            "the model", f"a model of {robot.name!r}", f"a model of {result.robot_name!r}"
+        )
     if list(base.names) != list(robot.parameter_names):
         theirs = sorted(set(base.names) - set(robot.parameter_names))
         raise ModelMismatchError(
@@ -140,6 +148,12 @@ def standard_from_base(robot: Robot, theta_base: ArrayLike, base) -> np.ndarray:
     dep, ind = base.dependent, base.independent
     theta[ind] = np.asarray(theta_base, dtype=float) - base.K @ nominal[dep]
     return theta
+
+
+def load_model(robot: Robot, path) -> MonitorModel:
+    """The :class:`MonitorModel` of a saved result (``manip-id identify --json``, a report's
+    result.json); :class:`~manip_id.errors.DataError` for a file that is not one."""
+    return model_from_result(robot, load_result(path), source=str(path))
 
 
 def model_from_robot(robot: Robot) -> MonitorModel:
