@@ -1,0 +1,118 @@
+"""``manip-id monitor``: detections in the JSON at the simulated collision, every model kind.
+
+Simulated ur5 files (NPZ) with a known external torque on one joint; models from a plain
+OLS result, a physically consistent one, and an exported URDF + sidecar (the true
+parameters): each detects the interval, and reports nothing on a collision-free file.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import get_robot
+
+from manip_id.cli import main
+from manip_id.datasets import Dataset, save_dataset
+from manip_id.export import export_urdf
+from manip_id.fleet import identify_files
+from manip_id.simulation import simulate
+from manip_id.trajectories import random_trajectory
+
+FV = np.array([2.0, 2.0, 1.5, 0.5, 0.5, 0.5])  # [N m s/rad]
+FC = np.array([3.0, 3.0, 2.0, 1.0, 1.0, 1.0])  # [N m]
+NOISE = np.array([0.05, 0.1, 0.05, 0.02, 0.02, 0.02])  # torque noise std [N m]
+HIT = (1, 2.0, 2.5, 12.0)  # joint, start [s], stop [s], external torque [N m]
+ROBOT = ["ur5", "--friction", "viscous,coulomb"]
+
+
+@pytest.fixture(scope="module")
+def robot():
+    return get_robot("ur5", friction=("viscous", "coulomb"))
+
+
+@pytest.fixture(scope="module")
+def files(robot, tmp_path_factory):
+    folder = tmp_path_factory.mktemp("monitor_cli")
+    theta = robot.nominal_parameters.copy()
+    theta[robot.layout.joint_columns("fv")] = FV
+    theta[robot.layout.joint_columns("fc")] = FC
+    out = {"theta": theta, "folder": folder}
+    for name, seed, hit in (("calib", 1, False), ("calib2", 2, False), ("clean", 3, False),
+                            ("hit", 4, True)):  # fmt: skip
+        traj = random_trajectory(robot, seed=200 + seed)
+        ds = simulate(robot, traj, duration=5.0, rate=500.0, theta=theta).dataset
+        # white noise of one size in every file (simulate's is relative to each file's RMS)
+        tau = ds.tau + NOISE * np.random.default_rng(seed).standard_normal(ds.tau.shape)
+        if hit:
+            j, a, b, size = HIT
+            tau[(ds.t >= a) & (ds.t < b), j] -= size  # the motors supply less: tau_ext helps
+        ds = Dataset(t=ds.t + 100.0, q=ds.q, dq=ds.dq, tau=tau, ddq=ds.ddq)  # own time base
+        out[name] = str(save_dataset(ds, folder / f"{name}.npz"))
+    return out
+
+
+def _result(robot, files, consistent: bool):
+    res = identify_files(robot, [files["calib"], files["calib2"]], consistent=consistent)
+    path = files["folder"] / f"result_{int(consistent)}.json"
+    path.write_text(json.dumps(res.to_dict()))
+    return str(path)
+
+
+def _check_detections(doc, files):
+    j, a, b, size = HIT
+    dets = doc["detections"]
+    assert [d["file"] for d in dets] == [files["hit"]], dets
+    d = dets[0]
+    assert 100.0 + a <= d["start"] <= 100.0 + a + 0.15  # the file's own time [s]
+    assert 100.0 + b <= d["stop"] <= 100.0 + b + 0.4  # decay of 12 N m to ~0.03 N m
+    assert d["joints"][0] == "shoulder_lift_joint" or "shoulder_lift_joint" in d["joints"]
+    assert d["peak"] == pytest.approx(size, rel=0.15)
+    assert {f["file"]: f["n_detections"] for f in doc["files"]} == {
+        files["clean"]: 0,
+        files["hit"]: 1,
+    }
+
+
+@pytest.mark.parametrize("consistent", [False, True])
+def test_monitor_json_from_results(robot, files, consistent, tmp_path, capsys):
+    model = _result(robot, files, consistent)
+    out = tmp_path / "mon.json"
+    report = tmp_path / "report"
+    argv = [*ROBOT, "--model", model, "--calibrate", files["calib"], files["calib2"]]
+    argv += ["--data", files["clean"], files["hit"], "--json", str(out)]
+    argv += ["--report", str(report)] if not consistent else []
+    assert main(["monitor", *argv]) == 0
+    doc = json.loads(out.read_text())
+    _check_detections(doc, files)
+    th = doc["thresholds"]
+    assert th["false_alarm"] == 1e-3 and th["rate"] <= 1e-3
+    assert [j["name"] for j in th["joints"]] == list(robot.dof_names)
+    assert "shoulder_lift_joint" in capsys.readouterr().out
+    if not consistent:
+        assert (report / "residuals_1.png").is_file() and (report / "index.html").is_file()
+
+
+def test_monitor_from_exported_urdf(robot, files, tmp_path):
+    urdf = tmp_path / "ur5_identified.urdf"
+    export_urdf(robot, files["theta"], urdf)
+    out = tmp_path / "mon.json"
+    argv = ["monitor", str(urdf), "--identified", "--calibrate", files["calib"], files["calib2"]]
+    assert main([*argv, "--data", files["clean"], files["hit"], "--json", str(out)]) == 0
+    _check_detections(json.loads(out.read_text()), files)
+
+
+def test_monitor_bad_input_is_one_line(robot, files, tmp_path, capsys):
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"hello": 1}))
+    base = ["monitor", *ROBOT, "--calibrate", files["calib"], "--data", files["hit"]]
+    for argv in (
+        [*base, "--model", str(bad)],  # not a result
+        ["monitor", "panda", "--model", _result(robot, files, False), *base[4:]],  # other robot
+        [*base, "--gain", "-3"],
+        [*base, "--json", files["hit"]],  # an input as the output
+    ):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert err.startswith("manip-id: error:") and len(err.strip().splitlines()) == 1, err
