@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from conftest import get_robot
 
+from manip_id.datasets import Dataset
 from manip_id.errors import DataError, InputError, ManipIdError, ModelMismatchError
 from manip_id.identification import identify
 from manip_id.monitor import (
@@ -28,6 +29,8 @@ from manip_id.trajectories import random_trajectory
 
 FV = np.array([2.0, 2.0, 1.5, 0.5, 0.5, 0.5])  # [N m s/rad]
 FC = np.array([3.0, 3.0, 2.0, 1.0, 1.0, 1.0])  # [N m]
+NOISE = np.array([0.3, 0.5, 0.3, 0.05, 0.05, 0.05])  # torque noise std [N m]
+NOISE_DQ = 1e-3  # velocity noise std [rad/s]
 
 
 @pytest.fixture(scope="module")
@@ -43,18 +46,17 @@ def theta(robot):
     return th
 
 
-def _run(robot, theta, seed, *, duration=6.0, rate=1000.0, noise_tau=0.0, noise_dq=0.0):
+def _run(robot, theta, seed, *, duration=6.0, rate=1000.0, noise=False):
+    """A simulated run; ``noise``: white torque noise of :data:`NOISE` (the same in every run,
+    unlike ``simulate``'s, which is relative to each run's torque RMS) and velocity noise."""
     traj = random_trajectory(robot, seed=seed)
-    return simulate(
-        robot,
-        traj,
-        duration=duration,
-        rate=rate,
-        theta=theta,
-        noise_tau=noise_tau,
-        noise_dq=noise_dq,
-        seed=seed,
-    ).dataset
+    ds = simulate(robot, traj, duration=duration, rate=rate, theta=theta).dataset
+    if not noise:
+        return ds
+    rng = np.random.default_rng(1000 + seed)
+    tau = ds.tau + NOISE * rng.standard_normal(ds.tau.shape)
+    dq = ds.dq + NOISE_DQ * rng.standard_normal(ds.dq.shape)
+    return Dataset(t=ds.t, q=ds.q, dq=dq, tau=tau, ddq=ds.ddq)
 
 
 def _step(t, joint, start, stop, size, nv):
@@ -132,7 +134,7 @@ def test_euler_unstable_gain_stays_stable(robot, theta):
 @pytest.fixture(scope="module")
 def identified(robot, theta):
     """An OLS identification from two noisy collision-free runs, and the runs."""
-    runs = [_run(robot, theta, seed=s, duration=8.0, rate=500.0, noise_tau=0.01) for s in (11, 12)]
+    runs = [_run(robot, theta, seed=s, duration=8.0, rate=500.0, noise=True) for s in (11, 12)]
     q = np.vstack([d.q for d in runs])
     dq = np.vstack([d.dq for d in runs])
     ddq = np.vstack([d.ddq for d in runs])
@@ -150,7 +152,7 @@ def test_false_alarm_rate_on_new_collision_free_runs(robot, theta, identified):
     mon = CollisionMonitor(robot, result_model(robot, result), th)
     n = alarms = 0
     for seed in range(20, 26):  # 6 new runs, 6 x 4001 samples
-        ds = _run(robot, theta, seed=seed, duration=8.0, rate=500.0, noise_tau=0.01)
+        ds = _run(robot, theta, seed=seed, duration=8.0, rate=500.0, noise=True)
         run = mon.run(ds.t, ds.q, ds.dq, ds.tau)
         n += ds.t.size
         alarms += int(run.detected.any(axis=1).sum())
@@ -166,7 +168,7 @@ def test_detects_each_interval_and_estimates_the_torque(robot, theta, identified
     result, calib = identified
     th = calibrate_thresholds(robot, result, calib, false_alarm=1e-3)
     mon = CollisionMonitor(robot, model_from_result(robot, result), th)
-    ds = _run(robot, theta, seed=30, duration=8.0, rate=500.0, noise_tau=0.01)
+    ds = _run(robot, theta, seed=30, duration=8.0, rate=500.0, noise=True)
     events = [(0, 1.0, 1.5, 8.0), (3, 3.0, 3.4, -3.0), (1, 5.0, 6.0, 10.0)]
     ext = sum(_step(ds.t, j, a, b, s, robot.nv) for j, a, b, s in events)
     run = mon.run(ds.t, ds.q, ds.dq, ds.tau - ext)
