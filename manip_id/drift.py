@@ -33,6 +33,7 @@ from scipy.special import chdtrc, ndtr
 from .errors import InputError, ModelMismatchError
 from .fleet import identify_files
 from .parameters import JOINT_TERM
+from .pipeline import PreprocessOptions
 from .results import single_standard
 from .robot import Robot
 
@@ -208,7 +209,7 @@ def drift_files(
     *,
     alpha: float = DEFAULT_ALPHA,
     scheduler=None,
-    options: Mapping | None = None,
+    options: PreprocessOptions | Mapping | None = None,
     window=None,
 ) -> DriftReport:
     """Test every file against the reference identification (module docstring).

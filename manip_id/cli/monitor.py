@@ -231,6 +231,7 @@ def residual_figure(path, run, title: str) -> None:
     """Residuals (estimated external torques) of one run with their bounds, one axis per joint."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg  # optional heavy library
     from matplotlib.figure import Figure
+    from matplotlib.text import Text
 
     nv = run.residual.shape[1]
     fig = Figure(figsize=(10.0, 1.8 * nv + 1.0), dpi=100)
@@ -254,7 +255,7 @@ def residual_figure(path, run, title: str) -> None:
             ax.set_title(title, fontsize=9)
             ax.legend(fontsize=7, loc="upper right")
     fig.axes[-1].set_xlabel("t [s]")
-    for text in fig.findobj(lambda a: hasattr(a, "set_parse_math")):
+    for text in fig.findobj(Text):
         text.set_parse_math(False)  # file names are shown literally
     fig.tight_layout()
     fig.savefig(path, format="png")

@@ -105,11 +105,16 @@ def as_logs(robot: Robot, data, options: ReadOptions | None = None) -> list[Moni
             missing = [k for k in ("t", "q", "dq", "tau") if k not in item]
             if missing:
                 raise InputError(f"log {i} misses {missing} (expected keys t, q, dq, tau)")
+            arr = {k: np.asarray(item[k], dtype=float) for k in ("t", "q", "dq", "tau")}
+            ddq = item.get("ddq")
             out.append(
                 MonitorLog(
-                    str(item.get("file", f"log {i}")),
-                    *(np.asarray(item[k], dtype=float) for k in ("t", "q", "dq", "tau")),
-                    ddq=None if item.get("ddq") is None else np.asarray(item["ddq"], float),
+                    file=str(item.get("file", f"log {i}")),
+                    t=arr["t"],
+                    q=arr["q"],
+                    dq=arr["dq"],
+                    tau=arr["tau"],
+                    ddq=None if ddq is None else np.asarray(ddq, dtype=float),
                 )
             )
         else:

@@ -210,10 +210,14 @@ class CollisionMonitor:
         self.thresholds = _bounds(robot, thresholds)
         self.model = robot.with_parameters(self.theta)
         self.data = self.model.createData()
+        self._model0 = self.model.copy()  # gravity-free: rnea(q, 0, dq) = M(q) dq
+        self._model0.gravity = pin.Motion.Zero()
+        self._data0 = self._model0.createData()
         self.nq, self.nv = robot.nq, robot.nv
+        self._zero = np.zeros(self.nv)
         self._terms = _friction_terms(robot, self.theta)
         self._spring = robot.layout.has_term("k")
-        self._iu = np.triu_indices(self.nv, 1)
+        self._dt = -1.0  # the step of the cached decay factors [s]
         self.reset()
 
     def reset(self) -> None:
@@ -227,8 +231,7 @@ class CollisionMonitor:
     def momentum_and_input(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray):
         """``p = M(q) dq`` and ``u = tau + C^T(q, dq) dq - g(q) - f(q, dq)``, shape (nv,) each."""
         model, data = self.model, self.data
-        M = pin.crba(model, data, q)  # upper triangle [kg m^2]
-        M[self._iu[1], self._iu[0]] = M[self._iu]
+        p = pin.rnea(self._model0, self._data0, q, self._zero, dq)  # M(q) dq, armature too
         C = pin.computeCoriolisMatrix(model, data, q, dq)
         g = pin.computeGeneralizedGravity(model, data, q)
         u = tau + C.T @ dq - g
@@ -236,7 +239,7 @@ class CollisionMonitor:
             angles = self.robot.dofs.angles(q) if self._spring else None
             for term, coef in self._terms:
                 u -= term.torque(coef, angles, dq, None)
-        return M @ dq, u
+        return p.copy(), u
 
     # ------------------------------------------------------------------ steps
     def step(self, q: ArrayLike, dq: ArrayLike, tau: ArrayLike, dt: float) -> MonitorStep:
@@ -266,13 +269,18 @@ class CollisionMonitor:
         if self._p is not None:
             if not dt > 0:
                 raise InputError(f"dt must be a positive time step [s], got {dt}")
-            a = np.exp(-self.gain * dt)
+            if dt != self._dt:  # decay factors, recomputed when the step changes
+                self._dt = dt
+                self._a = np.exp(-self.gain * dt)
+                if self.filter_gain is not None:
+                    self._b = np.exp(-self.filter_gain * dt)
+            a = self._a
             ds = (p - self._p) - 0.5 * dt * (u + self._u)  # [N m s]
             self._r = a * self._r + (1.0 - a) * (ds / dt)
             if self.filter_gain is None:
                 self.residual = self._r
             else:
-                b = np.exp(-self.filter_gain * dt)
+                b = self._b
                 self.residual = b * self.residual + (1.0 - b) * self._r
         self._p, self._u = p, u
         return MonitorStep(self.residual.copy(), np.abs(self.residual) > self.thresholds)
@@ -286,14 +294,14 @@ class CollisionMonitor:
         log's label. Returns the :class:`~manip_id.monitor.MonitorRun` (residuals, flags,
         detection intervals).
         """
-        t, q, dq, tau = _check_log(self.robot, t, q, dq, tau)
+        ts, qs, dqs, taus = _check_log(self.robot, t, q, dq, tau)
         self.reset()
-        r = np.empty((t.size, self.nv))
-        dts = np.diff(t, prepend=t[0])
-        for k in range(t.size):
-            r[k] = self.step(q[k], dq[k], tau[k], float(dts[k]) if k else 1.0).residual
+        r = np.empty((ts.size, self.nv))
+        dts = np.diff(ts, prepend=ts[0])
+        for k in range(ts.size):
+            r[k] = self.step(qs[k], dqs[k], taus[k], float(dts[k]) if k else 1.0).residual
         return MonitorRun(
-            t=t,
+            t=ts,
             residual=r,
             bounds=self.thresholds.copy(),
             dof_names=list(self.robot.dof_names),
@@ -329,7 +337,7 @@ def _bounds(robot: Robot, thresholds) -> np.ndarray:
     return arr
 
 
-def _check_log(robot: Robot, t, q, dq, tau):
+def _check_log(robot: Robot, t, q, dq, tau) -> tuple[np.ndarray, ...]:
     t = as_float_array(t, "t", ndim=1)
     q = as_float_array(q, "q", ndim=2)
     dq = as_float_array(dq, "dq", ndim=2)

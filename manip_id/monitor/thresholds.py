@@ -146,8 +146,10 @@ def filtered_variance(
 ) -> np.ndarray:
     """``mean_t s_j(t)^2`` (module docstring), shape (nv,) [(N m)^2]: the base regressor
     through the observer's filter (and its second low-pass when ``filter_gain``)."""
-    cov, base = model.covariance, model.base
-    ind = base.independent  # type: ignore[attr-defined]
+    if model.covariance is None or model.base is None:
+        raise InputError("the model carries no covariance of its base parameters")
+    cov = np.asarray(model.covariance, dtype=float)
+    ind = model.base.independent  # type: ignore[attr-defined]
     ddq = log.ddq if log.ddq is not None else np.gradient(log.dq, log.t, axis=0)
     w = np.zeros((robot.nv, len(ind)))
     wf = np.zeros_like(w)
