@@ -74,6 +74,38 @@ def _first_order(t, start, stop, size, K):
     return r
 
 
+def test_momentum_and_input_against_crba_and_finite_differences(robot, theta):
+    """p = crba(q) dq; C^T dq = 1/2 dq^T dM/dq_i dq by central differences of crba;
+    g = rnea(q, 0, 0); friction written here: independent of the observer's calls."""
+    import pinocchio as pin
+
+    model = robot.with_parameters(theta)
+    data = model.createData()
+    rng = np.random.default_rng(7)
+    mon = CollisionMonitor(robot, theta)
+
+    def mass(q):
+        M = pin.crba(model, data, q).copy()
+        return np.triu(M) + np.triu(M, 1).T
+
+    for _ in range(5):
+        q, dq, _ = robot.random_states(1, seed=int(rng.integers(1000)))
+        q, dq = q[0], dq[0]
+        tau = rng.standard_normal(robot.nv)
+        p, u = mon.momentum_and_input(q, dq, tau)
+        np.testing.assert_allclose(p, mass(q) @ dq, rtol=1e-10, atol=1e-10)
+        h = 1e-6
+        ctdq = np.array(
+            [
+                0.5 * dq @ ((mass(q + h * e) - mass(q - h * e)) / (2 * h)) @ dq
+                for e in np.eye(robot.nv)
+            ]
+        )
+        g = pin.rnea(model, data, q, np.zeros(robot.nv), np.zeros(robot.nv))
+        f = FV * dq + FC * np.sign(dq)
+        np.testing.assert_allclose(u, tau + ctdq - g - f, rtol=1e-6, atol=1e-6)
+
+
 @pytest.mark.parametrize("rate, tol", [(1000.0, 0.02), (10000.0, 0.002)])
 def test_first_order_residual_follows_the_external_torque(robot, theta, rate, tol):
     ds = _run(robot, theta, seed=3, duration=3.0, rate=rate)

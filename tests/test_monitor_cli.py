@@ -1,8 +1,8 @@
 """``manip-id monitor``: detections in the JSON at the simulated collision, every model kind.
 
 Simulated ur5 files (NPZ) with a known external torque on one joint; models from a plain
-OLS result, a physically consistent one, and an exported URDF + sidecar (the true
-parameters): each detects the interval, and reports nothing on a collision-free file.
+OLS result, a physically consistent one, a momentum-model one, and an exported URDF +
+sidecar (the true parameters): each detects the interval, and reports nothing on a collision-free file.
 """
 
 from __future__ import annotations
@@ -53,9 +53,11 @@ def files(robot, tmp_path_factory):
     return out
 
 
-def _result(robot, files, consistent: bool):
-    res = identify_files(robot, [files["calib"], files["calib2"]], consistent=consistent)
-    path = files["folder"] / f"result_{int(consistent)}.json"
+def _result(robot, files, kind: str):
+    kw = {"consistent": True} if kind == "consistent" else {}
+    kw |= {"model": "momentum"} if kind == "momentum" else {}
+    res = identify_files(robot, [files["calib"], files["calib2"]], **kw)
+    path = files["folder"] / f"result_{kind}.json"
     path.write_text(json.dumps(res.to_dict()))
     return str(path)
 
@@ -75,14 +77,15 @@ def _check_detections(doc, files):
     }
 
 
-@pytest.mark.parametrize("consistent", [False, True])
-def test_monitor_json_from_results(robot, files, consistent, tmp_path, capsys):
-    model = _result(robot, files, consistent)
+@pytest.mark.parametrize("kind", ["plain", "consistent", "momentum"])
+def test_monitor_json_from_results(robot, files, kind, tmp_path, capsys):
+    """Plain OLS, physically consistent, and the acceleration-free momentum model."""
+    model = _result(robot, files, kind)
     out = tmp_path / "mon.json"
     report = tmp_path / "report"
     argv = [*ROBOT, "--model", model, "--calibrate", files["calib"], files["calib2"]]
     argv += ["--data", files["clean"], files["hit"], "--json", str(out)]
-    argv += ["--report", str(report)] if not consistent else []
+    argv += ["--report", str(report)] if kind == "plain" else []
     assert main(["monitor", *argv]) == 0
     doc = json.loads(out.read_text())
     _check_detections(doc, files)
@@ -90,7 +93,7 @@ def test_monitor_json_from_results(robot, files, consistent, tmp_path, capsys):
     assert th["false_alarm"] == 1e-3 and th["rate"] <= 1e-3
     assert [j["name"] for j in th["joints"]] == list(robot.dof_names)
     assert "shoulder_lift_joint" in capsys.readouterr().out
-    if not consistent:
+    if kind == "plain":
         assert (report / "residuals_1.png").is_file() and (report / "index.html").is_file()
 
 
@@ -109,7 +112,7 @@ def test_monitor_bad_input_is_one_line(robot, files, tmp_path, capsys):
     base = ["monitor", *ROBOT, "--calibrate", files["calib"], "--data", files["hit"]]
     for argv in (
         [*base, "--model", str(bad)],  # not a result
-        ["monitor", "panda", "--model", _result(robot, files, False), *base[4:]],  # other robot
+        ["monitor", "panda", "--model", _result(robot, files, "plain"), *base[4:]],  # other robot
         [*base, "--gain", "-3"],
         [*base, "--json", files["hit"]],  # an input as the output
     ):
