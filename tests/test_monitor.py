@@ -20,6 +20,7 @@ from manip_id.identification import identify
 from manip_id.monitor import (
     CollisionMonitor,
     MonitorModel,
+    Thresholds,
     calibrate_thresholds,
     load_model,
     model_from_result,
@@ -190,6 +191,18 @@ def test_false_alarm_rate_on_new_collision_free_runs(robot, theta, identified):
         alarms += int(run.detected.any(axis=1).sum())
     assert n >= 20000
     assert alarms / n <= alpha, alarms / n
+
+
+def test_thresholds_round_trip_through_json(robot, identified):
+    result, calib = identified
+    th = calibrate_thresholds(robot, result, calib[:1], gain=30.0, filter_gain=None)
+    back = Thresholds.from_dict(json.loads(json.dumps(th.to_dict())))
+    np.testing.assert_array_equal(back.bound, th.bound)
+    np.testing.assert_array_equal(back.gain, th.gain)
+    assert back.filter_gain is None and back.dof_names == th.dof_names
+    assert back.rate == th.rate and back.methods == th.methods
+    with pytest.raises(DataError, match="not monitor thresholds"):
+        Thresholds.from_dict({"joints": [{"name": "x"}]})
 
 
 def result_model(robot, result) -> MonitorModel:

@@ -2,7 +2,8 @@
 
 Simulated ur5 files (NPZ) with a known external torque on one joint; models from a plain
 OLS result, a physically consistent one, a momentum-model one, and an exported URDF +
-sidecar (the true parameters): each detects the interval, and reports nothing on a collision-free file.
+sidecar (the true parameters): each detects the interval, and reports nothing on a
+collision-free file.
 """
 
 from __future__ import annotations
@@ -97,6 +98,21 @@ def test_monitor_json_from_results(robot, files, kind, tmp_path, capsys):
         assert (report / "residuals_1.png").is_file() and (report / "index.html").is_file()
 
 
+def test_monitor_with_saved_thresholds(robot, files, tmp_path):
+    """Calibrate once (--json), monitor later with --thresholds: the same detections."""
+    model = _result(robot, files, "plain")
+    first, second = tmp_path / "first.json", tmp_path / "second.json"
+    base = ["monitor", *ROBOT, "--model", model, "--gain", "30", "--filter-gain", "none"]
+    assert main([*base, "--calibrate", files["calib"], "--data", files["hit"],
+                 "--json", str(first)]) == 0  # fmt: skip
+    argv = ["monitor", *ROBOT, "--model", model, "--thresholds", str(first)]
+    assert main([*argv, "--data", files["hit"], "--json", str(second)]) == 0
+    a, b = json.loads(first.read_text()), json.loads(second.read_text())
+    assert a["detections"] == b["detections"] and len(a["detections"]) >= 1
+    assert b["thresholds"]["joints"][0]["gain"] == 30.0
+    assert b["thresholds"]["joints"][0]["filter_gain"] is None
+
+
 def test_monitor_from_exported_urdf(robot, files, tmp_path):
     urdf = tmp_path / "ur5_identified.urdf"
     export_urdf(robot, files["theta"], urdf)
@@ -114,6 +130,7 @@ def test_monitor_bad_input_is_one_line(robot, files, tmp_path, capsys):
         [*base, "--model", str(bad)],  # not a result
         ["monitor", "panda", "--model", _result(robot, files, "plain"), *base[4:]],  # other robot
         [*base, "--gain", "-3"],
+        [*base[:4], "--thresholds", str(bad), "--data", files["hit"]],  # not thresholds
         [*base, "--json", files["hit"]],  # an input as the output
     ):
         assert main(argv) == 2, argv

@@ -4,7 +4,8 @@ Calibrates per-joint bounds of the momentum observer's residual on collision-fre
 (:func:`manip_id.monitor.calibrate_thresholds`), runs the observer over the ``--data``
 files and prints the detections as time intervals (the files' own time [s]); ``--json``
 writes ``{"thresholds", "detections": [{file, start, stop, joints, peak}], "files"}``,
-``--report`` a folder with the residuals against their bounds per file.
+``--report`` a folder with the residuals against their bounds per file. ``--thresholds
+MONITOR.json`` instead of ``--calibrate`` reuses the bounds (and gains) of an earlier run.
 
 File options as ``identify``'s: ``FILE@START:STOP`` windows, ``--window``,
 ``--torque-scale``, ``--drop-bad-rows``, ``--topic``, ``--column``. The files are read
@@ -44,9 +45,15 @@ def register(sub) -> None:
         help="identification result (identify --json, a report's result.json); default the "
         "robot's own parameters (an exported URDF with --identified)",
     )
-    p.add_argument(
-        "--calibrate", nargs="+", action="extend", required=True, metavar="FILE",
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument(
+        "--calibrate", nargs="+", action="extend", metavar="FILE",
         help="collision-free files for the bounds",
+    )  # fmt: skip
+    src.add_argument(
+        "--thresholds", metavar="MONITOR.json", default=None,
+        help="bounds calibrated before (the --json of an earlier run); the observer takes "
+        "their gains",
     )  # fmt: skip
     p.add_argument(
         "--data", nargs="+", action="extend", required=True, metavar="FILE",
@@ -112,7 +119,7 @@ def _reserve(args):
 
     if getattr(args, "outputs", None) is None:
         args.outputs = OutputSet()
-    files = [*args.calibrate, *args.data, args.model]
+    files = [*(args.calibrate or []), *args.data, args.model, args.thresholds]
     args.outputs.add_inputs(
         f if os.path.exists(f) or "@" not in f else f.rsplit("@", 1)[0] for f in files if f
     )
@@ -140,12 +147,15 @@ def run(args: argparse.Namespace) -> int:
         as_logs,
         calibrate_thresholds,
         load_model,
+        load_thresholds,
         model_from_robot,
     )
 
     t_start = time.perf_counter()
     gain = _floats(args.gain, "--gain")
     fgain = _floats(args.filter_gain, "--filter-gain", none=True)
+    if args.thresholds is not None and (gain is not None or fgain is not None):
+        raise InputError("--thresholds carry the observer gains they hold for: no --gain then")
     gain = DEFAULT_GAIN if gain is None else gain
     fgain = DEFAULT_FILTER_GAIN if fgain is None else (None if fgain == "none" else fgain)
     scale = _floats(args.torque_scale, "--torque-scale")
@@ -159,16 +169,15 @@ def run(args: argparse.Namespace) -> int:
     outputs = _reserve(args)
     robot = _robot(args)
     model = load_model(robot, args.model) if args.model else model_from_robot(robot)
-    calib = as_logs(robot, args.calibrate, options)
+    if args.thresholds is not None:
+        th = load_thresholds(args.thresholds)
+        gain, fgain = th.gain, th.filter_gain
+    else:
+        calib = as_logs(robot, args.calibrate, options)
+        th = calibrate_thresholds(
+            robot, model, calib, false_alarm=args.false_alarm, gain=gain, filter_gain=fgain
+        )
     logs = as_logs(robot, args.data, options)
-    th = calibrate_thresholds(
-        robot,
-        model,
-        calib,
-        false_alarm=args.false_alarm,
-        gain=gain,
-        filter_gain=fgain,
-    )
     mon = CollisionMonitor(robot, model, th, gain=gain, filter_gain=fgain)
     runs = [mon.run(lg.t, lg.q, lg.dq, lg.tau, file=lg.file) for lg in logs]
     detections = [d for run in runs for d in run.detections()]

@@ -25,7 +25,7 @@ from .observer import (
     model_from_result,
     model_from_robot,
 )
-from .thresholds import DEFAULT_FALSE_ALARM, Thresholds, calibrate_thresholds
+from .thresholds import DEFAULT_FALSE_ALARM, Thresholds, calibrate_thresholds, load_thresholds
 
 __all__ = [
     "DEFAULT_FALSE_ALARM",
@@ -43,6 +43,7 @@ __all__ = [
     "calibrate_thresholds",
     "check_parameters",
     "load_model",
+    "load_thresholds",
     "model_from_result",
     "model_from_robot",
     "read_log",

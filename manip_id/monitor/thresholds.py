@@ -29,7 +29,9 @@ new data the rate is what it is, see ``manip-id monitor``).
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from scipy.special import ndtri
@@ -119,6 +121,54 @@ class Thresholds:
                 for j, n in enumerate(self.dof_names)
             ],
         }
+
+    @classmethod
+    def from_dict(cls, doc: dict) -> Thresholds:
+        """The thresholds of :meth:`to_dict` (``manip-id monitor --json``'s ``thresholds``),
+        e.g. to monitor online with bounds calibrated once."""
+        try:
+            joints = doc["joints"]
+            fg = [j.get("filter_gain") for j in joints]
+            return cls(
+                dof_names=[str(j["name"]) for j in joints],
+                bound=np.array([j["bound"] for j in joints], dtype=float),
+                noise_bound=np.array([j["noise_bound"] for j in joints], dtype=float),
+                model_bound=np.array([j["model_bound"] for j in joints], dtype=float),
+                gain=np.array([j["gain"] for j in joints], dtype=float),
+                filter_gain=None if any(g is None for g in fg) else np.array(fg, dtype=float),
+                false_alarm=float(doc["false_alarm"]),
+                methods=[str(j["method"]) for j in joints],
+                rate=float(doc["rate"]),
+                rate_per_joint=np.array([j["rate"] for j in joints], dtype=float),
+                n_samples=int(doc["n_samples"]),
+                covariance_kind=doc.get("covariance_kind"),
+                files=list(doc.get("files", [])),
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            raise DataError(
+                f"not monitor thresholds (manip-id monitor --json 'thresholds'): "
+                f"{type(exc).__name__}: {exc}"
+            ) from exc
+
+
+def load_thresholds(path) -> Thresholds:
+    """The thresholds saved by ``manip-id monitor --json`` (its ``thresholds``) or by
+    ``json.dump(thresholds.to_dict())``; :class:`~manip_id.errors.DataError` otherwise."""
+    p = Path(path)
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError as exc:
+        raise DataError(f"no such thresholds file: {p}") from exc
+    except (OSError, ValueError) as exc:
+        raise DataError(f"cannot read {p} as JSON: {exc}") from exc
+    if isinstance(doc, dict) and isinstance(doc.get("thresholds"), dict):
+        doc = doc["thresholds"]
+    if not isinstance(doc, dict):
+        raise DataError(f"{p}: not monitor thresholds (a JSON object is expected)")
+    try:
+        return Thresholds.from_dict(doc)
+    except DataError as exc:
+        raise DataError(f"{p}: {exc}") from exc
 
 
 def _theta_and_model(robot: Robot, model) -> tuple[np.ndarray, MonitorModel | None]:
