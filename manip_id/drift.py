@@ -32,6 +32,7 @@ from scipy.special import chdtrc, ndtr
 
 from .errors import InputError, ModelMismatchError
 from .fleet import identify_files
+from .monitor import covariance_kind
 from .parameters import JOINT_TERM
 from .pipeline import PreprocessOptions
 from .results import single_standard
@@ -252,5 +253,4 @@ def drift_files(
             out.append(FileDrift(fe.path, int(fe.n_samples), None, 0, None, None, [], fe.error))
         else:
             out.append(compare(reference, fe.result, alpha=float(alpha), file=fe.path))
-    kind = (reference.context or {}).get("covariance_kind", "white-noise")
-    return DriftReport(files=out, alpha=float(alpha), covariance_kind=str(kind))
+    return DriftReport(files=out, alpha=float(alpha), covariance_kind=covariance_kind(reference))

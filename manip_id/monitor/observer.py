@@ -93,6 +93,16 @@ def check_parameters(robot: Robot, theta: ArrayLike) -> np.ndarray:
     return arr
 
 
+def covariance_kind(result) -> str:
+    """What a result's ``covariance`` is: its ``covariance_kind`` (attribute, or key of the
+    saved JSON) when it says, else ``"white-noise"`` (``sigma2 (Y_b^T Y_b)^-1``, what
+    results hold before they carry an honest one)."""
+    kind = getattr(result, "covariance_kind", None)
+    if kind is None:
+        kind = (getattr(result, "context", None) or {}).get("covariance_kind")
+    return str(kind) if kind else "white-noise"
+
+
 def model_from_result(robot: Robot, result, source: str = "") -> MonitorModel:
     """The :class:`MonitorModel` of an identification result (plain, consistent, fleet).
 
@@ -125,7 +135,7 @@ def model_from_result(robot: Robot, result, source: str = "") -> MonitorModel:
     theta = standard_from_base(robot, result.estimate, base)
     cov = np.asarray(result.covariance, dtype=float)
     ok = cov.shape == (len(result.estimate),) * 2 and bool(np.isfinite(cov).all())
-    kind = (result.context or {}).get("covariance_kind", "white-noise") if ok else None
+    kind = covariance_kind(result) if ok else None
     return MonitorModel(
         robot_name=str(result.robot_name),
         theta=check_parameters(robot, theta),
