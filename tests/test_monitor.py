@@ -246,6 +246,10 @@ def test_bad_input_is_a_clear_error(robot, theta, identified, tmp_path):
         CollisionMonitor(panda, panda.nominal_parameters, th)
     with pytest.raises(ModelMismatchError):
         CollisionMonitor(robot, theta, np.ones(4))
+    with pytest.raises(InputError, match="calibrated with gain"):
+        CollisionMonitor(robot, theta, th, gain=10.0)
+    with pytest.raises(InputError, match="calibrated with gain"):
+        CollisionMonitor(robot, theta, th, filter_gain=None)
     with pytest.raises(InputError):
         CollisionMonitor(robot, theta, -1.0)
     with pytest.raises(InputError):

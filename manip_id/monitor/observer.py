@@ -218,6 +218,7 @@ class CollisionMonitor:
             else positive_vector(filter_gain, "filter_gain", robot.nv, "1/s")
         )
         self.thresholds = _bounds(robot, thresholds)
+        _check_gains(thresholds, self.gain, self.filter_gain)
         self.model = robot.with_parameters(self.theta)
         self.data = self.model.createData()
         self._model0 = self.model.copy()  # gravity-free: rnea(q, 0, dq) = M(q) dq
@@ -345,6 +346,28 @@ def _bounds(robot: Robot, thresholds) -> np.ndarray:
     if np.isnan(arr).any() or np.any(arr <= 0):
         raise InputError(f"thresholds must be positive [N m], got {arr.tolist()}")
     return arr
+
+
+def _check_gains(thresholds, gain: np.ndarray, filter_gain: np.ndarray | None) -> None:
+    """Bounds calibrated with other gains do not hold for this observer."""
+    if not hasattr(thresholds, "gain"):
+        return
+    theirs = thresholds.filter_gain
+    same = np.allclose(thresholds.gain, gain) and (
+        (theirs is None and filter_gain is None)
+        or (theirs is not None and filter_gain is not None and np.allclose(theirs, filter_gain))
+    )
+    if not same:
+
+        def text(g, f):
+            return f"gain {np.asarray(g).tolist()}, filter_gain " + (
+                "None" if f is None else f"{np.asarray(f).tolist()}"
+            )
+
+        raise InputError(
+            f"the thresholds were calibrated with {text(thresholds.gain, theirs)}, but this "
+            f"monitor has {text(gain, filter_gain)}: calibrate with the monitor's gains"
+        )
 
 
 def _check_log(robot: Robot, t, q, dq, tau) -> tuple[np.ndarray, ...]:
