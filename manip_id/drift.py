@@ -1,7 +1,8 @@
 """Drift: which robot (which log) has dynamics beyond the noise of a reference identification.
 
-Each file is identified on its own with the reference's base parametrization (on the fleet
-path, one task per file: :func:`manip_id.fleet.identify_files` with ``per_file=True``), and
+Each file (or each group of files: one robot's logs) is identified on its own with the
+reference's base parametrization (on the fleet path, one task per file:
+:func:`manip_id.fleet.identify_files`), and
 its base parameters ``theta_f`` are compared with the reference's ``theta_r``, both with
 their covariances (independent data)::
 
@@ -30,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import chdtrc, ndtr
 
-from .errors import InputError, ModelMismatchError
+from .errors import InputError, ModelMismatchError, RankDeficiencyError
 from .fleet import identify_files
 from .monitor import covariance_kind
 from .parameters import JOINT_TERM
@@ -206,27 +207,31 @@ def compare(reference, estimate, *, alpha: float = DEFAULT_ALPHA, file: str = ""
 def drift_files(
     robot: Robot,
     reference,
-    files: Sequence[str | os.PathLike],
+    files: Sequence[str | os.PathLike] | Mapping[str, Sequence[str | os.PathLike]],
     *,
     alpha: float = DEFAULT_ALPHA,
     scheduler=None,
     options: PreprocessOptions | Mapping | None = None,
     window=None,
 ) -> DriftReport:
-    """Test every file against the reference identification (module docstring).
+    """Test every file (or every group of files) against the reference (module docstring).
 
     Parameters
     ----------
     robot: the robot, with the reference's joint terms
     reference: the reference :class:`~manip_id.identification.IdentificationResult`
         (e.g. :func:`~manip_id.results.load_result` of ``manip-id identify --json``)
-    files: data files (file specs as :func:`~manip_id.fleet.identify_files` takes them)
+    files: data files (file specs as :func:`~manip_id.fleet.identify_files` takes them),
+        each tested alone; or a mapping ``group -> files`` (e.g. one robot's logs), each
+        group identified from all its files and tested as one
     alpha: significance level in (0, 1)
-    scheduler, options, window: as :func:`~manip_id.fleet.identify_files` (one task per file)
+    scheduler, options, window: as :func:`~manip_id.fleet.identify_files` (one task per
+        file; with groups, one map-reduce per group: give a running scheduler or a
+        ``distributed.Client`` rather than ``"local"``, which starts a cluster per group)
 
     Returns
     -------
-    :class:`DriftReport`; a file that cannot be identified alone has ``error`` set.
+    :class:`DriftReport`; a file (group) that cannot be identified alone has ``error`` set.
     """
     if not 0.0 < float(alpha) < 1.0:
         raise InputError(f"alpha must be a level in (0, 1), got {alpha}")
@@ -237,20 +242,23 @@ def drift_files(
             f"{len(reference.base.names)} parameters of {reference.robot_name!r}",
         )
     method = reference.method if reference.method in ("ols", "wls") else "ols"
-    pooled = identify_files(
-        robot,
-        list(files),
-        scheduler=scheduler,
-        method=method,
-        per_file=True,
-        base=reference.base,
-        options=options,
-        window=window,
+    kw = dict(
+        scheduler=scheduler, method=method, base=reference.base, options=options, window=window
     )
     out = []
-    for fe in pooled.per_file or []:
-        if fe.result is None:
-            out.append(FileDrift(fe.path, int(fe.n_samples), None, 0, None, None, [], fe.error))
-        else:
-            out.append(compare(reference, fe.result, alpha=float(alpha), file=fe.path))
+    if isinstance(files, Mapping):
+        for group, members in files.items():
+            try:
+                res = identify_files(robot, list(members), **kw)
+            except RankDeficiencyError as exc:
+                out.append(FileDrift(str(group), 0, None, 0, None, None, [], str(exc)))
+                continue
+            out.append(compare(reference, res, alpha=float(alpha), file=str(group)))
+    else:
+        pooled = identify_files(robot, list(files), per_file=True, **kw)
+        for fe in pooled.per_file or []:
+            if fe.result is None:
+                out.append(FileDrift(fe.path, int(fe.n_samples), None, 0, None, None, [], fe.error))
+            else:
+                out.append(compare(reference, fe.result, alpha=float(alpha), file=fe.path))
     return DriftReport(files=out, alpha=float(alpha), covariance_kind=covariance_kind(reference))

@@ -8,6 +8,7 @@ WLS (the noise differs per joint), so the covariances are honest and the p-value
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -103,6 +104,31 @@ def test_bad_reference_is_a_clear_error(robot, fleet):
     plain = identify_files(other, ref_files[:2])
     with pytest.raises(ModelMismatchError):
         compare(reference, plain)
+
+
+def test_groups_are_tested_as_one(robot, fleet, tmp_path):
+    """Two robots of three logs each (folders): the worn one is flagged on its elbow alone."""
+    reference, _, same, changed = fleet
+    out = tmp_path / "drift.json"
+    ref = tmp_path / "ref.json"
+    ref.write_text(json.dumps(reference.to_dict()))
+    groups = {}
+    for name, files in (("robot_a", same[:3]), ("robot_b", changed[:3])):
+        folder = tmp_path / name
+        folder.mkdir()
+        groups[name] = []
+        for f in files:
+            link = folder / Path(f).name
+            link.symlink_to(f)
+            groups[name].append(str(link))
+    argv = ["drift", "ur5", "--friction", "viscous,coulomb", "--reference", str(ref)]
+    argv += ["--group-by", "folder", "--data", *groups["robot_a"], *groups["robot_b"]]
+    assert main([*argv, "--json", str(out)]) == 0
+    files = json.loads(out.read_text())["drift"]["files"]
+    assert [Path(f["file"]).name for f in files] == ["robot_a", "robot_b"]
+    assert files[0]["changed"] is False and files[1]["changed"] is True
+    assert [t["name"] for t in files[1]["terms"] if t["changed"]] == ["elbow_joint.fv"]
+    assert files[1]["n_samples"] == 3 * 2001
 
 
 def test_cli_drift_json(robot, fleet, tmp_path, capsys):

@@ -1,7 +1,7 @@
 """``manip-id drift ROBOT --reference RESULT.json --data FILE... [--scheduler SPEC]``.
 
-Each file is identified alone with the reference's base parameters (one task per file on
-the fleet path, :func:`manip_id.drift.drift_files`) and tested against the reference: a
+Each file (``--group-by folder``: the files of each folder together) is identified alone
+with the reference's base parameters (one task per file on the fleet path, :func:`manip_id.drift.drift_files`) and tested against the reference: a
 chi-square on all base parameters, and a test per joint-level term ("panda_joint3 viscous
 friction +31 % (p < 1e-06)"). ``--json`` writes ``{"drift": {alpha, covariance_kind,
 reference, files: [{file, p_value, changed, terms: [{name, change, p_value, changed}]}]}}``.
@@ -30,6 +30,13 @@ def register(sub) -> None:
         "--data", nargs="+", action="extend", required=True, metavar="FILE",
         help="files to test, each identified alone (FILE@START:STOP windows)",
     )  # fmt: skip
+    p.add_argument(
+        "--group-by",
+        choices=("file", "folder"),
+        default="file",
+        help="test each file alone (default), or the files of each folder together (one "
+        "folder per robot)",
+    )
     p.add_argument("--alpha", type=float, default=0.05, help="significance level (0.05)")
     p.add_argument("--window", default=None, metavar="START:STOP", help="window of every file")
     p.add_argument("--cutoff", type=float, default=None, help="low-pass cut-off [Hz]")
@@ -54,10 +61,11 @@ def run(args: argparse.Namespace) -> int:
     robot = _robot(args)
     reference = load_result(args.reference)
     options = PreprocessOptions(cutoff=args.cutoff)
+    data = args.data if args.group_by == "file" else _by_folder(args.data)
     report = drift_files(
         robot,
         reference,
-        args.data,
+        data,
         alpha=args.alpha,
         scheduler=args.scheduler,
         options=options,
@@ -71,6 +79,17 @@ def run(args: argparse.Namespace) -> int:
     if args.json is not None:
         print(f"wrote {args.json}")
     return 0
+
+
+def _by_folder(files: list[str]) -> dict[str, list[str]]:
+    """``{folder: [its files]}`` in the order the folders first appear (``FILE@WINDOW`` kept)."""
+    import os
+
+    groups: dict[str, list[str]] = {}
+    for f in files:
+        path = f if os.path.exists(f) or "@" not in f else f.rsplit("@", 1)[0]
+        groups.setdefault(os.path.dirname(os.path.abspath(path)), []).append(f)
+    return groups
 
 
 def _robot(args):
