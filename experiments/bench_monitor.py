@@ -1,14 +1,15 @@
 """Per-step cost of the collision monitor (``CollisionMonitor.step``), whole processes.
 
-    python experiments/bench_monitor.py [--robot panda] [--steps 20000] [--repeat 5] [--json OUT]
+    python experiments/bench_monitor.py [--robot panda] [--steps 100000] [--repeat 5] [--json OUT]
 
 A simulated run of ``--steps`` samples at 1 kHz (the robot with viscous, Coulomb and
 offset friction) is saved once; then child processes load it, build the monitor and run
 either 0 or ``--steps`` calls of ``step(q, dq, tau, dt)`` (the default observer: gain
 25 /s and the residual's second low-pass; and the first-order observer). The per-step
 cost is the difference of the median wall times divided by the number of steps, so
-start-up, loading and set-up cancel. Target (issue 26): <= 50 us for a 7-joint arm. The
-in-process figure (``perf_counter`` around the loop, median of the runs) is printed too.
+start-up, loading and set-up cancel; the runs are interleaved (round-robin). Target
+(issue 26): <= 50 us for a 7-joint arm. The in-process figure (``perf_counter`` around
+the loop, median of the runs) is printed too.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _measure import machine, median_runs  # noqa: E402
+from _measure import machine, run  # noqa: E402
 
 FRICTION = "viscous,coulomb,offset"
 
@@ -66,7 +67,7 @@ def _data(robot_name: str, steps: int, path: Path) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--robot", default="panda")
-    parser.add_argument("--steps", type=int, default=20000)
+    parser.add_argument("--steps", type=int, default=100000)
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--json", default=None)
     parser.add_argument("--child", nargs=4, default=None, help=argparse.SUPPRESS)
@@ -76,29 +77,36 @@ def main() -> None:
         _child(path, name, int(steps), first == "1")
         return
     out: dict = {"robot": args.robot, "steps": args.steps, "machine": machine(), "cases": {}}
+    cases = {"default (K = K2 = 25 /s)": "0", "first-order": "1"}
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "run.npz"
         _data(args.robot, args.steps, path)
-        for label, first in (("default (K = K2 = 25 /s)", "0"), ("first-order", "1")):
-            runs = {}
-            for steps in (0, args.steps):
-                cmd = [sys.executable, __file__, "--child", str(path), args.robot, str(steps)]
-                runs[steps] = median_runs([*cmd, first], args.repeat)
-            wall = (runs[args.steps][0].seconds - runs[0][0].seconds) / args.steps * 1e6
+        runs: dict = {(c, n): [] for c in cases for n in (0, args.steps)}
+        for _ in range(args.repeat):  # round-robin: a change of the machine's load hits all
+            for label, first in cases.items():
+                for steps in (0, args.steps):
+                    cmd = [sys.executable, __file__, "--child", str(path), args.robot, str(steps)]
+                    r = run([*cmd, first])
+                    if r.status != 0:
+                        raise RuntimeError(f"{' '.join(cmd)} exited {r.status}: {r.stderr[-400:]}")
+                    runs[label, steps].append(r)
+        for label in cases:
+            full = statistics.median(r.seconds for r in runs[label, args.steps])
+            setup = statistics.median(r.seconds for r in runs[label, 0])
             inproc = statistics.median(
-                float(r.stderr.strip().splitlines()[-1]) for r in runs[args.steps][1]
+                float(r.stderr.strip().splitlines()[-1]) for r in runs[label, args.steps]
             )
             case = {
-                "per_step_us_whole_process": wall,
+                "per_step_us_whole_process": (full - setup) / args.steps * 1e6,
                 "per_step_us_in_process": inproc / args.steps * 1e6,
-                "wall_s_setup_only": runs[0][0].seconds,
-                "wall_s_with_steps": runs[args.steps][0].seconds,
+                "wall_s_setup_only": setup,
+                "wall_s_with_steps": full,
             }
             out["cases"][label] = case
             print(
-                f"{args.robot} {label}: {wall:.1f} us/step (whole process, median of "
-                f"{args.repeat}), {case['per_step_us_in_process']:.1f} us/step in process "
-                f"(target <= 50)"
+                f"{args.robot} {label}: {case['per_step_us_whole_process']:.1f} us/step (whole "
+                f"process, medians of {args.repeat}), {case['per_step_us_in_process']:.1f} "
+                "us/step in process (target <= 50)"
             )
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=2))
