@@ -126,13 +126,42 @@ def test_monitor_bad_input_is_one_line(robot, files, tmp_path, capsys):
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"hello": 1}))
     base = ["monitor", *ROBOT, "--calibrate", files["calib"], "--data", files["hit"]]
-    for argv in (
-        [*base, "--model", str(bad)],  # not a result
-        ["monitor", "panda", "--model", _result(robot, files, "plain"), *base[4:]],  # other robot
-        [*base, "--gain", "-3"],
-        [*base[:4], "--thresholds", str(bad), "--data", files["hit"]],  # not thresholds
-        [*base, "--json", files["hit"]],  # an input as the output
-    ):
+    plain = _result(robot, files, "plain")
+    good = [*base, "--model", plain]
+    for argv, says in (
+        ([*base, "--model", str(bad)], "not an identification result"),
+        (["monitor", "panda", "--model", plain, *base[4:]], "ur5"),  # another robot
+        ([*good, "--gain", "-3"], "gain"),
+        (base, "--model"),  # no model
+        ([*good[:4], "--model", plain, "--thresholds", str(bad), "--data", files["hit"]],
+         "not monitor thresholds"),
+        ([*good, "--json", files["hit"]], "input"),  # an input as the output
+    ):  # fmt: skip
         assert main(argv) == 2, argv
         err = capsys.readouterr().err
         assert err.startswith("manip-id: error:") and len(err.strip().splitlines()) == 1, err
+        assert says in err, err
+
+
+def test_monitor_reads_csv_columns_and_windows(robot, files, tmp_path):
+    """A CSV of other column names (--column) and a window in the file's own time give the
+    detections of the NPZ file."""
+    d = np.load(files["hit"])
+    nv = robot.nv
+    header = ["stamp", *[f"pos{j}" for j in range(nv)], *[f"vel{j}" for j in range(nv)]]
+    header += [f"eff{j}" for j in range(nv)]
+    rows = np.hstack([d["t"][:, None], d["q"], d["dq"], d["tau"]])
+    csv = tmp_path / "hit.csv"
+    np.savetxt(csv, rows, delimiter=",", header=",".join(header), comments="", fmt="%.17g")
+    cols = ["--column", "t=stamp", "--column", "q=pos*", "--column", "dq=vel*"]
+    cols += ["--column", "tau=eff*"]
+    ref, out = tmp_path / "ref.json", tmp_path / "csv.json"
+    model = _result(robot, files, "plain")
+    base = ["monitor", *ROBOT, "--model", model, "--calibrate", files["calib"]]
+    assert main([*base, "--data", f"{files['hit']}@1.5:4", "--json", str(ref)]) == 0
+    argv = [*base, "--data", f"{csv}@1.5:4", *cols, "--json", str(out)]
+    assert main(argv) == 0
+    a, b = json.loads(ref.read_text())["detections"], json.loads(out.read_text())["detections"]
+    assert len(a) == 1 and 101.5 <= a[0]["start"] <= 102.2  # the window is in seconds from
+    for x, y in zip(a, b, strict=True):  # the first stamp; times are the file's own
+        assert x["start"] == pytest.approx(y["start"]) and x["peak"] == pytest.approx(y["peak"])

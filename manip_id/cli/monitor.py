@@ -9,8 +9,9 @@ MONITOR.json`` instead of ``--calibrate`` reuses the bounds (and gains) of an ea
 
 File options as ``identify``'s: ``FILE@START:STOP`` windows, ``--window``,
 ``--torque-scale``, ``--drop-bad-rows``, ``--topic``, ``--column``. The files are read
-unfiltered (an online observer sees raw signals). Without ``--model`` the robot's own
-parameters are the model: an exported URDF loaded with ``--identified`` (its sidecar).
+unfiltered (an online observer sees raw signals); a column map applies to the CSV files,
+a topic to the bags. The model is ``--model RESULT.json``, or an exported URDF given as
+ROBOT with ``--identified`` (its sidecar; the robot's own parameters are the model).
 """
 
 from __future__ import annotations
@@ -42,8 +43,8 @@ def register(sub) -> None:
         "--model",
         metavar="RESULT.json",
         default=None,
-        help="identification result (identify --json, a report's result.json); default the "
-        "robot's own parameters (an exported URDF with --identified)",
+        help="identification result (identify --json, a report's result.json); not needed "
+        "for an exported URDF with --identified",
     )
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument(
@@ -76,8 +77,8 @@ def register(sub) -> None:
     g.add_argument("--topic", default=None, help="ROS bags: the JointState topic")
     g.add_argument("--drop-bad-rows", action="store_true", help="drop rows with NaN/Inf")
     g.add_argument(
-        "--column", action="append", default=[], metavar="FIELD=COLS",
-        help="CSV column map entry, e.g. q=pos*",
+        "--column", action="append", default=[], metavar="FIELD=COLUMNS",
+        help="CSV column map (repeatable), as identify's: --column t=stamp --column q='pos*'",
     )  # fmt: skip
     p.add_argument("--json", default=None, metavar="OUT", help="write the detections as JSON")
     p.add_argument("--report", default=None, metavar="DIR", help="write a report folder")
@@ -100,14 +101,19 @@ def _floats(text, what: str, *, none: bool = False):
 
 
 def _columns(items: list[str]):
+    """``["t=stamp", "q=pos*", "tau=3,4,5"]`` -> a column map, as ``identify --column`` reads
+    it (a copy of its private helper: the cli package has no public one yet)."""
     if not items:
         return None
-    out = {}
-    for item in items:
-        field, sep, cols = item.partition("=")
-        if not sep or not field or not cols:
-            raise InputError(f"--column expects FIELD=COLUMNS, got {item!r}")
-        out[field.strip()] = [c for c in cols.split(",") if c] if "," in cols else cols
+    out: dict = {}
+    for spec in items:
+        field, sep, cols = spec.partition("=")
+        if not sep or not field.strip() or not cols.strip():
+            raise InputError(f"--column expects FIELD=COLUMNS, e.g. q='pos*', got {spec!r}")
+        names = [c.strip() for c in cols.split(",") if c.strip()]
+        vals: list[int | str] = [int(c) if c.lstrip("-").isdigit() else c for c in names]
+        field = field.strip()
+        out[field] = vals if field == "joint_names" or len(vals) > 1 else vals[0]
     return out
 
 
@@ -168,6 +174,11 @@ def run(args: argparse.Namespace) -> int:
     )
     outputs = _reserve(args)
     robot = _robot(args)
+    if args.model is None and not args.identified:
+        raise InputError(
+            "give the identified model: --model RESULT.json, or an exported URDF as ROBOT "
+            "with --identified"
+        )
     model = load_model(robot, args.model) if args.model else model_from_robot(robot)
     if args.thresholds is not None:
         th = load_thresholds(args.thresholds)

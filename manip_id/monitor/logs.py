@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..datasets import Dataset, FileSpec, check_robot, iter_rows, open_source, parse_file_spec
-from ..datasets.stream import RowCounts, collect, torque_scale_vector
+from ..datasets.stream import RowCounts, collect, infer_format, torque_scale_vector
 from ..errors import DataError, InputError
 from ..robot import Robot
 
@@ -46,7 +46,8 @@ class ReadOptions:
     torque_scale: one gain or one per joint: ``tau_j <- G_j tau_j`` (None: 1)
     drop_bad_rows: drop (and count) rows holding NaN/Inf instead of refusing the file
     window: a window for files given without one (``"START:STOP"`` [s] or ``"#A:#B"``)
-    columns: CSV column map; topic: ROS bag topic
+    columns: column map of the CSV files (other formats ignore it); topic: ROS bag topic
+        (of the bags)
     """
 
     torque_scale: float | tuple[float, ...] | None = None
@@ -63,9 +64,12 @@ def read_log(robot: Robot, spec, options: ReadOptions | None = None) -> MonitorL
     does not fit the robot.
     """
     options = options or ReadOptions()
-    spec = parse_file_spec(
-        spec, window=options.window, columns=options.columns, topic=options.topic
-    )
+    spec = parse_file_spec(spec, window=options.window)
+    fmt = spec.format or (infer_format(spec.path) if spec.path.exists() else None)
+    if fmt == "csv" and options.columns is not None:  # the column map is for CSV files
+        spec = FileSpec(spec.path, spec.window, spec.format, options.columns, spec.topic)
+    if fmt == "rosbag" and options.topic is not None:  # the topic is for ROS bags
+        spec = FileSpec(spec.path, spec.window, spec.format, spec.columns, options.topic)
     src = open_source(spec, joint_names=list(robot.dof_names))
     scale = torque_scale_vector(options.torque_scale, src.layout.nv, "the torque scale")
     counts = RowCounts()
