@@ -11,9 +11,11 @@ reference, files: [{file, p_value, changed, terms: [{name, change, p_value, chan
 from __future__ import annotations
 
 import argparse
+import os
 
+from .._io import OutputSet
 from ..errors import InputError
-from ._common import add_robot_arguments, reserve_outputs
+from ._common import add_robot_arguments, reserve_outputs, robot_from_args
 from ._fleet import add_scheduler_argument, check_scheduler
 
 
@@ -47,19 +49,17 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..drift import drift_files
+    from ..drift import drift_files  # the fleet path loads with the command, not with --help
     from ..pipeline import PreprocessOptions
     from ..results import load_result
 
     if not 0.0 < args.alpha < 1.0:
         raise InputError(f"--alpha must be a level in (0, 1), got {args.alpha}")
     check_scheduler(args)
-    from .._io import OutputSet
-
     args.outputs = getattr(args, "outputs", None) or OutputSet()
     args.outputs.add_inputs([args.reference])
     outputs = reserve_outputs(args)
-    robot = _robot(args)
+    robot = robot_from_args(args)
     reference = load_result(args.reference)
     options = PreprocessOptions(cutoff=args.cutoff)
     data = args.data if args.group_by == "file" else _by_folder(args.data)
@@ -84,16 +84,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _by_folder(files: list[str]) -> dict[str, list[str]]:
     """``{folder: [its files]}`` in the order the folders first appear (``FILE@WINDOW`` kept)."""
-    import os
-
     groups: dict[str, list[str]] = {}
     for f in files:
         path = f if os.path.exists(f) or "@" not in f else f.rsplit("@", 1)[0]
         groups.setdefault(os.path.dirname(os.path.abspath(path)), []).append(f)
     return groups
-
-
-def _robot(args):
-    from ._common import robot_from_args
-
-    return robot_from_args(args)

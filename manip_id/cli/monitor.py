@@ -17,12 +17,15 @@ ROBOT with ``--identified`` (its sidecar; the robot's own parameters are the mod
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import numpy as np
 
+from .._io import OutputSet
+from . import native_stderr_captured
 from ..errors import InputError
-from ._common import add_robot_arguments, reserve_outputs
+from ._common import add_robot_arguments, reserve_outputs, robot_from_args
 
 
 def register(sub) -> None:
@@ -119,10 +122,6 @@ def _columns(items: list[str]):
 
 def _reserve(args):
     """The outputs, checked against every input (the --calibrate and --model files too)."""
-    import os
-
-    from .._io import OutputSet
-
     if getattr(args, "outputs", None) is None:
         args.outputs = OutputSet()
     files = [*(args.calibrate or []), *args.data, args.model, args.thresholds]
@@ -134,18 +133,15 @@ def _reserve(args):
 
 def _robot(args):
     if not args.identified:
-        from ._common import robot_from_args
-
         return robot_from_args(args)
-    from ..robot import load_robot
-    from . import native_stderr_captured
+    from ..robot import load_robot  # robot loading waits for the command (--help stays light)
 
     with native_stderr_captured("urdfdom"):
         return load_robot(args.robot, identified=True, package_dirs=args.package_dir)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..monitor import (
+    from ..monitor import (  # the package loads with the command, not with --help
         DEFAULT_FILTER_GAIN,
         DEFAULT_GAIN,
         CollisionMonitor,
@@ -251,7 +247,7 @@ def residual_figure(path, run, title: str) -> None:
     """Residuals (estimated external torques) of one run with their bounds, one axis per joint."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg  # optional heavy library
     from matplotlib.figure import Figure
-    from matplotlib.text import Text
+    from matplotlib.text import Text  # (matplotlib: optional heavy library)
 
     nv = run.residual.shape[1]
     fig = Figure(figsize=(10.0, 1.8 * nv + 1.0), dpi=100)
@@ -282,7 +278,7 @@ def residual_figure(path, run, title: str) -> None:
 
 
 def _write_report(robot, th, runs, doc, args):
-    from ..viz.report import write_report
+    from ..viz.report import write_report  # the report machinery, for --report only
 
     figs = {
         f"residuals_{i}": (
