@@ -153,3 +153,27 @@ def test_cli_drift_json(robot, fleet, tmp_path, capsys):
     assert main([*argv[:-2], "--reference", str(bad), "--data", same[0]]) == 2
     err = capsys.readouterr().err
     assert err.startswith("manip-id: error:") and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.slow
+def test_dask_local_cluster_gives_the_serial_report(robot, fleet):
+    """One task per file on a LocalCluster: the same p-values as in this process."""
+    from distributed import Client, LocalCluster
+
+    reference, _, same, changed = fleet
+    files = [same[0], changed[0]]
+    serial = drift_files(robot, reference, files)
+    cluster = LocalCluster(
+        n_workers=1,
+        threads_per_worker=1,
+        host="127.0.0.1",
+        scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
+    )
+    try:
+        with Client(cluster) as client:
+            dist = drift_files(robot, reference, files, scheduler=client)
+    finally:
+        cluster.close()
+    for a, b in zip(dist.files, serial.files, strict=True):
+        assert a.chi2 == pytest.approx(b.chi2, rel=1e-8)
+        assert [t.changed for t in a.terms] == [t.changed for t in b.terms]
