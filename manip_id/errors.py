@@ -152,6 +152,26 @@ class NumericalError(ManipIdError, ArithmeticError):
         return (_rebuild, (type(self), (self.operation, self.reason), {"hint": self.hint}))
 
 
+class ModelMismatchError(InputError):
+    """A model, or thresholds, made for another robot or other joints (the monitor, drift).
+
+    Attributes
+    ----------
+    what: what does not fit, e.g. ``"the model's parameters"`` or ``"the thresholds' joints"``.
+    expected: what the robot has (a short text).
+    got: what came (a short text).
+    """
+
+    def __init__(self, what: str, expected: str, got: str):
+        self.what = what
+        self.expected = expected
+        self.got = got
+        super().__init__(f"{what}: not for this robot: expected {expected}, got {got}")
+
+    def __reduce__(self):
+        return (_rebuild, (type(self), (self.what, self.expected, self.got), {}))
+
+
 def _rebuild(cls, args, kwargs):
     return cls(*args, **kwargs)
 
