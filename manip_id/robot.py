@@ -211,6 +211,18 @@ class Robot:
         """Total number of standard parameters (columns of the regressor)."""
         return self.layout.n_parameters
 
+    @property
+    def full_model(self) -> pin.Model:
+        """The unreduced model (every joint of the URDF, none locked)."""
+        return self._full_model
+
+    @property
+    def locked_configuration(self) -> np.ndarray:
+        """Configuration of :attr:`full_model` the locked joints are held at, shape (nq_full,)
+        (the neutral configuration when no joint is locked)."""
+        q = self._qref if self._qref is not None else pin.neutral(self._full_model)
+        return np.array(q, dtype=float)
+
     # ---------------------------------------------------------------- limits
     @property
     def lower(self) -> np.ndarray:
