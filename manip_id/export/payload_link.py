@@ -84,7 +84,9 @@ def _checked_payload(frame: str, mass, com, inertia) -> tuple[float, np.ndarray,
     check_finite(np.r_[m, c, Ic.ravel()], "payload")
     if not m > 0:
         raise PhysicalConsistencyError(f"the payload at {frame}", [Violation(frame, "m > 0", m)])
-    lam = np.linalg.eigvalsh(pseudo_inertia(pin.Inertia(m, c, Ic).toDynamicParameters()))
+    I_o = Ic + m * (float(c @ c) * np.eye(3) - np.outer(c, c))  # about the frame origin
+    phi = np.r_[m, m * c, [I_o[a, b] for a, b in _SIX]]  # [kg, kg m, kg m^2]
+    lam = np.linalg.eigvalsh(pseudo_inertia(phi))
     if not lam[0] > EIG_TOLERANCE * np.abs(lam).max():
         raise PhysicalConsistencyError(
             f"the payload at {frame} (identify it with --consistent)",

@@ -72,6 +72,55 @@ def sidecar_document(
     return doc
 
 
+def command_options(options: Mapping) -> dict:
+    """The options of a command that JSON can hold (numbers, text, flags, lists of them)."""
+    plain = (str, int, float, bool, type(None))
+    out = {}
+    for key, value in options.items():
+        if key.startswith("_") or callable(value):
+            continue
+        if isinstance(value, plain):
+            out[key] = value
+        elif isinstance(value, list | tuple) and all(isinstance(v, plain) for v in value):
+            out[key] = list(value)
+    return out
+
+
+def _finite(x) -> float | None:
+    x = float(x)
+    return x if np.isfinite(x) else None
+
+
+def identification_provenance(command: str, options: Mapping, result=None) -> dict:
+    """The sidecar's ``provenance`` of an export made by ``command``.
+
+    Parameters
+    ----------
+    command : str
+        The command, e.g. ``"manip-id identify"``.
+    options : mapping
+        Its options (``vars(args)``; only what JSON can hold is kept).
+    result : IdentificationResult, optional
+        Its uncertainty summary: the base parameters with their standard deviations, the
+        relative torque errors (train, validation), the condition number, the samples.
+    """
+    doc: dict = {"command": command, "options": command_options(options)}
+    if result is None:
+        return doc
+    err = result.relative_error
+    doc["uncertainty"] = {
+        "base_parameters": [
+            {"name": n, "value": _finite(v), "std": _finite(sd)}
+            for n, v, sd in zip(result.names, result.estimate, result.std, strict=True)
+        ],
+        "relative_error_train": _finite(err.train),
+        "relative_error_validation": None if err.validation is None else _finite(err.validation),
+        "condition_number": _finite(result.condition_number),
+        "n_samples": int(result.n_samples),
+    }
+    return doc
+
+
 def read_sidecar(path) -> dict:
     """Read and check a sidecar JSON written by an export."""
     p = Path(path)
