@@ -75,7 +75,7 @@ def sidecar_document(
 def command_options(options: Mapping) -> dict:
     """The options of a command that JSON can hold (numbers, text, flags, lists of them)."""
     plain = (str, int, float, bool, type(None))
-    out = {}
+    out: dict[str, object] = {}
     for key, value in options.items():
         if key.startswith("_") or callable(value):
             continue
