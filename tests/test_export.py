@@ -21,6 +21,7 @@ from manip_id.cli import main
 from manip_id.consistency import PhysicalConsistencyError, pseudo_inertia
 from manip_id.errors import CarriedInertiaError, ExportWarning, InputError
 from manip_id.export import export_urdf, sidecar_path
+from manip_id.export.links import SHARE_MARGIN
 
 
 def _consistent_theta(robot, seed: int = 0) -> np.ndarray:
@@ -173,6 +174,35 @@ def test_a_body_too_light_for_its_nominal_links_is_named_or_scaled(tmp_path):
     np.testing.assert_allclose(got, block, rtol=0, atol=1e-9 * np.abs(block).max())
     side = json.loads(sidecar_path(tmp_path / "b.urdf").read_text())
     assert side["composites"]["panda_joint7"]["share"] == pytest.approx(comp.share)
+    # the share is SHARE_MARGIN of the one that makes the holder singular
+    J = pseudo_inertia(block)
+    Jc = pseudo_inertia(comp.carried_parameters.sum(axis=0))
+    at_limit = np.linalg.eigvalsh(J - (comp.share / SHARE_MARGIN) * Jc)
+    assert abs(at_limit[0]) < 1e-9 * np.abs(at_limit).max()
+    assert np.linalg.eigvalsh(J - comp.share * Jc)[0] > 0
+    with pytest.raises(InputError, match="carried must be one of"):
+        export_urdf(robot, theta, tmp_path / "c.urdf", carried="all")
+
+
+def test_cli_export_mjcf_checks_before_the_work(tmp_path, capsys):
+    base = ["identify", "ur5", "--friction", "viscous", "--simulate", "--duration", "2"]
+    base += ["--rate", "50"]
+    (tmp_path / "there.xml").write_text("mine")
+    cases = [
+        ([*base, "--export-mjcf", str(tmp_path / "a.xml")], "needs a physically consistent"),
+        ([*base, "--consistent", "--export-mjcf", str(tmp_path / "a.urdf")], ".xml file"),
+        ([*base, "--consistent", "--export-mjcf", str(tmp_path / "there.xml")], "exists"),
+        (
+            [*base, "--consistent", "--export-mjcf", str(tmp_path / "no" / "a.xml")],
+            "does not exist",
+        ),
+    ]
+    for argv, message in cases:
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], err
+    assert (tmp_path / "there.xml").read_text() == "mine"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["there.xml"]
 
 
 def test_sidecar_reads_armature_and_offset_back(tmp_path):

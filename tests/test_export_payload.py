@@ -63,6 +63,8 @@ def test_exported_payload_link_gives_robot_plus_payload_torques(tmp_path, spec, 
     side = json.loads(sidecar_path(out).read_text())
     assert side["payload"]["frame"] == frame and side["payload"]["mass"] == MASS
     assert side["active_joints"] == robot.joint_names
+    back = load_robot(out, identified=True)  # the sidecar reads back
+    assert back.joint_names == robot.joint_names
 
 
 def test_payload_export_refuses_a_non_physical_payload_and_bad_input(tmp_path):

@@ -208,7 +208,7 @@ def split_composites(robot, theta, tree: LinkTree, carried: str = "auto") -> lis
             share = SHARE_MARGIN * min(1.0, _largest_share(block, total))
             rest = block - share * total
             lam, ok = _min_eig_ratio(rest)
-            scaled.append(f"{j} ({share:.3g})")
+            scaled.append(f"{j} (kept share {share:.3g})")
         if not ok:
             failed[j], worst[j] = names, lam
         out.append(Composite(j, tree.child_of[j], names, params, share, rest))
@@ -218,7 +218,8 @@ def split_composites(robot, theta, tree: LinkTree, carried: str = "auto") -> lis
         warnings.warn(
             "the nominal inertias of the links rigidly attached to "
             + ", ".join(scaled)
-            + " do not fit in the identified bodies: they were scaled by these shares",
+            + " do not fit in the identified bodies: they keep that share of their nominal "
+            "inertia (the sidecar's 'composites' lists them)",
             ExportWarning,
             stacklevel=3,
         )
