@@ -489,8 +489,9 @@ def load_robot(
     package_dirs: folders where ``package://`` mesh paths of a URDF are resolved.
     identified: for a URDF written by :func:`manip_id.export.export_urdf`: ``True`` reads
         its sidecar (``NAME.identified.json`` next to it), or give the sidecar's path.
-        Its joint terms, active joints, armature, offset and spring become the
-        defaults and the nominal parameters (explicit arguments still win).
+        Its joint terms, active joints and the positions of the locked ones, armature,
+        offset and spring become the defaults and the nominal parameters (explicit
+        arguments still win).
     profile: the identification profile (:mod:`manip_id.profiles`): a robot name or a
         ``.toml`` path, a :class:`~manip_id.profiles.RobotProfile`, or False for none.
         Default: ``robots/NAME.toml`` for a robot loaded by name when it exists; a URDF
@@ -503,10 +504,13 @@ def load_robot(
     sidecar = None
     if identified is not None and identified is not False:
         from .export import identified_options
+        from .export import locked_configuration as sidecar_locked
 
         sidecar, armature, friction, spring, active_joints = identified_options(
             spec_str, identified, armature, friction, spring, active_joints
         )
+        if locked_configuration is None:
+            locked_configuration = sidecar_locked(sidecar)
     prof = _profile(profile, name, src.by_path)
     terms = _terms(armature, friction, spring, _profile_terms(prof))
 

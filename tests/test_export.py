@@ -206,12 +206,16 @@ def test_cli_export_mjcf_checks_before_the_work(tmp_path, capsys):
 
 
 def test_sidecar_reads_armature_and_offset_back(tmp_path):
-    robot = load_robot("panda", friction="viscous,coulomb,offset", armature=True)
+    opened = {"panda_finger_joint1": 0.03, "panda_finger_joint2": 0.03}  # [m], not the default
+    robot = load_robot(
+        "panda", friction="viscous,coulomb,offset", armature=True, locked_configuration=opened
+    )
     theta = _consistent_theta(robot, seed=1)
     out = tmp_path / "panda_id.urdf"
     export_urdf(robot, theta, out)
-    back = load_robot(out, identified=True)
+    back = load_robot(out, identified=True)  # the fingers locked where they were
     assert back.joint_names == robot.joint_names
+    np.testing.assert_array_equal(back.locked_configuration, robot.locked_configuration)
     assert back.terms.enabled == robot.terms.enabled
     np.testing.assert_allclose(back.nominal_parameters, theta, rtol=1e-12, atol=1e-15)
     # an explicit sidecar path works too

@@ -23,6 +23,7 @@ from .sidecar import (
     SIDECAR_VERSION,
     apply_identified,
     identified_options,
+    locked_configuration,
     read_sidecar,
     sidecar_path,
 )
@@ -43,6 +44,7 @@ __all__ = [
     "export_texts",
     "export_urdf",
     "identified_options",
+    "locked_configuration",
     "mjcf_text",
     "payload_urdf_texts",
     "read_sidecar",

@@ -6,7 +6,8 @@
 - ``parameters``: the identified standard parameter vector (name, value, unit);
 - ``joints``: per joint its identified terms (armature ``Ia``, viscous ``fv``, Coulomb
   ``fc``, offset ``fo``, spring ``k``): armature and offset have no URDF field;
-- ``active_joints``, ``joint_terms``: how the robot was identified;
+- ``active_joints``, ``locked_joints`` (name -> position), ``joint_terms``: how the robot
+  was identified;
 - ``composites``: per body, the link holding the identified composite, the links it
   carries and their share (:mod:`manip_id.export.links`);
 - ``meshes``: how mesh references were written and those that did not resolve;
@@ -44,6 +45,18 @@ def sidecar_path(path) -> Path:
     return p.with_name(p.name + ".identified.json")
 
 
+def locked_joints(robot) -> dict[str, list[float]]:
+    """The joints locked for the identification and their positions [rad or m]."""
+    full, q = robot.full_model, robot.locked_configuration
+    out = {}
+    for i in range(1, full.njoints):
+        name = full.names[i]
+        if name not in robot.joint_names:
+            jm = full.joints[i]
+            out[name] = [float(v) for v in q[jm.idx_q : jm.idx_q + jm.nq]]
+    return out
+
+
 def sidecar_document(
     robot, theta: np.ndarray, *, target: str, source: str, provenance: Mapping | None = None
 ) -> dict:
@@ -57,6 +70,7 @@ def sidecar_document(
         "robot": robot.name,
         "source": source,
         "active_joints": list(robot.joint_names),
+        "locked_joints": locked_joints(robot),
         "joint_terms": list(robot.terms.enabled),
         "joints": {
             dof: {t: values[f"{dof}.{t}"] for t in robot.terms.enabled if f"{dof}.{t}" in values}
@@ -141,7 +155,8 @@ def identified_options(spec: str, identified, armature, friction, spring, active
     """The sidecar of an exported URDF and the load options it implies (explicit ones win).
 
     Returns ``(sidecar, armature, friction, spring, active_joints)`` for
-    :func:`manip_id.robot.load_robot`.
+    :func:`manip_id.robot.load_robot`; :func:`locked_configuration` gives the positions
+    of the locked joints.
     """
     path = sidecar_path(spec) if identified is True else Path(identified)
     data = read_sidecar(path)
@@ -155,6 +170,18 @@ def identified_options(spec: str, identified, armature, friction, spring, active
     if active_joints is None:
         active_joints = list(data["active_joints"])
     return data, armature, friction, spring, active_joints
+
+
+def locked_configuration(sidecar: dict) -> dict[str, list[float]] | None:
+    """The sidecar's locked joints as ``load_robot(locked_configuration=...)`` takes them
+    (None for a sidecar without them, version 1)."""
+    locked = sidecar.get("locked_joints")
+    if not isinstance(locked, dict) or not locked:
+        return None
+    try:
+        return {str(k): [float(x) for x in v] for k, v in locked.items()}
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"the sidecar's 'locked_joints' is malformed: {exc}") from exc
 
 
 def apply_identified(robot, sidecar: dict) -> None:

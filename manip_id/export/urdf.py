@@ -29,6 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 
 from .._checks import as_float_array, check_finite
 from .._io import atomic_write_text, check_output_file, json_text
@@ -92,12 +93,8 @@ def _fmt(x: float) -> str:
 
 def inertial_of(block: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
     """(mass [kg], com (3,) [m], inertia about the com (3, 3) [kg m^2]) of a body block."""
-    m = float(block[0])
-    c = block[1:4] / m
-    ixx, ixy, iyy, ixz, iyz, izz = block[4:]
-    I_o = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
-    I_c = I_o - m * (float(c @ c) * np.eye(3) - np.outer(c, c))
-    return m, c, I_c
+    inertia = pin.Inertia.FromDynamicParameters(np.asarray(block, dtype=float))
+    return float(inertia.mass), np.array(inertia.lever), np.array(inertia.inertia)
 
 
 def set_inertial(link: ET.Element, m: float, c, I_c) -> None:
