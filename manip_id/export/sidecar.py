@@ -23,6 +23,7 @@ from __future__ import annotations
 import json
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -45,15 +46,17 @@ def sidecar_path(path) -> Path:
     return p.with_name(p.name + ".identified.json")
 
 
-def locked_joints(robot) -> dict[str, list[float]]:
-    """The joints locked for the identification and their positions [rad or m]."""
+def locked_joints(robot) -> dict[str, Any]:
+    """The joints locked for the identification and their positions [rad or m] (a list of
+    the joint's coordinates for a joint of several, e.g. a continuous joint's cos, sin)."""
     full, q = robot.full_model, robot.locked_configuration
-    out = {}
+    out: dict[str, Any] = {}
     for i in range(1, full.njoints):
         name = full.names[i]
         if name not in robot.joint_names:
             jm = full.joints[i]
-            out[name] = [float(v) for v in q[jm.idx_q : jm.idx_q + jm.nq]]
+            coords = [float(v) for v in q[jm.idx_q : jm.idx_q + jm.nq]]
+            out[name] = coords[0] if jm.nq == 1 else coords
     return out
 
 
@@ -172,16 +175,21 @@ def identified_options(spec: str, identified, armature, friction, spring, active
     return data, armature, friction, spring, active_joints
 
 
-def locked_configuration(sidecar: dict) -> dict[str, list[float]] | None:
+def locked_configuration(sidecar: dict) -> dict[str, Any] | None:
     """The sidecar's locked joints as ``load_robot(locked_configuration=...)`` takes them
     (None for a sidecar without them, version 1)."""
     locked = sidecar.get("locked_joints")
     if not isinstance(locked, dict) or not locked:
         return None
-    try:
-        return {str(k): [float(x) for x in v] for k, v in locked.items()}
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"the sidecar's 'locked_joints' is malformed: {exc}") from exc
+    out: dict[str, Any] = {}
+    for name, value in locked.items():
+        try:
+            coords = np.asarray(value, dtype=float)
+        except (TypeError, ValueError) as exc:
+            what = f"the sidecar's locked joint {name!r}"
+            raise InputError(f"{what} has no position in [rad or m]: {value!r}") from exc
+        out[str(name)] = float(coords) if coords.ndim == 0 else coords.tolist()
+    return out
 
 
 def apply_identified(robot, sidecar: dict) -> None:
