@@ -114,6 +114,8 @@ def test_every_export_loads_in_mujoco_and_refuses_what_it_must(tmp_path):
     model = mujoco.MjModel.from_xml_path(str(out))
     assert model.nq == robot.full_model.nq and model.ngeom > 0 and model.nmesh > 0
     assert all(name.endswith(".dae") for name in result.skipped)  # COLLADA visuals left out
+    # every panda visual is COLLADA: the collision shapes are shown instead (group 0)
+    assert {int(g) for g in model.geom_group} == {0}
     names = [mujoco.mj_id2name(model, JOINT, j) for j in range(model.njnt)]
     assert names == [robot.full_model.names[i] for i in range(1, robot.full_model.njoints)]
     side = json.loads(sidecar_path(out).read_text())

@@ -12,7 +12,8 @@ same links and composites, every joint of the URDF free again) as an MJCF file:
   position limits, ``armature`` = ``Ia`` [kg m^2], ``damping`` = ``fv`` [N m s/rad],
   ``frictionloss`` = ``fc`` [N m], ``stiffness`` = ``k`` [N m/rad] (``springref`` 0) for
   the identified joints; the URDF's own values for the others;
-- the ``<visual>`` (group 1, no contact) and ``<collision>`` (group 3) geometry of the
+- the ``<visual>`` (group 1, no contact) and ``<collision>`` (group 3, hidden by
+  MuJoCo's viewer; group 0, shown, for a link whose visual was left out) geometry of the
   links: boxes, cylinders, spheres and meshes MuJoCo reads (STL, OBJ, MSH; others,
   e.g. COLLADA, are left out and listed), by absolute path.
 
@@ -188,11 +189,15 @@ def _bodies(robot, theta, exp: ExportedTree, model: pin.Model, world: ET.Element
         if not model.existFrame(link, pin.BODY):
             continue
         frame = model.frames[model.getFrameId(link, pin.BODY)]
-        for kind in ("visual", "collision"):
-            for part in el.findall(kind):
-                geom = _geom(kind, part, frame.placement, assets)
-                if geom is not None:
-                    bodies[frame.parentJoint].append(geom)
+        body = bodies[frame.parentJoint]
+        visuals = [_geom("visual", part, frame.placement, assets) for part in el.findall("visual")]
+        body.extend(g for g in visuals if g is not None)
+        for part in el.findall("collision"):
+            geom = _geom("collision", part, frame.placement, assets)
+            if geom is not None:
+                if None in visuals:  # a visual left out: its collision shape is shown instead
+                    geom.set("group", "0")
+                body.append(geom)
 
 
 @dataclass(frozen=True)
