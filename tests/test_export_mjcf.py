@@ -10,6 +10,7 @@ reason, when the optional ``mujoco`` package is not installed.
 from __future__ import annotations
 
 import json
+import warnings
 
 import numpy as np
 import pinocchio as pin
@@ -20,7 +21,7 @@ from test_export import CASES, _consistent_theta
 from manip_id import load_robot, regressor
 from manip_id.cli import main
 from manip_id.consistency import PhysicalConsistencyError
-from manip_id.errors import InputError
+from manip_id.errors import ExportWarning, InputError
 from manip_id.export import export_mjcf, sidecar_path
 from manip_id.simulation import simulate
 from manip_id.trajectories import random_trajectory
@@ -40,19 +41,29 @@ def _load(path, *disabled) -> tuple:
     return model, mujoco.MjData(model)
 
 
+def _angle(model: pin.Model, i: int, q: np.ndarray) -> float:
+    """MuJoCo's coordinate of Pinocchio joint ``i``: the angle of a continuous joint
+    (stored as cos, sin), else the coordinate itself."""
+    jm = model.joints[i]
+    c = q[jm.idx_q : jm.idx_q + jm.nq]
+    return float(np.arctan2(c[1], c[0])) if jm.nq == 2 else float(c[0])
+
+
 def _inverse(model, data, robot, q, dq, ddq) -> np.ndarray:
     """``qfrc_inverse`` of the robot's joints at each sample, shape (N, nv); the other joints
     held at the robot's locked configuration (zero velocity and acceleration)."""
-    full, qref = robot.full_model, robot.locked_configuration
+    full, qref, red = robot.full_model, robot.locked_configuration, robot.model
     out = np.empty((q.shape[0], robot.nv))
-    adr = [model.jnt_dofadr[mujoco.mj_name2id(model, JOINT, n)] for n in robot.dof_names]
-    qadr = [model.jnt_qposadr[mujoco.mj_name2id(model, JOINT, n)] for n in robot.dof_names]
+    ids = [mujoco.mj_name2id(model, JOINT, red.names[i]) for i in range(1, red.njoints)]
+    adr = model.jnt_dofadr[ids]
+    for jid in range(model.njnt):
+        i = full.getJointId(mujoco.mj_id2name(model, JOINT, jid))
+        data.qpos[model.jnt_qposadr[jid]] = _angle(full, i, qref)
     for k in range(q.shape[0]):
         data.qvel[:], data.qacc[:] = 0.0, 0.0
-        for jid in range(model.njnt):
-            name = mujoco.mj_id2name(model, JOINT, jid)
-            data.qpos[model.jnt_qposadr[jid]] = qref[full.joints[full.getJointId(name)].idx_q]
-        data.qpos[qadr], data.qvel[adr], data.qacc[adr] = q[k], dq[k], ddq[k]
+        for i, jid in enumerate(ids, start=1):
+            data.qpos[model.jnt_qposadr[jid]] = _angle(red, i, q[k])
+        data.qvel[adr], data.qacc[adr] = dq[k], ddq[k]
         mujoco.mj_inverse(model, data)
         out[k] = data.qfrc_inverse[adr]
     return out
@@ -89,6 +100,25 @@ def test_mujoco_inverse_dynamics_replays_the_identified_torques(tmp_path, spec, 
     model.opt.disableflags &= ~int(OFF.mjDSBL_FRICTIONLOSS)
     slide_on = _inverse(model, data, robot, q, dq, zero)
     np.testing.assert_allclose(slide_on - slide_off, coulomb, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    "spec", ["xarm7", "z1", "talos_arm", "kinova", "double_pendulum_continuous", "finger_edu"]
+)
+def test_other_manipulators_replay_too(tmp_path, spec):
+    """Unaligned axes, continuous joints (cos, sin in Pinocchio, an angle in MuJoCo),
+    fixed tool links, holders lighter than their nominal links (finger_edu)."""
+    robot = get_robot(spec, armature=True, friction="viscous")
+    theta = robot.nominal_parameters.copy()
+    theta[robot.n_rigid :] = 0.1  # [kg m^2], [N m s/rad]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ExportWarning)  # finger_edu: a scaled share
+        export_mjcf(robot, theta, tmp_path / "r.xml")
+    q, dq, ddq = robot.random_states(10, seed=2)
+    want = (regressor(robot, q, dq, ddq) @ theta).reshape(10, robot.nv)
+    model, data = _load(tmp_path / "r.xml", OFF.mjDSBL_CONTACT, OFF.mjDSBL_LIMIT)
+    got = _inverse(model, data, robot, q, dq, ddq)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-9 * np.abs(want).max())
 
 
 def test_the_spring_of_a_prismatic_joint_is_mujocos_stiffness(tmp_path):
