@@ -117,7 +117,10 @@ def link_inertia(link: ET.Element) -> pin.Inertia | None:
     ixx, ixy, ixz, iyy, iyz, izz = (get(k) for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"))
     I_c = np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])  # [kg m^2]
     R = pin.rpy.rpyToMatrix(*rpy)
-    return pin.Inertia(m, xyz, R @ I_c @ R.T)
+    try:
+        return pin.Inertia(m, xyz, R @ I_c @ R.T)
+    except RuntimeError as exc:  # Pinocchio refuses a non-positive inertia
+        raise RobotError(f"link {link.get('name')!r} of the URDF: {exc}") from exc
 
 
 @dataclass(frozen=True)
@@ -155,8 +158,8 @@ def carried_parameters(robot, tree: LinkTree) -> dict[str, tuple[list[str], np.n
         if link == tree.child_of[joint]:
             continue
         inertia = link_inertia(tree.links[link])
-        if inertia is None or inertia.mass == 0.0:
-            continue
+        if inertia is None or not np.any(inertia.toDynamicParameters()):
+            continue  # nothing to carry (a frame-only link)
         if not full.existFrame(link, pin.BODY):
             raise RobotError(f"link {link!r} of the URDF is not a body frame of {robot.name!r}")
         oMl = data.oMf[full.getFrameId(link, pin.BODY)]
