@@ -40,13 +40,13 @@ from .._io import atomic_write_text, json_text
 from ..errors import RobotError
 from ..parameters import bounded_range
 from .links import Composite, urdf_floats
-from .sidecar import sidecar_document, sidecar_path
+from .sidecar import sidecar_path
 from .urdf import (
     ExportedTree,
     ExportResult,
     check_output,
     checked_theta,
-    composites_document,
+    exported_sidecar,
     exported_tree,
 )
 
@@ -243,15 +243,8 @@ def mjcf_text(
     if not assets.meshes:
         root.remove(asset)
     ET.indent(root)
-    side = sidecar_document(
-        robot, theta, target=str(name), source=str(exp.source), provenance=provenance
-    )
-    side["composites"] = composites_document(exp.composites)
-    side["meshes"] = {
-        "written": "absolute",
-        "unresolved": exp.unresolved,
-        "left_out": assets.skipped,
-    }
+    side = exported_sidecar(robot, theta, exp, name, provenance)
+    side["meshes"]["left_out"] = assets.skipped
     side["not_in_file"] = [t for t in robot.terms.enabled if t == "fo"]  # offset: no MJCF field
     text = ET.tostring(root, encoding="unicode") + "\n"
     return MjcfText(text, side, exp.composites, exp.unresolved, assets.skipped)

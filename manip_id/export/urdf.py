@@ -163,6 +163,7 @@ class ExportedTree:
     tree: LinkTree
     composites: list[Composite]
     unresolved: list[str]
+    meshes: str
 
     def text(self) -> str:
         return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(self.root, "unicode") + "\n"
@@ -188,7 +189,7 @@ def exported_tree(
                 set_inertial(tree.links[link], *nominal)
     _set_dynamics(robot, tree, theta)
     unresolved = rewrite_meshes(root, src.parent, robot.package_dirs, meshes)
-    return ExportedTree(src, root, tree, composites, unresolved)
+    return ExportedTree(src, root, tree, composites, unresolved, meshes)
 
 
 def _scaled_nominal(link: ET.Element, share: float) -> tuple[float, np.ndarray, np.ndarray]:
@@ -197,12 +198,20 @@ def _scaled_nominal(link: ET.Element, share: float) -> tuple[float, np.ndarray, 
     return share * inertia.mass, np.array(inertia.lever), share * np.array(inertia.inertia)
 
 
-def composites_document(composites: list[Composite]) -> dict:
-    """The sidecar's ``composites``: per body its holder, carried links and share."""
-    return {
+def exported_sidecar(
+    robot, theta: np.ndarray, exp: ExportedTree, target: str, provenance: Mapping | None
+) -> dict:
+    """The sidecar of an export of ``exp``: the parameters, and per body its holder,
+    carried links and share (``composites``), and the mesh references (``meshes``)."""
+    side = sidecar_document(
+        robot, theta, target=str(target), source=str(exp.source), provenance=provenance
+    )
+    side["composites"] = {
         c.joint: {"holder": c.holder, "carried": list(c.carried), "share": c.share}
-        for c in composites
+        for c in exp.composites
     }
+    side["meshes"] = {"written": exp.meshes, "unresolved": exp.unresolved}
+    return side
 
 
 @dataclass(frozen=True)
@@ -228,11 +237,7 @@ def export_texts(
     """The exported URDF text and sidecar of :func:`export_urdf`, without writing them."""
     theta = checked_theta(robot, theta)
     exp = exported_tree(robot, theta, source=source, carried=carried, meshes=meshes)
-    side = sidecar_document(
-        robot, theta, target=str(urdf_name), source=str(exp.source), provenance=provenance
-    )
-    side["composites"] = composites_document(exp.composites)
-    side["meshes"] = {"written": meshes, "unresolved": exp.unresolved}
+    side = exported_sidecar(robot, theta, exp, urdf_name, provenance)
     return ExportTexts(exp.text(), side, exp.composites, exp.unresolved)
 
 
