@@ -14,7 +14,8 @@ defaults to /work/shared/data/panda_gaz2019, OUT is a temporary folder), then pr
 - a 2 s MuJoCo rollout of the MJCF export from rest at the log's first configuration
   (fingers at the locked configuration), the identified gravity ``g(q)`` of the
   exported URDF (Pinocchio) applied as the compensation: the largest joint excursion
-  [rad], with MuJoCo's friction loss on and off (off: the compensation alone holds it);
+  of the 7 arm joints [mrad], with MuJoCo's friction loss on and off (off: the
+  compensation alone holds it);
 - replay along the log's validation part (preprocessed as ``identify`` does): per
   joint, the relative difference ``||tau_x - Y theta|| / ||Y theta||`` of the URDF
   through Pinocchio (``rnea`` + URDF damping and friction + the sidecar's offset) and
@@ -61,7 +62,7 @@ def full_model_checks(urdf: Path, n: int = 1000) -> None:
         worst = min(worst, float(np.linalg.eigvalsh(np.triu(M) + np.triu(M, 1).T)[0]))
         finite &= bool(np.isfinite(pin.aba(model, data, q, z, z)).all())
     print(f"full exported model: nq={model.nq}; over neutral + {n} random states")
-    print(f"  smallest crba eigenvalue {worst:.4g} [kg m^2], aba finite: {finite}")
+    print(f"  smallest crba eigenvalue {worst:.4g} [kg m^2 or kg], aba finite: {finite}")
 
 
 def rollout(xml: Path, urdf: Path, q0: np.ndarray, friction: bool, seconds: float = 2.0) -> float:
@@ -156,8 +157,7 @@ def main() -> None:
     for friction in (True, False):
         dev = rollout(xml, urdf, q0, friction)
         state = "on" if friction else "off"
-        print(f"2 s MuJoCo rollout from rest, friction loss {state}: largest excursion ")
-        print(f"  of the 7 arm joints {dev * 1e3:.4g} mrad")
+        print(f"2 s MuJoCo rollout from rest, friction loss {state}: {dev * 1e3:.4g} mrad")
     replay(robot, theta, urdf, xml, side, valid.q, valid.dq, valid.ddq, valid.tau)
 
 
