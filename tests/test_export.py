@@ -85,12 +85,13 @@ def test_the_full_exported_model_simulates(tmp_path, spec, active):
     """No joint locked: every body physical, crba positive definite, aba finite."""
     robot = load_robot(spec, friction="viscous,coulomb", active_joints=active)
     out = tmp_path / "robot_id.urdf"
-    export_urdf(robot, _consistent_theta(robot), out)
+    result = export_urdf(robot, _consistent_theta(robot), out)
     model = pin.buildModelFromUrdf(str(out))
     data = model.createData()
     for i in range(1, model.njoints):  # every moving body: pseudo-inertia positive definite
         lam = np.linalg.eigvalsh(pseudo_inertia(model.inertias[i].toDynamicParameters()))
         assert lam[0] > 1e-10 * lam[-1], model.names[i]
+        assert result.min_eigenvalues[model.names[i]] == pytest.approx(lam[0])  # self-check
     rng = np.random.default_rng(5)
     lo, hi = model.lowerPositionLimit, model.upperPositionLimit
     for _ in range(20):
@@ -286,3 +287,28 @@ def test_report_draws_the_consistent_ellipsoids_beside_the_nominal_ones(tmp_path
     scene = (rep / "scene.html").read_text()
     assert "nominal: 6 of 6 bodies" in scene
     assert "identified (consistent): 6 of 6 bodies" in scene
+
+
+_TWO_LINKS = """<robot name="two">
+  <link name="base"/>
+  <link name="l1"><inertial><origin xyz="0.1 0 0"/><mass value="2"/>
+    <inertia ixx="0.01" iyy="0.02" izz="0.02" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <link name="tip"/>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>
+    <axis xyz="0 0 1"/><limit lower="-2" upper="2" effort="10" velocity="2"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="tip"/>
+    <origin xyz="0.2 0 0"/><axis xyz="0 0 1"/>
+    <limit lower="-2" upper="2" effort="10" velocity="2"/></joint>
+</robot>
+"""
+
+
+def test_a_locked_link_without_inertia_is_named(tmp_path):
+    """The unreduced model cannot simulate when a locked joint carries nothing: the export
+    (of a correct identified model) says which body."""
+    src = tmp_path / "two.urdf"
+    src.write_text(_TWO_LINKS)
+    robot = load_robot(src, active_joints=["j1"])
+    with pytest.warns(ExportWarning, match="bodies of j2"):
+        result = export_urdf(robot, robot.nominal_parameters, tmp_path / "two_id.urdf")
+    assert result.min_eigenvalues["j1"] > 0 and result.min_eigenvalues["j2"] == 0

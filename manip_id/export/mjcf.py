@@ -44,6 +44,7 @@ from .sidecar import sidecar_path
 from .urdf import (
     ExportedTree,
     ExportResult,
+    body_check,
     check_output,
     checked_theta,
     exported_sidecar,
@@ -209,6 +210,7 @@ class MjcfText:
     composites: list[Composite]
     unresolved: list[str]
     skipped: list[str]
+    min_eigenvalues: dict[str, float]
 
 
 def mjcf_text(
@@ -223,10 +225,8 @@ def mjcf_text(
     """The MJCF text and sidecar of :func:`export_mjcf`, without writing them."""
     theta = checked_theta(robot, theta)
     exp = exported_tree(robot, theta, source=source, carried=carried, meshes="absolute")
-    try:
-        model = pin.buildModelFromXML(exp.text())
-    except Exception as exc:  # Pinocchio raises plain RuntimeError / ValueError
-        raise RobotError(f"cannot build the exported model of {robot.name!r}: {exc}") from exc
+    model = exp.model()
+    check = body_check(model)
     root = ET.Element("mujoco", {"model": robot.name})
     ET.SubElement(
         root,
@@ -245,9 +245,10 @@ def mjcf_text(
     ET.indent(root)
     side = exported_sidecar(robot, theta, exp, name, provenance)
     side["meshes"]["left_out"] = assets.skipped
+    side["min_eigenvalues"] = check
     side["not_in_file"] = [t for t in robot.terms.enabled if t == "fo"]  # offset: no MJCF field
     text = ET.tostring(root, encoding="unicode") + "\n"
-    return MjcfText(text, side, exp.composites, exp.unresolved, assets.skipped)
+    return MjcfText(text, side, exp.composites, exp.unresolved, assets.skipped, check)
 
 
 def export_mjcf(
@@ -284,4 +285,6 @@ def export_mjcf(
     atomic_write_text(out, texts.xml)
     side = sidecar_path(out)
     atomic_write_text(side, json_text(texts.sidecar))
-    return ExportResult(out, side, texts.composites, texts.unresolved, texts.skipped)
+    return ExportResult(
+        out, side, texts.composites, texts.unresolved, texts.skipped, texts.min_eigenvalues
+    )

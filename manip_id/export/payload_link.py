@@ -33,10 +33,10 @@ import pinocchio as pin
 from .._checks import as_float_array, check_finite
 from .._io import atomic_write_text, json_text
 from ..consistency import EIG_TOLERANCE, PhysicalConsistencyError, Violation, pseudo_inertia
-from ..errors import InputError
+from ..errors import InputError, RobotError
 from .meshes import rewrite_meshes
 from .sidecar import sidecar_document
-from .urdf import ExportResult, check_output, read_urdf, set_inertial
+from .urdf import ExportResult, body_check, check_output, read_urdf, set_inertial
 
 _SIX = ((0, 0), (0, 1), (1, 1), (0, 2), (1, 2), (2, 2))
 
@@ -149,6 +149,11 @@ def payload_urdf_texts(
         "inertia": [float(Ic[a, b]) for a, b in _SIX],
     }
     text = '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, "unicode") + "\n"
+    try:
+        model = pin.buildModelFromXML(text)
+    except Exception as exc:  # Pinocchio raises plain RuntimeError / ValueError
+        raise RobotError(f"cannot build the exported model of {src}: {exc}") from exc
+    side["min_eigenvalues"] = body_check(model)
     return PayloadTexts(text, side, parent)
 
 
@@ -195,4 +200,5 @@ def export_payload_urdf(
     )
     atomic_write_text(out, texts.urdf)
     atomic_write_text(side, json_text(texts.sidecar))
-    return ExportResult(out, side, [], texts.sidecar["meshes"]["unresolved"], [])
+    unresolved = texts.sidecar["meshes"]["unresolved"]
+    return ExportResult(out, side, [], unresolved, [], texts.sidecar["min_eigenvalues"])

@@ -23,6 +23,7 @@ Everything else (limits, comments, other tags) is left as it was.
 
 from __future__ import annotations
 
+import warnings
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -33,8 +34,8 @@ import pinocchio as pin
 
 from .._checks import as_float_array, check_finite
 from .._io import atomic_write_text, check_output_file, json_text
-from ..consistency import require_consistent
-from ..errors import InputError, RobotError
+from ..consistency import EIG_TOLERANCE, pseudo_inertia, require_consistent
+from ..errors import ExportWarning, InputError, RobotError
 from .links import Composite, LinkTree, link_inertia, link_tree, split_composites
 from .meshes import rewrite_meshes
 from .sidecar import sidecar_document, sidecar_path
@@ -50,6 +51,9 @@ class ExportResult:
     composites: per identified body, its holder link, carried links and their share
     unresolved: mesh references that name no file (left as they were)
     skipped: meshes left out of an MJCF file (a format MuJoCo cannot read)
+    min_eigenvalues: the self-check: per joint of the unreduced exported model (no joint
+        locked), the smallest eigenvalue of its body's pseudo-inertia (all positive: the
+        model simulates) [mixed kg / kg m^2]
     """
 
     path: Path
@@ -57,6 +61,7 @@ class ExportResult:
     composites: list[Composite]
     unresolved: list[str]
     skipped: list[str]
+    min_eigenvalues: dict[str, float]
 
     @property
     def urdf(self) -> Path:
@@ -168,6 +173,35 @@ class ExportedTree:
     def text(self) -> str:
         return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(self.root, "unicode") + "\n"
 
+    def model(self) -> pin.Model:
+        """The unreduced Pinocchio model of the rewritten URDF."""
+        try:
+            return pin.buildModelFromXML(self.text())
+        except Exception as exc:  # Pinocchio raises plain RuntimeError / ValueError
+            raise RobotError(f"cannot build the exported model of {self.source}: {exc}") from exc
+
+
+def body_check(model: pin.Model) -> dict[str, float]:
+    """Per joint of ``model``, the smallest eigenvalue of its body's pseudo-inertia; warns
+    (:class:`~manip_id.errors.ExportWarning`) naming the bodies that are not positive
+    definite (a locked joint's link whose nominal inertia is not physical: the unreduced
+    model will not simulate, the identified one still does)."""
+    out: dict[str, float] = {}
+    bad: list[str] = []
+    for i in range(1, model.njoints):
+        lam = np.linalg.eigvalsh(pseudo_inertia(model.inertias[i].toDynamicParameters()))
+        out[model.names[i]] = float(lam[0])
+        if not lam[0] > EIG_TOLERANCE * np.abs(lam).max():
+            bad.append(model.names[i])
+    if bad:
+        warnings.warn(
+            "the bodies of " + ", ".join(bad) + " in the exported model (no joint locked) "
+            "are not physical: their URDF links' own inertias are not (they are kept)",
+            ExportWarning,
+            stacklevel=3,
+        )
+    return out
+
 
 def exported_tree(
     robot, theta, *, source=None, carried: str = "auto", meshes: str = "absolute"
@@ -222,6 +256,7 @@ class ExportTexts:
     sidecar: dict
     composites: list[Composite]
     unresolved: list[str]
+    min_eigenvalues: dict[str, float]
 
 
 def export_texts(
@@ -238,7 +273,9 @@ def export_texts(
     theta = checked_theta(robot, theta)
     exp = exported_tree(robot, theta, source=source, carried=carried, meshes=meshes)
     side = exported_sidecar(robot, theta, exp, urdf_name, provenance)
-    return ExportTexts(exp.text(), side, exp.composites, exp.unresolved)
+    check = body_check(exp.model())
+    side["min_eigenvalues"] = check
+    return ExportTexts(exp.text(), side, exp.composites, exp.unresolved, check)
 
 
 def export_urdf(
@@ -293,4 +330,4 @@ def export_urdf(
     )
     atomic_write_text(urdf, texts.urdf)
     atomic_write_text(side, json_text(texts.sidecar))
-    return ExportResult(urdf, side, texts.composites, texts.unresolved, [])
+    return ExportResult(urdf, side, texts.composites, texts.unresolved, [], texts.min_eigenvalues)
