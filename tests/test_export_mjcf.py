@@ -151,6 +151,14 @@ def test_every_export_loads_in_mujoco_and_refuses_what_it_must(tmp_path):
     assert names == [robot.full_model.names[i] for i in range(1, robot.full_model.njoints)]
     side = json.loads(sidecar_path(out).read_text())
     assert side["composites"]["panda_joint7"]["carried"][0] == "panda_hand"
+    # one motor per identified joint: ctrl is the joint torque, within the effort limit
+    assert model.nu == robot.nv
+    data = mujoco.MjData(model)
+    data.ctrl[:] = np.linspace(-100.0, 100.0, robot.nv)  # [N m]
+    mujoco.mj_forward(model, data)
+    dofs = [model.jnt_dofadr[mujoco.mj_name2id(model, JOINT, n)] for n in robot.dof_names]
+    want = np.clip(data.ctrl, -robot.effort_limit, robot.effort_limit)
+    np.testing.assert_allclose(data.qfrc_actuator[dofs], want, rtol=1e-12)
     with pytest.raises(InputError, match="exists"):
         export_mjcf(robot, theta, out)
     with pytest.raises(InputError, match=r"\.xml"):

@@ -12,6 +12,8 @@ same links and composites, every joint of the URDF free again) as an MJCF file:
   position limits, ``armature`` = ``Ia`` [kg m^2], ``damping`` = ``fv`` [N m s/rad],
   ``frictionloss`` = ``fc`` [N m], ``stiffness`` = ``k`` [N m/rad] (``springref`` 0) for
   the identified joints; the URDF's own values for the others;
+- a ``<motor>`` per identified joint (``ctrl`` = joint torque, ``ctrlrange`` the effort
+  limit when the URDF sets one), for a controller to drive the model;
 - the ``<visual>`` (group 1, no contact) and ``<collision>`` (group 3, hidden by
   MuJoCo's viewer; group 0, shown, for a link whose visual was left out) geometry of the
   links: boxes, cylinders, spheres and meshes MuJoCo reads (STL, OBJ, MSH; others,
@@ -38,7 +40,7 @@ import pinocchio as pin
 
 from .._io import atomic_write_text, json_text
 from ..errors import RobotError
-from ..parameters import bounded_range
+from ..parameters import bounded_range, bounded_rate
 from .links import Composite, urdf_floats
 from .sidecar import sidecar_path
 from .urdf import (
@@ -163,6 +165,20 @@ def _joint(robot, theta: np.ndarray, model: pin.Model, i: int) -> ET.Element:
     return ET.Element("joint", attrs)
 
 
+def _motors(robot) -> ET.Element:
+    """One ``<motor>`` per identified joint: ``ctrl`` is the joint torque [N m or N]
+    (``gear`` 1), limited to the URDF's effort limit when it is set."""
+    actuator = ET.Element("actuator")
+    effort = robot.effort_limit
+    bounded = bounded_rate(effort)
+    for k, dof in enumerate(robot.dof_names):
+        attrs = {"name": f"{dof}_motor", "joint": dof, "gear": "1"}
+        if bounded[k]:
+            attrs["ctrlrange"] = _vec([-effort[k], effort[k]])
+        ET.SubElement(actuator, "motor", attrs)
+    return actuator
+
+
 def _inertial(inertia: pin.Inertia) -> ET.Element:
     Ic = np.asarray(inertia.inertia)
     full = [Ic[0, 0], Ic[1, 1], Ic[2, 2], Ic[0, 1], Ic[0, 2], Ic[1, 2]]
@@ -242,6 +258,7 @@ def mjcf_text(
         ET.SubElement(asset, "mesh", {"name": mesh_name, "file": file, "scale": scale})
     if not assets.meshes:
         root.remove(asset)
+    root.append(_motors(robot))
     ET.indent(root)
     side = exported_sidecar(robot, theta, exp, name, provenance)
     side["meshes"]["left_out"] = assets.skipped
