@@ -172,7 +172,8 @@ def carried_parameters(robot, tree: LinkTree) -> dict[str, tuple[list[str], np.n
     }
 
 
-def _min_eig_ratio(pi: np.ndarray) -> tuple[float, bool]:
+def _positive_definite(pi: np.ndarray) -> tuple[float, bool]:
+    """Smallest eigenvalue of ``J(pi)`` and whether it passes the consistency test."""
     lam = np.linalg.eigvalsh(pseudo_inertia(pi))
     return float(lam[0]), bool(lam[0] > EIG_TOLERANCE * np.abs(lam).max())
 
@@ -180,8 +181,10 @@ def _min_eig_ratio(pi: np.ndarray) -> tuple[float, bool]:
 def _largest_share(theta_j: np.ndarray, carried: np.ndarray) -> float:
     """The share ``s`` at which ``J(theta_j) - s J_c`` becomes singular (inf if never)."""
     Jt, Jc = pseudo_inertia(theta_j), pseudo_inertia(carried)
-    L = np.linalg.cholesky(Jt)
-    Li = np.linalg.inv(L)
+    try:
+        Li = np.linalg.inv(np.linalg.cholesky(Jt))
+    except np.linalg.LinAlgError:  # J(theta_j) not numerically positive definite
+        return 0.0
     mu = float(np.linalg.eigvalsh(Li @ Jc @ Li.T).max())
     return np.inf if mu <= 0 else 1.0 / mu
 
@@ -206,11 +209,11 @@ def split_composites(robot, theta, tree: LinkTree, carried: str = "auto") -> lis
         total = params.sum(axis=0) if names else np.zeros(10)
         share = 1.0
         rest = block - total
-        lam, ok = _min_eig_ratio(rest)
+        lam, ok = _positive_definite(rest)
         if names and not ok and carried != "nominal":
             share = SHARE_MARGIN * min(1.0, _largest_share(block, total))
             rest = block - share * total
-            lam, ok = _min_eig_ratio(rest)
+            lam, ok = _positive_definite(rest)
             scaled.append(f"{j} (kept share {share:.3g})")
         if not ok:
             failed[j], worst[j] = names, lam
