@@ -21,8 +21,10 @@ same links and composites, every joint of the URDF free again) as an MJCF file:
 
 MuJoCo's inverse dynamics of the file (``mj_inverse`` with contacts, limits and friction
 loss disabled) is then ``M(q) ddq + C(q, dq) dq + g(q) + Ia ddq + fv dq + k q`` of the
-identified parameters; the Coulomb ``fc sign(dq)`` is MuJoCo's friction-loss constraint.
-The offset ``fo`` has no MJCF field: it is in the sidecar.
+identified parameters; the Coulomb ``fc sign(dq)`` is MuJoCo's friction-loss constraint,
+a soft constraint that equals it in steady sliding (``qacc = 0``) and mixes in the
+acceleration otherwise. A continuous joint (``cos, sin`` in Pinocchio) is a hinge without
+range (its angle in MuJoCo). The offset ``fo`` has no MJCF field: it is in the sidecar.
 
 Nothing here imports ``mujoco``: the text is written by hand and MuJoCo is only needed to
 load it (the optional extra ``manip_id[mujoco]``).
