@@ -42,7 +42,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
         "RobotError",
     ),
     ".consistency": ("PhysicalConsistencyError", "check_consistency", "pseudo_inertia"),
-    ".export": ("export_urdf",),
+    ".export": ("export_mjcf", "export_payload_urdf", "export_urdf"),
     ".estimators": (
         "ConcurrentLearningEstimator",
         "DREMEstimator",

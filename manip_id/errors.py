@@ -232,3 +232,39 @@ def format_direction(
         sign = "-" if c[i] < 0 else "+"
         out += f"{coef}{names[i]}" if n == 0 else f" {sign} {coef}{names[i]}"
     return out
+
+
+# ------------------------------------------------------------------ export (helper export)
+class CarriedInertiaError(ManipIdError):
+    """An identified composite body cannot carry the nominal inertias of its rigid links.
+
+    The export gives every link attached rigidly to a joint's body (fixed joints, joints
+    locked for the identification) its nominal inertia and the joint's own link the
+    identified composite minus them; for these bodies that remainder is not physical.
+
+    Attributes
+    ----------
+    bodies: per body (its joint's name), the links it carries.
+    min_eigenvalues: per body, the smallest eigenvalue of the remainder's pseudo-inertia
+        [mixed kg / kg m^2].
+    """
+
+    def __init__(self, bodies: dict[str, list[str]], min_eigenvalues: dict[str, float]):
+        self.bodies = {k: list(v) for k, v in bodies.items()}
+        self.min_eigenvalues = {k: float(v) for k, v in min_eigenvalues.items()}
+        shown = "; ".join(
+            f"{j} (carrying {', '.join(links)}: smallest pseudo-inertia eigenvalue "
+            f"{self.min_eigenvalues.get(j, math.nan):.4g})"
+            for j, links in self.bodies.items()
+        )
+        super().__init__(
+            "the identified bodies cannot carry the nominal inertias of their rigid links: "
+            f"{shown} (export with carried='scaled' to give these links a consistent share)"
+        )
+
+    def __reduce__(self):
+        return (_rebuild, (type(self), (self.bodies, self.min_eigenvalues), {}))
+
+
+class ExportWarning(UserWarning):
+    """An export changed something the user should know of (a scaled share of carried links)."""

@@ -159,6 +159,18 @@ class Robot:
         """Total number of standard parameters (columns of the regressor)."""
         return self.layout.n_parameters
 
+    @property
+    def full_model(self) -> pin.Model:
+        """The unreduced model (every joint of the URDF, none locked)."""
+        return self._full_model
+
+    @property
+    def locked_configuration(self) -> np.ndarray:
+        """Configuration of :attr:`full_model` the locked joints are held at, shape (nq_full,)
+        (the neutral configuration when no joint is locked)."""
+        q = self._qref if self._qref is not None else pin.neutral(self._full_model)
+        return np.array(q, dtype=float)
+
     # ---------------------------------------------------------------- limits
     @property
     def lower(self) -> np.ndarray:
@@ -379,8 +391,9 @@ def load_robot(
     package_dirs: folders where ``package://`` mesh paths of a URDF are resolved.
     identified: for a URDF written by :func:`manip_id.export.export_urdf`: ``True`` reads
         its sidecar (``NAME.identified.json`` next to it), or give the sidecar's path.
-        Its joint terms, active joints, armature, offset and spring become the
-        defaults and the nominal parameters (explicit arguments still win).
+        Its joint terms, active joints and the positions of the locked ones, armature,
+        offset and spring become the defaults and the nominal parameters (explicit
+        arguments still win).
     profile: the identification profile (:mod:`manip_id.profiles`): a robot name or a
         ``.toml`` path, a :class:`~manip_id.profiles.RobotProfile`, or False for none.
         Default: ``robots/NAME.toml`` for a robot loaded by name when it exists; a URDF
@@ -393,10 +406,13 @@ def load_robot(
     sidecar = None
     if identified is not None and identified is not False:
         from .export import identified_options
+        from .export import locked_configuration as sidecar_locked
 
         sidecar, armature, friction, spring, active_joints = identified_options(
             spec_str, identified, armature, friction, spring, active_joints
         )
+        if locked_configuration is None:
+            locked_configuration = sidecar_locked(sidecar)
     prof = resolve_profile(profile, name, src.by_path)
     terms = joint_terms(armature, friction, spring, profile_terms(prof))
 

@@ -291,13 +291,12 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
             train = _collect(robot, specs, options, scans)
             valid = None if vspecs is None else _collect(robot, vspecs, options, scans)
         path = cmd._write_report(robot, result, train, train, valid, report, args)
-    if args.export_urdf:
+    if args.export_urdf or args.export_mjcf:
         cmd._export(robot, result, args, outputs)
     outputs.publish()
     if args.json:
         print(f"wrote {args.json}")
-    if args.export_urdf:
-        print(f"wrote {args.export_urdf} and its sidecar")
+    cmd._exports_written(args)
     if path is not None:
         print(f"wrote the report to {path}/index.html")
     return 0

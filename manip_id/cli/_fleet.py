@@ -172,13 +172,12 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     path = None
     if args.report is not None:
         path = _write_report(robot, result, report, args)
-    if getattr(args, "export_urdf", None):
+    if getattr(args, "export_urdf", None) or getattr(args, "export_mjcf", None):
         cmd._export(robot, result, args, outputs)
     outputs.publish()
     if args.json:
         print(f"wrote {args.json}")
-    if getattr(args, "export_urdf", None):
-        print(f"wrote {args.export_urdf} and its sidecar")
+    cmd._exports_written(args)
     if path is not None:
         print(f"wrote the report to {path}/index.html")
     return 0

@@ -158,7 +158,7 @@ def register(sub) -> None:
     p.add_argument(
         "--force",
         action="store_true",
-        help="replace a non-empty --report folder or an existing --export-urdf file",
+        help="replace a non-empty --report folder or an existing --export-urdf/--export-mjcf file",
     )
     p.add_argument(
         "--quiet",
@@ -229,6 +229,12 @@ def register(sub) -> None:
         metavar="OUT.urdf",
         help="write the robot's URDF with the identified inertias and friction (needs "
         "--consistent); armature and offset go to OUT.identified.json next to it",
+    )
+    phys.add_argument(
+        "--export-mjcf",
+        metavar="OUT.xml",
+        help="write the identified robot as MuJoCo MJCF: inertias, armature, damping, "
+        "frictionloss, meshes (needs --consistent); sidecar OUT.xml.identified.json",
     )
     _fleet.add_arguments(p)
     _files.add_arguments(p)
@@ -354,10 +360,12 @@ def _check_consistent_args(args) -> None:
         args.prior_weight = DEFAULT_PRIOR_WEIGHT
     check_options(args.solver, args.prior, args.prior_weight)
     if not args.consistent:
-        if args.export_urdf:
-            raise InputError(
-                "--export-urdf needs a physically consistent estimate: add --consistent"
-            )
+        for flag, value in (
+            ("--export-urdf", args.export_urdf),
+            ("--export-mjcf", args.export_mjcf),
+        ):
+            if value:
+                raise InputError(f"{flag} needs a physically consistent estimate: add --consistent")
         if given:
             raise InputError(f"{given[0]} applies to --consistent only")
         return
@@ -365,19 +373,37 @@ def _check_consistent_args(args) -> None:
         raise InputError(f"--consistent applies to --method ols or wls, got {args.method}")
     if _fleet.wanted(args):
         raise InputError("--consistent is not available with several data files yet")
-    if args.export_urdf:
+    if args.export_urdf or args.export_mjcf:
         from ..export import check_output
 
-        check_output(args.export_urdf, force=args.force)
+        if args.export_urdf:
+            check_output(args.export_urdf, force=args.force)
+        if args.export_mjcf:
+            check_output(args.export_mjcf, force=args.force, suffixes=(".xml",))
 
 
 def _export(robot, result, args, outputs) -> None:
-    """Stage the exported URDF and its sidecar (published with the other outputs)."""
-    from ..export import export_texts, sidecar_path
+    """Stage the exported URDF / MJCF and their sidecars (published with the other outputs)."""
+    from ..export import export_texts, mjcf_text, sidecar_path
+    from ..export.sidecar import identification_provenance
 
-    texts = export_texts(robot, result.standard.values, args.export_urdf)
-    outputs.write_text(args.export_urdf, texts.urdf)
-    outputs.write_json(sidecar_path(args.export_urdf), texts.sidecar)
+    prov = identification_provenance("manip-id identify", vars(args), result)
+    theta = result.standard.values
+    if args.export_urdf:
+        texts = export_texts(robot, theta, args.export_urdf, provenance=prov)
+        outputs.write_text(args.export_urdf, texts.urdf)
+        outputs.write_json(sidecar_path(args.export_urdf), texts.sidecar)
+    if args.export_mjcf:
+        mj = mjcf_text(robot, theta, args.export_mjcf, provenance=prov)
+        outputs.write_text(args.export_mjcf, mj.xml)
+        outputs.write_json(sidecar_path(args.export_mjcf), mj.sidecar)
+
+
+def _exports_written(args) -> None:
+    """Print the exported files once they are published."""
+    for value in (args.export_urdf, getattr(args, "export_mjcf", None)):
+        if value:
+            print(f"wrote {value} and its sidecar")
 
 
 def _consistent_kwargs(args) -> dict:
@@ -489,13 +515,12 @@ def _run_stream(robot, args, outputs, timings: dict, t_start: float) -> int:
     print(_summary(robot, report))
     if args.json:
         outputs.write_json(args.json, report)
-    if args.export_urdf:
+    if args.export_urdf or args.export_mjcf:
         _export(robot, result, args, outputs)
     outputs.publish()
     if args.json:
         print(f"wrote {args.json}")
-    if args.export_urdf:
-        print(f"wrote {args.export_urdf}")
+    _exports_written(args)
     return 0
 
 
@@ -518,10 +543,14 @@ def _run(args: argparse.Namespace) -> int:
     t_start = time.perf_counter()
     _check_args(args)
     outputs = reserve_outputs(args)  # every output checked (and the report claimed) first
-    if args.export_urdf:
+    if args.export_urdf or args.export_mjcf:
         from ..export import sidecar_path
 
-        outputs.file(sidecar_path(args.export_urdf), "--export-urdf sidecar")
+        if args.export_urdf:
+            outputs.file(sidecar_path(args.export_urdf), "--export-urdf sidecar")
+        if args.export_mjcf:
+            outputs.file(args.export_mjcf, "--export-mjcf")
+            outputs.file(sidecar_path(args.export_mjcf), "--export-mjcf sidecar")
     if _fleet.wanted(args):  # many files, one task each (Dask with --scheduler)
         return _fleet.run(args, outputs, t_start)
     if args.model != "dynamic":  # energy / momentum: whole arrays, no ddq
@@ -593,13 +622,12 @@ def _run(args: argparse.Namespace) -> int:
         outputs.write_json(args.json, report)
     if args.report is not None:
         path = _write_report(robot, result, full, train, valid, report, args)
-    if args.export_urdf:
+    if args.export_urdf or args.export_mjcf:
         _export(robot, result, args, outputs)
     outputs.publish()  # all outputs appear together, once all are complete
     if args.json:
         print(f"wrote {args.json}")
-    if args.export_urdf:
-        print(f"wrote {args.export_urdf} and its sidecar")
+    _exports_written(args)
     if args.report is not None:
         print(f"wrote the report to {path}/index.html")
     return 0
@@ -698,13 +726,12 @@ def _run_acceleration_free(args, outputs, t_start: float) -> int:
         outputs.write_json(args.json, report)
     if args.report is not None:
         path = _write_report(robot, result, full, train, valid, report, args)
-    if args.export_urdf:
+    if args.export_urdf or args.export_mjcf:
         _export(robot, result, args, outputs)
     outputs.publish()
     if args.json:
         print(f"wrote {args.json}")
-    if args.export_urdf:
-        print(f"wrote {args.export_urdf} and its sidecar")
+    _exports_written(args)
     if args.report is not None:
         print(f"wrote the report to {path}/index.html")
     return 0

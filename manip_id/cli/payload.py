@@ -128,6 +128,14 @@ def register(sub) -> None:
         metavar="G[,G...]",
         help="multiply the torque columns of every file (one value, or one per joint)",
     )
+    p.add_argument(
+        "--export-urdf",
+        metavar="OUT.urdf",
+        default=None,
+        help="write the robot's URDF with the payload as a fixed link at FRAME (needs "
+        "--consistent); sidecar OUT.identified.json",
+    )
+    p.add_argument("--force", action="store_true", help="replace an existing --export-urdf file")
     from ._fleet import add_scheduler_argument
 
     add_scheduler_argument(
@@ -376,6 +384,7 @@ def run(args: argparse.Namespace) -> int:
 
     check_scheduler(args)
     reserve_json(args, input_paths(args))
+    _reserve_export(args, input_paths(args))
     from ..payload import identify_payload, load_known_base
 
     known = load_known_base(args.known_base) if args.known_base is not None else None
@@ -416,5 +425,45 @@ def run(args: argparse.Namespace) -> int:
     doc["preprocess"] = settings if distributed else preprocess_settings(unloaded + loaded)
     doc["timings"]["command_total"] = round(time.perf_counter() - t_start, 6)
     print(result.table())
-    publish_json(args, doc)
+    _stage_export(args, robot, result)
+    if args.json or not args.export_urdf:
+        publish_json(args, doc)
+    else:
+        args.outputs.publish()
+    if args.export_urdf:
+        print(f"wrote {args.export_urdf} and its sidecar")
     return 0
+
+
+def _reserve_export(args, inputs: list[str]) -> None:
+    """Check --export-urdf before the work: --consistent given, the file new unless --force."""
+    if not args.export_urdf:
+        return
+    if not args.consistent:
+        raise InputError("--export-urdf needs a physically consistent payload: add --consistent")
+    from .._io import OutputSet
+    from ..export import check_output, sidecar_path
+
+    check_output(args.export_urdf, force=args.force)
+    if getattr(args, "outputs", None) is None:
+        args.outputs = OutputSet()
+    args.outputs.add_inputs(inputs)
+    args.outputs.file(args.export_urdf, "--export-urdf")
+    args.outputs.file(sidecar_path(args.export_urdf), "--export-urdf sidecar")
+
+
+def _stage_export(args, robot, result) -> None:
+    """Write the payload link into the robot's URDF (published with the other outputs)."""
+    if not args.export_urdf:
+        return
+    from ..export import payload_urdf_texts, sidecar_path
+    from ..export.sidecar import identification_provenance
+
+    p = result.payload
+    prov = identification_provenance("manip-id payload", vars(args))
+    prov["uncertainty"] = p.to_dict()
+    texts = payload_urdf_texts(
+        robot, args.frame, p.mass, p.com, p.inertia, args.export_urdf, provenance=prov
+    )
+    args.outputs.write_text(args.export_urdf, texts.urdf)
+    args.outputs.write_json(sidecar_path(args.export_urdf), texts.sidecar)
