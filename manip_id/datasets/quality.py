@@ -54,6 +54,21 @@ STATIC_SPAN = 1e-3
 _MOTION_BINS = 4 * 20  # windows' motion: quarter decades from 1e-15 to 1e5
 
 
+def encoder_resolution(q) -> np.ndarray:
+    """Per column, the smallest non-zero step ``|q_{k+1} - q_k|`` [rad or m]; inf when q
+    never changes. Shape (nq,) from q of shape (N, nq)."""
+    steps = np.abs(np.diff(np.asarray(q, dtype=float), axis=0))
+    steps[steps == 0] = np.inf
+    return steps.min(axis=0) if steps.shape[0] else np.full(steps.shape[1], np.inf)
+
+
+def static_span(resolution) -> np.ndarray:
+    """The span of q [rad or m] within which a joint counts as still, per column:
+    ``max(STATIC_STEPS r_j, STATIC_SPAN)`` for the encoder resolution ``r_j``."""
+    res = np.asarray(resolution, dtype=float)
+    return np.maximum(STATIC_STEPS * np.where(np.isfinite(res), res, 0.0), STATIC_SPAN)
+
+
 @dataclass
 class DataQuality:
     """Data-quality summary of one file (see the module docstring); ``to_dict`` is its JSON."""
@@ -226,10 +241,8 @@ class QualityAccumulator:
             if self.lay.nq == self.lay.nv:
                 self._velocity(ext, dt)
         q = rows[:, s["q"]]
-        steps = np.abs(np.diff(ext[:, s["q"]], axis=0))
-        if steps.size:
-            steps[steps == 0] = np.inf
-            self.step = np.minimum(self.step, steps.min(axis=0))
+        if ext.shape[0] > 1:
+            self.step = np.minimum(self.step, encoder_resolution(ext[:, s["q"]]))
         self.q_min = np.minimum(self.q_min, q.min(axis=0))
         self.q_max = np.maximum(self.q_max, q.max(axis=0))
         dq = rows[:, s["dq"]]
@@ -325,8 +338,7 @@ class QualityAccumulator:
         res = self.step  # [rad or m], inf: q never changed
         out.resolution = [float(r) if np.isfinite(r) else math.nan for r in res]
         span = self.q_max - self.q_min
-        limit = np.maximum(STATIC_STEPS * np.where(np.isfinite(res), res, 0.0), STATIC_SPAN)
-        out.static = bool(n >= 2 and np.all(span <= limit))
+        out.static = bool(n >= 2 and np.all(span <= static_span(res)))
         if self.lay.nq == self.lay.nv:
             edges = 10.0 ** (np.arange(_MOTION_BINS) / 4.0 - 15.0)  # lower edge of each bin
             thr = MOTION_STEPS * np.where(np.isfinite(res), res, 0.0)
