@@ -50,8 +50,10 @@ from .signals import DEFAULT_CUTOFF, preprocess
 FAR = 2.0
 #: Share of the residual torque variance the nominal column must explain for a scale.
 EXPLAINED_MIN = 0.3
-#: A delay longer than this many sampling steps is reported.
+#: A delay longer than this many sampling steps is reported ...
 DELAY_STEPS = 1.5
+#: ... when it removes at least this share of the held-out torque error.
+DELAY_GAIN = 0.05
 #: Rest at a file's start or end longer than this [s] is reported (``--trim-standstill``).
 EDGE_REST = 1.0
 #: A joint at rest on more than this share of the rows is reported.
@@ -130,7 +132,9 @@ class FileAudit:
 
     ``suggestions`` holds the options the findings recommend: ``torque_scale`` (one
     per joint), ``delay`` [s] (one per joint), ``trim_standstill`` (bool). ``kept``:
-    the window ``--trim-standstill`` keeps (None: nothing to trim).
+    the window ``--trim-standstill`` keeps (None: nothing to trim). ``delay_gain``: the
+    share of the held-out torque error the file's delay removes against no delay (a
+    delay is reported as a finding only when it removes at least :data:`DELAY_GAIN`).
     """
 
     spec: FileSpec
@@ -143,6 +147,7 @@ class FileAudit:
     kept: Window | None = None
     dropped: dict[str, int] = field(default_factory=dict)
     suggestions: dict = field(default_factory=dict)
+    delay_gain: float | None = None
 
     @property
     def file(self) -> str:
@@ -156,6 +161,7 @@ class FileAudit:
             "static": self.static,
             "findings": list(self.findings),
             "joints": [j.to_dict() for j in self.joints],
+            "delay_gain": _num(self.delay_gain),
             "rest": {"start": _num(self.rest[0]), "end": _num(self.rest[1])},
             "kept_window": None if self.kept is None else str(self.kept),
             "dropped": dict(self.dropped),
@@ -281,12 +287,13 @@ def audit_file(robot: Robot, spec, options: AuditOptions | None = None) -> FileA
             f"{counts.n_dropped} bad rows dropped ({why}; first row {counts.first_dropped})"
         )
     findings += _position_findings(robot, ds.q)
+    gain = None
     if static:
         findings.append("static: used for gravity and offset only")
-        fits = _static_fits(robot, ds)
+        audits = _static_fits(robot, ds, still)
         rest, kept = (0.0, 0.0), None
     else:
-        fits = _motion_fits(robot, ds, eps, options, findings)
+        audits, gain = _motion_fits(robot, ds, still, eps, options, findings)
         rest, kept = _edges(ds, still, spec, counts)
         if max(rest) > EDGE_REST:
             findings.append(
@@ -299,19 +306,7 @@ def audit_file(robot: Robot, spec, options: AuditOptions | None = None) -> FileA
         share = still.mean(axis=0)
         for j in np.flatnonzero(share > REST_SHARE):
             findings.append(f"joint {joints[j]} at rest on {100 * share[j]:.0f} % of the rows")
-    audits = [
-        JointAudit(
-            joints[j],
-            scale=fits[j][0],
-            delay=fits[j][1],
-            offset=fits[j][2],
-            standstill=float(still[:, j].mean()),
-            explained=fits[j][3],
-            own_delay=fits[j][4],
-        )
-        for j in range(ds.nv)
-    ]
-    findings += _torque_findings(audits, 1.0 / rate, suggestions, options.currents)
+    findings += _torque_findings(audits, 1.0 / rate, gain, suggestions, options.currents)
     return FileAudit(
         spec=spec,
         n_rows=ds.n_samples,
@@ -323,6 +318,7 @@ def audit_file(robot: Robot, spec, options: AuditOptions | None = None) -> FileA
         kept=kept,
         dropped=dict(counts.reasons),
         suggestions=suggestions,
+        delay_gain=gain,
     )
 
 
@@ -371,8 +367,9 @@ def _nominal(robot: Robot, q, dq, ddq) -> np.ndarray:
     return out
 
 
-def _motion_fits(robot, ds, eps: float, options: AuditOptions, findings: list[str]):
-    """Per joint ``(scale, delay, offset, explained)`` of a moving file."""
+def _motion_fits(robot, ds, still, eps: float, options: AuditOptions, findings: list[str]):
+    """``(joints, delay_gain)`` of a moving file: per joint :class:`JointAudit`, and the
+    share of the held-out error the file's delay removes (None: not searched)."""
     proc = ds
     if ds.ddq is None:
         cutoff = DEFAULT_CUTOFF if options.cutoff is None else options.cutoff
@@ -380,18 +377,37 @@ def _motion_fits(robot, ds, eps: float, options: AuditOptions, findings: list[st
             proc = preprocess(ds, cutoff=cutoff)
         except (InputError, DataError) as exc:
             findings.append(f"torques not audited: {exc}")
-            return [(None, None, None, None, None)] * ds.nv
+            return [_joint(robot, j, still) for j in range(ds.nv)], None
     nom = _nominal(robot, proc.q, proc.dq, proc.ddq)
     step = float(np.median(np.diff(proc.t)))
     max_lag = min(int(round(options.max_delay / step)), proc.n_samples // 10)
-    common, own = _lags(robot, proc, eps, max_lag)
+    args = [(nom[:, j], proc.tau[:, j], proc.dq[:, j], eps, max_lag) for j in range(ds.nv)]
+    first = [_fit_joint(*a, 0.0) for a in args]
+    gains = np.array([1.0 if f[0] is None else f[0] for f in first])
+    common, gain, own = _lags(robot, proc, eps, max_lag, gains)
     out = []
     for j in range(ds.nv):
-        fit = _fit_joint(nom[:, j], proc.tau[:, j], proc.dq[:, j], eps, max_lag, common)
-        delay = None if common is None else float(common * step)
-        own_delay = None if own[j] is None else float(own[j] * step)
-        out.append((fit[0], delay, fit[1], fit[2], own_delay))
-    return out
+        scale, offset, explained = _fit_joint(*args[j], common)
+        out.append(
+            _joint(
+                robot,
+                j,
+                still,
+                scale=scale,
+                delay=None if common is None else float(common * step),
+                offset=offset,
+                explained=explained,
+                own_delay=None if own[j] is None else float(own[j] * step),
+            )
+        )
+    return out, (None if common is None else gain)
+
+
+def _joint(robot, j: int, still: np.ndarray, **fields) -> JointAudit:
+    base = {"scale": None, "delay": None, "offset": None, "explained": None, "own_delay": None}
+    return JointAudit(
+        robot.dof_names[j], standstill=float(still[:, j].mean()), **{**base, **fields}
+    )
 
 
 #: Rows of the motion stream the delay search fits (evenly spaced over the file).
@@ -400,11 +416,13 @@ LAG_ROWS = 12000
 LAG_BLOCK = 200
 
 
-def _lags(robot, proc, eps: float, max_lag: int):
-    """``(common, own)``: the lag [samples] of the whole torque stream, and per joint the lag
-    of its own torque (the others at the common lag), each None when not determined.
+def _lags(robot, proc, eps: float, max_lag: int, gains: np.ndarray):
+    """``(common, gain, own)``: the lag [samples] of the whole torque stream, the share of
+    the held-out error it removes against lag 0, and per joint the lag of its own torque
+    (the others at the common lag); lags are None when not determined.
 
-    The lag is the one whose torques one rigid-body model predicts best on held-out rows.
+    The lag is the one whose torques (each divided by its scale at lag 0, ``gains``) one
+    rigid-body model predicts best on held-out rows.
     The model is the robot's full regressor with parameters shared by all joints, plus
     per joint ``dq_j``, ``sgn_eps(dq_j)`` and 1 (friction, offset). The rows are cut into
     two interleaved halves of :data:`LAG_BLOCK` rows; the parameters fitted on one half
@@ -417,7 +435,7 @@ def _lags(robot, proc, eps: float, max_lag: int):
     """
     n, nv = proc.n_samples, robot.nv
     if max_lag < 1:
-        return None, [None] * nv
+        return None, 0.0, [None] * nv
     k = np.arange(max_lag, n - max_lag)
     k = k[:: max(1, k.size // LAG_ROWS)]
     Y = regressor(robot, proc.q[k], proc.dq[k], proc.ddq[k])  # (N', nv, p)
@@ -432,8 +450,11 @@ def _lags(robot, proc, eps: float, max_lag: int):
     Y = Y[:, :, norm > 0] / norm[norm > 0]
     sweep = np.arange(-max_lag, max_lag + 1)
     half = (np.arange(k.size) // LAG_BLOCK) % 2 == 0
-    parts = [_lag_sums(Y[m], proc.tau, k[m], sweep) for m in (half, ~half)]
-    common = _vertex(sum(_held_out(parts[a], parts[1 - a], None, None) for a in (0, 1)))
+    tau = proc.tau / gains  # currents and flipped signs undone: one model fits all joints
+    parts = [_lag_sums(Y[m], tau, k[m], sweep) for m in (half, ~half)]
+    curve = sum(_held_out(parts[a], parts[1 - a], None, None) for a in (0, 1))  # SSE
+    common = _vertex(curve)
+    gain = float((curve[max_lag] - curve.min()) / curve[max_lag]) if curve[max_lag] > 0 else 0.0
     at = np.full(nv, max_lag if common is None else int(round(common)))  # sweep indices
     own = [
         _vertex(sum(_held_out(parts[a], parts[1 - a], j, at) for a in (0, 1))) for j in range(nv)
@@ -441,6 +462,7 @@ def _lags(robot, proc, eps: float, max_lag: int):
     shift = -max_lag
     return (
         None if common is None else common + shift,
+        gain,
         [None if x is None else x + shift for x in own],
     )
 
@@ -490,13 +512,13 @@ def _held_out(train, valid, j: int | None, at: np.ndarray | None) -> np.ndarray:
     return yy - 2 * np.einsum("cl,cl->l", bv, beta) + np.einsum("cl,cd,dl->l", beta, Gv, beta)
 
 
-def _static_fits(robot, ds):
-    """Per joint ``(scale, None, offset, None)`` of a static file: the gravity torque alone
-    cannot tell a scale from an offset, so the scale is left undetermined and the offset is
-    the mean of ``tau - g(q)``."""
+def _static_fits(robot, ds, still) -> list[JointAudit]:
+    """The joints of a static file: the gravity torque alone cannot tell a scale from an
+    offset, so the scale is left undetermined and the offset is the mean of ``tau - g(q)``."""
     nom = _nominal(robot, ds.q, np.zeros_like(ds.dq), np.zeros_like(ds.dq))
     return [
-        (None, None, float(np.mean(ds.tau[:, j] - nom[:, j])), None, None) for j in range(ds.nv)
+        _joint(robot, j, still, offset=float(np.mean(ds.tau[:, j] - nom[:, j])))
+        for j in range(ds.nv)
     ]
 
 
@@ -541,7 +563,7 @@ def _huber(X: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 # ---------------------------------------------------------------- findings
 def _torque_findings(
-    audits: list[JointAudit], step: float, suggestions: dict, currents: bool = False
+    audits: list[JointAudit], step: float, gain, suggestions: dict, currents: bool = False
 ) -> list[str]:
     """Scale, sign and delay findings; fills ``suggestions``."""
     out: list[str] = []
@@ -563,7 +585,7 @@ def _torque_findings(
         suggestions["torque_scale"] = gains
         out.append("try --torque-scale " + ",".join(f"{g:g}" for g in gains))
     d = next((j.delay for j in audits if j.delay is not None), None)  # the file's
-    if d is not None and abs(d) > DELAY_STEPS * step:
+    if d is not None and abs(d) > DELAY_STEPS * step and gain is not None and gain >= DELAY_GAIN:
         word = "lags" if d > 0 else "leads"
         out.append(
             f"the torque stream {word} the motion stream by {1e3 * abs(d):.3g} ms "

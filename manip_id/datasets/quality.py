@@ -367,6 +367,8 @@ class QualityAccumulator:
         clipped = self.at_max / max(n, 1)
         out.clipped_share = clipped.tolist()
         for j, name in enumerate(joints):
+            if out.static:  # a still robot's torque sits at one value: not a clipped signal
+                break
             if clipped[j] > CLIPPED_SHARE and self.at_max[j] > 2 and self.tau_max[j] > 0:
                 out.warnings.append(
                     f"joint {name}: {100 * clipped[j]:.2g} % of the torques sit at the "
