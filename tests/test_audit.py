@@ -94,9 +94,7 @@ def test_delay_25_ms(robot, tmp_path):
     lag = 5  # 25 ms at 200 Hz
     t, q, dq, ddq, tau = log(robot, n=1500 + lag, rate=RATE, seed=3)
     # row k of the file: the motion of sample k + lag, the torque of sample k
-    path = save_npz(
-        tmp_path / "late.npz", robot, t[lag:], q[lag:], dq[lag:], ddq[lag:], tau[:-lag]
-    )
+    path = save_npz(tmp_path / "late.npz", robot, t[lag:], q[lag:], dq[lag:], ddq[lag:], tau[:-lag])
     fa = audit_file(robot, path)
     assert fa.joints[0].delay == pytest.approx(0.025, abs=1.0 / RATE)
     assert all(j.delay == fa.joints[0].delay for j in fa.joints)
