@@ -151,17 +151,17 @@ def run(args: argparse.Namespace) -> int:
     if colmap is None and profile is not None and profile.columns:
         colmap = dict(profile.columns)
     robot = robot_from_args(args)
-    scale = None
+    given: object = None
     if args.torque_scale_from is not None:
         from ..payload import load_torque_scale
 
-        scale = load_torque_scale(args.torque_scale_from)
+        given = load_torque_scale(args.torque_scale_from)
     elif args.torque_scale is not None:
-        scale = parse_floats(args.torque_scale, "--torque-scale")
+        given = parse_floats(args.torque_scale, "--torque-scale")
     elif profile is not None and profile.torque_scale is not None:
-        scale = profile.torque_scale
-    if scale is not None:
-        scale = tuple(torque_scale_vector(scale, robot.nv, "--torque-scale").tolist())
+        given = profile.torque_scale
+    vector = torque_scale_vector(given, robot.nv, "--torque-scale")
+    scale = None if vector is None else tuple(vector.tolist())
     extra = spec_options(args)
     specs = [
         parse_file_spec(v, window=args.window, columns=colmap, topic=args.topic, **extra)

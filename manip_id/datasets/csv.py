@@ -232,10 +232,10 @@ class CsvSource:
                             f"have {width}"
                         )
                     for name, cols in c.index.items():
-                        bad = [i for i in cols if not -width <= i < width]
-                        if bad:
+                        outside = [i for i in cols if not -width <= i < width]
+                        if outside:
                             raise DataError(
-                                f"column map: {name!r} refers to column {bad[0]} but "
+                                f"column map: {name!r} refers to column {outside[0]} but "
                                 f"{self.path} has {width} columns"
                             )
                 yield line_no - len(lines), table

@@ -188,7 +188,7 @@ def _implausible_cells(block: np.ndarray, layout: Layout) -> np.ndarray:
 
 def _implausible(block: np.ndarray, layout: Layout) -> np.ndarray:
     """Rows holding a value beyond the magnitude bounds of its field, shape (k,)."""
-    return _implausible_cells(block, layout).any(axis=1)
+    return np.asarray(_implausible_cells(block, layout).any(axis=1))
 
 
 def _field_of(layout: Layout, col: int) -> tuple[str, int]:
