@@ -287,3 +287,16 @@ def test_real_panda_log(panda_log):
             assert j.explained < EXPLAINED_MIN
         else:
             assert 0.5 < j.scale < 2.0
+
+
+def test_cli_time_unit_and_delay(robot, clean, tmp_path, capsys):
+    t, q, dq, ddq, tau = clean
+    path = save_npz(tmp_path / "ns.npz", robot, t * 1e9, q, dq, ddq, tau)
+    args = ["identify", "ur5", "--friction", "viscous,coulomb", "--data", str(path)]
+    assert main(args) == 2
+    assert "stamps in ns? pass --time-unit ns" in capsys.readouterr().err
+    res = tmp_path / "r.json"
+    assert main([*args, "--time-unit", "ns", "--delay", "0", "--json", str(res)]) == 0
+    doc = json.loads(res.read_text())
+    assert doc["audit"]["files"][0]["rate"] == pytest.approx(RATE)
+    assert doc["n_samples"] == t.size
