@@ -91,7 +91,8 @@ def audit_file(robot: Robot, spec, options: AuditOptions | None = None) -> FileA
     if counts.n_dropped:
         why = ", ".join(f"{n} {r}" for r, n in counts.reasons.items())
         findings.append(
-            f"{counts.n_dropped} bad rows dropped ({why}; first row {counts.first_dropped})"
+            f"{counts.n_dropped} bad row{'s' if counts.n_dropped > 1 else ''} dropped "
+            f"({why}; first row {counts.first_dropped})"
         )
     findings += position_findings(robot, ds.q)
     gain = None
