@@ -300,3 +300,50 @@ def test_cli_time_unit_and_delay(robot, clean, tmp_path, capsys):
     doc = json.loads(res.read_text())
     assert doc["audit"]["files"][0]["rate"] == pytest.approx(RATE)
     assert doc["n_samples"] == t.size
+
+
+def test_payload_and_drive_gains_run_the_audit(tmp_path, capsys):
+    from test_payload import make_payload, make_runs
+
+    ur5 = get_robot("ur5")
+    gains = np.array([0.45, 0.8, 1.1, 1.4, 1.7, 2.3])  # [N m / A]
+    payload = make_payload()
+
+    def save(name, block):
+        q, dq, ddq, tau = block
+        t = 0.01 * np.arange(q.shape[0])
+        return save_npz(tmp_path / name, ur5, t, q, dq, ddq, tau)
+
+    runs = make_runs(ur5, "tool0", payload, n=500)
+    u, ld = save("u.npz", runs[0]), save("l.npz", runs[1])
+    cu, cl = make_runs(ur5, "tool0", payload, n=500, seed=3, gains=gains)
+    cu, cl = save("cu.npz", cu), save("cl.npz", cl)
+    out = tmp_path / "p.json"
+    args = ["payload", "ur5", "--unloaded", str(u), "--loaded", str(ld), "--frame", "tool0"]
+    assert main([*args, "--json", str(out)]) == 0
+    assert "audit against the nominal model of ur5" in capsys.readouterr().out
+    doc = json.loads(out.read_text())
+    assert [f["file"] for f in doc["audit"]["files"]] == [str(u), str(ld)]
+    assert doc["audit"]["files"][0]["findings"] == []
+    out = tmp_path / "g.json"
+    args = ["drive-gains", "ur5", "--unloaded", str(cu), "--loaded", str(cl), "--frame", "tool0"]
+    args += ["--payload-mass", str(payload.mass), "--json", str(out)]
+    assert main(args) == 0
+    doc = json.loads(out.read_text())
+    unloaded = doc["audit"]["files"][0]
+    # the currents are tau / G: the audit reads their scale and suggests nothing
+    np.testing.assert_allclose([j["scale"] for j in unloaded["joints"]], 1 / gains, rtol=0.05)
+    assert "torque_scale" not in unloaded["suggestions"]
+
+
+def test_position_offset_against_the_limits(robot, clean, tmp_path):
+    t, q, dq, ddq, tau = clean
+    shifted = q.copy()
+    lo, hi = robot.lower[2], robot.upper[2]  # elbow_joint: [-pi, pi]
+    shifted[:, 2] = q[:, 2] - q[:, 2].min() + hi - 0.5 * (q[:, 2].max() - q[:, 2].min()) + 1.0
+    span = q[:, 2].max() - q[:, 2].min()
+    assert shifted[:, 2].max() > hi + 0.05 * (hi - lo) and span < hi - lo
+    fa = audit_file(robot, save_npz(tmp_path / "off.npz", robot, t, shifted, dq, ddq, tau))
+    found = [f for f in fa.findings if f.startswith("joint elbow_joint: positions")]
+    assert len(found) == 1 and "while their span fits: a zero offset?" in found[0]
+    assert f"(adding {hi - shifted[:, 2].max():+.3g} rad brings them inside)" in found[0]

@@ -11,6 +11,9 @@ from .report import JointAudit
 
 #: Measured / nominal torque ratios outside [1 / FAR, FAR] are reported (currents, gears).
 FAR = 2.0
+#: Median step of q [rad] below which positions are a smooth time series (wrap-around
+#: is looked for only there: jumps of 2 pi +- 0.5 between neighbours).
+SMOOTH_STEP = 0.1
 #: A delay longer than this many sampling steps is reported ...
 DELAY_STEPS = 1.5
 #: ... when it removes at least this share of the held-out torque error.
@@ -62,7 +65,9 @@ def position_findings(robot: Robot, q: np.ndarray) -> list[str]:
         qj = q[:, j]
         top = float(np.abs(qj).max())
         bounded = math.isfinite(lo[j]) and math.isfinite(hi[j]) and hi[j] - lo[j] < 1e3
-        jumps = int(np.sum(np.abs(np.diff(qj)) > math.pi))
+        steps = np.abs(np.diff(qj))
+        smooth = steps.size > 0 and float(np.median(steps)) < SMOOTH_STEP  # a time series
+        jumps = int(np.sum(np.abs(steps - 2 * math.pi) < 0.5)) if smooth else 0
         if jumps:
             out.append(
                 f"joint {name}: positions jump by about 2 pi {jumps} times: wrap-around? "
