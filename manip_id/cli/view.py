@@ -69,11 +69,14 @@ def _motion(robot, args):
     if args.simulate:  # kinematics only: no torques, so no inertias needed
         import numpy as np
 
+        from ..simulation import check_simulation_memory
         from ..trajectories import random_trajectory, trajectory_to_configuration
 
         traj = random_trajectory(robot, harmonics=5, seed=args.seed)
         rate = max(2 * args.fps, 50.0)
-        t = np.arange(int(round(args.duration * rate))) / rate
+        n = int(round(args.duration * rate))
+        check_simulation_memory(robot, n)  # before allocating: a clear error, not a crash
+        t = np.arange(n) / rate
         q = trajectory_to_configuration(robot, traj.sample(t)[0])
         return t, q, f"random excitation (seed {args.seed}, {args.duration:g} s)"
     return None
