@@ -142,7 +142,7 @@ class Audit:
         """One compact table: a row per file and joint, then the findings."""
         head = (
             f"{'file':<28} {'rows':>8} {'rate [Hz]':>9}  {'joint':<22} {'scale':>7} "
-            f"{'delay [ms]':>10} {'offset':>8} {'rest':>5}"
+            f"{'delay [ms]':>10} {'offset [N m]':>12} {'rest':>5}"
         )
         lines = [f"audit against the nominal model of {self.robot}", head]
         for fa in self.files:
@@ -152,7 +152,12 @@ class Audit:
                 lines.append(
                     f"{left}  {j.joint[-22:]:<22} {fmt(j.scale, '+.3f'):>7} "
                     f"{fmt(None if j.delay is None else 1e3 * j.delay, '+.2f'):>10} "
-                    f"{fmt(j.offset, '+.3g'):>8} {100 * j.standstill:>4.0f}%"
+                    f"{fmt(j.offset, '+.3g'):>12} {100 * j.standstill:>4.0f}%"
+                )
+            if fa.delay_gain is not None and fa.joints and fa.joints[0].delay is not None:
+                lines.append(
+                    f"  (the delay {1e3 * fa.joints[0].delay:+.3g} ms removes "
+                    f"{100 * fa.delay_gain:.2g} % of the held-out torque error)"
                 )
             lines += [f"  - {f}" for f in fa.findings] or ["  - no finding"]
         return "\n".join(lines)

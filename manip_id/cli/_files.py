@@ -203,6 +203,7 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
     audited, audit = before_fit(robot, specs + (vspecs or []), options, args)
     specs, vspecs = audited[: len(specs)], (None if vspecs is None else audited[len(specs) :])
     timings["audit"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
     scans = {s: scan_file(robot, s, options) for s in specs + (vspecs or [])}
     source: dict = {"data": [s.label for s in specs]}
     if vspecs is None and args.split is not None:
