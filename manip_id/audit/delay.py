@@ -25,15 +25,50 @@ def stream_lags(robot, proc, eps: float, max_lag: int, gains: np.ndarray):
     for lags ``L`` (``beta = G^+ b``, ``G = sum_j Y_j^T Y_j`` fixed by the motion stream,
     ``b = sum_j Y_j^T tau_j[k + L_j]``) predict the other, and the two prediction errors
     add up (two-fold cross-validation: an in-sample residual lets the lag fit the model's
-    own errors). The common lag is swept for all joints at once; each joint's own lag with
-    the others held at it. Both are refined to a sub-sample by the parabola through the
-    neighbours of the best lag.
+    own errors). The common lag is swept for all joints at once, on a grid of ``g =
+    max_lag // COARSE`` samples and then sample by sample around the best, and refined to
+    a sub-sample by the parabola through the neighbours of the best lag. Each joint's own
+    lag (informative only) is swept on the coarse grid with the others held at the common
+    lag, refined the same way.
     """
     n, nv = proc.n_samples, robot.nv
     if max_lag < 1:
         return None, 0.0, [None] * nv
     k = np.arange(max_lag, n - max_lag)
     k = k[:: max(1, k.size // LAG_ROWS)]
+    Y = _columns(robot, proc, k, eps)
+    half = (np.arange(k.size) // LAG_BLOCK) % 2 == 0
+    tau = proc.tau / gains  # currents and flipped signs undone: one model fits all joints
+    g = max(1, max_lag // COARSE)
+    coarse = np.arange(-(max_lag // g), max_lag // g + 1) * g  # holds lag 0
+    masks = (half, ~half)
+    grams = [gram(Y[m]) for m in masks]
+    parts = [lag_sums(Y[m], tau, k[m], coarse, gm) for m, gm in zip(masks, grams, strict=True)]
+    curve = _both(parts, None, None)  # the held-out SSE of all joints
+    zero = float(curve[coarse.size // 2])
+    best = int(coarse[int(np.argmin(curve))])
+    fine = np.arange(max(best - g, -max_lag), min(best + g, max_lag) + 1)
+    fine_parts = [lag_sums(Y[m], tau, k[m], fine, gm) for m, gm in zip(masks, grams, strict=True)]
+    fine_curve = _both(fine_parts, None, None)
+    v = vertex(fine_curve)
+    common = None if v is None else float(fine[0] + v)
+    gain = float((zero - fine_curve.min()) / zero) if zero > 0 else 0.0
+    at = np.full(nv, int(np.argmin(np.abs(coarse - (0 if common is None else common)))))
+    own = []
+    for j in range(nv):
+        w = vertex(_both(parts, j, at))
+        own.append(None if w is None else float(coarse[0] + w * g))
+    return common, gain, own
+
+
+#: Lags on each side of zero in the coarse sweep of the delay search.
+COARSE = 20
+
+
+def _columns(robot, proc, k: np.ndarray, eps: float) -> np.ndarray:
+    """The regressor rows ``k`` with per-joint friction and offset columns, each column
+    scaled to unit norm (zero columns dropped), shape (N', nv, c)."""
+    nv = robot.nv
     Y = regressor(robot, proc.q[k], proc.dq[k], proc.ddq[k])  # (N', nv, p)
     F = np.zeros((k.size, nv, 3 * nv))
     for j in range(nv):
@@ -43,25 +78,12 @@ def stream_lags(robot, proc, eps: float, max_lag: int, gains: np.ndarray):
         )
     Y = np.concatenate([Y, F], axis=2)
     norm = np.sqrt(np.einsum("njc,njc->c", Y, Y))
-    Y = Y[:, :, norm > 0] / norm[norm > 0]
-    sweep = np.arange(-max_lag, max_lag + 1)
-    half = (np.arange(k.size) // LAG_BLOCK) % 2 == 0
-    tau = proc.tau / gains  # currents and flipped signs undone: one model fits all joints
-    parts = [lag_sums(Y[m], tau, k[m], sweep) for m in (half, ~half)]
-    curve = held_out(parts[0], parts[1], None, None) + held_out(parts[1], parts[0], None, None)
-    common = vertex(curve)
-    gain = float((curve[max_lag] - curve.min()) / curve[max_lag]) if curve[max_lag] > 0 else 0.0
-    at = np.full(nv, max_lag if common is None else int(round(common)))  # sweep indices
-    own = [
-        vertex(held_out(parts[0], parts[1], j, at) + held_out(parts[1], parts[0], j, at))
-        for j in range(nv)
-    ]
-    shift = -max_lag
-    return (
-        None if common is None else common + shift,
-        gain,
-        [None if x is None else x + shift for x in own],
-    )
+    return np.ascontiguousarray(Y[:, :, norm > 0] / norm[norm > 0])
+
+
+def _both(parts, j: int | None, at: np.ndarray | None) -> np.ndarray:
+    """The two-fold cross-validated prediction error (see :func:`held_out`)."""
+    return held_out(parts[0], parts[1], j, at) + held_out(parts[1], parts[0], j, at)
 
 
 def vertex(curve: np.ndarray) -> float | None:
@@ -79,16 +101,21 @@ def vertex(curve: np.ndarray) -> float | None:
     return i + frac
 
 
-def lag_sums(Y: np.ndarray, tau: np.ndarray, k: np.ndarray, sweep: np.ndarray):
-    """``(G, G^+, B, yy)`` of rows ``k``: ``B[j, :, i] = Y_j^T tau_j[k + sweep_i]``,
-    ``yy[j, i] = ||tau_j[k + sweep_i]||^2``."""
+def gram(Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(G, G^+)`` with ``G = sum_j Y_j^T Y_j`` of regressor rows Y, shape (N, nv, c)."""
+    flat = Y.reshape(-1, Y.shape[2])
+    G = flat.T @ flat
+    return G, np.linalg.pinv(G, rcond=1e-10, hermitian=True)
+
+
+def lag_sums(Y: np.ndarray, tau: np.ndarray, k: np.ndarray, sweep: np.ndarray, grams):
+    """``(G, G^+, B, yy)`` of rows ``k`` (``grams``: their :func:`gram`):
+    ``B[j, :, i] = Y_j^T tau_j[k + sweep_i]``, ``yy[j, i] = ||tau_j[k + sweep_i]||^2``."""
     nv = Y.shape[1]
-    G = np.einsum("njc,njd->cd", Y, Y)
-    Gp = np.linalg.pinv(G, rcond=1e-10, hermitian=True)
     idx = k[:, None] + sweep[None, :]
-    B = np.stack([Y[:, j, :].T @ tau[idx, j] for j in range(nv)])
+    B = np.stack([np.ascontiguousarray(Y[:, j, :].T) @ tau[idx, j] for j in range(nv)])
     yy = np.stack([np.sum(tau[idx, j] ** 2, axis=0) for j in range(nv)])
-    return G, Gp, B, yy
+    return grams[0], grams[1], B, yy
 
 
 def held_out(train, valid, j: int | None, at: np.ndarray | None) -> np.ndarray:
@@ -106,4 +133,4 @@ def held_out(train, valid, j: int | None, at: np.ndarray | None) -> np.ndarray:
         bv = Bv[others, :, at[others]].sum(axis=0)[:, None] + Bv[j]
         yy = yyv[j]
     beta = Gp @ bt
-    return yy - 2 * np.einsum("cl,cl->l", bv, beta) + np.einsum("cl,cd,dl->l", beta, Gv, beta)
+    return yy - 2 * np.einsum("cl,cl->l", bv, beta) + np.einsum("cl,cl->l", beta, Gv @ beta)
