@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from .adjust import check_time_unit
 
 _NUM = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
 _TIME = re.compile(rf"^\s*({_NUM})?\s*:\s*({_NUM})?\s*$")
@@ -108,8 +109,6 @@ class FileSpec:
     delay: float | tuple[float, ...] | None = None
 
     def __post_init__(self):
-        from .adjust import check_time_unit
-
         object.__setattr__(self, "path", Path(self.path).expanduser())
         object.__setattr__(self, "time_unit", check_time_unit(self.time_unit))
         d = self.delay

@@ -32,6 +32,7 @@ import numpy as np
 
 from .._checks import MEASURED_LIMITS
 from ..errors import DataError, InputError
+from .adjust import TIME_UNITS, AdjustedSource, delay_vector
 from .core import Dataset, check_time, check_values
 from .layout import Layout
 from .spec import FileSpec, Window
@@ -116,8 +117,6 @@ def open_source(spec: FileSpec, joint_names=None):
     src = _raw_source(spec, fmt, joint_names)
     if spec.time_unit is None and spec.delay is None:
         return src
-    from .adjust import TIME_UNITS, AdjustedSource, delay_vector
-
     delay = delay_vector(spec.delay, src.layout.nv, f"the delay of {spec.label}")
     return AdjustedSource(src, TIME_UNITS[spec.time_unit or "s"], delay)
 
