@@ -95,6 +95,16 @@ def check(args: argparse.Namespace) -> None:
             if getattr(args, name, False):
                 raise InputError(f"--{name.replace('_', '-')} applies to --data files")
         return
+    from . import _fleet
+
+    if getattr(args, "trim_standstill", False) and _fleet.wanted(args):
+        raise InputError(
+            "--trim-standstill needs the pre-fit audit, which --scheduler / --per-file do not run"
+        )
+    if getattr(args, "model", "dynamic") != "dynamic":  # files read whole, without a FileSpec
+        for name in ("delay", "time_unit", "trim_standstill"):
+            if getattr(args, name, None) not in (None, False):
+                raise InputError(f"--{name.replace('_', '-')} applies to --model dynamic")
     if args.velocity_deadband is not None:
         eps = args.velocity_deadband
         if not (np.isfinite(eps) and eps > 0):

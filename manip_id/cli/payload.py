@@ -275,6 +275,8 @@ def read_runs(args, robot, scale=None, scan: bool = True) -> tuple[list, list, d
                 )
     options = _options(args, scale)
     audit = None
+    if not scan and getattr(args, "trim_standstill", False):
+        raise InputError("--trim-standstill needs the pre-fit audit, which --scheduler skips")
     if scan:  # the pre-fit audit, printed and saved as "audit" (not where tasks read the files)
         from .audit import before_fit
 
