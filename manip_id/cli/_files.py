@@ -62,7 +62,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--drop-bad-rows",
         action="store_true",
-        help="drop (and count) rows holding NaN/Inf instead of refusing the file",
+        help="drop (and count) bad rows instead of refusing the file: NaN/Inf, values beyond "
+        "the plausible magnitudes of their unit, malformed CSV lines",
     )
 
 
@@ -87,12 +88,23 @@ def check(args: argparse.Namespace) -> None:
         gains = load_torque_scale(args.torque_scale_from)
         args.torque_scale = ",".join(repr(float(g)) for g in gains)
     if args.simulate:
-        for name in ("window", "torque_scale", "velocity_deadband", "topic"):
-            if getattr(args, name) is not None:
+        for name in ("window", "torque_scale", "velocity_deadband", "topic", "delay", "time_unit"):
+            if getattr(args, name, None) is not None:
                 raise InputError(f"--{name.replace('_', '-')} applies to --data files")
-        if args.drop_bad_rows:
-            raise InputError("--drop-bad-rows applies to --data files")
+        for name in ("drop_bad_rows", "trim_standstill"):
+            if getattr(args, name, False):
+                raise InputError(f"--{name.replace('_', '-')} applies to --data files")
         return
+    from . import _fleet
+
+    if getattr(args, "trim_standstill", False) and _fleet.wanted(args):
+        raise InputError(
+            "--trim-standstill needs the pre-fit audit, which --scheduler / --per-file do not run"
+        )
+    if getattr(args, "model", "dynamic") != "dynamic":  # files read whole, without a FileSpec
+        for name in ("delay", "time_unit", "trim_standstill"):
+            if getattr(args, name, None) not in (None, False):
+                raise InputError(f"--{name.replace('_', '-')} applies to --model dynamic")
     if args.velocity_deadband is not None:
         eps = args.velocity_deadband
         if not (np.isfinite(eps) and eps > 0):
@@ -138,9 +150,11 @@ def _options(args, nv: int, profile_scale=None):
 
 def _specs(values, args, colmap):
     from ..datasets import parse_file_spec
+    from .audit import spec_options
 
+    extra = spec_options(args)  # --time-unit, --delay
     return [
-        parse_file_spec(v, window=args.window, columns=colmap, topic=args.topic)
+        parse_file_spec(v, window=args.window, columns=colmap, topic=args.topic, **extra)
         for v in values or []
     ]
 
@@ -192,6 +206,12 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
     vspecs = _specs(args.validate, args, colmap) if args.validate is not None else None
     robot = robot or robot_from_args(args)
     options = _options(args, robot.nv, None if profile is None else profile.torque_scale)
+    t0 = time.perf_counter()
+    from .audit import before_fit  # the pre-fit audit: printed, saved as "audit"
+
+    audited, audit = before_fit(robot, specs + (vspecs or []), options, args)
+    specs, vspecs = audited[: len(specs)], (None if vspecs is None else audited[len(specs) :])
+    timings["audit"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     scans = {s: scan_file(robot, s, options) for s in specs + (vspecs or [])}
     source: dict = {"data": [s.label for s in specs]}
@@ -262,6 +282,7 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
         settings,
     )
     _add_file_info(report, robot, specs, vspecs, scans, files, options, result)
+    report["audit"] = audit.to_dict()
     if args.report is not None or train is not None:  # the samples are in memory anyway
         if train is None:
             train = _collect(robot, specs, options, scans)

@@ -96,6 +96,7 @@ def run(args: argparse.Namespace) -> int:
         chunk=args.chunk,
     )
     doc = result.to_dict()
+    doc["audit"] = source.pop("audit")
     doc["data_quality"] = source.pop("data_quality")
     doc["source"] = source
     doc["preprocess"] = preprocess_settings(unloaded + loaded)

@@ -238,6 +238,9 @@ def register(sub) -> None:
     )
     _fleet.add_arguments(p)
     _files.add_arguments(p)
+    from .audit import add_stream_arguments
+
+    add_stream_arguments(p)
     p.set_defaults(func=run)
 
 

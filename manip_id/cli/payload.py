@@ -92,6 +92,9 @@ def add_run_arguments(p: argparse.ArgumentParser, *, unloaded_required: bool) ->
     sig.add_argument("--decimate", type=int, default=1, help="keep every D-th sample [default 1]")
     p.add_argument("--chunk", type=int, default=1024, help="samples per regressor chunk")
     p.add_argument("--json", metavar="OUT", help="write the result as JSON to OUT")
+    from .audit import add_stream_arguments
+
+    add_stream_arguments(p)
 
 
 def register(sub) -> None:
@@ -188,8 +191,11 @@ def _column_map(specs: list[str]):
 def _spec(text: str, args, colmap=None):
     """A file spec (path and window) of the real-log readers."""
     from ..datasets import parse_file_spec
+    from .audit import spec_options
 
-    return parse_file_spec(text, window=args.window, columns=colmap, topic=args.topic)
+    return parse_file_spec(
+        text, window=args.window, columns=colmap, topic=args.topic, **spec_options(args)
+    )
 
 
 def _options(args, scale=None):
@@ -276,6 +282,16 @@ def read_runs(args, robot, scale=None, scan: bool = True) -> tuple[list, list, d
                     "must be recorded with the payload mounted"
                 )
     options = _options(args, scale)
+    audit = None
+    if not scan and getattr(args, "trim_standstill", False):
+        raise InputError("--trim-standstill needs the pre-fit audit, which --scheduler skips")
+    if scan:  # the pre-fit audit, printed and saved as "audit" (not where tasks read the files)
+        from .audit import before_fit
+
+        audited, audit = before_fit(
+            robot, specs_u + specs_l, options, args, currents=args.command == "drive-gains"
+        )
+        specs_u, specs_l = audited[: len(specs_u)], audited[len(specs_u) :]
     runs: dict[str, list] = {"unloaded": [], "loaded": []}
     quality: dict[str, list] = {"unloaded": [], "loaded": []}
     for what, specs in (("unloaded", specs_u), ("loaded", specs_l)):
@@ -290,6 +306,7 @@ def read_runs(args, robot, scale=None, scan: bool = True) -> tuple[list, list, d
         "loaded": [s.label for s in specs_l],
         "data_quality": quality,
         "options": options.to_dict(),
+        "audit": None if audit is None else audit.to_dict(),
     }
     return runs["unloaded"], runs["loaded"], source
 
@@ -415,6 +432,7 @@ def run(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
     )
     doc = result.to_dict()
+    doc["audit"] = source.pop("audit")
     quality = source.pop("data_quality")
     settings = None
     if distributed:

@@ -66,14 +66,19 @@ def _motion(robot, args):
 
         ds = load_dataset(args.data)
         return ds.t, ds.q, f"data {args.data} ({ds.n_samples} samples)"
-    if args.simulate:
-        from ..simulation import simulate
-        from ..trajectories import random_trajectory
+    if args.simulate:  # kinematics only: no torques, so no inertias needed
+        import numpy as np
+
+        from ..simulation import check_simulation_memory
+        from ..trajectories import random_trajectory, trajectory_to_configuration
 
         traj = random_trajectory(robot, harmonics=5, seed=args.seed)
-        sim = simulate(robot, traj, duration=args.duration, rate=max(2 * args.fps, 50.0))
-        ds = sim.dataset
-        return ds.t, ds.q, f"random excitation (seed {args.seed}, {args.duration:g} s)"
+        rate = max(2 * args.fps, 50.0)
+        n = int(round(args.duration * rate))
+        check_simulation_memory(robot, n)  # before allocating: a clear error, not a crash
+        t = np.arange(n) / rate
+        q = trajectory_to_configuration(robot, traj.sample(t)[0])
+        return t, q, f"random excitation (seed {args.seed}, {args.duration:g} s)"
     return None
 
 

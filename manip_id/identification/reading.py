@@ -160,7 +160,7 @@ def scan_file(robot: Robot, spec, options: PreprocessOptions | None = None) -> F
         raise
     if fh is not None:
         fh.close()
-    quality = qa.finish(counts.n_dropped, counts.first_dropped)
+    quality = qa.finish(counts.n_dropped, counts.first_dropped, counts.reasons)
     if quality.n_samples:  # far outside the joint limits: refused (slightly: a warning)
         try:
             check_position_range(robot, quality.q_min, quality.q_max, spec.label)
