@@ -49,6 +49,8 @@ from .robot_sources import (
     MANIPULATORS,
     OUR_ROBOTS,
     JointTerms,
+    Reduction,
+    RobotSource,
     available_robots,
     joint_terms,
     load_source,
@@ -89,13 +91,8 @@ class Robot:
         model: pin.Model,
         terms: JointTerms,
         *,
-        source: str | None = None,
-        package_dirs: Sequence[str] = (),
-        full_model: pin.Model | None = None,
-        locked_ids: Sequence[int] = (),
-        reference_configuration: np.ndarray | None = None,
-        settings: Mapping | None = None,
-        geometry: Mapping | None = None,
+        origin: RobotSource | None = None,
+        reduction: Reduction | None = None,
         profile: RobotProfile | None = None,
     ):
         kinds = [model.joints[i].shortname() for i in range(1, model.njoints)]
@@ -111,15 +108,15 @@ class Robot:
         self.model = model
         self.data = model.createData()
         self.terms = terms
-        self.source = source
-        self.package_dirs = list(package_dirs)
-        self._full_model = full_model if full_model is not None else model
-        self._locked_ids = list(locked_ids)
-        self._qref = reference_configuration
-        self.settings = dict(settings or {})
+        self.source = None if origin is None else origin.source
+        self.package_dirs = [] if origin is None else list(origin.package_dirs)
+        self._full_model = model if reduction is None else reduction.full_model
+        self._locked_ids = [] if reduction is None else list(reduction.locked_ids)
+        self._qref = None if reduction is None else reduction.configuration
+        self.settings = {} if origin is None else dict(origin.settings)
         #: the identification profile the robot was loaded with (``robots/NAME.toml``), or None
         self.profile = profile
-        self._full_geometry = dict(geometry or {})
+        self._full_geometry = {} if origin is None else dict(origin.geometry)
         self.joint_names: list[str] = [model.names[i] for i in range(1, model.njoints)]
         self.dofs = DofLayout.from_model(model)
         self.dof_names: list[str] = list(self.dofs.names)
@@ -415,13 +412,8 @@ def load_robot(
         name,
         model,
         terms,
-        source=src.source,
-        package_dirs=src.package_dirs,
-        full_model=full_model,
-        locked_ids=locked_ids,
-        reference_configuration=qref,
-        settings=src.settings,
-        geometry=src.geometry,
+        origin=src,
+        reduction=Reduction(full_model, tuple(locked_ids), qref) if locked_ids else None,
         profile=prof,
     )
     if sidecar is not None:
