@@ -359,26 +359,35 @@ def load_robot(
 
     Parameters
     ----------
-    spec: a name of example-robot-data (``"panda"``, ``"ur5"``, ...), a path to a
+    spec
+        a name of example-robot-data (``"panda"``, ``"ur5"``, ...), a path to a
         URDF file, or ``"msd"`` (the one-DoF mass-spring-damper of ``robots/msd.urdf``).
-    armature: model a rotor inertia per joint (column ddq_j). Default: the profile's, else off.
-    friction: friction kinds per joint, some of ``("viscous", "coulomb",
+    armature
+        model a rotor inertia per joint (column ddq_j). Default: the profile's, else off.
+    friction
+        friction kinds per joint, some of ``("viscous", "coulomb",
         "offset")`` (also a comma-separated string). Default: the profile's
         (``"msd"``: viscous), else none.
-    spring: model a linear spring per joint (column q_j). Default: the profile's
+    spring
+        model a linear spring per joint (column q_j). Default: the profile's
         (on for ``"msd"``), else off.
-    active_joints: names of the joints to identify; the others are locked at
+    active_joints
+        names of the joints to identify; the others are locked at
         ``locked_configuration``. Default: the profile's (``robots/panda.toml`` locks
         the two finger joints), else every joint.
-    locked_configuration: positions of the locked joints, a full configuration
+    locked_configuration
+        positions of the locked joints, a full configuration
         vector of the unreduced model (shape (nq,)) or a mapping joint name ->
         position [rad or m]. Default: the neutral configuration clipped to the limits.
-    package_dirs: folders where ``package://`` mesh paths of a URDF are resolved.
-    identified: for a URDF written by :func:`manip_id.export.export_urdf`: ``True`` reads
+    package_dirs
+        folders where ``package://`` mesh paths of a URDF are resolved.
+    identified
+        for a URDF written by :func:`manip_id.export.export_urdf`: ``True`` reads
         its sidecar (``NAME.identified.json`` next to it), or give the sidecar's path.
         Its joint terms, active joints, armature, offset and spring become the
         defaults and the nominal parameters (explicit arguments still win).
-    profile: the identification profile (:mod:`manip_id.profiles`): a robot name or a
+    profile
+        the identification profile (:mod:`manip_id.profiles`): a robot name or a
         ``.toml`` path, a :class:`~manip_id.profiles.RobotProfile`, or False for none.
         Default: ``robots/NAME.toml`` for a robot loaded by name when it exists; a URDF
         loaded by path takes none (its file name decides nothing). Explicit arguments
