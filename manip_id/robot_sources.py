@@ -143,6 +143,25 @@ class RobotSource:
     by_path: bool
 
 
+@dataclass(frozen=True)
+class Reduction:
+    """The joints locked out of a loaded model.
+
+    Attributes
+    ----------
+    full_model : pinocchio.Model
+        The model before the reduction (all joints).
+    locked_ids : tuple of int
+        Joint ids of ``full_model`` held fixed.
+    configuration : numpy.ndarray or None
+        The configuration of ``full_model`` they are held at [rad or m], shape (nq,).
+    """
+
+    full_model: pin.Model
+    locked_ids: tuple[int, ...] = ()
+    configuration: np.ndarray | None = None
+
+
 def load_source(spec: str, pkg: list[str]) -> RobotSource:
     """Our robot (``robots/NAME.urdf`` and its ``.json`` settings), a URDF path, or a name
     of example-robot-data."""
