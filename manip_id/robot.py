@@ -59,6 +59,8 @@ from .robot_sources import (
     reference_configuration,
     resolve_profile,
 )
+from .sidecar import apply_identified, identified_options
+from .sidecar import locked_configuration as sidecar_locked
 
 __all__ = [
     "FRICTION_KINDS",
@@ -411,9 +413,6 @@ def load_robot(
     model, name = src.model, src.name
     sidecar = None
     if identified is not None and identified is not False:
-        from .export import identified_options
-        from .export import locked_configuration as sidecar_locked
-
         sidecar, armature, friction, spring, active_joints = identified_options(
             spec_str, identified, armature, friction, spring, active_joints
         )
@@ -442,7 +441,5 @@ def load_robot(
         profile=prof,
     )
     if sidecar is not None:
-        from .export import apply_identified
-
         apply_identified(robot, sidecar)
     return robot
