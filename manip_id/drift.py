@@ -33,10 +33,10 @@ from scipy.special import chdtrc, ndtr
 
 from .errors import InputError, ModelMismatchError, RankDeficiencyError
 from .fleet import identify_files
+from .identification import PartitionOptions, PreprocessOptions, RunOptions
+from .identification.document import single_standard
 from .monitor import covariance_kind
 from .parameters import JOINT_TERM
-from .pipeline import PreprocessOptions
-from .results import single_standard
 from .robot import Robot
 
 #: Default significance level of the tests.
@@ -220,7 +220,7 @@ def drift_files(
     ----------
     robot: the robot, with the reference's joint terms
     reference: the reference :class:`~manip_id.identification.IdentificationResult`
-        (e.g. :func:`~manip_id.results.load_result` of ``manip-id identify --json``)
+        (e.g. :func:`~manip_id.identification.load_result` of ``manip-id identify --json``)
     files: data files (file specs as :func:`~manip_id.fleet.identify_files` takes them),
         each tested alone; or a mapping ``group -> files`` (e.g. one robot's logs), each
         group identified from all its files and tested as one
@@ -243,7 +243,11 @@ def drift_files(
         )
     method = reference.method if reference.method in ("ols", "wls") else "ols"
     kw = dict(
-        scheduler=scheduler, method=method, base=reference.base, options=options, window=window
+        run=RunOptions(scheduler=scheduler),
+        method=method,
+        base=reference.base,
+        options=options,
+        window=window,
     )
     out = []
     if isinstance(files, Mapping):
@@ -255,7 +259,7 @@ def drift_files(
                 continue
             out.append(compare(reference, res, alpha=float(alpha), file=str(group)))
     else:
-        pooled = identify_files(robot, list(files), per_file=True, **kw)
+        pooled = identify_files(robot, list(files), partition=PartitionOptions(per_file=True), **kw)
         for fe in pooled.per_file or []:
             if fe.result is None:
                 out.append(FileDrift(fe.path, int(fe.n_samples), None, 0, None, None, [], fe.error))

@@ -50,8 +50,7 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..drift import drift_files  # the fleet path loads with the command, not with --help
-    from ..pipeline import PreprocessOptions
-    from ..results import load_result
+    from ..identification import PreprocessOptions, load_result
 
     if not 0.0 < args.alpha < 1.0:
         raise InputError(f"--alpha must be a level in (0, 1), got {args.alpha}")

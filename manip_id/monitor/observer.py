@@ -46,7 +46,7 @@ from numpy.typing import ArrayLike
 
 from .._checks import as_float_array, check_finite, positive_vector
 from ..errors import InputError, ModelMismatchError
-from ..results import load_result
+from ..identification import load_result
 from ..robot import Robot, available_robots
 from .detections import MonitorRun
 
