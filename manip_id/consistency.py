@@ -21,13 +21,12 @@ Joint terms: armature ``Ia``, viscous ``fv`` and Coulomb ``fc`` friction must be
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ._checks import as_float_array, check_finite
-from .errors import InputError, ManipIdError
+from .errors import InputError, PhysicalConsistencyError
 
 #: Relative eigenvalue tolerance of the consistency check (``lambda_min > tol * lambda_max``).
 EIG_TOLERANCE = 1e-10
@@ -145,16 +144,6 @@ class ConsistencyReport:
                 for v in self.violations
             ],
         }
-
-
-class PhysicalConsistencyError(ManipIdError, ValueError):
-    """A parameter vector that had to be physical is not; ``violations`` says where."""
-
-    def __init__(self, what: str, violations: Sequence[Violation]):
-        self.violations = list(violations)
-        shown = "; ".join(str(v) for v in self.violations[:4])
-        more = f"; ... {len(self.violations) - 4} more" if len(self.violations) > 4 else ""
-        super().__init__(f"{what} is not physically consistent: {shown}{more}")
 
 
 def _body_violations(name: str, pi: np.ndarray, lam: np.ndarray, tol: float) -> list[Violation]:
