@@ -43,7 +43,6 @@ import os
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -51,6 +50,17 @@ import numpy as np
 from .datasets import FileSpec, parse_file_spec
 from .errors import DataError, InputError, ManipIdError, RankDeficiencyError
 from .estimators import InformationAccumulator
+from .execution import (
+    DEFAULT_LOCAL_WORKERS,
+    SPLIT_EVERY,
+    WORKER_ENV,
+    DaskBackend,
+    SerialBackend,
+    open_backend,
+    parse_scheduler,
+    portable_robot,
+    reduce_tree,
+)
 from .identifiability import BaseParameters
 from .identification import (
     IdentificationResult,
@@ -63,20 +73,12 @@ from .pipeline import PreprocessOptions
 from .regressor import DEFAULT_CHUNK
 from .robot import Robot
 
-#: Parts added together by one reduction task.
-SPLIT_EVERY = 8
 #: Methods that accumulate (the online laws need the samples in order).
 FLEET_METHODS: tuple[str, ...] = ("ols", "wls")
-#: Worker processes of ``scheduler="local"``.
-DEFAULT_LOCAL_WORKERS = 2
-#: Environment of the LocalCluster's workers: one BLAS thread (the tasks' matrices are
-#: small), and no statistical profiler (it samples the task thread's Python stack every
-#: 10 ms, which slowed the regressor loop by about 20 % in ``experiments/bench_fleet.py``).
-WORKER_ENV = {
-    "OPENBLAS_NUM_THREADS": "1",
-    "OMP_NUM_THREADS": "1",
-    "DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED": "False",
-}
+
+# Temporary aliases for manip_id.payload until it uses the public names of
+# manip_id.execution (the payload package switches to them).
+_Serial, _Dask, _tree = SerialBackend, DaskBackend, reduce_tree
 
 
 # ------------------------------------------------------------------ the parts
@@ -231,22 +233,6 @@ class FileEstimate:
 
 
 # --------------------------------------------------------------- task bodies
-def portable_robot(robot: Robot) -> Robot:
-    """A copy of ``robot`` that holds what identification needs and pickles small.
-
-    The Pinocchio model and the joint terms (about 0.2 MB pickled), without any
-    geometry or cached evaluator: what is sent to the workers.
-    """
-    return Robot(
-        robot.name,
-        robot.model,
-        robot.terms,
-        source=robot.source,
-        package_dirs=robot.package_dirs,
-        settings=robot.settings,
-    )
-
-
 def _named(label: str, exc: BaseException) -> DataError:
     msg = str(exc) if isinstance(exc, ManipIdError) else f"{type(exc).__name__}: {exc}"
     path = label.partition("@")[0]
@@ -441,152 +427,12 @@ def accumulate_parts(
     if not parts:
         raise InputError("no parts to accumulate")
     light = portable_robot(robot)
-    backend = _Serial() if scheduler is None else _Dask(scheduler)
-    try:
-        leaves = [
-            backend.submit(_blocks_sums, light, func, tuple(args), columns, chunk)
-            for func, args in parts
-        ]
-        (total,) = backend.gather([_tree(backend, leaves, int(split_every))])
-    finally:
-        backend.close()
+    with open_backend(scheduler=scheduler) as backend:
+        leaves = backend.map(
+            _blocks_sums, [(light, func, tuple(args), columns, chunk) for func, args in parts]
+        )
+        (total,) = backend.gather([reduce_tree(backend, leaves, int(split_every))])
     return total.acc, dict(total.timings)
-
-
-def _sum(*parts):
-    """Add parts in their order (one reduction task)."""
-    total = parts[0]
-    for p in parts[1:]:
-        total = total + p
-    return total
-
-
-# ------------------------------------------------------------------ back-ends
-class _Serial:
-    """The tasks and the tree of the distributed run, in this process, eagerly."""
-
-    client = None
-    description = "in this process"
-
-    def submit(self, fn: Callable, *args):
-        return fn(*args)
-
-    def gather(self, items):
-        return list(items) if isinstance(items, list) else items
-
-    def close(self) -> None:
-        pass
-
-
-class _Dask:
-    """Tasks on a ``dask.distributed`` cluster (futures); only sums come back."""
-
-    def __init__(self, scheduler):
-        Client = _distributed().Client
-
-        self._own_client = self._cluster = None
-        if isinstance(scheduler, Client):
-            self.client = scheduler
-        else:
-            self.client, self._cluster = _connect(str(scheduler))
-            self._own_client = self.client
-        self._futures: list = []
-        info = self.client.scheduler_info()
-        self.n_workers = len(info.get("workers", {}))
-        self.description = f"Dask at {self.client.scheduler.address} ({self.n_workers} workers)"
-
-    def submit(self, fn: Callable, *args):
-        fut = self.client.submit(fn, *args, pure=False)
-        self._futures.append(fut)
-        return fut
-
-    def gather(self, items):
-        return self.client.gather(items)
-
-    def close(self) -> None:
-        try:
-            if self._futures:
-                self.client.cancel(self._futures)
-        finally:
-            self._futures = []
-            if self._own_client is not None:
-                self._own_client.close()
-            if self._cluster is not None:
-                self._cluster.close()
-
-
-def _distributed():
-    """``dask.distributed``, or an error saying how to install it."""
-    try:
-        import distributed
-    except ImportError as exc:
-        raise InputError(
-            "a Dask scheduler needs dask.distributed: pip install 'manip_id[fleet]'"
-        ) from exc
-    return distributed
-
-
-def parse_scheduler(spec: str) -> tuple[str, Any]:
-    """``"local[:N]"`` -> ("local", N); ``"tcp://HOST:PORT"`` -> ("address", spec);
-    an existing ``.json`` file -> ("file", path). Raises :class:`InputError` otherwise."""
-    spec = str(spec).strip()
-    if spec == "local" or spec.startswith("local:"):
-        n_text = spec.partition(":")[2] or str(DEFAULT_LOCAL_WORKERS)
-        if not n_text.isdigit() or int(n_text) < 1:
-            raise InputError(f"scheduler local:N needs a positive number of workers, got {spec!r}")
-        return "local", int(n_text)
-    if "://" in spec:
-        proto, _, rest = spec.partition("://")
-        host, sep, port = rest.rpartition(":")
-        if proto not in ("tcp", "tls", "inproc", "ucx") or not sep or not port.isdigit():
-            raise InputError(f"scheduler address must look like tcp://HOST:PORT, got {spec!r}")
-        return "address", spec
-    path = Path(spec).expanduser()
-    if path.suffix.lower() == ".json":
-        if not path.is_file():
-            raise InputError(f"no such scheduler file: {path}")
-        return "file", str(path)
-    raise InputError(
-        f"scheduler must be local[:N], tcp://HOST:PORT or a scheduler JSON file, got {spec!r}"
-    )
-
-
-def _connect(spec: str):
-    """A client (and the LocalCluster it owns, if any) for a scheduler spec."""
-    kind, value = parse_scheduler(spec)
-    dist = _distributed()
-    Client, LocalCluster = dist.Client, dist.LocalCluster
-
-    try:
-        if kind == "local":
-            cluster = LocalCluster(
-                n_workers=value,
-                threads_per_worker=1,
-                processes=True,
-                host="127.0.0.1",
-                scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
-                env=WORKER_ENV,
-            )
-            try:
-                return Client(cluster), cluster
-            except BaseException:
-                cluster.close()
-                raise
-        if kind == "address":
-            return Client(value, timeout=os.environ.get("MANIP_ID_DASK_TIMEOUT", "30s")), None
-        return Client(scheduler_file=value, timeout="30s"), None
-    except (OSError, TimeoutError) as exc:
-        raise InputError(f"cannot reach the Dask scheduler {spec!r}: {exc}") from exc
-
-
-def _tree(backend, items: list, split_every: int):
-    """Add ``items`` in a tree, ``split_every`` consecutive ones per task; the root."""
-    while len(items) > 1:
-        items = [
-            backend.submit(_sum, *items[i : i + split_every])
-            for i in range(0, len(items), split_every)
-        ]
-    return items[0]
 
 
 # --------------------------------------------------------------------- entry
@@ -718,8 +564,7 @@ def identify_files(
     ind = np.asarray(base.independent, dtype=np.intp)
     light = portable_robot(robot)
 
-    backend = _Serial() if scheduler is None else _Dask(scheduler)
-    try:
+    with open_backend(scheduler=scheduler) as backend:
         t0 = time.perf_counter()
         if block is None:
             layout = [[FilePart(s, i)] for i, s in enumerate(specs)]
@@ -755,8 +600,8 @@ def identify_files(
                 return backend.submit(part_sums, light, pt, ind, chunk, opts)
             return backend.submit(model_sums, light, pt, ind, mopts, model, window_length)
 
-        per = [_tree(backend, [leaf(pt) for pt in lp], split_every) for lp in layout]
-        total = _tree(backend, list(per), split_every)
+        per = [reduce_tree(backend, [leaf(pt) for pt in lp], split_every) for lp in layout]
+        total = reduce_tree(backend, list(per), split_every)
         vparts = (
             []
             if vspecs is None
@@ -767,8 +612,6 @@ def identify_files(
         )
         fetched = backend.gather([total, *vparts, *(per if per_file else [])])
         timings["distributed"] = time.perf_counter() - t0
-    finally:
-        backend.close()
 
     sums: PartSums = fetched[0]
     vsums: list[PartSums] = fetched[1 : 1 + len(vparts)]
@@ -873,6 +716,9 @@ def _file_estimate(robot, info: FileInfo, fs: PartSums, base, method, chunk, mod
 
 
 __all__ = [
+    "DEFAULT_LOCAL_WORKERS",
+    "SPLIT_EVERY",
+    "WORKER_ENV",
     "FileEstimate",
     "FileInfo",
     "FilePart",

@@ -43,6 +43,7 @@ from .estimators.consistent import (
     minimum_norm_standard,
 )
 from .estimators.consistent import check_options as check_consistent_options
+from .execution import ForkBackend
 from .identifiability import BaseParameters, RankAnalysis, analyze, analyze_information
 from .regressor import DEFAULT_CHUNK, check_states, iter_regressor
 from .robot import Robot
@@ -453,37 +454,26 @@ def _accumulate_blocks(
     return acc, {"regressor": t_reg, "accumulate": t_acc}
 
 
-#: The job of a forked worker process, set by :func:`_init_worker` in the worker only.
-_worker_job: tuple | None = None
-
-
-def _init_worker(robot: Robot, ind: np.ndarray, chunk: int, parts: list) -> None:
-    """Pool initializer: the job, inherited through fork (never pickled)."""
-    global _worker_job
-    _worker_job = (robot, ind, chunk, parts)
-
-
-def _worker_accumulate(i: int):
-    assert _worker_job is not None, "_init_worker did not run in this process"
-    robot, ind, chunk, parts = _worker_job
-    func, args = parts[i]
+def _part_accumulate(robot: Robot, func, args, ind, chunk: int):
+    """One part ``(func, args)``: the blocks ``func(*args)`` accumulated (a task)."""
     return _accumulate_blocks(robot, func(*args), ind, chunk)
 
 
 def _accumulate_parallel(robot: Robot, parts, ind, chunk: int, workers: int, progress=None):
     """Accumulate ``parts`` (each ``(func, args)`` with ``func(*args)`` yielding blocks) in
     ``workers`` forked processes; the accumulators merge by addition in part order."""
-    import multiprocessing as mp
-
     parts = list(parts)
-    ctx = mp.get_context("fork")
-    job = (robot, ind, chunk, parts)
-    with ctx.Pool(min(workers, len(parts)), initializer=_init_worker, initargs=job) as pool:
-        results = []
-        for k, res in enumerate(pool.imap(_worker_accumulate, range(len(parts)))):
-            results.append(res)
-            if progress is not None:
-                progress(k + 1, len(parts))
+
+    def report(k: int, _value) -> None:
+        if progress is not None:
+            progress(k + 1, len(parts))
+
+    with ForkBackend(workers) as backend:
+        results = backend.map(
+            _part_accumulate,
+            [(robot, func, args, ind, chunk) for func, args in parts],
+            on_result=report,
+        )
     acc = results[0][0].copy()
     for other, _ in results[1:]:
         acc.merge(other)

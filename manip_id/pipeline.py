@@ -42,6 +42,7 @@ from .datasets.quality import DataQuality, QualityAccumulator
 from .datasets.stream import READ_CHUNK, torque_scale_vector
 from .errors import DataError, InputError
 from .estimators import InformationAccumulator
+from .execution import ForkBackend
 from .regressor import DEFAULT_CHUNK
 from .robot import Robot
 from .signals import DEFAULT_BLOCK, DEFAULT_CUTOFF, DEFAULT_ORDER, PreprocessSettings
@@ -499,19 +500,10 @@ def processed_count(
     return len(range(settings.trim, n - settings.trim, settings.decimate))
 
 
-# State handed to forked worker processes (inherited, never pickled).
-_JOB: dict = {}
-
-
-def _job_file(i: int) -> FileAccumulation:
-    robot, specs, options, ind, chunk, scans = _JOB["job"]
-    return accumulate_file(robot, specs[i], options, ind, chunk=chunk, scan=scans.get(specs[i]))
-
-
-def _job_part(i: int) -> FileAccumulation:
-    robot, spec, options, ind, chunk, scan, parts = _JOB["job"]
+def _file_task(robot, spec, options, ind, chunk, scan, part=None, discard=True):
+    """One task of :func:`accumulate_files`: one file, or one part of it."""
     return accumulate_file(
-        robot, spec, options, ind, chunk=chunk, scan=scan, part=(i, parts), discard=False
+        robot, spec, options, ind, chunk=chunk, scan=scan, part=part, discard=discard
     )
 
 
@@ -557,16 +549,19 @@ def accumulate_files(
             scans[spec] = scan_file(robot, spec, options)
     total = sum(scans[s].n for s in specs)
     if int(workers) > 1 and len(specs) == 1:  # one file: its samples in parts
-        import multiprocessing as mp
-
         spec = specs[0]
         scan = scans.get(spec) or scan_file(robot, spec, options)
-        _JOB["job"] = (robot, spec, options, ind, int(chunk), scan, int(workers))
+        k_parts = int(workers)
         try:
-            with mp.get_context("fork").Pool(int(workers)) as pool:
-                parts = pool.map(_job_part, range(int(workers)))
+            with ForkBackend(k_parts) as backend:
+                parts = backend.map(
+                    _file_task,
+                    [
+                        (robot, spec, options, ind, int(chunk), scan, (i, k_parts), False)
+                        for i in range(k_parts)
+                    ],
+                )
         finally:
-            _JOB.pop("job", None)
             scan.discard()
         first = parts[0]
         for other in parts[1:]:
@@ -579,19 +574,17 @@ def accumulate_files(
             progress(total, total)
         return [first]
     if int(workers) > 1 and len(specs) > 1:
-        import multiprocessing as mp
 
-        _JOB["job"] = (robot, specs, options, ind, int(chunk), scans)
-        try:
-            with mp.get_context("fork").Pool(min(int(workers), len(specs))) as pool:
-                forked: list[FileAccumulation] = []
-                for k, fa in enumerate(pool.imap(_job_file, range(len(specs)))):
-                    forked.append(fa)
-                    if progress is not None:
-                        progress(sum(scans[s].n for s in specs[: k + 1]), total)
-                return forked
-        finally:
-            _JOB.pop("job", None)
+        def report(k: int, _value) -> None:
+            if progress is not None:
+                progress(sum(scans[s].n for s in specs[: k + 1]), total)
+
+        with ForkBackend(int(workers)) as backend:
+            return backend.map(
+                _file_task,
+                [(robot, s, options, ind, int(chunk), scans.get(s)) for s in specs],
+                on_result=report,
+            )
     out: list[FileAccumulation] = []
     done = 0
     last = [0]

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from conftest import get_robot
 
+import manip_id.execution as execution
 import manip_id.identification as identification
 from manip_id.errors import InputError
 from manip_id.estimators import GradientEstimator, RLSEstimator
@@ -85,5 +86,5 @@ def test_forked_back_end_equals_serial_and_leaves_no_state(ur5_data):
     scale = np.abs(serial.estimate).max()
     assert np.abs(forked.estimate - serial.estimate).max() <= 1e-9 * scale
     assert "accumulate_wall" in forked.timings and "accumulate_wall" not in serial.timings
-    assert identification._worker_job is None  # set in the workers only
+    assert execution._forked_job is None  # set in the workers only
     assert not hasattr(identification, "_WORK")
