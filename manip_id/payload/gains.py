@@ -21,6 +21,7 @@ from .._checks import as_float_array
 from ..errors import DataError, InputError
 from ..estimators import InformationAccumulator, solve_accumulator
 from ..identifiability import BaseParameters, RankAnalysis, analyze, analyze_information
+from ..metrics import relative_error
 from ..robot import Robot
 from .gain_estimators import check_payload_present, ml_gains, tls
 from .geometry import (
@@ -351,9 +352,7 @@ def _gain_errors(sums: _GainSums, x: np.ndarray, nv: int, p: int) -> tuple[dict,
         xg = np.zeros(p)
         xg[:nv] = x[:nv]
         tt = np.maximum(np.einsum("a,jab,b->j", xg, a.A_joint, xg), 0.0)  # ||g_j i_j||^2
-        rel[key] = float(np.sqrt(rss.sum() / tt.sum())) if tt.sum() > 0 else float("nan")
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rel_j[key] = np.sqrt(rss / tt)
+        rel[key], rel_j[key] = relative_error(rss, tt)
     return rel, rel_j
 
 

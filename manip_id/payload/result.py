@@ -14,12 +14,14 @@ import os
 import sys
 import warnings
 from dataclasses import dataclass, field
+from types import FrameType
 
 import numpy as np
 
 from ..consistency import EIG_TOLERANCE
 from ..errors import PayloadWarning
 from ..identifiability import RankAnalysis
+from ..metrics import finite_or_none
 from .geometry import (
     DEPENDS,
     INERTIA_COMPONENTS,
@@ -42,15 +44,15 @@ def fit_dict(r) -> dict:
     return {
         "payload": r.payload.to_dict(),
         "n_samples": dict(r.n_samples),
-        "relative_error": {k: _f(v) for k, v in r.relative_error.items()},
+        "relative_error": {k: finite_or_none(v) for k, v in r.relative_error.items()},
         "relative_error_per_joint": {
-            k: [_f(x) for x in v] for k, v in r.relative_error_per_joint.items()
+            k: [finite_or_none(x) for x in v] for k, v in r.relative_error_per_joint.items()
         },
         "rows_left_out": dict(zip(r.dof_names, (int(x) for x in r.rows_left_out), strict=True)),
-        "sigma2": _f(r.sigma2),
-        "condition_number": _f(r.condition_number),
+        "sigma2": finite_or_none(r.sigma2),
+        "condition_number": finite_or_none(r.condition_number),
         "base_parameters": [
-            {"name": n, "expression": e, "value": _f(x), "std": _f(s)}
+            {"name": n, "expression": e, "value": finite_or_none(x), "std": finite_or_none(s)}
             for n, e, x, s in zip(
                 r.base_names, r.base_expressions, r.base_estimate, r.base_std, strict=True
             )
@@ -59,13 +61,6 @@ def fit_dict(r) -> dict:
         "warnings": list(r.warnings),
         "timings": {k: round(float(v), 6) for k, v in r.timings.items()},
     }
-
-
-def _f(x):
-    if x is None:
-        return None
-    x = float(x)
-    return x if math.isfinite(x) else None
 
 
 def samples_text(n_samples: dict) -> str:
@@ -126,13 +121,13 @@ class PayloadEstimate:
         return self.values[4:].copy()
 
     def _shown(self, i: int, arr: np.ndarray):
-        return _f(arr[i]) if (self.identifiable[i] or self.known[i]) else None
+        return finite_or_none(arr[i]) if (self.identifiable[i] or self.known[i]) else None
 
     def to_dict(self) -> dict:
         """The JSON ``payload`` block; what the data do not identify is ``None``."""
         v = [self._shown(i, self.values) for i in range(10)]
         s = [
-            None if self.known[i] else (_f(self.std[i]) if self.identifiable[i] else None)
+            finite_or_none(self.std[i]) if self.identifiable[i] and not self.known[i] else None
             for i in range(10)
         ]
         return {
@@ -160,8 +155,8 @@ class PayloadEstimate:
             "standard_parameters": [
                 {
                     "name": n,
-                    "value": _f(x) if ok else None,
-                    "std": _f(sd) if ok else None,
+                    "value": finite_or_none(x) if ok else None,
+                    "std": finite_or_none(sd) if ok else None,
                     "identifiable": bool(ok),
                 }
                 for n, x, sd, ok in zip(
@@ -175,7 +170,7 @@ class PayloadEstimate:
             "physically_consistent": (
                 None if self.physically_consistent is None else bool(self.physically_consistent)
             ),
-            "pseudo_inertia_min_eigenvalue": _f(self.min_eigenvalue),
+            "pseudo_inertia_min_eigenvalue": finite_or_none(self.min_eigenvalue),
         }
 
     def table(self) -> str:
@@ -259,7 +254,7 @@ class PayloadResult:
             "known_base": self.known_base,
             **fit_dict(self),
             "payload_test": {
-                k: _f(v) if k != "dof" else int(v) for k, v in self.payload_test.items()
+                k: finite_or_none(v) if k != "dof" else int(v) for k, v in self.payload_test.items()
             },
         }
 
@@ -327,7 +322,8 @@ class DriveGainResult:
         rows = []
         for j, name in enumerate(self.dof_names):
             ok = bool(self.determined[j])
-            g, s = (_f(self.gains[j]), _f(self.gains_std[j])) if ok else (None, None)
+            g = finite_or_none(self.gains[j]) if ok else None
+            s = finite_or_none(self.gains_std[j]) if ok else None
             pct = None
             if ok and g not in (None, 0.0) and s is not None:
                 pct = 100.0 * s / abs(g)
@@ -464,7 +460,8 @@ def record_warning(messages: list[str], text: str) -> None:
     (:class:`~manip_id.errors.PayloadWarning`), pointing at the first caller outside this
     package (the user's call, from whichever step of it warns)."""
     messages.append(text)
-    frame, level = sys._getframe(0), 1
+    frame: FrameType | None = sys._getframe(0)
+    level = 1
     while frame is not None and frame.f_code.co_filename.startswith(_PACKAGE_DIR):
         frame, level = frame.f_back, level + 1
     warnings.warn(text, PayloadWarning, stacklevel=level)

@@ -21,6 +21,8 @@ import numpy as np
 from .._checks import as_float_array, check_finite
 from ..errors import DataError, InputError, ManipIdError
 from ..estimators import InformationAccumulator
+from ..execution import SPLIT_EVERY, open_backend, portable_robot, reduce_tree
+from ..metrics import relative_error
 from ..regressor import DEFAULT_CHUNK, check_states
 from ..robot import Robot
 
@@ -226,25 +228,20 @@ def accumulate_runs(
     """Each group's runs summed, one :func:`run_sums` task per run, added in a tree.
 
     ``scheduler``: None (this process, nothing of Dask imported) or any scheduler of
-    :func:`manip_id.fleet.identify_files` (``"local[:N]"``, ``"tcp://HOST:PORT"``, a
+    :func:`manip_id.execution.open_backend` (``"local[:N]"``, ``"tcp://HOST:PORT"``, a
     scheduler JSON file, a ``distributed.Client``). The same tasks and the same tree
     either way; a failing run fails the whole call (no partial sums).
     """
-    from ..fleet import SPLIT_EVERY, _Dask, _Serial, _tree, portable_robot
-
-    backend = _Serial() if scheduler is None else _Dask(scheduler)
     worker_robot = robot if scheduler is None else portable_robot(robot)
-    try:
+    with open_backend(scheduler=scheduler) as backend:
         roots = []
         for runs, design in groups:
             leaves = [
                 backend.submit(run_sums, worker_robot, run, design, int(chunk), deadband)
                 for run in runs
             ]
-            roots.append(_tree(backend, leaves, SPLIT_EVERY))
+            roots.append(reduce_tree(backend, leaves, SPLIT_EVERY))
         return list(backend.gather(roots))
-    finally:
-        backend.close()
 
 
 def sub_accumulator(acc: InformationAccumulator, cols: np.ndarray, offset=None, known=None):
@@ -280,15 +277,13 @@ def check_deadband(deadband) -> float | None:
 
 
 def relative_errors(accs: dict, x: np.ndarray) -> tuple[dict, dict]:
+    """Per kind of run (``accs``: name -> accumulator or None), the relative error of ``x``
+    overall and per joint (:func:`manip_id.metrics.relative_error`); empty kinds are left out."""
     total, per = {}, {}
     for key, acc in accs.items():
         if acc is None or acc.n == 0:
             continue
-        rss = acc.residual_sum_of_squares(x)
-        zz = acc.zz_joint
-        total[key] = float(np.sqrt(rss.sum() / zz.sum())) if zz.sum() > 0 else float("nan")
-        with np.errstate(divide="ignore", invalid="ignore"):
-            per[key] = np.sqrt(rss / zz)
+        total[key], per[key] = relative_error(acc.residual_sum_of_squares(x), acc.zz_joint)
     return total, per
 
 

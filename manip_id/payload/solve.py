@@ -22,6 +22,7 @@ from ..errors import DataError, InputError, RankDeficiencyError
 from ..estimators import InformationAccumulator, LeastSquaresSolution, solve_accumulator
 from ..estimators.consistent import ConsistentProblem, base_map, solve_sdp
 from ..identifiability import BaseParameters, RankAnalysis, analyze, analyze_information
+from ..metrics import relative_error
 from ..robot import Robot
 from .geometry import (
     PAYLOAD_NAMES,
@@ -364,12 +365,8 @@ def _payload_errors(prob: _PayloadProblem, sums: _PayloadSums, x: np.ndarray):
         return relative_errors({"unloaded": sums.acc_u, "loaded": sums.acc_l}, x)
     # residual of tau - Y_b beta - Y_p psi, relative to the loaded torques
     assert sums.full is not None
-    rss = sums.acc.residual_sum_of_squares(x)
-    zz = sums.full.zz_joint
-    rel = {"loaded": float(np.sqrt(rss.sum() / zz.sum())) if zz.sum() > 0 else math.nan}
-    with np.errstate(divide="ignore", invalid="ignore"):
-        rel_j = {"loaded": np.sqrt(rss / zz)}
-    return rel, rel_j
+    total, per_joint = relative_error(sums.acc.residual_sum_of_squares(x), sums.full.zz_joint)
+    return {"loaded": total}, {"loaded": per_joint}
 
 
 def identify_payload(

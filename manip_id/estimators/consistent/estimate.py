@@ -13,6 +13,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ...consistency import ConsistencyReport, check_consistency
+from ...metrics import finite_or_none
 from .problem import (
     DEFAULT_PRIOR_WEIGHT,
     SCALE_WEIGHT,
@@ -91,10 +92,10 @@ class StandardEstimate:
                 "prior": self.prior,
                 "prior_weight": float(self.prior_weight),
                 "base_shift_std": float(self.base_shift_std),
-                "fit": _finite(self.fit),
-                "prior_distance": _finite(self.prior_distance),
-                "fit_scale": _finite(self.fit_scale),
-                "prior_shift_std": _finite(self.prior_shift_std),
+                "fit": finite_or_none(self.fit),
+                "prior_distance": finite_or_none(self.prior_distance),
+                "fit_scale": finite_or_none(self.fit_scale),
+                "prior_shift_std": finite_or_none(self.prior_shift_std),
             },
         }
 
@@ -118,11 +119,6 @@ class StandardEstimate:
             ),
         ]
         return lines
-
-
-def _finite(x: float) -> float | None:
-    x = float(x)
-    return x if np.isfinite(x) else None
 
 
 def consistent_estimate(

@@ -26,19 +26,25 @@ def solve_sdp(problem: ConsistentProblem, *, tolerance: float = 1e-8, max_iter: 
     """Solve ``problem`` as a semidefinite program (cvxpy with Clarabel), unchecked.
 
     Every body's pseudo-inertia is constrained to ``J_i >= margin_i 1`` (one 4 x 4 LMI
-    each), the joint terms in ``problem.nonnegative`` to ``>= 0``. Returns
-    ``(theta, status, iterations)``; :func:`solve_consistent` adds the independent
-    check. Also the one-body payload solve of :mod:`manip_id.payload`.
+    each), the joint terms in ``problem.nonnegative`` to ``>= 0``. Returns ``(theta,
+    status, iterations)``; :func:`solve_consistent` adds the independent check. Also the
+    one-body payload solve of :mod:`manip_id.payload`.
     """
-    import cvxpy as cp
+    import cvxpy as cp  # optional heavy dependency: only the SDP needs it
 
-    pr = problem
-    nb, p = pr.n_bodies, pr.p
-    E = pseudo_inertia_basis().reshape(10, 16).T  # vec(J_i) = E @ pi_i (row-major vec)
-    eye_vec = np.eye(4).ravel()
-    # theta = G (beta_ls + W^+ u + V_0 v) + N z: the fit is ||u||^2 exactly, and the
-    # ill-conditioning of a nearly noise-free fit becomes a column scaling of u that
-    # the solver's equilibration removes (in theta it would be a dense ill-conditioned W P).
+    theta, u = _theta_expression(cp, problem)
+    cons, Js = _constraints(cp, problem, theta)
+    obj = _objective(cp, problem, theta, u, Js)
+    return _solve_scaled(cp, cons, obj, theta, tolerance, max_iter)
+
+
+def _theta_expression(cp, pr: ConsistentProblem):
+    """``theta = G (beta_ls + W^+ u + V_0 v) + N z`` as a cvxpy expression, and ``u``.
+
+    The fit is ``||u||^2`` exactly, and the ill-conditioning of a nearly noise-free fit
+    becomes a column scaling of ``u`` that the solver's equilibration removes (in
+    ``theta`` it would be a dense ill-conditioned ``W P``).
+    """
     r = pr.P.shape[0]
     G, N = row_and_null_maps(pr)
     _, sw, Vwt = np.linalg.svd(pr.W, full_matrices=True)
@@ -53,7 +59,14 @@ def solve_sdp(problem: ConsistentProblem, *, tolerance: float = 1e-8, max_iter: 
         theta = theta + (G @ V0) @ v
     if z is not None:
         theta = theta + N @ z
-    Js = [cp.Variable((4, 4), symmetric=True) for _ in range(nb)]
+    return theta, u
+
+
+def _constraints(cp, pr: ConsistentProblem, theta):
+    """The LMIs ``J_i - eps_i 1 >= 0`` (as PSD variables ``Js``), signs and bounds."""
+    E = pseudo_inertia_basis().reshape(10, 16).T  # vec(J_i) = E @ pi_i (row-major vec)
+    eye_vec = np.eye(4).ravel()
+    Js = [cp.Variable((4, 4), symmetric=True) for _ in range(pr.n_bodies)]
     cons = []
     for i, Ji in enumerate(Js):
         # Ji is the part of body i's pseudo-inertia above its margin: J_i - eps_i 1
@@ -66,6 +79,12 @@ def solve_sdp(problem: ConsistentProblem, *, tolerance: float = 1e-8, max_iter: 
             cons.append(Jfull - MARGIN * cp.trace(Jfull) * np.eye(4) >> 0)
     if pr.nonnegative.size:
         cons.append(theta[pr.nonnegative] >= 0)
+    return cons, Js
+
+
+def _objective(cp, pr: ConsistentProblem, theta, u, Js):
+    """``||u||^2 + w (sum_i tr(J0_i^-1 J_i) - log det J_i + joint-term squares)``."""
+    nb, p = pr.n_bodies, pr.p
     obj = cp.sum_squares(u)
     if pr.J0 is not None and pr.weight > 0:
         prior = 0
@@ -76,6 +95,17 @@ def solve_sdp(problem: ConsistentProblem, *, tolerance: float = 1e-8, max_iter: 
                 cp.multiply(1.0 / pr.term_scale, theta[10 * nb :] - pr.theta0[10 * nb :])
             )
         obj = obj + pr.weight * prior
+    return obj
+
+
+def _solve_scaled(cp, cons, obj, theta, tolerance: float, max_iter: int):
+    """Clarabel on ``obj / scale`` for each of :data:`OBJECTIVE_SCALES` until "optimal".
+
+    The interior-point method stalls on badly scaled objectives (a fit of 1e4 squared
+    standard deviations when least squares is far from physical); the minimizer does
+    not change with the scale. Returns ``(theta, status, iterations)`` or raises
+    :class:`SolverError` with every status.
+    """
     opts = dict(
         tol_gap_abs=tolerance,
         tol_gap_rel=tolerance,
@@ -83,9 +113,6 @@ def solve_sdp(problem: ConsistentProblem, *, tolerance: float = 1e-8, max_iter: 
         tol_ktratio=1e-8,
         max_iter=int(max_iter),
     )
-    # The interior-point method stalls on badly scaled objectives (a fit of 1e4 squared
-    # standard deviations when least squares is far from physical): retry with the
-    # objective divided by growing scales; the minimizer does not change.
     statuses = []
     best = None
     inv_scale = cp.Parameter(nonneg=True)  # a parameter: compiled once for every scale
@@ -108,11 +135,8 @@ def solve_sdp(problem: ConsistentProblem, *, tolerance: float = 1e-8, max_iter: 
         iters = int(getattr(prob.solver_stats, "num_iters", 0) or 0)
         value = np.array(theta.value, dtype=float)
         if status == cp.OPTIMAL:
-            return (
-                value,
-                status + (f" (objective scaled by 1/{scale:g})" if scale != 1 else ""),
-                iters,
-            )
+            scaled = f" (objective scaled by 1/{scale:g})" if scale != 1 else ""
+            return value, status + scaled, iters
         if best is None:
             best = (value, status, iters)
     if best is not None:
