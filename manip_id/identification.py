@@ -901,6 +901,7 @@ def _finish(
             f"({ls.solver})"
         )
         timings["consistent"] = standard.time
+        warnings_ += standard.warnings  # implausible bodies, named
         if not standard.physically_consistent:
             warnings_.append(
                 "the consistent estimate fails the eigenvalue test: "

@@ -41,6 +41,10 @@ from .result import (
 )
 from .runs import Run, accumulate_runs, as_runs, check_deadband, check_distinct, dof_factor
 
+#: A gain of OLS, WLS or TLS this many of its standard deviations from the ML gain of the
+#: same data is named in a warning.
+ML_DISAGREEMENT = 3.0
+
 
 @dataclass(frozen=True, eq=False)
 class GainDesign:
@@ -299,10 +303,46 @@ def _gains_solve(
                 "TLS: smallest right singular vector of the column-scaled [W, -y], scaled to "
                 "the known payload; covariance sigma^2 (W^T W)^-1 at the TLS estimate"
             )
-    elif method == "ml":  # damped steps leave the unexcited directions where OLS put them
+    if method == "ml":  # damped steps leave the unexcited directions where OLS put them
         x, cov, sigma2, what = ml_gains(acc, nv, x, acc.n - left_out, determined)
         solver = f"{what}, started from OLS ({ls.solver})"
+    else:  # the ML gains from the same sums: a check of the errors in variables
+        x_ml = ml_gains(acc, nv, ls.estimate, acc.n - left_out, determined)[0]
+        _warn_ml_disagreement(sums, method, x, cov, x_ml, determined, messages)
     return x, cov, sigma2, solver
+
+
+def _warn_ml_disagreement(
+    sums: _GainSums,
+    method: str,
+    x: np.ndarray,
+    cov: np.ndarray,
+    x_ml: np.ndarray,
+    determined: np.ndarray,
+    messages: list[str],
+) -> None:
+    """Warn, naming each joint, where a gain of ``method`` is more than
+    :data:`ML_DISAGREEMENT` of its own standard deviations from the ML gain."""
+    nv = determined.size
+    std = np.sqrt(np.maximum(np.diag(cov)[:nv], 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.abs(x[:nv] - x_ml[:nv]) / std
+    bad = [j for j in range(nv) if determined[j] and not z[j] <= ML_DISAGREEMENT]
+    if not bad:
+        return
+    shown = "; ".join(
+        f"{sums.names[j].removesuffix('.gain')} {x[j]:.4g} +- {std[j]:.2g} against {x_ml[j]:.4g}"
+        f" ({z[j]:.3g} std)"
+        for j in bad
+    )
+    record_warning(
+        messages,
+        f"the {method.upper()} drive gain differs from the maximum-likelihood gain of the "
+        f"same data by more than {ML_DISAGREEMENT:g} of its standard deviations: {shown}; "
+        f"{method.upper()} holds the noisy currents in the regressor (errors in variables: "
+        "a gain shrinks where its current is small against its noise), ML does not "
+        "(method='ml', --method ml)",
+    )
 
 
 def _gains_uncertainty(

@@ -8,12 +8,18 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ...consistency import ConsistencyReport, check_consistency
+from ...consistency import (
+    ConsistencyReport,
+    PlausibilityReport,
+    check_consistency,
+    check_plausibility,
+)
 from ...metrics import finite_or_none
+from .bounds import BodyBounds, BoundsOptions, body_bounds
 from .problem import (
     DEFAULT_PRIOR_WEIGHT,
     SCALE_WEIGHT,
@@ -47,6 +53,10 @@ class StandardEstimate:
     prior_shift_std: largest ``|beta - beta_feas| / (sqrt(k) std(beta_ls))``: how far the
         prior moved the fit beyond what physical consistency needs [honest standard
         deviations]; the default weight keeps it below 1.
+    bounds: the plausibility bounds the estimate was solved with (None for none).
+    plausibility: per body, mass against nominal and position against its bounding
+        ellipsoid (:func:`manip_id.consistency.check_plausibility`); None for plain LS.
+    warnings: what the user should know about these values (implausible bodies).
     """
 
     names: list[str]
@@ -64,6 +74,9 @@ class StandardEstimate:
     prior_distance: float = 0.0
     fit_scale: float = 1.0
     prior_shift_std: float = 0.0
+    bounds: BodyBounds | None = None
+    plausibility: PlausibilityReport | None = None
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def physically_consistent(self) -> bool:
@@ -97,7 +110,15 @@ class StandardEstimate:
                 "fit_scale": finite_or_none(self.fit_scale),
                 "prior_shift_std": finite_or_none(self.prior_shift_std),
             },
+            "plausibility": self._plausibility_dict(),
         }
+
+    def _plausibility_dict(self) -> dict | None:
+        if self.plausibility is None:
+            return None
+        out = self.plausibility.to_dict()
+        out["bounds"] = None if self.bounds is None else self.bounds.to_dict()
+        return out
 
     def summary_lines(self) -> list[str]:
         """Readable lines: the check, the per-body minimum eigenvalues and the solver."""
@@ -118,6 +139,17 @@ class StandardEstimate:
                 f"{n} {v:.3g}" for n, v in zip(c.body_names, c.min_eigenvalues, strict=True)
             ),
         ]
+        if self.plausibility is not None:
+            pl = self.plausibility
+            lines.append(
+                "link masses [kg] (x nominal): "
+                + ", ".join(
+                    f"{b.name} {b.mass:.3g}"
+                    + ("" if b.mass_ratio is None else f" ({b.mass_ratio:.2g}x)")
+                    for b in pl.bodies
+                )
+                + f"; total {pl.total_mass:.3g} (nominal {pl.nominal_total_mass:.3g})"
+            )
         return lines
 
 
@@ -131,14 +163,18 @@ def consistent_estimate(
     prior: str = "nominal",
     prior_weight: float = DEFAULT_PRIOR_WEIGHT,
     prior_parameters=None,
+    bounds: BoundsOptions | None = None,
 ) -> StandardEstimate:
     """Consistent standard parameters from an accumulator of the base columns and its LS fit.
 
     ``acc`` is the :class:`~manip_id.estimators.InformationAccumulator` of the base
     regressor, ``ls`` its :class:`~manip_id.estimators.LeastSquaresSolution`: ordinary
     (fit measured with ``C^-1 = A / sigma^2``) or weighted (``ls.weights``: the
-    weighted sums, ``C^-1 = A_w``). Raises :class:`SolverError` on a solver failure or
-    an infeasible problem, :class:`PhysicalConsistencyError` for a non-physical prior.
+    weighted sums, ``C^-1 = A_w``). ``bounds``: the plausibility bounds
+    (:class:`~manip_id.estimators.consistent.bounds.BoundsOptions`; default: each body
+    inside the bounding ellipsoid of its link). Raises :class:`SolverError` on a solver
+    failure or an infeasible problem, :class:`PhysicalConsistencyError` for a
+    non-physical prior.
 
     Two solves with ``solver``. The scale solve (prior at :data:`SCALE_WEIGHT`, nearly
     feasibility alone) gives the least fit ``f_feas`` any physical model reaches and
@@ -146,17 +182,17 @@ def consistent_estimate(
     the ``r`` identified base directions. ``f_feas`` is a chi-square with at most ``r``
     degrees of freedom when the covariance is honest and the robot physical (it is
     near 0 on white noise); far above ``r`` it says by how much ``C`` is too small at
-    least. The estimate then solves with the prior weight ``w k``: the prior counts
-    ``w`` against the fit in honest standard deviations, whatever the residuals'
-    correlation. ``prior="none"``: one solve, ``k`` reported only.
+    least. The estimate then solves with the prior weight ``w k``. The result carries
+    its plausibility (masses against nominal, bodies against their ellipsoids) and a
+    warning naming each implausible body.
     """
     check_options(solver, prior, prior_weight)
+    bounds = BoundsOptions() if bounds is None else bounds
     if ls.weights is None:
         A, b, zz, variance = acc.A, acc.b, acc.zz, ls.sigma2
     else:
         A, b, zz = acc.weighted(ls.weights)
         variance = 1.0
-    w = float(prior_weight)
     problem = build_problem(
         robot,
         base,
@@ -169,36 +205,62 @@ def consistent_estimate(
         n_rows=acc.n_rows,
         zz=zz,
     )
+    problem = replace(problem, bounds=body_bounds(robot, bounds))
     feas = solve_consistent(robot, problem, solver=solver)
     scale = max(1.0, feas.fit / max(int(problem.W.shape[0]), 1))  # k = max(1, f_feas / r)
     sol, elapsed = feas, feas.time
     if prior != "none":
-        problem = replace(problem, weight=w * scale)
-        sol = solve_consistent(robot, problem, solver=solver)
+        sol = solve_consistent(robot, replace(problem, weight=prior_weight * scale), solver=solver)
         elapsed += sol.time
+    return _estimate(robot, problem, ls, feas, sol, scale, elapsed, prior_weight)
+
+
+def _estimate(robot, problem, ls, feas, sol, scale: float, elapsed: float, weight: float):
+    """The :class:`StandardEstimate` of a solved problem: shifts, plausibility, warnings."""
     std = np.sqrt(np.maximum(np.diag(ls.covariance), 0.0))
     with np.errstate(divide="ignore", invalid="ignore"):
         shift = np.abs(sol.beta - ls.estimate) / std
         moved = np.abs(sol.beta - feas.beta) / (np.sqrt(scale) * std)
     shift = shift[np.isfinite(shift)]
     moved = moved[np.isfinite(moved)]
+    bounds = problem.bounds
+    ellipsoids = None if bounds is None else bounds.ellipsoids
+    plausibility = check_plausibility(robot, sol.theta, ellipsoids)
+    prior = "none" if problem.J0 is None else "nominal"
     return StandardEstimate(
         names=list(robot.parameter_names),
         units=list(robot.parameter_units),
         values=sol.theta,
         nominal=np.array(robot.nominal_parameters, dtype=float),
         consistency=sol.consistency,
-        solver=solver,
+        solver=sol.solver,
         status=sol.status,
         time=elapsed,
         prior=prior,
-        prior_weight=w if prior != "none" else 0.0,
+        prior_weight=float(weight) if prior != "none" else 0.0,
         base_shift_std=float(shift.max()) if shift.size else 0.0,
         fit=sol.fit,
         prior_distance=sol.prior_distance,
         fit_scale=scale,
         prior_shift_std=float(moved.max()) if moved.size else 0.0,
+        bounds=bounds,
+        plausibility=plausibility,
+        warnings=plausibility_warnings(plausibility),
     )
+
+
+def plausibility_warnings(report: PlausibilityReport) -> list[str]:
+    """One warning naming each implausible body (none when every body is plausible)."""
+    if report.plausible:
+        return []
+    lo, hi = 1.0 / report.ratio_limit, report.ratio_limit
+    return [
+        f"implausible link parameters (physically consistent, but outside {lo:.2g}-{hi:.2g}x "
+        "the nominal mass or the link's bounding ellipsoid): "
+        + "; ".join(report.messages())
+        + " (check the model's joint terms, e.g. --armature or --friction; or bound the "
+        "masses: --mass-range, --total-mass)"
+    ]
 
 
 def minimum_norm_standard(robot, base, beta) -> StandardEstimate:

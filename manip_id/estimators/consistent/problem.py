@@ -22,6 +22,7 @@ from ...consistency import (
     pseudo_inertia,
 )
 from ...errors import InputError, PhysicalConsistencyError
+from .bounds import BodyBounds
 
 SOLVERS: tuple[str, ...] = ("sdp", "logchol")
 PRIORS: tuple[str, ...] = ("nominal", "none")
@@ -59,6 +60,8 @@ class ConsistentProblem:
     weight: prior weight ``w`` (0 for no prior).
     independent, dependent: the base parametrization's column indices.
     names: standard parameter names.
+    bounds: the plausibility bounds (:class:`~manip_id.estimators.consistent.bounds.BodyBounds`:
+        bounding ellipsoids, mass ranges, total mass), linear in theta; None for none.
     """
 
     P: np.ndarray
@@ -74,6 +77,7 @@ class ConsistentProblem:
     independent: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
     dependent: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
     names: list[str] = field(default_factory=list)
+    bounds: BodyBounds | None = None
 
     @property
     def p(self) -> int:

@@ -16,19 +16,24 @@ import numpy as np
 
 from ...consistency import pseudo_inertia_basis
 from ...errors import SolverError
+from .bounds import bound_constraints
 from .problem import MARGIN, ConsistentProblem, row_and_null_maps
 
-#: Objective scales the SDP is tried with, in turn, until Clarabel reports "optimal".
-OBJECTIVE_SCALES: tuple[float, ...] = (1.0, 1e2, 1e4, 1e-2)
+#: Objective scales the SDP is tried with, in turn, until Clarabel reports "optimal" (the
+#: large ones for bounds that hold the fit millions of squared standard deviations away).
+OBJECTIVE_SCALES: tuple[float, ...] = (1.0, 1e2, 1e4, 1e-2, 1e6, 1e8)
 
 
 def solve_sdp(problem: ConsistentProblem, *, tolerance: float = 1e-8, max_iter: int = 500):
     """Solve ``problem`` as a semidefinite program (cvxpy with Clarabel), unchecked.
 
     Every body's pseudo-inertia is constrained to ``J_i >= margin_i 1`` (one 4 x 4 LMI
-    each), the joint terms in ``problem.nonnegative`` to ``>= 0``. Returns ``(theta,
-    status, iterations)``; :func:`solve_consistent` adds the independent check. Also the
-    one-body payload solve of :mod:`manip_id.payload`.
+    each), the joint terms in ``problem.nonnegative`` to ``>= 0`` and, when the problem
+    carries them, each body's mass distribution to its bounding ellipsoid
+    (``tr(J_i Q_bar_i) >= 0``), its mass to its range and the total mass to its interval
+    (:mod:`~manip_id.estimators.consistent.bounds`). Returns ``(theta, status,
+    iterations)``; :func:`solve_consistent` adds the independent check. Also the one-body
+    payload solve of :mod:`manip_id.payload`.
     """
     import cvxpy as cp  # optional heavy dependency: only the SDP needs it
 
@@ -79,6 +84,8 @@ def _constraints(cp, pr: ConsistentProblem, theta):
             cons.append(Jfull - MARGIN * cp.trace(Jfull) * np.eye(4) >> 0)
     if pr.nonnegative.size:
         cons.append(theta[pr.nonnegative] >= 0)
+    if pr.bounds is not None:
+        cons += bound_constraints(pr.bounds, theta)
     return cons, Js
 
 

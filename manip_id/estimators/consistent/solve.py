@@ -22,6 +22,13 @@ def solve_consistent(
     1e-8), ``max_iter``; ``logchol``: ``max_iter`` (default 500), ``tolerance``
     (relative decrease/gradient, default 1e-13), ``theta_start`` (a consistent start).
     Raises :class:`SolverError` with the solver's status on failure or infeasibility.
+
+    Bounds (``problem.bounds``): the SDP holds them as constraints. The log-Cholesky
+    parametrization has no room for them, so its result is checked against them
+    afterwards; when it breaks one, the problem is solved again by the SDP and the
+    status says so (``"logchol broke the bounds (...); solved by the SDP: ..."``);
+    without cvxpy the log-Cholesky result stays, with the status ``"bounds not held:
+    ..."`` and the plausibility check of the estimate names the bodies.
     """
     if solver not in SOLVERS:
         raise InputError(f"solver must be one of {list(SOLVERS)}, got {solver!r}")
@@ -30,6 +37,9 @@ def solve_consistent(
         theta, status, iters = solve_sdp(problem, **options)
     else:
         theta, status, iters = solve_logchol(problem, **options)
+        broken = [] if problem.bounds is None else problem.bounds.violations(theta)
+        if broken:
+            theta, status, iters = _bounded_by_sdp(problem, theta, status, iters, broken)
     elapsed = time.perf_counter() - t0
     theta, moved = project(problem, theta)
     if moved > 0:
@@ -70,3 +80,13 @@ def project(pr: ConsistentProblem, theta: np.ndarray) -> tuple[np.ndarray, float
     if k.size:
         theta[k] = np.maximum(theta[k], 0.0)
     return theta, float(np.abs(theta - before).max())
+
+
+def _bounded_by_sdp(problem: ConsistentProblem, theta, status: str, iters: int, broken: list):
+    """The SDP's solution of a problem whose log-Cholesky result broke its bounds."""
+    what = "; ".join(broken[:3]) + ("; ..." if len(broken) > 3 else "")
+    try:
+        theta_b, status_b, iters_b = solve_sdp(problem)
+    except ImportError:  # cvxpy is optional: keep the unbounded result, say so
+        return theta, f"{status}; bounds not held: {what} (install cvxpy for the SDP)", iters
+    return theta_b, f"logchol broke the bounds ({what}); solved by the SDP: {status_b}", iters_b
