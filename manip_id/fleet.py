@@ -485,6 +485,7 @@ def identify_files(
     solver: str = "sdp",
     prior: str = "nominal",
     prior_weight: float | None = None,
+    bounds=None,
     model: str = "dynamic",
     window_length: float | None = None,
 ) -> IdentificationResult:
@@ -633,7 +634,7 @@ def identify_files(
         t_start,
         chunk=int(chunk),
         minimum_norm=minimum_norm,
-        consistent=(consistent, solver, prior, weight),
+        consistent=(consistent, solver, prior, weight, bounds),
     )
     files = [sums.files[i] for i in range(len(specs))]
     result = _as_model(robot, result, model, sum(f.n_samples for f in files))

@@ -43,6 +43,7 @@ from .estimators.consistent import (
     minimum_norm_standard,
 )
 from .estimators.consistent import check_options as check_consistent_options
+from .estimators.consistent.bounds import BoundsOptions
 from .execution import ForkBackend
 from .identifiability import BaseParameters, RankAnalysis, analyze, analyze_information
 from .regressor import DEFAULT_CHUNK, check_states, iter_regressor
@@ -601,6 +602,7 @@ def identify(
     solver: str = "sdp",
     prior: str = "nominal",
     prior_weight: float = DEFAULT_PRIOR_WEIGHT,
+    bounds: BoundsOptions | None = None,
     model: str = "dynamic",
     window_length: float | None = None,
 ) -> IdentificationResult:
@@ -635,6 +637,9 @@ def identify(
     solver: "sdp" (cvxpy + Clarabel) or "logchol" (log-Cholesky Levenberg-Marquardt)
     prior: "nominal" (the URDF parameters, log-det divergence) or "none"
     prior_weight: weight of the prior against the fit in standard deviations
+    bounds: plausibility bounds of the consistent estimate
+        (:class:`~manip_id.estimators.consistent.bounds.BoundsOptions`; default: each
+        body inside the bounding ellipsoid of its link)
     model: "dynamic" (needs ``ddq``), or "energy" / "momentum", which need no
         acceleration (``ddq`` may be None; ``dt`` is then the sample time [s] of
         uniformly sampled data; see :mod:`manip_id.models`); "ols"/"wls" only
@@ -660,7 +665,7 @@ def identify(
             base=base,
             chunk=int(chunk),
             minimum_norm=minimum_norm,
-            consistent=(consistent, solver, prior, prior_weight),
+            consistent=(consistent, solver, prior, prior_weight, bounds),
             timings=timings,
             t_start=t_start,
         )
@@ -696,7 +701,7 @@ def identify(
         minimum_norm=minimum_norm,
         est=est,
         solver_online=solver_online,
-        consistent=(consistent, solver, prior, prior_weight),
+        consistent=(consistent, solver, prior, prior_weight, bounds),
     )
 
 
@@ -775,6 +780,7 @@ def identify_chunks(
     solver: str = "sdp",
     prior: str = "nominal",
     prior_weight: float = DEFAULT_PRIOR_WEIGHT,
+    bounds: BoundsOptions | None = None,
 ) -> IdentificationResult:
     """Least-squares identification from data that arrive in blocks (files, logs, streams).
 
@@ -826,7 +832,7 @@ def identify_chunks(
         validation=validation,
         chunk=int(chunk),
         minimum_norm=minimum_norm,
-        consistent=(consistent, solver, prior, prior_weight),
+        consistent=(consistent, solver, prior, prior_weight, bounds),
     )
 
 
@@ -843,11 +849,11 @@ def _finish(
     minimum_norm: bool = False,
     est=None,
     solver_online: str = "",
-    consistent: tuple = (False, "sdp", "nominal", DEFAULT_PRIOR_WEIGHT),
+    consistent: tuple = (False, "sdp", "nominal", DEFAULT_PRIOR_WEIGHT, None),
 ) -> IdentificationResult:
     """Rank check, solve, errors and the result, from the accumulated information."""
     r, nv, n = base.n_base, robot.nv, acc.n
-    want_consistent, c_solver, c_prior, c_weight = consistent
+    want_consistent, c_solver, c_prior, c_weight, c_bounds = consistent
     if want_consistent:
         if method not in ("ols", "wls"):
             raise InputError(f"consistent=True applies to ols and wls, got method {method!r}")
@@ -891,7 +897,14 @@ def _finish(
     standard, warnings_ = None, []
     if want_consistent:  # beta = P theta of consistent standard parameters
         standard = consistent_estimate(
-            robot, acc, base, ls, solver=c_solver, prior=c_prior, prior_weight=c_weight
+            robot,
+            acc,
+            base,
+            ls,
+            solver=c_solver,
+            prior=c_prior,
+            prior_weight=c_weight,
+            bounds=c_bounds,
         )
         estimate = base.to_base(standard.values)
         rss_j = acc.residual_sum_of_squares(estimate)
@@ -1053,6 +1066,7 @@ def identify_datasets(
     solver: str = "sdp",
     prior: str = "nominal",
     prior_weight: float = DEFAULT_PRIOR_WEIGHT,
+    bounds: BoundsOptions | None = None,
     scans: dict | None = None,
     scheduler=None,
 ) -> IdentificationResult:
@@ -1107,6 +1121,7 @@ def identify_datasets(
             solver=solver,
             prior=prior,
             prior_weight=prior_weight,
+            bounds=bounds,
         )
 
     timings: dict[str, float] = {}
@@ -1137,7 +1152,7 @@ def identify_datasets(
         t_start,
         chunk=int(chunk),
         minimum_norm=minimum_norm,
-        consistent=(consistent, solver, prior, prior_weight),
+        consistent=(consistent, solver, prior, prior_weight, bounds),
     )
     re = result.relative_error
     if valid is not None:

@@ -217,3 +217,34 @@ def test_bound_options_are_checked():
     with pytest.raises(InputError, match="KG"):
         parse_total_mass("heavy")
     assert body_bounds(get_robot("ur5"), BoundsOptions("none")) is None
+
+
+def test_cli_bounds_options_reach_the_estimate(tmp_path):
+    """``--mass-range`` holds every link mass within it; the JSON carries the plausibility
+    section and the warning names each implausible body, printed as saved."""
+    import json
+    import subprocess
+    import sys
+
+    out = tmp_path / "r.json"
+    base = ["identify", "ur5", "--simulate", "--duration", "4", "--noise", "0.05"]
+    cmd = [sys.executable, "-m", "manip_id", *base, "--consistent", "--json", str(out)]
+    run = subprocess.run(
+        [*cmd, "--mass-range", "0.5,2", "--total-mass", "18+-20"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert run.returncode == 0, run.stderr
+    doc = json.loads(out.read_text())
+    bodies = doc["plausibility"]["bodies"]
+    assert all(0.5 * (1 - 1e-6) <= b["mass_ratio"] <= 2.0 * (1 + 1e-6) for b in bodies)
+    assert doc["plausibility"]["bounds"]["bodies"][1]["mass_range"] is not None
+    for w in doc["warnings"]:
+        if w.startswith("implausible"):
+            assert w in run.stdout + run.stderr
+    bad = subprocess.run([*cmd, "--mass-range", "2"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "--mass-range must read LO,HI" in bad.stderr
+    plain = [sys.executable, "-m", "manip_id", *base, "--bounds", "none"]
+    bad = subprocess.run(plain, capture_output=True, text=True)
+    assert bad.returncode == 2 and "--bounds applies to --consistent only" in bad.stderr

@@ -135,6 +135,20 @@ def parse_total_mass(text: str) -> tuple[float, float]:
     return m, tol
 
 
+def bound_options(bounds: str, mass_range: str | None, total_mass: str | None) -> BoundsOptions:
+    """:class:`BoundsOptions` from the command line's ``--bounds``, ``--mass-range LO,HI``
+    and ``--total-mass KG[+-TOL]`` (None: not given); bad text raises :class:`InputError`."""
+    mr = None
+    if mass_range is not None:
+        try:
+            lo, hi = (float(x) for x in str(mass_range).split(","))
+        except ValueError as exc:
+            raise InputError(f"--mass-range must read LO,HI, got {mass_range!r}") from exc
+        mr = (lo, hi)
+    tm = None if total_mass is None else parse_total_mass(total_mass)
+    return BoundsOptions(bounds, mass_range=mr, total_mass=tm)
+
+
 @dataclass(frozen=True)
 class BodyBounds:
     """The linear bounds of a consistent problem, per body (module docstring).
