@@ -44,6 +44,7 @@ from .estimators.consistent import (
 )
 from .estimators.consistent import check_options as check_consistent_options
 from .estimators.consistent.bounds import BoundsOptions
+from .estimators.consistent.terms import missing_term_warnings
 from .execution import ForkBackend
 from .identifiability import BaseParameters, RankAnalysis, analyze, analyze_information
 from .regressor import DEFAULT_CHUNK, check_states, iter_regressor
@@ -689,7 +690,7 @@ def identify(
     else:
         acc, times = _accumulate_serial(robot, q, dq, ddq, tau, ind, chunk, progress)
     timings.update(times)
-    return _finish(
+    result = _finish(
         robot,
         acc,
         base,
@@ -703,6 +704,11 @@ def identify(
         solver_online=solver_online,
         consistent=(consistent, solver, prior, prior_weight, bounds),
     )
+    # an implausible consistent fit: would a joint term the model lacks lower the error?
+    result.warnings.extend(
+        missing_term_warnings(robot, result.standard, [(q, dq, ddq, tau)], blocks, ind, chunk)
+    )
+    return result
 
 
 def _identify_acceleration_free(
@@ -1049,6 +1055,19 @@ def identify_dataset(
     )
 
 
+def _file_blocks(robot: Robot, files, options, scans):
+    """The files' blocks ``(q, dq, ddq, tau)`` as the fit sees them, read again (one pass)."""
+    from .pipeline import iter_processed  # pipeline imports this module (a cycle)
+
+    nq, nv = robot.nq, robot.nv
+    for spec in files:
+        _, blocks = iter_processed(robot, spec, options, (scans or {}).get(spec))
+        for b in blocks:  # packed t | q | dq | tau | ddq
+            q, dq = b[:, 1 : 1 + nq], b[:, 1 + nq : 1 + nq + nv]
+            tau, ddq = b[:, 1 + nq + nv : 1 + nq + 2 * nv], b[:, 1 + nq + 2 * nv :]
+            yield q, dq, ddq, tau
+
+
 def identify_datasets(
     robot: Robot,
     files,
@@ -1154,6 +1173,17 @@ def identify_datasets(
         minimum_norm=minimum_norm,
         consistent=(consistent, solver, prior, prior_weight, bounds),
     )
+    if window is None:  # an implausible fit: would a joint term the model lacks lower the error?
+        result.warnings.extend(
+            missing_term_warnings(
+                robot,
+                result.standard,
+                _file_blocks(robot, files, options, scans),
+                None if validation is None else _file_blocks(robot, validation, options, scans),
+                ind,
+                chunk,
+            )
+        )
     re = result.relative_error
     if valid is not None:
         t0 = time.perf_counter()

@@ -248,3 +248,50 @@ def test_cli_bounds_options_reach_the_estimate(tmp_path):
     plain = [sys.executable, "-m", "manip_id", *base, "--bounds", "none"]
     bad = subprocess.run(plain, capture_output=True, text=True)
     assert bad.returncode == 2 and "--bounds applies to --consistent only" in bad.stderr
+
+
+def test_missing_joint_terms_are_compared_on_the_same_sums():
+    """Truth with Coulomb friction, model without: adding fc lowers the error to the noise
+    floor, armature (absent from the truth) does not; the suggestion names --friction
+    coulomb, and only when the consistent fit is implausible."""
+    from types import SimpleNamespace
+
+    from manip_id.estimators.consistent.terms import (
+        accumulate_candidates,
+        compare_terms,
+        missing_term_warnings,
+        missing_terms,
+    )
+
+    truth_robot = get_robot("ur5", friction="coulomb")
+    robot = get_robot("ur5")
+    theta = truth_robot.nominal_parameters.copy()
+    theta[truth_robot.n_rigid :] = 2.0  # [N m]
+    q, dq, ddq = robot.random_states(800, seed=5)
+    tau = regressor(truth_robot, q, dq, ddq) @ theta
+    tau = tau + 0.005 * tau.std(axis=0) * np.random.default_rng(5).standard_normal(tau.shape)
+    base = analyze(robot).base
+    terms = [c[0] for c in missing_terms(robot)]
+    assert terms == ["Ia", "fv", "fc", "fo"]
+    acc = accumulate_candidates(robot, [(q, dq, ddq, tau)], base.independent, terms, 256)
+    # the candidate accumulator's own-columns block is the plain base accumulator's
+    plain = InformationAccumulator(base.n_base, robot.nv).add(
+        regressor(robot, q, dq, ddq), tau, columns=base.independent
+    )
+    np.testing.assert_allclose(acc.A[: base.n_base, : base.n_base], plain.A, rtol=1e-12)
+    by = {c.term: c for c in compare_terms(robot, acc, base.n_base)}
+    assert by["fc"].lowers and by["fc"].train_with < 0.2 * by["fc"].train_without
+    assert by["fc"].train_with == pytest.approx(0.005, rel=0.3)  # the noise floor
+    assert not by["Ia"].lowers
+    bad = robot.nominal_parameters.copy()
+    bad[10:20] *= 5.0
+    implausible = SimpleNamespace(plausibility=check_plausibility(robot, bad))
+    (text,) = missing_term_warnings(
+        robot, implausible, [(q, dq, ddq, tau)], None, base.independent, 256
+    )
+    assert "--friction coulomb (Coulomb friction) lowers the training error" in text
+    assert "--armature" not in text
+    fine = SimpleNamespace(plausibility=check_plausibility(robot, robot.nominal_parameters))
+    assert (
+        missing_term_warnings(robot, fine, [(q, dq, ddq, tau)], None, base.independent, 256) == []
+    )
