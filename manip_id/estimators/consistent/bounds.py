@@ -292,22 +292,28 @@ def _geometry_points(robot, kind: str) -> dict[int, np.ndarray]:
     geom = robot.collision_model if kind == "collision" else robot.visual_model
     out: dict[int, list] = {}
     for obj in geom.geometryObjects:
-        g = obj.geometry
-        if hasattr(g, "vertices"):  # a mesh (BVH): its vertices, already scaled on loading
-            pts = np.asarray(g.vertices(), dtype=float).reshape(-1, 3)
-        else:  # a primitive: the corners of its local bounding box
-            g.computeLocalAABB()
-            lo, hi = np.asarray(g.aabb_local.min_), np.asarray(g.aabb_local.max_)
-            pts = np.array(
-                [[(lo, hi)[a][0], (lo, hi)[b][1], (lo, hi)[c][2]] for a, b, c in _bits()]
-            )
-        if pts.size == 0 or not np.isfinite(pts).all():
+        pts = _object_points(obj.geometry)
+        if pts is None or pts.size == 0 or not np.isfinite(pts).all():
             continue
         M = obj.placement
         out.setdefault(int(obj.parentJoint), []).append(
             pts @ np.asarray(M.rotation).T + M.translation
         )
     return {j: np.vstack(v) for j, v in out.items()}
+
+
+def _object_points(g) -> np.ndarray | None:
+    """A geometry's points in its own frame: a mesh's vertices (already scaled when
+    Pinocchio loaded it), a primitive's local bounding-box corners; None for a geometry
+    that offers neither (it is left out)."""
+    try:
+        if hasattr(g, "vertices"):
+            return np.asarray(g.vertices(), dtype=float).reshape(-1, 3)
+        g.computeLocalAABB()
+        lo, hi = np.asarray(g.aabb_local.min_), np.asarray(g.aabb_local.max_)
+    except (AttributeError, RuntimeError, TypeError, ValueError):  # hpp-fcl: exotic types
+        return None
+    return np.array([[(lo, hi)[a][0], (lo, hi)[b][1], (lo, hi)[c][2]] for a, b, c in _bits()])
 
 
 def _bits() -> list[tuple[int, int, int]]:

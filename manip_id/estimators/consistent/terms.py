@@ -68,21 +68,21 @@ class TermComparison:
         return "training" if self.validation_without is None else "validation"
 
     @property
+    def deciding(self) -> tuple[float, float]:
+        """``(without, with)``: the validation errors when there are some, else training."""
+        if self.validation_without is None or self.validation_with is None:
+            return self.train_without, self.train_with
+        return self.validation_without, self.validation_with
+
+    @property
     def lowers(self) -> bool:
         """Whether the term lowers the deciding error by at least :data:`MIN_GAIN` of it."""
-        without, with_ = (
-            (self.train_without, self.train_with)
-            if self.validation_without is None
-            else (self.validation_without, self.validation_with)
-        )
-        return bool(with_ is not None and with_ <= (1.0 - MIN_GAIN) * without)
+        without, with_ = self.deciding
+        return bool(with_ <= (1.0 - MIN_GAIN) * without)
 
     def message(self) -> str:
         """``"--armature lowers the validation error from 0.82 % to 0.61 %"``."""
-        if self.validation_without is None:
-            a, b = self.train_without, self.train_with
-        else:
-            a, b = self.validation_without, self.validation_with
+        a, b = self.deciding
         return (
             f"{self.option} ({self.what}) lowers the {self.on} error from {100 * a:.3g} % to "
             f"{100 * b:.3g} %"
@@ -149,10 +149,10 @@ def compare_terms(
     for k, (term, what, option) in enumerate(cands):
         cols = np.r_[own, n_base + k * nv + np.arange(nv)]
         x = _fit(train, cols)
-        e_v = (None, None)
+        v0 = v1 = None
         if validation is not None:
-            e_v = (_error(validation, x0), _error(validation, x))
-        out.append(TermComparison(term, what, option, _error(train, x0), _error(train, x), *e_v))
+            v0, v1 = _error(validation, x0), _error(validation, x)
+        out.append(TermComparison(term, what, option, _error(train, x0), _error(train, x), v0, v1))
     return out
 
 
