@@ -513,7 +513,7 @@ def identify_files(
     base: base parametrization; default the structural one
     minimum_norm: solve rank-deficient data with the minimum-norm solution
     split_every: parts added by one reduction task (>= 2)
-    consistent, solver, prior, prior_weight: a physically consistent pooled
+    consistent, solver, prior, prior_weight, bounds: a physically consistent pooled
         estimate, as :func:`~manip_id.identification.identify` (solved on the
         client from the reduced sums)
     model: "dynamic" (``tau = Y(q, dq, ddq) theta``), or "energy" / "momentum"

@@ -245,19 +245,30 @@ def _estimate(robot, problem, ls, feas, sol, scale: float, elapsed: float, weigh
         prior_shift_std=float(moved.max()) if moved.size else 0.0,
         bounds=bounds,
         plausibility=plausibility,
-        warnings=plausibility_warnings(plausibility),
+        warnings=plausibility_warnings(plausibility, bounds),
     )
 
 
-def plausibility_warnings(report: PlausibilityReport) -> list[str]:
-    """One warning naming each implausible body (none when every body is plausible)."""
+def plausibility_warnings(report: PlausibilityReport, bounds: BodyBounds | None = None):
+    """One warning naming each implausible body (none when every body is plausible); a
+    body whose mass sits on its ``mass_range`` bound is said to be held there."""
     if report.plausible:
         return []
     lo, hi = 1.0 / report.ratio_limit, report.ratio_limit
+    held = set()
+    if bounds is not None and bounds.mass_range is not None:
+        for b, (m_lo, m_hi) in zip(report.bodies, bounds.mass_range, strict=True):
+            if min(abs(b.mass - m_lo), abs(b.mass - m_hi)) <= 1e-4 * max(abs(b.mass), 1e-12):
+                held.add(b.name)
+    texts = [
+        b.message()
+        + (" (held at its mass bound: the data push it further)" if b.name in held else "")
+        for b in report.implausible
+    ]
     return [
         f"implausible link parameters (physically consistent, but outside {lo:.2g}-{hi:.2g}x "
         "the nominal mass or the link's bounding ellipsoid): "
-        + "; ".join(report.messages())
+        + "; ".join(texts)
         + " (check the model's joint terms, e.g. --armature or --friction; or bound the "
         "masses: --mass-range, --total-mass)"
     ]
