@@ -43,7 +43,7 @@ class PayloadOptions:
         The robot's base parametrization (default: its structural analysis).
     scheduler : object
         None (accumulate in this process; nothing of Dask is imported), or a Dask
-        scheduler as in :func:`manip_id.fleet.identify_files` (``"local[:N]"``,
+        scheduler as in :func:`manip_id.execution.open_backend` (``"local[:N]"``,
         ``"tcp://HOST:PORT"``, a scheduler JSON file, a ``distributed.Client``): each
         run is one task (runs and their blocks must pickle), the sums are added in a
         tree on the cluster and the solve happens here; the result equals the local one

@@ -183,7 +183,7 @@ def run_sums(
 
     Parameters
     ----------
-    robot: the robot (:func:`manip_id.fleet.portable_robot` for a worker)
+    robot: the robot (:func:`manip_id.execution.portable_robot` for a worker)
     run: the run (its label, blocks and joint names); picklable for a worker
     design: the rows of the problem, a picklable callable with ``n_cols``
     chunk: samples per regressor chunk; deadband: see above
