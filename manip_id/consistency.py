@@ -103,13 +103,19 @@ class ConsistencyReport:
 
     Attributes
     ----------
-    consistent: every body's ``J`` positive definite and every ``Ia, fv, fc >= 0``.
-    body_names: one per moving body (its joint's name).
-    min_eigenvalues: smallest eigenvalue of each body's ``J``, shape (n_bodies,) [mixed
+    consistent
+        every body's ``J`` positive definite and every ``Ia, fv, fc >= 0``.
+    body_names
+        one per moving body (its joint's name).
+    min_eigenvalues
+        smallest eigenvalue of each body's ``J``, shape (n_bodies,) [mixed
         kg / kg m^2: the eigenvalue of a matrix holding both].
-    max_eigenvalues: largest eigenvalue of each ``J``, shape (n_bodies,).
-    violations: each broken condition, by body or parameter name.
-    tolerance: relative eigenvalue tolerance used.
+    max_eigenvalues
+        largest eigenvalue of each ``J``, shape (n_bodies,).
+    violations
+        each broken condition, by body or parameter name.
+    tolerance
+        relative eigenvalue tolerance used.
     """
 
     consistent: bool
@@ -265,17 +271,23 @@ class BodyPlausibility:
 
     Attributes
     ----------
-    name : str
+    name
+        str
         The body (its joint's name).
-    mass, nominal_mass : float
+    mass, nominal_mass
+        float
         [kg].
-    mass_ratio : float or None
+    mass_ratio
+        float or None
         ``mass / nominal_mass`` [-] (None for a massless nominal body).
-    com_inside : bool or None
+    com_inside
+        bool or None
         Whether the centre of mass lies inside the bounding ellipsoid (None: no ellipsoid).
-    inside : bool or None
+    inside
+        bool or None
         Whether the mass distribution fits the ellipsoid (``tr(J Q_bar) >= 0``).
-    flags : list of str
+    flags
+        list of str
         What is implausible, e.g. ``"mass 3.4x nominal"``.
     """
 
@@ -317,10 +329,13 @@ class PlausibilityReport:
 
     Attributes
     ----------
-    bodies : list of BodyPlausibility
-    total_mass, nominal_total_mass : float
+    bodies
+        list of BodyPlausibility
+    total_mass, nominal_total_mass
+        float
         Sums over the moving bodies [kg].
-    ratio_limit : float
+    ratio_limit
+        float
         Masses beyond ``[1/limit, limit]`` times nominal are flagged.
     """
 

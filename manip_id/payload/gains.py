@@ -424,21 +424,28 @@ def identify_drive_gains(
 
     Parameters
     ----------
-    robot : Robot
+    robot
+        Robot
         The robot.
-    unloaded, loaded : runs
+    unloaded, loaded
+        runs
         As in :func:`~manip_id.payload.identify_payload`, with motor currents [A] in the
         torque columns.
-    frame : str
+    frame
+        str
         The frame the payload is fixed to.
-    payload_mass : float
+    payload_mass
+        float
         The payload's known mass [kg], > 0 (it fixes the scale).
-    payload_com : array_like or None
+    payload_com
+        array_like or None
         Its centre of mass in ``frame`` [m], shape (3,), when known.
-    payload_inertia : array_like or None
+    payload_inertia
+        array_like or None
         Its inertia about the CoM in ``frame`` axes [kg m^2], (Ixx, Ixy, Iyy, Ixz, Iyz,
         Izz), when known (needs ``payload_com``).
-    options : DriveGainOptions or None
+    options
+        DriveGainOptions or None
         Method ("ml" by default), deadband, chunk, base, scheduler.
     **settings
         Fields of :class:`DriveGainOptions` given as keywords (``method="tls"``).

@@ -90,13 +90,20 @@ class PayloadFrame:
 
     Attributes
     ----------
-    name: frame name (as in the URDF: a link, an operational frame, a joint)
-    frame_id: Pinocchio frame index in ``robot.model``
-    joint_id: Pinocchio index of the parent joint (1 .. njoints - 1)
-    joint_name: its name
-    body: position of that joint's body in the parameter vector (0-based)
-    placement: the frame in the joint's frame, ``jMf``
-    transform: ``T`` of :func:`payload_transform`, shape (10, 10)
+    name
+        frame name (as in the URDF: a link, an operational frame, a joint)
+    frame_id
+        Pinocchio frame index in ``robot.model``
+    joint_id
+        Pinocchio index of the parent joint (1 .. njoints - 1)
+    joint_name
+        its name
+    body
+        position of that joint's body in the parameter vector (0-based)
+    placement
+        the frame in the joint's frame, ``jMf``
+    transform
+        ``T`` of :func:`payload_transform`, shape (10, 10)
     """
 
     name: str
@@ -159,8 +166,10 @@ def payload_regressor(robot: Robot, frame: str | PayloadFrame, q, dq, ddq) -> np
 
     Parameters
     ----------
-    frame: a frame name of ``robot`` or a :class:`PayloadFrame`
-    q: positions [rad or m], shape (nq,) or (N, nq); dq, ddq: shape (nv,) or (N, nv)
+    frame
+        a frame name of ``robot`` or a :class:`PayloadFrame`
+    q
+        positions [rad or m], shape (nq,) or (N, nq); dq, ddq: shape (nv,) or (N, nv)
 
     Returns
     -------

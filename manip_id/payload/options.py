@@ -27,21 +27,27 @@ class PayloadOptions:
 
     Attributes
     ----------
-    method : str
+    method
+        str
         "wls" (default: each joint weighted by its residual variance, re-estimated from
         the residuals) or "ols". Noise that differs from joint to joint (the rule on a
         real arm) leaves the OLS standard deviations wrong (mass: predicted 1.1 g,
         observed 2.0 g in ``experiments/payload.py``) and its estimate 2-30 times less
         precise; WLS's are right.
-    consistent : bool
+    consistent
+        bool
         Constrain the payload's pseudo-inertia to be positive definite.
-    velocity_deadband : float or None
+    velocity_deadband
+        float or None
         Leave out the rows of joint j where ``|dq_j| <`` this [rad/s].
-    chunk : int
+    chunk
+        int
         Samples per regressor chunk.
-    base : BaseParameters or None
+    base
+        BaseParameters or None
         The robot's base parametrization (default: its structural analysis).
-    scheduler : object
+    scheduler
+        object
         None (accumulate in this process; nothing of Dask is imported), or a Dask
         scheduler as in :func:`manip_id.execution.open_backend` (``"local[:N]"``,
         ``"tcp://HOST:PORT"``, a scheduler JSON file, a ``distributed.Client``): each
@@ -64,7 +70,8 @@ class DriveGainOptions:
 
     Attributes
     ----------
-    method : str
+    method
+        str
         "ml" (default: maximum likelihood under current noise, Gauss-Newton from the OLS
         start), "ols" (ordinary least squares with the known columns on the right-hand
         side, Gautier & Briot), "wls" (the same, each joint weighted by its residual

@@ -74,20 +74,32 @@ class PayloadEstimate:
 
     Attributes
     ----------
-    frame: frame name; parent_joint: the joint carrying it
-    standard: ``phi`` (10,): m [kg], h = m c [kg m], inertia about the frame origin
+    frame
+        frame name; parent_joint: the joint carrying it
+    standard
+        ``phi`` (10,): m [kg], h = m c [kg m], inertia about the frame origin
         [kg m^2]; the representative with zero unidentifiable components
-    standard_std: standard deviations of ``phi`` (10,) (NaN where not identifiable)
-    values: ``[m, c (3), I_c (6)]`` [kg, m, kg m^2] (inertia about the CoM, frame axes)
-    std: their standard deviations (delta method), shape (10,); NaN where not identifiable
-    identifiable: per quantity of :data:`QUANTITY_NAMES`, whether the data fix it
-    standard_identifiable: per standard parameter, whether the data fix it
-    known: per quantity, whether it was given (drive gains with a known payload)
-    combinations: the payload base parameters the data fix, in standard names
-    unidentifiable: the directions of ``phi`` no data can see
-    min_eigenvalue: smallest eigenvalue of the pseudo-inertia ``J(phi)`` (NumPy eigvalsh)
+    standard_std
+        standard deviations of ``phi`` (10,) (NaN where not identifiable)
+    values
+        ``[m, c (3), I_c (6)]`` [kg, m, kg m^2] (inertia about the CoM, frame axes)
+    std
+        their standard deviations (delta method), shape (10,); NaN where not identifiable
+    identifiable
+        per quantity of :data:`QUANTITY_NAMES`, whether the data fix it
+    standard_identifiable
+        per standard parameter, whether the data fix it
+    known
+        per quantity, whether it was given (drive gains with a known payload)
+    combinations
+        the payload base parameters the data fix, in standard names
+    unidentifiable
+        the directions of ``phi`` no data can see
+    min_eigenvalue
+        smallest eigenvalue of the pseudo-inertia ``J(phi)`` (NumPy eigvalsh)
         of :attr:`standard`
-    physically_consistent: ``min_eigenvalue > 1e-10 max|eig J|``; ``None`` when some
+    physically_consistent
+        ``min_eigenvalue > 1e-10 max|eig J|``; ``None`` when some
         directions of ``phi`` are not identifiable and no consistent fit chose them
     """
 
@@ -204,19 +216,31 @@ class PayloadResult:
     Attributes
     ----------
     robot_name, method ("ols" or "wls"), payload (:class:`PayloadEstimate`)
-    base_names, base_expressions: the robot's base parameters
-    base_estimate, base_std: their estimate (or the known one) and standard deviations (r,)
-    known_base: whether the base parameters came from an earlier identification
-    consistent: whether the payload was constrained to be physically consistent
-    sigma2: residual variance [(N m)^2]; condition_number: of the joint regressor
-    n_samples: {"unloaded": N_u, "loaded": N_l}
-    relative_error: {"unloaded": e_u, "loaded": e_l} (``||tau - tau_hat|| / ||tau||``)
-    relative_error_per_joint: the same per joint, (nv,) each
-    rows_left_out: per joint, rows dropped by the velocity deadband
-    payload_test: the Wald statistic that the loaded runs show a payload, its degrees
+    base_names, base_expressions
+        the robot's base parameters
+    base_estimate, base_std
+        their estimate (or the known one) and standard deviations (r,)
+    known_base
+        whether the base parameters came from an earlier identification
+    consistent
+        whether the payload was constrained to be physically consistent
+    sigma2
+        residual variance [(N m)^2]; condition_number: of the joint regressor
+    n_samples
+        {"unloaded": N_u, "loaded": N_l}
+    relative_error
+        {"unloaded": e_u, "loaded": e_l} (``||tau - tau_hat|| / ||tau||``)
+    relative_error_per_joint
+        the same per joint, (nv,) each
+    rows_left_out
+        per joint, rows dropped by the velocity deadband
+    payload_test
+        the Wald statistic that the loaded runs show a payload, its degrees
         of freedom and p-value
-    solver: how it was solved; warnings: what the user should know; timings [s]
-    runs: {"unloaded": [...], "loaded": [...]}, per run what its source reported
+    solver
+        how it was solved; warnings: what the user should know; timings [s]
+    runs
+        {"unloaded": [...], "loaded": [...]}, per run what its source reported
         (:attr:`RunSums.runs`: a file's data quality and preprocessing, read where the
         run was accumulated; None for arrays)
     """
@@ -281,16 +305,23 @@ class DriveGainResult:
     Attributes
     ----------
     robot_name, method ("ols" or "tls"), dof_names
-    gains, gains_std: shape (nv,) [N m / A] (NaN where not determined)
-    determined: per joint, whether the data fix its gain
-    payload: :class:`PayloadEstimate` (``known`` marks the given quantities)
-    base_names, base_expressions, base_estimate, base_std: the robot's base parameters
+    gains, gains_std
+        shape (nv,) [N m / A] (NaN where not determined)
+    determined
+        per joint, whether the data fix its gain
+    payload
+        :class:`PayloadEstimate` (``known`` marks the given quantities)
+    base_names, base_expressions, base_estimate, base_std
+        the robot's base parameters
         [in torque units]
-    sigma2: residual variance, [A^2] for "ml" (current units), [(N m)^2] otherwise;
+    sigma2
+        residual variance, [A^2] for "ml" (current units), [(N m)^2] otherwise;
         condition_number: of the homogeneous system with the known columns moved right
-    n_samples, relative_error, relative_error_per_joint: as :class:`PayloadResult`, the
+    n_samples, relative_error, relative_error_per_joint
+        as :class:`PayloadResult`, the
         error relative to the torques ``g_j i_j``
-    rows_left_out: per joint, rows dropped by the velocity deadband
+    rows_left_out
+        per joint, rows dropped by the velocity deadband
     solver, warnings, timings, runs (as :class:`PayloadResult`)
     """
 

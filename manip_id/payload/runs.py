@@ -151,9 +151,12 @@ class RunSums:
 
     Attributes
     ----------
-    acc: the accumulated rows of the runs' design
-    left_out: rows left out by the velocity deadband per joint, shape (nv,)
-    runs: per run, in order, what its source reports (``summary()`` of a run given as
+    acc
+        the accumulated rows of the runs' design
+    left_out
+        rows left out by the velocity deadband per joint, shape (nv,)
+    runs
+        per run, in order, what its source reports (``summary()`` of a run given as
         a callable object that has one, e.g. a file's data quality and preprocessing;
         else None)
     """
@@ -183,10 +186,14 @@ def run_sums(
 
     Parameters
     ----------
-    robot: the robot (:func:`manip_id.execution.portable_robot` for a worker)
-    run: the run (its label, blocks and joint names); picklable for a worker
-    design: the rows of the problem, a picklable callable with ``n_cols``
-    chunk: samples per regressor chunk; deadband: see above
+    robot
+        the robot (:func:`manip_id.execution.portable_robot` for a worker)
+    run
+        the run (its label, blocks and joint names); picklable for a worker
+    design
+        the rows of the problem, a picklable callable with ``n_cols``
+    chunk
+        samples per regressor chunk; deadband: see above
 
     Raises
     ------

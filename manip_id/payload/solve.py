@@ -383,21 +383,27 @@ def identify_payload(
 
     Parameters
     ----------
-    robot : Robot
+    robot
+        Robot
         The robot (its joint terms decide the base columns).
-    unloaded : runs
+    unloaded
+        runs
         Runs without the payload: a Dataset (with ddq), a tuple ``(q, dq, ddq, tau)`` of
         arrays ((N, nq), (N, nv) x 3 [rad, rad/s, rad/s^2, N m]), a function of no
         argument returning an iterable of such tuples (a long log streamed block by
         block), or a list of those; may be empty/None with ``known_base``.
-    loaded : runs
+    loaded
+        runs
         Runs with the payload mounted, the same forms.
-    frame : str
+    frame
+        str
         The frame or link the payload is fixed to (e.g. ``"tool0"``).
-    known_base : KnownBase, IdentificationResult or None
+    known_base
+        KnownBase, IdentificationResult or None
         Base parameters from an earlier identification (:func:`load_known_base`), used
         instead of the unloaded runs.
-    options : PayloadOptions or None
+    options
+        PayloadOptions or None
         Method, consistency, deadband, chunk, base, scheduler.
     **settings
         Fields of :class:`PayloadOptions` given as keywords (``method="ols"``).

@@ -74,11 +74,14 @@ class BoundsOptions:
 
     Attributes
     ----------
-    bounds : str
+    bounds
+        str
         "geometry" (each body's mass inside a bounding ellipsoid of its link) or "none".
-    mass_range : tuple of float or None
+    mass_range
+        tuple of float or None
         ``(lo, hi)``: each body's mass within ``[lo, hi]`` times its nominal mass [-].
-    total_mass : tuple of float or None
+    total_mass
+        tuple of float or None
         ``(M, tol)``: the moving bodies' total mass within ``M +- tol`` [kg].
     """
 
@@ -155,18 +158,23 @@ class BodyBounds:
 
     Attributes
     ----------
-    body_names : list of str
+    body_names
+        list of str
         One per moving body (its joint's name).
-    ellipsoids : numpy.ndarray or None
+    ellipsoids
+        numpy.ndarray or None
         ``Q_bar`` of each body's bounding ellipsoid, shape (n_bodies, 4, 4); None
         without ellipsoid bounds.
-    sources : list of str
+    sources
+        list of str
         Per body, where its ellipsoid came from ("collision geometry", "visual
         geometry", "kinematic segment", with ", semi-axes xF to hold the nominal body"
         when it had to grow).
-    mass_range : numpy.ndarray or None
+    mass_range
+        numpy.ndarray or None
         ``[lo, hi]`` of each body's mass [kg], shape (n_bodies, 2).
-    total_mass : tuple of float or None
+    total_mass
+        tuple of float or None
         ``(lo, hi)`` of the total mass [kg].
     """
 

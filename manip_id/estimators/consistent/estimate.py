@@ -36,27 +36,40 @@ class StandardEstimate:
 
     Attributes
     ----------
-    names, units: of each standard parameter, length p.
-    values: the standard parameters, shape (p,): the consistent estimate, or for
+    names, units
+        of each standard parameter, length p.
+    values
+        the standard parameters, shape (p,): the consistent estimate, or for
         plain least squares the minimum-norm standard vector with the LS base parameters.
-    nominal: the robot's nominal (URDF) parameters, shape (p,).
-    consistency: the independent eigenvalue test of ``values``.
-    solver, status, time: how the consistent estimate was solved ("" for plain LS) [s].
-    prior, prior_weight: the prior used.
-    base_shift_std: largest ``|beta - beta_ls| / std(beta_ls)`` over the base parameters:
+    nominal
+        the robot's nominal (URDF) parameters, shape (p,).
+    consistency
+        the independent eigenvalue test of ``values``.
+    solver, status, time
+        how the consistent estimate was solved ("" for plain LS) [s].
+    prior, prior_weight
+        the prior used.
+    base_shift_std
+        largest ``|beta - beta_ls| / std(beta_ls)`` over the base parameters:
         how far physical consistency (and the prior) moved the fit [OLS standard deviations].
-    fit, prior_distance: objective terms of the consistent solve (module docstring);
+    fit, prior_distance
+        objective terms of the consistent solve (module docstring);
         ``fit`` in squared OLS standard deviations.
-    fit_scale: ``k = max(1, f_feas / r)``: the fit of the feasibility solve against its
+    fit_scale
+        ``k = max(1, f_feas / r)``: the fit of the feasibility solve against its
         expected value; the prior weight applies to the fit divided by ``k`` (1 on white
         noise; large when the residuals are correlated and the OLS covariance too small).
-    prior_shift_std: largest ``|beta - beta_feas| / (sqrt(k) std(beta_ls))``: how far the
+    prior_shift_std
+        largest ``|beta - beta_feas| / (sqrt(k) std(beta_ls))``: how far the
         prior moved the fit beyond what physical consistency needs [honest standard
         deviations]; the default weight keeps it below 1.
-    bounds: the plausibility bounds the estimate was solved with (None for none).
-    plausibility: per body, mass against nominal and position against its bounding
+    bounds
+        the plausibility bounds the estimate was solved with (None for none).
+    plausibility
+        per body, mass against nominal and position against its bounding
         ellipsoid (:func:`manip_id.consistency.check_plausibility`); None for plain LS.
-    warnings: what the user should know about these values (implausible bodies).
+    warnings
+        what the user should know about these values (implausible bodies).
     """
 
     names: list[str]

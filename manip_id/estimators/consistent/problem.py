@@ -47,20 +47,33 @@ class ConsistentProblem:
 
     Attributes
     ----------
-    P: base map, shape (r, p): ``beta = P theta``.
-    beta_ls: unconstrained least-squares base parameters, shape (r,).
-    W: whitening, shape (r, r): ``f(theta) = ||W (P theta - beta_ls)||^2`` (``W^T W = C^-1``).
-    n_bodies: bodies; the first ``10 n_bodies`` entries of theta are theirs.
-    nonnegative: indices of the joint terms constrained ``>= 0``.
-    theta0: the prior's standard parameters (or the reference point when none), (p,).
-    J0: prior pseudo-inertias less their margins, ``J0_i - eps_i 1``, shape
+    P
+        base map, shape (r, p): ``beta = P theta``.
+    beta_ls
+        unconstrained least-squares base parameters, shape (r,).
+    W
+        whitening, shape (r, r): ``f(theta) = ||W (P theta - beta_ls)||^2`` (``W^T W = C^-1``).
+    n_bodies
+        bodies; the first ``10 n_bodies`` entries of theta are theirs.
+    nonnegative
+        indices of the joint terms constrained ``>= 0``.
+    theta0
+        the prior's standard parameters (or the reference point when none), (p,).
+    J0
+        prior pseudo-inertias less their margins, ``J0_i - eps_i 1``, shape
         (n_bodies, 4, 4) (None without a prior).
-    term_scale: ``s_t`` of each joint term, shape (p - 10 n_bodies,).
-    margin: ``eps_i`` per body, shape (n_bodies,).
-    weight: prior weight ``w`` (0 for no prior).
-    independent, dependent: the base parametrization's column indices.
-    names: standard parameter names.
-    bounds: the plausibility bounds (:class:`~manip_id.estimators.consistent.bounds.BodyBounds`:
+    term_scale
+        ``s_t`` of each joint term, shape (p - 10 n_bodies,).
+    margin
+        ``eps_i`` per body, shape (n_bodies,).
+    weight
+        prior weight ``w`` (0 for no prior).
+    independent, dependent
+        the base parametrization's column indices.
+    names
+        standard parameter names.
+    bounds
+        the plausibility bounds (:class:`~manip_id.estimators.consistent.bounds.BodyBounds`:
         bounding ellipsoids, mass ranges, total mass), linear in theta; None for none.
     """
 
@@ -113,12 +126,18 @@ class ConsistentSolution:
 
     Attributes
     ----------
-    theta: standard parameters, shape (p,).
-    beta: base parameters implied, ``P theta``, shape (r,).
-    solver: "sdp" or "logchol"; status: the solver's status; iterations; time [s].
-    fit: ``f(theta)`` [squared standard deviations of the LS base estimate].
-    prior_distance: the unweighted prior term at theta; objective: ``fit + w prior``.
-    consistency: the independent eigenvalue test of theta (not the solver's word).
+    theta
+        standard parameters, shape (p,).
+    beta
+        base parameters implied, ``P theta``, shape (r,).
+    solver
+        "sdp" or "logchol"; status: the solver's status; iterations; time [s].
+    fit
+        ``f(theta)`` [squared standard deviations of the LS base estimate].
+    prior_distance
+        the unweighted prior term at theta; objective: ``fit + w prior``.
+    consistency
+        the independent eigenvalue test of theta (not the solver's word).
     """
 
     theta: np.ndarray
@@ -163,23 +182,33 @@ def build_problem(
 
     Parameters
     ----------
-    robot: the robot (its parameter layout and nominal parameters).
-    base: :class:`~manip_id.identifiability.BaseParameters` of the accumulated columns.
-    A: ``Y_b^T W Y_b``, shape (r, r) [(N m)^2 / units of beta^2]; may be singular
+    robot
+        the robot (its parameter layout and nominal parameters).
+    base
+        :class:`~manip_id.identifiability.BaseParameters` of the accumulated columns.
+    A
+        ``Y_b^T W Y_b``, shape (r, r) [(N m)^2 / units of beta^2]; may be singular
         (directions the data do not excite are then left to the prior).
-    b: ``Y_b^T W tau``, shape (r,).
-    variance: the residual variance ``s`` with ``C^-1 = A / s`` (1 for weighted least
+    b
+        ``Y_b^T W tau``, shape (r,).
+    variance
+        the residual variance ``s`` with ``C^-1 = A / s`` (1 for weighted least
         squares whose weights are inverse variances) [(N m)^2]; floored at
         ``VARIANCE_FLOOR^2 zz / n_rows`` when ``zz`` and ``n_rows`` are given.
-    prior: "nominal" or "none"; prior_weight: ``w`` >= 0.
-    prior_parameters: standard parameters (p,) to use as the prior instead of the
+    prior
+        "nominal" or "none"; prior_weight: ``w`` >= 0.
+    prior_parameters
+        standard parameters (p,) to use as the prior instead of the
         robot's nominal ones.
-    n_rows: number of stacked equations; zz: ``tau^T W tau`` [(N m)^2].
+    n_rows
+        number of stacked equations; zz: ``tau^T W tau`` [(N m)^2].
 
     Raises
     ------
-    InputError: unknown prior, bad weight or shapes.
-    PhysicalConsistencyError: the prior itself is not physical (names the body).
+    InputError
+        unknown prior, bad weight or shapes.
+    PhysicalConsistencyError
+        the prior itself is not physical (names the body).
     """
     if prior not in PRIORS:
         raise InputError(f"prior must be one of {list(PRIORS)}, got {prior!r}")

@@ -46,11 +46,14 @@ class TermComparison:
 
     Attributes
     ----------
-    term, what, option : str
+    term, what, option
+        str
         The term (``"Ia"``), its name and the option that adds it.
-    train_without, train_with : float
+    train_without, train_with
+        float
         Training relative error without and with the term [-].
-    validation_without, validation_with : float or None
+    validation_without, validation_with
+        float or None
         The same on the validation data (None without any).
     """
 
