@@ -224,6 +224,27 @@ def _weights(var: np.ndarray, zz: np.ndarray, n: int) -> np.ndarray:
 
 
 # -------------------------------------------------------------------- stacked
+def _stacked_inputs(Phi, z, nv: int, weights, names):
+    """``Phi`` (n_rows, p) and ``z`` (n_rows,) checked, and the row weights ``sqrt(w_j)``."""
+    Phi = as_float_array(Phi, "Phi", ndim=2)
+    z = as_float_array(z, "z", ndim=1)
+    n_rows, p = Phi.shape
+    if z.shape != (n_rows,):
+        raise InputError(f"Phi.shape={Phi.shape} but z.shape={z.shape}")
+    if nv < 1 or n_rows % nv:
+        raise InputError(f"Phi.shape={Phi.shape} has rows not a multiple of nv={nv}")
+    _check_names(names, p)
+    check_finite_rows(Phi.reshape(-1, nv, p).transpose(1, 0, 2), "Phi", 0)
+    check_finite_rows(z.reshape(-1, nv).T, "z", 0)
+    w_rows = None
+    if weights is not None:
+        w = as_float_array(weights, "weights", ndim=1)
+        if w.shape != (nv,) or np.any(w <= 0):
+            raise InputError(f"weights must be {nv} positive numbers, got weights.shape={w.shape}")
+        w_rows = np.tile(np.sqrt(w), n_rows // nv)
+    return Phi, z, w_rows
+
+
 def solve_stacked(
     Phi,
     z,
@@ -245,22 +266,8 @@ def solve_stacked(
     weights: per-output weights ``1/sigma_j^2``, shape (nv,), for weighted least
         squares with known variances; the covariance is then ``(Phi^T W Phi)^-1``.
     """
-    Phi = as_float_array(Phi, "Phi", ndim=2)
-    z = as_float_array(z, "z", ndim=1)
+    Phi, z, w_rows = _stacked_inputs(Phi, z, nv, weights, names)
     n_rows, p = Phi.shape
-    if z.shape != (n_rows,):
-        raise InputError(f"Phi.shape={Phi.shape} but z.shape={z.shape}")
-    if nv < 1 or n_rows % nv:
-        raise InputError(f"Phi.shape={Phi.shape} has rows not a multiple of nv={nv}")
-    _check_names(names, p)
-    check_finite_rows(Phi.reshape(-1, nv, p).transpose(1, 0, 2), "Phi", 0)
-    check_finite_rows(z.reshape(-1, nv).T, "z", 0)
-    w_rows = None
-    if weights is not None:
-        w = as_float_array(weights, "weights", ndim=1)
-        if w.shape != (nv,) or np.any(w <= 0):
-            raise InputError(f"weights must be {nv} positive numbers, got weights.shape={w.shape}")
-        w_rows = np.tile(np.sqrt(w), n_rows // nv)
     Pw = Phi if w_rows is None else Phi * w_rows[:, None]
     zw = z if w_rows is None else z * w_rows
     norms = np.linalg.norm(Pw, axis=0)

@@ -133,38 +133,6 @@ class StandardEstimate:
         out["bounds"] = None if self.bounds is None else self.bounds.to_dict()
         return out
 
-    def summary_lines(self) -> list[str]:
-        """Readable lines: the check, the per-body minimum eigenvalues and the solver."""
-        c = self.consistency
-        kind = (
-            f"consistent estimate ({self.solver}, {self.status}, {self.time:.3g} s, prior "
-            f"{self.prior}, weight {self.prior_weight:g} against the fit in units of "
-            f"{self.fit_scale:.3g} x the OLS covariance; base fit moved by at most "
-            f"{self.base_shift_std:.3g} OLS std, by the prior {self.prior_shift_std:.3g} "
-            "of these std)"
-            if self.solver
-            else "minimum-norm standard parameters of the least-squares fit"
-        )
-        lines = [
-            f"{kind}: physically consistent {'yes' if c.consistent else 'NO'}",
-            "min eigenvalue of each pseudo-inertia J: "
-            + ", ".join(
-                f"{n} {v:.3g}" for n, v in zip(c.body_names, c.min_eigenvalues, strict=True)
-            ),
-        ]
-        if self.plausibility is not None:
-            pl = self.plausibility
-            lines.append(
-                "link masses [kg] (x nominal): "
-                + ", ".join(
-                    f"{b.name} {b.mass:.3g}"
-                    + ("" if b.mass_ratio is None else f" ({b.mass_ratio:.2g}x)")
-                    for b in pl.bodies
-                )
-                + f"; total {pl.total_mass:.3g} (nominal {pl.nominal_total_mass:.3g})"
-            )
-        return lines
-
 
 def consistent_estimate(
     robot,
