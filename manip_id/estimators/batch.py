@@ -260,10 +260,14 @@ def solve_stacked(
 
     Parameters
     ----------
-    Phi: stacked regressor, shape (n_rows, p), sample-major (row ``k*nv + j``).
-    z: stacked outputs, shape (n_rows,).
-    nv: outputs per sample, for the per-joint statistics (``n_rows % nv == 0``).
-    weights: per-output weights ``1/sigma_j^2``, shape (nv,), for weighted least
+    Phi
+        stacked regressor, shape (n_rows, p), sample-major (row ``k*nv + j``).
+    z
+        stacked outputs, shape (n_rows,).
+    nv
+        outputs per sample, for the per-joint statistics (``n_rows % nv == 0``).
+    weights
+        per-output weights ``1/sigma_j^2``, shape (nv,), for weighted least
         squares with known variances; the covariance is then ``(Phi^T W Phi)^-1``.
     """
     Phi, z, w_rows = _stacked_inputs(Phi, z, nv, weights, names)
