@@ -57,6 +57,8 @@ BOUNDS: tuple[str, ...] = ("geometry", "none")
 GEOMETRY_MARGIN = 0.05
 #: Radius of the kinematic fallback: ``max(fraction * segment length, minimum [m])``.
 KINEMATIC_RADIUS: tuple[float, float] = (0.25, 0.05)
+#: Directions along which a large point cloud keeps its extreme points (Khachiyan's input).
+EXTREME_DIRECTIONS = 200
 #: Thinnest extent of a point cloud along a principal axis before it is padded [m].
 MIN_THICKNESS = 0.01
 #: Enlargement (of ``Q``) beyond the least that holds the nominal body, when it must.
@@ -246,15 +248,18 @@ def bound_constraints(bounds: BodyBounds, theta) -> list:
 
 
 # ------------------------------------------------------------------ ellipsoids
-def minimum_volume_ellipsoid(points, tolerance: float = 1e-4) -> tuple[np.ndarray, np.ndarray]:
+def minimum_volume_ellipsoid(points, tolerance: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
     """Khachiyan's minimum-volume ellipsoid holding ``points`` (n, 3) [m]: ``(c, Q)``.
 
     ``E = {x : (x - c)^T Q^-1 (x - c) <= 1}``; the iteration stops within ``tolerance``
     of the optimum and ``Q`` is then scaled so that every point is inside (a point
     cloud thinner than :data:`MIN_THICKNESS` along a principal axis is first padded to
-    that thickness, so that ``Q`` stays positive definite).
+    that thickness, so that ``Q`` stays positive definite). A large cloud (a visual
+    mesh) is first reduced to its extreme points along :data:`EXTREME_DIRECTIONS`
+    directions (the ellipsoid of those, then scaled to hold every point).
     """
-    P = _padded(np.asarray(points, dtype=float).reshape(-1, 3))
+    every = np.asarray(points, dtype=float).reshape(-1, 3)
+    P = _padded(_extreme_points(every))
     n, d = P.shape
     Qh = np.vstack([P.T, np.ones(n)])  # (d + 1, n)
     u = np.full(n, 1.0 / n)
@@ -270,9 +275,24 @@ def minimum_volume_ellipsoid(points, tolerance: float = 1e-4) -> tuple[np.ndarra
     c = P.T @ u
     S = (P.T * u) @ P - np.outer(c, c)
     Q = d * S  # E = {(x - c)^T (d S)^-1 (x - c) <= 1}
-    D = P - c
+    D = np.vstack([P, every]) - c
     reach = np.einsum("ni,ij,nj->n", D, np.linalg.inv(Q), D).max()
     return c, Q * max(float(reach), 1.0)
+
+
+def _extreme_points(P: np.ndarray) -> np.ndarray:
+    """The points of ``P`` extreme along :data:`EXTREME_DIRECTIONS` directions spread
+    over the sphere (a Fibonacci lattice), without repeats; ``P`` itself when small."""
+    if P.shape[0] <= 2 * EXTREME_DIRECTIONS:
+        return P
+    k = np.arange(EXTREME_DIRECTIONS) + 0.5
+    z = 1.0 - 2.0 * k / EXTREME_DIRECTIONS
+    phi = np.pi * (1.0 + 5.0**0.5) * k
+    r = np.sqrt(1.0 - z**2)
+    dirs = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)  # (K, 3)
+    proj = P @ dirs.T  # (n, K)
+    keep = np.unique(np.r_[proj.argmax(axis=0), proj.argmin(axis=0)])
+    return P[keep]
 
 
 def _padded(P: np.ndarray) -> np.ndarray:
