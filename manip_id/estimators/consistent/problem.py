@@ -210,19 +210,9 @@ def build_problem(
     PhysicalConsistencyError
         the prior itself is not physical (names the body).
     """
-    if prior not in PRIORS:
-        raise InputError(f"prior must be one of {list(PRIORS)}, got {prior!r}")
-    w = float(prior_weight)
-    if not (np.isfinite(w) and w >= 0):
-        raise InputError(f"prior_weight must be a finite number >= 0, got {prior_weight!r}")
-    w = 0.0 if prior == "none" else w
-    p, r = robot.n_parameters, base.n_base
-    if len(base.names) != p:
-        raise InputError(f"base is for {len(base.names)} parameters but robot has {p}")
-    A = as_float_array(A, "A", ndim=2)
-    b = as_float_array(b, "b", ndim=1)
-    if A.shape != (r, r) or b.shape != (r,):
-        raise InputError(f"A.shape={A.shape}, b.shape={b.shape} but the base has r={r}")
+    w = _prior_weight(prior, prior_weight)
+    p = robot.n_parameters
+    A, b = _checked_information(robot, base, A, b)
     beta_ls, W = _whitened_fit(A, b, variance, zz, n_rows)
     P = base_map(base, p)
     nb = robot.n_bodies
@@ -251,6 +241,28 @@ def build_problem(
         dependent=np.asarray(base.dependent, dtype=np.intp),
         names=list(robot.parameter_names),
     )
+
+
+def _prior_weight(prior: str, prior_weight) -> float:
+    """The prior's weight ``w`` (0 for ``prior="none"``), checked."""
+    if prior not in PRIORS:
+        raise InputError(f"prior must be one of {list(PRIORS)}, got {prior!r}")
+    w = float(prior_weight)
+    if not (np.isfinite(w) and w >= 0):
+        raise InputError(f"prior_weight must be a finite number >= 0, got {prior_weight!r}")
+    return 0.0 if prior == "none" else w
+
+
+def _checked_information(robot, base, A, b) -> tuple[np.ndarray, np.ndarray]:
+    """``A`` (r, r) and ``b`` (r,) as arrays, checked against ``base`` and the robot."""
+    p, r = robot.n_parameters, base.n_base
+    if len(base.names) != p:
+        raise InputError(f"base is for {len(base.names)} parameters but robot has {p}")
+    A = as_float_array(A, "A", ndim=2)
+    b = as_float_array(b, "b", ndim=1)
+    if A.shape != (r, r) or b.shape != (r,):
+        raise InputError(f"A.shape={A.shape}, b.shape={b.shape} but the base has r={r}")
+    return A, b
 
 
 def nonnegative_terms(robot) -> np.ndarray:
