@@ -52,11 +52,8 @@ from .execution import (
     DEFAULT_LOCAL_WORKERS,
     SPLIT_EVERY,
     WORKER_ENV,
-    DaskBackend,
-    SerialBackend,
     parse_scheduler,
     portable_robot,
-    reduce_tree,
 )
 from .identifiability import BaseParameters
 from .identification import (
@@ -82,10 +79,6 @@ from .robot import Robot
 FLEET_METHODS: tuple[str, ...] = LEAST_SQUARES
 #: The record of one file (its former name here).
 FileInfo = FileRecord
-
-# Temporary aliases for manip_id.payload until it uses the public names of
-# manip_id.execution (the payload package switches to them).
-_Serial, _Dask, _tree = SerialBackend, DaskBackend, reduce_tree
 
 
 @dataclass(frozen=True)
