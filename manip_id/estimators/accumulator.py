@@ -21,14 +21,247 @@ from scipy.linalg.blas import dsyrk
 from .._checks import as_float_array
 from ..errors import InputError
 
+#: Default cap on the number of recorded blocks (a power of two: a pair merge halves it).
+MAX_BLOCKS = 128
+#: Default length of a block [samples] before the first doubling.
+BLOCK_LENGTH = 32
+
+
+class ScoreBlocks:
+    """Per-block sums over contiguous runs of samples, for scores at the estimate.
+
+    Parameters
+    ----------
+    p : int
+        Number of columns (the accumulator's).
+    nv : int
+        Outputs per sample (joints).
+    block_length : int
+        Samples per block until the first doubling.
+    max_blocks : int
+        Cap on the number of blocks (>= 2); when a new block would exceed it,
+        adjacent pairs merge and the block length doubles.
+
+    Block ``k`` holds ``A_kj`` (valid lower triangle), ``b_kj``, ``zz_kj`` for each
+    joint ``j`` and its sample count ``n_k``. Only the last block may still take
+    samples (:attr:`open`); a block filled by :meth:`add_sums` with more samples
+    than the block length is closed as it is.
+    """
+
+    def __init__(
+        self, p: int, nv: int, block_length: int = BLOCK_LENGTH, max_blocks: int = MAX_BLOCKS
+    ):
+        block_length, max_blocks = int(block_length), int(max_blocks)
+        if block_length < 1 or max_blocks < 2:
+            raise InputError(
+                f"blocks need block_length >= 1 and max_blocks >= 2, got "
+                f"block_length={block_length}, max_blocks={max_blocks}"
+            )
+        self.p, self.nv = int(p), int(nv)
+        self.length = block_length  # [samples] target length of the open block
+        self.max_blocks = max_blocks
+        self._A: list[np.ndarray] = []  # each (nv, p, p), lower triangles valid
+        self._b: list[np.ndarray] = []  # each (nv, p)
+        self._zz: list[np.ndarray] = []  # each (nv,)
+        self._n: list[int] = []
+        self.open = False
+
+    # ------------------------------------------------------------- adding
+    def _start(self) -> None:
+        """Open a new empty block, merging adjacent pairs first when at the cap."""
+        if len(self._n) >= self.max_blocks:
+            self._merge_pairs()
+            self.length *= 2
+        self._A.append(np.zeros((self.nv, self.p, self.p)))
+        self._b.append(np.zeros((self.nv, self.p)))
+        self._zz.append(np.zeros(self.nv))
+        self._n.append(0)
+        self.open = True
+
+    def _merge_pairs(self) -> None:
+        """Blocks (0, 1), (2, 3), ... become one each (an odd last block stays alone)."""
+        for name in ("_A", "_b", "_zz"):
+            old = getattr(self, name)
+            setattr(self, name, [sum(old[i : i + 2]) for i in range(0, len(old), 2)])
+        self._n = [sum(self._n[i : i + 2]) for i in range(0, len(self._n), 2)]
+
+    def _segments(self, n: int):
+        """Cut ``n`` new samples at block boundaries: yields ``(start, stop)`` in order."""
+        pos = 0
+        while pos < n:
+            if not self.open or self._n[-1] >= self.length:
+                self._start()
+            m = min(n - pos, self.length - self._n[-1])
+            yield pos, pos + m
+            self._n[-1] += m
+            pos += m
+
+    def add(self, Yt: np.ndarray, tau: np.ndarray) -> None:
+        """Samples of the accumulator's columns: ``Yt`` (nv, n, p) C order, ``tau`` (n, nv)."""
+        for a, c in self._segments(tau.shape[0]):
+            A, b = self._A[-1], self._b[-1]
+            for j in range(self.nv):
+                dsyrk(1.0, Yt[j, a:c].T, beta=1.0, c=A[j].T, trans=0, lower=0, overwrite_c=1)
+                b[j] += tau[a:c, j] @ Yt[j, a:c]
+            self._zz[-1] += np.einsum("nj,nj->j", tau[a:c], tau[a:c])
+
+    def add_rows(self, rows, tau: np.ndarray, supports, keep: np.ndarray | None = None) -> None:
+        """Samples given per joint on its non-zero columns.
+
+        ``rows[j]`` (n, r_j): row ``j`` of the regressor of each sample on the columns
+        ``supports[j]``; ``tau`` (n, nv) [N m]; ``keep`` (n, nv) bool: the rows that
+        count (e.g. a velocity deadband; a left-out row adds nothing, its sample still
+        counts in ``n_k``).
+        """
+        for a, c in self._segments(tau.shape[0]):
+            A, b = self._A[-1], self._b[-1]
+            t = tau[a:c] if keep is None else np.where(keep[a:c], tau[a:c], 0.0)
+            for j in range(self.nv):
+                sj = np.asarray(supports[j], dtype=np.intp)
+                rj = rows[j][a:c] if keep is None else rows[j][a:c][keep[a:c, j]]
+                tj = t[:, j] if keep is None else t[keep[a:c, j], j]
+                A[j][np.ix_(sj, sj)] += rj.T @ rj
+                b[j][sj] += tj @ rj
+            self._zz[-1] += np.einsum("nj,nj->j", t, t)
+
+    def add_sums(self, A_joint, b_joint, zz_joint, n: int, supports=None) -> None:
+        """One contiguous run of ``n`` samples given by its sums (see
+        :meth:`InformationAccumulator.add_sums`): added to the open block when it has
+        room, else it starts a block of its own."""
+        n = int(n)
+        if not self.open or self._n[-1] + n > self.length:
+            self._start()
+        A, b = self._A[-1], self._b[-1]
+        for j in range(self.nv):
+            if supports is None:
+                A[j] += np.tril(A_joint[j])
+                b[j] += b_joint[j]
+            else:
+                sj = np.asarray(supports[j], dtype=np.intp)
+                A[j][np.ix_(sj, sj)] += np.tril(A_joint[j])
+                b[j][sj] += b_joint[j]
+        self._zz[-1] += np.asarray(zz_joint, dtype=float)
+        self._n[-1] += n
+
+    def merge(self, other: ScoreBlocks) -> ScoreBlocks:
+        """Append the blocks of ``other`` (data that follows) to ``self``; returns ``self``.
+
+        The last block of ``self`` is closed (the boundary is a block boundary). When the
+        total exceeds :attr:`max_blocks`, the adjacent pair with the fewest samples is
+        merged (the leftmost of equals) until it fits; the block length becomes the
+        larger of the two.
+        """
+        if (other.p, other.nv) != (self.p, self.nv):
+            raise InputError(
+                f"cannot merge blocks of (p={other.p}, nv={other.nv}) into (p={self.p}, "
+                f"nv={self.nv})"
+            )
+        other = other.copy()
+        self._A += other._A
+        self._b += other._b
+        self._zz += other._zz
+        self._n += other._n
+        self.open = other.open
+        self.length = max(self.length, other.length)
+        self.max_blocks = max(self.max_blocks, other.max_blocks)
+        while len(self._n) > self.max_blocks:
+            pairs = [self._n[i] + self._n[i + 1] for i in range(len(self._n) - 1)]
+            i = int(np.argmin(pairs))
+            for name in ("_A", "_b", "_zz", "_n"):
+                seq = getattr(self, name)
+                seq[i : i + 2] = [seq[i] + seq[i + 1]]
+        return self
+
+    def copy(self) -> ScoreBlocks:
+        """An independent copy."""
+        out = ScoreBlocks(self.p, self.nv, self.length, self.max_blocks)
+        out._A = [a.copy() for a in self._A]
+        out._b = [b.copy() for b in self._b]
+        out._zz = [z.copy() for z in self._zz]
+        out._n = list(self._n)
+        out.open = self.open
+        return out
+
+    # ---------------------------------------------------------- read back
+    @property
+    def n_blocks(self) -> int:
+        """Number of non-empty blocks ``B``."""
+        return sum(1 for n in self._n if n > 0)
+
+    @property
+    def counts(self) -> np.ndarray:
+        """Samples per block ``n_k``, shape (B,)."""
+        return np.array([n for n in self._n if n > 0], dtype=np.int64)
+
+    def _kept(self, seq: list[np.ndarray], shape: tuple[int, ...]) -> np.ndarray:
+        kept = [x for x, n in zip(seq, self._n, strict=True) if n > 0]
+        return np.stack(kept) if kept else np.zeros((0, *shape))
+
+    @property
+    def A_joint(self) -> np.ndarray:
+        """Per-block, per-joint information ``A_kj``, shape (B, nv, p, p), symmetric."""
+        A = self._kept(self._A, (self.nv, self.p, self.p))
+        return np.tril(A) + np.swapaxes(np.tril(A, -1), -1, -2)
+
+    @property
+    def b_joint(self) -> np.ndarray:
+        """Per-block, per-joint ``b_kj``, shape (B, nv, p)."""
+        return self._kept(self._b, (self.nv, self.p))
+
+    @property
+    def zz_joint(self) -> np.ndarray:
+        """Per-block, per-joint ``zz_kj`` [(N m)^2], shape (B, nv)."""
+        return self._kept(self._zz, (self.nv,))
+
+    def information(self, weights=None) -> np.ndarray:
+        """``A_k = sum_j w_j A_kj``, shape (B, p, p) (``w_j = 1`` by default)."""
+        w = self._weights(weights)
+        return np.einsum("j,kjab->kab", w, self.A_joint)
+
+    def scores(self, theta, weights=None) -> np.ndarray:
+        """Block scores ``s_k = sum_j w_j (b_kj - A_kj theta)``, shape (B, p).
+
+        At the least-squares estimate they sum to zero; each is ``Y_k^T W e_k``,
+        block ``k``'s regressor times its weighted residuals.
+        """
+        theta = as_float_array(theta, "theta", ndim=1)
+        if theta.shape != (self.p,):
+            raise InputError(f"theta.shape={theta.shape} but the blocks have p={self.p}")
+        w = self._weights(weights)
+        res = self.b_joint - np.einsum("kjab,b->kja", self.A_joint, theta)
+        return np.einsum("j,kja->ka", w, res)
+
+    def _weights(self, weights) -> np.ndarray:
+        if weights is None:
+            return np.ones(self.nv)
+        w = as_float_array(weights, "weights", ndim=1)
+        if w.shape != (self.nv,):
+            raise InputError(f"weights.shape={w.shape} but the blocks have nv={self.nv}")
+        return w
+
+    def __repr__(self) -> str:
+        return (
+            f"ScoreBlocks(p={self.p}, nv={self.nv}, blocks={self.n_blocks}, "
+            f"length={self.length}, max_blocks={self.max_blocks})"
+        )
+
 
 class InformationAccumulator:
     """Per-joint sums ``A_j``, ``b_j``, ``zz_j`` and the sample count ``n``.
 
     Parameters
     ----------
-    p: number of parameters (columns accumulated).
-    nv: number of outputs per sample (joints).
+    p : int
+        Number of parameters (columns accumulated).
+    nv : int
+        Number of outputs per sample (joints).
+    blocks : bool
+        Also record the sums per block of contiguous samples (:attr:`blocks`, a
+        :class:`ScoreBlocks`), for the autocorrelation-consistent covariance.
+    block_length : int
+        Samples per block until the first doubling (with ``blocks``).
+    max_blocks : int
+        Cap on the number of blocks (with ``blocks``).
 
     ``add(Y, tau)`` takes Y of shape (n, nv, P) and tau of shape (n, nv); with
     ``columns`` (P >= p) only those columns of Y are accumulated (e.g. the
@@ -37,7 +270,15 @@ class InformationAccumulator:
     place; :attr:`A_joint` returns the symmetrized matrices.
     """
 
-    def __init__(self, p: int, nv: int):
+    def __init__(
+        self,
+        p: int,
+        nv: int,
+        *,
+        blocks: bool = False,
+        block_length: int = BLOCK_LENGTH,
+        max_blocks: int = MAX_BLOCKS,
+    ):
         p, nv = int(p), int(nv)
         if p < 1 or nv < 1:
             raise InputError(f"an accumulator needs p >= 1 and nv >= 1, got p={p}, nv={nv}")
@@ -47,6 +288,10 @@ class InformationAccumulator:
         self._b = np.zeros((nv, p))
         self._zz = np.zeros(nv)
         self.n = 0
+        #: The per-block sums (None when not recorded, or after merging data without them).
+        self.blocks: ScoreBlocks | None = (
+            ScoreBlocks(p, nv, block_length, max_blocks) if blocks else None
+        )
 
     # ------------------------------------------------------------- adding
     def add(self, Y, tau, *, columns=None, check: bool = True) -> InformationAccumulator:
@@ -94,6 +339,8 @@ class InformationAccumulator:
             self._b[j] += tau[:, j] @ Yt[j]
         self._zz += np.einsum("nj,nj->j", tau, tau)
         self.n += n
+        if self.blocks is not None:
+            self.blocks.add(Yt, tau)
         return self
 
     def add_sums(self, A_joint, b_joint, zz_joint, n: int, supports=None) -> InformationAccumulator:
@@ -101,8 +348,12 @@ class InformationAccumulator:
 
         ``A_joint[j]`` (r_j, r_j) with a valid lower triangle, ``b_joint[j]`` (r_j,)
         are the sums over the columns ``supports[j]`` of this accumulator (all
-        columns when ``supports`` is None); ``zz_joint`` (nv,), ``n`` samples.
+        columns when ``supports`` is None); ``zz_joint`` (nv,), ``n`` samples. With
+        :attr:`blocks`, the sums count as one contiguous run of samples (one block, or
+        part of the open one when it has room).
         """
+        if self.blocks is not None:
+            self.blocks.add_sums(A_joint, b_joint, zz_joint, n, supports)
         for j in range(self.nv):
             if supports is None:
                 self._A[j] += np.tril(A_joint[j])
@@ -129,6 +380,12 @@ class InformationAccumulator:
         self._A += other._A
         self._b += other._b
         self._zz += other._zz
+        if self.blocks is not None and other.blocks is not None:
+            self.blocks.merge(other.blocks)
+        elif other.n > 0 and self.blocks is not None:
+            self.blocks = None  # data without blocks: no block scores for the whole
+        elif self.n == 0 and other.blocks is not None:
+            self.blocks = other.blocks.copy()
         self.n += other.n
         return self
 
@@ -136,13 +393,31 @@ class InformationAccumulator:
         return self.copy().merge(other)
 
     def copy(self) -> InformationAccumulator:
-        """An independent copy."""
+        """An independent copy (with a copy of the blocks)."""
         out = InformationAccumulator(self.p, self.nv)
         out._A[:] = self._A
         out._b[:] = self._b
         out._zz[:] = self._zz
         out.n = self.n
+        out.blocks = None if self.blocks is None else self.blocks.copy()
         return out
+
+    def attach_blocks(self, blocks: ScoreBlocks) -> InformationAccumulator:
+        """Use ``blocks``, recorded by the caller over the same samples, as :attr:`blocks`.
+
+        For callers that accumulate the totals themselves (on each joint's non-zero
+        columns, :meth:`add_sums`) and the blocks alongside (:meth:`ScoreBlocks.add_rows`).
+        Returns ``self``.
+        """
+        if not isinstance(blocks, ScoreBlocks):
+            raise InputError(f"expected ScoreBlocks, got {type(blocks).__name__}")
+        if (blocks.p, blocks.nv) != (self.p, self.nv) or int(blocks.counts.sum()) != self.n:
+            raise InputError(
+                f"blocks of (p={blocks.p}, nv={blocks.nv}, n={int(blocks.counts.sum())}) do "
+                f"not match the accumulator's (p={self.p}, nv={self.nv}, n={self.n})"
+            )
+        self.blocks = blocks
+        return self
 
     # ---------------------------------------------------------- read back
     @property
@@ -201,7 +476,8 @@ class InformationAccumulator:
         return np.maximum(self._zz - 2.0 * self._b @ theta + quad, 0.0)
 
     def __repr__(self) -> str:
-        return f"InformationAccumulator(p={self.p}, nv={self.nv}, n={self.n})"
+        blocks = "" if self.blocks is None else f", blocks={self.blocks.n_blocks}"
+        return f"InformationAccumulator(p={self.p}, nv={self.nv}, n={self.n}{blocks})"
 
 
 def check_finite_rows(arr: np.ndarray, name: str, offset: int) -> None:

@@ -1,0 +1,301 @@
+"""Per-block sums of the accumulator and the covariance that holds for correlated residuals.
+
+References independent of the code under test: sums over sample ranges computed
+directly with numpy, the Monte Carlo spread of estimates over noise draws, and
+Andrews' (1991) closed-form bandwidth for an AR(1).
+"""
+
+from __future__ import annotations
+
+import pickle
+
+import numpy as np
+import pytest
+from conftest import get_robot
+
+from manip_id import regressor
+from manip_id.errors import InputError
+from manip_id.estimators.accumulator import InformationAccumulator, ScoreBlocks
+from manip_id.estimators.batch import solve_accumulator
+from manip_id.estimators.uncertainty import (
+    UncertaintyOptions,
+    andrews_bandwidth,
+    bartlett_weights,
+    estimate_uncertainty,
+    long_run_covariance,
+    solution_uncertainty,
+)
+from manip_id.identifiability import analyze
+from manip_id.simulation import simulate
+from manip_id.trajectories import random_trajectory
+
+
+def _random_problem(n=1000, nv=3, p=5, seed=0):
+    rng = np.random.default_rng(seed)
+    Y = rng.standard_normal((n, nv, p))
+    tau = Y @ rng.standard_normal(p) + 0.1 * rng.standard_normal((n, nv))
+    return Y, tau
+
+
+def _ranges(counts):
+    edges = np.concatenate([[0], np.cumsum(counts)])
+    return list(zip(edges[:-1], edges[1:], strict=True))
+
+
+# ----------------------------------------------------------------- block sums
+def test_blocks_off_and_on_give_bit_identical_totals():
+    Y, tau = _random_problem()
+    off = InformationAccumulator(5, 3)
+    on = InformationAccumulator(5, 3, blocks=True, block_length=16, max_blocks=8)
+    for a in range(0, 1000, 37):
+        off.add(Y[a : a + 37], tau[a : a + 37])
+        on.add(Y[a : a + 37], tau[a : a + 37])
+    assert off.blocks is None
+    np.testing.assert_array_equal(on.A_joint, off.A_joint)
+    np.testing.assert_array_equal(on.b_joint, off.b_joint)
+    np.testing.assert_array_equal(on.zz_joint, off.zz_joint)
+    assert on.n == off.n == 1000
+    np.testing.assert_array_equal(solve_accumulator(on).estimate, solve_accumulator(off).estimate)
+
+
+def test_block_sums_equal_direct_sums_over_their_samples():
+    Y, tau = _random_problem()
+    acc = InformationAccumulator(5, 3, blocks=True, block_length=16, max_blocks=8)
+    for a in range(0, 1000, 37):
+        acc.add(Y[a : a + 37], tau[a : a + 37])
+    blk = acc.blocks
+    # 1000 samples, 16 per block, cap 8: the length doubles to 128 (8 * 128 >= 1000)
+    assert blk.length == 128
+    np.testing.assert_array_equal(blk.counts, [128] * 7 + [104])
+    for k, (a, c) in enumerate(_ranges(blk.counts)):
+        Yk, tk = Y[a:c], tau[a:c]
+        np.testing.assert_allclose(
+            blk.A_joint[k], np.einsum("nja,njb->jab", Yk, Yk), rtol=1e-12, atol=1e-10
+        )
+        np.testing.assert_allclose(blk.b_joint[k], np.einsum("nja,nj->ja", Yk, tk), atol=1e-10)
+        np.testing.assert_allclose(blk.zz_joint[k], (tk**2).sum(axis=0), rtol=1e-12)
+    np.testing.assert_allclose(blk.A_joint.sum(axis=0), acc.A_joint, rtol=1e-12, atol=1e-9)
+
+
+def test_blocks_do_not_depend_on_the_chunking():
+    Y, tau = _random_problem(n=700)
+    accs = []
+    for chunk in (1, 50, 700):
+        acc = InformationAccumulator(5, 3, blocks=True, block_length=20, max_blocks=16)
+        for a in range(0, 700, chunk):
+            acc.add(Y[a : a + chunk], tau[a : a + chunk])
+        accs.append(acc.blocks)
+    for other in accs[1:]:
+        np.testing.assert_array_equal(other.counts, accs[0].counts)
+        np.testing.assert_allclose(other.A_joint, accs[0].A_joint, rtol=1e-12, atol=1e-10)
+        np.testing.assert_allclose(other.b_joint, accs[0].b_joint, atol=1e-10)
+
+
+def test_merge_concatenates_blocks_in_sample_order():
+    Y, tau = _random_problem(n=600)
+    first = InformationAccumulator(5, 3, blocks=True, block_length=50, max_blocks=16)
+    second = InformationAccumulator(5, 3, blocks=True, block_length=50, max_blocks=16)
+    first.add(Y[:230], tau[:230])  # 4 full blocks and one of 30: the boundary closes it
+    second.add(Y[230:], tau[230:])
+    merged = first + second
+    np.testing.assert_array_equal(merged.blocks.counts, [50, 50, 50, 50, 30] + [50] * 7 + [20])
+    assert first.blocks.n_blocks == 5  # __add__ leaves its operands alone
+    for k, (a, c) in enumerate(_ranges(merged.blocks.counts)):
+        np.testing.assert_allclose(
+            merged.blocks.b_joint[k], np.einsum("nja,nj->ja", Y[a:c], tau[a:c]), atol=1e-10
+        )
+    # above the cap the adjacent pair with the fewest samples merges, until it fits
+    small = InformationAccumulator(5, 3, blocks=True, block_length=50, max_blocks=8)
+    small.add(Y[:230], tau[:230])
+    tail = InformationAccumulator(5, 3, blocks=True, block_length=50, max_blocks=8)
+    tail.add(Y[230:], tau[230:])
+    both = small.copy().merge(tail)
+    assert both.blocks.n_blocks == 8
+    assert both.blocks.counts.sum() == 600
+    np.testing.assert_allclose(both.blocks.A_joint.sum(axis=0), both.A_joint, atol=1e-9)
+
+
+def test_merge_with_data_without_blocks_drops_them():
+    Y, tau = _random_problem(n=200)
+    on = InformationAccumulator(5, 3, blocks=True).add(Y[:100], tau[:100])
+    off = InformationAccumulator(5, 3).add(Y[100:], tau[100:])
+    assert (on + off).blocks is None
+    assert (on + InformationAccumulator(5, 3)).blocks is not None  # empty: nothing lost
+    assert (InformationAccumulator(5, 3) + on).blocks.n_blocks == on.blocks.n_blocks
+
+
+def test_rows_on_supports_and_deadband_equal_full_rows():
+    Y, tau = _random_problem(n=300)
+    Y[:, 0, 3:] = 0.0  # joint 0 sees columns 0..2 only
+    supports = [np.arange(3), np.arange(5), np.arange(5)]
+    keep = np.random.default_rng(1).random((300, 3)) > 0.3
+    full = InformationAccumulator(5, 3, blocks=True, block_length=40, max_blocks=4)
+    full.add(np.where(keep[:, :, None], Y, 0.0), np.where(keep, tau, 0.0))
+    blocks = ScoreBlocks(5, 3, block_length=40, max_blocks=4)
+    for a in range(0, 300, 64):
+        rows = [Y[a : a + 64, j, supports[j]] for j in range(3)]
+        blocks.add_rows(rows, tau[a : a + 64], supports, keep[a : a + 64])
+    np.testing.assert_array_equal(blocks.counts, full.blocks.counts)
+    np.testing.assert_allclose(blocks.A_joint, full.blocks.A_joint, rtol=1e-12, atol=1e-10)
+    np.testing.assert_allclose(blocks.b_joint, full.blocks.b_joint, atol=1e-10)
+    np.testing.assert_allclose(blocks.zz_joint, full.blocks.zz_joint, rtol=1e-12)
+    totals = InformationAccumulator(5, 3).add(np.where(keep[:, :, None], Y, 0.0), tau * keep)
+    totals.attach_blocks(blocks)
+    assert totals.blocks is blocks
+    with pytest.raises(InputError, match="do not match"):
+        InformationAccumulator(5, 3).add(Y[:10], tau[:10]).attach_blocks(blocks)
+
+
+def test_add_sums_is_one_run_of_samples():
+    Y, tau = _random_problem(n=90)
+    acc = InformationAccumulator(5, 3, blocks=True, block_length=40, max_blocks=8)
+    for a, c in ((0, 30), (30, 35), (35, 90)):  # 30 + 5 fit one block; 55 > 40 starts one
+        part = InformationAccumulator(5, 3).add(Y[a:c], tau[a:c])
+        acc.add_sums(part.A_joint, part.b_joint, part.zz_joint, part.n)
+    np.testing.assert_array_equal(acc.blocks.counts, [35, 55])
+
+
+def test_scores_are_block_regressor_times_residuals_and_pickle():
+    Y, tau = _random_problem(n=400)
+    acc = InformationAccumulator(5, 3, blocks=True, block_length=25, max_blocks=16)
+    acc.add(Y, tau)
+    theta = solve_accumulator(acc).estimate
+    w = np.array([1.0, 2.0, 0.5])
+    s = acc.blocks.scores(theta, w)
+    for k, (a, c) in enumerate(_ranges(acc.blocks.counts)):
+        e = tau[a:c] - Y[a:c] @ theta
+        np.testing.assert_allclose(s[k], np.einsum("nja,nj,j->a", Y[a:c], e, w), atol=1e-9)
+    np.testing.assert_allclose(acc.blocks.scores(theta).sum(axis=0), 0.0, atol=1e-8)
+    back = pickle.loads(pickle.dumps(acc))
+    np.testing.assert_array_equal(back.blocks.A_joint, acc.blocks.A_joint)
+
+
+# ----------------------------------------------------------------- estimators
+def test_bartlett_and_long_run_covariance_by_hand():
+    np.testing.assert_allclose(bartlett_weights(2.5, 4), [1.0, 0.6, 0.2, 0.0])
+    s = np.random.default_rng(2).standard_normal((9, 3))
+    np.testing.assert_allclose(long_run_covariance(s, 0.7), s.T @ s)  # S <= 1: batch means
+    by_hand = s.T @ s
+    for h, w in ((1, 1 - 1 / 2.5), (2, 1 - 2 / 2.5)):
+        g = sum(np.outer(s[k + h], s[k]) for k in range(9 - h))
+        by_hand = by_hand + w * (g + g.T)
+    np.testing.assert_allclose(long_run_covariance(s, 2.5), by_hand)
+    assert np.linalg.eigvalsh(long_run_covariance(s, 2.5)).min() > -1e-12
+
+
+def test_andrews_bandwidth_matches_the_closed_form_for_ar1():
+    rho, B = 0.5, 20000
+    rng = np.random.default_rng(3)
+    x = np.zeros((B, 4))
+    z = rng.standard_normal((B, 4))
+    for k in range(1, B):
+        x[k] = rho * x[k - 1] + z[k]
+    x *= [1.0, 1e3, 1e-3, 5.0]  # the units of the parameters must not matter
+    alpha = 4 * rho**2 / ((1 - rho) ** 6 * (1 + rho) ** 2) * (1 - rho) ** 4
+    assert andrews_bandwidth(x) == pytest.approx(1.1447 * (alpha * B) ** (1 / 3), rel=0.03)
+    white = rng.standard_normal((B, 4))
+    # rho_a ~ N(0, 1/B) by chance: alpha ~ 4 / B, so S ~ 1.1447 4^(1/3) = 1.8 for any B
+    assert andrews_bandwidth(white) < 2.5
+    assert andrews_bandwidth(np.zeros((50, 2))) == 0.0
+
+
+def test_auto_falls_back_to_white_with_a_reason_and_hac_needs_blocks():
+    Y, tau = _random_problem(n=200)
+    acc = InformationAccumulator(5, 3, blocks=True, block_length=50, max_blocks=16).add(Y, tau)
+    sol = solve_accumulator(acc)
+    u = solution_uncertainty(acc, sol, "auto")
+    assert u.method == "white" and "4 blocks" in u.reason
+    np.testing.assert_array_equal(u.covariance, sol.covariance)
+    assert u.inflation == 1.0
+    assert solution_uncertainty(acc, sol, "hac").method == "hac"  # asked for: 4 blocks do
+    plain = InformationAccumulator(5, 3).add(Y, tau)
+    assert "not recorded" in solution_uncertainty(plain, sol).reason
+    with pytest.raises(InputError, match="hac"):
+        solution_uncertainty(plain, sol, "hac")
+    with pytest.raises(InputError, match="uncertainty must be one of"):
+        UncertaintyOptions(method="sandwich")
+    with pytest.raises(InputError, match="unknown uncertainty option"):
+        UncertaintyOptions.from_value({"kernel": "parzen"})
+    with pytest.raises(InputError, match="bandwidth"):
+        UncertaintyOptions(bandwidth=-1.0)
+    d = solution_uncertainty(acc, sol, {"method": "hac", "bandwidth": 1.5}).to_dict()
+    assert d["method"] == "hac" and d["bandwidth"] == 1.5 and d["n_blocks"] == 4
+
+
+def test_white_residuals_are_not_inflated():
+    """On independent, equal-variance noise the honest std agrees with the white one."""
+    rng = np.random.default_rng(4)
+    n, nv, p = 20000, 2, 6
+    Y = rng.standard_normal((n, nv, p))
+    tau = Y @ np.arange(1.0, p + 1) + rng.standard_normal((n, nv))
+    acc = UncertaintyOptions().accumulator(p, nv).add(Y, tau)
+    u = solution_uncertainty(acc, solve_accumulator(acc))
+    assert u.method == "hac" and 64 <= u.n_blocks <= 128
+    assert 0.85 <= u.inflation <= 1.15
+    noise_free = UncertaintyOptions().accumulator(p, nv).add(Y, Y @ np.ones(p))
+    sol = solve_accumulator(noise_free)
+    np.testing.assert_allclose(solution_uncertainty(noise_free, sol).std, 0.0, atol=1e-9)
+
+
+def test_estimate_uncertainty_checks_shapes():
+    Y, tau = _random_problem(n=200)
+    acc = InformationAccumulator(5, 3, blocks=True, block_length=10).add(Y, tau)
+    sol = solve_accumulator(acc)
+    with pytest.raises(InputError, match="information_inverse"):
+        estimate_uncertainty(acc, sol.estimate, sol.covariance, np.eye(4), options="hac")
+
+
+# ----------------------------------------------------------------- Monte Carlo
+N_SAMPLES = 16384
+N_RUNS = 40
+CORRELATION_TIME = 20.0  # [samples]: AR(1) phi = exp(-1/20)
+
+
+@pytest.fixture(scope="module")
+def ur5_excitation():
+    """The base regressor and noise-free torques of one ur5 excitation, (N, 6, r) and (N, 6)."""
+    robot = get_robot("ur5")
+    ind = analyze(robot).base.independent
+    traj = random_trajectory(robot, harmonics=5, seed=3)
+    sim = simulate(robot, traj, duration=(N_SAMPLES - 1) / 100.0, rate=100.0)
+    d = sim.dataset
+    return regressor(robot, d.q, d.dq, d.ddq)[:, :, ind], d.tau
+
+
+def _ar1_noise(rng, n: int, nv: int, phi: float) -> np.ndarray:
+    """Stationary AR(1) noise of unit variance per column, shape (n, nv)."""
+    from scipy.signal import lfilter  # optional heavy import (scipy.signal)
+
+    z = rng.standard_normal((n, nv))
+    z[1:] *= np.sqrt(1.0 - phi**2)
+    return lfilter([1.0], [1.0, -phi], z, axis=0)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["ols", "wls"])
+def test_monte_carlo_honest_std_matches_the_spread_and_white_does_not(ur5_excitation, method):
+    """40 noise draws on one ur5 excitation, AR(1) torque noise of correlation time 20
+    samples: the spread of the estimates over the draws against the mean reported std."""
+    Y, tau0 = ur5_excitation
+    n, nv, r = Y.shape
+    scale = 0.02 * np.sqrt((tau0**2).mean(axis=0)) * [1.0, 1.0, 3.0, 1.0, 1.0, 0.3]  # [N m]
+    phi = np.exp(-1.0 / CORRELATION_TIME)
+    estimates, honest, white = [], [], []
+    for run in range(N_RUNS):
+        tau = tau0 + scale * _ar1_noise(np.random.default_rng(100 + run), n, nv, phi)
+        acc = UncertaintyOptions().accumulator(r, nv)
+        for a in range(0, n, 1000):
+            acc.add(Y[a : a + 1000], tau[a : a + 1000], check=False)
+        sol = solve_accumulator(acc, method=method)
+        u = solution_uncertainty(acc, sol)
+        assert u.method == "hac"
+        estimates.append(sol.estimate)
+        honest.append(u.std)
+        white.append(u.std_white)
+    spread = np.std(estimates, axis=0, ddof=1)
+    ratio_honest = spread / np.mean(honest, axis=0)
+    ratio_white = spread / np.mean(white, axis=0)
+    assert 0.75 <= np.median(ratio_honest) <= 1.33, np.median(ratio_honest)
+    lo, hi = np.quantile(ratio_honest, [0.1, 0.9])
+    assert 0.6 <= lo and hi <= 1.6, (lo, hi)
+    assert not 0.5 <= np.median(ratio_white) <= 2.0, np.median(ratio_white)
