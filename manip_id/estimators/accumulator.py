@@ -65,6 +65,7 @@ class ScoreBlocks:
         self._zz: list[np.ndarray] = []  # each (nv,)
         self._n: list[int] = []
         self.open = False
+        self._flat_cache: tuple | None = None  # see _flat_supports
 
     # ------------------------------------------------------------- adding
     def _start(self) -> None:
@@ -82,7 +83,9 @@ class ScoreBlocks:
         """Blocks (0, 1), (2, 3), ... become one each (an odd last block stays alone)."""
         for name in ("_A", "_b", "_zz"):
             old = getattr(self, name)
-            setattr(self, name, [sum(old[i : i + 2]) for i in range(0, len(old), 2)])
+            for i in range(0, len(old) - 1, 2):
+                old[i] += old[i + 1]  # in place: each block array is owned by this store
+            setattr(self, name, old[::2])
         self._n = [sum(self._n[i : i + 2]) for i in range(0, len(self._n), 2)]
 
     def _segments(self, n: int):
@@ -113,16 +116,28 @@ class ScoreBlocks:
         count (e.g. a velocity deadband; a left-out row adds nothing, its sample still
         counts in ``n_k``).
         """
+        flat = self._flat_supports(supports)
         for a, c in self._segments(tau.shape[0]):
             A, b = self._A[-1], self._b[-1]
             t = tau[a:c] if keep is None else np.where(keep[a:c], tau[a:c], 0.0)
-            for j in range(self.nv):
-                sj = np.asarray(supports[j], dtype=np.intp)
+            for j, (sj, fj) in enumerate(flat):
                 rj = rows[j][a:c] if keep is None else rows[j][a:c][keep[a:c, j]]
                 tj = t[:, j] if keep is None else t[keep[a:c, j], j]
-                A[j][np.ix_(sj, sj)] += rj.T @ rj
+                A[j].reshape(-1)[fj] += (rj.T @ rj).reshape(-1)  # unique indices: no add.at
                 b[j][sj] += tj @ rj
             self._zz[-1] += np.einsum("nj,nj->j", t, t)
+
+    def _flat_supports(self, supports) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per joint ``(s_j, flat indices of s_j x s_j in a (p, p) block)``, cached for the
+        ``supports`` object of the last call (a caller passes the same one every chunk)."""
+        if self._flat_cache is not None and self._flat_cache[0] is supports:
+            return self._flat_cache[1]
+        flat = []
+        for sj in supports:
+            sj = np.asarray(sj, dtype=np.intp)
+            flat.append((sj, (sj[:, None] * self.p + sj[None, :]).reshape(-1)))
+        self._flat_cache = (supports, flat)
+        return flat
 
     def add_sums(self, A_joint, b_joint, zz_joint, n: int, supports=None) -> None:
         """One contiguous run of ``n`` samples given by its sums (see
