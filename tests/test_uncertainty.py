@@ -271,6 +271,28 @@ def _ar1_noise(rng, n: int, nv: int, phi: float) -> np.ndarray:
     return lfilter([1.0], [1.0, -phi], z, axis=0)
 
 
+def test_block_hac_agrees_with_sample_level_batch_means_of_the_residuals(ur5_excitation):
+    """One draw of correlated noise: the std from the streamed block scores against
+    overlapping batch means of the per-sample scores ``Y_t^T e_t`` (residuals in memory,
+    windows of H samples: ``Omega = n / (n - H + 1) sum_t w_t w_t^T / H``)."""
+    Y, tau0 = ur5_excitation
+    n, nv, r = Y.shape
+    scale = 0.02 * np.sqrt((tau0**2).mean(axis=0))  # [N m]
+    tau = tau0 + scale * _ar1_noise(np.random.default_rng(7), n, nv, np.exp(-1 / 20))
+    acc = UncertaintyOptions().accumulator(r, nv).add(Y, tau)
+    sol = solve_accumulator(acc)
+    u = solution_uncertainty(acc, sol)
+    scores = np.einsum("nja,nj->na", Y, tau - Y @ sol.estimate)  # (n, r)
+    csum = np.vstack([np.zeros(r), np.cumsum(scores, axis=0)])
+    Ainv = sol.covariance / sol.sigma2
+    for H in (400, 800):
+        w = csum[H:] - csum[:-H]
+        omega = w.T @ w / H * n / (n - H + 1)
+        std_obm = np.sqrt(np.diag(Ainv @ omega @ Ainv))
+        assert 0.8 <= np.median(u.std / std_obm) <= 1.25, (H, np.median(u.std / std_obm))
+    assert u.inflation > 2.5  # and both are far from the white std
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("method", ["ols", "wls"])
 def test_monte_carlo_honest_std_matches_the_spread_and_white_does_not(ur5_excitation, method):
