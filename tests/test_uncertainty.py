@@ -15,7 +15,7 @@ from conftest import get_robot
 
 from manip_id import regressor
 from manip_id.errors import InputError
-from manip_id.estimators.accumulator import InformationAccumulator, ScoreBlocks
+from manip_id.estimators.accumulator import BlockPlan, InformationAccumulator, ScoreBlocks
 from manip_id.estimators.batch import solve_accumulator
 from manip_id.estimators.uncertainty import (
     UncertaintyOptions,
@@ -113,6 +113,32 @@ def test_merge_concatenates_blocks_in_sample_order():
     assert both.blocks.n_blocks == 8
     assert both.blocks.counts.sum() == 600
     np.testing.assert_allclose(both.blocks.A_joint.sum(axis=0), both.A_joint, atol=1e-9)
+
+
+def test_a_plan_gives_the_serial_blocks_whatever_the_parts_and_merge_order():
+    Y, tau = _random_problem(n=1000)
+    serial = InformationAccumulator(5, 3, blocks=True, block_length=16, max_blocks=8).add(Y, tau)
+    plan = BlockPlan.for_samples(1000, 3, block_length=16, max_blocks=8)
+    assert plan.length == serial.blocks.length == 128 and plan.max_blocks == 11
+    cuts = plan.cuts(1000, 3)
+    np.testing.assert_array_equal(cuts, [0, 384, 640, 1000])
+    parts = [
+        UncertaintyOptions().accumulator(5, 3, plan).add(Y[a:c], tau[a:c])
+        for a, c in zip(cuts[:-1], cuts[1:], strict=True)
+    ]
+    left = (parts[0] + parts[1]) + parts[2]
+    right = parts[0] + (parts[1] + parts[2])
+    for merged in (left, right):
+        np.testing.assert_array_equal(merged.blocks.counts, serial.blocks.counts)
+        np.testing.assert_allclose(merged.blocks.A_joint, serial.blocks.A_joint, atol=1e-10)
+    # files of their own lengths: every file ends on a short block, no merge needed
+    files = [(0, 300), (300, 650), (650, 1000)]
+    plan = BlockPlan.for_samples(1000, len(files), block_length=16, max_blocks=8)
+    accs = [UncertaintyOptions().accumulator(5, 3, plan).add(Y[a:c], tau[a:c]) for a, c in files]
+    a1, a2 = (accs[0] + accs[1]) + accs[2], accs[0] + (accs[1] + accs[2])
+    np.testing.assert_array_equal(a1.blocks.counts, [128, 128, 44, 128, 128, 94, 128, 128, 94])
+    np.testing.assert_array_equal(a1.blocks.b_joint, a2.blocks.b_joint)
+    assert UncertaintyOptions(method="white").accumulator(5, 3, plan).blocks is None
 
 
 def test_merge_with_data_without_blocks_drops_them():

@@ -15,6 +15,8 @@ second pass over the data. Accumulators of disjoint data merge by addition.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy.linalg.blas import dsyrk
 
@@ -25,6 +27,56 @@ from ..errors import InputError
 MAX_BLOCKS = 128
 #: Default length of a block [samples] before the first doubling.
 BLOCK_LENGTH = 32
+
+
+@dataclass(frozen=True)
+class BlockPlan:
+    """Block settings fixed in advance for data of known length.
+
+    A stream of ``n`` samples that starts with blocks of ``block_length`` and doubles
+    them at ``max_blocks`` ends with blocks of ``length = block_length 2^k`` (the
+    smallest with ``ceil(n / length) <= max_blocks``), aligned on multiples of
+    ``length``. Starting every part of the data at that length, with a cap no merge
+    reaches (``ceil(n / length) + n_parts``: each part may end on a short block),
+    gives the same blocks whatever the cut into parts (forked workers, files, Dask
+    partitions) and the order of the merges, as long as the parts that make one
+    contiguous record are cut on multiples of ``length``.
+
+    Attributes
+    ----------
+    length : int
+        Samples per block.
+    max_blocks : int
+        The cap of every part's :class:`ScoreBlocks`.
+    """
+
+    length: int
+    max_blocks: int
+
+    @classmethod
+    def for_samples(
+        cls,
+        n_samples: int,
+        n_parts: int = 1,
+        *,
+        block_length: int = BLOCK_LENGTH,
+        max_blocks: int = MAX_BLOCKS,
+    ) -> BlockPlan:
+        """The plan for ``n_samples`` in ``n_parts`` separately accumulated parts."""
+        n, length = max(int(n_samples), 1), max(int(block_length), 1)
+        while -(-n // length) > max_blocks:
+            length *= 2
+        return cls(length, max(int(max_blocks), -(-n // length) + int(n_parts)))
+
+    def cuts(self, n_samples: int, n_parts: int) -> np.ndarray:
+        """Bounds of at most ``n_parts`` non-empty contiguous parts of ``n_samples``, cut
+        on block boundaries and as equal as the block length allows, increasing, from 0
+        to ``n_samples`` (fewer parts when the record has fewer blocks)."""
+        n = int(n_samples)
+        even = np.linspace(0, n, max(int(n_parts), 1) + 1)
+        bounds = np.minimum(np.round(even / self.length).astype(np.int64) * self.length, n)
+        bounds[0], bounds[-1] = 0, n
+        return np.unique(bounds)
 
 
 class ScoreBlocks:

@@ -72,7 +72,13 @@ import numpy as np
 
 from .._checks import as_float_array
 from ..errors import InputError
-from .accumulator import BLOCK_LENGTH, MAX_BLOCKS, InformationAccumulator, ScoreBlocks
+from .accumulator import (
+    BLOCK_LENGTH,
+    MAX_BLOCKS,
+    BlockPlan,
+    InformationAccumulator,
+    ScoreBlocks,
+)
 from .results import LeastSquaresSolution
 
 AUTO, WHITE, HAC = "auto", "white", "hac"
@@ -149,14 +155,29 @@ class UncertaintyOptions:
         """Whether the accumulation should record blocks (not for ``"white"``)."""
         return self.method != WHITE
 
-    def accumulator(self, p: int, nv: int) -> InformationAccumulator:
-        """An empty accumulator that records blocks as these options need."""
+    def plan(self, n_samples: int, n_parts: int = 1) -> BlockPlan:
+        """The blocks of data of ``n_samples`` in ``n_parts`` parts (:class:`BlockPlan`)."""
+        return BlockPlan.for_samples(
+            n_samples, n_parts, block_length=self.block_length, max_blocks=self.max_blocks
+        )
+
+    def blocks(self, p: int, nv: int, plan: BlockPlan | None = None) -> ScoreBlocks | None:
+        """An empty block record for ``p`` columns and ``nv`` joints (None for ``"white"``);
+        with ``plan``, of its length and cap."""
+        if not self.records_blocks:
+            return None
+        if plan is None:
+            return ScoreBlocks(p, nv, self.block_length, self.max_blocks)
+        return ScoreBlocks(p, nv, plan.length, plan.max_blocks)
+
+    def accumulator(self, p: int, nv: int, plan: BlockPlan | None = None) -> InformationAccumulator:
+        """An empty accumulator that records blocks as these options need (with ``plan``,
+        of its length and cap)."""
+        length, cap = (
+            (self.block_length, self.max_blocks) if plan is None else (plan.length, plan.max_blocks)
+        )
         return InformationAccumulator(
-            p,
-            nv,
-            blocks=self.records_blocks,
-            block_length=self.block_length,
-            max_blocks=self.max_blocks,
+            p, nv, blocks=self.records_blocks, block_length=length, max_blocks=cap
         )
 
 
