@@ -15,8 +15,9 @@ from conftest import get_robot
 
 from manip_id import regressor
 from manip_id.errors import InputError
-from manip_id.estimators.accumulator import BlockPlan, InformationAccumulator, ScoreBlocks
+from manip_id.estimators.accumulator import InformationAccumulator
 from manip_id.estimators.batch import solve_accumulator
+from manip_id.estimators.blocks import ScoreBlocks
 from manip_id.estimators.uncertainty import (
     UncertaintyOptions,
     andrews_bandwidth,
@@ -43,10 +44,14 @@ def _ranges(counts):
 
 
 # ----------------------------------------------------------------- block sums
+def _acc(block_length: int, max_blocks: int, stream: int = 0, offset: int = 0):
+    blocks = ScoreBlocks(5, 3, block_length, max_blocks, stream=stream, offset=offset)
+    return InformationAccumulator(5, 3, blocks=blocks)
+
+
 def test_blocks_off_and_on_give_bit_identical_totals():
     Y, tau = _random_problem()
-    off = InformationAccumulator(5, 3)
-    on = InformationAccumulator(5, 3, blocks=True, block_length=16, max_blocks=8)
+    off, on = InformationAccumulator(5, 3), _acc(16, 8)
     for a in range(0, 1000, 37):
         off.add(Y[a : a + 37], tau[a : a + 37])
         on.add(Y[a : a + 37], tau[a : a + 37])
@@ -60,7 +65,7 @@ def test_blocks_off_and_on_give_bit_identical_totals():
 
 def test_block_sums_equal_direct_sums_over_their_samples():
     Y, tau = _random_problem()
-    acc = InformationAccumulator(5, 3, blocks=True, block_length=16, max_blocks=8)
+    acc = _acc(16, 8)
     for a in range(0, 1000, 37):
         acc.add(Y[a : a + 37], tau[a : a + 37])
     blk = acc.blocks
@@ -81,7 +86,7 @@ def test_blocks_do_not_depend_on_the_chunking():
     Y, tau = _random_problem(n=700)
     accs = []
     for chunk in (1, 50, 700):
-        acc = InformationAccumulator(5, 3, blocks=True, block_length=20, max_blocks=16)
+        acc = _acc(20, 16)
         for a in range(0, 700, chunk):
             acc.add(Y[a : a + chunk], tau[a : a + chunk])
         accs.append(acc.blocks)
@@ -91,54 +96,47 @@ def test_blocks_do_not_depend_on_the_chunking():
         np.testing.assert_allclose(other.b_joint, accs[0].b_joint, atol=1e-10)
 
 
-def test_merge_concatenates_blocks_in_sample_order():
-    Y, tau = _random_problem(n=600)
-    first = InformationAccumulator(5, 3, blocks=True, block_length=50, max_blocks=16)
-    second = InformationAccumulator(5, 3, blocks=True, block_length=50, max_blocks=16)
-    first.add(Y[:230], tau[:230])  # 4 full blocks and one of 30: the boundary closes it
-    second.add(Y[230:], tau[230:])
-    merged = first + second
-    np.testing.assert_array_equal(merged.blocks.counts, [50, 50, 50, 50, 30] + [50] * 7 + [20])
-    assert first.blocks.n_blocks == 5  # __add__ leaves its operands alone
-    for k, (a, c) in enumerate(_ranges(merged.blocks.counts)):
-        np.testing.assert_allclose(
-            merged.blocks.b_joint[k], np.einsum("nja,nj->ja", Y[a:c], tau[a:c]), atol=1e-10
-        )
-    # above the cap the adjacent pair with the fewest samples merges, until it fits
-    small = InformationAccumulator(5, 3, blocks=True, block_length=50, max_blocks=8)
-    small.add(Y[:230], tau[:230])
-    tail = InformationAccumulator(5, 3, blocks=True, block_length=50, max_blocks=8)
-    tail.add(Y[230:], tau[230:])
-    both = small.copy().merge(tail)
-    assert both.blocks.n_blocks == 8
-    assert both.blocks.counts.sum() == 600
-    np.testing.assert_allclose(both.blocks.A_joint.sum(axis=0), both.A_joint, atol=1e-9)
-
-
-def test_a_plan_gives_the_serial_blocks_whatever_the_parts_and_merge_order():
+def test_parts_of_a_record_give_the_serial_blocks_whatever_the_cut_and_merge_order():
     Y, tau = _random_problem(n=1000)
-    serial = InformationAccumulator(5, 3, blocks=True, block_length=16, max_blocks=8).add(Y, tau)
-    plan = BlockPlan.for_samples(1000, 3, block_length=16, max_blocks=8)
-    assert plan.length == serial.blocks.length == 128 and plan.max_blocks == 11
-    cuts = plan.cuts(1000, 3)
-    np.testing.assert_array_equal(cuts, [0, 384, 640, 1000])
-    parts = [
-        UncertaintyOptions().accumulator(5, 3, plan).add(Y[a:c], tau[a:c])
-        for a, c in zip(cuts[:-1], cuts[1:], strict=True)
-    ]
-    left = (parts[0] + parts[1]) + parts[2]
-    right = parts[0] + (parts[1] + parts[2])
-    for merged in (left, right):
-        np.testing.assert_array_equal(merged.blocks.counts, serial.blocks.counts)
-        np.testing.assert_allclose(merged.blocks.A_joint, serial.blocks.A_joint, atol=1e-10)
-    # files of their own lengths: every file ends on a short block, no merge needed
+    serial = _acc(16, 8).add(Y, tau).blocks
+    cuts = [(0, 230), (230, 517), (517, 1000)]  # not on block boundaries
+    parts = [_acc(16, 8, offset=a).add(Y[a:c], tau[a:c]) for a, c in cuts]
+    assert parts[0].blocks.length == 32  # each part alone needs a lower level
+    for merged in (
+        (parts[0] + parts[1]) + parts[2],
+        parts[0] + (parts[1] + parts[2]),
+        (parts[2] + parts[0]) + parts[1],
+    ):
+        assert merged.blocks.length == serial.length == 128
+        assert merged.blocks.keys == serial.keys
+        np.testing.assert_array_equal(merged.blocks.counts, serial.counts)
+        np.testing.assert_allclose(merged.blocks.A_joint, serial.A_joint, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(merged.blocks.b_joint, serial.b_joint, atol=1e-9)
+    assert parts[0].blocks.n_blocks == 8  # __add__ leaves its operands alone
+
+
+def test_records_are_streams_whose_ends_are_block_boundaries():
+    Y, tau = _random_problem(n=1000)
     files = [(0, 300), (300, 650), (650, 1000)]
-    plan = BlockPlan.for_samples(1000, len(files), block_length=16, max_blocks=8)
-    accs = [UncertaintyOptions().accumulator(5, 3, plan).add(Y[a:c], tau[a:c]) for a, c in files]
-    a1, a2 = (accs[0] + accs[1]) + accs[2], accs[0] + (accs[1] + accs[2])
-    np.testing.assert_array_equal(a1.blocks.counts, [128, 128, 44, 128, 128, 94, 128, 128, 94])
-    np.testing.assert_array_equal(a1.blocks.b_joint, a2.blocks.b_joint)
-    assert UncertaintyOptions(method="white").accumulator(5, 3, plan).blocks is None
+    accs = [_acc(16, 8, stream=f).add(Y[a:c], tau[a:c]) for f, (a, c) in enumerate(files)]
+    assert accs[0].blocks.length == 64  # 300 samples alone: 5 blocks of 64
+    one, other = (accs[0] + accs[1]) + accs[2], accs[2] + (accs[1] + accs[0])
+    # together 17 blocks of 64 > 8, 9 of 128 > 8: 6 of 256, each file ending short
+    np.testing.assert_array_equal(one.blocks.counts, [256, 44, 256, 94, 256, 94])
+    assert one.blocks.keys == other.blocks.keys == [(0, 0), (0, 1), (1, 0), (1, 1), (2, 0), (2, 1)]
+    np.testing.assert_allclose(one.blocks.b_joint, other.blocks.b_joint, atol=1e-10)
+    for k, (a, c) in enumerate(_ranges(one.blocks.counts)):
+        np.testing.assert_allclose(
+            one.blocks.b_joint[k], np.einsum("nja,nj->ja", Y[a:c], tau[a:c]), atol=1e-10
+        )
+    # more records than the cap: one block each, none merged across records
+    many = sum(
+        (_acc(16, 4, stream=f).add(Y[20 * f : 20 * f + 20], tau[:20]) for f in range(10)),
+        start=_acc(16, 4),
+    )
+    np.testing.assert_array_equal(many.blocks.counts, [20] * 10)
+    with pytest.raises(InputError, match="block_length"):
+        _acc(16, 8).merge(_acc(32, 8).add(Y[:10], tau[:10]))
 
 
 def test_merge_with_data_without_blocks_drops_them():
@@ -148,6 +146,8 @@ def test_merge_with_data_without_blocks_drops_them():
     assert (on + off).blocks is None
     assert (on + InformationAccumulator(5, 3)).blocks is not None  # empty: nothing lost
     assert (InformationAccumulator(5, 3) + on).blocks.n_blocks == on.blocks.n_blocks
+    with pytest.raises(InputError, match="empty ScoreBlocks"):
+        InformationAccumulator(5, 3, blocks=on.blocks)
 
 
 def test_rows_on_supports_and_deadband_equal_full_rows():
@@ -155,8 +155,7 @@ def test_rows_on_supports_and_deadband_equal_full_rows():
     Y[:, 0, 3:] = 0.0  # joint 0 sees columns 0..2 only
     supports = [np.arange(3), np.arange(5), np.arange(5)]
     keep = np.random.default_rng(1).random((300, 3)) > 0.3
-    full = InformationAccumulator(5, 3, blocks=True, block_length=40, max_blocks=4)
-    full.add(np.where(keep[:, :, None], Y, 0.0), np.where(keep, tau, 0.0))
+    full = _acc(40, 4).add(np.where(keep[:, :, None], Y, 0.0), np.where(keep, tau, 0.0))
     blocks = ScoreBlocks(5, 3, block_length=40, max_blocks=4)
     for a in range(0, 300, 64):
         rows = [Y[a : a + 64, j, supports[j]] for j in range(3)]
@@ -172,10 +171,10 @@ def test_rows_on_supports_and_deadband_equal_full_rows():
         InformationAccumulator(5, 3).add(Y[:10], tau[:10]).attach_blocks(blocks)
 
 
-def test_add_sums_is_one_run_of_samples():
+def test_add_sums_is_one_run_of_samples_in_the_block_of_its_middle():
     Y, tau = _random_problem(n=90)
-    acc = InformationAccumulator(5, 3, blocks=True, block_length=40, max_blocks=8)
-    for a, c in ((0, 30), (30, 35), (35, 90)):  # 30 + 5 fit one block; 55 > 40 starts one
+    acc = _acc(40, 8)
+    for a, c in ((0, 30), (30, 35), (35, 90)):  # middles 15, 32, 62: blocks 0, 0, 1
         part = InformationAccumulator(5, 3).add(Y[a:c], tau[a:c])
         acc.add_sums(part.A_joint, part.b_joint, part.zz_joint, part.n)
     np.testing.assert_array_equal(acc.blocks.counts, [35, 55])
@@ -183,8 +182,7 @@ def test_add_sums_is_one_run_of_samples():
 
 def test_scores_are_block_regressor_times_residuals_and_pickle():
     Y, tau = _random_problem(n=400)
-    acc = InformationAccumulator(5, 3, blocks=True, block_length=25, max_blocks=16)
-    acc.add(Y, tau)
+    acc = _acc(25, 16).add(Y, tau)
     theta = solve_accumulator(acc).estimate
     w = np.array([1.0, 2.0, 0.5])
     s = acc.blocks.scores(theta, w)
@@ -194,6 +192,7 @@ def test_scores_are_block_regressor_times_residuals_and_pickle():
     np.testing.assert_allclose(acc.blocks.scores(theta).sum(axis=0), 0.0, atol=1e-8)
     back = pickle.loads(pickle.dumps(acc))
     np.testing.assert_array_equal(back.blocks.A_joint, acc.blocks.A_joint)
+    assert back.blocks.keys == acc.blocks.keys
 
 
 # ----------------------------------------------------------------- estimators
@@ -227,7 +226,7 @@ def test_andrews_bandwidth_matches_the_closed_form_for_ar1():
 
 def test_auto_falls_back_to_white_with_a_reason_and_hac_needs_blocks():
     Y, tau = _random_problem(n=200)
-    acc = InformationAccumulator(5, 3, blocks=True, block_length=50, max_blocks=16).add(Y, tau)
+    acc = _acc(50, 16).add(Y, tau)
     sol = solve_accumulator(acc)
     u = solution_uncertainty(acc, sol, "auto")
     assert u.method == "white" and "4 blocks" in u.reason
@@ -265,7 +264,7 @@ def test_white_residuals_are_not_inflated():
 
 def test_estimate_uncertainty_checks_shapes():
     Y, tau = _random_problem(n=200)
-    acc = InformationAccumulator(5, 3, blocks=True, block_length=10).add(Y, tau)
+    acc = _acc(10, 128).add(Y, tau)
     sol = solve_accumulator(acc)
     with pytest.raises(InputError, match="information_inverse"):
         estimate_uncertainty(acc, sol.estimate, sol.covariance, np.eye(4), options="hac")

@@ -17,7 +17,7 @@ correlation time (on the real Panda log, about 16x in standard deviation).
 
 **hac** (:data:`HAC`, heteroskedasticity and autocorrelation consistent): the
 samples are cut into ``B`` blocks of contiguous samples, recorded while the sums
-are accumulated (:class:`~manip_id.estimators.accumulator.ScoreBlocks`), and
+are accumulated (:class:`~manip_id.estimators.blocks.ScoreBlocks`), and
 ``s = sum_k s_k`` with the block scores ``s_k = b_k - A_k theta``. Then::
 
     Omega = sum_{h=-(B-1)}^{B-1} Gamma_h,      Gamma_h = sum_k E[s_k s_{k+h}^T]
@@ -72,13 +72,8 @@ import numpy as np
 
 from .._checks import as_float_array
 from ..errors import InputError
-from .accumulator import (
-    BLOCK_LENGTH,
-    MAX_BLOCKS,
-    BlockPlan,
-    InformationAccumulator,
-    ScoreBlocks,
-)
+from .accumulator import InformationAccumulator
+from .blocks import BLOCK_LENGTH, MAX_BLOCKS, ScoreBlocks
 from .results import LeastSquaresSolution
 
 AUTO, WHITE, HAC = "auto", "white", "hac"
@@ -155,30 +150,20 @@ class UncertaintyOptions:
         """Whether the accumulation should record blocks (not for ``"white"``)."""
         return self.method != WHITE
 
-    def plan(self, n_samples: int, n_parts: int = 1) -> BlockPlan:
-        """The blocks of data of ``n_samples`` in ``n_parts`` parts (:class:`BlockPlan`)."""
-        return BlockPlan.for_samples(
-            n_samples, n_parts, block_length=self.block_length, max_blocks=self.max_blocks
-        )
-
-    def blocks(self, p: int, nv: int, plan: BlockPlan | None = None) -> ScoreBlocks | None:
-        """An empty block record for ``p`` columns and ``nv`` joints (None for ``"white"``);
-        with ``plan``, of its length and cap."""
+    def blocks(self, p: int, nv: int, *, stream: int = 0, offset: int = 0) -> ScoreBlocks | None:
+        """An empty block record of ``p`` columns and ``nv`` joints for the samples of
+        ``stream`` from ``offset`` on (:class:`~manip_id.estimators.blocks.ScoreBlocks`);
+        None for ``"white"``, which needs none."""
         if not self.records_blocks:
             return None
-        if plan is None:
-            return ScoreBlocks(p, nv, self.block_length, self.max_blocks)
-        return ScoreBlocks(p, nv, plan.length, plan.max_blocks)
+        return ScoreBlocks(p, nv, self.block_length, self.max_blocks, stream=stream, offset=offset)
 
-    def accumulator(self, p: int, nv: int, plan: BlockPlan | None = None) -> InformationAccumulator:
-        """An empty accumulator that records blocks as these options need (with ``plan``,
-        of its length and cap)."""
-        length, cap = (
-            (self.block_length, self.max_blocks) if plan is None else (plan.length, plan.max_blocks)
-        )
-        return InformationAccumulator(
-            p, nv, blocks=self.records_blocks, block_length=length, max_blocks=cap
-        )
+    def accumulator(
+        self, p: int, nv: int, *, stream: int = 0, offset: int = 0
+    ) -> InformationAccumulator:
+        """An empty accumulator that records blocks as these options need."""
+        blocks = self.blocks(p, nv, stream=stream, offset=offset)
+        return InformationAccumulator(p, nv, blocks=False if blocks is None else blocks)
 
 
 @dataclass(frozen=True)
