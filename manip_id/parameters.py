@@ -33,8 +33,9 @@ infinite or empty one, and a velocity limit that is not positive, infinite or
 above :data:`UNSET_LIMIT` count as *unset* (URDFs write 1e10 or nothing):
 :func:`bounded_range` and :func:`bounded_rate` are that rule.
 
-Standard <-> base. With a :class:`~manip_id.identifiability.BaseParameters`
-``B`` (independent columns ``I``, dependent ``D``, regrouping ``K``)::
+Standard <-> base lives in one place, :class:`~manip_id.identifiability.BaseParameters`
+(``to_base``, ``from_base``): with independent columns ``I``, dependent ``D``,
+regrouping ``K``::
 
     theta_base = theta[I] + K theta[D]                       (standard -> base)
     theta      = P^T [theta_base; 0]                         (base -> standard, minimum
@@ -54,13 +55,15 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._checks import as_float_array
+from .consistency import ConsistencyReport as ConsistencyReport  # re-exported
+from .consistency import check_consistency as check_consistency  # re-exported
+from .consistency import parameters_from_pseudo_inertia as parameters_from_pseudo_inertia
+from .consistency import pseudo_inertia
+from .consistency import pseudo_inertia_basis as pseudo_inertia_basis  # re-exported
 from .errors import InputError
 
 if TYPE_CHECKING:  # pragma: no cover
     import pinocchio as pin
-
-    from .identifiability import BaseParameters
 
 #: Inertial parameter names of one body, in Pinocchio's order.
 INERTIAL_NAMES: tuple[str, ...] = (
@@ -465,54 +468,10 @@ class ParameterLayout:
         (:func:`manip_id.consistency.pseudo_inertia`); ``J`` is positive definite for a
         physically realizable body.
         """
-        from .consistency import pseudo_inertia
-
         return pseudo_inertia(self.rigid_blocks(theta))
-
-    # ------------------------------------------------------- standard <-> base
-    def to_base(self, theta: ArrayLike, base: BaseParameters) -> np.ndarray:
-        """Base parameters ``theta[I] + K theta[D]``, (..., p) -> (..., r)."""
-        self._check_base(base)
-        return base.to_base(self._check_theta(theta))
-
-    def from_base(self, theta_base: ArrayLike, base: BaseParameters) -> np.ndarray:
-        """A standard vector with these base parameters, zero on the dependent columns.
-
-        (..., r) -> (..., p); ``to_base(from_base(b)) == b``.
-        """
-        self._check_base(base)
-        arr = as_float_array(theta_base, "theta_base")
-        if arr.ndim == 0 or arr.shape[-1] != base.n_base:
-            raise InputError(f"theta_base.shape={arr.shape} but the base has {base.n_base}")
-        out = np.zeros((*arr.shape[:-1], self.n_parameters))
-        out[..., base.independent] = arr
-        return out
-
-    def _check_base(self, base: BaseParameters) -> None:
-        if tuple(base.names) != self.names:
-            raise InputError("the base parameters belong to another parameter layout")
 
     def __repr__(self) -> str:
         return (
             f"ParameterLayout(bodies={self.n_bodies}, nv={self.nv}, "
             f"terms={self.terms}, p={self.n_parameters})"
         )
-
-
-# -------------------------------------------------------- physical consistency
-_CONSISTENCY_EXPORTS = (
-    "check_consistency",
-    "ConsistencyReport",
-    "pseudo_inertia",
-    "pseudo_inertia_basis",
-    "parameters_from_pseudo_inertia",
-)
-
-
-def __getattr__(name: str):
-    """Re-export the physical-consistency checks of :mod:`manip_id.consistency` lazily."""
-    if name in _CONSISTENCY_EXPORTS:
-        from . import consistency
-
-        return getattr(consistency, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

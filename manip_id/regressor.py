@@ -34,13 +34,16 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
 
 from ._checks import as_float_array, check_finite
 from .errors import InputError
-from .robot import Robot
+
+if TYPE_CHECKING:
+    from .robot import Robot
 
 DEFAULT_CHUNK = 1024
 _STACK = 32

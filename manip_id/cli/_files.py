@@ -116,7 +116,7 @@ def check(args: argparse.Namespace) -> None:
 
 def _options(args, nv: int, profile_scale=None):
     from ..datasets.stream import torque_scale_vector
-    from ..pipeline import PreprocessOptions
+    from ..identification import PreprocessOptions
 
     scale = None
     if args.torque_scale is not None:
@@ -147,7 +147,7 @@ def _specs(values, args, colmap):
 
 def _collect(robot, specs, options, scans) -> SimpleNamespace:
     """The preprocessed files in memory, one after the other (time shifted to increase)."""
-    from ..pipeline import iter_processed
+    from ..identification import iter_processed
 
     nq, nv = robot.nq, robot.nv
     parts: list[np.ndarray] = []
@@ -179,8 +179,7 @@ def _collect(robot, specs, options, scans) -> SimpleNamespace:
 
 def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
     """``manip-id identify --data ...`` (after the outputs were reserved)."""
-    from ..identification import identify, identify_datasets
-    from ..pipeline import scan_file, split_file
+    from ..identification import RunOptions, identify, identify_datasets, scan_file, split_file
     from . import identify as cmd
     from ._common import profile_from_args, robot_from_args
 
@@ -224,8 +223,7 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
             train.tau,
             method=args.method,
             validation=None if valid is None else (valid.q, valid.dq, valid.ddq, valid.tau),
-            chunk=args.chunk,
-            progress=cmd._progress(train.n_samples),
+            run=RunOptions(chunk=args.chunk, progress=cmd._progress(train.n_samples)),
         )
         files = None
         settings = train.settings
@@ -237,10 +235,12 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
             validation=vspecs,
             options=options,
             method=args.method,
-            chunk=args.chunk,
-            workers=args.workers,
+            run=RunOptions(
+                chunk=args.chunk,
+                workers=args.workers,
+                progress=cmd._progress(sum(scans[s].n for s in specs)),
+            ),
             scans=scans,
-            progress=cmd._progress(sum(scans[s].n for s in specs)),
             **cmd._consistent_kwargs(args),
         )
         files = result.files or {}

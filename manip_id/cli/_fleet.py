@@ -34,7 +34,7 @@ def add_scheduler_argument(parser, what: str) -> None:
 def check_scheduler(args: argparse.Namespace) -> None:
     """Refuse a malformed ``--scheduler`` before any work (nothing of Dask imported)."""
     if getattr(args, "scheduler", None) is not None:
-        from ..fleet import parse_scheduler
+        from ..execution import parse_scheduler
 
         parse_scheduler(args.scheduler)
 
@@ -97,6 +97,7 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     from types import SimpleNamespace
 
     from ..fleet import identify_files
+    from ..identification import ModelOptions, PartitionOptions, RunOptions
     from . import _files
     from . import identify as cmd
     from ._common import profile_from_args, robot_from_args
@@ -119,15 +120,12 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     result = identify_files(
         robot,
         specs,
-        scheduler=args.scheduler,
         method=args.method,
-        per_file=args.per_file,
-        block=args.block,
         options=options,
         validation=vspecs,
-        chunk=args.chunk,
-        model=model,
-        window_length=getattr(args, "window_length", None),
+        run=RunOptions(scheduler=args.scheduler, chunk=args.chunk),
+        partition=PartitionOptions(block=args.block, per_file=args.per_file),
+        model=ModelOptions(model, window_length=getattr(args, "window_length", None)),
         **cmd._consistent_kwargs(args),
     )
     files: dict = result.files or {"train": [], "validation": None}

@@ -381,11 +381,15 @@ def _export(robot, result, args, outputs) -> None:
 
 
 def _consistent_kwargs(args) -> dict:
+    from ..identification import ConsistentOptions
+
     return dict(
-        consistent=args.consistent,
-        solver=args.solver,
-        prior=args.prior,
-        prior_weight=args.prior_weight,
+        consistent=ConsistentOptions(
+            enabled=args.consistent,
+            solver=args.solver,
+            prior=args.prior,
+            prior_weight=args.prior_weight,
+        )
     )
 
 
@@ -447,7 +451,7 @@ def _run_stream(robot, args, outputs, timings: dict, t_start: float) -> int:
     """
     from types import SimpleNamespace
 
-    from ..identification import identify_chunks
+    from ..identification import RunOptions, identify_chunks
 
     t0 = time.perf_counter()
     stream, opts = _simulation_stream(robot, args)
@@ -471,9 +475,7 @@ def _run_stream(robot, args, outputs, timings: dict, t_start: float) -> int:
         train,
         method=args.method,
         validation=stream.blocks(k, n) if k < n else None,
-        chunk=args.chunk,
-        workers=args.workers,
-        progress=progress,
+        run=RunOptions(chunk=args.chunk, workers=args.workers, progress=progress),
         **_consistent_kwargs(args),
     )
     timings.update({name: float(v) for name, v in dict(result.timings).items()})
@@ -558,7 +560,7 @@ def _run(args: argparse.Namespace) -> int:
     timings["preprocess"] = time.perf_counter() - t0
     settings = train.meta.get("preprocess")
 
-    from ..identification import identify
+    from ..identification import RunOptions, identify
 
     result = identify(
         robot,
@@ -568,9 +570,11 @@ def _run(args: argparse.Namespace) -> int:
         train.tau,
         method=args.method,
         validation=None if valid is None else (valid.q, valid.dq, valid.ddq, valid.tau),
-        chunk=args.chunk,
-        workers=args.workers,
-        progress=_progress(train.n_samples + (0 if valid is None else valid.n_samples)),
+        run=RunOptions(
+            chunk=args.chunk,
+            workers=args.workers,
+            progress=_progress(train.n_samples + (0 if valid is None else valid.n_samples)),
+        ),
         **_consistent_kwargs(args),
     )
     timings.update({k: float(v) for k, v in dict(result.timings).items()})
@@ -603,7 +607,7 @@ def _run(args: argparse.Namespace) -> int:
 
 def _run_acceleration_free(args, outputs, t_start: float) -> int:
     """``--model energy|momentum``: one file or a simulation, whole; q, dq filtered only."""
-    from ..identification import identify
+    from ..identification import ModelOptions, RunOptions, identify
 
     if args.workers > 1 or _fleet.wanted(args):
         raise InputError(f"--model {args.model} runs in one process (no --workers, --scheduler)")
@@ -670,10 +674,8 @@ def _run_acceleration_free(args, outputs, t_start: float) -> int:
         train.tau,
         method=args.method,
         validation=None if valid is None else (valid.q, valid.dq, valid.ddq, valid.tau),
-        chunk=args.chunk,
-        model=args.model,
-        dt=dt,
-        window_length=args.window_length,
+        run=RunOptions(chunk=args.chunk),
+        model=ModelOptions(args.model, window_length=args.window_length, dt=dt),
         **_consistent_kwargs(args),
     )
     timings.update({k: float(v) for k, v in dict(result.timings).items()})

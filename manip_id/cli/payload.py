@@ -185,7 +185,7 @@ def _spec(text: str, args, colmap=None):
 
 
 def _options(args, scale=None):
-    from ..pipeline import PreprocessOptions
+    from ..identification import PreprocessOptions
 
     eps = args.velocity_deadband
     return PreprocessOptions(
@@ -210,7 +210,7 @@ class StreamedRun:
     """
 
     def __init__(self, robot, spec, options, scan: bool = True):
-        from ..pipeline import scan_file
+        from ..identification import scan_file
 
         self.robot, self.spec, self.options = robot, spec, options
         # bad files fail here, named
@@ -231,7 +231,7 @@ class StreamedRun:
         }
 
     def __call__(self):
-        from ..pipeline import iter_processed, scan_file
+        from ..identification import iter_processed, scan_file
 
         nq, nv = self.robot.nq, self.robot.nv
         if self.scan is None:
@@ -385,7 +385,7 @@ def run(args: argparse.Namespace) -> int:
         scale = parse_floats(args.torque_scale, "--torque-scale")
     distributed = args.scheduler is not None
     if distributed:  # the tasks read the files: send them a light robot
-        from ..fleet import portable_robot
+        from ..execution import portable_robot
 
         unloaded, loaded, source = read_runs(args, portable_robot(robot), scale, scan=False)
     else:

@@ -25,7 +25,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from ..errors import InputError
-    from ..results import load_result, result_text
+    from ..identification import load_result, result_text
 
     path = Path(args.result)
     if path.is_dir():

@@ -15,6 +15,8 @@ import numpy as np
 
 from .._checks import as_float_array, as_int, as_real
 from ..errors import InputError
+from ..regressor import iter_regressor
+from ..robot import Robot
 from .accumulator import RFactorAccumulator
 from .notes import robot_notes, zero_columns
 from .qr import EPS, analyze_factor, default_tolerance
@@ -67,8 +69,6 @@ def structural_analysis(
     from ``robot.random_states(n_samples, seed)``, streamed through
     :func:`manip_id.regressor.iter_regressor` into a (p, p) factor.
     """
-    from ..regressor import iter_regressor
-
     p, nv = robot.n_parameters, robot.nv
     if n_samples is None:
         n_samples = max(MIN_SAMPLES, math.ceil(ROWS_PER_PARAMETER * p / nv))
@@ -128,8 +128,6 @@ def analyze(
     :class:`RankAnalysis`. A regressor with NaN/Inf, no rows, fewer rows than
     columns, all zeros, or a width other than ``len(names)`` raises :class:`InputError`.
     """
-    from ..robot import Robot
-
     if isinstance(source, Robot):
         return structural_analysis(source, seed=seed, n_samples=n_samples, tolerance=tolerance)
     if hasattr(source, "q") and hasattr(source, "dq"):  # a Dataset (duck-typed: no import)
@@ -179,8 +177,6 @@ def analyze_trajectory(
     ``q`` (N, nq) [rad or m], ``dq``, ``ddq`` (N, nv); the structural analysis
     of ``robot`` is computed when not given, and the unexcited directions reported.
     """
-    from ..regressor import iter_regressor
-
     tol = _check_tolerance(tolerance)
     acc = RFactorAccumulator(robot.n_parameters, robot.parameter_names)
     for c in iter_regressor(robot, q, dq, ddq, chunk=chunk):

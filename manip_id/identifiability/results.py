@@ -7,13 +7,13 @@ holds rank, conditioning, null space and readable directions, with a JSON-ready
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .._checks import as_float_array
 from ..errors import InputError, RankDeficiencyError
+from ..metrics import finite_or_none
 
 
 @dataclass(frozen=True)
@@ -51,6 +51,18 @@ class BaseParameters:
         if theta.ndim == 0 or theta.shape[-1] != len(self.names):
             raise InputError(f"theta.shape={theta.shape} but n_parameters={len(self.names)}")
         return theta[..., self.independent] + theta[..., self.dependent] @ self.K.T
+
+    def from_base(self, theta_base) -> np.ndarray:
+        """A standard vector with these base parameters, zero on the dependent columns.
+
+        (..., r) -> (..., p); ``to_base(from_base(b)) == b``.
+        """
+        arr = as_float_array(theta_base, "theta_base")
+        if arr.ndim == 0 or arr.shape[-1] != self.n_base:
+            raise InputError(f"theta_base.shape={arr.shape} but the base has {self.n_base}")
+        out = np.zeros((*arr.shape[:-1], len(self.names)))
+        out[..., self.independent] = arr
+        return out
 
     def regressor(self, Y) -> np.ndarray:
         """The base regressor ``Y[..., independent]``: ``Y theta == Y_base theta_base``."""
@@ -149,8 +161,8 @@ class RankAnalysis:
             "n_rows": self.n_rows,
             "rank": self.rank,
             "tolerance": self.tolerance,
-            "condition_number": _finite_or_none(self.condition_number),
-            "condition_number_scaled": _finite_or_none(self.condition_number_scaled),
+            "condition_number": finite_or_none(self.condition_number),
+            "condition_number_scaled": finite_or_none(self.condition_number_scaled),
             "base_parameters": self.base.to_dict(),
             "unidentifiable": list(self.unidentifiable),
             "unexcited": list(self.unexcited),
@@ -229,7 +241,3 @@ class RankAnalysis:
             lines.append("notes:")
             lines += [f"  - {n}" for n in self.notes]
         return "\n".join(lines)
-
-
-def _finite_or_none(x: float):
-    return float(x) if math.isfinite(x) else None

@@ -23,8 +23,10 @@ import pinocchio as pin
 from .._checks import as_float_array
 from ..errors import InputError
 from ..estimators import InformationAccumulator
-from ..regressor import check_states
+from ..identifiability import analyze
+from ..regressor import check_states, iter_regressor
 from ..robot import Robot
+from ..trajectories import random_trajectory, trajectory_to_configuration
 
 #: Default window (energy) and row spacing (momentum) [s].
 DEFAULT_WINDOW = 0.2
@@ -56,7 +58,8 @@ def _simpson_weights(w: int, dt: float) -> np.ndarray:
     return c * (dt / 3.0)
 
 
-def _states(robot: Robot, q, dq, tau):
+def check_model_states(robot: Robot, q, dq, tau):
+    """``(q, dq, tau)`` of N samples checked for the acceleration-free models."""
     batched, (q, dq) = check_states(robot, q=q, dq=dq)
     if not batched:
         raise InputError(f"the energy model takes N samples (2-D arrays), got q.shape={q.shape}")
@@ -110,7 +113,7 @@ def energy_rows(
         other, ``floor((N - 1) / w)`` of them
     chunk: windows per yielded block (default: about 4096 samples' worth)
     """
-    q, dq, tau = _states(robot, q, dq, tau)
+    q, dq, tau = check_model_states(robot, q, dq, tau)
     w = window_samples(window_length, dt)
     n = q.shape[0]
     n_win = (n - 1) // w
@@ -225,10 +228,6 @@ def check_energy_base(
     one scalar per instant, and a few harmonics leave some of its directions
     unexcited where the dynamic model's are not (e.g. 3 harmonics on the Panda).
     """
-    from ..identifiability import analyze
-    from ..regressor import iter_regressor
-    from ..trajectories import random_trajectory, trajectory_to_configuration
-
     if base is None:
         base = analyze(robot).base
     if harmonics is None:
