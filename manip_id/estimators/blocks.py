@@ -240,6 +240,19 @@ class ScoreBlocks:
         self._fit()
         return self
 
+    def set_stream(self, stream: int) -> ScoreBlocks:
+        """Number the record these blocks come from ``stream`` (for a caller that learns
+        it after the accumulation, e.g. a file's index in the run); the blocks must all
+        be of one record. Returns ``self``."""
+        streams = {f for f, _ in self._blocks}
+        if len(streams) > 1:
+            raise InputError(f"these blocks hold records {sorted(streams)}: cannot renumber")
+        if int(stream) < 0:
+            raise InputError(f"stream must be >= 0, got {stream}")
+        self._blocks = {(int(stream), i): b for (_, i), b in self._blocks.items()}
+        self.stream = int(stream)
+        return self
+
     def copy(self) -> ScoreBlocks:
         """An independent copy."""
         out = ScoreBlocks(self.p, self.nv, self.block_length, self.max_blocks, stream=self.stream)

@@ -449,10 +449,17 @@ def solution_uncertainty(
     acc: InformationAccumulator,
     solution: LeastSquaresSolution,
     options: UncertaintyOptions | str | dict | None = None,
+    *,
+    estimate=None,
+    white_covariance=None,
 ) -> Uncertainty:
     """:func:`estimate_uncertainty` of a :func:`~manip_id.estimators.batch.solve_accumulator`
     solution on the same sums (OLS: ``A^-1 = covariance / sigma2``; WLS: the covariance
-    is ``A_w^-1`` with the solution's weights)."""
+    is ``A_w^-1`` with the solution's weights).
+
+    ``estimate`` and ``white_covariance``: another estimate on the same data and its
+    white-noise covariance (an online law's final estimate); default the solution's.
+    """
     if solution.weights is not None:
         Ainv = solution.covariance
     elif solution.sigma2 > 0:
@@ -461,8 +468,8 @@ def solution_uncertainty(
         Ainv = np.linalg.pinv(acc.A)
     return estimate_uncertainty(
         acc,
-        solution.estimate,
-        solution.covariance,
+        solution.estimate if estimate is None else estimate,
+        solution.covariance if white_covariance is None else white_covariance,
         Ainv,
         weights=solution.weights,
         options=options,

@@ -8,7 +8,11 @@ reports; :func:`summary_rows` its headline figures). The keys::
 
     method, model, robot, n_samples, n_validation_samples, n_parameters, n_base,
     joints, joint_terms, outputs
-    base_parameters     [{name, expression, value, std, std_percent, unit, nominal, flags}]
+    base_parameters     [{name, expression, value, std, std_percent, std_white, unit,
+                          nominal, flags}]   (std: the honest one, see uncertainty)
+    uncertainty         {method, requested, bandwidth, inflation, n_blocks, block_samples,
+                         reason}: how std was made ("hac": holds for correlated residuals;
+                         inflation: median std / std_white)
     relative_error      {train, train_per_joint, validation, per_joint_validation,
                          nominal_train, nominal_train_per_joint, nominal_validation,
                          nominal_per_joint_validation[, validation_per_file]
@@ -95,6 +99,7 @@ OWN_KEYS = {
     "warnings",
     "base",
     "rank_analysis",
+    "uncertainty",
 }
 
 
@@ -275,6 +280,7 @@ def result_to_dict(
         "unexcited": list(ra.unidentifiable) + list(ra.unexcited),
         "relative_error": errors_to_dict(result.relative_error),
         "covariance": [[finite_or_none(v) for v in row] for row in np.asarray(result.covariance)],
+        "uncertainty": result.uncertainty,
         "timings": {k: round(float(v), 6) for k, v in result.timings.items()},
         "solver": result.solver,
         "convergence": result.convergence,
@@ -316,6 +322,7 @@ def _limits(saved: dict, poorly, cond, conv) -> tuple[float, float, float]:
 def _parameter_rows(result, flags) -> list[dict]:
     nominal = result.nominal if result.nominal is not None else [None] * len(result.names)
     units = result.units or [""] * len(result.names)
+    std_white = result.std_white if result.std_white is not None else [None] * len(result.names)
     return [
         {
             "name": n,
@@ -323,16 +330,18 @@ def _parameter_rows(result, flags) -> list[dict]:
             "value": finite_or_none(x),
             "std": finite_or_none(s),
             "std_percent": finite_or_none(sp),
+            "std_white": finite_or_none(sw),
             "unit": u,
             "nominal": finite_or_none(x0),
             "flags": fl,
         }
-        for n, e, x, s, sp, u, x0, fl in zip(
+        for n, e, x, s, sp, sw, u, x0, fl in zip(
             result.names,
             result.expressions,
             result.estimate,
             result.std,
             result.std_percent,
+            std_white,
             units,
             nominal,
             flags,

@@ -19,6 +19,7 @@ from .options import (
     PreprocessOptions,
     RankOptions,
     RunOptions,
+    UncertaintyOptions,
     check_least_squares,
 )
 from .problem import Problem, check_equations, resolve_base
@@ -40,6 +41,7 @@ def identify_datasets(
     rank: RankOptions | dict | None = None,
     run: RunOptions | dict | None = None,
     scans: dict | None = None,
+    uncertainty: UncertaintyOptions | str | dict | None = None,
 ) -> IdentificationResult:
     """Least squares from several log files, each read in chunks and preprocessed on its own.
 
@@ -66,6 +68,9 @@ def identify_datasets(
     scans : dict or None
         FileSpec -> :class:`~manip_id.identification.reading.FileScan` of files
         already scanned.
+    uncertainty : UncertaintyOptions, str or None
+        The covariance: "auto" (default), "white" or "hac" (as :func:`identify`); each
+        file's end is a block boundary.
 
     Returns
     -------
@@ -83,21 +88,41 @@ def identify_datasets(
     copts = ConsistentOptions.from_value(consistent)
     minimum_norm = RankOptions.from_value(rank).minimum_norm
     options = options or PreprocessOptions()
+    uopts = UncertaintyOptions.from_value(uncertainty)
     base = resolve_base(robot, base, timings)
     if run_o.scheduler is not None:
         problem = distributed_problem(
-            robot, files, validation, base, options, window=window, run=run_o, timings=timings
+            robot,
+            files,
+            validation,
+            base,
+            options,
+            window=window,
+            run=run_o,
+            timings=timings,
+            uncertainty=uopts,
         ).problem
         problem.t_start = t_start
-        return solve(problem, method, consistent=copts, minimum_norm=minimum_norm)
+        return solve(
+            problem, method, consistent=copts, minimum_norm=minimum_norm, uncertainty=uopts
+        )
     ind = base.independent
     t0 = time.perf_counter()
-    train = accumulate_files(robot, files, options, ind, window=window, run=run_o, scans=scans)
+    train = accumulate_files(
+        robot, files, options, ind, window=window, run=run_o, scans=scans, uncertainty=uopts
+    )
     valid = None
     if validation is not None:
         vrun = RunOptions(chunk=run_o.chunk, workers=run_o.workers)
         valid = accumulate_files(
-            robot, validation, options, ind, window=window, run=vrun, scans=scans
+            robot,
+            validation,
+            options,
+            ind,
+            window=window,
+            run=vrun,
+            scans=scans,
+            uncertainty=UncertaintyOptions(method="white"),  # errors only: no blocks
         )
     timings["accumulate_wall"] = time.perf_counter() - t0
     for fa in train + (valid or []):
@@ -122,7 +147,7 @@ def identify_datasets(
         still=sums.still,
         raw=sums.raw,
     )
-    return solve(problem, method, consistent=copts, minimum_norm=minimum_norm)
+    return solve(problem, method, consistent=copts, minimum_norm=minimum_norm, uncertainty=uopts)
 
 
 __all__ = ["identify_datasets"]

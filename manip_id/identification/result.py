@@ -59,9 +59,15 @@ class IdentificationResult:
     names: one name per base parameter (its independent column, ``R`` if regrouped)
     expressions: each base parameter in standard parameter names
     estimate: base parameters theta_b, shape (r,) [units of the independent columns]
-    std: standard deviations, shape (r,); std_percent: ``100 std / |estimate|`` [%]
-    covariance: shape (r, r): ``sigma2 (Y_b^T Y_b)^-1`` (OLS, and RLS/gradient at their
-        final estimate), ``(Y_b^T W Y_b)^-1`` for WLS
+    std: standard deviations, shape (r,); std_percent: ``100 std / |estimate|`` [%]: the
+        honest ones (``uncertainty["method"]``: "hac", which holds for correlated
+        residuals, or "white"; :mod:`manip_id.estimators.uncertainty`)
+    covariance: shape (r, r): the covariance behind ``std``; for "white"
+        ``sigma2 (Y_b^T Y_b)^-1`` (OLS, and RLS/gradient at their final estimate),
+        ``(Y_b^T W Y_b)^-1`` for WLS; for "hac" the sandwich of the block scores
+    std_white: the white-noise standard deviations, shape (r,) (None when not known)
+    uncertainty: how ``std`` was made: ``{method, requested, bandwidth, inflation,
+        n_blocks, block_samples, reason}`` (inflation: median ``std / std_white``)
     sigma2: residual variance [(N m)^2] (weighted, about 1, for WLS)
     noise_variance: per-joint residual variance, shape (nv,) [(N m)^2]
     condition_number: 2-norm condition number of the base regressor on these data
@@ -122,6 +128,8 @@ class IdentificationResult:
     context: dict = field(default_factory=dict)
     #: the errors against the raw (unfiltered) torques, when they could be read again
     raw_error: RelativeError | None = None
+    std_white: np.ndarray | None = None
+    uncertainty: dict | None = None
 
     @property
     def standard_parameters(self) -> list[dict]:
@@ -244,6 +252,11 @@ def result_from_dict(doc: dict) -> IdentificationResult:
         )
         estimate = _array([r["value"] for r in rows])
         std = _array([r["std"] for r in rows])
+        std_white = (
+            _array([r["std_white"] for r in rows])
+            if rows and all("std_white" in r for r in rows)
+            else None
+        )
         std_pct = _array([np.inf if r["std_percent"] is None else r["std_percent"] for r in rows])
         cov = _array([v for row in doc["covariance"] for v in row]).reshape(len(rows), len(rows))
         ra = _rank_from_dict(doc, base, names)
@@ -282,6 +295,8 @@ def result_from_dict(doc: dict) -> IdentificationResult:
             convergence=doc.get("convergence"),
             context=context,
             raw_error=None if not raw else errors_from_dict(raw),
+            std_white=std_white,
+            uncertainty=doc.get("uncertainty"),
         )
     except (KeyError, TypeError, ValueError, IndexError) as exc:
         raise DataError(f"a malformed identification result: {type(exc).__name__}: {exc}") from exc
