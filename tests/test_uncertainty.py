@@ -7,6 +7,7 @@ Andrews' (1991) closed-form bandwidth for an AR(1).
 
 from __future__ import annotations
 
+import json
 import pickle
 
 import numpy as np
@@ -346,3 +347,90 @@ def test_monte_carlo_honest_std_matches_the_spread_and_white_does_not(ur5_excita
     lo, hi = np.quantile(ratio_honest, [0.1, 0.9])
     assert 0.6 <= lo and hi <= 1.6, (lo, hi)
     assert not 0.5 <= np.median(ratio_white) <= 2.0, np.median(ratio_white)
+
+
+# ----------------------------------------------------------------- identify and the CLI
+@pytest.fixture(scope="module")
+def ur5_correlated():
+    """4000 samples of one ur5 excitation with AR(1) torque noise (correlation 20 samples)."""
+    robot = get_robot("ur5")
+    traj = random_trajectory(robot, harmonics=5, seed=3)
+    d = simulate(robot, traj, duration=39.99, rate=100.0).dataset
+    scale = 0.02 * np.sqrt((d.tau**2).mean(axis=0))  # [N m]
+    noise = _ar1_noise(np.random.default_rng(11), d.tau.shape[0], robot.nv, np.exp(-1 / 20))
+    return robot, (d.q, d.dq, d.ddq, d.tau + scale * noise)
+
+
+def test_identify_reports_the_honest_std_and_keeps_the_white_one(ur5_correlated, tmp_path):
+    from manip_id.identification import RunOptions, identify, load_result
+
+    robot, data = ur5_correlated
+    honest = identify(robot, *data)  # "auto"
+    white = identify(robot, *data, uncertainty="white")
+    np.testing.assert_array_equal(honest.estimate, white.estimate)  # the same fit
+    np.testing.assert_array_equal(honest.std_white, white.std)
+    assert white.uncertainty["method"] == "white" and white.uncertainty["n_blocks"] == 0
+    u = honest.uncertainty
+    assert u["method"] == "hac" and u["requested"] == "auto" and 64 <= u["n_blocks"] <= 128
+    assert u["inflation"] == pytest.approx(np.median(honest.std / honest.std_white), rel=1e-5)
+    assert u["inflation"] > 2.5
+    np.testing.assert_allclose(honest.std, np.sqrt(np.diag(honest.covariance)))
+    # forked parts give the serial blocks (parts of one record merge exactly)
+    forked = identify(robot, *data, run=RunOptions(workers=2))
+    np.testing.assert_allclose(forked.std, honest.std, rtol=1e-8)
+    # the flags use the honest std: a threshold between the white and the honest std %
+    white_pct = 100 * honest.std_white / np.abs(honest.estimate)
+    limit = float(np.median(np.sqrt(white_pct * honest.std_percent)))
+    flagged = [
+        "poorly identified" in p["flags"]
+        for p in honest.to_dict(poorly_identified=limit)["base_parameters"]
+    ]
+    assert sum(flagged) > sum(white_pct > limit)
+    # JSON: the section and std_white per parameter, read back
+    path = tmp_path / "result.json"
+    path.write_text(json.dumps(honest.to_dict()))
+    back = load_result(path)
+    assert back.uncertainty == json.loads(path.read_text())["uncertainty"]
+    np.testing.assert_allclose(back.std_white, honest.std_white, rtol=1e-12)
+    np.testing.assert_allclose(back.std, honest.std, rtol=1e-12)
+    assert back.to_dict()["uncertainty"] == honest.to_dict()["uncertainty"]
+
+
+def test_short_records_fall_back_to_white_and_hac_can_be_forced(ur5_correlated):
+    from manip_id.identification import identify
+
+    robot, data = ur5_correlated
+    short = tuple(a[:300] for a in data)  # 300 samples: 10 blocks of 32
+    auto = identify(robot, *short)
+    assert auto.uncertainty["method"] == "white" and "10 blocks" in auto.uncertainty["reason"]
+    np.testing.assert_array_equal(auto.std, auto.std_white)
+    forced = identify(robot, *short, uncertainty={"method": "hac", "bandwidth": 1.0})
+    assert forced.uncertainty["method"] == "hac" and forced.uncertainty["bandwidth"] == 1.0
+    with pytest.raises(InputError, match="uncertainty must be one of"):
+        identify(robot, *short, uncertainty="newey")
+
+
+def test_online_methods_get_the_honest_std_at_their_estimate(ur5_correlated):
+    from manip_id.identification import identify
+
+    robot, data = ur5_correlated
+    res = identify(robot, *data, method="rls")
+    assert res.uncertainty["method"] == "hac" and res.uncertainty["inflation"] > 2.5
+
+
+def test_cli_uncertainty_flag(tmp_path, capsys):
+    from manip_id.cli import main
+
+    out = tmp_path / "out.json"
+    args = ["identify", "ur5", "--simulate", "--duration", "20", "--rate", "100", "--seed", "3"]
+    assert main([*args, "--json", str(out)]) == 0
+    auto = json.loads(out.read_text())
+    assert auto["uncertainty"]["method"] == "hac"
+    assert "standard deviations: autocorrelation-consistent" in capsys.readouterr().out
+    assert main([*args, "--uncertainty", "white", "--json", str(out), "--force"]) == 0
+    white = json.loads(out.read_text())
+    assert white["uncertainty"]["method"] == "white"
+    for a, b in zip(auto["base_parameters"], white["base_parameters"], strict=True):
+        assert a["value"] == b["value"] and a["std_white"] == b["std"]
+    assert main([*args, "--uncertainty", "sandwich"]) == 2
+    assert "--uncertainty" in capsys.readouterr().err

@@ -224,6 +224,7 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
             method=args.method,
             validation=None if valid is None else (valid.q, valid.dq, valid.ddq, valid.tau),
             run=RunOptions(chunk=args.chunk, progress=cmd._progress(train.n_samples)),
+            uncertainty=args.uncertainty,
         )
         files = None
         settings = train.settings
@@ -241,6 +242,7 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
                 progress=cmd._progress(sum(scans[s].n for s in specs)),
             ),
             scans=scans,
+            uncertainty=args.uncertainty,
             **cmd._consistent_kwargs(args),
         )
         files = result.files or {}

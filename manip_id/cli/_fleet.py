@@ -126,6 +126,7 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
         run=RunOptions(scheduler=args.scheduler, chunk=args.chunk),
         partition=PartitionOptions(block=args.block, per_file=args.per_file),
         model=ModelOptions(model, window_length=getattr(args, "window_length", None)),
+        uncertainty=args.uncertainty,
         **cmd._consistent_kwargs(args),
     )
     files: dict = result.files or {"train": [], "validation": None}

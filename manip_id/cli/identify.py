@@ -98,6 +98,14 @@ def register(sub) -> None:
     )
     p.add_argument("--method", choices=METHODS, default="ols", help="estimator [default ols]")
     p.add_argument(
+        "--uncertainty",
+        choices=("auto", "white", "hac"),
+        default="auto",
+        help="covariance of the estimate: hac holds for correlated residuals (per-block "
+        "scores, Bartlett kernel, automatic bandwidth), white is sigma^2 (Y^T Y)^-1; auto "
+        "[default]: hac when the data give enough blocks, else white",
+    )
+    p.add_argument(
         "--model",
         choices=("dynamic", "energy", "momentum"),
         default="dynamic",
@@ -476,6 +484,7 @@ def _run_stream(robot, args, outputs, timings: dict, t_start: float) -> int:
         method=args.method,
         validation=stream.blocks(k, n) if k < n else None,
         run=RunOptions(chunk=args.chunk, workers=args.workers, progress=progress),
+        uncertainty=args.uncertainty,
         **_consistent_kwargs(args),
     )
     timings.update({name: float(v) for name, v in dict(result.timings).items()})
@@ -575,6 +584,7 @@ def _run(args: argparse.Namespace) -> int:
             workers=args.workers,
             progress=_progress(train.n_samples + (0 if valid is None else valid.n_samples)),
         ),
+        uncertainty=args.uncertainty,
         **_consistent_kwargs(args),
     )
     timings.update({k: float(v) for k, v in dict(result.timings).items()})
@@ -676,6 +686,7 @@ def _run_acceleration_free(args, outputs, t_start: float) -> int:
         validation=None if valid is None else (valid.q, valid.dq, valid.ddq, valid.tau),
         run=RunOptions(chunk=args.chunk),
         model=ModelOptions(args.model, window_length=args.window_length, dt=dt),
+        uncertainty=args.uncertainty,
         **_consistent_kwargs(args),
     )
     timings.update({k: float(v) for k, v in dict(result.timings).items()})

@@ -446,7 +446,26 @@ def summary_rows(doc: dict) -> dict[str, str]:
         )
     if doc.get("reference_torques"):
         rows["reference torques"] = str(doc["reference_torques"])
+    if doc.get("uncertainty"):
+        rows["standard deviations"] = uncertainty_text(doc["uncertainty"])
     return rows
+
+
+def uncertainty_text(u: dict) -> str:
+    """How the standard deviations were made, in words (the ``uncertainty`` section)."""
+    if u.get("method") == "hac":
+        bw = u.get("bandwidth")
+        text = (
+            f"autocorrelation-consistent (hac, {u.get('n_blocks')} blocks of "
+            f"{u.get('block_samples') or 0:.0f} samples"
+            + ("" if bw is None else f", bandwidth {bw:.3g} blocks")
+            + ")"
+        )
+        if u.get("inflation") is not None:
+            text += f", {u['inflation']:.3g} x the white-noise ones"
+        return text
+    text = "white noise, sigma^2 (Y^T Y)^-1"
+    return text + (f" ({u['reason']})" if u.get("reason") else "")
 
 
 def _parameter_lines(rows: list[dict], max_rows: int | None) -> list[str]:
@@ -528,4 +547,5 @@ __all__ = [
     "result_warnings",
     "structural_directions",
     "summary_rows",
+    "uncertainty_text",
 ]
