@@ -10,6 +10,7 @@ estimate follow from them.
 from __future__ import annotations
 
 import time
+from typing import Any
 
 from ..identifiability import BaseParameters
 from ..robot import Robot
@@ -90,22 +91,14 @@ def identify_datasets(
     options = options or PreprocessOptions()
     uopts = UncertaintyOptions.from_value(uncertainty)
     base = resolve_base(robot, base, timings)
+    kw: dict[str, Any] = dict(consistent=copts, minimum_norm=minimum_norm, uncertainty=uopts)
     if run_o.scheduler is not None:
         problem = distributed_problem(
-            robot,
-            files,
-            validation,
-            base,
-            options,
-            window=window,
-            run=run_o,
-            timings=timings,
+            robot, files, validation, base, options, window=window, run=run_o, timings=timings,
             uncertainty=uopts,
-        ).problem
+        ).problem  # fmt: skip
         problem.t_start = t_start
-        return solve(
-            problem, method, consistent=copts, minimum_norm=minimum_norm, uncertainty=uopts
-        )
+        return solve(problem, method, **kw)
     ind = base.independent
     t0 = time.perf_counter()
     train = accumulate_files(
@@ -114,16 +107,11 @@ def identify_datasets(
     valid = None
     if validation is not None:
         vrun = RunOptions(chunk=run_o.chunk, workers=run_o.workers)
+        white = UncertaintyOptions(method="white")  # validation: errors only, no blocks
         valid = accumulate_files(
-            robot,
-            validation,
-            options,
-            ind,
-            window=window,
-            run=vrun,
-            scans=scans,
-            uncertainty=UncertaintyOptions(method="white"),  # errors only: no blocks
-        )
+            robot, validation, options, ind, window=window, run=vrun, scans=scans,
+            uncertainty=white,
+        )  # fmt: skip
     timings["accumulate_wall"] = time.perf_counter() - t0
     for fa in train + (valid or []):
         for k, v in fa.timings.items():
@@ -147,7 +135,7 @@ def identify_datasets(
         still=sums.still,
         raw=sums.raw,
     )
-    return solve(problem, method, consistent=copts, minimum_norm=minimum_norm, uncertainty=uopts)
+    return solve(problem, method, **kw)
 
 
 __all__ = ["identify_datasets"]

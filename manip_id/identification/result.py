@@ -252,11 +252,6 @@ def result_from_dict(doc: dict) -> IdentificationResult:
         )
         estimate = _array([r["value"] for r in rows])
         std = _array([r["std"] for r in rows])
-        std_white = (
-            _array([r["std_white"] for r in rows])
-            if rows and all("std_white" in r for r in rows)
-            else None
-        )
         std_pct = _array([np.inf if r["std_percent"] is None else r["std_percent"] for r in rows])
         cov = _array([v for row in doc["covariance"] for v in row]).reshape(len(rows), len(rows))
         ra = _rank_from_dict(doc, base, names)
@@ -295,11 +290,18 @@ def result_from_dict(doc: dict) -> IdentificationResult:
             convergence=doc.get("convergence"),
             context=context,
             raw_error=None if not raw else errors_from_dict(raw),
-            std_white=std_white,
+            std_white=_std_white(rows),
             uncertainty=doc.get("uncertainty"),
         )
     except (KeyError, TypeError, ValueError, IndexError) as exc:
         raise DataError(f"a malformed identification result: {type(exc).__name__}: {exc}") from exc
+
+
+def _std_white(rows: list[dict]) -> np.ndarray | None:
+    """The white-noise std of the parameter rows (None in documents written without it)."""
+    if rows and all("std_white" in r for r in rows):
+        return _array([r["std_white"] for r in rows])
+    return None
 
 
 def _rank_from_dict(doc: dict, base: BaseParameters, names: list[str]) -> RankAnalysis:
