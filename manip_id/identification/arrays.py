@@ -10,6 +10,7 @@ Every path ends in the same :func:`~manip_id.identification.solve`.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -210,8 +211,17 @@ def _identify_acceleration_free(
     t0 = time.perf_counter()
     accumulate = accumulate_energy if model.name == "energy" else accumulate_momentum
     dt = 1.0 if model.dt is None else float(model.dt)
+    nv_rows = 1 if model.name == "energy" else robot.nv
+    rows_unc = replace(opts.uncertainty, block_length=1)  # rows span windows: start at one
     acc = accumulate(
-        robot, q, dq, tau, dt=dt, window_length=model.window_length, columns=base.independent
+        robot,
+        q,
+        dq,
+        tau,
+        dt=dt,
+        window_length=model.window_length,
+        columns=base.independent,
+        blocks=rows_unc.blocks(base.n_base, nv_rows),
     )
     timings["accumulate"] = time.perf_counter() - t0
     if acc.n_rows <= base.n_base:
