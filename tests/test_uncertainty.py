@@ -434,3 +434,28 @@ def test_cli_uncertainty_flag(tmp_path, capsys):
         assert a["value"] == b["value"] and a["std_white"] == b["std"]
     assert main([*args, "--uncertainty", "sandwich"]) == 2
     assert "--uncertainty" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_monte_carlo_through_identify(ur5_excitation):
+    """The bite test on the public path: 30 draws through :func:`identify` (its own
+    regressor, accumulation and solve), AR(1) noise of correlation time 30 samples."""
+    from manip_id.identification import identify
+
+    robot = get_robot("ur5")
+    traj = random_trajectory(robot, harmonics=5, seed=3)
+    d = simulate(robot, traj, duration=(8192 - 1) / 100.0, rate=100.0).dataset
+    scale = 0.02 * np.sqrt((d.tau**2).mean(axis=0))  # [N m]
+    estimates, honest, white = [], [], []
+    for run in range(30):
+        noise = _ar1_noise(np.random.default_rng(500 + run), d.tau.shape[0], 6, np.exp(-1 / 30))
+        res = identify(robot, d.q, d.dq, d.ddq, d.tau + scale * noise)
+        assert res.uncertainty["method"] == "hac"
+        estimates.append(res.estimate)
+        honest.append(res.std)
+        white.append(res.std_white)
+    spread = np.std(estimates, axis=0, ddof=1)
+    ratio_honest = float(np.median(spread / np.mean(honest, axis=0)))
+    ratio_white = float(np.median(spread / np.mean(white, axis=0)))
+    assert 0.75 <= ratio_honest <= 1.33, ratio_honest
+    assert not 0.5 <= ratio_white <= 2.0, ratio_white
