@@ -38,6 +38,30 @@ class ReportBusyError(OutputError):
     """Another run has claimed the report folder (of two concurrent runs, one wins)."""
 
 
+# --- report folders (manip_id._io.report_folder, manip_id.viz.report) --------------
+class ReportExistsError(InputError):
+    """The report folder exists and is not empty, and ``force`` was not given.
+
+    Attributes
+    ----------
+    path : str
+        The report folder.
+    """
+
+    def __init__(self, path):
+        self.path = str(path)
+        super().__init__(
+            f"report folder {self.path} exists and is not empty "
+            "(use --force / force=True to replace it)"
+        )
+
+    def __reduce__(self):
+        return (type(self), (self.path,))
+
+
+# --- end of report folders ---------------------------------------------------------
+
+
 class ResourceError(InputError):
     """A computation would not fit the machine (memory estimated before the work)."""
 

@@ -1,17 +1,9 @@
-"""A report folder: result.json, PNG figures, scene.html and an index.html that shows them.
+"""What a report folder shows: result.json, PNG figures, scene.html and an index.html.
 
-Rules (issue 14):
-
-- **Claimed atomically before the work** (:func:`claim_report`): the folder is created
-  if missing and a claim file ``.manip-id-claim`` is created in it with ``O_EXCL``; of
-  two concurrent runs into one folder exactly one gets the claim, the other gets
-  :class:`~manip_id.errors.ReportBusyError`.
-- **Never half-written**: the report is built in a temporary sibling folder
-  (``.<name>.tmp-*``, registered for removal on signals) and renamed into place at the end.
-- **Only our own folders are replaced**: every report folder holds a manifest,
-  ``.manip-id-report.json``, listing the files manip_id wrote. An existing non-empty
-  folder is replaced only with ``force=True``, and only when it has a manifest and holds
-  nothing the manifest does not list; anything else is refused, never deleted.
+This module only renders. The folder itself (claimed before the work, built in a
+temporary sibling, published with the other outputs, replaced only when manip_id wrote
+it) is :mod:`manip_id._io.report_folder`'s: :func:`write_report` fills a
+:class:`~manip_id._io.ReportFolder`.
 """
 
 from __future__ import annotations
@@ -19,226 +11,37 @@ from __future__ import annotations
 import html as html_lib
 import os
 import shutil
-import tempfile
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
-from .. import __name__ as _package
 from .._io import (
+    CLAIM,
+    MANIFEST,
+    ReportFolder,
     atomic_write_text,
-    check_output_dir,
+    check_report_target,
+    claim_report,
     json_text,
-    register_temporary,
-    unregister_temporary,
 )
-from ..errors import InputError, OutputError, ReportBusyError
+from ..errors import InputError, ReportExistsError
 
 INDEX, RESULT, SCENE = "index.html", "result.json", "scene.html"
-#: The manifest that marks a folder written by manip_id, and the claim of a run in progress.
-MANIFEST, CLAIM = ".manip-id-report.json", ".manip-id-claim"
 
-
-class ReportExistsError(InputError):
-    """The report folder exists and is not empty, and ``force`` was not given."""
-
-
-def _manifest_files(path: Path) -> set[str] | None:
-    """The files a report folder's manifest lists, or None without a (readable) manifest."""
-    import json
-
-    try:
-        data = json.loads((path / MANIFEST).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    if not isinstance(data, dict) or data.get("written_by") != _package:
-        return None
-    files = data.get("files")
-    if not isinstance(files, list) or not all(isinstance(f, str) for f in files):
-        return None
-    return set(files)
-
-
-def check_report_target(directory, force: bool = False, *, inputs=(), what="report folder") -> Path:
-    """Raise unless ``directory`` may receive a report; call it before the long work.
-
-    Refused (:class:`~manip_id.errors.OutputError`): a file in the way, a missing
-    parent, the current directory or an ancestor of it or of an input. A non-empty
-    folder needs ``force`` (:class:`ReportExistsError`) and, even then, a manifest
-    listing everything it holds (a folder manip_id did not write is never removed).
-    A folder another run has claimed raises :class:`~manip_id.errors.ReportBusyError`.
-    """
-    try:
-        path = check_output_dir(directory, inputs=inputs, what=what)
-    except OutputError as exc:
-        if "not a folder" in str(exc):
-            raise OutputError(f"report folder {directory} exists and is not a folder") from exc
-        raise
-    if not path.is_dir():
-        return path
-    try:
-        entries = sorted(p.name for p in path.iterdir())
-    except OSError as exc:
-        raise OutputError(f"cannot read the report folder {path}: {exc.strerror}") from exc
-    if CLAIM in entries:
-        raise ReportBusyError(_busy_message(path))
-    if not entries:
-        return path
-    if not force:
-        raise ReportExistsError(
-            f"report folder {path} exists and is not empty (use --force / force=True to replace it)"
-        )
-    listed = _manifest_files(path)
-    if listed is None:
-        raise OutputError(
-            f"report folder {path} was not written by manip-id (no {MANIFEST}); "
-            "--force only replaces folders manip-id wrote: remove it yourself or choose another"
-        )
-    extra = [e for e in entries if e not in listed and e != MANIFEST]
-    if extra:
-        raise OutputError(
-            f"report folder {path} holds files manip-id did not write ({', '.join(extra[:5])}"
-            f"{', ...' if len(extra) > 5 else ''}); --force will not delete them"
-        )
-    return path
-
-
-def _busy_message(path: Path) -> str:
-    """Who holds the claim of ``path``: a running process, or a dead one (then: remove it)."""
-    claim = path / CLAIM
-    try:
-        pid = int(claim.read_text().split()[0])
-    except (OSError, ValueError, IndexError):
-        pid = None
-    if pid is not None:
-        import psutil
-
-        if not psutil.pid_exists(pid):
-            return (
-                f"report folder {path} was claimed by manip-id process {pid}, which is no "
-                f"longer running (killed?): remove {claim} and run again"
-            )
-        return f"report folder {path} is being written by another manip-id run (process {pid})"
-    return (
-        f"report folder {path} is being written by another manip-id run "
-        f"(if none is running, remove {claim})"
-    )
-
-
-class ReportFolder:
-    """A report folder claimed by this run: built by :meth:`write`, then :meth:`publish`-ed.
-
-    Made by :func:`claim_report`. Until published, the target holds only the claim file
-    (or its old manifest-listed contents); :meth:`discard` gives the folder back as it was.
-    """
-
-    def __init__(self, path: Path, force: bool, created: bool, claim: Path):
-        self.path = path
-        self.force = force
-        self._created = created
-        self._claim = claim
-        self._tmp: Path | None = None
-
-    def write(self, **content) -> Path:
-        """Build the report in a temporary sibling folder (arguments of :func:`write_report`)."""
-        if self._tmp is not None:
-            raise InputError(f"report {self.path} was already written")
-        self._tmp = _build(self.path, **content)
-        return self.path
-
-    def publish(self) -> None:
-        """Rename the built report into place (nothing is built: give the folder back)."""
-        if self._tmp is None:
-            self.discard()
-            return
-        tmp, self._tmp = self._tmp, None
-        try:
-            _swap(tmp, self.path)
-        except BaseException:
-            shutil.rmtree(tmp, ignore_errors=True)
-            unregister_temporary(tmp)
-            self.discard()
-            raise
-        unregister_temporary(tmp)
-        unregister_temporary(self._claim)
-        if self._created:
-            unregister_temporary(self.path)
-
-    def discard(self) -> None:
-        """Remove the temporary build and the claim (and the folder if this run created it)."""
-        if self._tmp is not None:
-            shutil.rmtree(self._tmp, ignore_errors=True)
-            unregister_temporary(self._tmp)
-            self._tmp = None
-        if self._claim.exists():
-            self._claim.unlink(missing_ok=True)
-        unregister_temporary(self._claim)
-        if self._created:
-            try:
-                self.path.rmdir()
-            except OSError:
-                pass
-            unregister_temporary(self.path)
-
-
-def claim_report(
-    directory, *, force: bool = False, inputs=(), what="report folder"
-) -> ReportFolder:
-    """Check ``directory`` (:func:`check_report_target`) and claim it for this run.
-
-    The claim is a file created with ``O_CREAT | O_EXCL`` in the folder (created here
-    if missing): of two runs, exactly one succeeds; the other raises
-    :class:`~manip_id.errors.ReportBusyError`.
-    """
-    path = check_report_target(directory, force, inputs=inputs, what=what)
-    created = False
-    try:
-        path.mkdir()
-        created = True
-        register_temporary(path)
-    except FileExistsError:
-        pass
-    except OSError as exc:
-        raise OutputError(f"cannot create the report folder {path}: {exc.strerror}") from exc
-    claim = path / CLAIM
-    try:
-        fd = os.open(claim, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-    except FileExistsError as exc:
-        raise ReportBusyError(_busy_message(path)) from exc
-    except OSError as exc:
-        if created:
-            path.rmdir()
-            unregister_temporary(path)
-        raise OutputError(f"cannot write into the report folder {path}: {exc.strerror}") from exc
-    register_temporary(claim)
-    with os.fdopen(fd, "w") as fh:
-        fh.write(f"{os.getpid()}\n")
-    if not created:  # re-check under the claim: the folder may have changed meanwhile
-        try:
-            check_report_target_claimed(path, force)
-        except BaseException:
-            claim.unlink(missing_ok=True)
-            unregister_temporary(claim)
-            raise
-    return ReportFolder(path, force, created, claim)
-
-
-def check_report_target_claimed(path: Path, force: bool) -> None:
-    """:func:`check_report_target`'s content rules on a folder that holds our claim."""
-    entries = [p.name for p in path.iterdir() if p.name != CLAIM]
-    if not entries:
-        return
-    if not force:
-        raise ReportExistsError(
-            f"report folder {path} exists and is not empty (use --force / force=True to replace it)"
-        )
-    listed = _manifest_files(path)
-    if listed is None or any(e not in listed and e != MANIFEST for e in entries):
-        raise OutputError(
-            f"report folder {path} was not written by manip-id or holds other files; "
-            "--force only replaces folders manip-id wrote"
-        )
+#: Re-exported for the imports of earlier releases (they live in manip_id._io / errors).
+__all__ = [
+    "CLAIM",
+    "INDEX",
+    "MANIFEST",
+    "RESULT",
+    "SCENE",
+    "ReportExistsError",
+    "ReportFolder",
+    "check_report_target",
+    "claim_report",
+    "write_report",
+]
 
 
 def _cell(value) -> str:
@@ -367,11 +170,16 @@ def write_report(
         notes=notes,
         tables=tables,
     )
+    _check_names(figures, scene)
+
+    def fill(tmp: Path) -> None:
+        _fill(tmp, **content)
+
     if isinstance(directory, ReportFolder):
-        return directory.write(**content)
+        return directory.build(fill)
     claim = claim_report(directory, force=force, inputs=inputs)
     try:
-        claim.write(**content)
+        claim.build(fill)
         claim.publish()
     except BaseException:
         claim.discard()
@@ -400,8 +208,8 @@ def _check_content(title, summary, parameter_table, figures, notes) -> None:
         raise InputError(f"notes must be a sequence of lines, got {type(notes).__name__}")
 
 
-def _build(
-    target: Path,
+def _fill(
+    tmp: Path,
     *,
     title: str,
     summary: Mapping,
@@ -411,8 +219,41 @@ def _build(
     json_result=None,
     notes: Sequence[str] = (),
     tables=None,
-) -> Path:
-    """The complete report in a temporary sibling folder of ``target``; returns that folder."""
+) -> None:
+    """Write the report's files into the (temporary) folder ``tmp``."""
+    payload = (
+        json_result
+        if json_result is not None
+        else {"title": title, "summary": dict(summary), "parameters": list(parameter_table)}
+    )
+    atomic_write_text(tmp / RESULT, json_text(payload))
+    written = []
+    for name, fig in figures.items():
+        out = tmp / f"{name}.png"
+        if callable(fig):
+            fig(out)
+        else:
+            src = Path(fig)
+            if not src.is_file():
+                raise InputError(f"figure {name!r}: no file at {src}")
+            shutil.copyfile(src, out)
+        if not out.is_file():
+            raise InputError(f"figure {name!r} wrote nothing to {out}")
+        written.append(out.name)
+    if scene is not None:
+        text = scene if isinstance(scene, str) else scene.html()
+        atomic_write_text(tmp / SCENE, text)
+        assets: dict = {} if isinstance(scene, str) else getattr(scene, "asset_files", dict)()
+        for name, asset in assets.items():  # a scene's external assets, written once
+            atomic_write_text(tmp / name, asset)
+    atomic_write_text(
+        tmp / INDEX,
+        _index(title, summary, parameter_table, written, scene is not None, notes, tables),
+    )
+
+
+def _check_names(figures: Mapping, scene) -> None:
+    """Figure names are plain file stems; a scene is a RobotScene or HTML (before any work)."""
     for name in figures:
         if not name or "/" in name or name.startswith(".") or name in ("index", "scene"):
             raise InputError(f"figure names must be plain file stems, got {name!r}")
@@ -420,63 +261,3 @@ def _build(
         raise InputError(
             f"scene must be a RobotScene or an HTML string, got {type(scene).__name__}"
         )
-    try:
-        tmp = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.tmp-"))
-    except OSError as exc:
-        raise OutputError(f"cannot create a folder beside {target}: {exc.strerror}") from exc
-    register_temporary(tmp)
-    try:
-        os.chmod(tmp, 0o755)
-        payload = (
-            json_result
-            if json_result is not None
-            else {"title": title, "summary": dict(summary), "parameters": list(parameter_table)}
-        )
-        atomic_write_text(tmp / RESULT, json_text(payload))
-        written = []
-        for name, fig in figures.items():
-            out = tmp / f"{name}.png"
-            if callable(fig):
-                fig(out)
-            else:
-                src = Path(fig)
-                if not src.is_file():
-                    raise InputError(f"figure {name!r}: no file at {src}")
-                shutil.copyfile(src, out)
-            if not out.is_file():
-                raise InputError(f"figure {name!r} wrote nothing to {out}")
-            written.append(out.name)
-        if scene is not None:
-            text = scene if isinstance(scene, str) else scene.html()
-            atomic_write_text(tmp / SCENE, text)
-            assets: dict = {} if isinstance(scene, str) else getattr(scene, "asset_files", dict)()
-            for name, asset in assets.items():  # a scene's external assets, written once
-                atomic_write_text(tmp / name, asset)
-        atomic_write_text(
-            tmp / INDEX,
-            _index(title, summary, parameter_table, written, scene is not None, notes, tables),
-        )
-        files = sorted(p.name for p in tmp.iterdir())
-        manifest = {"written_by": _package, "files": files}
-        atomic_write_text(tmp / MANIFEST, json_text(manifest))
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        unregister_temporary(tmp)
-        raise
-    return tmp
-
-
-def _swap(new: Path, target: Path) -> None:
-    """Move the complete folder ``new`` to ``target``, replacing it (renamed aside first)."""
-    if not target.exists():
-        os.replace(new, target)
-        return
-    old = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.old-"))
-    old.rmdir()
-    os.replace(target, old)
-    try:
-        os.replace(new, target)
-    except BaseException:
-        os.replace(old, target)
-        raise
-    shutil.rmtree(old, ignore_errors=True)
