@@ -35,7 +35,9 @@ import sys
 import traceback
 import warnings
 
+from .._io import OutputSet, remove_temporaries
 from ..errors import ManipIdError
+from ._common import warn  # noqa: F401 (the commands' warnings, as earlier releases had it)
 
 PROG = "manip-id"
 
@@ -118,15 +120,6 @@ def _library(filename: str) -> str:
     return ""
 
 
-def warn(message: str) -> None:
-    """Print ``manip-id: warning: message`` (once; the commands' own warnings)."""
-    warnings.warn(message, UserWarning, stacklevel=2)
-
-
-# ------------------------------------------------------- native stderr (fd 2)
-from .._native import native_stderr_captured  # noqa: E402, F401 (re-exported for commands)
-
-
 # ---------------------------------------------------------- child processes
 def stop_children(timeout: float = 3.0) -> None:
     """Terminate (then kill) every process this process started, recursively."""
@@ -177,7 +170,6 @@ def _install_signal_handlers():
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the exit status (see the module docstring)."""
-    from .._io import OutputSet, remove_temporaries
 
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv[: argv.index("--")] if "--" in argv else "--debug" in argv

@@ -13,6 +13,13 @@ from __future__ import annotations
 
 import argparse
 
+from .._io import OutputSet
+from ..datasets import RowCounts, iter_rows, open_source, parse_file_spec
+from ..datasets.io import output_format, write_rows_to
+from ..datasets.stream import torque_scale_vector
+from ..errors import DataError
+from ._common import column_map, parse_floats
+
 
 def register(sub) -> None:
     p = sub.add_parser(
@@ -39,15 +46,7 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .._io import OutputSet
-    from ..datasets import RowCounts, iter_rows, open_source, parse_file_spec
-    from ..datasets.io import output_format, write_rows_to
-    from ..datasets.stream import torque_scale_vector
-    from ..errors import DataError
-    from ._files import parse_floats
-    from .identify import _column_map
-
-    spec = parse_file_spec(args.input, columns=_column_map(args.column), topic=args.topic)
+    spec = parse_file_spec(args.input, columns=column_map(args.column), topic=args.topic)
     outputs = getattr(args, "outputs", None) or OutputSet()
     outputs.add_inputs([spec.path])
     out = outputs.file(args.output, "OUT")

@@ -24,7 +24,15 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import DataError, InputError
-from ._common import add_robot_arguments, robot_from_args, write_json
+from ._common import (
+    add_robot_arguments,
+    add_scheduler_argument,
+    check_scheduler,
+    column_map,
+    parse_floats,
+    robot_from_args,
+    write_json,
+)
 
 
 # ------------------------------------------------------------------ options
@@ -128,8 +136,6 @@ def register(sub) -> None:
         metavar="G[,G...]",
         help="multiply the torque columns of every file (one value, or one per joint)",
     )
-    from ._fleet import add_scheduler_argument
-
     add_scheduler_argument(
         p,
         "each file is one task (read, preprocessed and accumulated on a worker), the sums "
@@ -139,21 +145,6 @@ def register(sub) -> None:
 
 
 # ------------------------------------------------------------------ reading
-def parse_floats(text: str | None, what: str, n: int | None = None) -> list[float] | None:
-    """``"1,2,3"`` -> [1.0, 2.0, 3.0]; ``n`` values when given; None passes through."""
-    if text is None:
-        return None
-    try:
-        values = [float(v) for v in str(text).split(",") if v.strip()]
-    except ValueError as exc:
-        raise InputError(f"{what} takes comma-separated numbers, got {text!r}") from exc
-    if n is not None and len(values) != n:
-        raise InputError(f"{what} takes {n} comma-separated numbers, got {len(values)}: {text!r}")
-    if not values or not all(math.isfinite(v) for v in values):
-        raise InputError(f"{what} takes finite numbers, got {text!r}")
-    return values
-
-
 def check_run_args(args) -> None:
     """Option checks that need no data."""
     if args.cutoff is not None and not (math.isfinite(args.cutoff) and args.cutoff > 0):
@@ -169,12 +160,6 @@ def check_run_args(args) -> None:
     d = args.velocity_deadband
     if d is not None and not (math.isfinite(d) and d >= 0):
         raise InputError(f"--velocity-deadband must be >= 0 [rad/s], got {d}")
-
-
-def _column_map(specs: list[str]):
-    from .identify import _column_map as column_map
-
-    return column_map(specs)
 
 
 def _spec(text: str, args, colmap=None):
@@ -256,7 +241,7 @@ def read_runs(args, robot, scale=None, scan: bool = True) -> tuple[list, list, d
     bad file fails, named, before the long work; ``scan=False`` (``--scheduler``): the
     files are scanned by the tasks that accumulate them (quality: :func:`run_quality`).
     """
-    colmap = _column_map(args.column)
+    colmap = column_map(args.column)
     specs_u = [_spec(t, args, colmap) for t in args.unloaded]
     specs_l = [_spec(t, args, colmap) for t in args.loaded]
     for sl in specs_l:
@@ -372,7 +357,6 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("give --unloaded runs or --known-base RESULT.json, not both")
     if args.known_base is None and not args.unloaded:
         raise InputError("give the --unloaded runs (or --known-base RESULT.json)")
-    from ._fleet import check_scheduler
 
     check_scheduler(args)
     reserve_json(args, input_paths(args))

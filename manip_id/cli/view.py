@@ -18,7 +18,7 @@ import sys
 import time
 
 from ..errors import InputError
-from ._common import add_robot_arguments, reserve_outputs, robot_from_args
+from ._common import add_robot_arguments, reserve_outputs, robot_from_args, warn
 
 
 def register(sub) -> None:
@@ -92,8 +92,6 @@ def run(args: argparse.Namespace) -> int:
 
         host = check_host(args.host)
         if not is_loopback(host):
-            from . import warn
-
             warn(f"--host {host}: the viewer is reachable from the network, without authentication")
     outputs = reserve_outputs(args)  # --html checked before the work
     from ..viz.meshcat_scene import RobotScene, check_trajectory

@@ -11,6 +11,8 @@ pid elsewhere); :meth:`MeshcatServer.stop` ends it explicitly.
 
 from __future__ import annotations
 
+import contextlib
+import io
 import ipaddress
 import os
 import signal
@@ -19,7 +21,9 @@ import subprocess
 import sys
 import threading
 import time
+import webbrowser
 from dataclasses import dataclass, field
+from typing import Any
 
 from ..errors import InputError, ManipIdError
 
@@ -109,6 +113,61 @@ def start_server(host: str = LOOPBACK, timeout: float = 30.0) -> MeshcatServer:
             f"(exit status {proc.poll()})"
         )
     return MeshcatServer(proc, urls["zmq_url"], urls["web_url"], host)
+
+
+def webbrowser_open(url: str) -> None:  # pragma: no cover - interactive
+    webbrowser.open(url, new=2)
+
+
+@dataclass
+class LiveView:
+    """A scene replayed into a running meshcat server (see :meth:`RobotScene.serve`)."""
+
+    visualizer: Any  # meshcat.Visualizer
+    server: MeshcatServer
+
+    @property
+    def url(self) -> str:
+        """The viewer's address, on the server's host."""
+        return self.server.web_url
+
+    def stop(self) -> None:
+        """Close the connection and stop the server process."""
+        try:
+            self.visualizer.window.zmq_socket.close(linger=0)
+        finally:
+            self.server.stop()
+
+    def __enter__(self) -> LiveView:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+def replay(commands, host: str = LOOPBACK, open_browser: bool = False) -> LiveView:
+    """Start a server on ``host`` (:func:`start_server`) and replay the packed meshcat
+    ``commands`` into it; returns the :class:`LiveView` (stop it when done)."""
+    import meshcat  # optional heavy library: only for a live view
+    import umsgpack
+
+    server = start_server(host)
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):  # meshcat prints its URL
+            vis = meshcat.Visualizer(zmq_url=server.zmq_url)
+        for packed in commands:
+            data = umsgpack.unpackb(packed)
+            vis.window.zmq_socket.send_multipart(
+                [data["type"].encode(), data.get("path", "").encode(), packed]
+            )
+            vis.window.zmq_socket.recv()
+    except BaseException:
+        server.stop()
+        raise
+    view = LiveView(vis, server)
+    if open_browser:
+        webbrowser_open(view.url)
+    return view
 
 
 def _die_with_parent(parent: int) -> None:
