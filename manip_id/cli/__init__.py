@@ -35,6 +35,8 @@ import sys
 import traceback
 import warnings
 
+import psutil
+
 from .._io import OutputSet, remove_temporaries
 from ..errors import ManipIdError
 from ._common import warn  # noqa: F401 (the commands' warnings, as earlier releases had it)
@@ -123,10 +125,6 @@ def _library(filename: str) -> str:
 # ---------------------------------------------------------- child processes
 def stop_children(timeout: float = 3.0) -> None:
     """Terminate (then kill) every process this process started, recursively."""
-    try:
-        import psutil
-    except ImportError:  # pragma: no cover - psutil is a dependency
-        return
     try:
         children = psutil.Process().children(recursive=True)
     except psutil.Error:  # pragma: no cover

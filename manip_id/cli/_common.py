@@ -20,7 +20,10 @@ from typing import TYPE_CHECKING
 
 from .._io import OutputSet, write_json  # noqa: F401 (the commands import write_json here)
 from .._native import native_stderr_captured
+from ..datasets import parse_file_spec
+from ..datasets.stream import torque_scale_vector
 from ..errors import InputError
+from ..profiles import find_profile, load_profile
 from ..signals import DEFAULT_CUTOFF, preprocess
 
 if TYPE_CHECKING:
@@ -93,8 +96,6 @@ def profile_from_args(args: argparse.Namespace):
     ``--profile`` when given (``none``: no profile), else ``robots/ROBOT.toml`` for a
     robot given by name; None when there is none.
     """
-    from ..profiles import find_profile, load_profile  # example-robot-data paths, tomllib
-
     value = _profile_option(args)
     if value is False:
         return None
@@ -264,8 +265,6 @@ def check_scheduler(args: argparse.Namespace) -> None:
 # ---------------------------------------------------- data files of identify
 def file_specs(values, args: argparse.Namespace, colmap) -> list:
     """The file specs (path, window, columns, topic) of ``--data`` / ``--validate`` values."""
-    from ..datasets import parse_file_spec
-
     return [
         parse_file_spec(v, window=args.window, columns=colmap, topic=args.topic)
         for v in values or []
@@ -285,7 +284,6 @@ def preprocess_options(args: argparse.Namespace, nv: int, profile_scale=None):
 
     ``--torque-scale`` (one gain or one per joint), else the profile's [data] torque_scale.
     """
-    from ..datasets.stream import torque_scale_vector
     from ..pipeline import PreprocessOptions  # pinocchio: heavy, not for --help
 
     scale = None

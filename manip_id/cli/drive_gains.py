@@ -82,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
     if inertia is not None and com is None:
         raise InputError("--payload-inertia (about the centre of mass) needs --payload-com")
     reserve_json(args, input_paths(args))
-    from ..payload import identify_drive_gains
+    from ..payload import identify_drive_gains  # pinocchio: heavy, not for --help
 
     robot = robot_from_args(args)
     unloaded, loaded, source = read_runs(args, robot)

@@ -347,7 +347,7 @@ def _check_args(args) -> None:
 
 def _check_consistent_args(args) -> None:
     """--consistent, --solver, --prior, --prior-weight, --export-urdf (before any work)."""
-    from ..estimators.consistent import DEFAULT_PRIOR_WEIGHT, check_options  # numpy only
+    from ..estimators.consistent import DEFAULT_PRIOR_WEIGHT, check_options  # pinocchio: heavy
 
     given = [
         f"--{n.replace('_', '-')}"

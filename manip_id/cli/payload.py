@@ -23,6 +23,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from ..datasets import parse_file_spec
 from ..errors import DataError, InputError
 from ._common import (
     add_robot_arguments,
@@ -164,13 +165,11 @@ def check_run_args(args) -> None:
 
 def _spec(text: str, args, colmap=None):
     """A file spec (path and window) of the real-log readers."""
-    from ..datasets import parse_file_spec
-
     return parse_file_spec(text, window=args.window, columns=colmap, topic=args.topic)
 
 
 def _options(args, scale=None):
-    from ..pipeline import PreprocessOptions
+    from ..pipeline import PreprocessOptions  # pinocchio: heavy, not for --help
 
     eps = args.velocity_deadband
     return PreprocessOptions(
@@ -195,7 +194,7 @@ class StreamedRun:
     """
 
     def __init__(self, robot, spec, options, scan: bool = True):
-        from ..pipeline import scan_file
+        from ..pipeline import scan_file  # pinocchio: heavy, not for --help
 
         self.robot, self.spec, self.options = robot, spec, options
         # bad files fail here, named
@@ -216,7 +215,7 @@ class StreamedRun:
         }
 
     def __call__(self):
-        from ..pipeline import iter_processed, scan_file
+        from ..pipeline import iter_processed, scan_file  # pinocchio: heavy, not for --help
 
         nq, nv = self.robot.nq, self.robot.nv
         if self.scan is None:
@@ -360,7 +359,7 @@ def run(args: argparse.Namespace) -> int:
 
     check_scheduler(args)
     reserve_json(args, input_paths(args))
-    from ..payload import identify_payload, load_known_base
+    from ..payload import identify_payload, load_known_base  # pinocchio: heavy, not for --help
 
     known = load_known_base(args.known_base) if args.known_base is not None else None
     robot = robot_from_args(args)
@@ -369,7 +368,7 @@ def run(args: argparse.Namespace) -> int:
         scale = parse_floats(args.torque_scale, "--torque-scale")
     distributed = args.scheduler is not None
     if distributed:  # the tasks read the files: send them a light robot
-        from ..fleet import portable_robot
+        from ..fleet import portable_robot  # pinocchio: heavy, not for --help
 
         unloaded, loaded, source = read_runs(args, portable_robot(robot), scale, scan=False)
     else:

@@ -29,6 +29,8 @@ import meshcat.geometry as mg
 import numpy as np
 import pinocchio as pin
 from meshcat.animation import Animation
+from pinocchio.visualize import MeshcatVisualizer
+from pinocchio.visualize.meshcat_visualizer import applyScalingOnHomegeneousTransform
 
 from .._checks import as_float_array, check_finite
 from .._io import atomic_write_text
@@ -214,8 +216,6 @@ class RobotScene:
 
     # ------------------------------------------------------------- building
     def _load_meshes(self) -> None:
-        from pinocchio.visualize import MeshcatVisualizer
-
         self._viz = MeshcatVisualizer(self._model, None, self._geom)
         self._viz.initViewer(viewer=self._vis)
         self._viz.viewerRootNodeName = _ROBOT_ROOT
@@ -294,8 +294,6 @@ class RobotScene:
 
     def _transforms(self, q) -> dict[str, np.ndarray]:
         """World transforms of every node at configuration ``q``."""
-        from pinocchio.visualize.meshcat_visualizer import applyScalingOnHomegeneousTransform
-
         pin.forwardKinematics(self._model, self._data, q)
         out: dict[str, np.ndarray] = {}
         if self._geom.ngeoms:

@@ -12,6 +12,7 @@ pid elsewhere); :meth:`MeshcatServer.stop` ends it explicitly.
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import io
 import ipaddress
 import os
@@ -149,7 +150,7 @@ def replay(commands, host: str = LOOPBACK, open_browser: bool = False) -> LiveVi
     """Start a server on ``host`` (:func:`start_server`) and replay the packed meshcat
     ``commands`` into it; returns the :class:`LiveView` (stop it when done)."""
     import meshcat  # optional heavy library: only for a live view
-    import umsgpack
+    import umsgpack  # meshcat's message packing, with meshcat
 
     server = start_server(host)
     try:
@@ -174,8 +175,6 @@ def _die_with_parent(parent: int) -> None:
     """End this process when ``parent`` ends (PR_SET_PDEATHSIG, plus a watchdog)."""
     if sys.platform.startswith("linux"):
         try:
-            import ctypes
-
             libc = ctypes.CDLL(None, use_errno=True)
             libc.prctl(1, signal.SIGTERM, 0, 0, 0)  # PR_SET_PDEATHSIG = 1
         except (OSError, AttributeError):  # pragma: no cover
@@ -195,7 +194,7 @@ def _die_with_parent(parent: int) -> None:
 def _serve(http_host: str, parent: int) -> None:  # pragma: no cover - runs in the child
     _die_with_parent(parent)
     signal.signal(signal.SIGTERM, lambda *_: os._exit(0))
-    from meshcat.servers.zmqserver import ZMQWebSocketBridge
+    from meshcat.servers.zmqserver import ZMQWebSocketBridge  # meshcat: heavy, the child only
 
     class Bridge(ZMQWebSocketBridge):
         """The ZeroMQ socket on 127.0.0.1 (self.host); the web server on ``http_host``."""

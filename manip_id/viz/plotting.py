@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.text import Text
 
 from .._checks import as_float_array, check_finite
 from .._io import atomic_write
@@ -89,8 +90,6 @@ def no_mathtext(fig: Figure) -> None:
     file names, titles) never go through mathtext, so ``$`` is just a character, and bytes
     of a file name that are not UTF-8 show as ``\udcff``. Tick labels (matplotlib's own,
     e.g. ``10^{-2}`` on log axes) keep their formatting."""
-    from matplotlib.text import Text
-
     texts: list[Text] = list(fig.texts)  # suptitle, supxlabel, supylabel and fig.text's
     for ax in fig.axes:
         # the axes' Text children: its three titles (center, left, right) and ax.texts
