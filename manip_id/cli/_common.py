@@ -362,9 +362,18 @@ def report_options(args: argparse.Namespace, source: str | None = None):
     )
 
 
+def print_warnings(document: dict) -> None:
+    """Every warning of the document (its JSON ``warnings``), once each, on stderr as
+    ``manip-id: warning: ...``: what is saved is what is printed."""
+    for text in document.get("warnings") or []:
+        warn(str(text))
+
+
 def write_outputs(args: argparse.Namespace, outputs, robot, result, report: dict, samples) -> int:
-    """Stage ``--json``, ``--report`` (``samples``: what it draws) and ``--export-urdf``,
-    then publish them all together (:func:`finish`); the exit status (0)."""
+    """Print the warnings of ``report``, stage ``--json``, ``--report`` (``samples``: what it
+    draws) and ``--export-urdf``, then publish them all together (:func:`finish`); the exit
+    status (0)."""
+    print_warnings(report)
     if args.json:
         outputs.write_json(args.json, report)
     path = None

@@ -26,6 +26,7 @@ from ._common import (
     file_specs,
     finish,
     preprocess_options,
+    print_warnings,
     profile_from_args,
     report_options,
     robot_from_args,
@@ -120,6 +121,7 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     print(summary_text(report))
     if args.per_file:
         print(_per_file_table(result))
+    print_warnings(report)
     if args.json:
         outputs.write_json(args.json, report)
     path = None

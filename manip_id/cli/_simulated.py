@@ -27,6 +27,7 @@ from ._common import (
     consistent_kwargs,
     finish,
     prepare,
+    print_warnings,
     progress,
     robot_from_args,
     stage_export,
@@ -131,6 +132,7 @@ def _run_stream(robot, args, outputs, timings: dict, t_start: float) -> int:
     report = result_document(robot, result, ctx)
     print(result.table())
     print(summary_text(report))
+    print_warnings(report)
     if args.json:
         outputs.write_json(args.json, report)
     if args.export_urdf:

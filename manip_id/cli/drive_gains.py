@@ -17,7 +17,7 @@ import math
 import time
 
 from ..errors import InputError
-from ._common import add_robot_arguments, parse_floats, robot_from_args
+from ._common import add_robot_arguments, parse_floats, print_warnings, robot_from_args
 from .payload import (
     add_run_arguments,
     check_run_args,
@@ -104,5 +104,6 @@ def run(args: argparse.Namespace) -> int:
     doc["preprocess"] = preprocess_settings(unloaded + loaded)
     doc["timings"]["command_total"] = round(time.perf_counter() - t_start, 6)
     print(result.table())
+    print_warnings(doc)
     publish_json(args, doc)
     return 0

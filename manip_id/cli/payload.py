@@ -31,6 +31,7 @@ from ._common import (
     check_scheduler,
     column_map,
     parse_floats,
+    print_warnings,
     robot_from_args,
     write_json,
 )
@@ -399,5 +400,6 @@ def run(args: argparse.Namespace) -> int:
     doc["preprocess"] = settings if distributed else preprocess_settings(unloaded + loaded)
     doc["timings"]["command_total"] = round(time.perf_counter() - t_start, 6)
     print(result.table())
+    print_warnings(doc)
     publish_json(args, doc)
     return 0
