@@ -8,6 +8,7 @@ cause.
 
 from __future__ import annotations
 
+import difflib
 import math
 from collections.abc import Sequence
 
@@ -236,3 +237,12 @@ def format_direction(
         sign = "-" if c[i] < 0 else "+"
         out += f"{coef}{names[i]}" if n == 0 else f" {sign} {coef}{names[i]}"
     return out
+
+
+def did_you_mean(word: str, choices, n: int = 1) -> str:
+    """``" (did you mean 'panda'?)"`` for the ``n`` choices closest to ``word`` (difflib),
+    or ``""`` when none is close: what follows a wrong name in an error message."""
+    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=n, cutoff=0.6)
+    if not close:
+        return ""
+    return " (did you mean " + " or ".join(repr(c) for c in close) + "?)"

@@ -190,5 +190,7 @@ def test_progress_bar_on_a_terminal_and_quiet(tmp_path, capsys, monkeypatch):
     term.truncate()
     out = tmp_path / "r.json"
     assert main(["identify", "double_pendulum", *SIM, "--quiet", "--json", str(out)]) == 0
-    assert capsys.readouterr().out == "" and term.getvalue() == ""
-    assert json.loads(out.read_text())["robot"] == "double_pendulum"
+    doc = json.loads(out.read_text())
+    assert capsys.readouterr().out == ""  # quiet: no bar, no table; the warnings remain
+    assert term.getvalue().splitlines() == [f"manip-id: warning: {w}" for w in doc["warnings"]]
+    assert doc["robot"] == "double_pendulum"

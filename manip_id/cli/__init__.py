@@ -30,6 +30,7 @@ import argparse
 import importlib
 import os
 import pkgutil
+import re
 import signal
 import sys
 import traceback
@@ -38,7 +39,7 @@ import warnings
 import psutil
 
 from .._io import OutputSet, remove_temporaries
-from ..errors import ManipIdError
+from ..errors import ManipIdError, did_you_mean
 from ._common import warn  # noqa: F401 (the commands' warnings, as earlier releases had it)
 
 PROG = "manip-id"
@@ -53,9 +54,33 @@ class Terminated(BaseException):
 
 
 class OneLineParser(argparse.ArgumentParser):
-    """An ``ArgumentParser`` whose errors are one line (``manip-id CMD: error: ...``), exit 2."""
+    """An ``ArgumentParser`` whose errors are one line (``manip-id CMD: error: ...``), exit 2,
+    with "did you mean" for a misspelt option, command or choice."""
+
+    def parse_args(self, args=None, namespace=None):
+        namespace, extras = self.parse_known_args(args, namespace)
+        if extras:
+            options = self._options_of(namespace)
+            hints = "".join(
+                did_you_mean(x.split("=", 1)[0], options) for x in extras if x[:1] == "-"
+            )
+            self.error(f"unrecognized arguments: {' '.join(extras)}{hints}")
+        return namespace
+
+    def _options_of(self, namespace) -> list[str]:
+        """The option strings of this parser and of the command ``namespace`` chose."""
+        options = [o for a in self._actions for o in a.option_strings]
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                command = action.choices.get(getattr(namespace, action.dest, None) or "")
+                if command is not None:
+                    options += [o for a in command._actions for o in a.option_strings]
+        return [o for o in options if o.startswith("--")]
 
     def error(self, message: str):
+        bad = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+        if bad:
+            message += did_you_mean(bad.group(1), re.findall(r"'([^']*)'", bad.group(2)))
         self.exit(2, f"{self.prog}: error: {_one_line(message)} (see {self.prog} --help)\n")
 
 

@@ -22,7 +22,7 @@ from .._io import OutputSet, write_json  # noqa: F401 (the commands import write
 from .._native import native_stderr_captured
 from ..datasets import parse_file_spec
 from ..datasets.stream import torque_scale_vector
-from ..errors import InputError
+from ..errors import InputError, did_you_mean
 from ..profiles import find_profile, load_profile
 from ..signals import DEFAULT_CUTOFF, preprocess
 
@@ -40,19 +40,26 @@ def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--friction",
         default=None,
-        help="comma-separated friction terms per joint: viscous,coulomb,offset",
+        help="comma-separated friction terms per joint, some of viscous,coulomb,offset "
+        "[default: the robot profile's (robots/ROBOT.toml), else none]",
     )
     parser.add_argument(
         "--armature",
         action="store_true",
         default=None,
-        help="model a rotor inertia (armature) per joint",
+        help="model a rotor inertia (armature) per joint [default: the robot profile's, else off]",
     )
     parser.add_argument(
-        "--spring", action="store_true", default=None, help="model a linear spring per joint"
+        "--spring",
+        action="store_true",
+        default=None,
+        help="model a linear spring per joint [default: the robot profile's, else off]",
     )
     parser.add_argument(
-        "--joints", default=None, help="comma-separated active joints (the others are locked)"
+        "--joints",
+        default=None,
+        help="comma-separated active joints, the others locked [default: the robot profile's, "
+        "else every joint]",
     )
     parser.add_argument(
         "--profile",
@@ -163,6 +170,21 @@ def check_seed_and_workers(args: argparse.Namespace) -> None:
         if workers > cores:
             warn(f"--workers {workers} capped at the {cores} cores of this machine")
             args.workers = cores
+
+
+def check_frame(robot, frame: str) -> None:
+    """A misspelt ``--frame``: an error naming the closest frame (and the frames on moving
+    joints); other frames are left to the library's own checks."""
+    model = robot.model
+    if model.existFrame(frame):
+        return
+    hint = did_you_mean(frame, [f.name for f in model.frames])
+    if hint:
+        moving = [f.name for f in model.frames if int(f.parentJoint) > 0]
+        raise InputError(
+            f"robot {robot.name!r} has no frame {frame!r}{hint}; frames on moving joints: "
+            + ", ".join(moving)
+        )
 
 
 def warn(message: str) -> None:

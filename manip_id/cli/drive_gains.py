@@ -17,7 +17,13 @@ import math
 import time
 
 from ..errors import InputError
-from ._common import add_robot_arguments, parse_floats, print_warnings, robot_from_args
+from ._common import (
+    add_robot_arguments,
+    check_frame,
+    parse_floats,
+    print_warnings,
+    robot_from_args,
+)
 from .payload import (
     add_run_arguments,
     check_run_args,
@@ -85,6 +91,7 @@ def run(args: argparse.Namespace) -> int:
     from ..payload import identify_drive_gains  # pinocchio: heavy, not for --help
 
     robot = robot_from_args(args)
+    check_frame(robot, args.frame)
     unloaded, loaded, source = read_runs(args, robot)
     result = identify_drive_gains(
         robot,

@@ -195,7 +195,9 @@ def register(sub) -> None:
         metavar="C",
         help="warn when the condition number exceeds C [default 100]",
     )
-    p.add_argument("--chunk", type=int, default=1024, help="samples per regressor chunk")
+    p.add_argument(
+        "--chunk", type=int, default=1024, help="samples per regressor chunk [default 1024]"
+    )
     p.add_argument(
         "--workers",
         type=int,

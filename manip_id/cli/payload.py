@@ -28,6 +28,7 @@ from ..errors import DataError, InputError
 from ._common import (
     add_robot_arguments,
     add_scheduler_argument,
+    check_frame,
     check_scheduler,
     column_map,
     parse_floats,
@@ -100,7 +101,9 @@ def add_run_arguments(p: argparse.ArgumentParser, *, unloaded_required: bool) ->
         help="seconds dropped at each end of each file [default: the filter's edge transient]",
     )
     sig.add_argument("--decimate", type=int, default=1, help="keep every D-th sample [default 1]")
-    p.add_argument("--chunk", type=int, default=1024, help="samples per regressor chunk")
+    p.add_argument(
+        "--chunk", type=int, default=1024, help="samples per regressor chunk [default 1024]"
+    )
     p.add_argument("--json", metavar="OUT", help="write the result as JSON to OUT")
 
 
@@ -364,6 +367,7 @@ def run(args: argparse.Namespace) -> int:
 
     known = load_known_base(args.known_base) if args.known_base is not None else None
     robot = robot_from_args(args)
+    check_frame(robot, args.frame)
     scale = None
     if args.torque_scale is not None:
         scale = parse_floats(args.torque_scale, "--torque-scale")

@@ -42,7 +42,9 @@ def register(sub) -> None:
         "--duration", type=float, default=10.0, help="seconds of --simulate motion [default 10]"
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the --simulate excitation")
-    p.add_argument("--fps", type=float, default=30.0, help="animation frames per second")
+    p.add_argument(
+        "--fps", type=float, default=30.0, help="animation frames per second [default 30]"
+    )
     p.add_argument(
         "--no-inertia", action="store_true", help="do not draw the nominal inertia ellipsoids"
     )
