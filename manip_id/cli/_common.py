@@ -391,11 +391,23 @@ def print_warnings(document: dict) -> None:
         warn(str(text))
 
 
+def note_exports(args: argparse.Namespace, report: dict) -> None:
+    """Record in the document the files ``--export-urdf`` writes (the report links them)."""
+    if getattr(args, "export_urdf", None):
+        from ..export import sidecar_path  # pinocchio: heavy, not for --help
+
+        report["exported"] = {
+            "URDF": str(args.export_urdf),
+            "sidecar (armature, offsets)": str(sidecar_path(args.export_urdf)),
+        }
+
+
 def write_outputs(args: argparse.Namespace, outputs, robot, result, report: dict, samples) -> int:
     """Print the warnings of ``report``, stage ``--json``, ``--report`` (``samples``: what it
     draws) and ``--export-urdf``, then publish them all together (:func:`finish`); the exit
     status (0)."""
     print_warnings(report)
+    note_exports(args, report)
     if args.json:
         outputs.write_json(args.json, report)
     path = None

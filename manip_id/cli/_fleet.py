@@ -25,6 +25,7 @@ from ._common import (
     data_column_map,
     file_specs,
     finish,
+    note_exports,
     preprocess_options,
     print_warnings,
     profile_from_args,
@@ -122,6 +123,7 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     if args.per_file:
         print(_per_file_table(result))
     print_warnings(report)
+    note_exports(args, report)
     if args.json:
         outputs.write_json(args.json, report)
     path = None

@@ -26,6 +26,7 @@ from ._common import (
     column_map,
     consistent_kwargs,
     finish,
+    note_exports,
     prepare,
     print_warnings,
     progress,
@@ -133,6 +134,7 @@ def _run_stream(robot, args, outputs, timings: dict, t_start: float) -> int:
     print(result.table())
     print(summary_text(report))
     print_warnings(report)
+    note_exports(args, report)
     if args.json:
         outputs.write_json(args.json, report)
     if args.export_urdf:

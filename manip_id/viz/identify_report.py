@@ -18,6 +18,7 @@ import numpy as np
 from ..errors import InfeasibleTrajectoryError
 from . import figures
 from .report import write_report
+from .report_answers import identify_answers
 from .report_document import ReportOptions, ReportSamples
 from .report_tables import report_parameter_rows, report_quality_rows, report_summary
 
@@ -185,7 +186,7 @@ def write_identify_report(
             joint_names=list(robot.dof_names),
             title=f"simulated excitation of {robot.name} against its position limits",
         )
-    notes = list(report["warnings"])
+    notes: list[str] = []  # the warnings are answered under "What to do next?"
     title = f"manip-id identify: {run_name}"
     scene = build_scene(robot, result, full, title, notes, options.scene_assets)
     quality = report_quality_rows(report)
@@ -200,6 +201,7 @@ def write_identify_report(
         notes=notes,
         force=options.force,
         tables={"Data quality": quality} if quality else None,
+        questions=identify_answers(report, getattr(folder, "path", folder)),
     )
 
 
@@ -237,7 +239,7 @@ def write_fleet_report(
         **report_summary(report, f"{len(files)} files"),
         "scheduler": report["source"]["scheduler"],
     }
-    notes = list(report["warnings"]) + [
+    notes = [  # the warnings are answered under "What to do next?"
         f"{f.path}: not solvable alone ({f.error})"
         for f in (result.per_file or [])
         if f.result is None
@@ -253,4 +255,5 @@ def write_fleet_report(
         notes=notes,
         force=options.force,
         tables={"Data quality": quality} if quality else None,
+        questions=identify_answers(report, getattr(folder, "path", folder)),
     )

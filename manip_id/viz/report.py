@@ -12,6 +12,7 @@ import html as html_lib
 import os
 import shutil
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +30,22 @@ from ..errors import InputError, ReportExistsError
 
 INDEX, RESULT, SCENE = "index.html", "result.json", "scene.html"
 
+
+@dataclass(frozen=True)
+class ReportContent:
+    """What a report page shows (the arguments of :func:`write_report`)."""
+
+    title: str
+    summary: Mapping
+    parameter_table: Sequence[Mapping]
+    figures: Mapping[str, Callable[[Path], object] | str | os.PathLike]
+    scene: object = None
+    json_result: object = None
+    notes: Sequence[str] = ()
+    tables: Mapping[str, Sequence[Mapping]] | None = None
+    questions: Sequence[tuple[str, str]] = ()
+
+
 #: Re-exported for the imports of earlier releases (they live in manip_id._io / errors).
 __all__ = [
     "CLAIM",
@@ -44,7 +61,8 @@ __all__ = [
 ]
 
 
-def _cell(value) -> str:
+def html_cell(value) -> str:
+    """A table cell's text, escaped; floats with 6 significant digits, None as n/a."""
     if isinstance(value, float | np.floating):
         return "n/a" if not np.isfinite(value) else f"{float(value):.6g}"
     if value is None:
@@ -52,7 +70,7 @@ def _cell(value) -> str:
     return html_lib.escape(str(value))
 
 
-def _table(rows: Sequence[Mapping], empty: str = "(no parameters)") -> str:
+def html_table(rows: Sequence[Mapping], empty: str = "(no parameters)") -> str:
     """An HTML table; keys starting with ``_`` are not columns: ``_class`` is the row's
     CSS class (``"bad"`` rows are highlighted)."""
     if not rows:
@@ -63,7 +81,7 @@ def _table(rows: Sequence[Mapping], empty: str = "(no parameters)") -> str:
     head = "".join(f"<th>{html_lib.escape(str(c))}</th>" for c in cols)
     body = "\n".join(
         (f'<tr class="{html_lib.escape(str(row["_class"]))}">' if row.get("_class") else "<tr>")
-        + "".join(f"<td>{_cell(row.get(c))}</td>" for c in cols)
+        + "".join(f"<td>{html_cell(row.get(c))}</td>" for c in cols)
         + "</tr>"
         for row in rows
     )
@@ -72,15 +90,16 @@ def _table(rows: Sequence[Mapping], empty: str = "(no parameters)") -> str:
 
 def _summary(summary: Mapping) -> str:
     items = "\n".join(
-        f"<tr><th>{html_lib.escape(str(k))}</th><td>{_cell(v)}</td></tr>"
+        f"<tr><th>{html_lib.escape(str(k))}</th><td>{html_cell(v)}</td></tr>"
         for k, v in summary.items()
     )
     return f'<table class="summary">\n{items}\n</table>'
 
 
-def _index(
-    title: str, summary: Mapping, rows, figures: list[str], scene: bool, notes, tables=None
-) -> str:
+def _index(c: ReportContent, figures: list[str]) -> str:
+    """The page: title, the answers, summary, notes, scene, figures, parameters, tables."""
+    title, summary, rows, notes, tables = c.title, c.summary, c.parameter_table, c.notes, c.tables
+    scene = c.scene is not None
     figs = "\n".join(
         f'<figure><img src="{html_lib.escape(f)}" alt="{html_lib.escape(Path(f).stem)}">'
         f"<figcaption>{html_lib.escape(Path(f).stem.replace('_', ' '))}</figcaption></figure>"
@@ -93,9 +112,13 @@ def _index(
         if scene
         else ""
     )
+    answers = "\n".join(
+        f'<section class="answer"><h2>{html_lib.escape(str(q))}</h2>\n{a}</section>'
+        for q, a in c.questions
+    )
     note_html = "".join(f"<li>{html_lib.escape(str(n))}</li>" for n in notes)
     extra = "\n".join(
-        f"<h2>{html_lib.escape(str(name))}</h2>\n{_table(t, '(none)')}"
+        f"<h2>{html_lib.escape(str(name))}</h2>\n{html_table(t, '(none)')}"
         for name, t in (tables or {}).items()
     )
     return f"""<!DOCTYPE html>
@@ -110,9 +133,14 @@ figure {{ margin: 0 0 1.5em 0; }} img {{ max-width: 100%; border: 1px solid #ddd
 iframe {{ width: 100%; height: 600px; border: 1px solid #ddd; }}
 tr.bad td {{ background: #fde2dd; }} tr.warn td {{ background: #fff4cc; }}
 td {{ white-space: nowrap; }} td:last-child {{ white-space: normal; }}
+section.answer {{ border-left: 4px solid #1f77b4; padding: 0 0 0 0.8em; margin: 0 0 1em 0; }}
+section.answer h2 {{ margin: 0.3em 0; font-size: 1.15em; }}
+p.verdict {{ font-size: 1.1em; margin: 0.3em 0 1em 0; }}
+.yes {{ color: #1a7f37; font-weight: bold; }} .no {{ color: #b42318; font-weight: bold; }}
 </style></head>
 <body>
 <h1>{html_lib.escape(title)}</h1>
+{answers}
 <h2>Summary</h2>
 {_summary(summary)}
 {f"<ul>{note_html}</ul>" if note_html else ""}
@@ -120,7 +148,7 @@ td {{ white-space: nowrap; }} td:last-child {{ white-space: normal; }}
 <h2>Figures</h2>
 {figs or "<p>(no figures)</p>"}
 <h2>Parameters</h2>
-{_table(rows)}
+{html_table(rows)}
 {extra}
 <p><a href="{RESULT}">{RESULT}</a>: the full result.</p>
 </body></html>
@@ -140,6 +168,7 @@ def write_report(
     force: bool = False,
     inputs: Sequence = (),
     tables: Mapping[str, Sequence[Mapping]] | None = None,
+    questions: Sequence[tuple[str, str]] = (),
 ) -> Path:
     """Write a report folder and return its path.
 
@@ -153,6 +182,8 @@ def write_report(
     notes: lines shown under the summary;
     tables: more sections after the parameters, title -> rows (as ``parameter_table``;
         a row's ``_class`` key, e.g. ``"bad"``, highlights it);
+    questions: sections shown first, ``(question, answer HTML)`` pairs (the answer is
+        markup built by the caller, escaped there), e.g. "How good is the model?";
     inputs: paths the report must not replace or contain (see :func:`check_report_target`).
 
     ``directory`` may also be a :class:`ReportFolder` from :func:`claim_report`: the
@@ -160,7 +191,7 @@ def write_report(
     outputs of a command).
     """
     _check_content(title, summary, parameter_table, figures, notes)
-    content = dict(
+    content = ReportContent(
         title=title,
         summary=summary,
         parameter_table=parameter_table,
@@ -169,11 +200,12 @@ def write_report(
         json_result=json_result,
         notes=notes,
         tables=tables,
+        questions=tuple(questions),
     )
     _check_names(figures, scene)
 
     def fill(tmp: Path) -> None:
-        _fill(tmp, **content)
+        _fill(tmp, content)
 
     if isinstance(directory, ReportFolder):
         return directory.build(fill)
@@ -208,19 +240,10 @@ def _check_content(title, summary, parameter_table, figures, notes) -> None:
         raise InputError(f"notes must be a sequence of lines, got {type(notes).__name__}")
 
 
-def _fill(
-    tmp: Path,
-    *,
-    title: str,
-    summary: Mapping,
-    parameter_table: Sequence[Mapping],
-    figures: Mapping[str, Callable[[Path], object] | str | os.PathLike],
-    scene=None,
-    json_result=None,
-    notes: Sequence[str] = (),
-    tables=None,
-) -> None:
+def _fill(tmp: Path, c: ReportContent) -> None:
     """Write the report's files into the (temporary) folder ``tmp``."""
+    title, summary, parameter_table, scene = c.title, c.summary, c.parameter_table, c.scene
+    json_result = c.json_result
     payload = (
         json_result
         if json_result is not None
@@ -228,7 +251,7 @@ def _fill(
     )
     atomic_write_text(tmp / RESULT, json_text(payload))
     written = []
-    for name, fig in figures.items():
+    for name, fig in c.figures.items():
         out = tmp / f"{name}.png"
         if callable(fig):
             fig(out)
@@ -248,7 +271,7 @@ def _fill(
             atomic_write_text(tmp / name, asset)
     atomic_write_text(
         tmp / INDEX,
-        _index(title, summary, parameter_table, written, scene is not None, notes, tables),
+        _index(c, written),
     )
 
 
