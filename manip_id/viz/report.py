@@ -14,6 +14,7 @@ import shutil
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -39,8 +40,8 @@ class ReportContent:
     summary: Mapping
     parameter_table: Sequence[Mapping]
     figures: Mapping[str, Callable[[Path], object] | str | os.PathLike]
-    scene: object = None
-    json_result: object = None
+    scene: Any = None  # a RobotScene (html(), asset_files()) or its HTML
+    json_result: Any = None
     notes: Sequence[str] = ()
     tables: Mapping[str, Sequence[Mapping]] | None = None
     questions: Sequence[tuple[str, str]] = ()
