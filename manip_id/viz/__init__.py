@@ -48,7 +48,7 @@ _WHERE: dict[str, tuple[str, str | None]] = {
     "EquivalentEllipsoid": (".inertia_ellipsoid", "EquivalentEllipsoid"),
     "LinkIdentifiability": (".link_colors", "LinkIdentifiability"),
     "RobotScene": (".meshcat_scene", "RobotScene"),
-    "check_trajectory": (".meshcat_scene", "check_trajectory"),
+    "check_trajectory": (".trajectory_check", "check_trajectory"),
     "equivalent_ellipsoid": (".inertia_ellipsoid", "equivalent_ellipsoid"),
     "inertia_ellipsoids": (".inertia_ellipsoid", "inertia_ellipsoids"),
     "link_identifiability": (".link_colors", "link_identifiability"),

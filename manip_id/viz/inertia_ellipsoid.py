@@ -111,3 +111,15 @@ def inertia_ellipsoids(robot: Robot, theta) -> list[EquivalentEllipsoid]:
 
 
 # ------------------------------------------------------------- identifiability
+
+
+def degenerate_shape(semi_axes, ratio: float = 10.0) -> str:
+    """``"a rod (mass concentrated on a line)"``, ``"a disc (mass concentrated on a
+    plane)"`` or ``""``: an ellipsoid whose sorted semi-axes [m] differ by more than
+    ``ratio``."""
+    a0, a1, a2 = np.sort(np.asarray(semi_axes, dtype=float))
+    if a2 > ratio * a1:
+        return "a rod (mass concentrated on a line)"
+    if a1 > ratio * a0:
+        return "a disc (mass concentrated on a plane)"
+    return ""

@@ -32,12 +32,16 @@ from meshcat.animation import Animation
 from pinocchio.visualize import MeshcatVisualizer
 from pinocchio.visualize.meshcat_visualizer import applyScalingOnHomegeneousTransform
 
-from .._checks import as_float_array, check_finite
 from .._io import atomic_write_text
-from ..errors import InfeasibleTrajectoryError, InputError, ManipIdError
-from ..parameters import bounded_range
+from ..errors import InputError, ManipIdError
 from ..robot import Robot
-from .inertia_ellipsoid import EquivalentEllipsoid, equivalent_ellipsoid, inertia_ellipsoids
+from .camera import place_camera
+from .inertia_ellipsoid import (
+    EquivalentEllipsoid,
+    degenerate_shape,
+    equivalent_ellipsoid,
+    inertia_ellipsoids,
+)
 from .link_colors import (
     LinkIdentifiability,
     css_color,
@@ -48,6 +52,7 @@ from .link_colors import (
 from .meshcat_server import LiveView, replay
 from .meshes import MAX_TRIANGLES, decimate_mesh, mesh_arrays
 from .scene_page import OfflineVisualizer, RecordingWindow, page_html, viewer_js
+from .trajectory_check import check_trajectory
 
 #: Re-exported: the scene's parts of earlier releases live in their own modules now.
 __all__ = [
@@ -63,13 +68,17 @@ __all__ = [
     "share_color",
 ]
 
-#: Colors of successive parameter sets (RGBA): nominal, then compared ones.
-SET_COLORS: tuple[tuple[float, float, float, float], ...] = (
-    (0.15, 0.45, 0.95, 0.45),
-    (0.95, 0.45, 0.10, 0.45),
-    (0.55, 0.20, 0.80, 0.45),
-    (0.10, 0.70, 0.55, 0.45),
+#: Styles of successive parameter sets, (RGBA, wire frame): the first (the reference, e.g.
+#: the nominal model) a dark wire frame, the next ones solid and translucent in blue,
+#: purple and teal; none of them on the links' red-yellow-green identifiability scale.
+SET_STYLES: tuple[tuple[tuple[float, float, float, float], bool], ...] = (
+    ((0.12, 0.12, 0.12, 0.85), True),
+    ((0.10, 0.35, 0.90, 0.50), False),
+    ((0.55, 0.15, 0.75, 0.50), False),
+    ((0.00, 0.55, 0.65, 0.50), False),
 )
+#: The colours of :data:`SET_STYLES` (earlier releases' name).
+SET_COLORS = tuple(c for c, _ in SET_STYLES)
 GREY = (0.6, 0.6, 0.6, 1.0)
 _ROBOT_ROOT = "robot"
 #: A parameter set is hidden at first when one of its ellipsoids is wider than this
@@ -89,56 +98,6 @@ def _rotation_y_to(axis: np.ndarray) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ trajectory
-def check_trajectory(robot: Robot, t, q, *, tolerance: float = 1e-6):
-    """Validated ``(t, q)``: t [s] shape (N,) strictly increasing, q shape (N, nq) within limits.
-
-    Raises :class:`InputError` for wrong shapes or non-finite values and
-    :class:`InfeasibleTrajectoryError` (carrying joint, limit, excess) for a
-    position outside the robot's finite limits by more than ``tolerance``.
-    """
-    q = as_float_array(q, "q", ndim=(1, 2))
-    if q.ndim == 1:
-        q = q[None, :]
-    if q.shape[1] != robot.nq:
-        raise InputError(f"q.shape={q.shape} but robot.nq={robot.nq} ({robot.name})")
-    t = as_float_array(t, "t", ndim=1)
-    if t.shape[0] != q.shape[0]:
-        raise InputError(f"t.shape={t.shape} but q.shape={q.shape}: one time per row of q")
-    check_finite(t, "t")
-    check_finite(q, "q")
-    if t.shape[0] > 1 and np.any(np.diff(t) <= 0):
-        k = int(np.argmax(np.diff(t) <= 0)) + 1
-        raise InputError(f"time must increase strictly: t[{k}]={t[k]} after t[{k - 1}]={t[k - 1]}")
-    lo, hi = robot.lower, robot.upper
-    names = _q_names(robot)
-    bounded = bounded_range(lo, hi)
-    for i in np.flatnonzero(bounded):
-        below, above = lo[i] - q[:, i].min(), q[:, i].max() - hi[i]
-        excess = max(below, above)
-        if excess > tolerance:
-            k = int(np.argmin(q[:, i]) if below >= above else np.argmax(q[:, i]))
-            raise InfeasibleTrajectoryError(
-                f"trajectory leaves the position limits of {names[i]}: q={q[k, i]:.4g} at "
-                f"sample {k} (t={t[k]:.4g} s), limits [{lo[i]:.4g}, {hi[i]:.4g}]",
-                joint=names[i],
-                limit="position",
-                excess=float(excess),
-            )
-    return t, q
-
-
-def _q_names(robot: Robot) -> list[str]:
-    names = []
-    for i in range(1, robot.model.njoints):
-        nq = robot.model.joints[i].nq
-        names += (
-            [robot.model.names[i]]
-            if nq == 1
-            else [f"{robot.model.names[i]}[{k}]" for k in range(nq)]
-        )
-    return names
-
-
 @dataclass
 class _Legend:
     title: str
@@ -222,6 +181,7 @@ class RobotScene:
         self._viz.viewerVisualGroupName = f"{_ROBOT_ROOT}/visuals"
         self._viz.viewerCollisionGroupName = f"{_ROBOT_ROOT}/collisions"
         self._boxes: dict[str, np.ndarray] = {}
+        self._vertices: dict[str, np.ndarray] = {}  # a sample of each mesh's, for framing
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             for obj in self._geom.geometryObjects:
@@ -247,6 +207,7 @@ class RobotScene:
                     mg.TriangularMeshGeometry(V.astype(np.float32), F.astype(np.uint32)), material
                 )
                 self._boxes[self._node(obj)] = np.array([V.min(axis=0), V.max(axis=0)])
+                self._vertices[self._node(obj)] = V[:: max(1, len(V) // 300)]
         for w in caught:
             self.notes.append(f"mesh: {w.message}")
         if self.geometry == "capsules":
@@ -315,35 +276,46 @@ class RobotScene:
         for path, T in self._transforms(q).items():
             vis[path].set_transform(T)
 
-    def _set_camera(self, qs) -> None:
-        """Aim the camera at the robot's bounding box over configurations ``qs``: every
-        joint origin and the placed box of every mesh (or capsule)."""
-        qs = np.atleast_2d(qs)
-        qs = qs[np.linspace(0, len(qs) - 1, min(len(qs), 60)).astype(int)]
-        found: list = []
+    def _points(self, q, vertices: bool = False) -> np.ndarray:
+        """Every joint origin and the corners of every placed mesh (or capsule) box at
+        configuration ``q`` (``vertices``: a sample of each mesh's vertices instead of its
+        box), world frame [m], shape (n, 3)."""
         corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
-        for q in qs:
-            pin.forwardKinematics(self._model, self._data, q)
-            found += [self._data.oMi[i].translation.copy() for i in range(self._model.njoints)]
-            for path, T in self._transforms(q).items():  # every mesh's box, placed
-                box = self._boxes.get(path)
-                if box is None:
-                    continue
+        pin.forwardKinematics(self._model, self._data, q)
+        found = [self._data.oMi[i].translation.copy() for i in range(self._model.njoints)]
+        for path, T in self._transforms(q).items():  # every mesh's box, placed
+            box = self._boxes.get(path)
+            if box is None:
+                continue
+            local = self._vertices.get(path) if vertices else None
+            if local is None:
                 local = np.where(corners == 0, box[0], box[1])  # (8, 3) [m]
-                found += list(local @ T[:3, :3].T + T[:3, 3])  # T carries the mesh scale
-        pts = np.array(found)
-        lo, hi = pts.min(axis=0), pts.max(axis=0)
-        center = 0.5 * (lo + hi)
-        size = max(float(np.linalg.norm(hi - lo)), 0.25)
+            found += list(local @ T[:3, :3].T + T[:3, 3])  # T carries the mesh scale
+        return np.array(found)
+
+    def _set_camera(self, q_start, qs=None) -> None:
+        """Frame the robot: its start pose ``q_start`` spans about 0.8 of the view height
+        (at least 0.68), the motion ``qs`` (shape (N, nq), or None) stays in view when it
+        can (:func:`~manip_id.viz.camera.place_camera`)."""
+        start = self._points(q_start, vertices=True)
+        center = 0.5 * (start.min(axis=0) + start.max(axis=0))
+        pad = center + 0.1 * np.vstack([np.eye(3), -np.eye(3)])  # a robot of a point: 20 cm
+        start = np.vstack([start, pad])
+        motion = None
+        if qs is not None:
+            qs = np.atleast_2d(qs)
+            qs = qs[np.linspace(0, len(qs) - 1, min(len(qs), 60)).astype(int)]
+            motion = np.vstack([self._points(q) for q in qs] + [pad])
+        self.camera = place_camera(start - center, None if motion is None else motion - center)
         # The viewer's orbit controls always aim at the world origin: shift the scene
-        # (robot and world axes) so that the centre of the motion sits there; the
+        # (robot and world axes) so that the centre of the start pose sits there; the
         # viewer's grid would no longer be the floor, so it is hidden.
         shift = pin.SE3(np.eye(3), -center).homogeneous
         for node in ("/meshcat", "/Axes"):
             self._vis[node].set_transform(shift)
         self._vis["/Grid"].set_property("visible", False)
         # camera offset in the viewer's y-up camera frame: world (dx, dy, dz) -> (dx, dz, -dy)
-        d = 0.6 * size * np.array([1.0, 0.7, 0.45])
+        d = self.camera.position
         self._vis["/Cameras/default/rotated/<object>"].set_property(
             "position", [float(d[0]), float(d[2]), float(-d[1])]
         )
@@ -389,12 +361,18 @@ class RobotScene:
                 for path, T in self._transforms(q[k]).items():
                     f[path].set_transform(T)
         self._place_all(q[idx[0]], self._vis)
-        self._set_camera(q[idx])
+        self._set_camera(q[idx[0]], q[idx])
         self._vis.set_animation(anim, play=play, repetitions=1)
         self.duration = (n_frames - 1) / fps
 
     def add_inertia(
-        self, theta, *, label: str = "nominal", color=None, visible: bool | None = None
+        self,
+        theta,
+        *,
+        label: str = "nominal",
+        color=None,
+        visible: bool | None = None,
+        wireframe: bool | None = None,
     ) -> list[str]:
         """Draw the equivalent inertia ellipsoid of each body of ``theta`` (shape (p,)).
 
@@ -403,24 +381,42 @@ class RobotScene:
         visible: shown at first; default: unless one of its ellipsoids is wider
         than :data:`HIDE_WIDER_THAN` times the robot's size (it would hide the arm).
         The page's legend has a check box per set that shows or hides it.
+        color, wireframe: the set's style; default: the next of :data:`SET_STYLES` (the
+        first set a dark wire frame, the others solid translucent blue, purple, teal).
         """
         if not isinstance(label, str) or not label or "/" in label:
             raise InputError(f"label must be a non-empty name without '/', got {label!r}")
         if any(lb == label for lb, _, _ in self._sets):
             raise InputError(f"a parameter set labelled {label!r} is already drawn")
         ellipsoids = inertia_ellipsoids(self.robot, theta)
-        color = tuple(color) if color is not None else SET_COLORS[len(self._sets) % len(SET_COLORS)]
+        default, wire = SET_STYLES[len(self._sets) % len(SET_STYLES)]
+        color = tuple(color) if color is not None else default
+        wire = wire if wireframe is None else bool(wireframe)
         if len(color) not in (3, 4):
             raise InputError(f"color must be RGB or RGBA floats, got {color!r}")
         color = (*color[:3], color[3] if len(color) == 4 else 0.45)
         material = mg.MeshLambertMaterial(
-            color=hex_color(color), opacity=float(color[3]), transparent=float(color[3]) < 1.0
+            color=hex_color(color),
+            opacity=float(color[3]),
+            transparent=float(color[3]) < 1.0,
+            wireframe=wire,
         )
         notes = []
         for ell in ellipsoids:
             if ell.physical:
                 radii = np.maximum(ell.semi_axes, 1e-4)
                 self._vis[f"inertia/{label}/{ell.joint}"].set_object(mg.Ellipsoid(radii), material)
+                shape = degenerate_shape(radii)
+                if shape:
+                    notes.append(
+                        f"{label}: {ell.joint}'s ellipsoid is {shape} "
+                        f"({2 * float(np.max(radii)):.2f} m across)"
+                        + (
+                            ""
+                            if label == "nominal"
+                            else ": the data fix only grouped terms of this body's inertia"
+                        )
+                    )
             else:
                 notes.append(f"{label}: {ell.note} (not drawn)")
         self._sets.append((label, ellipsoids, color))
@@ -449,8 +445,10 @@ class RobotScene:
                 f"inertia ellipsoids: {html_lib.escape(label)}",
                 [
                     f"<label>{box}"
-                    f'<span class="sw" style="background:{css_color(color)}"></span> '
-                    f"{html_lib.escape(label)}: {drawn} of {len(ellipsoids)} bodies{why}</label>"
+                    f'<span class="sw{" wire" if wire else ""}" style="background:'
+                    f'{css_color(color)}; border-color:{css_color(color)}"></span> '
+                    f"{html_lib.escape(label)} ({'wire frame' if wire else 'solid'}): "
+                    f"{drawn} of {len(ellipsoids)} bodies{why}</label>"
                 ],
                 notes,
             )

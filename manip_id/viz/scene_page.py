@@ -88,17 +88,25 @@ _PAGE = """<!DOCTYPE html>
 <head><meta charset="utf-8"><title>{title}</title>
 <style>
 body {{ margin: 0; }}
-#meshcat-pane {{ width: 100vw; height: 100vh; overflow: hidden; }}
-#legend {{ position: absolute; left: 8px; bottom: 8px; max-width: 46vw; max-height: 45vh;
-  overflow: auto; background: rgba(255,255,255,0.85); font: 12px sans-serif; padding: 6px 8px;
-  border-radius: 4px; line-height: 1.5; }}
+#wrap {{ display: flex; width: 100vw; height: 100vh; }}
+#meshcat-pane {{ flex: 1 1 auto; min-width: 0; height: 100vh; overflow: hidden;
+  position: relative; }}
+#legend {{ flex: 0 0 min(270px, 32vw); box-sizing: border-box; height: 100vh; overflow: auto;
+  background: #f6f6f4; border-right: 1px solid #bbb; font: 12px sans-serif; padding: 6px 8px;
+  line-height: 1.5; }}
+#legend summary {{ cursor: pointer; font-weight: bold; }}
 #legend .sw {{ display: inline-block; width: 11px; height: 11px; border: 1px solid #444;
-  vertical-align: middle; margin: 0 3px; }}
+  vertical-align: middle; margin: 0 3px; box-sizing: border-box; }}
+#legend .sw.wire {{ background: transparent !important; border: 2px dashed; }}
 #legend .note {{ color: #a33; }}
 </style></head>
 <body>
+<div id="wrap">
+<aside id="legend"><details open><summary>Legend</summary>
+{legend}
+</details></aside>
 <div id="meshcat-pane"></div>
-<div id="legend">{legend}</div>
+</div>
 {viewer}
 {data}
 <script>
