@@ -34,13 +34,16 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
 
 from ._checks import as_float_array, check_finite
 from .errors import InputError
-from .robot import Robot
+
+if TYPE_CHECKING:
+    from .robot import Robot
 
 DEFAULT_CHUNK = 1024
 _STACK = 32
@@ -270,9 +273,12 @@ def regressor(robot: Robot, q, dq, ddq) -> np.ndarray:
 
     Parameters
     ----------
-    q: joint positions [rad or m], shape (nq,) or (N, nq)
-    dq: joint velocities [rad/s or m/s], shape (nv,) or (N, nv)
-    ddq: joint accelerations [rad/s^2 or m/s^2], shape (nv,) or (N, nv)
+    q
+        joint positions [rad or m], shape (nq,) or (N, nq)
+    dq
+        joint velocities [rad/s or m/s], shape (nv,) or (N, nv)
+    ddq
+        joint accelerations [rad/s^2 or m/s^2], shape (nv,) or (N, nv)
 
     Returns
     -------
@@ -300,10 +306,14 @@ def slotine_li_regressor(robot: Robot, q, dq, v, w) -> np.ndarray:
 
     Parameters
     ----------
-    q: joint positions [rad or m], shape (nq,) or (N, nq)
-    dq: joint velocities [rad/s or m/s], shape (nv,) or (N, nv)
-    v: the vector multiplying M(q) (reference acceleration), shape like dq
-    w: the vector multiplying C(q, dq) (reference velocity), shape like dq
+    q
+        joint positions [rad or m], shape (nq,) or (N, nq)
+    dq
+        joint velocities [rad/s or m/s], shape (nv,) or (N, nv)
+    v
+        the vector multiplying M(q) (reference acceleration), shape like dq
+    w
+        the vector multiplying C(q, dq) (reference velocity), shape like dq
 
     Returns
     -------

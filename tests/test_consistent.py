@@ -29,6 +29,7 @@ from manip_id.estimators.consistent import (
     solve_consistent,
 )
 from manip_id.identifiability import analyze
+from manip_id.identification import ConsistentOptions
 
 FRICTION = "viscous,coulomb"
 
@@ -113,7 +114,9 @@ def test_noise_free_data_recover_the_base_parameters_exactly(solver, friction, a
     robot = get_robot("panda", friction=friction, armature=armature)
     truth = _truth(robot)
     q, dq, ddq, tau = _data(robot, truth, 1500, 0.0, seed=1)
-    res = identify(robot, q, dq, ddq, tau, consistent=True, solver=solver)
+    res = identify(
+        robot, q, dq, ddq, tau, consistent=ConsistentOptions(enabled=True, solver=solver)
+    )
     beta_true = res.base.to_base(truth)
     err = np.linalg.norm(res.estimate - beta_true) / np.linalg.norm(beta_true)
     assert err < 1e-8
@@ -279,7 +282,7 @@ def test_real_panda_log_default_gives_plausible_link_masses(panda_split, solver)
     v = (valid.q, valid.dq, valid.ddq, valid.tau)
     args = (robot, train.q, train.dq, train.ddq, train.tau)
     ols = identify(*args, validation=v)
-    cons = identify(*args, validation=v, consistent=True, solver=solver)
+    cons = identify(*args, validation=v, consistent=ConsistentOptions(enabled=True, solver=solver))
     _assert_physical(robot, cons.standard.values)
     masses = cons.standard.values[: robot.n_rigid : 10]  # [kg]
     nominal = robot.nominal_parameters[: robot.n_rigid : 10]  # [kg]
@@ -305,11 +308,15 @@ def test_unknown_solver_or_prior_and_bad_weight():
     robot = get_robot("ur5", friction=FRICTION)
     q, dq, ddq, tau = _data(robot, _truth(robot), 200, 0.0, seed=0)
     with pytest.raises(InputError, match="solver must be one of"):
-        identify(robot, q, dq, ddq, tau, consistent=True, solver="mosek")
+        identify(robot, q, dq, ddq, tau, consistent=ConsistentOptions(enabled=True, solver="mosek"))
     with pytest.raises(InputError, match="prior must be one of"):
-        identify(robot, q, dq, ddq, tau, consistent=True, prior="uniform")
+        identify(
+            robot, q, dq, ddq, tau, consistent=ConsistentOptions(enabled=True, prior="uniform")
+        )
     with pytest.raises(InputError, match="prior_weight"):
-        identify(robot, q, dq, ddq, tau, consistent=True, prior_weight=-1.0)
+        identify(
+            robot, q, dq, ddq, tau, consistent=ConsistentOptions(enabled=True, prior_weight=-1.0)
+        )
     with pytest.raises(InputError, match="applies to ols and wls"):
         identify(robot, q, dq, ddq, tau, consistent=True, method="rls")
 

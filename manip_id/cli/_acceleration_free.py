@@ -15,7 +15,7 @@ import numpy as np
 
 from ..datasets import check_robot, load_dataset
 from ..errors import InputError
-from ..identification import identify
+from ..identification import ModelOptions, RunOptions, identify
 from ..signals import DEFAULT_CUTOFF, preprocess
 from ..viz.report_document import ReportSamples, RunContext, result_document
 from ..viz.report_tables import summary_text
@@ -116,10 +116,10 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
         train.tau,
         method=args.method,
         validation=None if valid is None else (valid.q, valid.dq, valid.ddq, valid.tau),
-        chunk=args.chunk,
-        model=args.model,
-        dt=_uniform_step(train.t, args.model),
-        window_length=args.window_length,
+        run=RunOptions(chunk=args.chunk),
+        model=ModelOptions(
+            args.model, window_length=args.window_length, dt=_uniform_step(train.t, args.model)
+        ),
         **consistent_kwargs(args),
     )
     timings.update({k: float(v) for k, v in dict(result.timings).items()})

@@ -279,7 +279,7 @@ def add_scheduler_argument(parser, what: str) -> None:
 def check_scheduler(args: argparse.Namespace) -> None:
     """Refuse a malformed ``--scheduler`` before any work (nothing of Dask imported)."""
     if getattr(args, "scheduler", None) is not None:
-        from ..fleet import parse_scheduler  # pinocchio: heavy, not for --help
+        from ..execution import parse_scheduler  # numpy, psutil: not for --help
 
         parse_scheduler(args.scheduler)
 
@@ -302,11 +302,11 @@ def data_column_map(args: argparse.Namespace, profile) -> dict | None:
 
 
 def preprocess_options(args: argparse.Namespace, nv: int, profile_scale=None):
-    """The :class:`~manip_id.pipeline.PreprocessOptions` of identify's data-file options.
+    """The :class:`~manip_id.identification.PreprocessOptions` of identify's data-file options.
 
     ``--torque-scale`` (one gain or one per joint), else the profile's [data] torque_scale.
     """
-    from ..pipeline import PreprocessOptions  # pinocchio: heavy, not for --help
+    from ..identification import PreprocessOptions  # pinocchio: heavy, not for --help
 
     scale = None
     if args.torque_scale is not None:
@@ -329,11 +329,15 @@ def preprocess_options(args: argparse.Namespace, nv: int, profile_scale=None):
 # ------------------------------------------------------- consistent, export
 def consistent_kwargs(args: argparse.Namespace) -> dict:
     """The physically consistent estimation options of identify, as keyword arguments."""
+    from ..identification import ConsistentOptions  # pinocchio: heavy, not for --help
+
     return dict(
-        consistent=args.consistent,
-        solver=args.solver,
-        prior=args.prior,
-        prior_weight=args.prior_weight,
+        consistent=ConsistentOptions(
+            enabled=args.consistent,
+            solver=args.solver,
+            prior=args.prior,
+            prior_weight=args.prior_weight,
+        )
     )
 
 

@@ -22,8 +22,14 @@ import numpy as np
 
 from ..datasets import load_dataset
 from ..errors import InputError
-from ..identification import identify, identify_datasets
-from ..pipeline import iter_processed, scan_file, split_file
+from ..identification import (
+    RunOptions,
+    identify,
+    identify_datasets,
+    iter_processed,
+    scan_file,
+    split_file,
+)
 from ..viz.report_document import (
     ReportSamples,
     RunContext,
@@ -110,8 +116,7 @@ def _identify_online(robot, args, options, files: SimpleNamespace, timings: dict
         train.tau,
         method=args.method,
         validation=None if valid is None else (valid.q, valid.dq, valid.ddq, valid.tau),
-        chunk=args.chunk,
-        progress=progress(args, train.n_samples),
+        run=RunOptions(chunk=args.chunk, progress=progress(args, train.n_samples)),
     )
     return result, train, valid
 
@@ -177,10 +182,12 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
             validation=f.vspecs,
             options=options,
             method=args.method,
-            chunk=args.chunk,
-            workers=args.workers,
+            run=RunOptions(
+                chunk=args.chunk,
+                workers=args.workers,
+                progress=progress(args, sum(f.scans[s].n for s in f.specs)),
+            ),
             scans=f.scans,
-            progress=progress(args, sum(f.scans[s].n for s in f.specs)),
             **consistent_kwargs(args),
         )
         files = result.files or {}

@@ -17,6 +17,7 @@ from pathlib import Path
 from types import SimpleNamespace
 
 from ..fleet import identify_files
+from ..identification import ModelOptions, PartitionOptions, RunOptions
 from ..signals import DEFAULT_CUTOFF
 from ..viz.report_document import RunContext, add_file_info, result_document
 from ..viz.report_tables import summary_text
@@ -65,15 +66,12 @@ def _identify(args: argparse.Namespace):
     result = identify_files(
         robot,
         specs,
-        scheduler=args.scheduler,
         method=args.method,
-        per_file=args.per_file,
-        block=args.block,
         options=options,
         validation=vspecs,
-        chunk=args.chunk,
-        model=model,
-        window_length=getattr(args, "window_length", None),
+        run=RunOptions(scheduler=args.scheduler, chunk=args.chunk),
+        partition=PartitionOptions(block=args.block, per_file=args.per_file),
+        model=ModelOptions(model, window_length=getattr(args, "window_length", None)),
         **consistent_kwargs(args),
     )
     return SimpleNamespace(robot=robot, specs=specs, vspecs=vspecs, options=options), result

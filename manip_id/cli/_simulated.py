@@ -16,7 +16,7 @@ import numpy as np
 
 from ..datasets import check_robot, load_dataset
 from ..errors import InputError
-from ..identification import identify, identify_chunks
+from ..identification import RunOptions, identify, identify_chunks
 from ..simulation import SimulationStream, check_simulation_memory
 from ..trajectories import optimize_excitation, random_trajectory
 from ..viz.report_document import ReportSamples, RunContext, add_raw_reference, result_document
@@ -121,9 +121,7 @@ def _run_stream(robot, args, outputs, timings: dict, t_start: float) -> int:
         train,
         method=args.method,
         validation=stream.blocks(k, n) if k < n else None,
-        chunk=args.chunk,
-        workers=args.workers,
-        progress=on_progress,
+        run=RunOptions(chunk=args.chunk, workers=args.workers, progress=on_progress),
         **consistent_kwargs(args),
     )
     timings.update({name: float(v) for name, v in dict(result.timings).items()})
@@ -179,9 +177,11 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
         train.tau,
         method=args.method,
         validation=None if valid is None else (valid.q, valid.dq, valid.ddq, valid.tau),
-        chunk=args.chunk,
-        workers=args.workers,
-        progress=progress(args, train.n_samples + (0 if valid is None else valid.n_samples)),
+        run=RunOptions(
+            chunk=args.chunk,
+            workers=args.workers,
+            progress=progress(args, train.n_samples + (0 if valid is None else valid.n_samples)),
+        ),
         **consistent_kwargs(args),
     )
     timings.update({k: float(v) for k, v in dict(result.timings).items()})

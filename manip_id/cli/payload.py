@@ -1,9 +1,9 @@
 """``manip-id payload``: the inertial parameters of a payload from unloaded and loaded runs.
 
 Pipeline: scan every ``--unloaded`` and ``--loaded`` file first with the real-log
-readers (:func:`manip_id.pipeline.scan_file`: its window, ``FILE@START:STOP`` or
+readers (:func:`manip_id.identification.scan_file`: its window, ``FILE@START:STOP`` or
 ``--window``, ``--torque-scale``, checks and the data-quality summary, printed), then
-stream each file's rows (:func:`manip_id.pipeline.iter_processed`: preprocessed on its
+stream each file's rows (:func:`manip_id.identification.iter_processed`: preprocessed on its
 own in overlapping blocks when it has no accelerations) into
 :func:`manip_id.payload.identify_payload`, memory bounded whatever the files' length:
 the robot's base
@@ -173,7 +173,7 @@ def _spec(text: str, args, colmap=None):
 
 
 def _options(args, scale=None):
-    from ..pipeline import PreprocessOptions  # pinocchio: heavy, not for --help
+    from ..identification import PreprocessOptions  # pinocchio: heavy, not for --help
 
     eps = args.velocity_deadband
     return PreprocessOptions(
@@ -198,7 +198,7 @@ class StreamedRun:
     """
 
     def __init__(self, robot, spec, options, scan: bool = True):
-        from ..pipeline import scan_file  # pinocchio: heavy, not for --help
+        from ..identification import scan_file  # pinocchio: heavy, not for --help
 
         self.robot, self.spec, self.options = robot, spec, options
         # bad files fail here, named
@@ -219,7 +219,7 @@ class StreamedRun:
         }
 
     def __call__(self):
-        from ..pipeline import iter_processed, scan_file  # pinocchio: heavy, not for --help
+        from ..identification import iter_processed, scan_file  # pinocchio: heavy, not for --help
 
         nq, nv = self.robot.nq, self.robot.nv
         if self.scan is None:
@@ -373,7 +373,7 @@ def run(args: argparse.Namespace) -> int:
         scale = parse_floats(args.torque_scale, "--torque-scale")
     distributed = args.scheduler is not None
     if distributed:  # the tasks read the files: send them a light robot
-        from ..fleet import portable_robot  # pinocchio: heavy, not for --help
+        from ..execution import portable_robot  # pinocchio: heavy, not for --help
 
         unloaded, loaded, source = read_runs(args, portable_robot(robot), scale, scan=False)
     else:

@@ -25,7 +25,7 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..results import load_result, result_text  # pinocchio: heavy, not for --help
+    from ..identification import load_result, result_text  # pinocchio: heavy, not for --help
 
     path = Path(args.result)
     if path.is_dir():

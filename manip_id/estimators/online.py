@@ -56,9 +56,12 @@ class OnlineHistory:
 
     Attributes
     ----------
-    t: time stamps [s], shape (K,) (the first is the initial estimate)
-    theta: estimates, shape (K, p)
-    error: norm of the prediction error before the update, shape (K,) (NaN at the start)
+    t
+        time stamps [s], shape (K,) (the first is the initial estimate)
+    theta
+        estimates, shape (K, p)
+    error
+        norm of the prediction error before the update, shape (K,) (NaN at the start)
     """
 
     t: np.ndarray
@@ -66,7 +69,7 @@ class OnlineHistory:
     error: np.ndarray
 
 
-class _OnlineEstimator:
+class OnlineEstimator:
     """Shared bookkeeping: estimate, bounds, time, history."""
 
     def __init__(self, theta0, *, bounds=None, record_every: int = 1, t0: float = 0.0):
@@ -159,16 +162,21 @@ class _OnlineEstimator:
             self._err.append(float(np.sqrt(np.dot(e, e))) if np.ndim(e) else abs(float(e)))
 
 
-class GradientEstimator(_OnlineEstimator):
+class GradientEstimator(OnlineEstimator):
     """Gradient (optionally normalized) adaptation law, integrated with explicit Euler.
 
     Parameters
     ----------
-    theta0: initial estimate, shape (p,)
-    gamma: adaptation gain Gamma, shape (p,) (diagonal, positive) or (p, p) (SPD)
-    normalized: divide by ``m^2 = 1 + trace(Y Gamma Y^T)`` (see module docstring)
-    bounds: optional ``(lower, upper)`` box for the projection, shapes (p,)
-    record_every: keep every k-th estimate in :attr:`history` (0: none)
+    theta0
+        initial estimate, shape (p,)
+    gamma
+        adaptation gain Gamma, shape (p,) (diagonal, positive) or (p, p) (SPD)
+    normalized
+        divide by ``m^2 = 1 + trace(Y Gamma Y^T)`` (see module docstring)
+    bounds
+        optional ``(lower, upper)`` box for the projection, shapes (p,)
+    record_every
+        keep every k-th estimate in :attr:`history` (0: none)
     """
 
     def __init__(
@@ -223,18 +231,24 @@ class GradientEstimator(_OnlineEstimator):
         return th
 
 
-class RLSEstimator(_OnlineEstimator):
+class RLSEstimator(OnlineEstimator):
     """Recursive least squares with exponential, bounded forgetting.
 
     Parameters
     ----------
-    theta0: initial estimate, shape (p,)
-    P0: initial covariance: scalar (times I), shape (p,) (diagonal) or (p, p) (SPD)
-    forgetting: lambda in (0, 1]; 1 means no forgetting
-    p_min, p_max: bounds on trace(P) (see module docstring); ``p_max`` defaults to
+    theta0
+        initial estimate, shape (p,)
+    P0
+        initial covariance: scalar (times I), shape (p,) (diagonal) or (p, p) (SPD)
+    forgetting
+        lambda in (0, 1]; 1 means no forgetting
+    p_min, p_max
+        bounds on trace(P) (see module docstring); ``p_max`` defaults to
         trace(P0) when ``forgetting < 1``, otherwise none
-    bounds: optional ``(lower, upper)`` box for the projection, shapes (p,)
-    record_every: keep every k-th estimate in :attr:`history` (0: none)
+    bounds
+        optional ``(lower, upper)`` box for the projection, shapes (p,)
+    record_every
+        keep every k-th estimate in :attr:`history` (0: none)
     """
 
     _SYMMETRIZE_EVERY = 64

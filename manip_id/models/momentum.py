@@ -36,7 +36,7 @@ import pinocchio as pin
 from ..errors import InputError
 from ..estimators import InformationAccumulator
 from ..robot import Robot
-from .energy import _states, window_samples
+from .energy import check_model_states, window_samples
 
 _CHUNK = 1024
 
@@ -60,7 +60,7 @@ def momentum_regressors(robot: Robot, q, dq) -> tuple[np.ndarray, np.ndarray]:
     ``q`` [rad or m] (N, nq), ``dq`` [rad/s or m/s] (N, nv).
     ``Y_p theta = M(q) dq`` [N m s], ``Y_h theta = g(q) - C(q, dq)^T dq + tau_joint`` [N m].
     """
-    q, dq, _ = _states(robot, q, dq, np.zeros_like(np.asarray(dq, dtype=float)))
+    q, dq, _ = check_model_states(robot, q, dq, np.zeros_like(np.asarray(dq, dtype=float)))
     return _regressors(robot, q, dq)
 
 
@@ -192,14 +192,19 @@ def momentum_rows(
 
     Parameters
     ----------
-    q: positions [rad or m], shape (N, nq); dq [rad/s or m/s] and tau [N m or N], (N, nv)
-    dt: sample time [s] (uniform sampling)
-    window_length: spacing of the rows [s] (default :data:`~manip_id.models.DEFAULT_WINDOW`):
+    q
+        positions [rad or m], shape (N, nq); dq [rad/s or m/s] and tau [N m or N], (N, nv)
+    dt
+        sample time [s] (uniform sampling)
+    window_length
+        spacing of the rows [s] (default :data:`~manip_id.models.DEFAULT_WINDOW`):
         samples ``k = s, 2 s, ...`` with ``s = round(window_length / dt)``
-    bandwidth: lambda of the filter [rad/s]; default ``3 / window_length``
-    chunk: samples per regressor chunk
+    bandwidth
+        lambda of the filter [rad/s]; default ``3 / window_length``
+    chunk
+        samples per regressor chunk
     """
-    q, dq, tau = _states(robot, q, dq, tau)
+    q, dq, tau = check_model_states(robot, q, dq, tau)
     stride = window_samples(window_length, dt, even=False)
     lam = 3.0 / (stride * float(dt)) if bandwidth is None else float(bandwidth)
     if not (math.isfinite(lam) and lam > 0):

@@ -447,8 +447,8 @@ class RobotScene:
                     f"<label>{box}"
                     f'<span class="sw{" wire" if wire else ""}" style="background:'
                     f'{css_color(color)}; border-color:{css_color(color)}"></span> '
-                    f"{html_lib.escape(label)} ({'wire frame' if wire else 'solid'}): "
-                    f"{drawn} of {len(ellipsoids)} bodies{why}</label>"
+                    f"{html_lib.escape(label)}: {drawn} of {len(ellipsoids)} bodies, "
+                    f"{'wire frame' if wire else 'solid'}{why}</label>"
                 ],
                 notes,
             )
