@@ -211,13 +211,15 @@ def model_sums(
     options: PreprocessOptions,
     model: str,
     window_length: float | None = None,
+    uncertainty: UncertaintyOptions | None = None,
 ) -> PartSums:
     """Task body of the acceleration-free models: one file's (or block's) rows, accumulated.
 
     The file's preprocessed stream is held in memory (as the local energy and
     momentum paths do); a block ``[start, stop)`` of it holds whole energy
     windows, its last sample being the next block's first (the windows share
-    their end points), so the blocks' rows are exactly the file's.
+    their end points), so the blocks' rows are exactly the file's. The rows' per-block
+    sums (``uncertainty``) are numbered by the file, from the block's first row.
     """
     try:
         f, scan, settings = _processed_rows(robot, part.spec, options)
@@ -234,7 +236,13 @@ def model_sums(
             )
         t0 = time.perf_counter()
         accumulate = accumulate_energy if model == "energy" else accumulate_momentum
-        acc = accumulate(robot, q, dq, tau, dt=dt, window_length=window_length, columns=columns)
+        first_row = part.start // window_samples(window_length, dt) if model == "energy" else 0
+        record = replace(UncertaintyOptions.from_value(uncertainty), block_length=1).blocks(
+            len(columns), 1 if model == "energy" else robot.nv, stream=part.file, offset=first_row
+        )
+        acc = accumulate(
+            robot, q, dq, tau, dt=dt, window_length=window_length, columns=columns, blocks=record
+        )
     except Exception as exc:
         raise named_error(part.spec.label, exc) from exc
     # a block ends on the next block's first sample (stop=None: the file's last block)
@@ -395,7 +403,7 @@ def distributed_problem(
             args = [[(light, pt, ind, chunk, options, uncertainty) for pt in lp] for lp in layout]
             leaves = [backend.map(part_sums, a) for a in args]
         else:
-            mo = (mopts, model.name, model.window_length)
+            mo = (mopts, model.name, model.window_length, uncertainty)
             leaves = [
                 backend.map(model_sums, [(light, pt, ind, *mo) for pt in lp]) for lp in layout
             ]
