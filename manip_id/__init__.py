@@ -69,6 +69,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
         "PreprocessOptions",
         "RankOptions",
         "RunOptions",
+        "UncertaintyOptions",
         "accumulate_file",
         "identify",
         "identify_chunks",

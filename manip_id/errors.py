@@ -8,6 +8,7 @@ cause.
 
 from __future__ import annotations
 
+import difflib
 import math
 from collections.abc import Sequence
 
@@ -36,6 +37,30 @@ class OutputError(InputError):
 
 class ReportBusyError(OutputError):
     """Another run has claimed the report folder (of two concurrent runs, one wins)."""
+
+
+# --- report folders (manip_id._io.report_folder, manip_id.viz.report) --------------
+class ReportExistsError(InputError):
+    """The report folder exists and is not empty, and ``force`` was not given.
+
+    Attributes
+    ----------
+    path : str
+        The report folder.
+    """
+
+    def __init__(self, path):
+        self.path = str(path)
+        super().__init__(
+            f"report folder {self.path} exists and is not empty "
+            "(use --force / force=True to replace it)"
+        )
+
+    def __reduce__(self):
+        return (type(self), (self.path,))
+
+
+# --- end of report folders ---------------------------------------------------------
 
 
 class ResourceError(InputError):
@@ -321,3 +346,12 @@ class CarriedInertiaError(ManipIdError):
 
 class ExportWarning(ManipIdWarning):
     """An export changed something the user should know of (a scaled share of carried links)."""
+
+
+def did_you_mean(word: str, choices, n: int = 1) -> str:
+    """``" (did you mean 'panda'?)"`` for the ``n`` choices closest to ``word`` (difflib),
+    or ``""`` when none is close: what follows a wrong name in an error message."""
+    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=n, cutoff=0.6)
+    if not close:
+        return ""
+    return " (did you mean " + " or ".join(repr(c) for c in close) + "?)"

@@ -67,6 +67,7 @@ from .identification import (
     Problem,
     RankOptions,
     RunOptions,
+    UncertaintyOptions,
     distributed_problem,
     solve,
 )
@@ -170,6 +171,7 @@ def identify_files(
     model: ModelOptions | str | dict | None = None,
     run: RunOptions | dict | None = None,
     partition: PartitionOptions | dict | None = None,
+    uncertainty: UncertaintyOptions | str | dict | None = None,
 ) -> IdentificationResult:
     """Identify the base parameters of ``robot`` from many files, each file a task.
 
@@ -206,6 +208,10 @@ def identify_files(
     partition : PartitionOptions or None
         ``block`` (samples per task), ``split_every`` (parts per reduction task),
         ``per_file`` (also each file's own estimate, ``result.per_file``).
+    uncertainty : UncertaintyOptions or str or None
+        The covariance: "auto" (default), "white" or "hac", as
+        :func:`~manip_id.identification.identify`; the per-block sums travel with each
+        task's sums (a file's end is a block boundary; its blocks merge exactly).
 
     Returns
     -------
@@ -235,6 +241,7 @@ def identify_files(
     mopts = ModelOptions.from_value(model)
     part = options_from(PartitionOptions, partition, "partition")
     base = resolve_base(robot, base, timings)
+    uopts = UncertaintyOptions.from_value(uncertainty)
     sums = distributed_problem(
         robot,
         paths,
@@ -246,14 +253,17 @@ def identify_files(
         run=RunOptions.from_value(run),
         model=mopts,
         partition=part,
+        uncertainty=uopts,
     )
     sums.problem.t_start = t_start
-    result = solve(sums.problem, method, consistent=copts, minimum_norm=minimum_norm)
+    result = solve(
+        sums.problem, method, consistent=copts, minimum_norm=minimum_norm, uncertainty=uopts
+    )
     if sums.per_file is None:
         return result
     records = sums.problem.files["train"] if sums.problem.files else []
     estimates = [
-        _file_estimate(robot, info, fs, base, method, mopts.name)
+        _file_estimate(robot, info, fs, base, method, mopts.name, uopts)
         for info, fs in zip(records, sums.per_file, strict=True)
     ]
     result = replace(result, per_file=estimates)
@@ -261,13 +271,15 @@ def identify_files(
     return result
 
 
-def _file_estimate(robot, info: FileRecord, fs: PartSums, base, method, model="dynamic"):
+def _file_estimate(
+    robot, info: FileRecord, fs: PartSums, base, method, model="dynamic", uncertainty=None
+):
     """One file's own estimate from its own sums (None with the reason when unsolvable)."""
     summary = info.summary(robot.dof_names)
     n = info.n_samples
     problem = Problem(robot, base, fs.acc, n, dict(fs.timings), model=model)
     try:
-        res = solve(problem, method)
+        res = solve(problem, method, uncertainty=uncertainty)
         return FileEstimate(info.label, n, info.n_tasks, res, summary=summary)
     except (RankDeficiencyError, InputError) as exc:
         return FileEstimate(info.label, n, info.n_tasks, None, str(exc), summary=summary)

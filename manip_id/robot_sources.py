@@ -20,7 +20,7 @@ import pinocchio as pin
 
 from ._checks import as_float_array
 from ._native import native_stderr_captured
-from .errors import InputError, RobotError
+from .errors import InputError, RobotError, did_you_mean
 from .parameters import JOINT_TERM_NAMES
 from .profiles import RobotProfile, find_profile, load_profile, robots_dir
 
@@ -204,7 +204,8 @@ def locked_names(name: str, all_joints: list[str], active_joints) -> list[str]:
     unknown = [j for j in active_joints if j not in all_joints]
     if unknown:
         raise InputError(
-            f"unknown joint {unknown[0]!r} for robot {name!r}; valid joints: {all_joints}"
+            f"unknown joint {unknown[0]!r} for robot {name!r}"
+            f"{did_you_mean(unknown[0], all_joints)}; valid joints: {all_joints}"
         )
     if not active_joints:
         raise InputError("active_joints is empty: at least one joint must move")
@@ -268,7 +269,8 @@ def load_erd(name: str):
         raise RobotError("example-robot-data-loaders is not installed") from exc
     if name not in ROBOTS:
         raise RobotError(
-            f"unknown robot {name!r}; available: {', '.join(available_robots())} "
+            f"unknown robot {name!r}{did_you_mean(name, available_robots())}; available: "
+            f"{', '.join(available_robots())} "
             "or a path to a .urdf file"
         )
     cls = ROBOTS[name]

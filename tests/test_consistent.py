@@ -261,6 +261,9 @@ def test_real_panda_log_fit_scale_matches_batch_means(panda_split):
     assert bm > 50  # the residuals of the filtered log are strongly correlated
     assert 0.5 * bm <= k <= 2.0 * bm
     assert any("not white noise" in w for w in res.warnings)
+    # the honest (block-score) variance inflation agrees with batch means too
+    assert res.uncertainty["method"] == "hac"
+    assert 0.5 * bm <= res.uncertainty["inflation"] ** 2 <= 2.0 * bm
     # and on white noise of one variance (OLS's model) both are about 1
     sim = get_robot("panda", friction=FRICTION)
     q, dq, ddq, tau_s = _data(sim, _truth(sim), 1500, 0.0, seed=11)

@@ -74,11 +74,23 @@ def reference(robot, fleet):
     return {m: identify(robot, q, dq, ddq, tau, method=m) for m in ("ols", "wls")}
 
 
-def _same(res, ref, method="ols", std_rtol=None):
+@pytest.fixture(scope="module")
+def files_reference(robot, fleet):
+    """The files in this process, one task each: the reference of the honest std, whose
+    blocks end at each file's end (the concatenated arrays' blocks run across them)."""
+    return {m: identify_files(robot, fleet[0], method=m) for m in ("ols", "wls")}
+
+
+def _same(res, ref, method="ols", std_rtol=None, honest=None):
+    """Estimate, white-noise std and noise variances as ``ref``; the honest std as
+    ``honest`` (a result of the same files) when given."""
     _close(res.estimate, ref.estimate)
     if std_rtol is None:
         std_rtol = 1e-8 if method == "wls" else 1e-9
-    _close(res.std, ref.std, rtol=std_rtol)
+    _close(res.std_white, ref.std_white, rtol=std_rtol)
+    if honest is not None:
+        assert res.uncertainty["method"] == honest.uncertainty["method"]
+        _close(res.std, honest.std, rtol=100 * std_rtol)
     _close(res.noise_variance, ref.noise_variance, rtol=1e-6)
     assert res.n_samples == ref.n_samples
 
@@ -87,7 +99,7 @@ def _same(res, ref, method="ols", std_rtol=None):
 @pytest.mark.parametrize("method", ["ols", "wls"])
 @pytest.mark.parametrize("block,split_every", [(None, 8), (400, 2), (1, 3), (10**6, 8)])
 def test_serial_any_partition_gives_the_concatenated_result(
-    robot, fleet, reference, method, block, split_every
+    robot, fleet, reference, files_reference, method, block, split_every
 ):
     paths = fleet[0]
     if block == 1:  # one task per sample: only on a short file pair, against its own reference
@@ -103,15 +115,16 @@ def test_serial_any_partition_gives_the_concatenated_result(
         )
         paths = [str(Path(paths[0]).with_name("short.npz"))]
         ref = identify(robot, q, dq, ddq, tau, method=method)
+        honest = ref  # one file: its blocks are the arrays'
     else:
-        ref = reference[method]
+        ref, honest = reference[method], files_reference[method]
     res = identify_files(
         robot,
         paths,
         method=method,
         partition=PartitionOptions(block=block, split_every=split_every),
     )
-    _same(res, ref, method)
+    _same(res, ref, method, honest=honest)
 
 
 def test_wls_noise_variances_are_the_per_file_residual_sums(robot, fleet, reference):
@@ -213,7 +226,8 @@ def test_acceleration_free_models(robot, tmp_path, model):
     q, dq, ddq, tau = arrays[0]
     own = identify(robot, q, dq, None, tau, model=replace(kw["model"], dt=1 / 500.0))
     one = identify_files(robot, paths[:1], **kw)
-    _same(one, own)
+    _same(one, own, honest=own)  # the rows' blocks too
+    assert own.uncertainty["method"] == "hac"
     assert one.model == model and one.n_samples == q.shape[0]
     # several files: any partition of the energy windows gives the same sums
     whole = identify_files(robot, paths, partition=PartitionOptions(per_file=True), **kw)
@@ -225,6 +239,7 @@ def test_acceleration_free_models(robot, tmp_path, model):
                 identify_files(robot, paths, partition=PartitionOptions(block=block), **kw),
                 whole,
                 std_rtol=1e-6,
+                honest=whole,
             )
     else:
         with pytest.raises(InputError, match="no blocks"):
@@ -354,7 +369,9 @@ def local_client():
 
 
 @pytest.mark.parametrize("method", ["ols", "wls"])
-def test_local_cluster_gives_the_local_result(robot, fleet, reference, local_client, method):
+def test_local_cluster_gives_the_local_result(
+    robot, fleet, reference, files_reference, local_client, method
+):
     res = identify_files(
         robot,
         fleet[0],
@@ -362,7 +379,7 @@ def test_local_cluster_gives_the_local_result(robot, fleet, reference, local_cli
         run=RunOptions(scheduler=local_client),
         partition=PartitionOptions(block=700, per_file=True),
     )
-    _same(res, reference[method], method)
+    _same(res, reference[method], method, honest=files_reference[method])
     serial = identify_files(
         robot, fleet[0], method=method, partition=PartitionOptions(per_file=True)
     )
@@ -402,12 +419,12 @@ def test_local_cluster_bad_file_no_result(robot, fleet, local_client, tmp_path):
     assert not any(local_client.processing().values())
 
 
-def test_local_spec_starts_and_stops_its_cluster(robot, fleet, reference):
+def test_local_spec_starts_and_stops_its_cluster(robot, fleet, reference, files_reference):
     import psutil
 
     before = {p.pid for p in psutil.Process().children(recursive=True)}
     res = identify_files(robot, fleet[0], run=RunOptions(scheduler="local:2"))
-    _same(res, reference["ols"])
+    _same(res, reference["ols"], honest=files_reference["ols"])
     deadline = time.monotonic() + 30
     while time.monotonic() < deadline:
         left = {p.pid for p in psutil.Process().children(recursive=True)} - before
@@ -480,7 +497,7 @@ def dask_cli(tmp_path_factory):
             _stop(p)
 
 
-def test_cli_cluster_by_address_and_by_file(robot, fleet, reference, dask_cli):
+def test_cli_cluster_by_address_and_by_file(robot, fleet, reference, files_reference, dask_cli):
     address = json.loads(dask_cli["file"].read_text())["address"]
     assert address.startswith("tcp://127.0.0.1:")
     res = identify_files(
@@ -490,12 +507,14 @@ def test_cli_cluster_by_address_and_by_file(robot, fleet, reference, dask_cli):
         run=RunOptions(scheduler=address),
         partition=PartitionOptions(block=600),
     )
-    _same(res, reference["wls"], "wls")
+    _same(res, reference["wls"], "wls", honest=files_reference["wls"])
     res = identify_files(robot, fleet[0], run=RunOptions(scheduler=str(dask_cli["file"])))
-    _same(res, reference["ols"])
+    _same(res, reference["ols"], honest=files_reference["ols"])
 
 
-def test_a_worker_killed_mid_run_changes_nothing(robot, fleet, reference, dask_cli):
+def test_a_worker_killed_mid_run_changes_nothing(
+    robot, fleet, reference, files_reference, dask_cli
+):
     from distributed import Client
 
     sched = dask_cli["file"]
@@ -525,7 +544,7 @@ def test_a_worker_killed_mid_run_changes_nothing(robot, fleet, reference, dask_c
                 victim.wait(timeout=20)
                 res = job.result(timeout=300)
             assert addr not in client.scheduler_info()["workers"]
-        _same(res, reference["wls"], "wls")
+        _same(res, reference["wls"], "wls", honest=files_reference["wls"])
     finally:
         _stop(victim)
 
@@ -714,7 +733,7 @@ def test_identify_datasets_with_a_scheduler(robot, fleet, local_client):
         method="wls",
         run=RunOptions(scheduler=local_client),
     )
-    _same(res, local, "wls")
+    _same(res, local, "wls", honest=local)
     assert res.relative_error.validation == pytest.approx(local.relative_error.validation, 1e-9)
     joints = list(robot.dof_names)
     for a, b in zip(res.files["train"], local.files["train"], strict=True):

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from matplotlib.patches import Rectangle
 
-from manip_id.cli import identify as identify_cli
+from manip_id.cli import _common as cli_common
 from manip_id.cli import main
 from manip_id.robot import load_robot
 from manip_id.viz import figures
@@ -180,7 +180,7 @@ class _Terminal(io.StringIO):
 
 
 def test_progress_bar_on_a_terminal_and_quiet(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(identify_cli, "PROGRESS_DELAY", 0.0)
+    monkeypatch.setattr(cli_common, "PROGRESS_DELAY", 0.0)
     term = _Terminal()
     monkeypatch.setattr(sys, "stderr", term)
     assert main(["identify", "double_pendulum", *SIM]) == 0
@@ -190,5 +190,7 @@ def test_progress_bar_on_a_terminal_and_quiet(tmp_path, capsys, monkeypatch):
     term.truncate()
     out = tmp_path / "r.json"
     assert main(["identify", "double_pendulum", *SIM, "--quiet", "--json", str(out)]) == 0
-    assert capsys.readouterr().out == "" and term.getvalue() == ""
-    assert json.loads(out.read_text())["robot"] == "double_pendulum"
+    doc = json.loads(out.read_text())
+    assert capsys.readouterr().out == ""  # quiet: no bar, no table; the warnings remain
+    assert term.getvalue().splitlines() == [f"manip-id: warning: {w}" for w in doc["warnings"]]
+    assert doc["robot"] == "double_pendulum"

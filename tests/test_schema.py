@@ -70,9 +70,21 @@ def test_schema_keys_and_names(ur5_result):
         "value",
         "std",
         "std_percent",
+        "std_white",
         "unit",
         "nominal",
         "flags",
+    }
+    # 800 independent samples: 25 blocks of 32, the autocorrelation-consistent std
+    assert d["uncertainty"]["method"] == "hac" and d["uncertainty"]["n_blocks"] == 25
+    assert set(d["uncertainty"]) == {
+        "method",
+        "requested",
+        "bandwidth",
+        "inflation",
+        "n_blocks",
+        "block_samples",
+        "reason",
     }
     for p, i in zip(d["base_parameters"], res.base.independent, strict=True):
         assert p["unit"] == robot.parameter_units[i]

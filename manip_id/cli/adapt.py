@@ -6,7 +6,7 @@ import argparse
 
 import numpy as np
 
-from ._common import add_robot_arguments, reserve_outputs, robot_from_args
+from ._common import add_robot_arguments, finish, reserve_outputs, robot_from_args
 
 
 def register(sub) -> None:
@@ -106,14 +106,14 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
+def _compare(robot, args: argparse.Namespace):
+    """The adaptive and the fixed-parameter runs on the perturbed plant (:func:`compare_fixed`)."""
+    # pinocchio, the closed loop: heavy, imported when the command runs (not for --help)
     from ..adaptive import default_gains
     from ..closed_loop import compare_fixed, default_reference, with_payload
     from ..simulation import perturb_parameters, require_physical
     from ..trajectories import trajectory_to_configuration
 
-    outputs = reserve_outputs(args)  # every output checked (and the report claimed) first
-    robot = robot_from_args(args)
     theta0 = robot.nominal_parameters
     require_physical(robot, theta0)  # the simulated plant: a message naming the body
     theta_true = perturb_parameters(robot, args.perturb, seed=args.seed)
@@ -135,8 +135,7 @@ def run(args: argparse.Namespace) -> int:
         gain=args.gain if args.composite else "constant",
         forgetting=args.forgetting,
     )
-    record_every = max(int(round(args.rate / 100.0)), 1)
-    cmp = compare_fixed(
+    return compare_fixed(
         robot,
         theta_true,
         theta0,
@@ -149,10 +148,12 @@ def run(args: argparse.Namespace) -> int:
         noise_q=args.noise_q,
         noise_dq=args.noise_dq,
         seed=args.seed,
-        record_every=record_every,
+        record_every=max(int(round(args.rate / 100.0)), 1),
     )
+
+
+def _print_run(robot, cmp, law: str, args: argparse.Namespace) -> None:
     a, f = cmp.adaptive, cmp.fixed
-    law = "composite" if a.composite else "plain"
     print(
         f"robot {robot.name}: nv={robot.nv}, {robot.n_parameters} parameters; true = nominal "
         f"perturbed (perturb_parameters rel={args.perturb:g}, seed={args.seed})"
@@ -190,7 +191,11 @@ def run(args: argparse.Namespace) -> int:
             f"{a.theta_hat[-1, i]:10.4g}"
         )
     print(f"real-time factor {a.real_time_factor:.1f} (wall {a.wall_time:.3f} s)")
-    out = {
+
+
+def _document(robot, cmp, law: str, args: argparse.Namespace) -> dict:
+    a, f = cmp.adaptive, cmp.fixed
+    return {
         "robot": robot.name,
         "law": law,
         "perturb": args.perturb,
@@ -210,100 +215,35 @@ def run(args: argparse.Namespace) -> int:
         "theta_hat": a.theta_hat[-1],
         "history": {"t": a.t, "prediction_error": a.prediction_error},
     }
+
+
+def run(args: argparse.Namespace) -> int:
+    """``manip-id adapt``: the closed loop simulated, printed, saved and reported."""
+    outputs = reserve_outputs(args)  # every output checked (and the report claimed) first
+    robot = robot_from_args(args)
+    cmp = _compare(robot, args)
+    law = "composite" if cmp.adaptive.composite else "plain"
+    _print_run(robot, cmp, law, args)
+    out = _document(robot, cmp, law, args)
     if args.json:
         outputs.write_json(args.json, out)
+    path = None
     if args.report is not None:
-        path = _write_report(robot, cmp, out, law, args)
-    outputs.publish()  # all outputs appear together, once all are complete
-    if args.json:
-        print(f"wrote {args.json}")
-    if args.report is not None:
-        print(f"wrote the report to {path}/index.html")
-    return 0
+        from ..viz.adapt_report import write_adapt_report  # matplotlib, meshcat: heavy
 
-
-def _write_report(robot, cmp, out: dict, law: str, args):
-    """Report folder of an adaptive run (see :func:`manip_id.viz.report.write_report`)."""
-    from ..errors import InfeasibleTrajectoryError
-    from ..viz import figures
-    from ..viz.meshcat_scene import RobotScene
-    from ..viz.report import write_report
-
-    a, f = cmp.adaptive, cmp.fixed
-    run_name = (
-        f"{robot.name}, {law} Slotine-Li adaptation, {args.duration:g} s at {args.rate:g} Hz, "
-        f"perturb {args.perturb:g}" + (f", payload {args.payload:g} kg" if args.payload else "")
-    )
-    joints = list(robot.dof_names)
-    from ..identifiability import analyze
-
-    base = analyze(robot).base  # the combinations adaptation can converge to
-    figs = {
-        "parameter_estimates": lambda path: figures.online_history(
-            path,
-            a.t,
-            base.to_base(a.theta_hat),
-            names=base.base_names,
-            reference=base.to_base(a.theta_true),
-            reference_label="truth",
-            prediction_error=a.prediction_error,
-            error_label="torque prediction error on new states [-]",
-            title=f"base-parameter error and prediction error over time: {run_name}",
-        ),
-        "tracking_error": lambda path: figures.tracking_error(
-            path,
-            a.t,
-            a.q - a.q_d,
-            joint_names=joints if a.q.shape[1] == len(joints) else None,
-            baseline=f.q - f.q_d if f.q.shape == a.q.shape else None,
-            title=f"tracking error: {run_name}",
-        ),
-    }
-    notes = []
-    scene = RobotScene(robot, title=f"manip-id adapt: {run_name}")
-    try:
-        scene.animate(a.t, a.q)
-    except InfeasibleTrajectoryError as exc:
-        notes.append(f"scene not animated: {exc}")
-    scene.add_inertia(a.theta_true, label="true")
-    scene.add_inertia(a.theta_hat[-1], label="final_estimate")
-    notes += list(scene.notes)
-    rows = [
-        {"parameter": n, "unit": u, "true": t, "initial": s0, "final": s1}
-        for n, u, t, s0, s1 in zip(
-            robot.parameter_names,
-            robot.parameter_units,
-            a.theta_true,
-            a.theta0,
-            a.theta_hat[-1],
-            strict=True,
+        run_name = (
+            f"{robot.name}, {law} Slotine-Li adaptation, {args.duration:g} s at "
+            f"{args.rate:g} Hz, perturb {args.perturb:g}"
+            + (f", payload {args.payload:g} kg" if args.payload else "")
         )
-    ]
-    summary = {
-        "robot": robot.name,
-        "law": law,
-        "duration [s]": args.duration,
-        "rate [Hz]": args.rate,
-        "rms tracking error, adaptive [rad]": a.rms_tracking_error,
-        "rms tracking error, fixed parameters [rad]": f.rms_tracking_error,
-        "final tracking error, adaptive [rad]": a.final_tracking_error,
-        "final tracking error, fixed parameters [rad]": f.final_tracking_error,
-        "torque prediction error, start": f"{100 * a.initial_prediction_error:.3g} %",
-        "torque prediction error, end": f"{100 * a.final_prediction_error:.3g} %",
-    }
-    notes.append(
-        f"the estimates are shown as the {base.n_base} base parameters (the combinations the "
-        f"regressor can determine); the {robot.n_parameters} standard parameters in the table "
-        "need not converge"
-    )
-    return write_report(
-        args.report_claim,
-        title=f"manip-id adapt: {run_name}",
-        summary=summary,
-        parameter_table=rows,
-        figures=figs,
-        scene=scene,
-        json_result=out,
-        notes=notes,
-        force=args.force,
-    )
+        settings = {"duration [s]": args.duration, "rate [Hz]": args.rate}
+        path = write_adapt_report(
+            args.report_claim,
+            robot,
+            cmp,
+            out,
+            run_name=run_name,
+            settings=settings,
+            force=args.force,
+        )
+    return finish(args, outputs, path)

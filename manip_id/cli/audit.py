@@ -14,76 +14,18 @@ from __future__ import annotations
 import argparse
 
 from ..errors import InputError
-from ._common import add_robot_arguments, input_paths, reserve_outputs, robot_from_args
-
-
-def add_stream_arguments(parser: argparse.ArgumentParser, trim: bool = True) -> None:
-    """``--delay``, ``--time-unit`` and (``trim``) ``--trim-standstill``."""
-    g = parser.add_argument_group("streams (the audit's findings)")
-    g.add_argument(
-        "--delay",
-        metavar="SECONDS[,...]",
-        default=None,
-        help="the torque stream lags the motion stream by SECONDS (one value, or one per "
-        "joint): each row takes the torque logged SECONDS later (interpolated)",
-    )
-    g.add_argument(
-        "--time-unit",
-        choices=("s", "ms", "us", "ns"),
-        default=None,
-        help="unit of the files' time stamps [default s]",
-    )
-    if trim:
-        g.add_argument(
-            "--trim-standstill",
-            action="store_true",
-            help="keep each file from the first to the last row where a joint moves "
-            "(the JSON records the windows kept)",
-        )
-
-
-def spec_options(args: argparse.Namespace) -> dict:
-    """The :class:`~manip_id.datasets.FileSpec` keywords of the stream options."""
-    from ._files import parse_floats
-
-    delay = getattr(args, "delay", None)
-    values = None if delay is None else parse_floats(delay, "--delay")
-    return {
-        "time_unit": getattr(args, "time_unit", None),
-        "delay": None if values is None else tuple(values),
-    }
-
-
-def before_fit(robot, specs, options, args, *, currents: bool = False):
-    """The pre-fit audit of ``specs``: printed, and the specs to fit.
-
-    ``options``: the run's :class:`~manip_id.pipeline.PreprocessOptions` (torque
-    scale, bad rows, deadband, cut-off). ``currents``: the torque columns are expected
-    to hold currents (``drive-gains``): no torque-scale finding. With
-    ``--trim-standstill`` the specs come back with the windows the audit keeps.
-    Returns ``(specs, audit)``.
-    """
-    from ..audit import audit_files
-
-    audit = audit_files(robot, specs, _audit_options(options, currents))
-    print(audit.table())
-    if getattr(args, "trim_standstill", False):
-        specs = audit.trimmed()
-        kept = [s.label for s in specs]
-        print("--trim-standstill: " + ", ".join(kept))
-    return specs, audit
-
-
-def _audit_options(options, currents: bool):
-    from ..audit import AuditOptions
-
-    return AuditOptions(
-        torque_scale=options.torque_scale,
-        drop_bad_rows=options.drop_bad_rows,
-        standstill=options.velocity_deadband,
-        cutoff=options.cutoff,
-        currents=currents,
-    )
+from ._common import (
+    add_file_arguments,
+    add_robot_arguments,
+    add_stream_arguments,
+    column_map,
+    input_paths,
+    parse_floats,
+    profile_from_args,
+    reserve_outputs,
+    robot_from_args,
+    spec_options,
+)
 
 
 def register(sub) -> None:
@@ -120,9 +62,7 @@ def register(sub) -> None:
         help="low-pass cut-off [Hz] for files without ddq [default that of identify]",
     )
     p.add_argument("--json", metavar="OUT", help="write the audit as JSON to OUT")
-    from . import _files
-
-    _files.add_arguments(p)
+    add_file_arguments(p)
     add_stream_arguments(p, trim=False)
     p.set_defaults(func=run)
 
@@ -131,9 +71,6 @@ def run(args: argparse.Namespace) -> int:
     from ..audit import AuditOptions, audit_files
     from ..datasets import Window, parse_file_spec
     from ..datasets.stream import torque_scale_vector
-    from ._common import profile_from_args
-    from ._files import parse_floats
-    from .identify import _column_map
 
     if args.torque_scale is not None and args.torque_scale_from is not None:
         raise InputError("give --torque-scale or --torque-scale-from, not both")
@@ -147,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
     outputs = reserve_outputs(args)
     outputs.add_inputs(input_paths(args))
     profile = profile_from_args(args)
-    colmap = _column_map(args.column)
+    colmap = column_map(args.column)
     if colmap is None and profile is not None and profile.columns:
         colmap = dict(profile.columns)
     robot = robot_from_args(args)

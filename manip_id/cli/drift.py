@@ -15,8 +15,13 @@ import os
 
 from .._io import OutputSet
 from ..errors import InputError
-from ._common import add_robot_arguments, reserve_outputs, robot_from_args
-from ._fleet import add_scheduler_argument, check_scheduler
+from ._common import (
+    add_robot_arguments,
+    add_scheduler_argument,
+    check_scheduler,
+    reserve_outputs,
+    robot_from_args,
+)
 
 
 def register(sub) -> None:

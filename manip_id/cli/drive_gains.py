@@ -17,12 +17,17 @@ import math
 import time
 
 from ..errors import InputError
-from ._common import add_robot_arguments, robot_from_args
+from ._common import (
+    add_robot_arguments,
+    check_frame,
+    parse_floats,
+    print_warnings,
+    robot_from_args,
+)
 from .payload import (
     add_run_arguments,
     check_run_args,
     input_paths,
-    parse_floats,
     preprocess_settings,
     publish_json,
     read_runs,
@@ -74,14 +79,19 @@ def run(args: argparse.Namespace) -> int:
     check_run_args(args)
     if not (math.isfinite(args.payload_mass) and args.payload_mass > 0):
         raise InputError(f"--payload-mass must be > 0 [kg], got {args.payload_mass}")
-    com = parse_floats(args.payload_com, "--payload-com", 3)
-    inertia = parse_floats(args.payload_inertia, "--payload-inertia", 6)
+    com = None if args.payload_com is None else parse_floats(args.payload_com, "--payload-com", 3)
+    inertia = (
+        None
+        if args.payload_inertia is None
+        else parse_floats(args.payload_inertia, "--payload-inertia", 6)
+    )
     if inertia is not None and com is None:
         raise InputError("--payload-inertia (about the centre of mass) needs --payload-com")
     reserve_json(args, input_paths(args))
-    from ..payload import identify_drive_gains
+    from ..payload import identify_drive_gains  # pinocchio: heavy, not for --help
 
     robot = robot_from_args(args)
+    check_frame(robot, args.frame)
     unloaded, loaded, source = read_runs(args, robot)
     result = identify_drive_gains(
         robot,
@@ -102,5 +112,6 @@ def run(args: argparse.Namespace) -> int:
     doc["preprocess"] = preprocess_settings(unloaded + loaded)
     doc["timings"]["command_total"] = round(time.perf_counter() - t_start, 6)
     print(result.table())
+    print_warnings(doc)
     publish_json(args, doc)
     return 0

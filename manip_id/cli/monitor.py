@@ -24,7 +24,7 @@ import numpy as np
 
 from .._io import OutputSet
 from ..errors import InputError
-from . import native_stderr_captured
+from .._native import native_stderr_captured
 from ._common import add_robot_arguments, reserve_outputs, robot_from_args
 
 

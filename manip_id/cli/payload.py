@@ -1,9 +1,9 @@
 """``manip-id payload``: the inertial parameters of a payload from unloaded and loaded runs.
 
 Pipeline: scan every ``--unloaded`` and ``--loaded`` file first with the real-log
-readers (:func:`manip_id.pipeline.scan_file`: its window, ``FILE@START:STOP`` or
+readers (:func:`manip_id.identification.scan_file`: its window, ``FILE@START:STOP`` or
 ``--window``, ``--torque-scale``, checks and the data-quality summary, printed), then
-stream each file's rows (:func:`manip_id.pipeline.iter_processed`: preprocessed on its
+stream each file's rows (:func:`manip_id.identification.iter_processed`: preprocessed on its
 own in overlapping blocks when it has no accelerations) into
 :func:`manip_id.payload.identify_payload`, memory bounded whatever the files' length:
 the robot's base
@@ -23,8 +23,22 @@ import time
 from pathlib import Path
 from typing import Any
 
+from ..datasets import parse_file_spec
 from ..errors import DataError, InputError
-from ._common import add_robot_arguments, robot_from_args, write_json
+from ._common import (
+    add_robot_arguments,
+    add_scheduler_argument,
+    add_stream_arguments,
+    before_fit,
+    check_frame,
+    check_scheduler,
+    column_map,
+    parse_floats,
+    print_warnings,
+    robot_from_args,
+    spec_options,
+    write_json,
+)
 
 
 # ------------------------------------------------------------------ options
@@ -90,10 +104,10 @@ def add_run_arguments(p: argparse.ArgumentParser, *, unloaded_required: bool) ->
         help="seconds dropped at each end of each file [default: the filter's edge transient]",
     )
     sig.add_argument("--decimate", type=int, default=1, help="keep every D-th sample [default 1]")
-    p.add_argument("--chunk", type=int, default=1024, help="samples per regressor chunk")
+    p.add_argument(
+        "--chunk", type=int, default=1024, help="samples per regressor chunk [default 1024]"
+    )
     p.add_argument("--json", metavar="OUT", help="write the result as JSON to OUT")
-    from .audit import add_stream_arguments
-
     add_stream_arguments(p)
 
 
@@ -139,8 +153,6 @@ def register(sub) -> None:
         "--consistent); sidecar OUT.identified.json",
     )
     p.add_argument("--force", action="store_true", help="replace an existing --export-urdf file")
-    from ._fleet import add_scheduler_argument
-
     add_scheduler_argument(
         p,
         "each file is one task (read, preprocessed and accumulated on a worker), the sums "
@@ -150,21 +162,6 @@ def register(sub) -> None:
 
 
 # ------------------------------------------------------------------ reading
-def parse_floats(text: str | None, what: str, n: int | None = None) -> list[float] | None:
-    """``"1,2,3"`` -> [1.0, 2.0, 3.0]; ``n`` values when given; None passes through."""
-    if text is None:
-        return None
-    try:
-        values = [float(v) for v in str(text).split(",") if v.strip()]
-    except ValueError as exc:
-        raise InputError(f"{what} takes comma-separated numbers, got {text!r}") from exc
-    if n is not None and len(values) != n:
-        raise InputError(f"{what} takes {n} comma-separated numbers, got {len(values)}: {text!r}")
-    if not values or not all(math.isfinite(v) for v in values):
-        raise InputError(f"{what} takes finite numbers, got {text!r}")
-    return values
-
-
 def check_run_args(args) -> None:
     """Option checks that need no data."""
     if args.cutoff is not None and not (math.isfinite(args.cutoff) and args.cutoff > 0):
@@ -182,24 +179,15 @@ def check_run_args(args) -> None:
         raise InputError(f"--velocity-deadband must be >= 0 [rad/s], got {d}")
 
 
-def _column_map(specs: list[str]):
-    from .identify import _column_map as column_map
-
-    return column_map(specs)
-
-
 def _spec(text: str, args, colmap=None):
     """A file spec (path and window) of the real-log readers."""
-    from ..datasets import parse_file_spec
-    from .audit import spec_options
-
     return parse_file_spec(
         text, window=args.window, columns=colmap, topic=args.topic, **spec_options(args)
     )
 
 
 def _options(args, scale=None):
-    from ..identification import PreprocessOptions
+    from ..identification import PreprocessOptions  # pinocchio: heavy, not for --help
 
     eps = args.velocity_deadband
     return PreprocessOptions(
@@ -224,7 +212,7 @@ class StreamedRun:
     """
 
     def __init__(self, robot, spec, options, scan: bool = True):
-        from ..identification import scan_file
+        from ..identification import scan_file  # pinocchio: heavy, not for --help
 
         self.robot, self.spec, self.options = robot, spec, options
         # bad files fail here, named
@@ -245,7 +233,7 @@ class StreamedRun:
         }
 
     def __call__(self):
-        from ..identification import iter_processed, scan_file
+        from ..identification import iter_processed, scan_file  # pinocchio: heavy, not for --help
 
         nq, nv = self.robot.nq, self.robot.nv
         if self.scan is None:
@@ -270,7 +258,7 @@ def read_runs(args, robot, scale=None, scan: bool = True) -> tuple[list, list, d
     bad file fails, named, before the long work; ``scan=False`` (``--scheduler``): the
     files are scanned by the tasks that accumulate them (quality: :func:`run_quality`).
     """
-    colmap = _column_map(args.column)
+    colmap = column_map(args.column)
     specs_u = [_spec(t, args, colmap) for t in args.unloaded]
     specs_l = [_spec(t, args, colmap) for t in args.loaded]
     for sl in specs_l:
@@ -286,8 +274,6 @@ def read_runs(args, robot, scale=None, scan: bool = True) -> tuple[list, list, d
     if not scan and getattr(args, "trim_standstill", False):
         raise InputError("--trim-standstill needs the pre-fit audit, which --scheduler skips")
     if scan:  # the pre-fit audit, printed and saved as "audit" (not where tasks read the files)
-        from .audit import before_fit
-
         audited, audit = before_fit(
             robot, specs_u + specs_l, options, args, currents=args.command == "drive-gains"
         )
@@ -397,21 +383,21 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("give --unloaded runs or --known-base RESULT.json, not both")
     if args.known_base is None and not args.unloaded:
         raise InputError("give the --unloaded runs (or --known-base RESULT.json)")
-    from ._fleet import check_scheduler
 
     check_scheduler(args)
     reserve_json(args, input_paths(args))
     _reserve_export(args, input_paths(args))
-    from ..payload import identify_payload, load_known_base
+    from ..payload import identify_payload, load_known_base  # pinocchio: heavy, not for --help
 
     known = load_known_base(args.known_base) if args.known_base is not None else None
     robot = robot_from_args(args)
+    check_frame(robot, args.frame)
     scale = None
     if args.torque_scale is not None:
         scale = parse_floats(args.torque_scale, "--torque-scale")
     distributed = args.scheduler is not None
     if distributed:  # the tasks read the files: send them a light robot
-        from ..execution import portable_robot
+        from ..execution import portable_robot  # pinocchio: heavy, not for --help
 
         unloaded, loaded, source = read_runs(args, portable_robot(robot), scale, scan=False)
     else:
@@ -443,6 +429,7 @@ def run(args: argparse.Namespace) -> int:
     doc["preprocess"] = settings if distributed else preprocess_settings(unloaded + loaded)
     doc["timings"]["command_total"] = round(time.perf_counter() - t_start, 6)
     print(result.table())
+    print_warnings(doc)
     _stage_export(args, robot, result)
     if args.json or not args.export_urdf:
         publish_json(args, doc)
@@ -460,7 +447,7 @@ def _reserve_export(args, inputs: list[str]) -> None:
     if not args.consistent:
         raise InputError("--export-urdf needs a physically consistent payload: add --consistent")
     from .._io import OutputSet
-    from ..export import check_output, sidecar_path
+    from ..export import check_output, sidecar_path  # pinocchio: heavy, not for --help
 
     check_output(args.export_urdf, force=args.force)
     if getattr(args, "outputs", None) is None:
@@ -474,8 +461,8 @@ def _stage_export(args, robot, result) -> None:
     """Write the payload link into the robot's URDF (published with the other outputs)."""
     if not args.export_urdf:
         return
-    from ..export import payload_urdf_texts, sidecar_path
-    from ..export.sidecar import identification_provenance
+    from ..export import payload_urdf_texts, sidecar_path  # pinocchio: heavy
+    from ..export.sidecar import identification_provenance  # pinocchio: heavy
 
     p = result.payload
     prov = identification_provenance("manip-id payload", vars(args))

@@ -21,7 +21,7 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..robot import available_robots, load_robot
+    from ..robot import available_robots, load_robot  # pinocchio: heavy, not for --help
 
     print(f"{'name':28s} {'nq':>4s} {'nv':>4s} {'parameters':>11s}  profile")
     for name in getattr(args, "names", None) or available_robots():

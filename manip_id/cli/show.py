@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
+
+from ..errors import InputError
 
 
 def register(sub) -> None:
@@ -22,10 +25,7 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    from ..errors import InputError
-    from ..identification import load_result, result_text
+    from ..identification import load_result, result_text  # pinocchio: heavy, not for --help
 
     path = Path(args.result)
     if path.is_dir():

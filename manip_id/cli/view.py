@@ -17,8 +17,10 @@ import math
 import sys
 import time
 
+from ..datasets import load_dataset
 from ..errors import InputError
-from ._common import add_robot_arguments, reserve_outputs, robot_from_args
+from ..viz.meshcat_server import check_host, is_loopback
+from ._common import add_robot_arguments, reserve_outputs, robot_from_args, warn
 
 
 def register(sub) -> None:
@@ -40,7 +42,9 @@ def register(sub) -> None:
         "--duration", type=float, default=10.0, help="seconds of --simulate motion [default 10]"
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the --simulate excitation")
-    p.add_argument("--fps", type=float, default=30.0, help="animation frames per second")
+    p.add_argument(
+        "--fps", type=float, default=30.0, help="animation frames per second [default 30]"
+    )
     p.add_argument(
         "--no-inertia", action="store_true", help="do not draw the nominal inertia ellipsoids"
     )
@@ -62,14 +66,12 @@ def register(sub) -> None:
 def _motion(robot, args):
     """``(t, q, what)`` to animate along, or None for a still robot."""
     if args.data is not None:
-        from ..datasets import load_dataset
-
         ds = load_dataset(args.data)
         return ds.t, ds.q, f"data {args.data} ({ds.n_samples} samples)"
     if args.simulate:  # kinematics only: no torques, so no inertias needed
         import numpy as np
 
-        from ..simulation import check_simulation_memory
+        from ..simulation import check_simulation_memory  # pinocchio: heavy, not for --help
         from ..trajectories import random_trajectory, trajectory_to_configuration
 
         traj = random_trajectory(robot, harmonics=5, seed=args.seed)
@@ -93,15 +95,11 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--host applies to --serve only")
     host = "127.0.0.1"
     if args.host is not None:
-        from ..viz.meshcat_server import check_host, is_loopback
-
         host = check_host(args.host)
         if not is_loopback(host):
-            from . import warn
-
             warn(f"--host {host}: the viewer is reachable from the network, without authentication")
     outputs = reserve_outputs(args)  # --html checked before the work
-    from ..viz.meshcat_scene import RobotScene, check_trajectory
+    from ..viz.meshcat_scene import RobotScene, check_trajectory  # meshcat: heavy, optional
 
     robot = robot_from_args(args)
     motion = _motion(robot, args)

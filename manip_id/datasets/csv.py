@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import fnmatch
 import itertools
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -116,7 +116,10 @@ def resolve_columns(path: Path, columns: Mapping | None, width: int | None = Non
             if header is not None
             else "no header row: give a column map with 0-based indices"
         )
-        raise DataError(f"{path}: cannot find column(s) for {', '.join(missing)} ({layout})")
+        raise DataError(
+            f"{path}: cannot find column(s) for {', '.join(missing)} ({layout})"
+            + ("" if header is None else _column_hint(header))
+        )
     if len(idx["t"]) != 1:
         raise DataError(f"{path}: 't' must be one column, got {len(idx['t'])}")
     if width is None:
@@ -349,3 +352,15 @@ def write_csv(fh, blocks, layout: Layout, joint_names=None) -> None:
     fh.write(",".join(csv_header(layout, joint_names)) + "\n")
     for block in blocks:
         np.savetxt(fh, block, delimiter=",", fmt="%.17g")
+
+
+def _column_hint(header: Sequence[str]) -> str:
+    """What to do about a CSV whose header is not ours: its columns, and how to map them
+    (``--column FIELD=COLUMNS`` on the command line, ``columns=`` in the API)."""
+    shown = ", ".join(header[:10]) + (", ..." if len(header) > 10 else "")
+    first = header[0] if header else "stamp"
+    return (
+        f"; this file's columns are {shown}: map them with --column FIELD=COLUMNS "
+        f"(columns={{...}} in the API), e.g. --column t={first} --column q='pos*' "
+        "--column dq='vel*' --column tau='eff*'"
+    )

@@ -49,6 +49,7 @@ from .options import (
     PreprocessOptions,
     RankOptions,
     RunOptions,
+    UncertaintyOptions,
 )
 from .problem import FileRecord, FileSums, Problem, accumulate_blocks, row_supports
 from .reading import FileScan, iter_processed, processed_count, scan_file, split_file
@@ -77,6 +78,7 @@ __all__ = [
     "RankOptions",
     "RelativeError",
     "RunOptions",
+    "UncertaintyOptions",
     "accumulate_blocks",
     "accumulate_file",
     "accumulate_files",

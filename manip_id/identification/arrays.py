@@ -10,6 +10,7 @@ Every path ends in the same :func:`~manip_id.identification.solve`.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -28,6 +29,7 @@ from .options import (
     OnlineOptions,
     RankOptions,
     RunOptions,
+    UncertaintyOptions,
     check_least_squares,
     check_method,
 )
@@ -85,6 +87,7 @@ def identify(
     model: ModelOptions | str | dict | None = None,
     rank: RankOptions | dict | None = None,
     run: RunOptions | dict | None = None,
+    uncertainty: UncertaintyOptions | str | dict | None = None,
 ) -> IdentificationResult:
     """Identify the base parameters of ``robot`` from N samples, streamed.
 
@@ -116,6 +119,11 @@ def identify(
     run : RunOptions or None
         ``chunk``, ``workers`` (forked contiguous parts for "ols"/"wls", equal to the
         serial result to round-off) and ``progress(done, total)``.
+    uncertainty : UncertaintyOptions, str, dict or None
+        The covariance behind ``std``: "auto" (default: autocorrelation-consistent,
+        from per-block sums of the accumulation, when the data give at least 16
+        blocks; else white), "white" (``sigma^2 (Y^T Y)^-1``) or "hac"; see
+        :mod:`manip_id.estimators.uncertainty`. ``std_white`` keeps the white one.
 
     Returns
     -------
@@ -124,7 +132,7 @@ def identify(
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
     check_method(method)
-    opts = _Opts(consistent, model, rank, run)
+    opts = _Opts(consistent, model, rank, run, uncertainty)
     online_options = OnlineOptions.from_value(online)
     if opts.model.name != "dynamic":
         return _identify_acceleration_free(robot, (q, dq, tau), method, validation, base, opts)
@@ -140,10 +148,14 @@ def identify(
     online_run = None
     if method in ONLINE:
         est, what = online_estimator(method, r, online_options, n)
-        acc, times = accumulate_online(robot, q, dq, ddq, tau, ind, est, dt, run=run_o)
+        acc, times = accumulate_online(
+            robot, q, dq, ddq, tau, ind, est, dt, run=run_o, uncertainty=opts.uncertainty
+        )
         online_run = OnlineRun(est, what)
     else:
-        acc, times = accumulate_arrays(robot, q, dq, ddq, tau, ind, run=run_o)
+        acc, times = accumulate_arrays(
+            robot, q, dq, ddq, tau, ind, run=run_o, uncertainty=opts.uncertainty
+        )
     timings.update(times)
     problem = Problem(
         robot,
@@ -156,7 +168,7 @@ def identify(
         online=online_run,
         chunk=run_o.chunk,
     )
-    result = solve(problem, method, consistent=opts.consistent, minimum_norm=opts.rank.minimum_norm)
+    result = _solve(problem, method, opts)
     # an implausible consistent fit: would a joint term the model lacks lower the error?
     result.warnings.extend(
         missing_term_warnings(robot, result.standard, [(q, dq, ddq, tau)], blocks, ind, run_o.chunk)
@@ -167,11 +179,23 @@ def identify(
 class _Opts:
     """The option objects of one call, each from its value (None: the defaults)."""
 
-    def __init__(self, consistent, model, rank, run):
+    def __init__(self, consistent, model, rank, run, uncertainty=None):
         self.consistent = ConsistentOptions.from_value(consistent)
         self.model = ModelOptions.from_value(model)
         self.rank = RankOptions.from_value(rank)
         self.run = RunOptions.from_value(run)
+        self.uncertainty = UncertaintyOptions.from_value(uncertainty)
+
+
+def _solve(problem: Problem, method: str, opts: _Opts) -> IdentificationResult:
+    """:func:`solve` with the call's options."""
+    return solve(
+        problem,
+        method,
+        consistent=opts.consistent,
+        minimum_norm=opts.rank.minimum_norm,
+        uncertainty=opts.uncertainty,
+    )
 
 
 def _identify_acceleration_free(
@@ -193,8 +217,17 @@ def _identify_acceleration_free(
     t0 = time.perf_counter()
     accumulate = accumulate_energy if model.name == "energy" else accumulate_momentum
     dt = 1.0 if model.dt is None else float(model.dt)
+    nv_rows = 1 if model.name == "energy" else robot.nv
+    rows_unc = replace(opts.uncertainty, block_length=1)  # rows span windows: start at one
     acc = accumulate(
-        robot, q, dq, tau, dt=dt, window_length=model.window_length, columns=base.independent
+        robot,
+        q,
+        dq,
+        tau,
+        dt=dt,
+        window_length=model.window_length,
+        columns=base.independent,
+        blocks=rows_unc.blocks(base.n_base, nv_rows),
     )
     timings["accumulate"] = time.perf_counter() - t0
     if acc.n_rows <= base.n_base:
@@ -213,7 +246,7 @@ def _identify_acceleration_free(
         model=model.name,
         chunk=opts.run.chunk,
     )
-    return solve(problem, method, consistent=opts.consistent, minimum_norm=opts.rank.minimum_norm)
+    return _solve(problem, method, opts)
 
 
 def _check_parts(parts: list) -> None:
@@ -225,20 +258,38 @@ def _check_parts(parts: list) -> None:
             )
 
 
-def accumulate_parts(robot: Robot, parts, columns, run: RunOptions, split_every: int = 8):
+def accumulate_parts(
+    robot: Robot,
+    parts,
+    columns,
+    run: RunOptions,
+    split_every: int = 8,
+    *,
+    uncertainty: UncertaintyOptions | None = None,
+):
     """Parts ``(func, args)`` (``func(*args)`` yielding blocks ``(q, dq, ddq, tau)``), each one
     task on the run's back-end (:func:`manip_id.execution.open_backend`), the sums added in a
-    tree. ``func`` must be importable on Dask workers and ``args`` picklable. Returns the
-    sums and the task times summed."""
+    tree. ``func`` must be importable on Dask workers and ``args`` picklable. Each part is a
+    record of its own for the per-block sums of ``uncertainty``. Returns the sums and the
+    task times summed."""
     parts = list(parts)
     if not parts:
         raise InputError("no parts to accumulate")
+    unc = UncertaintyOptions.from_value(uncertainty)
     if run.scheduler is None:
-        return accumulate_forked(robot, parts, columns, run.chunk, run.workers, run.progress)
+        r, nv = len(columns), robot.nv
+        records = [unc.blocks(r, nv, stream=k) for k in range(len(parts))]
+        return accumulate_forked(
+            robot, parts, columns, run.chunk, run.workers, run.progress, records=records
+        )
     light = portable_robot(robot)
     with open_backend(scheduler=run.scheduler) as backend:
         leaves = backend.map(
-            blocks_sums, [(light, func, tuple(args), columns, run.chunk) for func, args in parts]
+            blocks_sums,
+            [
+                (light, func, tuple(args), columns, run.chunk, unc, k)
+                for k, (func, args) in enumerate(parts)
+            ],
         )
         (total,) = backend.gather([reduce_tree(backend, leaves, split_every)])
     assert isinstance(total, PartSums)
@@ -255,6 +306,7 @@ def identify_chunks(
     consistent: ConsistentOptions | bool | dict | None = None,
     rank: RankOptions | dict | None = None,
     run: RunOptions | dict | None = None,
+    uncertainty: UncertaintyOptions | str | dict | None = None,
 ) -> IdentificationResult:
     """Least-squares identification from data that arrive in blocks (files, logs, streams).
 
@@ -265,12 +317,14 @@ def identify_chunks(
     process (or Dask task) and the accumulators merge by addition. Memory stays
     O(chunk nv p + nv r^2) per process however many samples flow through.
     ``validation`` is an iterable of blocks too. Methods: "ols" and "wls" (the online
-    laws need the samples in order: use :func:`identify`). Options as :func:`identify`.
+    laws need the samples in order: use :func:`identify`). Options as :func:`identify`;
+    for ``uncertainty`` the blocks of one iterable follow each other, each part is a
+    record of its own.
     """
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
     check_least_squares(method, "identify_chunks solves")
-    opts = _Opts(consistent, None, rank, run)
+    opts = _Opts(consistent, None, rank, run, uncertainty)
     base = resolve_base(robot, base, timings)
     ind = base.independent
     t0 = time.perf_counter()
@@ -278,10 +332,13 @@ def identify_chunks(
     if run_o.workers > 1 or run_o.scheduler is not None:
         parts = list(source)
         _check_parts(parts)
-        acc, times = accumulate_parts(robot, parts, ind, run_o)
+        acc, times = accumulate_parts(robot, parts, ind, run_o, uncertainty=opts.uncertainty)
         timings["accumulate_wall"] = time.perf_counter() - t0
     else:
-        acc, times = accumulate_blocks(robot, source, ind, run_o.chunk, progress=run_o.progress)
+        record = opts.uncertainty.blocks(len(ind), robot.nv)
+        acc, times = accumulate_blocks(
+            robot, source, ind, run_o.chunk, progress=run_o.progress, record=record
+        )
     timings.update(times)
     check_equations(acc.n * robot.nv, base.n_base, f"{acc.n} samples")
     problem = Problem(
@@ -294,7 +351,7 @@ def identify_chunks(
         validation_blocks=validation,
         chunk=run_o.chunk,
     )
-    return solve(problem, method, consistent=opts.consistent, minimum_norm=opts.rank.minimum_norm)
+    return _solve(problem, method, opts)
 
 
 def identify_dataset(robot: Robot, dataset, *, ddq=None, validation=None, **kwargs):

@@ -8,7 +8,11 @@ reports; :func:`summary_rows` its headline figures). The keys::
 
     method, model, robot, n_samples, n_validation_samples, n_parameters, n_base,
     joints, joint_terms, outputs
-    base_parameters     [{name, expression, value, std, std_percent, unit, nominal, flags}]
+    base_parameters     [{name, expression, value, std, std_percent, std_white, unit,
+                          nominal, flags}]   (std: the honest one, see uncertainty)
+    uncertainty         {method, requested, bandwidth, inflation, n_blocks, block_samples,
+                         reason}: how std was made ("hac": holds for correlated residuals;
+                         inflation: median std / std_white)
     relative_error      {train, train_per_joint, validation, per_joint_validation,
                          nominal_train, nominal_train_per_joint, nominal_validation,
                          nominal_per_joint_validation[, validation_per_file]
@@ -95,6 +99,7 @@ OWN_KEYS = {
     "warnings",
     "base",
     "rank_analysis",
+    "uncertainty",
 }
 
 
@@ -275,6 +280,7 @@ def result_to_dict(
         "unexcited": list(ra.unidentifiable) + list(ra.unexcited),
         "relative_error": errors_to_dict(result.relative_error),
         "covariance": [[finite_or_none(v) for v in row] for row in np.asarray(result.covariance)],
+        "uncertainty": result.uncertainty,
         "timings": {k: round(float(v), 6) for k, v in result.timings.items()},
         "solver": result.solver,
         "convergence": result.convergence,
@@ -316,6 +322,7 @@ def _limits(saved: dict, poorly, cond, conv) -> tuple[float, float, float]:
 def _parameter_rows(result, flags) -> list[dict]:
     nominal = result.nominal if result.nominal is not None else [None] * len(result.names)
     units = result.units or [""] * len(result.names)
+    std_white = result.std_white if result.std_white is not None else [None] * len(result.names)
     return [
         {
             "name": n,
@@ -323,16 +330,18 @@ def _parameter_rows(result, flags) -> list[dict]:
             "value": finite_or_none(x),
             "std": finite_or_none(s),
             "std_percent": finite_or_none(sp),
+            "std_white": finite_or_none(sw),
             "unit": u,
             "nominal": finite_or_none(x0),
             "flags": fl,
         }
-        for n, e, x, s, sp, u, x0, fl in zip(
+        for n, e, x, s, sp, sw, u, x0, fl in zip(
             result.names,
             result.expressions,
             result.estimate,
             result.std,
             result.std_percent,
+            std_white,
             units,
             nominal,
             flags,
@@ -437,7 +446,26 @@ def summary_rows(doc: dict) -> dict[str, str]:
         )
     if doc.get("reference_torques"):
         rows["reference torques"] = str(doc["reference_torques"])
+    if doc.get("uncertainty"):
+        rows["standard deviations"] = uncertainty_text(doc["uncertainty"])
     return rows
+
+
+def uncertainty_text(u: dict) -> str:
+    """How the standard deviations were made, in words (the ``uncertainty`` section)."""
+    if u.get("method") == "hac":
+        bw = u.get("bandwidth")
+        text = (
+            f"autocorrelation-consistent (hac, {u.get('n_blocks')} blocks of "
+            f"{u.get('block_samples') or 0:.0f} samples"
+            + ("" if bw is None else f", bandwidth {bw:.3g} blocks")
+            + ")"
+        )
+        if u.get("inflation") is not None:
+            text += f", {u['inflation']:.3g} x the white-noise ones"
+        return text
+    text = "white noise, sigma^2 (Y^T Y)^-1"
+    return text + (f" ({u['reason']})" if u.get("reason") else "")
 
 
 def _parameter_lines(rows: list[dict], max_rows: int | None) -> list[str]:
@@ -530,4 +558,5 @@ __all__ = [
     "result_warnings",
     "structural_directions",
     "summary_rows",
+    "uncertainty_text",
 ]

@@ -26,7 +26,7 @@ from ..execution import ForkBackend
 from ..identifiability import analyze
 from ..regressor import DEFAULT_CHUNK
 from ..robot import Robot
-from .options import PreprocessOptions, RunOptions
+from .options import PreprocessOptions, RunOptions, UncertaintyOptions
 from .problem import FileRecord, FileSums, RowSums, accumulate_rows
 from .reading import FileScan, iter_processed, processed_count, scan_file
 
@@ -134,9 +134,12 @@ def accumulate_span(
     run: RunOptions,
     scan: FileScan,
     span: tuple[int, int | None] = (0, None),
+    uncertainty: UncertaintyOptions | None = None,
 ) -> FileAccumulation:
     """The sums of rows ``[lo, hi)`` of one scanned file's preprocessed stream (the file is
-    preprocessed whole, so spans add up to the file); ``run.progress(samples_done)``."""
+    preprocessed whole, so spans add up to the file); ``run.progress(samples_done)``. The
+    fit's sums carry the per-block sums ``uncertainty`` needs (record 0 from offset ``lo``;
+    :meth:`~manip_id.estimators.blocks.ScoreBlocks.set_stream` numbers the file)."""
     t0 = time.perf_counter()
     settings, pairs = file_stream(robot, spec, options, scan)
     eps = options.velocity_deadband
@@ -144,7 +147,10 @@ def accumulate_span(
     counts: dict[str, Any] = {"n": 0, "excluded": np.zeros(robot.nv, dtype=np.int64)}
     states = _span_states(pairs, robot, span, deadband, counts, run.progress)
     try:
-        sums = accumulate_rows(robot, states, ind, int(run.chunk), deadband=deadband)
+        record = UncertaintyOptions.from_value(uncertainty).blocks(
+            len(ind), robot.nv, offset=int(span[0])
+        )
+        sums = accumulate_rows(robot, states, ind, int(run.chunk), deadband=deadband, record=record)
     except (InputError, DataError) as exc:
         msg = str(exc)
         raise DataError(msg if str(spec.path) in msg else f"{spec.label}: {msg}") from exc
@@ -173,6 +179,7 @@ def accumulate_file(
     scan: FileScan | None = None,
     progress=None,
     part: tuple[int, int] | None = None,
+    uncertainty: UncertaintyOptions | None = None,
 ) -> FileAccumulation:
     """The information sums of one file (see the module docstring).
 
@@ -197,6 +204,8 @@ def accumulate_file(
         ``(k, K)``: only the k-th of K contiguous parts of the file's preprocessed
         samples (the K parts add up to the whole file's sums); the scan's spill file
         is then kept for the other parts (else removed at the end).
+    uncertainty : UncertaintyOptions or None
+        The per-block sums its covariance needs (default ``"auto"``: recorded).
 
     Returns
     -------
@@ -222,7 +231,9 @@ def accumulate_file(
             total = processed_count(scan, settings, options)
             span = ((k * total) // parts, ((k + 1) * total) // parts)
         run = RunOptions(chunk=int(chunk), progress=progress)
-        fa = accumulate_span(robot, spec, options, ind, run=run, scan=scan, span=span)
+        fa = accumulate_span(
+            robot, spec, options, ind, run=run, scan=scan, span=span, uncertainty=uncertainty
+        )
     finally:
         if part is None:
             scan.discard()
@@ -231,12 +242,16 @@ def accumulate_file(
     return fa
 
 
-def _file_task(robot, spec, options, ind, chunk, scan, part=None):
+def _file_task(robot, spec, options, ind, chunk, scan, part=None, uncertainty=None):
     """One task of :func:`accumulate_files`: one file, or one part of it."""
-    return accumulate_file(robot, spec, options, ind, chunk=chunk, scan=scan, part=part)
+    return accumulate_file(
+        robot, spec, options, ind, chunk=chunk, scan=scan, part=part, uncertainty=uncertainty
+    )
 
 
-def _one_file_in_parts(robot, spec, options, ind, run: RunOptions, scan) -> FileAccumulation:
+def _one_file_in_parts(
+    robot, spec, options, ind, run: RunOptions, scan, uncertainty=None
+) -> FileAccumulation:
     """One file's samples in ``run.workers`` contiguous parts, in forked processes."""
     k_parts = int(run.workers)
     try:
@@ -244,7 +259,7 @@ def _one_file_in_parts(robot, spec, options, ind, run: RunOptions, scan) -> File
             parts = backend.map(
                 _file_task,
                 [
-                    (robot, spec, options, ind, run.chunk, scan, (i, k_parts))
+                    (robot, spec, options, ind, run.chunk, scan, (i, k_parts), uncertainty)
                     for i in range(k_parts)
                 ],
             )
@@ -266,6 +281,7 @@ def accumulate_files(
     window=None,
     run: RunOptions | None = None,
     scans: dict | None = None,
+    uncertainty: UncertaintyOptions | None = None,
 ) -> list[FileAccumulation]:
     """:func:`accumulate_file` for every file of ``files`` (specs or their texts), in order.
 
@@ -277,6 +293,8 @@ def accumulate_files(
     made) before any is accumulated, so a bad file fails first, naming it.
     ``run.progress(done, total)`` is called as samples go by (total: the rows the scans
     counted). ``scans``: :class:`FileSpec` -> :class:`FileScan` of files already scanned.
+    ``uncertainty``: the per-block sums its covariance needs (default recorded); each
+    file's blocks are numbered by its place in ``files``.
     """
     run = run or RunOptions()
     scans = dict(scans or {})
@@ -295,7 +313,7 @@ def accumulate_files(
     total = sum(scans[s].n for s in specs)
     progress = run.progress
     if run.workers > 1 and len(specs) == 1:  # one file: its samples in parts
-        out = [_one_file_in_parts(robot, specs[0], options, ind, run, scans[specs[0]])]
+        out = [_one_file_in_parts(robot, specs[0], options, ind, run, scans[specs[0]], uncertainty)]
     elif run.workers > 1:
 
         def report(k: int, _value) -> None:
@@ -303,21 +321,48 @@ def accumulate_files(
                 progress(sum(scans[s].n for s in specs[: k + 1]), total)
 
         with ForkBackend(run.workers) as backend:
-            args = [(robot, s, options, ind, run.chunk, scans[s]) for s in specs]
-            return backend.map(_file_task, args, on_result=report)
+            args = [(robot, s, options, ind, run.chunk, scans[s], None, uncertainty) for s in specs]
+            return _numbered(backend.map(_file_task, args, on_result=report))
     else:
         out = [
             _serial_file(
-                robot, s, options, ind, run, scans[s], sum(scans[x].n for x in specs[:i]), total
+                robot,
+                s,
+                options,
+                ind,
+                run,
+                scans[s],
+                sum(scans[x].n for x in specs[:i]),
+                total,
+                uncertainty=uncertainty,
             )
             for i, s in enumerate(specs)
         ]
     if progress is not None:
         progress(total, total)
-    return out
+    return _numbered(out)
 
 
-def _serial_file(robot, spec, options, ind, run: RunOptions, scan, before: int, total: int):
+def _numbered(files: list[FileAccumulation]) -> list[FileAccumulation]:
+    """Each file's per-block sums numbered by its place in the run (record ``i``)."""
+    for i, fa in enumerate(files):
+        if fa.accumulator.blocks is not None:
+            fa.accumulator.blocks.set_stream(i)
+    return files
+
+
+def _serial_file(
+    robot,
+    spec,
+    options,
+    ind,
+    run: RunOptions,
+    scan,
+    before: int,
+    total: int,
+    *,
+    uncertainty: UncertaintyOptions | None = None,
+):
     """One file in this process, its progress reported as samples of all files (the end
     is reported once, by the caller)."""
     progress = run.progress
@@ -327,7 +372,16 @@ def _serial_file(robot, spec, options, ind, run: RunOptions, scan, before: int, 
         if progress is not None and done < total:
             progress(done, total)
 
-    return accumulate_file(robot, spec, options, ind, chunk=run.chunk, scan=scan, progress=report)
+    return accumulate_file(
+        robot,
+        spec,
+        options,
+        ind,
+        chunk=run.chunk,
+        scan=scan,
+        progress=report,
+        uncertainty=uncertainty,
+    )
 
 
 def merge_accumulations(parts: list[FileAccumulation]) -> RowSums:

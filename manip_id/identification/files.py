@@ -10,6 +10,7 @@ estimate follow from them.
 from __future__ import annotations
 
 import time
+from typing import Any
 
 from ..estimators.consistent.terms import missing_term_warnings
 from ..identifiability import BaseParameters
@@ -20,6 +21,7 @@ from .options import (
     PreprocessOptions,
     RankOptions,
     RunOptions,
+    UncertaintyOptions,
     check_least_squares,
 )
 from .problem import Problem, check_equations, resolve_base
@@ -42,6 +44,7 @@ def identify_datasets(
     rank: RankOptions | dict | None = None,
     run: RunOptions | dict | None = None,
     scans: dict | None = None,
+    uncertainty: UncertaintyOptions | str | dict | None = None,
 ) -> IdentificationResult:
     """Least squares from several log files, each read in chunks and preprocessed on its own.
 
@@ -68,6 +71,9 @@ def identify_datasets(
     scans : dict or None
         FileSpec -> :class:`~manip_id.identification.reading.FileScan` of files
         already scanned.
+    uncertainty : UncertaintyOptions, str or None
+        The covariance: "auto" (default), "white" or "hac" (as :func:`identify`); each
+        file's end is a block boundary.
 
     Returns
     -------
@@ -85,22 +91,29 @@ def identify_datasets(
     copts = ConsistentOptions.from_value(consistent)
     minimum_norm = RankOptions.from_value(rank).minimum_norm
     options = options or PreprocessOptions()
+    uopts = UncertaintyOptions.from_value(uncertainty)
     base = resolve_base(robot, base, timings)
+    kw: dict[str, Any] = dict(consistent=copts, minimum_norm=minimum_norm, uncertainty=uopts)
     if run_o.scheduler is not None:
         problem = distributed_problem(
-            robot, files, validation, base, options, window=window, run=run_o, timings=timings
-        ).problem
+            robot, files, validation, base, options, window=window, run=run_o, timings=timings,
+            uncertainty=uopts,
+        ).problem  # fmt: skip
         problem.t_start = t_start
-        return solve(problem, method, consistent=copts, minimum_norm=minimum_norm)
+        return solve(problem, method, **kw)
     ind = base.independent
     t0 = time.perf_counter()
-    train = accumulate_files(robot, files, options, ind, window=window, run=run_o, scans=scans)
+    train = accumulate_files(
+        robot, files, options, ind, window=window, run=run_o, scans=scans, uncertainty=uopts
+    )
     valid = None
     if validation is not None:
         vrun = RunOptions(chunk=run_o.chunk, workers=run_o.workers)
+        white = UncertaintyOptions(method="white")  # validation: errors only, no blocks
         valid = accumulate_files(
-            robot, validation, options, ind, window=window, run=vrun, scans=scans
-        )
+            robot, validation, options, ind, window=window, run=vrun, scans=scans,
+            uncertainty=white,
+        )  # fmt: skip
     timings["accumulate_wall"] = time.perf_counter() - t0
     for fa in train + (valid or []):
         for k, v in fa.timings.items():
@@ -124,7 +137,7 @@ def identify_datasets(
         still=sums.still,
         raw=sums.raw,
     )
-    result = solve(problem, method, consistent=copts, minimum_norm=minimum_norm)
+    result = solve(problem, method, **kw)
     if window is None:  # an implausible fit: would a joint term the model lacks lower the error?
         vblocks = None if validation is None else _file_blocks(robot, validation, options, scans)
         result.warnings.extend(

@@ -6,6 +6,8 @@
 - :class:`ModelOptions`: the acceleration-free models (energy, momentum).
 - :class:`RankOptions`: what to do with rank-deficient data (minimum norm).
 - :class:`RunOptions`: how the work is executed (chunk, workers, scheduler, progress).
+- :class:`UncertaintyOptions`: the covariance of the estimate ("auto", "white", "hac";
+  defined with its estimators in :mod:`manip_id.estimators.uncertainty`).
 
 and :data:`METHODS`, the one table of estimation methods.
 """
@@ -25,6 +27,7 @@ from ..errors import InputError
 from ..estimators.consistent import DEFAULT_PRIOR_WEIGHT
 from ..estimators.consistent import check_options as check_consistent_options
 from ..estimators.consistent.bounds import BoundsOptions
+from ..estimators.uncertainty import UncertaintyOptions
 from ..regressor import DEFAULT_CHUNK
 from ..signals import DEFAULT_BLOCK, DEFAULT_ORDER
 
@@ -381,6 +384,7 @@ __all__ = [
     "PreprocessOptions",
     "RunOptions",
     "RankOptions",
+    "UncertaintyOptions",
     "check_least_squares",
     "check_method",
     "options_from",

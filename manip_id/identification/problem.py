@@ -27,11 +27,12 @@ from .._checks import as_float_array, check_finite, check_magnitude
 from ..datasets import FileSpec
 from ..errors import InputError
 from ..estimators import InformationAccumulator
+from ..estimators.blocks import ScoreBlocks
 from ..execution import ForkBackend
 from ..identifiability import BaseParameters, analyze
 from ..regressor import DEFAULT_CHUNK, check_states, iter_regressor
 from ..robot import Robot
-from .options import RunOptions
+from .options import RunOptions, UncertaintyOptions
 
 
 @dataclass
@@ -349,6 +350,7 @@ def accumulate_rows(
     deadband: np.ndarray | None = None,
     progress=None,
     total: int = 0,
+    record: ScoreBlocks | None = None,
 ) -> RowSums:
     """Accumulate the base-column information of blocks ``(q, dq, ddq, tau[, tau_raw])``.
 
@@ -358,7 +360,10 @@ def accumulate_rows(
     of samples with ``|dq_j| < deadband_j`` are left out of the fit (standstill, where
     the Coulomb column sign(dq_j) is noise) and summed apart with that column zero
     (:class:`RowSums`); a block's fifth array, the raw torques (N, nv) [N m], is summed
-    against every row for the raw-torque errors. Each block is checked.
+    against every row for the raw-torque errors. Each block is checked. ``record``: an
+    empty :class:`~manip_id.estimators.blocks.ScoreBlocks` that also gets the fit's rows
+    per block of contiguous samples (for the covariance of correlated residuals); it
+    becomes the fit's ``blocks``.
     """
     ev, nv, r = robot.evaluator, robot.nv, len(ind)
     supports = row_supports(robot, ind)
@@ -380,6 +385,8 @@ def accumulate_rows(
             t_reg += t1 - t0
             tau = btau[start:stop]
             keep = None if deadband is None else np.abs(bdq[start:stop]) >= deadband
+            if record is not None:
+                record.add_rows(rows, tau, supports, keep)
             for j in range(nv):
                 rj, tj = rows[j], tau[:, j]
                 rawj = None if braw is None else braw[start:stop, j]
@@ -402,6 +409,8 @@ def accumulate_rows(
                 progress(done + stop, total)
         done += bq.shape[0]
     out = RowSums(fit.accumulator(r, nv, done, supports))
+    if record is not None:
+        out.fit.attach_blocks(record)
     if deadband is not None:
         out.still = still.accumulator(r, nv, 0, supports)
     if with_raw:
@@ -418,23 +427,29 @@ def accumulate_blocks(
     chunk: int,
     progress=None,
     total: int = 0,
+    record: ScoreBlocks | None = None,
 ) -> tuple[InformationAccumulator, dict[str, float]]:
     """The fit's sums of blocks ``(q, dq, ddq, tau)`` (:func:`accumulate_rows` without a
-    deadband) and the seconds spent."""
-    sums = accumulate_rows(robot, blocks, ind, chunk, progress=progress, total=total)
+    deadband, ``record`` the same) and the seconds spent."""
+    sums = accumulate_rows(robot, blocks, ind, chunk, progress=progress, total=total, record=record)
     return sums.fit, sums.timings
 
 
-def _part_accumulate(robot: Robot, func, args, ind, chunk: int):
+def _part_accumulate(robot: Robot, func, args, ind, chunk: int, record=None):
     """One part ``(func, args)``: the blocks ``func(*args)`` accumulated (a task)."""
-    return accumulate_blocks(robot, func(*args), ind, chunk)
+    return accumulate_blocks(robot, func(*args), ind, chunk, record=record)
 
 
-def accumulate_forked(robot: Robot, parts, ind, chunk: int, workers: int, progress=None):
+def accumulate_forked(
+    robot: Robot, parts, ind, chunk: int, workers: int, progress=None, records=None
+):
     """Accumulate ``parts`` (each ``(func, args)`` with ``func(*args)`` yielding blocks) in
     ``workers`` forked processes; the accumulators merge by addition in part order.
-    Returns the sums and the seconds summed over the parts."""
+    ``records``: per part an empty :class:`~manip_id.estimators.blocks.ScoreBlocks` (of
+    the part's stream and offset) or None. Returns the sums and the seconds summed over
+    the parts."""
     parts = list(parts)
+    records = [None] * len(parts) if records is None else list(records)
 
     def report(k: int, _value) -> None:
         if progress is not None:
@@ -443,7 +458,10 @@ def accumulate_forked(robot: Robot, parts, ind, chunk: int, workers: int, progre
     with ForkBackend(workers) as backend:
         results = backend.map(
             _part_accumulate,
-            [(robot, func, args, ind, chunk) for func, args in parts],
+            [
+                (robot, func, args, ind, chunk, rec)
+                for (func, args), rec in zip(parts, records, strict=True)
+            ],
             on_result=report,
         )
     acc = results[0][0].copy()
@@ -461,10 +479,23 @@ def array_part(q, dq, ddq, tau, start: int, stop: int):
     yield q[start:stop], dq[start:stop], ddq[start:stop], tau[start:stop]
 
 
-def accumulate_arrays(robot: Robot, q, dq, ddq, tau, ind, *, run: RunOptions):
+def accumulate_arrays(
+    robot: Robot,
+    q,
+    dq,
+    ddq,
+    tau,
+    ind,
+    *,
+    run: RunOptions,
+    uncertainty: UncertaintyOptions | None = None,
+):
     """The samples' information: in this process, or in ``run.workers`` contiguous parts
-    in forked processes merged by addition (equal to the serial sums to round-off)."""
+    in forked processes merged by addition (equal to the serial sums to round-off, the
+    per-block sums of ``uncertainty`` too)."""
     n, workers, chunk, progress = q.shape[0], run.workers, run.chunk, run.progress
+    unc = UncertaintyOptions.from_value(uncertainty)
+    r, nv = len(ind), robot.nv
     if workers > 1 and n >= 2 * workers:
         t0 = time.perf_counter()
         cuts = np.linspace(0, n, workers + 1).astype(int)
@@ -472,18 +503,35 @@ def accumulate_arrays(robot: Robot, q, dq, ddq, tau, ind, *, run: RunOptions):
             (array_part, (q, dq, ddq, tau, int(a), int(b)))
             for a, b in zip(cuts[:-1], cuts[1:], strict=True)
         ]
-        acc, times = accumulate_forked(robot, parts, ind, chunk, workers)
+        records = [unc.blocks(r, nv, offset=int(a)) for a in cuts[:-1]]
+        acc, times = accumulate_forked(robot, parts, ind, chunk, workers, records=records)
         times["accumulate_wall"] = time.perf_counter() - t0
         return acc, times
-    return accumulate_blocks(robot, [(q, dq, ddq, tau)], ind, chunk, progress=progress, total=n)
+    record = unc.blocks(r, nv)
+    return accumulate_blocks(
+        robot, [(q, dq, ddq, tau)], ind, chunk, progress=progress, total=n, record=record
+    )
 
 
-def accumulate_online(robot: Robot, q, dq, ddq, tau, ind, est, dt: float, *, run: RunOptions):
+def accumulate_online(
+    robot: Robot,
+    q,
+    dq,
+    ddq,
+    tau,
+    ind,
+    est,
+    dt: float,
+    *,
+    run: RunOptions,
+    uncertainty: UncertaintyOptions | None = None,
+):
     """One pass of the online law ``est`` over the samples in order (Euler step ``dt``
     [s]), with the information accumulated in the same pass (for the covariance and the
-    errors); ``run.chunk``, ``run.progress(done, total)``."""
+    errors, with the per-block sums of ``uncertainty``); ``run.chunk``,
+    ``run.progress(done, total)``."""
     n, nv, chunk, progress = q.shape[0], robot.nv, run.chunk, run.progress
-    acc = InformationAccumulator(len(ind), nv)
+    acc = UncertaintyOptions.from_value(uncertainty).accumulator(len(ind), nv)
     t_reg = t_acc = t_onl = 0.0
     t0 = time.perf_counter()
     for c in iter_regressor(robot, q, dq, ddq, chunk=chunk):

@@ -65,10 +65,18 @@ class IdentificationResult:
     estimate
         base parameters theta_b, shape (r,) [units of the independent columns]
     std
-        standard deviations, shape (r,); std_percent: ``100 std / |estimate|`` [%]
+        standard deviations, shape (r,); std_percent: ``100 std / |estimate|`` [%]: the
+        honest ones (``uncertainty["method"]``: "hac", which holds for correlated
+        residuals, or "white"; :mod:`manip_id.estimators.uncertainty`)
     covariance
-        shape (r, r): ``sigma2 (Y_b^T Y_b)^-1`` (OLS, and RLS/gradient at their
-        final estimate), ``(Y_b^T W Y_b)^-1`` for WLS
+        shape (r, r): the covariance behind ``std``; for "white" ``sigma2 (Y_b^T
+        Y_b)^-1`` (OLS, and RLS/gradient at their final estimate), ``(Y_b^T W Y_b)^-1``
+        for WLS; for "hac" the sandwich of the block scores
+    std_white
+        the white-noise standard deviations, shape (r,) (None when not known)
+    uncertainty
+        how ``std`` was made: ``{method, requested, bandwidth, inflation, n_blocks,
+        block_samples, reason}`` (inflation: median ``std / std_white``)
     sigma2
         residual variance [(N m)^2] (weighted, about 1, for WLS)
     noise_variance
@@ -146,6 +154,8 @@ class IdentificationResult:
     context: dict = field(default_factory=dict)
     #: the errors against the raw (unfiltered) torques, when they could be read again
     raw_error: RelativeError | None = None
+    std_white: np.ndarray | None = None
+    uncertainty: dict | None = None
 
     @property
     def standard_parameters(self) -> list[dict]:
@@ -306,9 +316,18 @@ def result_from_dict(doc: dict) -> IdentificationResult:
             convergence=doc.get("convergence"),
             context=context,
             raw_error=None if not raw else errors_from_dict(raw),
+            std_white=_std_white(rows),
+            uncertainty=doc.get("uncertainty"),
         )
     except (KeyError, TypeError, ValueError, IndexError) as exc:
         raise DataError(f"a malformed identification result: {type(exc).__name__}: {exc}") from exc
+
+
+def _std_white(rows: list[dict]) -> np.ndarray | None:
+    """The white-noise std of the parameter rows (None in documents written without it)."""
+    if rows and all("std_white" in r for r in rows):
+        return _array([r["std_white"] for r in rows])
+    return None
 
 
 def _rank_from_dict(doc: dict, base: BaseParameters, names: list[str]) -> RankAnalysis:

@@ -22,53 +22,67 @@ import numpy as np
 from ..errors import InputError, RankDeficiencyError
 from ..estimators import InformationAccumulator, LeastSquaresSolution, solve_accumulator
 from ..estimators.consistent import StandardEstimate, consistent_estimate, minimum_norm_standard
+from ..estimators.uncertainty import Uncertainty, solution_uncertainty
 from ..identifiability import RankAnalysis, analyze_information
 from ..metrics import finite_or_none, relative_error
 from ..robot import Robot
-from .options import LEAST_SQUARES, ConsistentOptions, check_method
+from .options import LEAST_SQUARES, ConsistentOptions, UncertaintyOptions, check_method
 from .problem import FileSums, Problem, check_samples
 from .result import IdentificationResult, RelativeError
 
 
 @dataclass(frozen=True)
-class Uncertainty:
+class FitUncertainty:
     """The covariance of an estimate and the residual variances behind it.
 
     Attributes
     ----------
-    covariance : numpy.ndarray
-        Shape (r, r) [units of the base parameters squared].
+    honest : Uncertainty
+        The covariance of the requested method and the white-noise one beside it
+        (:class:`~manip_id.estimators.uncertainty.Uncertainty`: ``"hac"`` holds for
+        correlated residuals; ``"auto"`` picks it when the sums carry enough blocks).
     sigma2 : float
         Residual variance [(N m)^2] (weighted, about 1, for WLS).
     noise_variance : numpy.ndarray
         Per-joint residual variance, shape (nv,) [(N m)^2].
     """
 
-    covariance: np.ndarray
+    honest: Uncertainty
     sigma2: float
     noise_variance: np.ndarray
 
     @property
+    def covariance(self) -> np.ndarray:
+        """The honest covariance, shape (r, r) [units of the base parameters squared]."""
+        return self.honest.covariance
+
+    @property
     def std(self) -> np.ndarray:
-        """Standard deviations, shape (r,)."""
-        return np.sqrt(np.maximum(np.diag(self.covariance), 0.0))
+        """Honest standard deviations, shape (r,)."""
+        return self.honest.std
 
 
-def estimate_uncertainty(
-    acc: InformationAccumulator, ls: LeastSquaresSolution, estimate: np.ndarray | None = None
-) -> Uncertainty:
-    """The covariance of the least-squares fit ``ls`` on the sums ``acc``.
+def fit_uncertainty(
+    acc: InformationAccumulator,
+    ls: LeastSquaresSolution,
+    estimate: np.ndarray | None = None,
+    options: UncertaintyOptions | None = None,
+) -> FitUncertainty:
+    """The covariance of the least-squares fit ``ls`` on the sums ``acc`` (``options``:
+    its method, default ``"auto"``; :mod:`manip_id.estimators.uncertainty`).
 
     ``estimate``: another estimate on the same data (an online law's final one): the
-    covariance ``sigma^2 (Y_b^T Y_b)^-1`` is then taken at its residual,
-    ``sigma^2 = RSS(estimate) / (n_rows - rank)``.
+    white-noise covariance ``sigma^2 (Y_b^T Y_b)^-1`` is then taken at its residual,
+    ``sigma^2 = RSS(estimate) / (n_rows - rank)``, and the block scores at it.
     """
     if estimate is None:
-        return Uncertainty(ls.covariance, ls.sigma2, ls.noise_variance)
+        honest = solution_uncertainty(acc, ls, options)
+        return FitUncertainty(honest, ls.sigma2, ls.noise_variance)
     rss_j = acc.residual_sum_of_squares(estimate)
     sigma2 = float(rss_j.sum() / max(acc.n_rows - ls.rank, 1))
     cov = ls.covariance * (sigma2 / ls.sigma2) if ls.sigma2 > 0 else ls.covariance * 0
-    return Uncertainty(cov, sigma2, rss_j / max(acc.n - ls.rank / acc.nv, 1e-300))
+    honest = solution_uncertainty(acc, ls, options, estimate=estimate, white_covariance=cov)
+    return FitUncertainty(honest, sigma2, rss_j / max(acc.n - ls.rank / acc.nv, 1e-300))
 
 
 def _rss(acc: InformationAccumulator, still: InformationAccumulator | None, theta):
@@ -188,8 +202,15 @@ def stream_validation(robot: Robot, blocks, ind, estimate, nominal, chunk: int) 
     )
 
 
-def _consistent(problem: Problem, ls: LeastSquaresSolution, opts: ConsistentOptions, method):
-    """The consistent standard parameters, their base estimate, solver text and warnings."""
+def _consistent(
+    problem: Problem,
+    ls: LeastSquaresSolution,
+    opts: ConsistentOptions,
+    method: str,
+    honest: Uncertainty,
+):
+    """The consistent standard parameters, their base estimate, solver text and warnings
+    (``honest``: the covariance the result reports, named in the fit-scale warning)."""
     acc, base = problem.accumulator, problem.base
     standard = consistent_estimate(
         problem.robot,
@@ -213,12 +234,22 @@ def _consistent(problem: Problem, ls: LeastSquaresSolution, opts: ConsistentOpti
             + "; ".join(standard.consistency.messages())
         )
     if standard.fit_scale > 10.0:  # f_feas / r: a chi-square of <= r dof would be ~1
+        if honest.method == "hac":
+            told = (
+                "the reported standard deviations are the autocorrelation-consistent ones "
+                f"({honest.inflation:.3g} times the white-noise ones)"
+            )
+        else:
+            told = (
+                f"the reported (white-noise) standard deviations are likely about "
+                f"{np.sqrt(standard.fit_scale):.2g} times too small"
+                + (f" ({honest.reason})" if honest.reason else "")
+            )
         warnings_.append(
-            f"the residuals are not white noise: the best physical model's fit is "
-            f"{standard.fit_scale:.3g} times its expected chi-square, so the reported "
-            f"(OLS) standard deviations are likely about {np.sqrt(standard.fit_scale):.2g} "
-            "times too small (correlated residuals, filtered torques, model error); the "
-            "prior was weighed against the fit in these inflated units"
+            f"the residuals are not white noise (correlated residuals, filtered torques, model "
+            f"error): the best physical model's fit is {standard.fit_scale:.3g} times its "
+            f"expected chi-square, so {told}; the prior was weighed against the fit in these "
+            "inflated units"
         )
     return standard, base.to_base(standard.values), solver, warnings_
 
@@ -276,6 +307,7 @@ def solve(
     consistent: ConsistentOptions | None = None,
     minimum_norm: bool = False,
     chunk: int | None = None,
+    uncertainty: UncertaintyOptions | str | dict | None = None,
 ) -> IdentificationResult:
     """The identification result of an accumulated problem (module docstring).
 
@@ -292,6 +324,11 @@ def solve(
         Solve rank-deficient data with the minimum-norm solution instead of raising.
     chunk : int or None
         Samples per regressor chunk of a streamed validation pass (default the problem's).
+    uncertainty : UncertaintyOptions, str, dict or None
+        The covariance: ``"auto"`` (default: autocorrelation-consistent from the sums'
+        blocks when they hold enough, else white), ``"white"`` or ``"hac"``
+        (:mod:`manip_id.estimators.uncertainty`). ``std``, ``std_percent`` and
+        ``covariance`` are that one; ``std_white`` the white-noise std.
 
     Raises
     ------
@@ -305,7 +342,8 @@ def solve(
     if (method in LEAST_SQUARES) == (problem.online is not None):
         raise InputError(f"method {method!r} does not match the problem's online pass")
     robot, base, timings = problem.robot, problem.base, problem.timings
-    fit = _fit(problem, method, copts, minimum_norm)
+    uopts = UncertaintyOptions.from_value(uncertainty)
+    fit = _fit(problem, method, copts, minimum_norm, uopts)
     nominal_b = np.asarray(base.to_base(robot.nominal_parameters), dtype=float)
     errors = _errors(problem, fit.estimate, nominal_b, int(chunk or problem.chunk))
     std = fit.uncertainty.std
@@ -323,6 +361,8 @@ def solve(
         std=std,
         std_percent=std_pct,
         covariance=fit.uncertainty.covariance,
+        std_white=fit.uncertainty.honest.std_white,
+        uncertainty=fit.uncertainty.honest.to_dict(),
         sigma2=fit.uncertainty.sigma2,
         noise_variance=fit.uncertainty.noise_variance,
         condition_number=float(fit.rank_analysis.condition_number),
@@ -352,13 +392,19 @@ class _Fit:
 
     estimate: np.ndarray
     solver: str
-    uncertainty: Uncertainty
+    uncertainty: FitUncertainty
     rank_analysis: RankAnalysis
     standard: StandardEstimate | None
     warnings: list[str]
 
 
-def _fit(problem: Problem, method: str, copts: ConsistentOptions, minimum_norm: bool) -> _Fit:
+def _fit(
+    problem: Problem,
+    method: str,
+    copts: ConsistentOptions,
+    minimum_norm: bool,
+    uopts: UncertaintyOptions,
+) -> _Fit:
     """Rank check, least squares (or the online law's estimate), the consistent estimate."""
     robot, acc, base, timings = problem.robot, problem.accumulator, problem.base, problem.timings
     t0 = time.perf_counter()
@@ -386,14 +432,14 @@ def _fit(problem: Problem, method: str, copts: ConsistentOptions, minimum_norm: 
     if online is not None:
         estimate = online.estimator.theta
         solver = (
-            f"{online.description}, one pass over {acc.n} samples; covariance sigma^2 "
-            f"(Y^T Y)^-1 at the final estimate ({ls.solver})"
+            f"{online.description}, one pass over {acc.n} samples; covariance at the final "
+            f"estimate ({ls.solver})"
         )
-    unc = estimate_uncertainty(acc, ls, None if online is None else estimate)
+    unc = fit_uncertainty(acc, ls, None if online is None else estimate, uopts)
     standard: StandardEstimate | None = None
     warnings_: list[str] = []
     if copts.enabled:  # beta = P theta of consistent standard parameters
-        standard, estimate, solver, warnings_ = _consistent(problem, ls, copts, method)
+        standard, estimate, solver, warnings_ = _consistent(problem, ls, copts, method, unc.honest)
         timings["consistent"] = standard.time
     elif online is None:
         standard, warnings_ = _minimum_norm_check(problem, estimate)
@@ -434,8 +480,8 @@ def _outputs(robot: Robot, model: str) -> list[str]:
 
 
 __all__ = [
-    "Uncertainty",
-    "estimate_uncertainty",
+    "FitUncertainty",
+    "fit_uncertainty",
     "raw_errors",
     "solve",
     "stream_validation",

@@ -38,7 +38,7 @@ from ..models import accumulate_energy, accumulate_momentum, window_samples
 from ..regressor import DEFAULT_CHUNK
 from ..robot import Robot
 from .file_sums import accumulate_file, accumulate_span
-from .options import ModelOptions, PreprocessOptions, RunOptions
+from .options import ModelOptions, PreprocessOptions, RunOptions, UncertaintyOptions
 from .problem import (
     FileRecord,
     FileSums,
@@ -127,6 +127,7 @@ def part_sums(
     columns: np.ndarray,
     chunk: int = DEFAULT_CHUNK,
     options: PreprocessOptions | None = None,
+    uncertainty: UncertaintyOptions | None = None,
 ) -> PartSums:
     """The task body: read, preprocess and accumulate one part of one file.
 
@@ -142,6 +143,9 @@ def part_sums(
         samples per regressor chunk
     options
         how files are read and preprocessed (:class:`~.options.PreprocessOptions`)
+    uncertainty
+        the per-block sums its covariance needs (default recorded), numbered by
+        ``part.file`` from the part's first sample
 
     Raises
     ------
@@ -152,19 +156,32 @@ def part_sums(
     ind = np.asarray(columns, dtype=np.intp)
     try:
         if part.start == 0 and part.stop is None:
-            fa = accumulate_file(robot, part.spec, options, ind, chunk=int(chunk))
+            fa = accumulate_file(
+                robot, part.spec, options, ind, chunk=int(chunk), uncertainty=uncertainty
+            )
         else:  # a block of the file's preprocessed stream: only its rows enter the sums
             scan = scan_file(robot, part.spec, options)
             try:
                 run = RunOptions(chunk=int(chunk))
                 span = (part.start, part.stop)
-                fa = accumulate_span(robot, part.spec, options, ind, run=run, scan=scan, span=span)
+                fa = accumulate_span(
+                    robot,
+                    part.spec,
+                    options,
+                    ind,
+                    run=run,
+                    scan=scan,
+                    span=span,
+                    uncertainty=uncertainty,
+                )
             finally:
                 scan.discard()
             if fa.n_samples == 0:
                 raise DataError(f"block [{part.start}, {part.stop}) holds no samples of the file")
     except Exception as exc:
         raise named_error(part.spec.label, exc) from exc
+    if fa.accumulator.blocks is not None:
+        fa.accumulator.blocks.set_stream(part.file)
     return PartSums(fa.accumulator, {part.file: fa.record()}, dict(fa.timings), fa.still, fa.raw)
 
 
@@ -194,13 +211,15 @@ def model_sums(
     options: PreprocessOptions,
     model: str,
     window_length: float | None = None,
+    uncertainty: UncertaintyOptions | None = None,
 ) -> PartSums:
     """Task body of the acceleration-free models: one file's (or block's) rows, accumulated.
 
     The file's preprocessed stream is held in memory (as the local energy and
     momentum paths do); a block ``[start, stop)`` of it holds whole energy
     windows, its last sample being the next block's first (the windows share
-    their end points), so the blocks' rows are exactly the file's.
+    their end points), so the blocks' rows are exactly the file's. The rows' per-block
+    sums (``uncertainty``) are numbered by the file, from the block's first row.
     """
     try:
         f, scan, settings = _processed_rows(robot, part.spec, options)
@@ -217,7 +236,13 @@ def model_sums(
             )
         t0 = time.perf_counter()
         accumulate = accumulate_energy if model == "energy" else accumulate_momentum
-        acc = accumulate(robot, q, dq, tau, dt=dt, window_length=window_length, columns=columns)
+        first_row = part.start // window_samples(window_length, dt) if model == "energy" else 0
+        record = replace(UncertaintyOptions.from_value(uncertainty), block_length=1).blocks(
+            len(columns), 1 if model == "energy" else robot.nv, stream=part.file, offset=first_row
+        )
+        acc = accumulate(
+            robot, q, dq, tau, dt=dt, window_length=window_length, columns=columns, blocks=record
+        )
     except Exception as exc:
         raise named_error(part.spec.label, exc) from exc
     # a block ends on the next block's first sample (stop=None: the file's last block)
@@ -226,10 +251,21 @@ def model_sums(
     return PartSums(acc, {part.file: info}, {"accumulate": time.perf_counter() - t0})
 
 
-def blocks_sums(robot: Robot, func: Callable, args: tuple, columns, chunk: int) -> PartSums:
-    """Task body of a generic part ``(func, args)``: accumulate the blocks ``func(*args)``."""
+def blocks_sums(
+    robot: Robot,
+    func: Callable,
+    args: tuple,
+    columns,
+    chunk: int,
+    uncertainty: UncertaintyOptions | None = None,
+    stream: int = 0,
+) -> PartSums:
+    """Task body of a generic part ``(func, args)``: accumulate the blocks ``func(*args)``
+    (with the per-block sums of ``uncertainty``, as record ``stream``)."""
     t0 = time.perf_counter()
-    acc, times = accumulate_blocks(robot, func(*args), np.asarray(columns, np.intp), int(chunk))
+    ind = np.asarray(columns, np.intp)
+    record = UncertaintyOptions.from_value(uncertainty).blocks(ind.size, robot.nv, stream=stream)
+    acc, times = accumulate_blocks(robot, func(*args), ind, int(chunk), record=record)
     return PartSums(acc, {}, {**times, "task": time.perf_counter() - t0})
 
 
@@ -339,12 +375,15 @@ def distributed_problem(
     run: RunOptions | None = None,
     model: ModelOptions | None = None,
     partition: PartitionOptions | None = None,
+    uncertainty: UncertaintyOptions | None = None,
 ) -> DistributedSums:
     """The problem of ``files`` (and ``validation`` files), each file a task or blocks of
     tasks on the run's back-end (serial without a scheduler, else Dask), added in a tree.
 
     ``model``: "dynamic", or "energy" / "momentum" (their rows from the unfiltered
     torques); the validation error is always the dynamic model's torque error.
+    ``uncertainty``: the per-block sums its covariance needs travel with the sums (each
+    file a record of its own, its parts merged exactly).
     """
     run = run or RunOptions()
     model = model or ModelOptions()
@@ -361,10 +400,10 @@ def distributed_problem(
         t0 = time.perf_counter()
         layout = plan_parts(backend, light, specs, mopts, model, partition.block)
         if model.name == "dynamic":
-            args = [[(light, pt, ind, chunk, options) for pt in lp] for lp in layout]
+            args = [[(light, pt, ind, chunk, options, uncertainty) for pt in lp] for lp in layout]
             leaves = [backend.map(part_sums, a) for a in args]
         else:
-            mo = (mopts, model.name, model.window_length)
+            mo = (mopts, model.name, model.window_length, uncertainty)
             leaves = [
                 backend.map(model_sums, [(light, pt, ind, *mo) for pt in lp]) for lp in layout
             ]
@@ -372,7 +411,10 @@ def distributed_problem(
         total = reduce_tree(backend, per, every)
         vparts = backend.map(
             part_sums,
-            [(light, FilePart(s, i), ind, chunk, options) for i, s in enumerate(vspecs or [])],
+            [
+                (light, FilePart(s, i), ind, chunk, options, UncertaintyOptions(method="white"))
+                for i, s in enumerate(vspecs or [])
+            ],
         )
         fetched = backend.gather([total, *vparts, *(per if partition.per_file else [])])
         timings["distributed"] = time.perf_counter() - t0

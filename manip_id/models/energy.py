@@ -23,6 +23,7 @@ import pinocchio as pin
 from .._checks import as_float_array
 from ..errors import InputError
 from ..estimators import InformationAccumulator
+from ..estimators.blocks import ScoreBlocks
 from ..identifiability import analyze
 from ..regressor import check_states, iter_regressor
 from ..robot import Robot
@@ -160,10 +161,12 @@ def accumulate_energy(
     dt: float,
     window_length: float | None = None,
     columns=None,
+    blocks: ScoreBlocks | None = None,
 ) -> InformationAccumulator:
-    """The energy rows' information on ``columns`` (default all), one output (``nv = 1``)."""
+    """The energy rows' information on ``columns`` (default all), one output (``nv = 1``);
+    with ``blocks`` (empty, of ``nv = 1``) also per block of consecutive windows."""
     cols = np.arange(robot.n_parameters) if columns is None else np.asarray(columns, np.intp)
-    acc = InformationAccumulator(cols.size, 1)
+    acc = InformationAccumulator(cols.size, 1, blocks=False if blocks is None else blocks)
     for E, z in energy_rows(robot, q, dq, tau, dt=dt, window_length=window_length):
         acc.add(E[:, None, :], z[:, None], columns=cols, check=False)
     return acc

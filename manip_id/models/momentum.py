@@ -35,6 +35,7 @@ import pinocchio as pin
 
 from ..errors import InputError
 from ..estimators import InformationAccumulator
+from ..estimators.blocks import ScoreBlocks
 from ..robot import Robot
 from .energy import check_model_states, window_samples
 
@@ -244,10 +245,12 @@ def accumulate_momentum(
     window_length: float | None = None,
     bandwidth: float | None = None,
     columns=None,
+    blocks: ScoreBlocks | None = None,
 ) -> InformationAccumulator:
-    """The momentum rows' information on ``columns`` (default all), per joint (``nv`` outputs)."""
+    """The momentum rows' information on ``columns`` (default all), per joint (``nv`` outputs);
+    with ``blocks`` (empty) also per block of consecutive rows."""
     cols = np.arange(robot.n_parameters) if columns is None else np.asarray(columns, np.intp)
-    acc = InformationAccumulator(cols.size, robot.nv)
+    acc = InformationAccumulator(cols.size, robot.nv, blocks=False if blocks is None else blocks)
     for W, z in momentum_rows(
         robot, q, dq, tau, dt=dt, window_length=window_length, bandwidth=bandwidth
     ):
