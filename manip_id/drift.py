@@ -15,11 +15,10 @@ the relative change ``d_i / theta_r,i``. A file is ``changed`` when ``p < alpha`
 when ``p_i < alpha / n_terms`` (Bonferroni over the file's terms, so that an unchanged file
 flags some term with probability at most ``alpha``).
 
-The covariances are the results' as given: today the white-noise ``sigma2 (Y_b^T Y_b)^-1``
-(WLS: its weighted form), which is too small when the residuals are correlated (filtered
-real data); then the p-values are too small too. On data whose noise is white (simulation)
-and of different size per joint, identify with ``method="wls"``: the pooled OLS variance
-misstates each parameter's.
+The covariances are :func:`test_covariance` of the results: the honest standard deviations
+(autocorrelation-consistent, so that filtered real data do not flag every file) with the
+white-noise correlations. On data whose noise is of different size per joint, identify
+with ``method="wls"``: the pooled OLS variance misstates each parameter's.
 """
 
 from __future__ import annotations
@@ -160,12 +159,37 @@ def _check_same_base(reference, estimate) -> None:
         )
 
 
+def test_covariance(result) -> np.ndarray:
+    """The covariance a drift test uses: the white-noise correlations scaled to the honest
+    standard deviations, ``D C_white D`` with ``D = diag(max(1, std / std_white))``.
+
+    The honest (autocorrelation-consistent) covariance is estimated from some 60-130 block
+    scores: its diagonal is good, but as a full (r, r) matrix with r near the number of
+    blocks it is ill-conditioned, and ``d^T S^-1 d`` then grows far beyond its chi-square
+    (every unchanged simulated robot flagged). The white-noise matrix holds the
+    correlations the regressor implies, exactly; the honest std scale them. A result
+    without the white covariance (an older JSON) uses its ``covariance`` as given.
+    """
+    cov = np.asarray(result.covariance, float)
+    white = getattr(result, "covariance_white", None)
+    std_white = getattr(result, "std_white", None)
+    if white is None or std_white is None:
+        return cov
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    sw = np.asarray(std_white, float)
+    scale = np.divide(std, sw, out=np.ones_like(std), where=sw > 0)
+    # never below the white-noise std: an inflation under 1 is the block estimate's own
+    # noise (about 10 % on a 10 s file), and a 54-dof chi-square is that sensitive
+    scale = np.maximum(scale, 1.0)
+    return np.asarray(white, float) * np.outer(scale, scale)
+
+
 def compare(reference, estimate, *, alpha: float = DEFAULT_ALPHA, file: str = "") -> FileDrift:
     """One estimate against the reference (module docstring); both
     :class:`~manip_id.identification.IdentificationResult` s of the same base parameters."""
     _check_same_base(reference, estimate)
     d = np.asarray(estimate.estimate, float) - np.asarray(reference.estimate, float)
-    S = np.asarray(reference.covariance, float) + np.asarray(estimate.covariance, float)
+    S = test_covariance(reference) + test_covariance(estimate)
     if not (np.isfinite(S).all() and np.isfinite(d).all()):
         raise InputError(f"{file or 'the estimate'}: non-finite estimates or covariances")
     w, V = np.linalg.eigh(0.5 * (S + S.T))

@@ -23,8 +23,8 @@ import time
 import numpy as np
 
 from .._io import OutputSet
-from ..errors import InputError
 from .._native import native_stderr_captured
+from ..errors import InputError
 from ._common import add_robot_arguments, reserve_outputs, robot_from_args
 
 

@@ -280,6 +280,7 @@ def result_to_dict(
         "unexcited": list(ra.unidentifiable) + list(ra.unexcited),
         "relative_error": errors_to_dict(result.relative_error),
         "covariance": [[finite_or_none(v) for v in row] for row in np.asarray(result.covariance)],
+        **_white_covariance(result),
         "uncertainty": result.uncertainty,
         "timings": {k: round(float(v), 6) for k, v in result.timings.items()},
         "solver": result.solver,
@@ -542,6 +543,14 @@ def result_text(doc: dict, max_rows: int | None = None) -> str:
     lines += _standard_lines(doc)
     lines += [f"warning: {x}" for x in doc.get("warnings", [])]
     return "\n".join(lines)
+
+
+def _white_covariance(result) -> dict:
+    """``{"covariance_white": rows}`` when the result carries the white-noise covariance."""
+    cov = getattr(result, "covariance_white", None)
+    if cov is None:
+        return {}
+    return {"covariance_white": [[finite_or_none(v) for v in row] for row in np.asarray(cov)]}
 
 
 __all__ = [

@@ -156,6 +156,8 @@ class IdentificationResult:
     raw_error: RelativeError | None = None
     std_white: np.ndarray | None = None
     uncertainty: dict | None = None
+    #: the white-noise covariance beside the honest ``covariance``, shape (r, r)
+    covariance_white: np.ndarray | None = None
 
     @property
     def standard_parameters(self) -> list[dict]:
@@ -318,9 +320,17 @@ def result_from_dict(doc: dict) -> IdentificationResult:
             raw_error=None if not raw else errors_from_dict(raw),
             std_white=_std_white(rows),
             uncertainty=doc.get("uncertainty"),
+            covariance_white=_matrix(doc.get("covariance_white"), len(rows)),
         )
     except (KeyError, TypeError, ValueError, IndexError) as exc:
         raise DataError(f"a malformed identification result: {type(exc).__name__}: {exc}") from exc
+
+
+def _matrix(value, n: int) -> np.ndarray | None:
+    """An (n, n) matrix of the JSON (rows of numbers), or None when absent."""
+    if value is None:
+        return None
+    return _array([v for row in value for v in row]).reshape(n, n)
 
 
 def _std_white(rows: list[dict]) -> np.ndarray | None:

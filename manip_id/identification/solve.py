@@ -362,6 +362,7 @@ def solve(
         std_percent=std_pct,
         covariance=fit.uncertainty.covariance,
         std_white=fit.uncertainty.honest.std_white,
+        covariance_white=fit.uncertainty.honest.covariance_white,
         uncertainty=fit.uncertainty.honest.to_dict(),
         sigma2=fit.uncertainty.sigma2,
         noise_variance=fit.uncertainty.noise_variance,
