@@ -160,28 +160,10 @@ def _check_same_base(reference, estimate) -> None:
 
 
 def test_covariance(result) -> np.ndarray:
-    """The covariance a drift test uses: the white-noise correlations scaled to the honest
-    standard deviations, ``D C_white D`` with ``D = diag(max(1, std / std_white))``.
-
-    The honest (autocorrelation-consistent) covariance is estimated from some 60-130 block
-    scores: its diagonal is good, but as a full (r, r) matrix with r near the number of
-    blocks it is ill-conditioned, and ``d^T S^-1 d`` then grows far beyond its chi-square
-    (every unchanged simulated robot flagged). The white-noise matrix holds the
-    correlations the regressor implies, exactly; the honest std scale them. A result
-    without the white covariance (an older JSON) uses its ``covariance`` as given.
-    """
-    cov = np.asarray(result.covariance, float)
-    white = getattr(result, "covariance_white", None)
-    std_white = getattr(result, "std_white", None)
-    if white is None or std_white is None:
-        return cov
-    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    sw = np.asarray(std_white, float)
-    scale = np.divide(std, sw, out=np.ones_like(std), where=sw > 0)
-    # never below the white-noise std: an inflation under 1 is the block estimate's own
-    # noise (about 10 % on a 10 s file), and a 54-dof chi-square is that sensitive
-    scale = np.maximum(scale, 1.0)
-    return np.asarray(white, float) * np.outer(scale, scale)
+    """The covariance of ``result`` the tests use (:meth:`IdentificationResult.test_covariance`;
+    a result object without that method: its ``covariance``)."""
+    method = getattr(result, "test_covariance", None)
+    return np.asarray(method() if callable(method) else result.covariance, float)
 
 
 def compare(reference, estimate, *, alpha: float = DEFAULT_ALPHA, file: str = "") -> FileDrift:

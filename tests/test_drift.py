@@ -80,7 +80,7 @@ def test_unchanged_robots_give_uniform_p_values(robot, fleet):
     assert stats.kstest(p, "uniform").pvalue > 0.01, np.sort(p)
     flagged_terms = sum(any(t.changed for t in f.terms) for f in rep.files)
     assert stats.binomtest(flagged_terms, N_UNCHANGED, 0.05, alternative="greater").pvalue > 0.01
-    assert rep.covariance_kind == "white-noise"
+    assert rep.covariance_kind == "honest (hac std, white-noise correlations)"
 
 
 def test_changed_viscous_friction_is_flagged_on_that_joint_alone(robot, fleet):

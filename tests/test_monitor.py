@@ -181,7 +181,7 @@ def test_false_alarm_rate_on_new_collision_free_runs(robot, theta, identified):
     th = calibrate_thresholds(robot, result, calib, false_alarm=alpha)
     assert th.rate <= alpha and th.n_samples == sum(d.t.size for d in calib)
     assert np.all(th.model_bound > 0)  # the result's covariance adds its part
-    assert th.covariance_kind == "white-noise"
+    assert th.covariance_kind == "honest (hac std, white-noise correlations)"
     mon = CollisionMonitor(robot, result_model(robot, result), th)
     n = alarms = 0
     for seed in range(20, 26):  # 6 new runs, 6 x 4001 samples

@@ -159,6 +159,27 @@ class IdentificationResult:
     #: the white-noise covariance beside the honest ``covariance``, shape (r, r)
     covariance_white: np.ndarray | None = None
 
+    def test_covariance(self) -> np.ndarray:
+        """The covariance for tests on the base parameters (drift, monitor bounds), shape
+        (r, r): the white-noise correlations scaled to the honest standard deviations,
+        ``D C_white D`` with ``D = diag(max(1, std / std_white))``.
+
+        The honest (autocorrelation-consistent) covariance comes from some 60-130 block
+        scores: its diagonal is good, but as a full matrix with r near the number of blocks
+        it is ill-conditioned, and a chi-square ``d^T S^-1 d`` grows far beyond its
+        distribution. The white-noise matrix holds the correlations the regressor implies;
+        the honest std scale them, never below the white ones (an inflation under 1 is the
+        block estimate's own noise, about 10 % on a 10 s file). Without the white
+        covariance (an older JSON) it is ``covariance`` as given.
+        """
+        cov = np.asarray(self.covariance, float)
+        if self.covariance_white is None or self.std_white is None:
+            return cov
+        std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        sw = np.asarray(self.std_white, float)
+        scale = np.maximum(np.divide(std, sw, out=np.ones_like(std), where=sw > 0), 1.0)
+        return np.asarray(self.covariance_white, float) * np.outer(scale, scale)
+
     @property
     def standard_parameters(self) -> list[dict]:
         """``[{"name", "value", "unit", "nominal"}]`` per standard parameter (see ``standard``)."""

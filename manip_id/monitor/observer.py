@@ -100,6 +100,9 @@ def covariance_kind(result) -> str:
     kind = getattr(result, "covariance_kind", None)
     if kind is None:
         kind = (getattr(result, "context", None) or {}).get("covariance_kind")
+    if kind is None and isinstance(getattr(result, "uncertainty", None), dict):
+        method = result.uncertainty.get("method")  # "hac": honest std, white correlations
+        kind = {"hac": "honest (hac std, white-noise correlations)"}.get(method, kind)
     return str(kind) if kind else "white-noise"
 
 
@@ -133,7 +136,8 @@ def model_from_result(robot: Robot, result, source: str = "") -> MonitorModel:
             + (f" (e.g. {theirs[0]})" if theirs else ""),
         )
     theta = standard_from_base(robot, result.estimate, base)
-    cov = np.asarray(result.covariance, dtype=float)
+    test = getattr(result, "test_covariance", None)
+    cov = np.asarray(test() if callable(test) else result.covariance, dtype=float)
     ok = cov.shape == (len(result.estimate),) * 2 and bool(np.isfinite(cov).all())
     kind = covariance_kind(result) if ok else None
     return MonitorModel(
