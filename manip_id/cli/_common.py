@@ -388,6 +388,21 @@ def report_options(args: argparse.Namespace, source: str | None = None):
     )
 
 
+def print_result(report: dict) -> None:
+    """The run's result on stdout: the one text rendering of its document
+    (:func:`manip_id.identification.result_text`; the warnings go to stderr,
+    :func:`print_warnings`), then a simulation's base-parameter error against its truth."""
+    from ..identification import result_text  # pinocchio: heavy, not for --help
+
+    print(result_text({**report, "warnings": []}))
+    if report.get("parameter_error") is not None:
+        worst = report.get("parameter_error_in_std")
+        print(
+            f"base parameter error vs truth: {100 * report['parameter_error']:.3f} %"
+            + ("" if worst is None else f" (max {worst:.2f} std)")
+        )
+
+
 def print_warnings(document: dict) -> None:
     """Every warning of the document (its JSON ``warnings``), once each, on stderr as
     ``manip-id: warning: ...``: what is saved is what is printed."""

@@ -37,12 +37,12 @@ from ..viz.report_document import (
     add_raw_reference,
     result_document,
 )
-from ..viz.report_tables import summary_text
 from ._common import (
     consistent_kwargs,
     data_column_map,
     file_specs,
     preprocess_options,
+    print_result,
     profile_from_args,
     progress,
     robot_from_args,
@@ -212,7 +212,6 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     if train is not None:  # the samples are in memory anyway
         parts = _raw_parts(f.specs, f.vspecs, train, valid, options)
         add_raw_reference(report, robot, result, parts, args.chunk)
-    print(result.table())
-    print(summary_text(report))
+    print_result(report)
     _print_files(args, report, files is not None)
     return write_outputs(args, outputs, robot, result, report, ReportSamples(train, valid, train))

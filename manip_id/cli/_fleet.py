@@ -20,7 +20,6 @@ from ..fleet import identify_files
 from ..identification import ModelOptions, PartitionOptions, RunOptions
 from ..signals import DEFAULT_CUTOFF
 from ..viz.report_document import RunContext, add_file_info, result_document
-from ..viz.report_tables import summary_text
 from ._common import (
     consistent_kwargs,
     data_column_map,
@@ -28,6 +27,7 @@ from ._common import (
     finish,
     note_exports,
     preprocess_options,
+    print_result,
     print_warnings,
     profile_from_args,
     report_options,
@@ -116,8 +116,7 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     if model != "dynamic":  # as the local energy / momentum path reports them
         report.update(model=model, window_length=args.window_length)
         report["outputs"] = list(result.output_names)
-    print(result.table())
-    print(summary_text(report))
+    print_result(report)
     if args.per_file:
         print(_per_file_table(result))
     print_warnings(report)
