@@ -17,6 +17,7 @@ import numpy as np
 
 from ..errors import InfeasibleTrajectoryError
 from . import figures
+from .meshcat_scene import RobotScene, link_identifiability
 from .report import write_report
 from .report_answers import identify_answers
 from .report_document import ReportOptions, ReportSamples
@@ -25,8 +26,6 @@ from .report_tables import report_parameter_rows, report_quality_rows, report_su
 
 def build_scene(robot, result, full, title: str, notes: list, assets: str = "inline"):
     """The report's scene, or None (with a note) when it cannot be drawn: never fatal."""
-    from .meshcat_scene import RobotScene, link_identifiability  # meshcat: heavy, optional
-
     try:
         scene = RobotScene(robot, title=title)
         scene.assets = assets
