@@ -88,8 +88,8 @@ def test_torque_figure_panels(tmp_path):
         pred,
         nom,
         validation_start=7.0,
-        zoom=1.0,
         errors=[(0.01, 0.2), (0.02, 0.2)],
+        options=figures.FigureOptions(zoom=1.0),
     )
     axes = fig.axes
     assert len(axes) == 6  # per joint: record, zoom, histogram

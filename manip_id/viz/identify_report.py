@@ -77,7 +77,9 @@ def history_figure(robot, result, train, report: dict):
         reference_label=label,
         prediction_error=h.error,
         torque_rms=rms,
-        title=f"{report['method']} on {robot.name}: convergence of the base parameters",
+        options=figures.FigureOptions(
+            title=f"{report['method']} on {robot.name}: convergence of the base parameters"
+        ),
     )
 
 
@@ -131,12 +133,14 @@ def _fit_figures(robot, result, report: dict, samples: ReportSamples, run_name: 
             j["pred"],
             j["npred"],
             validation_start=j["start"],
-            joint_names=joints,
-            units=units,
             errors=errors,
             reference=reference,
-            title=f"measured, identified and nominal torques ({part} errors in the titles): "
-            f"{run_name}",
+            options=figures.FigureOptions(
+                title=f"measured, identified and nominal torques ({part} errors in the "
+                f"titles): {run_name}",
+                joint_names=joints,
+                units=units,
+            ),
         ),
         "residuals": lambda path: figures.residuals(
             path,
