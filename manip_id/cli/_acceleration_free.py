@@ -18,15 +18,8 @@ from ..errors import InputError
 from ..identification import ModelOptions, RunOptions, identify
 from ..signals import DEFAULT_CUTOFF, preprocess
 from ..viz.report_document import ReportSamples, RunContext, result_document
-from ._common import (
-    column_map,
-    consistent_kwargs,
-    fleet_wanted,
-    prepare,
-    print_result,
-    robot_from_args,
-    write_outputs,
-)
+from ._common import column_map, fleet_wanted, prepare
+from ._runtime import consistent_kwargs, print_result, robot_from_args, write_outputs
 from ._simulated import simulate_record
 
 

@@ -37,14 +37,11 @@ from ..viz.report_document import (
     add_raw_reference,
     result_document,
 )
-from ._common import (
+from ._common import data_column_map, file_specs, profile_from_args, progress
+from ._runtime import (
     consistent_kwargs,
-    data_column_map,
-    file_specs,
     preprocess_options,
     print_result,
-    profile_from_args,
-    progress,
     robot_from_args,
     write_outputs,
 )

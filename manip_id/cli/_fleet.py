@@ -19,17 +19,14 @@ from types import SimpleNamespace
 from ..fleet import identify_files
 from ..identification import ModelOptions, PartitionOptions, RunOptions
 from ..signals import DEFAULT_CUTOFF
+from ..viz.identify_report import write_fleet_report
 from ..viz.report_document import RunContext, add_file_info, result_document
-from ._common import (
+from ._common import data_column_map, file_specs, finish, print_warnings, profile_from_args
+from ._runtime import (
     consistent_kwargs,
-    data_column_map,
-    file_specs,
-    finish,
     note_exports,
     preprocess_options,
     print_result,
-    print_warnings,
-    profile_from_args,
     report_options,
     robot_from_args,
     stage_export,
@@ -125,8 +122,6 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
         outputs.write_json(args.json, report)
     path = None
     if args.report is not None:
-        from ..viz.identify_report import write_fleet_report  # matplotlib, meshcat: heavy
-
         options = report_options(args, f"{len(specs)} files")
         path = write_fleet_report(
             args.report_claim, robot, result, report, options=options, per_file=args.per_file

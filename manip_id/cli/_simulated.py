@@ -20,16 +20,11 @@ from ..identification import RunOptions, identify, identify_chunks
 from ..simulation import SimulationStream, check_simulation_memory
 from ..trajectories import optimize_excitation, random_trajectory
 from ..viz.report_document import ReportSamples, RunContext, add_raw_reference, result_document
-from ._common import (
-    SIM_DEFAULTS,
-    column_map,
+from ._common import SIM_DEFAULTS, column_map, finish, prepare, print_warnings, progress
+from ._runtime import (
     consistent_kwargs,
-    finish,
     note_exports,
-    prepare,
     print_result,
-    print_warnings,
-    progress,
     robot_from_args,
     stage_export,
     write_outputs,
