@@ -686,7 +686,7 @@ def test_json_not_published_when_the_report_fails(work, capfd, monkeypatch):
     ids=["runtime-error", "type-error", "keyboard-interrupt", "multiline-error"],
 )
 def test_the_one_exception_boundary(exc, status, text, work, capfd, monkeypatch):
-    from manip_id.cli import robots
+    from manip_id.cli import _robots as robots  # the command's run function
 
     def fail(args):
         args.outputs.file("o.json", "--json")  # a reserved output must vanish too
@@ -708,7 +708,7 @@ def test_the_one_exception_boundary(exc, status, text, work, capfd, monkeypatch)
 
 
 def test_library_warnings_become_one_line_each(work, capfd, monkeypatch):
-    from manip_id.cli import robots
+    from manip_id.cli import _robots as robots  # the command's run function
 
     def noisy(args):
         for _ in range(3):

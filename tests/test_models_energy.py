@@ -289,7 +289,8 @@ def test_cli_model_option(tmp_path, capsys):
     assert report["window_length"] == 0.05
     assert report["n_base"] == len(report["true_base_parameters"])
     assert report["parameter_error_in_std"] < 4.5  # 1 % torque noise, within its std
-    assert "relative error: train" in capsys.readouterr().out
+    out_text = capsys.readouterr().out  # the one rendering: the model's own outputs
+    assert "(energy model)" in out_text and "train error per joint: energy" in out_text
     assert main([*args, "--model", "momentum", "--workers", "2"]) == 2
     assert "one process" in capsys.readouterr().err
     assert main([*args, "--model", "energy", "--window-length", "-1"]) == 2

@@ -88,8 +88,8 @@ def test_torque_figure_panels(tmp_path):
         pred,
         nom,
         validation_start=7.0,
-        zoom=1.0,
         errors=[(0.01, 0.2), (0.02, 0.2)],
+        options=figures.FigureOptions(zoom=1.0),
     )
     axes = fig.axes
     assert len(axes) == 6  # per joint: record, zoom, histogram
@@ -144,7 +144,7 @@ def test_real_panda_report(panda_log, tmp_path, capsys):
     assert sorted(bad) == ["panda_joint6.fv", "panda_joint7.Izz"]
     first_flagged = min(i for i, r in enumerate(rows) if r[1])
     assert all(not r[1] for r in rows[:first_flagged]) and names.index(bad[0]) > first_flagged
-    assert "0.741 % (nominal URDF model 18 %)" in index
+    assert "0.741 % (nominal model 18.009 %)" in index  # summary_rows, the one rendering
     assert "low-pass 3 Hz" in index and "trimmed" in index
     assert "<h2>Data quality</h2>" in index
     assert (rep / "scene.html").stat().st_size < 5_000_000  # decimated meshes

@@ -39,6 +39,7 @@ import warnings
 import psutil
 
 from .._io import OutputSet, remove_temporaries
+from .._native import native_stderr_captured  # noqa: F401 (re-exported, as earlier)
 from ..errors import ManipIdError, did_you_mean
 from ._common import warn  # noqa: F401 (the commands' warnings, as earlier releases had it)
 

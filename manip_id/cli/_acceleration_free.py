@@ -18,15 +18,8 @@ from ..errors import InputError
 from ..identification import ModelOptions, RunOptions, identify
 from ..signals import DEFAULT_CUTOFF, preprocess
 from ..viz.report_document import ReportSamples, RunContext, result_document
-from ..viz.report_tables import summary_text
-from ._common import (
-    column_map,
-    consistent_kwargs,
-    fleet_wanted,
-    prepare,
-    robot_from_args,
-    write_outputs,
-)
+from ._common import column_map, fleet_wanted, prepare
+from ._runtime import consistent_kwargs, print_result, robot_from_args, write_outputs
 from ._simulated import simulate_record
 
 
@@ -139,6 +132,5 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     report["model"] = args.model
     report["window_length"] = args.window_length
     report["outputs"] = list(result.output_names)
-    print(result.table())
-    print(summary_text(report))
+    print_result(report)
     return write_outputs(args, outputs, robot, result, report, ReportSamples(train, valid, full))

@@ -4,30 +4,25 @@ Robot options and loading, output reservation, progress bars, CSV column maps, t
 data-file options of identify (specs, preprocessing options), the consistency options,
 the URDF export and the end of a run (publish the outputs, say where they are).
 
-Modules that load Pinocchio (the robot, the identification) are imported inside the
-functions that need them: ``manip-id --help`` builds every parser from this module
-without them.
+Nothing here loads Pinocchio: ``manip-id --help`` builds every parser from this module.
+What the commands share once they run is in :mod:`._runtime`; a command's run function
+is imported by :func:`command` when the command runs.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import math
 import os
 import sys
 import warnings
-from typing import TYPE_CHECKING
 
 from .._io import OutputSet, write_json  # noqa: F401 (the commands import write_json here)
-from .._native import native_stderr_captured
 from ..datasets import parse_file_spec
-from ..datasets.stream import torque_scale_vector
-from ..errors import InputError, did_you_mean
+from ..errors import InputError
 from ..profiles import find_profile, load_profile
 from ..signals import DEFAULT_CUTOFF, preprocess
-
-if TYPE_CHECKING:
-    from ..robot import Robot
 
 
 def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
@@ -75,24 +70,8 @@ def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def robot_from_args(args: argparse.Namespace) -> Robot:
-    """Load the robot named by :func:`add_robot_arguments` options."""
-    from ..robot import load_robot  # pinocchio: heavy, not for --help
-
-    joints = [j for j in args.joints.split(",") if j] if getattr(args, "joints", None) else None
-    with native_stderr_captured("urdfdom"):  # its C++ messages become one warning line
-        return load_robot(
-            args.robot,
-            armature=args.armature,
-            friction=args.friction,
-            spring=args.spring,
-            active_joints=joints,
-            package_dirs=args.package_dir,
-            profile=_profile_option(args),
-        )
-
-
-def _profile_option(args: argparse.Namespace):
+def profile_option(args: argparse.Namespace):
+    """``--profile``: a name or path, False for ``none``, None when not given."""
     value = getattr(args, "profile", None)
     return False if value == "none" else value
 
@@ -103,7 +82,7 @@ def profile_from_args(args: argparse.Namespace):
     ``--profile`` when given (``none``: no profile), else ``robots/ROBOT.toml`` for a
     robot given by name; None when there is none.
     """
-    value = _profile_option(args)
+    value = profile_option(args)
     if value is False:
         return None
     if value is not None:
@@ -170,21 +149,6 @@ def check_seed_and_workers(args: argparse.Namespace) -> None:
         if workers > cores:
             warn(f"--workers {workers} capped at the {cores} cores of this machine")
             args.workers = cores
-
-
-def check_frame(robot, frame: str) -> None:
-    """A misspelt ``--frame``: an error naming the closest frame (and the frames on moving
-    joints); other frames are left to the library's own checks."""
-    model = robot.model
-    if model.existFrame(frame):
-        return
-    hint = did_you_mean(frame, [f.name for f in model.frames])
-    if hint:
-        moving = [f.name for f in model.frames if int(f.parentJoint) > 0]
-        raise InputError(
-            f"robot {robot.name!r} has no frame {frame!r}{hint}; frames on moving joints: "
-            + ", ".join(moving)
-        )
 
 
 def warn(message: str) -> None:
@@ -276,14 +240,6 @@ def add_scheduler_argument(parser, what: str) -> None:
     )
 
 
-def check_scheduler(args: argparse.Namespace) -> None:
-    """Refuse a malformed ``--scheduler`` before any work (nothing of Dask imported)."""
-    if getattr(args, "scheduler", None) is not None:
-        from ..execution import parse_scheduler  # numpy, psutil: not for --help
-
-        parse_scheduler(args.scheduler)
-
-
 # ---------------------------------------------------- data files of identify
 def add_file_arguments(parser: argparse.ArgumentParser) -> None:
     """The data-file options of ``manip-id identify`` (besides --data and --validate)."""
@@ -325,7 +281,7 @@ def add_file_arguments(parser: argparse.ArgumentParser) -> None:
         "--drop-bad-rows",
         action="store_true",
         help="drop (and count) bad rows instead of refusing the file: NaN/Inf, values beyond "
-        "the plausible magnitudes of their unit, malformed CSV lines",
+        "the plausible magnitudes of their unit, malformed CSV lines [default: refuse]",
     )
 
 
@@ -364,38 +320,6 @@ def spec_options(args: argparse.Namespace) -> dict:
     }
 
 
-def before_fit(robot, specs, options, args, *, currents: bool = False):
-    """The pre-fit audit of ``specs``: printed, and the specs to fit.
-
-    ``options``: the run's :class:`~manip_id.pipeline.PreprocessOptions` (torque
-    scale, bad rows, deadband, cut-off). ``currents``: the torque columns are expected
-    to hold currents (``drive-gains``): no torque-scale finding. With
-    ``--trim-standstill`` the specs come back with the windows the audit keeps.
-    Returns ``(specs, audit)``.
-    """
-    from ..audit import audit_files
-
-    audit = audit_files(robot, specs, _audit_options(options, currents))
-    print(audit.table())
-    if getattr(args, "trim_standstill", False):
-        specs = audit.trimmed()
-        kept = [s.label for s in specs]
-        print("--trim-standstill: " + ", ".join(kept))
-    return specs, audit
-
-
-def _audit_options(options, currents: bool):
-    from ..audit import AuditOptions
-
-    return AuditOptions(
-        torque_scale=options.torque_scale,
-        drop_bad_rows=options.drop_bad_rows,
-        standstill=options.velocity_deadband,
-        cutoff=options.cutoff,
-        currents=currents,
-    )
-
-
 def file_specs(values, args: argparse.Namespace, colmap) -> list:
     """The file specs (path, window, columns, topic, time unit, delay) of ``--data`` /
     ``--validate`` values."""
@@ -414,69 +338,7 @@ def data_column_map(args: argparse.Namespace, profile) -> dict | None:
     return colmap
 
 
-def preprocess_options(args: argparse.Namespace, nv: int, profile_scale=None):
-    """The :class:`~manip_id.identification.PreprocessOptions` of identify's data-file options.
-
-    ``--torque-scale`` (one gain or one per joint), else the profile's [data] torque_scale.
-    """
-    from ..identification import PreprocessOptions  # pinocchio: heavy, not for --help
-
-    scale = None
-    if args.torque_scale is not None:
-        scale = torque_scale_vector(
-            parse_floats(args.torque_scale, "--torque-scale"), nv, "--torque-scale"
-        )
-    elif profile_scale is not None:  # the robot profile's [data] torque_scale
-        scale = torque_scale_vector(profile_scale, nv, "the profile's torque_scale")
-    return PreprocessOptions(
-        cutoff=args.cutoff,
-        order=args.order,
-        trim=args.trim,
-        decimate=args.decimate,
-        torque_scale=None if scale is None else tuple(scale.tolist()),
-        velocity_deadband=args.velocity_deadband,
-        drop_bad_rows=args.drop_bad_rows,
-    )
-
-
 # ------------------------------------------------------- consistent, export
-def consistent_kwargs(args: argparse.Namespace) -> dict:
-    """The physically consistent estimation options of identify, as keyword arguments."""
-    from ..identification import ConsistentOptions  # pinocchio: heavy, not for --help
-
-    return dict(
-        consistent=ConsistentOptions(
-            enabled=args.consistent,
-            solver=args.solver,
-            prior=args.prior,
-            prior_weight=args.prior_weight,
-            bounds=args.bound_options.bounds,
-            mass_range=args.bound_options.mass_range,
-            total_mass=args.bound_options.total_mass,
-        )
-    )
-
-
-def stage_export(robot, result, args: argparse.Namespace, outputs) -> None:
-    """Stage the exported URDF / MJCF and their sidecars (published with the other outputs)."""
-    from ..export import export_texts, mjcf_text, sidecar_path  # pinocchio: heavy
-    from ..export.sidecar import identification_provenance  # pinocchio: heavy
-
-    prov = identification_provenance("manip-id identify", vars(args), result)
-    theta = result.standard.values
-    if getattr(args, "export_urdf", None):
-        texts = export_texts(robot, theta, args.export_urdf, provenance=prov)
-        outputs.write_text(args.export_urdf, texts.urdf)
-        outputs.write_json(sidecar_path(args.export_urdf), texts.sidecar)
-    if getattr(args, "export_mjcf", None):
-        mj = mjcf_text(robot, theta, args.export_mjcf, provenance=prov)
-        outputs.write_text(args.export_mjcf, mj.xml)
-        outputs.write_json(sidecar_path(args.export_mjcf), mj.sidecar)
-
-
-def exports_wanted(args: argparse.Namespace) -> bool:
-    """Whether the run writes a URDF or an MJCF export."""
-    return bool(getattr(args, "export_urdf", None) or getattr(args, "export_mjcf", None))
 
 
 def finish(args: argparse.Namespace, outputs, report_path=None) -> int:
@@ -498,24 +360,14 @@ SIM_DEFAULTS = {"duration": 20.0, "rate": 200.0, "noise": 0.01, "seed": 0}
 FLEET_METHODS = ("ols", "wls")
 
 
+def exports_wanted(args: argparse.Namespace) -> bool:
+    """Whether the run writes a URDF or an MJCF export."""
+    return bool(getattr(args, "export_urdf", None) or getattr(args, "export_mjcf", None))
+
+
 def fleet_wanted(args: argparse.Namespace) -> bool:
     """Whether an identify run goes through :func:`manip_id.fleet.identify_files`."""
     return getattr(args, "scheduler", None) is not None or bool(getattr(args, "per_file", False))
-
-
-def report_options(args: argparse.Namespace, source: str | None = None):
-    """The :class:`~manip_id.viz.report_document.ReportOptions` of identify's options."""
-    from ..viz.report_document import ReportOptions  # pinocchio: heavy, not for --help
-
-    if source is None:
-        source = "simulated" if args.simulate else ", ".join(map(str, args.data))
-    return ReportOptions(
-        source=source,
-        simulated=bool(args.simulate),
-        chunk=args.chunk,
-        scene_assets=getattr(args, "scene_assets", "inline"),
-        force=args.force,
-    )
 
 
 def print_warnings(document: dict) -> None:
@@ -523,42 +375,6 @@ def print_warnings(document: dict) -> None:
     ``manip-id: warning: ...``: what is saved is what is printed."""
     for text in document.get("warnings") or []:
         warn(str(text))
-
-
-def note_exports(args: argparse.Namespace, report: dict) -> None:
-    """Record in the document the files ``--export-urdf`` writes (the report links them)."""
-    if exports_wanted(args):
-        from ..export import sidecar_path  # pinocchio: heavy, not for --help
-
-        report["exported"] = {}
-        if getattr(args, "export_urdf", None):
-            report["exported"]["URDF"] = str(args.export_urdf)
-            report["exported"]["URDF sidecar (armature, offsets)"] = str(
-                sidecar_path(args.export_urdf)
-            )
-        if getattr(args, "export_mjcf", None):
-            report["exported"]["MJCF"] = str(args.export_mjcf)
-            report["exported"]["MJCF sidecar"] = str(sidecar_path(args.export_mjcf))
-
-
-def write_outputs(args: argparse.Namespace, outputs, robot, result, report: dict, samples) -> int:
-    """Print the warnings of ``report``, stage ``--json``, ``--report`` (``samples``: what it
-    draws) and ``--export-urdf``, then publish them all together (:func:`finish`); the exit
-    status (0)."""
-    print_warnings(report)
-    note_exports(args, report)
-    if args.json:
-        outputs.write_json(args.json, report)
-    path = None
-    if args.report is not None:
-        from ..viz.identify_report import write_identify_report  # matplotlib, meshcat: heavy
-
-        path = write_identify_report(
-            args.report_claim, robot, result, report, samples, options=report_options(args)
-        )
-    if exports_wanted(args):
-        stage_export(robot, result, args, outputs)
-    return finish(args, outputs, path)
 
 
 def prepare(ds, args: argparse.Namespace, what: str):
@@ -572,3 +388,14 @@ def prepare(ds, args: argparse.Namespace, what: str):
         )
     except InputError as exc:
         raise InputError(f"{what}: {exc}") from exc
+
+
+def command(module: str):
+    """The run function of a command, in ``module`` (``manip_id.cli._identify``),
+    imported when the command runs: that module loads Pinocchio and the identification,
+    which ``manip-id --help`` never needs."""
+
+    def run(args: argparse.Namespace) -> int:
+        return importlib.import_module(module).run(args)
+
+    return run

@@ -37,15 +37,12 @@ from ..viz.report_document import (
     add_raw_reference,
     result_document,
 )
-from ..viz.report_tables import summary_text
-from ._common import (
+from ._common import data_column_map, file_specs, profile_from_args, progress
+from ._runtime import (
     before_fit,
     consistent_kwargs,
-    data_column_map,
-    file_specs,
     preprocess_options,
-    profile_from_args,
-    progress,
+    print_result,
     robot_from_args,
     write_outputs,
 )
@@ -221,7 +218,6 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     if train is not None:  # the samples are in memory anyway
         parts = _raw_parts(f.specs, f.vspecs, train, valid, options)
         add_raw_reference(report, robot, result, parts, args.chunk)
-    print(result.table())
-    print(summary_text(report))
+    print_result(report)
     _print_files(args, report, files is not None)
     return write_outputs(args, outputs, robot, result, report, ReportSamples(train, valid, train))

@@ -19,18 +19,21 @@ from types import SimpleNamespace
 from ..fleet import identify_files
 from ..identification import ModelOptions, PartitionOptions, RunOptions
 from ..signals import DEFAULT_CUTOFF
+from ..viz.identify_report import write_fleet_report
 from ..viz.report_document import RunContext, add_file_info, result_document
-from ..viz.report_tables import summary_text
 from ._common import (
-    consistent_kwargs,
     data_column_map,
     exports_wanted,
     file_specs,
     finish,
-    note_exports,
-    preprocess_options,
     print_warnings,
     profile_from_args,
+)
+from ._runtime import (
+    consistent_kwargs,
+    note_exports,
+    preprocess_options,
+    print_result,
     report_options,
     robot_from_args,
     stage_export,
@@ -118,8 +121,7 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     if model != "dynamic":  # as the local energy / momentum path reports them
         report.update(model=model, window_length=args.window_length)
         report["outputs"] = list(result.output_names)
-    print(result.table())
-    print(summary_text(report))
+    print_result(report)
     if args.per_file:
         print(_per_file_table(result))
     print_warnings(report)
@@ -128,8 +130,6 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
         outputs.write_json(args.json, report)
     path = None
     if args.report is not None:
-        from ..viz.identify_report import write_fleet_report  # matplotlib, meshcat: heavy
-
         options = report_options(args, f"{len(specs)} files")
         path = write_fleet_report(
             args.report_claim, robot, result, report, options=options, per_file=args.per_file

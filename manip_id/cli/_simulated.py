@@ -20,17 +20,19 @@ from ..identification import RunOptions, identify, identify_chunks
 from ..simulation import SimulationStream, check_simulation_memory
 from ..trajectories import optimize_excitation, random_trajectory
 from ..viz.report_document import ReportSamples, RunContext, add_raw_reference, result_document
-from ..viz.report_tables import summary_text
 from ._common import (
     SIM_DEFAULTS,
     column_map,
-    consistent_kwargs,
     exports_wanted,
     finish,
-    note_exports,
     prepare,
     print_warnings,
     progress,
+)
+from ._runtime import (
+    consistent_kwargs,
+    note_exports,
+    print_result,
     robot_from_args,
     stage_export,
     write_outputs,
@@ -131,8 +133,7 @@ def _run_stream(robot, args, outputs, timings: dict, t_start: float) -> int:
     theta_true = np.asarray(stream.theta_true, dtype=float)
     ctx = _context(args, source, n_validation=n - k, theta_true=theta_true, timings=timings)
     report = result_document(robot, result, ctx)
-    print(result.table())
-    print(summary_text(report))
+    print_result(report)
     print_warnings(report)
     note_exports(args, report)
     if args.json:
@@ -204,6 +205,5 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     if valid is not None and validation is not None:  # valid is validation preprocessed
         parts.append(("validation", valid, validation.t, validation.tau))
     add_raw_reference(report, robot, result, parts, args.chunk)
-    print(result.table())
-    print(summary_text(report))
+    print_result(report)
     return write_outputs(args, outputs, robot, result, report, ReportSamples(train, valid, full))

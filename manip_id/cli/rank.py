@@ -2,11 +2,7 @@
 
 from __future__ import annotations
 
-import argparse
-
-from ..datasets import check_robot, load_dataset
-from ..signals import preprocess
-from ._common import add_robot_arguments, reserve_outputs, robot_from_args
+from ._common import add_robot_arguments, command
 
 
 def register(sub) -> None:
@@ -49,46 +45,4 @@ def register(sub) -> None:
         help="relative rank tolerance on the column-scaled singular values "
         "(default max(max(M, p) * eps, 1e-8))",
     )
-    p.set_defaults(func=run)
-
-
-def run(args: argparse.Namespace) -> int:
-    from ..identifiability import analyze_dataset, structural_analysis  # pinocchio: heavy
-
-    outputs = reserve_outputs(args)  # every output checked (and the report claimed) first
-    robot = robot_from_args(args)
-    dataset = _load_data(robot, args.data) if args.data is not None else None
-    structural = structural_analysis(
-        robot, seed=args.seed, n_samples=args.samples, tolerance=args.tolerance
-    )
-    print(structural.report())
-    out = {"robot": robot.name, **structural.to_dict()}
-    data = None
-    if dataset is not None:
-        data = analyze_dataset(robot, dataset, structural=structural, tolerance=args.tolerance)
-        print()
-        print(data.report(details=False))
-        out["data"] = {"file": str(args.data), **data.to_dict()}
-    if args.json is not None:
-        outputs.write_json(args.json, out)
-    if args.report is not None:
-        from ..viz.rank_report import write_rank_report  # matplotlib, meshcat: heavy
-
-        path = write_rank_report(
-            args.report_claim, robot, structural, out, data=data, dataset=dataset, force=args.force
-        )
-    outputs.publish()  # all outputs appear together, once all are complete
-    if args.json is not None:
-        print(f"\nwrote {args.json}")
-    if args.report is not None:
-        print(f"\nwrote the report to {path}/index.html")
-    return 0
-
-
-def _load_data(robot, path):
-    """The dataset at ``path``, checked against ``robot``, with accelerations."""
-    dataset = load_dataset(path)
-    check_robot(dataset, robot)
-    if dataset.ddq is None:
-        dataset = preprocess(dataset)
-    return dataset
+    p.set_defaults(func=command("manip_id.cli._rank"))

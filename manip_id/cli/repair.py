@@ -10,9 +10,10 @@ is checked before the work and written atomically.
 
 from __future__ import annotations
 
-import argparse
-
-from ._common import add_robot_arguments, robot_from_args
+from ._common import (
+    add_robot_arguments,
+    command,
+)
 
 
 def register(sub) -> None:
@@ -28,30 +29,4 @@ def register(sub) -> None:
     p.add_argument("out", metavar="OUT.urdf", help="the repaired URDF to write")
     p.add_argument("--force", action="store_true", help="replace OUT if it exists")
     p.add_argument("--json", metavar="OUT", help="write what changed per body as JSON")
-    p.set_defaults(func=run)
-
-
-def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    from ..errors import InputError
-    from ..export import check_output, export_urdf, sidecar_path
-    from ..repair import repair_nominal
-    from ._common import reserve_outputs
-
-    check_output(args.out, args.force)  # before the work
-    if args.json and Path(args.json).resolve() == Path(args.out).resolve():
-        raise InputError(f"--json {args.json} is OUT.urdf")
-    outputs = reserve_outputs(args)
-    robot = robot_from_args(args)
-    result = repair_nominal(robot)
-    print(f"repair of {robot.name}:")
-    print(result.table())
-    written = export_urdf(robot, result.theta, args.out, force=args.force)
-    if args.json:
-        outputs.write_json(args.json, {"robot": robot.name, "repair": result.to_dict()})
-    outputs.publish()
-    print(f"wrote {written.urdf} and its sidecar {sidecar_path(written.urdf).name}")
-    if args.json:
-        print(f"wrote {args.json}")
-    return 0
+    p.set_defaults(func=command("manip_id.cli._repair"))

@@ -30,8 +30,10 @@ def _figures(robot, cmp, run_name: str, base) -> dict:
             reference=base.to_base(a.theta_true),
             reference_label="truth",
             prediction_error=a.prediction_error,
-            error_label="torque prediction error on new states [-]",
-            title=f"base-parameter error and prediction error over time: {run_name}",
+            options=figures.FigureOptions(
+                title=f"base-parameter error and prediction error over time: {run_name}",
+                error_label="torque prediction error on new states [-]",
+            ),
         ),
         "tracking_error": lambda path: figures.tracking_error(
             path,

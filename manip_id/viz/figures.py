@@ -31,6 +31,7 @@ from .plotting import (
     TRAIN,
     VAL,
     VPRED,
+    FigureOptions,
     names_for,
     new_figure,
     no_mathtext,
@@ -43,6 +44,7 @@ from .plotting import (
 
 __all__ = [
     "DPI",
+    "FigureOptions",
     "MAX_POINTS",
     "online_history",
     "parameter_history",
@@ -311,13 +313,9 @@ def torque_comparison(
     tau_nominal,
     *,
     validation_start: float | None = None,
-    joint_names: Sequence[str] | None = None,
-    units: str | Sequence[str] = "N m",
-    zoom: float = 2.0,
     errors: Sequence[tuple[float | None, float | None]] | None = None,
     reference: str = "measured",
-    title: str = "torques",
-    bins: int = 60,
+    options: FigureOptions | None = None,
 ) -> Figure:
     """Per joint: measured, identified and nominal torques over time, a zoom, the residuals.
 
@@ -330,8 +328,12 @@ def torque_comparison(
 
     t: [s], shape (N,); tau, tau_pred, tau_nominal: shape (N, n) [units];
     errors: per joint ``(identified, nominal)`` relative errors shown in the
-    titles (fractions); reference: what "measured" is (e.g. "filtered at 3 Hz").
+    titles (fractions); reference: what "measured" is (e.g. "filtered at 3 Hz");
+    options: title, joint names, units, the zoom's span [s] and the histograms' bins.
     """
+    o = options or FigureOptions()
+    joint_names, units, zoom, bins = o.joint_names, o.units, o.zoom, o.bins
+    title = o.title or "torques"
     t, tau = series(t, tau, "t", "tau")
     n = tau.shape[1]
     _, pred = series(t, tau_pred, "t", "tau_pred", width=n)

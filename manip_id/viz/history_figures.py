@@ -19,6 +19,7 @@ from .plotting import (
     PRED,
     VAL,
     VPRED,
+    FigureOptions,
     names_for,
     new_figure,
     save,
@@ -198,9 +199,7 @@ def online_history(
     reference_label: str = "final estimate",
     prediction_error=None,
     torque_rms: float | None = None,
-    error_label: str = "prediction error [N m]",
-    max_lines: int = 12,
-    title: str = "online estimate",
+    options: FigureOptions | None = None,
 ) -> Figure:
     """Convergence of an online law: base-parameter relative errors and prediction error.
 
@@ -212,8 +211,11 @@ def online_history(
     otherwise, e.g. an error that is already relative).
 
     t: [s], shape (K,); theta_hat: shape (K, r); reference: shape (r,) (the truth of
-    a simulation, or the batch / final estimate); prediction_error: shape (K,).
+    a simulation, or the batch / final estimate); prediction_error: shape (K,);
+    options: title, ``error_label``, ``max_lines``.
     """
+    o = options or FigureOptions()
+    error_label, max_lines, title = o.error_label, o.max_lines, o.title or "online estimate"
     t, th = series(t, theta_hat, "t", "theta_hat")
     r = th.shape[1]
     names = names_for(names, r, "parameter names", "parameter")

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..errors import InfeasibleTrajectoryError
 from . import figures
+from .meshcat_scene import RobotScene, link_identifiability
 from .report import write_report
 from .report_answers import identify_answers
 from .report_document import ReportOptions, ReportSamples
@@ -25,8 +26,6 @@ from .report_tables import report_parameter_rows, report_quality_rows, report_su
 
 def build_scene(robot, result, full, title: str, notes: list, assets: str = "inline"):
     """The report's scene, or None (with a note) when it cannot be drawn: never fatal."""
-    from .meshcat_scene import RobotScene, link_identifiability  # meshcat: heavy, optional
-
     try:
         scene = RobotScene(robot, title=title)
         scene.assets = assets
@@ -78,7 +77,9 @@ def history_figure(robot, result, train, report: dict):
         reference_label=label,
         prediction_error=h.error,
         torque_rms=rms,
-        title=f"{report['method']} on {robot.name}: convergence of the base parameters",
+        options=figures.FigureOptions(
+            title=f"{report['method']} on {robot.name}: convergence of the base parameters"
+        ),
     )
 
 
@@ -132,12 +133,14 @@ def _fit_figures(robot, result, report: dict, samples: ReportSamples, run_name: 
             j["pred"],
             j["npred"],
             validation_start=j["start"],
-            joint_names=joints,
-            units=units,
             errors=errors,
             reference=reference,
-            title=f"measured, identified and nominal torques ({part} errors in the titles): "
-            f"{run_name}",
+            options=figures.FigureOptions(
+                title=f"measured, identified and nominal torques ({part} errors in the "
+                f"titles): {run_name}",
+                joint_names=joints,
+                units=units,
+            ),
         ),
         "residuals": lambda path: figures.residuals(
             path,

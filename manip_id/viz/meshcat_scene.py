@@ -98,6 +98,23 @@ def _rotation_y_to(axis: np.ndarray) -> np.ndarray:
 
 
 # ------------------------------------------------------------------ trajectory
+def _set_entry(label: str, color, wire: bool, shown: bool, count: str) -> str:
+    """A parameter set's legend line: a check box that shows or hides it, its swatch
+    (dashed for a wire frame), its label and how many bodies it draws."""
+    path = json.dumps(["meshcat", "inertia", label])
+    box = (
+        f'<input type="checkbox" {"checked " if shown else ""}'
+        f'onchange=\'viewer.set_property({html_lib.escape(path)}, "visible", '
+        "this.checked); viewer.set_dirty()'>"
+    )
+    return (
+        f"<label>{box}"
+        f'<span class="sw{" wire" if wire else ""}" style="background:'
+        f'{css_color(color)}; border-color:{css_color(color)}"></span> '
+        f"{html_lib.escape(label)}: {count}, {'wire frame' if wire else 'solid'}</label>"
+    )
+
+
 @dataclass
 class _Legend:
     title: str
@@ -434,24 +451,9 @@ class RobotScene:
             if too_wide and visible is None
             else ""
         )
-        path = json.dumps(["meshcat", "inertia", label])
-        box = (
-            f'<input type="checkbox" {"checked " if shown else ""}'
-            f'onchange=\'viewer.set_property({html_lib.escape(path)}, "visible", '
-            "this.checked); viewer.set_dirty()'>"
-        )
+        entry = _set_entry(label, color, wire, shown, f"{drawn} of {len(ellipsoids)} bodies")
         self._legend.append(
-            _Legend(
-                f"inertia ellipsoids: {html_lib.escape(label)}",
-                [
-                    f"<label>{box}"
-                    f'<span class="sw{" wire" if wire else ""}" style="background:'
-                    f'{css_color(color)}; border-color:{css_color(color)}"></span> '
-                    f"{html_lib.escape(label)}: {drawn} of {len(ellipsoids)} bodies, "
-                    f"{'wire frame' if wire else 'solid'}{why}</label>"
-                ],
-                notes,
-            )
+            _Legend(f"inertia ellipsoids: {html_lib.escape(label)}", [entry + why], notes)
         )
         self._place_all(self._q_static, self._vis)
         self._build_animation()

@@ -26,6 +26,8 @@ import webbrowser
 from dataclasses import dataclass, field
 from typing import Any
 
+import umsgpack
+
 from ..errors import InputError, ManipIdError
 
 LOOPBACK = "127.0.0.1"
@@ -150,7 +152,6 @@ def replay(commands, host: str = LOOPBACK, open_browser: bool = False) -> LiveVi
     """Start a server on ``host`` (:func:`start_server`) and replay the packed meshcat
     ``commands`` into it; returns the :class:`LiveView` (stop it when done)."""
     import meshcat  # optional heavy library: only for a live view
-    import umsgpack  # meshcat's message packing, with meshcat
 
     server = start_server(host)
     try:

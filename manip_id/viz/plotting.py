@@ -9,6 +9,7 @@ at an even stride (:func:`stride`; the arrays themselves are not copied).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +25,39 @@ from ..errors import InputError
 MAX_POINTS = 4000
 #: Resolution of the PNG files [dots per inch].
 DPI = 100
+
+
+@dataclass(frozen=True)
+class FigureOptions:
+    """How a figure is labelled and drawn.
+
+    Attributes
+    ----------
+    title : str
+        The figure's title ("" for the figure's own default).
+    joint_names : sequence of str or None
+        One name per column (default ``joint 1``, ...).
+    units : str or sequence of str
+        The columns' unit, or one per column (e.g. ``N m``, ``N``).
+    zoom : float
+        Span of a zoomed window [s] (torque comparisons).
+    bins : int
+        Histogram bins (torque comparisons).
+    error_label : str
+        What a prediction-error axis shows (online histories).
+    max_lines : int
+        Lines drawn at most (online histories: the parameters that end farthest).
+    """
+
+    title: str = ""
+    joint_names: Sequence[str] | None = None
+    units: str | Sequence[str] = "N m"
+    zoom: float = 2.0
+    bins: int = 60
+    error_label: str = "prediction error [N m]"
+    max_lines: int = 12
+
+
 #: Colors: measured (training), identified prediction, validation, its prediction, nominal.
 TRAIN, PRED, VAL, VPRED, NOM = "#7f7f7f", "#1f77b4", "#bcbd22", "#d62728", "#2ca02c"
 

@@ -24,8 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..identification import NOT_DETERMINED
 from .report import html_table
-from .report_tables import NOT_DETERMINED, not_determined, number
+from .report_tables import not_determined, number
 
 #: A body mass outside [1/MASS_RATIO, MASS_RATIO] times the nominal one is implausible.
 MASS_RATIO = 3.0
@@ -101,10 +102,29 @@ def model_quality(doc: Mapping) -> tuple[str, str]:
                     if val and per_train and per_train[j] is not None
                     else {}
                 ),
+                **_raw_columns(raw, j, val),
                 "_class": "warn" if e is not None and e > 0.1 else "",
             }
         )
     return "How good is the model?", text + html_table(rows, "(no per-joint errors)")
+
+
+def _raw_columns(raw: Mapping, j: int, val: bool) -> dict:
+    """Joint ``j``'s errors against the raw torques, when the document has them."""
+    key, nkey = (
+        ("per_joint_validation", "nominal_per_joint_validation")
+        if val
+        else (
+            "train_per_joint",
+            "nominal_train_per_joint",
+        )
+    )
+    out = {}
+    for label, k in (("identified, raw [%]", key), ("nominal, raw [%]", nkey)):
+        values = raw.get(k)
+        if values is not None and j < len(values) and values[j] is not None:
+            out[label] = number(100 * values[j], 3)
+    return out
 
 
 # ---------------------------------------------------------------- trust

@@ -181,11 +181,12 @@ def add_raw_reference(report: dict, robot, result, parts, chunk: int) -> None:
     torques are interpolated linearly at the processed times (the processed samples
     are the raw ones, trimmed, or resampled on a uniform grid).
     Adds ``relative_error_raw`` {train, validation, nominal_train, nominal_validation}
-    and states both references in ``reference_torques``.
+    and states both references in ``reference_torques``, unless the identification
+    measured them itself (its raw pass over the files).
     """
     pre = report.get("preprocess") or {}
-    if not pre.get("filter_torque"):
-        return
+    if not pre.get("filter_torque") or report.get("relative_error_raw"):
+        return  # raw torques as the reference, or the identification's own raw pass
     nominal = replace(result, estimate=result.nominal)
     out: dict = {}
     for name, proc, t_raw, tau_raw in parts:

@@ -9,31 +9,21 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..identification import NOT_DETERMINED, summary_rows
+from ..identification.document import NOT_DETERMINED_PERCENT
+
 
 def _pct(x) -> str:
     return "n/a" if x is None else f"{100 * float(x):.3g} %"
 
 
 def report_summary(report: dict, source: str) -> dict:
-    """The report's summary rows: errors in percent as the CLI prints them, the nominal
-    model beside the identified one, and the preprocessing stated."""
-    rel = report["relative_error"]
+    """The report's summary rows: the result's headline figures as every rendering shows
+    them (:func:`manip_id.identification.summary_rows`: errors in percent, the nominal
+    model beside the identified one, raw-torque errors, reference torques), then what the
+    run knows (source, preprocessing, split, windows, deadband, a simulation's truth)."""
     pre = report.get("preprocess") or {}
-    summary = {
-        "robot": report["robot"],
-        "method": report["method"]
-        + ("" if report.get("model", "dynamic") == "dynamic" else f" ({report['model']} model)"),
-        "source": source,
-        "training samples": report["n_samples"],
-        "validation samples": report.get("n_validation_samples"),
-        "base parameters": f"{report['n_base']} of {report['n_parameters']}",
-        "condition number": report["condition_number"],
-        "relative torque error, train": f"{_pct(rel['train'])} (nominal URDF model "
-        f"{_pct(rel.get('nominal_train'))})",
-        "relative torque error, validation": f"{_pct(rel['validation'])} (nominal URDF model "
-        f"{_pct(rel.get('nominal_validation'))})",
-        "reference torques": report.get("reference_torques", "raw"),
-    }
+    summary: dict = {"robot": report["robot"], "source": source, **summary_rows(report)}
     if pre:
         rate = pre.get("rate")
         summary["preprocessing"] = (
@@ -61,12 +51,6 @@ def report_summary(report: dict, source: str) -> dict:
     n_bad = sum(bool(p["flags"]) for p in report["base_parameters"])
     summary["flagged parameters"] = f"{n_bad} of {report['n_base']}"
     return summary
-
-
-#: A std above this [%] is no number a user can act on: "not determined by these data"
-#: (as the result's flag of the same name, which also marks minimum-norm values).
-NOT_DETERMINED_PERCENT = 1000.0
-NOT_DETERMINED = "not determined by these data"
 
 
 def number(x, digits: int = 4) -> str:
@@ -175,49 +159,3 @@ def report_quality_rows(report: dict) -> list[dict]:
                 }
             )
     return rows
-
-
-def summary_text(report: dict) -> str:
-    """The run in a few lines, as ``manip-id identify`` prints them after the table.
-
-    An energy or momentum model (``report["model"]``) without per-joint validation
-    reports its own outputs (``report["outputs"]``), not the joints.
-    """
-    if report.get("model", "dynamic") != "dynamic":
-        rel = report["relative_error"]
-        shown = report if rel["per_joint_validation"] else {**report, "joints": report["outputs"]}
-        text = _summary_lines(shown)
-        return text.replace("relative torque error: train", "relative error: train")
-    return _summary_lines(report)
-
-
-def _summary_lines(report: dict) -> str:
-    rel = report["relative_error"]
-
-    def pct(x):
-        return "n/a" if x is None else f"{100 * x:.3f} %"
-
-    lines = [
-        f"robot {report['robot']}: {report['n_base']} base parameters of {report['n_parameters']}, "
-        f"{report['n_samples']} training samples, method {report['method']}",
-        f"condition number {report['condition_number']:.6g}"
-        if report["condition_number"]
-        else "condition number n/a",
-        f"relative torque error: train {pct(rel['train'])}, validation {pct(rel['validation'])}",
-        f"nominal model (URDF): train {pct(rel.get('nominal_train'))}, validation "
-        f"{pct(rel.get('nominal_validation'))}",
-    ]
-    if report.get("reference_torques"):
-        lines.append(f"reference torques: {report['reference_torques']}")
-    per_joint = rel["per_joint_validation"] or rel["train_per_joint"]
-    label = "validation" if rel["per_joint_validation"] else "train"
-    lines.append(
-        f"per joint ({label}): "
-        + ", ".join(f"{j} {pct(e)}" for j, e in zip(report["joints"], per_joint, strict=True))
-    )
-    if "parameter_error" in report:
-        lines.append(
-            f"base parameter error vs truth: {pct(report['parameter_error'])} "
-            f"(max {report['parameter_error_in_std']:.2f} std)"
-        )
-    return "\n".join(lines)
