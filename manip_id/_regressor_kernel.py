@@ -24,11 +24,14 @@ def _cross(a, b, out):
 
 
 @numba.njit(cache=True)
-def _forward(parent, kind, axis, rot0, pos0, idx_q, gravity, q, dq, ddq, idx_v, R, P, V, A, S):
+def _forward(tree, q, dq, ddq, work):
     """Joint placements R (n,3,3), P (n,3) and spatial v, a (n,6) of one sample.
 
-    ``S``: scratch, shape (6, 3).
+    ``tree``: the model's arrays (:func:`block`); ``work``: ``(R, P, V, A, S)``, the
+    outputs and a scratch ``S`` of shape (6, 3).
     """
+    parent, kind, axis, rot0, pos0, idx_q, idx_v, gravity = tree
+    R, P, V, A, S = work
     n = parent.shape[0]
     RJ = S[:3]
     tmp = S[3]
@@ -159,35 +162,24 @@ def _project(s, v, a, y):
 
 
 @numba.njit(cache=True)
-def block(parent, kind, axis, rot0, pos0, idx_q, idx_v, gravity, q, dq, ddq, out):
-    """Y_rigid of every sample of the block into ``out`` (N, nv, >= 10 n), in place."""
+def block(tree, q, dq, ddq, out):
+    """Y_rigid of every sample of the block into ``out`` (N, nv, >= 10 n), in place.
+
+    ``tree = (parent, kind, axis, rot0, pos0, idx_q, idx_v, gravity)``: the arrays of
+    :class:`~manip_id.compiled_regressor.CompiledModel`, gravity as used (zero for the
+    gravity-free model).
+    """
+    parent, kind, axis, _, _, _, idx_v, _ = tree
     n = parent.shape[0]
     R = np.empty((n, 3, 3))
     P = np.empty((n, 3))
     V = np.empty((n, 6))
     A = np.empty((n, 6))
     T = np.empty((n, n, 6))
-    S1 = np.empty((6, 3))
+    work = (R, P, V, A, np.empty((6, 3)))
     y = np.empty(10)
     for k in range(q.shape[0]):
-        _forward(
-            parent,
-            kind,
-            axis,
-            rot0,
-            pos0,
-            idx_q,
-            gravity,
-            q[k],
-            dq[k],
-            ddq[k],
-            idx_v,
-            R,
-            P,
-            V,
-            A,
-            S1,
-        )
+        _forward(tree, q[k], dq[k], ddq[k], work)
         _axes(parent, kind, axis, R, P, T)
         Y = out[k]
         for row in range(Y.shape[0]):

@@ -189,17 +189,5 @@ def rigid_block(desc: CompiledModel, q, dq, ddq, out: np.ndarray, gravity: bool 
     gravity-free model (the Slotine-Li velocity part).
     """
     g = desc.gravity if gravity else np.zeros(3)
-    _kernel()(
-        desc.parent,
-        desc.kind,
-        desc.axis,
-        desc.rot0,
-        desc.pos0,
-        desc.idx_q,
-        desc.idx_v,
-        g,
-        q,
-        dq,
-        ddq,
-        out,
-    )
+    tree = (desc.parent, desc.kind, desc.axis, desc.rot0, desc.pos0, desc.idx_q, desc.idx_v, g)
+    _kernel()(tree, q, dq, ddq, out)

@@ -49,6 +49,7 @@ HEAVY = {
     "tomllib",  # profiles (the tomli backport on Python 3.10)
     "tomli",
     "webbrowser",  # opening a report only when asked
+    "manip_id._regressor_kernel",  # numba kernels: imports numba at module level
 }
 MAX_MODULE_LINES = 600
 MAX_FUNCTION_LINES = 80
