@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 export OPENBLAS_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
 
-.PHONY: demo test lint format system-deps bench clean docs
+.PHONY: demo test lint format system-deps bench clean docs docs-check
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -50,6 +50,13 @@ format: $(STAMP)
 docs: $(STAMP)
 	$(PY) -m pip install --quiet -e '.[docs]'
 	$(PY) -m sphinx -b html docs docs/_build/html
+
+# The same build as a check (for CI): warnings are errors, output into a temporary folder.
+# SPHINX_PYTHON names another interpreter that has Sphinx, numpydoc and myst-parser.
+SPHINX_PYTHON ?= $(PY)
+docs-check:
+	@out=$$(mktemp -d) && trap 'rm -rf "$$out"' EXIT && \
+		$(SPHINX_PYTHON) -m sphinx -b html -W --keep-going -q -d "$$out/doctrees" docs "$$out/html"
 
 # Benchmarks of the README's Performance section (minutes; prints tables).
 bench: $(STAMP)
