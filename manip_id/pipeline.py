@@ -341,18 +341,10 @@ def iter_processed(
         rows = _rows(src, spec, options, RowCounts(), checked=True)
     if not options.preprocesses(lay.has_ddq):
         return None, rows
-    from .signals import preprocess_blocks
+    from .signals import SignalOptions, StreamStats, preprocess_blocks
 
     try:
-        settings, blocks = preprocess_blocks(
-            rows,
-            lay.nq,
-            lay.nv,
-            n=scan.n,
-            t_first=scan.t_first,
-            t_last=scan.t_last,
-            dt_min=scan.dt_min,
-            dt_max=scan.dt_max,
+        signal_options = SignalOptions(
             cutoff=DEFAULT_CUTOFF if options.cutoff is None else options.cutoff,
             order=options.order,
             rate=options.rate,
@@ -360,7 +352,10 @@ def iter_processed(
             trim=options.trim,
             velocity=options.velocity,
             filter_torque=options.filter_torque,
-            block=options.block,
+        )
+        stats = StreamStats(scan.n, scan.t_first, scan.t_last, scan.dt_min, scan.dt_max)
+        settings, blocks = preprocess_blocks(
+            rows, lay.nq, lay.nv, stats, options=signal_options, block=options.block
         )
     except (InputError, DataError) as exc:
         raise type(exc)(f"{spec.label}: {exc}") from exc
