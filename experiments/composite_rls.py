@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from manip_id import load_robot  # noqa: E402
 from manip_id._io import atomic_write, write_json  # noqa: E402
 from manip_id.adaptive import default_gains  # noqa: E402
-from manip_id.closed_loop import default_reference, simulate  # noqa: E402
+from manip_id.closed_loop import ClosedLoopOptions, default_reference, simulate  # noqa: E402
 from manip_id.simulation import perturb_parameters  # noqa: E402
 from manip_id.trajectories import trajectory_to_configuration  # noqa: E402
 
@@ -65,9 +65,7 @@ def main(argv=None) -> int:
             theta0,
             reference=reference,
             gains=gains,
-            duration=args.duration,
-            rate=1000.0,
-            record_every=10,
+            options=ClosedLoopOptions(duration=args.duration, rate=1000.0, record_every=10),
         )
         runs[label] = run
         t1, t05 = run.time_to_prediction_error(0.01), run.time_to_prediction_error(0.005)

@@ -31,7 +31,7 @@ __version__ = "0.1.0"
 #: Add new exports here; nothing else in this file needs editing.
 _EXPORTS: dict[str, tuple[str, ...]] = {
     ".adaptive": ("AdaptiveGains", "SlotineLiController", "default_gains", "lyapunov_function"),
-    ".closed_loop": ("ClosedLoopRun", "compare_fixed", "with_payload"),
+    ".closed_loop": ("ClosedLoopOptions", "ClosedLoopRun", "compare_fixed", "with_payload"),
     ".datasets": ("Dataset", "FileSpec", "check_robot", "load_dataset", "save_dataset"),
     ".pipeline": ("PreprocessOptions", "accumulate_file"),
     ".errors": (

@@ -108,7 +108,7 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..adaptive import default_gains
-    from ..closed_loop import compare_fixed, default_reference, with_payload
+    from ..closed_loop import ClosedLoopOptions, compare_fixed, default_reference, with_payload
     from ..simulation import perturb_parameters, require_physical
     from ..trajectories import trajectory_to_configuration
 
@@ -142,14 +142,16 @@ def run(args: argparse.Namespace) -> int:
         theta0,
         reference=reference,
         gains=gains,
-        duration=args.duration,
-        rate=args.rate,
-        substeps=args.substeps,
-        integrator=args.integrator,
-        noise_q=args.noise_q,
-        noise_dq=args.noise_dq,
-        seed=args.seed,
-        record_every=record_every,
+        options=ClosedLoopOptions(
+            duration=args.duration,
+            rate=args.rate,
+            substeps=args.substeps,
+            integrator=args.integrator,
+            noise_q=args.noise_q,
+            noise_dq=args.noise_dq,
+            seed=args.seed,
+            record_every=record_every,
+        ),
     )
     a, f = cmp.adaptive, cmp.fixed
     law = "composite" if a.composite else "plain"
