@@ -30,7 +30,13 @@ __version__ = "0.1.0"
 #: Public name -> the submodule (relative to this package) that defines it.
 #: Add new exports here; nothing else in this file needs editing.
 _EXPORTS: dict[str, tuple[str, ...]] = {
-    ".adaptive": ("AdaptiveGains", "SlotineLiController", "default_gains", "lyapunov_function"),
+    ".adaptive": (
+        "AdaptiveGains",
+        "CompositeLaw",
+        "SlotineLiController",
+        "default_gains",
+        "lyapunov_function",
+    ),
     ".closed_loop": ("ClosedLoopOptions", "ClosedLoopRun", "compare_fixed", "with_payload"),
     ".datasets": ("Dataset", "FileSpec", "check_robot", "load_dataset", "save_dataset"),
     ".pipeline": ("PreprocessOptions", "accumulate_file"),

@@ -114,6 +114,29 @@ class AdaptiveGains:
     forgetting: float = 0.0
 
 
+@dataclass(frozen=True)
+class CompositeLaw:
+    """The composite adaptation of :func:`default_gains` (fields as in :class:`AdaptiveGains`).
+
+    Attributes
+    ----------
+    kappa : float
+        Weight kappa >= 0 [1/s] of the normalized prediction-error term; 0 gives the plain
+        Slotine-Li law.
+    filter_bandwidth : float
+        lambda_f > 0 of the composite filter lambda_f/(s + lambda_f) [rad/s].
+    gain : str
+        ``"constant"`` (Gamma) or ``"rls"`` (the time-varying P(t); needs ``kappa > 0``).
+    forgetting : float
+        beta_0 >= 0 of the bounded-gain forgetting with ``gain="rls"`` [1/s].
+    """
+
+    kappa: float = 0.0
+    filter_bandwidth: float = 20.0
+    gain: str = "constant"
+    forgetting: float = 0.0
+
+
 def default_gains(
     robot: Robot,
     theta: np.ndarray | None = None,
@@ -122,11 +145,8 @@ def default_gains(
     lam: float = 20.0,
     kd_rate: float = 50.0,
     gamma: float = 1.0,
-    composite: float = 0.0,
-    filter_bandwidth: float = 20.0,
     dead_zone: float = 0.0,
-    gain: str = "constant",
-    forgetting: float = 0.0,
+    composite: float | CompositeLaw = 0.0,
 ) -> AdaptiveGains:
     """Gains scaled to the robot.
 
@@ -136,9 +156,12 @@ def default_gains(
     stiff for the light modes or too soft for the heavy ones of a coupled arm);
     ``Gamma = gamma diag(scale^2)`` with ``scale_i = |theta_i| + floor(unit_i)``
     (floors 1 kg, 0.1 kg m, 0.01 kg m^2, 1 for joint terms, the sizes of an arm's
-    links): each parameter adapts in proportion to its size. ``gain`` and
-    ``forgetting`` as in :class:`AdaptiveGains` (with ``gain="rls"``, Gamma is P(0)).
+    links): each parameter adapts in proportion to its size. ``dead_zone`` as in
+    :class:`AdaptiveGains`. ``composite`` is kappa [1/s] of the composite law with its
+    default filter, or a :class:`CompositeLaw` (filter bandwidth, ``gain="rls"``,
+    forgetting; with ``gain="rls"``, Gamma is P(0)).
     """
+    law = composite if isinstance(composite, CompositeLaw) else CompositeLaw(kappa=composite)
     theta = robot.nominal_parameters if theta is None else as_float_array(theta, "theta", 1)
     q = robot.neutral() if q is None else as_float_array(q, "q", 1)
     model = robot.with_parameters(theta)
@@ -154,11 +177,11 @@ def default_gains(
         lam=lam,
         kd=kd_rate * M,
         gamma=gamma * scale**2,
-        composite=composite,
-        filter_bandwidth=filter_bandwidth,
+        composite=law.kappa,
+        filter_bandwidth=law.filter_bandwidth,
         dead_zone=dead_zone,
-        gain=gain,
-        forgetting=forgetting,
+        gain=law.gain,
+        forgetting=law.forgetting,
     )
 
 

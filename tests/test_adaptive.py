@@ -16,6 +16,7 @@ from conftest import get_robot
 
 from manip_id.adaptive import (
     AdaptiveGains,
+    CompositeLaw,
     SlotineLiController,
     default_gains,
     lyapunov_function,
@@ -244,7 +245,7 @@ def test_one_dof_composite_filter_identity_holds_on_the_plant():
 @pytest.mark.parametrize(("gain", "bound"), [("constant", 0.5), ("rls", 0.05)])
 def test_one_dof_composite_tracks_and_predicts(gain, bound):
     robot, theta0, theta = _msd()
-    gains = default_gains(robot, theta0, composite=50.0, gain=gain)
+    gains = default_gains(robot, theta0, composite=CompositeLaw(50.0, gain=gain))
     run = simulate(
         robot,
         theta,

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from manip_id.adaptive import AdaptiveGains, SlotineLiController, default_gains
+from manip_id.adaptive import AdaptiveGains, CompositeLaw, SlotineLiController, default_gains
 from manip_id.cli import main
 from manip_id.closed_loop import ClosedLoopOptions, default_reference, simulate
 from manip_id.errors import InputError
@@ -44,7 +44,7 @@ def ur5_loop():
 def test_gain_update_is_the_information_update(ur5_loop):
     """One adaptation step: P_new^-1 = P^-1 + dt kappa Yf^T Yf / m^2 (then no forgetting)."""
     robot, theta0, _, ref, q0 = ur5_loop
-    gains = default_gains(robot, theta0, q0, composite=50.0, gain="rls")
+    gains = default_gains(robot, theta0, q0, composite=CompositeLaw(50.0, gain="rls"))
     ctrl = SlotineLiController(robot, theta0, gains)
     rng = np.random.default_rng(0)
     dt = 1e-3
@@ -68,7 +68,9 @@ def test_gain_update_is_the_information_update(ur5_loop):
 
 def test_bounded_forgetting_keeps_the_gain_bounded(ur5_loop):
     robot, theta0, theta_true, ref, q0 = ur5_loop
-    gains = default_gains(robot, theta0, q0, composite=50.0, gain="rls", forgetting=2.0)
+    gains = default_gains(
+        robot, theta0, q0, composite=CompositeLaw(50.0, gain="rls", forgetting=2.0)
+    )
     run = simulate(
         robot,
         theta_true,
@@ -118,7 +120,7 @@ def test_lyapunov_function_with_the_time_varying_gain(monkeypatch):
     theta0 = robot.nominal_parameters.copy()
     theta0[robot.n_rigid :] = 0.05
     theta = perturb_parameters(robot, 0.3, seed=2, theta=theta0)
-    gains = default_gains(robot, theta0, composite=50.0, gain="rls")
+    gains = default_gains(robot, theta0, composite=CompositeLaw(50.0, gain="rls"))
     Ps: list[np.ndarray] = [np.asarray(gains.gamma, dtype=float).copy()]
     if Ps[0].ndim == 1:
         Ps[0] = np.diag(Ps[0])

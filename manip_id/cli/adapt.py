@@ -107,7 +107,7 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..adaptive import default_gains
+    from ..adaptive import CompositeLaw, default_gains
     from ..closed_loop import ClosedLoopOptions, compare_fixed, default_reference, with_payload
     from ..simulation import perturb_parameters, require_physical
     from ..trajectories import trajectory_to_configuration
@@ -129,11 +129,13 @@ def run(args: argparse.Namespace) -> int:
         lam=args.lam,
         kd_rate=args.kd_rate,
         gamma=args.gamma,
-        composite=args.kappa if args.composite else 0.0,
-        filter_bandwidth=args.filter,
         dead_zone=args.dead_zone,
-        gain=args.gain if args.composite else "constant",
-        forgetting=args.forgetting,
+        composite=CompositeLaw(
+            kappa=args.kappa if args.composite else 0.0,
+            filter_bandwidth=args.filter,
+            gain=args.gain if args.composite else "constant",
+            forgetting=args.forgetting,
+        ),
     )
     record_every = max(int(round(args.rate / 100.0)), 1)
     cmp = compare_fixed(
