@@ -57,15 +57,24 @@ class SimulatedData:
 
     Attributes
     ----------
-    dataset: the measurements (noisy ``q``, ``dq``, ``tau``; exact ``ddq``).
-    theta_true: the parameters that produced the torques, shape (p,).
-    tau_true: noise-free torques [N m or N], shape (N, nv).
-    noise_tau: torque noise, relative to each joint's torque RMS.
-    noise_q: position noise standard deviation [rad or m].
-    noise_dq: velocity noise standard deviation [rad/s or m/s].
-    perturb: relative perturbation applied to the parameters.
-    rate: sampling rate [Hz].
-    seed: the seed of every random draw.
+    dataset : Dataset
+        the measurements (noisy ``q``, ``dq``, ``tau``; exact ``ddq``).
+    theta_true : numpy.ndarray
+        the parameters that produced the torques, shape (p,).
+    tau_true : numpy.ndarray
+        noise-free torques [N m or N], shape (N, nv).
+    noise_tau : float
+        torque noise, relative to each joint's torque RMS.
+    noise_q : float
+        position noise standard deviation [rad or m].
+    noise_dq : float
+        velocity noise standard deviation [rad/s or m/s].
+    perturb : float
+        relative perturbation applied to the parameters.
+    rate : float
+        sampling rate [Hz].
+    seed : int
+        the seed of every random draw.
     """
 
     dataset: Dataset
@@ -138,21 +147,26 @@ def perturb_parameters(robot: Robot, rel: float, seed: int = 0, theta=None) -> n
 
     Parameters
     ----------
-    robot: the robot whose layout ``theta`` follows.
-    rel: relative standard deviation of the perturbation (e.g. 0.1 for about 10%).
-    seed: seed of the draws.
-    theta: parameters to perturb, shape (p,); default ``robot.nominal_parameters``.
+    robot : Robot
+        the robot whose layout ``theta`` follows.
+    rel : float
+        relative standard deviation of the perturbation (e.g. 0.1 for about 10%).
+    seed : int
+        seed of the draws.
+    theta : array_like
+        parameters to perturb, shape (p,); default ``robot.nominal_parameters``.
 
     Returns
     -------
-    Perturbed parameters, shape (p,). Per body: mass times ``exp(rel e)``,
-    principal second moments of the mass distribution times ``exp(rel e)``
-    (the principal moments of inertia at the CoM then satisfy the triangle
-    inequalities), principal axes rotated by about ``rel`` [rad], centre of
-    mass moved by about ``rel`` times its distance from the joint (at least
-    the radius of gyration); massless bodies are left unchanged. Joint terms
-    times ``exp(rel e)``, so Ia, fv, fc, k keep their (non-negative) sign; a
-    zero term stays zero.
+    numpy.ndarray
+        Perturbed parameters, shape (p,). Per body: mass times ``exp(rel e)``,
+        principal second moments of the mass distribution times ``exp(rel e)``
+        (the principal moments of inertia at the CoM then satisfy the triangle
+        inequalities), principal axes rotated by about ``rel`` [rad], centre of
+        mass moved by about ``rel`` times its distance from the joint (at least
+        the radius of gyration); massless bodies are left unchanged. Joint terms
+        times ``exp(rel e)``, so Ia, fv, fc, k keep their (non-negative) sign; a
+        zero term stays zero.
     """
     rel = _nonnegative(rel, "rel")
     theta = robot.nominal_parameters.copy() if theta is None else _check_theta(robot, theta).copy()
@@ -181,11 +195,13 @@ def inverse_dynamics(robot: Robot, theta, q, dq, ddq) -> np.ndarray:
 
     Parameters
     ----------
-    theta: shape (p,); q: (N, nq) [rad or m]; dq, ddq: (N, nv).
+    theta : array_like
+        shape (p,); q: (N, nq) [rad or m]; dq, ddq: (N, nv).
 
     Returns
     -------
-    tau [N m or N], shape (N, nv).
+    numpy.ndarray
+        tau [N m or N], shape (N, nv).
     """
     theta = _check_theta(robot, theta)
     model = robot.with_parameters(theta)
@@ -276,20 +292,31 @@ def simulate(
 
     Parameters
     ----------
-    robot: the robot (its joint terms decide which torques are added).
-    trajectory: joint coordinates per DoF (see :mod:`manip_id.trajectories`).
-    duration: length of the record [s].
-    rate: sampling rate [Hz]; samples at ``t_k = k / rate``.
-    theta: true parameters, shape (p,); default the nominal ones.
-    perturb: relative perturbation of ``theta`` (see :func:`perturb_parameters`).
-    noise_tau: torque noise standard deviation relative to each joint's torque RMS.
-    noise_q: position noise standard deviation [rad or m].
-    noise_dq: velocity noise standard deviation [rad/s or m/s].
-    seed: seed of every random draw (module docstring).
+    robot : Robot
+        the robot (its joint terms decide which torques are added).
+    trajectory : FourierTrajectory
+        joint coordinates per DoF (see :mod:`manip_id.trajectories`).
+    duration : float
+        length of the record [s].
+    rate : float
+        sampling rate [Hz]; samples at ``t_k = k / rate``.
+    theta : array_like
+        true parameters, shape (p,); default the nominal ones.
+    perturb : float
+        relative perturbation of ``theta`` (see :func:`perturb_parameters`).
+    noise_tau : float
+        torque noise standard deviation relative to each joint's torque RMS.
+    noise_q : float
+        position noise standard deviation [rad or m].
+    noise_dq : float
+        velocity noise standard deviation [rad/s or m/s].
+    seed : int
+        seed of every random draw (module docstring).
 
     Returns
     -------
-    :class:`SimulatedData` with the dataset and ``theta_true``.
+    SimulatedData
+        :class:`SimulatedData` with the dataset and ``theta_true``.
     """
     stream = SimulationStream(
         robot,
@@ -338,11 +365,16 @@ class SimulationStream:
 
     Attributes
     ----------
-    robot, trajectory: as given.
-    theta_true: the parameters that produce the torques, shape (p,).
-    n_samples: number of samples ``N = floor(duration rate) + 1``.
-    rate: sampling rate [Hz]; sample ``k`` is at ``t_k = k / rate`` [s].
-    noise_tau, noise_q, noise_dq, perturb, seed: as given (validated).
+    robot, trajectory
+        as given.
+    theta_true : array_like
+        the parameters that produce the torques, shape (p,).
+    n_samples
+        number of samples ``N = floor(duration rate) + 1``.
+    rate : float
+        sampling rate [Hz]; sample ``k`` is at ``t_k = k / rate`` [s].
+    noise_tau, noise_q, noise_dq, perturb, seed
+        as given (validated).
     """
 
     def __init__(
@@ -450,9 +482,10 @@ class SimulationStream:
 
         Yields
         ------
-        ``(t, q, dq, ddq, tau)``: t [s] of shape (n,), q (n, nq) [rad or m]
-        (noisy), dq (n, nv) (noisy), ddq (n, nv) (exact), tau (n, nv) [N m or N]
-        (noisy), with ``n <= NOISE_BLOCK``.
+        object : array_like
+            ``(t, q, dq, ddq, tau)``: t [s] of shape (n,), q (n, nq) [rad or m]
+            (noisy), dq (n, nv) (noisy), ddq (n, nv) (exact), tau (n, nv) [N m or N]
+            (noisy), with ``n <= NOISE_BLOCK``.
         """
         start, stop = self._range(start, stop)
         nv = self.robot.nv

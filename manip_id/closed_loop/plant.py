@@ -25,11 +25,16 @@ class Plant:
 
     Parameters
     ----------
-    robot: the robot; its joint terms are the plant's.
-    theta_true: parameters of the plant, shape (p,), physically consistent.
-    rate: control rate [Hz].
-    substeps: physics steps per control period.
-    integrator: ``"euler"`` (semi-implicit) or ``"rk4"``.
+    robot : Robot
+        the robot; its joint terms are the plant's.
+    theta_true : array_like
+        parameters of the plant, shape (p,), physically consistent.
+    rate : float
+        control rate [Hz].
+    substeps : int
+        physics steps per control period.
+    integrator : str
+        ``"euler"`` (semi-implicit) or ``"rk4"``.
     """
 
     def __init__(
@@ -112,9 +117,12 @@ class SensorNoise:
 
     Attributes
     ----------
-    std_q: standard deviation on positions [rad] (applied in the tangent space).
-    std_dq: standard deviation on velocities [rad/s].
-    rng: the generator; ``q`` is drawn before ``dq`` at every step.
+    std_q : float
+        standard deviation on positions [rad] (applied in the tangent space).
+    std_dq : float
+        standard deviation on velocities [rad/s].
+    rng : numpy.random.Generator
+        the generator; ``q`` is drawn before ``dq`` at every step.
     """
 
     std_q: float

@@ -21,12 +21,18 @@ class Recorder:
 
     Parameters
     ----------
-    robot: the robot (sizes nq, nv, p).
-    n_steps: control steps of the run.
-    dt: control period [s].
-    record_every: stride of the full records.
-    tail: fraction of the run at its end for :meth:`rms_tail`, in (0, 1].
-    damping: ``D`` [N m s/rad], shape (nv, nv).
+    robot : Robot
+        the robot (sizes nq, nv, p).
+    n_steps : int
+        control steps of the run.
+    dt : float
+        control period [s].
+    record_every : int
+        stride of the full records.
+    tail : float
+        fraction of the run at its end for :meth:`rms_tail`, in (0, 1].
+    damping : numpy.ndarray
+        ``D`` [N m s/rad], shape (nv, nv).
     """
 
     def __init__(

@@ -31,25 +31,41 @@ class ClosedLoopRun:
 
     Attributes
     ----------
-    t: times [s], shape (K,)
-    q, q_d: positions and reference [rad or m], shape (K, nq)
-    dq: velocities, shape (K, nv)
-    tau: applied torques [N m or N], shape (K, nv)
-    s: sliding variable [rad/s], shape (K, nv)
-    theta_hat: estimates, shape (K, p)
-    prediction_error: relative torque error of theta_hat on the validation states
+    t : numpy.ndarray
+        times [s], shape (K,)
+    q, q_d : numpy.ndarray
+        positions and reference [rad or m], shape (K, nq)
+    dq : numpy.ndarray
+        velocities, shape (K, nv)
+    tau : numpy.ndarray
+        applied torques [N m or N], shape (K, nv)
+    s : numpy.ndarray
+        sliding variable [rad/s], shape (K, nv)
+    theta_hat : numpy.ndarray
+        estimates, shape (K, p)
+    prediction_error : numpy.ndarray
+        relative torque error of theta_hat on the validation states
         ``||Y_val (theta_hat - theta)|| / ||Y_val theta||``, shape (K,)
-    filtered_prediction_error: |eps| of the composite law [N m], shape (K,) (zeros
+    filtered_prediction_error : numpy.ndarray
+        ``|eps|`` of the composite law [N m], shape (K,) (zeros
         without composite adaptation)
-    theta_true, theta0: shape (p,)
-    rms_tracking_error: sqrt(mean over all control steps and joints of q_tilde^2) [rad]
-    rms_tracking_error_per_joint: shape (nv,) [rad]
-    rms_tracking_error_tail: the same over the last ``tail`` fraction of the run [rad]
-    initial_tracking_error, final_tracking_error: |q_tilde| at the first and last
+    theta_true, theta0 : numpy.ndarray
+        shape (p,)
+    rms_tracking_error : float
+        sqrt(mean over all control steps and joints of q_tilde^2) [rad]
+    rms_tracking_error_per_joint : numpy.ndarray
+        shape (nv,) [rad]
+    rms_tracking_error_tail : float
+        the same over the last ``tail`` fraction of the run [rad]
+    initial_tracking_error, final_tracking_error : float
+        ``|q_tilde|`` at the first and last
         control step [rad]
-    final_prediction_error, initial_prediction_error: prediction error at the end and start
-    wall_time: seconds spent in the simulation loop [s]; real_time_factor: duration / wall_time
-    dissipation: integral of ``s^T (K_D + F_v) s + kappa |eps|^2 / m^2`` over the run [J] (the
+    final_prediction_error, initial_prediction_error : float
+        prediction error at the end and start
+    wall_time : float
+        seconds spent in the simulation loop [s]; real_time_factor: duration / wall_time
+    dissipation : float
+        integral of ``s^T (K_D + F_v) s + kappa |eps|^2 / m^2`` over the run [J] (the
         predicted decrease of the Lyapunov function in a noise-free, Coulomb-free run;
         with the RLS gain the composite part is ``kappa |eps|^2 / (2 m^2)`` and the
         Lyapunov function uses ``P(t)^-1``, see :mod:`manip_id.adaptive`; forgetting not
@@ -118,17 +134,22 @@ def step(
 
     Parameters
     ----------
-    q, dq: the true state at ``t = k dt``, shapes (nq,), (nv,).
-    setpoint: the reference ``(q_d, dq_d, ddq_d)`` at ``t``.
-    noise: measurement noise of what the controller sees (None: exact state).
+    q, dq : numpy.ndarray
+        the true state at ``t = k dt``, shapes (nq,), (nv,).
+    setpoint : Setpoint
+        the reference ``(q_d, dq_d, ddq_d)`` at ``t``.
+    noise : SensorNoise, optional
+        measurement noise of what the controller sees (None: exact state).
 
     Returns
     -------
-    The true state ``(q, dq)`` at ``t + dt``.
+    tuple[numpy.ndarray, numpy.ndarray]
+        The true state ``(q, dq)`` at ``t + dt``.
 
     Raises
     ------
-    NumericalError: the state diverged.
+    NumericalError
+        the state diverged.
     """
     q_d, dq_d, ddq_d = setpoint
     qm, dqm = (q, dq) if noise is None else noise.measure(plant, q, dq)
@@ -232,16 +253,24 @@ def simulate(
 
     Parameters
     ----------
-    robot: the robot; its joint terms are both the plant's and the estimate's.
-    theta_true: parameters of the plant, shape (p,).
-    theta0: the controller's initial estimate, shape (p,).
-    reference: joint-angle reference (default :func:`default_reference`), checked
+    robot : Robot
+        the robot; its joint terms are both the plant's and the estimate's.
+    theta_true : array_like
+        parameters of the plant, shape (p,).
+    theta0 : array_like
+        the controller's initial estimate, shape (p,).
+    reference : FourierTrajectory, optional
+        joint-angle reference (default :func:`default_reference`), checked
         against the joint limits (:func:`check_reference`).
-    gains: default :func:`default_gains` of ``theta0`` at the reference start.
-    adapt: False holds the estimate at ``theta0``.
-    validation: states ``(q, dq, ddq)`` for the prediction error (default
+    gains : AdaptiveGains, optional
+        default :func:`default_gains` of ``theta0`` at the reference start.
+    adapt : bool
+        False holds the estimate at ``theta0``.
+    validation : tuple[numpy.ndarray, numpy.ndarray, numpy.ndarray], optional
+        states ``(q, dq, ddq)`` for the prediction error (default
         :func:`validation_states` of the reference).
-    options: duration, rate, integrator, start offset, measurement noise and recording
+    options : ClosedLoopOptions, optional
+        duration, rate, integrator, start offset, measurement noise and recording
         (:class:`ClosedLoopOptions`; default ``ClosedLoopOptions()``: 10 s at 1 kHz).
     """
     options = ClosedLoopOptions() if options is None else options
@@ -350,8 +379,10 @@ class AdaptiveComparison:
 
     Attributes
     ----------
-    adaptive: the run with adaptation (plain or composite as asked).
-    fixed: the same reference, plant, gains and initial state, ``theta_hat = theta0`` held.
+    adaptive : ClosedLoopRun
+        the run with adaptation (plain or composite as asked).
+    fixed : ClosedLoopRun
+        the same reference, plant, gains and initial state, ``theta_hat = theta0`` held.
     """
 
     adaptive: ClosedLoopRun

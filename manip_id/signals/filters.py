@@ -26,10 +26,13 @@ class Lowpass:
 
     Attributes
     ----------
-    cutoff: cut-off frequency f_c [Hz], 0 < f_c < rate / 2; the forward-backward
+    cutoff : float
+        cut-off frequency f_c [Hz], 0 < f_c < rate / 2; the forward-backward
         gain there is 1/2.
-    rate: sampling rate f_s [Hz].
-    order: order n of the one-way Butterworth filter (the forward-backward
+    rate : float
+        sampling rate f_s [Hz].
+    order : int
+        order n of the one-way Butterworth filter (the forward-backward
         filter has twice its attenuation in dB).
     """
 
@@ -100,10 +103,14 @@ def lowpass(x, cutoff: float, rate: float, order: int = DEFAULT_ORDER, axis: int
 
     Parameters
     ----------
-    x: signal sampled at ``rate``, any shape with time along ``axis``
-    cutoff: cut-off frequency [Hz] (forward-backward gain 1/2 there)
-    rate: sampling rate [Hz]
-    order: Butterworth order of the one-way filter
+    x : array_like
+        signal sampled at ``rate``, any shape with time along ``axis``
+    cutoff : float
+        cut-off frequency [Hz] (forward-backward gain 1/2 there)
+    rate : float
+        sampling rate [Hz]
+    order : int
+        Butterworth order of the one-way filter
     """
     return Lowpass(cutoff, rate, order)(x, axis=axis)
 
@@ -115,18 +122,23 @@ def filter_regressor(
 
     Parameters
     ----------
-    Y: stacked regressor, shape (N, nv, p), sample-major (as :func:`manip_id.regressor.regressor`
+    Y : numpy.ndarray
+        stacked regressor, shape (N, nv, p), sample-major (as :func:`manip_id.regressor.regressor`
         returns it); time runs along axis 0.
-    filt: the same :class:`Lowpass` applied to the torques (``filt(tau)``).
-    block: number of parameter columns filtered at once; bounds the temporaries
+    filt : Lowpass
+        the same :class:`Lowpass` applied to the torques (``filt(tau)``).
+    block : int
+        number of parameter columns filtered at once; bounds the temporaries
         of ``sosfiltfilt`` to O(N * nv * block) besides the output.
-    out: array of Y's shape to write into (may be ``Y`` itself, filtering in place).
+    out : numpy.ndarray, optional
+        array of Y's shape to write into (may be ``Y`` itself, filtering in place).
 
     Returns
     -------
-    F[Y], shape (N, nv, p), with ``F[Y] @ theta == filt(Y @ theta)`` up to rounding.
-    The whole time series is needed (the filter runs backward), so N must fit in
-    memory; for very long logs filter and decimate the log in overlapping windows.
+    numpy.ndarray
+        F[Y], shape (N, nv, p), with ``F[Y] @ theta == filt(Y @ theta)`` up to rounding.
+        The whole time series is needed (the filter runs backward), so N must fit in
+        memory; for very long logs filter and decimate the log in overlapping windows.
     """
     Y = np.asarray(Y, dtype=float)
     if Y.ndim != 3:

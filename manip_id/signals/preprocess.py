@@ -127,8 +127,10 @@ def preprocess(
 
     Parameters
     ----------
-    dataset: measurements (ddq, if present, is replaced)
-    cutoff: low-pass cut-off [Hz]. The default 3 Hz was chosen on the real
+    dataset : Dataset
+        measurements (ddq, if present, is replaced)
+    cutoff : float
+        low-pass cut-off [Hz]. The default 3 Hz was chosen on the real
         Panda log (Fourier excitation up to 0.375 Hz, about 1 kHz): with 64 base
         parameters identified on its first 70 % (each part preprocessed alone,
         1 s trimmed at each end), the validation torque error is flat from 2 to
@@ -136,23 +138,30 @@ def preprocess(
         bites the motion's harmonics and velocity ramps), 1.07 % at 10 Hz and
         2.60 % at 20 Hz (differentiated noise in ddq, torque noise in the
         reference). See ``experiments/panda_real.py``.
-    order: Butterworth order (forward-backward: twice the attenuation).
-    rate: sampling rate of the uniform grid [Hz]; default the mean rate
+    order : int
+        Butterworth order (forward-backward: twice the attenuation).
+    rate : float, optional
+        sampling rate of the uniform grid [Hz]; default the mean rate
         (:func:`sampling_rate`).
-    decimate: keep every ``decimate``-th sample after filtering; needs
+    decimate : int
+        keep every ``decimate``-th sample after filtering; needs
         ``cutoff < rate / (2 decimate)``.
-    trim: seconds removed at each end; default the edge transient of the
+    trim : float, optional
+        seconds removed at each end; default the edge transient of the
         filter (:meth:`Lowpass.transient_samples`).
-    velocity: ``"measured"`` filters the logged dq; ``"differentiate"``
+    velocity : str
+        ``"measured"`` filters the logged dq; ``"differentiate"``
         replaces it by the central-difference derivative of the filtered q.
-    filter_torque: low-pass the torques with the same filter (default). Turn
+    filter_torque : bool
+        low-pass the torques with the same filter (default). Turn
         it off to parallel-filter them with the regressor instead
         (:func:`filter_regressor`).
 
     Returns
     -------
-    A new :class:`Dataset` on the uniform grid with ``ddq`` [rad/s^2]; its
-    ``meta["preprocess"]`` holds the :class:`PreprocessSettings` used.
+    Dataset
+        A new :class:`Dataset` on the uniform grid with ``ddq`` [rad/s^2]; its
+        ``meta["preprocess"]`` holds the :class:`PreprocessSettings` used.
     """
     options = SignalOptions(cutoff, order, rate, decimate, trim, velocity, filter_torque)
     uniform = is_uniform(dataset.t)

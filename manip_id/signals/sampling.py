@@ -49,14 +49,19 @@ def resample(t, x, t_new, kind: str = "cubic") -> np.ndarray:
 
     Parameters
     ----------
-    t: original time stamps [s], shape (N,), strictly increasing, possibly non-uniform
-    x: samples, shape (N,) or (N, m)
-    t_new: target time stamps [s], shape (M,)
-    kind: ``"cubic"`` (not-a-knot cubic spline, exact on cubics) or ``"linear"``
+    t : array_like
+        original time stamps [s], shape (N,), strictly increasing, possibly non-uniform
+    x : array_like
+        samples, shape (N,) or (N, m)
+    t_new : array_like
+        target time stamps [s], shape (M,)
+    kind : str
+        ``"cubic"`` (not-a-knot cubic spline, exact on cubics) or ``"linear"``
 
     Returns
     -------
-    shape (M,) or (M, m).
+    numpy.ndarray
+        shape (M,) or (M, m).
     """
     from scipy.interpolate import CubicSpline
 
@@ -81,13 +86,16 @@ def derivative(t, x) -> np.ndarray:
 
     Parameters
     ----------
-    t: time stamps [s], shape (N,) (uniform or not), or a scalar step dt [s]
-    x: samples, shape (N,) or (N, m)
+    t : array_like
+        time stamps [s], shape (N,) (uniform or not), or a scalar step dt [s]
+    x : array_like
+        samples, shape (N,) or (N, m)
 
     Returns
     -------
-    dx/dt of x's shape: second-order central differences inside, second-order
-    one-sided differences at both ends (``numpy.gradient``, ``edge_order=2``).
+    numpy.ndarray
+        dx/dt of x's shape: second-order central differences inside, second-order
+        one-sided differences at both ends (``numpy.gradient``, ``edge_order=2``).
     """
     x = np.asarray(x, dtype=float)
     if x.shape[0] < 3:

@@ -128,18 +128,25 @@ def check_limits(
 
     Parameters
     ----------
-    robot: the robot whose URDF limits apply.
-    trajectory: a :class:`FourierTrajectory` with ``nv`` joints.
-    duration: time span checked from t = 0 [s]; default (and at most, since
+    robot : Robot
+        the robot whose URDF limits apply.
+    trajectory : FourierTrajectory
+        a :class:`FourierTrajectory` with ``nv`` joints.
+    duration : float, optional
+        time span checked from t = 0 [s]; default (and at most, since
         the motion is periodic) one period.
-    margin: relative margin, a fraction of each position range and of each
+    margin : float
+        relative margin, a fraction of each position range and of each
         velocity and acceleration limit (see module docstring).
-    acceleration_limit: [rad/s^2 or m/s^2], scalar or shape (nv,); None: unchecked.
-    n_points: number of time samples over the checked span.
+    acceleration_limit : array_like
+        [rad/s^2 or m/s^2], scalar or shape (nv,); None: unchecked.
+    n_points : int
+        number of time samples over the checked span.
 
     Returns
     -------
-    :class:`LimitUsage` (each entry <= 1) when feasible.
+    LimitUsage
+        :class:`LimitUsage` (each entry <= 1) when feasible.
 
     Raises
     ------
