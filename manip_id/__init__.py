@@ -94,7 +94,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     ".results": ("load_result",),
     ".robot": ("JointTerms", "Robot", "available_robots", "load_robot"),
     ".signals": ("Lowpass", "preprocess"),
-    ".simulation": ("SimulatedData", "perturb_parameters", "simulate"),
+    ".simulation": ("MeasurementNoise", "SimulatedData", "perturb_parameters", "simulate"),
     ".trajectories": (
         "ExcitationResult",
         "FourierTrajectory",

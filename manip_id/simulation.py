@@ -18,7 +18,8 @@ Noise (seeded, Gaussian, independent per sample and joint)::
     dq_meas_j = dq_j + noise_dq * e                     [rad/s or m/s]
 
 ``noise_tau`` is relative to each joint's noise-free torque RMS over the
-record; ``noise_q`` and ``noise_dq`` are absolute. Noise on a continuous
+record; ``noise_q`` and ``noise_dq`` are absolute (the fields ``tau``, ``q``, ``dq`` of
+:class:`MeasurementNoise`). Noise on a continuous
 joint's position is added to the angle before it is stored as (cos, sin).
 The dataset's ``ddq`` is the exact (analytic) acceleration. The torque, the
 position and the velocity noise, and the parameter perturbation, draw from
@@ -49,6 +50,25 @@ from .trajectories import FourierTrajectory, trajectory_to_configuration
 
 #: Joint terms that must stay non-negative (offset may take either sign).
 _POSITIVE_TERMS = ("Ia", "fv", "fc", "k")
+
+
+@dataclass(frozen=True)
+class MeasurementNoise:
+    """Gaussian noise on the simulated measurements (module docstring), each >= 0.
+
+    Attributes
+    ----------
+    tau : float
+        Torque noise standard deviation, relative to each joint's noise-free torque RMS.
+    q : float
+        Position noise standard deviation [rad or m] (on the angle of a continuous joint).
+    dq : float
+        Velocity noise standard deviation [rad/s or m/s].
+    """
+
+    tau: float = 0.0
+    q: float = 0.0
+    dq: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -283,9 +303,7 @@ def simulate(
     rate: float,
     theta=None,
     perturb: float = 0.0,
-    noise_tau: float = 0.0,
-    noise_q: float = 0.0,
-    noise_dq: float = 0.0,
+    noise: MeasurementNoise | None = None,
     seed: int = 0,
 ) -> SimulatedData:
     """Simulated measurements along a trajectory.
@@ -304,12 +322,9 @@ def simulate(
         true parameters, shape (p,); default the nominal ones.
     perturb : float
         relative perturbation of ``theta`` (see :func:`perturb_parameters`).
-    noise_tau : float
-        torque noise standard deviation relative to each joint's torque RMS.
-    noise_q : float
-        position noise standard deviation [rad or m].
-    noise_dq : float
-        velocity noise standard deviation [rad/s or m/s].
+    noise : MeasurementNoise, optional
+        torque noise relative to each joint's torque RMS, position noise [rad or m] and
+        velocity noise [rad/s or m/s] (:class:`MeasurementNoise`); default none.
     seed : int
         seed of every random draw (module docstring).
 
@@ -325,9 +340,7 @@ def simulate(
         rate=rate,
         theta=theta,
         perturb=perturb,
-        noise_tau=noise_tau,
-        noise_q=noise_q,
-        noise_dq=noise_dq,
+        noise=noise,
         seed=seed,
     )
     check_simulation_memory(robot, stream.n_samples)
@@ -386,9 +399,7 @@ class SimulationStream:
         rate: float,
         theta=None,
         perturb: float = 0.0,
-        noise_tau: float = 0.0,
-        noise_q: float = 0.0,
-        noise_dq: float = 0.0,
+        noise: MeasurementNoise | None = None,
         seed: int = 0,
     ):
         if not isinstance(trajectory, FourierTrajectory):
@@ -413,9 +424,10 @@ class SimulationStream:
         self.n_samples = n
         self.rate = rate  # [Hz]
         self.perturb = _nonnegative(perturb, "perturb")
-        self.noise_tau = _nonnegative(noise_tau, "noise_tau")
-        self.noise_q = _nonnegative(noise_q, "noise_q")  # [rad or m]
-        self.noise_dq = _nonnegative(noise_dq, "noise_dq")  # [rad/s or m/s]
+        noise = MeasurementNoise() if noise is None else noise
+        self.noise_tau = _nonnegative(noise.tau, "noise.tau")  # relative
+        self.noise_q = _nonnegative(noise.q, "noise.q")  # [rad or m]
+        self.noise_dq = _nonnegative(noise.dq, "noise.dq")  # [rad/s or m/s]
         self.seed = int(seed)
         base = robot.nominal_parameters if theta is None else _check_theta(robot, theta)
         require_physical(robot, base)

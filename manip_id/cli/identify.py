@@ -391,7 +391,7 @@ def _consistent_kwargs(args) -> dict:
 
 def _simulation_stream(robot, args):
     """The simulated record of the ``--simulate`` options, as a block-wise stream."""
-    from ..simulation import SimulationStream
+    from ..simulation import MeasurementNoise, SimulationStream
     from ..trajectories import optimize_excitation, random_trajectory
 
     opts = {
@@ -410,7 +410,7 @@ def _simulation_stream(robot, args):
         traj,
         duration=opts["duration"],
         rate=opts["rate"],
-        noise_tau=opts["noise"],
+        noise=MeasurementNoise(tau=opts["noise"]),
         seed=seed,
     )
     return stream, opts
