@@ -94,7 +94,8 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     ".results": ("load_result",),
     ".robot": ("JointTerms", "Robot", "available_robots", "load_robot"),
     ".signals": ("Lowpass", "preprocess"),
-    ".simulation": ("MeasurementNoise", "SimulatedData", "perturb_parameters", "simulate"),
+    ".perturbation": ("perturb_parameters",),
+    ".simulation": ("MeasurementNoise", "SimulatedData", "simulate"),
     ".trajectories": (
         "ExcitationResult",
         "FourierTrajectory",

@@ -12,8 +12,8 @@ from numpy.typing import ArrayLike
 
 from .._checks import as_float_array, check_finite
 from ..errors import InputError
+from ..perturbation import require_physical
 from ..robot import Robot
-from ..simulation import require_physical
 
 
 class Plant:

@@ -286,18 +286,8 @@ def simulate(
     if gains is None:
         gains = default_gains(robot, theta0, q_start_ref)
     ctrl = SlotineLiController(robot, theta0, gains, adapt=adapt)
-
-    # initial state
-    init = as_float_array(options.initial_error, "initial_error", (0, 1))
-    off = np.broadcast_to(init, (robot.nv,))
-    q = angles_to_q(robot, (start_angles + off)[None])[0].copy()
-    dq = start_dq.copy()
-    noise_q, noise_dq = options.noise_q, options.noise_dq
-    noise = (
-        SensorNoise(noise_q, noise_dq, random_generator(options.seed))
-        if noise_q > 0 or noise_dq > 0
-        else None
-    )
+    q, dq = _initial_state(robot, start_angles, start_dq, options.initial_error)
+    noise = _sensor_noise(options)
     fv = plant.viscous
     damping = ctrl.kd + (np.diag(fv) if fv is not None else 0.0)  # [N m s/rad]
     rec = Recorder(
@@ -321,6 +311,23 @@ def simulate(
     )
     pred = _prediction_error(robot, rec.theta_hat, theta_true, q_val, dq_val, ddq_val)
     return _run_result(rec, pred, theta_true, theta0, ctrl, wall, (duration, rate, substeps))
+
+
+def _initial_state(robot: Robot, start_angles, start_dq, initial_error):
+    """The true start ``(q, dq)``: the reference's start, its angles offset by
+    ``initial_error`` [rad] (scalar or shape (nv,))."""
+    init = as_float_array(initial_error, "initial_error", (0, 1))
+    off = np.broadcast_to(init, (robot.nv,))
+    q = angles_to_q(robot, (start_angles + off)[None])[0].copy()
+    return q, start_dq.copy()
+
+
+def _sensor_noise(options: ClosedLoopOptions) -> SensorNoise | None:
+    """The measurement noise of the options (None when there is none)."""
+    noise_q, noise_dq = options.noise_q, options.noise_dq
+    if noise_q > 0 or noise_dq > 0:
+        return SensorNoise(noise_q, noise_dq, random_generator(options.seed))
+    return None
 
 
 def _run_result(rec: Recorder, pred, theta_true, theta0, ctrl, wall: float, timing):

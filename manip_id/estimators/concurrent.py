@@ -37,10 +37,10 @@ import numpy as np
 
 from .._checks import spd_gain
 from ..errors import InputError
-from .online import _OnlineEstimator
+from .online import OnlineEstimator
 
 
-class ConcurrentLearningEstimator(_OnlineEstimator):
+class ConcurrentLearningEstimator(OnlineEstimator):
     """Gradient law plus a singular-value-maximizing history stack (module docstring).
 
     Parameters

@@ -51,10 +51,10 @@ import numpy as np
 
 from .._checks import positive_vector
 from ..errors import InputError
-from .online import _OnlineEstimator
+from .online import OnlineEstimator
 
 
-class DREMEstimator(_OnlineEstimator):
+class DREMEstimator(OnlineEstimator):
     """DREM with Kreisselmeier's extension (module docstring), one scalar law per parameter.
 
     Parameters

@@ -66,8 +66,8 @@ class OnlineHistory:
     error: np.ndarray
 
 
-class _OnlineEstimator:
-    """Shared bookkeeping: estimate, bounds, time, history."""
+class OnlineEstimator:
+    """The base of the online laws: estimate, bounds, time, history (shared bookkeeping)."""
 
     def __init__(self, theta0, *, bounds=None, record_every: int = 1, t0: float = 0.0):
         theta = as_float_array(theta0, "theta0", ndim=1)
@@ -159,7 +159,7 @@ class _OnlineEstimator:
             self._err.append(float(np.sqrt(np.dot(e, e))) if np.ndim(e) else abs(float(e)))
 
 
-class GradientEstimator(_OnlineEstimator):
+class GradientEstimator(OnlineEstimator):
     """Gradient (optionally normalized) adaptation law, integrated with explicit Euler.
 
     Parameters
@@ -223,7 +223,7 @@ class GradientEstimator(_OnlineEstimator):
         return th
 
 
-class RLSEstimator(_OnlineEstimator):
+class RLSEstimator(OnlineEstimator):
     """Recursive least squares with exponential, bounded forgetting.
 
     Parameters

@@ -115,6 +115,17 @@ def peak_usage(use: np.ndarray) -> np.ndarray:
     return peak
 
 
+def _worst_violation(kinds, uses) -> tuple[float, str, int, int] | None:
+    """``(use, kind, sample, joint)`` of the largest relative use above 1, or None."""
+    worst = None
+    for kind, use in zip(kinds, uses, strict=True):
+        u = np.where(np.isfinite(use), use, -np.inf)
+        kk, jj = np.unravel_index(np.argmax(u), u.shape)
+        if u[kk, jj] > 1.0 + 1e-12 and (worst is None or u[kk, jj] > worst[0]):
+            worst = (float(u[kk, jj]), kind, int(kk), int(jj))
+    return worst
+
+
 def check_limits(
     robot: Robot,
     trajectory: FourierTrajectory,
@@ -150,9 +161,9 @@ def check_limits(
 
     Raises
     ------
-    InfeasibleTrajectoryError naming the joint, the limit ("position",
-    "velocity", "acceleration") and the excess [rad, rad/s, rad/s^2 or m...]
-    of the worst violation (largest relative use).
+    InfeasibleTrajectoryError
+        naming the joint, the limit ("position", "velocity", "acceleration") and the
+        excess [rad, rad/s, rad/s^2 or m...] of the worst violation (largest relative use).
     """
     check_trajectory(robot, trajectory)
     margin = check_margin(margin)
@@ -169,12 +180,7 @@ def check_limits(
     states, uses = limit_usage(trajectory, t, lo_m, hi_m, vel, acc)
     usage = LimitUsage(*(peak_usage(u) for u in uses))
     kinds = ("position", "velocity", "acceleration")
-    worst = None
-    for kind, use in zip(kinds, uses, strict=True):
-        u = np.where(np.isfinite(use), use, -np.inf)
-        kk, jj = np.unravel_index(np.argmax(u), u.shape)
-        if u[kk, jj] > 1.0 + 1e-12 and (worst is None or u[kk, jj] > worst[0]):
-            worst = (float(u[kk, jj]), kind, int(kk), int(jj))
+    worst = _worst_violation(kinds, uses)
     if worst is None:
         return usage
     _, kind, k, j = worst
