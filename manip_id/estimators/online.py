@@ -67,7 +67,7 @@ class OnlineHistory:
 
 
 class OnlineEstimator:
-    """The base of the online laws: estimate, bounds, time, history (shared bookkeeping)."""
+    """Shared bookkeeping: estimate, bounds, time, history."""
 
     def __init__(self, theta0, *, bounds=None, record_every: int = 1, t0: float = 0.0):
         theta = as_float_array(theta0, "theta0", ndim=1)

@@ -30,7 +30,7 @@ def overlap_margin(filt: Lowpass, tol: float = 1e-16) -> int:
     ``filt``, times 1.25 for the polynomial factors of clustered poles, plus
     the padding of ``sosfiltfilt`` and a few rows for the central differences.
     """
-    from scipy import signal as _signal
+    import scipy.signal as _signal  # heavy (0.4 s): only when a filter runs
 
     _, poles, _ = _signal.sos2zpk(filt.sos)
     r = float(np.max(np.abs(poles)))
@@ -102,7 +102,7 @@ def iter_overlapping(chunks, block: int, margin: int):
 
 def resample_windows(windows, cols: slice, t0: float, rate: float, n_grid: int, kind: str):
     """Blocked cubic-spline resampling: grid points ``t0 + k / rate`` in each block's span."""
-    from scipy.interpolate import CubicSpline
+    from scipy.interpolate import CubicSpline  # heavy (0.13 s): only when resampling
 
     k_next = 0
     for w in windows:

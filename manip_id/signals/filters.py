@@ -58,7 +58,7 @@ class Lowpass:
     @cached_property
     def sos(self) -> np.ndarray:
         """Second-order sections of the one-way filter, shape (ceil(n/2), 6)."""
-        from scipy import signal as _signal
+        import scipy.signal as _signal  # heavy (0.4 s): only when a filter runs
 
         return _signal.butter(self.order, self.cutoff, btype="low", fs=self.rate, output="sos")
 
@@ -79,7 +79,7 @@ class Lowpass:
         n = int(20 * self.rate / self.cutoff) + 64
         impulse = np.zeros(n)
         impulse[0] = 1.0
-        from scipy import signal as _signal
+        import scipy.signal as _signal  # heavy (0.4 s): only when a filter runs
 
         h = np.abs(_signal.sosfilt(self.sos, impulse))
         above = np.nonzero(h > tol * h.max())[0]
@@ -93,7 +93,7 @@ class Lowpass:
                 f"{x.shape[axis]} samples are too few to filter with order {self.order}: "
                 f"need more than {3 * (2 * self.sos.shape[0] + 1)}"
             )
-        from scipy import signal as _signal
+        import scipy.signal as _signal  # heavy (0.4 s): only when a filter runs
 
         return _signal.sosfiltfilt(self.sos, x, axis=axis)
 

@@ -63,7 +63,7 @@ def resample(t, x, t_new, kind: str = "cubic") -> np.ndarray:
     numpy.ndarray
         shape (M,) or (M, m).
     """
-    from scipy.interpolate import CubicSpline
+    from scipy.interpolate import CubicSpline  # heavy (0.13 s): only when resampling
 
     t = as_float_array(t, "t", ndim=1)
     x = as_float_array(x, "x", ndim=(1, 2))

@@ -16,6 +16,7 @@ import pinocchio as pin
 
 from .._checks import as_int, as_real, random_generator
 from ..errors import InfeasibleTrajectoryError, InputError, NumericalError
+from ..identifiability import analyze
 from ..regressor import iter_regressor
 from ..robot import Robot
 from .fourier import DEFAULT_WF, FourierTrajectory, trajectory_to_configuration
@@ -97,8 +98,6 @@ def base_columns(robot: Robot, seed: int = 0) -> np.ndarray:
     Those of :func:`manip_id.identifiability.analyze` (structural analysis at
     random states drawn with ``seed``).
     """
-    from ..identifiability import analyze
-
     return np.asarray(analyze(robot, seed=seed).base.independent, dtype=int)
 
 
