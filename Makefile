@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 export OPENBLAS_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
 
-.PHONY: demo test lint format system-deps bench clean docs
+.PHONY: demo test lint format system-deps bench clean docs docs-check
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -47,9 +47,27 @@ format: $(STAMP)
 	$(VENV)/bin/ruff check --fix manip_id tests experiments
 
 # The documentation (Sphinx, numpydoc, MyST): API reference and worked examples.
-docs: $(STAMP)
+DOCS_STAMP := $(VENV)/.docs-installed
+
+$(DOCS_STAMP): pyproject.toml | $(STAMP)
 	$(PY) -m pip install --quiet -e '.[docs]'
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
 	$(PY) -m sphinx -b html docs docs/_build/html
+
+# The same build as a check (for CI): warnings are errors, output into a temporary folder.
+# SPHINX_PYTHON=... builds with another interpreter that has Sphinx, numpydoc and
+# myst-parser and this package importable (no .venv is made or changed then).
+SPHINX_CHECK = out=$$(mktemp -d) && trap 'rm -rf "$$out"' EXIT && \
+	$(1) -m sphinx -b html -W --keep-going -q -d "$$out/doctrees" docs "$$out/html"
+ifdef SPHINX_PYTHON
+docs-check:
+	@$(call SPHINX_CHECK,$(SPHINX_PYTHON))
+else
+docs-check: $(DOCS_STAMP)
+	@$(call SPHINX_CHECK,$(PY))
+endif
 
 # Benchmarks of the README's Performance section (minutes; prints tables).
 bench: $(STAMP)

@@ -26,6 +26,7 @@ import numpy as np
 from manip_id import load_robot
 from manip_id.adaptive import default_gains, lyapunov_function
 from manip_id.closed_loop import (
+    ClosedLoopOptions,
     default_reference,
     simulate,
     with_payload,
@@ -46,10 +47,7 @@ def lyapunov_check(name: str) -> dict:
             theta,
             theta0,
             gains=gains,
-            duration=1.0,
-            rate=5000,
-            integrator="rk4",
-            record_every=5,
+            options=ClosedLoopOptions(duration=1.0, rate=5000, integrator="rk4", record_every=5),
         )
         V = lyapunov_function(robot, theta, run.gamma, run.q, run.s, run.theta_hat)
         out[law] = {
@@ -80,10 +78,8 @@ def tracking_and_prediction(name: str, duration: float) -> dict:
             theta0,
             reference=ref,
             gains=gains,
-            duration=duration,
-            rate=1000,
-            record_every=10,
             adapt=adapt,
+            options=ClosedLoopOptions(duration=duration, rate=1000, record_every=10),
         )
     plain, comp = runs["plain"], runs["composite"]
     at = [t for t in (0.0, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0) if t <= duration]

@@ -20,7 +20,7 @@ import statistics
 from manip_id import load_robot
 from manip_id.adaptive import default_gains
 from manip_id.cli._common import write_json
-from manip_id.closed_loop import simulate
+from manip_id.closed_loop import ClosedLoopOptions, simulate
 from manip_id.simulation import perturb_parameters
 
 
@@ -51,9 +51,7 @@ def main() -> None:
                 theta,
                 theta0,
                 gains=gains,
-                duration=args.duration,
-                rate=args.rate,
-                record_every=100,
+                options=ClosedLoopOptions(duration=args.duration, rate=args.rate, record_every=100),
             )
             walls.append(run.wall_time)
         best, median = min(walls), statistics.median(walls)

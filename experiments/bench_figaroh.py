@@ -66,12 +66,14 @@ def write_record(n: int, folder: Path) -> tuple[Path, str, str]:
     import numpy as np
 
     from manip_id.robot import load_robot
-    from manip_id.simulation import SimulationStream
+    from manip_id.simulation import MeasurementNoise, SimulationStream
     from manip_id.trajectories import random_trajectory
 
     robot = load_robot("ur10", friction="viscous,coulomb")
     traj = random_trajectory(robot, harmonics=5, seed=0)  # as manip-id --simulate --seed 0
-    stream = SimulationStream(robot, traj, duration=(n - 1) / RATE, rate=RATE, noise_tau=0.01)
+    stream = SimulationStream(
+        robot, traj, duration=(n - 1) / RATE, rate=RATE, noise=MeasurementNoise(tau=0.01)
+    )
     ds = stream.dataset()
     path = folder / "record.npz"
     np.savez(path, q=ds.q, dq=ds.dq, ddq=ds.ddq, tau=ds.tau)

@@ -29,15 +29,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from manip_id import load_robot  # noqa: E402
 from manip_id._io import atomic_write, write_json  # noqa: E402
-from manip_id.adaptive import default_gains  # noqa: E402
-from manip_id.closed_loop import default_reference, simulate  # noqa: E402
+from manip_id.adaptive import CompositeLaw, default_gains  # noqa: E402
+from manip_id.closed_loop import ClosedLoopOptions, default_reference, simulate  # noqa: E402
 from manip_id.simulation import perturb_parameters  # noqa: E402
 from manip_id.trajectories import trajectory_to_configuration  # noqa: E402
 
 LAWS = {
-    "plain Slotine-Li (gradient)": {"composite": 0.0},
-    "composite, constant Gamma": {"composite": 50.0, "gain": "constant"},
-    "composite, RLS gain P(t)": {"composite": 50.0, "gain": "rls"},
+    "plain Slotine-Li (gradient)": CompositeLaw(kappa=0.0),
+    "composite, constant Gamma": CompositeLaw(kappa=50.0, gain="constant"),
+    "composite, RLS gain P(t)": CompositeLaw(kappa=50.0, gain="rls"),
 }
 
 
@@ -57,17 +57,15 @@ def main(argv=None) -> int:
     reference = default_reference(robot, amplitude=0.4, period=5.0, seed=0)
     q_start = trajectory_to_configuration(robot, reference.sample(0.0)[0])
     runs, summary = {}, {}
-    for label, opts in LAWS.items():
-        gains = default_gains(robot, theta0, q_start, lam=20.0, kd_rate=50.0, **opts)
+    for label, law in LAWS.items():
+        gains = default_gains(robot, theta0, q_start, lam=20.0, kd_rate=50.0, composite=law)
         run = simulate(
             robot,
             theta_true,
             theta0,
             reference=reference,
             gains=gains,
-            duration=args.duration,
-            rate=1000.0,
-            record_every=10,
+            options=ClosedLoopOptions(duration=args.duration, rate=1000.0, record_every=10),
         )
         runs[label] = run
         t1, t05 = run.time_to_prediction_error(0.01), run.time_to_prediction_error(0.005)

@@ -37,7 +37,7 @@ from manip_id.identification import (
 )
 from manip_id.models import check_energy_base  # noqa: E402
 from manip_id.robot import available_robots  # noqa: E402
-from manip_id.simulation import simulate  # noqa: E402
+from manip_id.simulation import MeasurementNoise, simulate  # noqa: E402
 from manip_id.trajectories import random_trajectory  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "panda_gaz2019"
@@ -70,7 +70,7 @@ def simulated(seeds: int) -> None:
                     duration=2 * np.pi / WF,
                     rate=RATE,
                     theta=theta,
-                    noise_tau=noise,
+                    noise=MeasurementNoise(tau=noise),
                     seed=seed,
                 ).dataset
                 t0 = time.perf_counter()

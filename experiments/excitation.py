@@ -26,6 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from manip_id import ManipIdError, load_robot  # noqa: E402
 from manip_id.cli._common import write_json  # noqa: E402
 from manip_id.trajectories import (  # noqa: E402
+    ExcitationSearch,
     base_columns,
     excitation_condition_number,
     optimize_excitation,
@@ -55,11 +56,11 @@ def main(argv=None) -> int:
             args.harmonics,
             wf,
             args.seed,
-            n_points=args.n_points,
-            maxiter=args.maxiter,
-            n_random=args.n_random,
             acceleration_limit=args.acceleration_limit,
             base=base,
+            search=ExcitationSearch(
+                n_points=args.n_points, maxiter=args.maxiter, n_random=args.n_random
+            ),
         )
         t0 = time.perf_counter()
         dense_opt = excitation_condition_number(robot, res.trajectory, 1000, base)

@@ -86,7 +86,7 @@ def profile_one(n: int) -> dict:
     from manip_id.cli import identify as _cli_identify  # noqa: F401 (the CLI's own imports)
     from manip_id.identification import identify_chunks
     from manip_id.robot import load_robot
-    from manip_id.simulation import SimulationStream
+    from manip_id.simulation import MeasurementNoise, SimulationStream
     from manip_id.trajectories import random_trajectory
 
     phase("imports", time.perf_counter() - t0)
@@ -97,7 +97,9 @@ def profile_one(n: int) -> dict:
 
     t0 = time.perf_counter()
     traj = random_trajectory(robot, harmonics=5, seed=0)
-    stream = SimulationStream(robot, traj, duration=(n - 1) / RATE, rate=RATE, noise_tau=0.01)
+    stream = SimulationStream(
+        robot, traj, duration=(n - 1) / RATE, rate=RATE, noise=MeasurementNoise(tau=0.01)
+    )
     stream.tau_true  # noqa: B018
     mib = stream.nbytes / 2**20
     phase("simulate", time.perf_counter() - t0, f"tau_true {mib:.0f} MiB")

@@ -30,8 +30,14 @@ __version__ = "0.1.0"
 #: Public name -> the submodule (relative to this package) that defines it.
 #: Add new exports here; nothing else in this file needs editing.
 _EXPORTS: dict[str, tuple[str, ...]] = {
-    ".adaptive": ("AdaptiveGains", "SlotineLiController", "default_gains", "lyapunov_function"),
-    ".closed_loop": ("ClosedLoopRun", "compare_fixed", "with_payload"),
+    ".adaptive": (
+        "AdaptiveGains",
+        "CompositeLaw",
+        "SlotineLiController",
+        "default_gains",
+        "lyapunov_function",
+    ),
+    ".closed_loop": ("ClosedLoopOptions", "ClosedLoopRun", "compare_fixed", "with_payload"),
     ".datasets": ("Dataset", "FileSpec", "check_robot", "load_dataset", "save_dataset"),
     ".errors": (
         "DataError",
@@ -94,7 +100,8 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     ),
     ".robot": ("JointTerms", "Robot", "available_robots", "load_robot"),
     ".signals": ("Lowpass", "preprocess"),
-    ".simulation": ("SimulatedData", "perturb_parameters", "simulate"),
+    ".perturbation": ("perturb_parameters",),
+    ".simulation": ("MeasurementNoise", "SimulatedData", "simulate"),
     ".trajectories": (
         "ExcitationResult",
         "FourierTrajectory",

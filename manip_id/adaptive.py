@@ -86,20 +86,29 @@ class AdaptiveGains:
 
     Attributes
     ----------
-    lam: Lambda, diagonal [1/s], a scalar or shape (nv,), positive.
-    kd: K_D [N m s/rad], a positive scalar, a positive diagonal (nv,) or a symmetric
+    lam : float or numpy.ndarray
+        Lambda, diagonal [1/s], a scalar or shape (nv,), positive.
+    kd : float or numpy.ndarray
+        K_D [N m s/rad], a positive scalar, a positive diagonal (nv,) or a symmetric
         positive definite matrix (nv, nv).
-    gamma: Gamma, adaptation gain, a scalar, its diagonal (p,) or a symmetric
+    gamma : float or numpy.ndarray
+        Gamma, adaptation gain, a scalar, its diagonal (p,) or a symmetric
         positive definite matrix (p, p).
-    composite: kappa >= 0 [1/s], weight of the normalized prediction-error term
+    composite : float
+        kappa >= 0 [1/s], weight of the normalized prediction-error term
         (see the module docstring); 0 gives the plain Slotine-Li law.
-    filter_bandwidth: lambda_f > 0 of the composite filter lambda_f/(s + lambda_f) [rad/s].
-    dead_zone: delta >= 0 on each s_j [rad/s].
-    lower, upper: optional bounds on theta_hat, shape (p,) (+-inf for none).
-    gain: "constant" (Gamma) or "rls" (the time-varying P(t) of the module
+    filter_bandwidth : float
+        lambda_f > 0 of the composite filter lambda_f/(s + lambda_f) [rad/s].
+    dead_zone : float
+        delta >= 0 on each s_j [rad/s].
+    lower, upper : numpy.ndarray, optional
+        optional bounds on theta_hat, shape (p,) (+-inf for none).
+    gain : str
+        "constant" (Gamma) or "rls" (the time-varying P(t) of the module
         docstring; needs ``composite > 0``). With bounds, the box clip is not the
         P-weighted projection once P is not diagonal: V may then increase at a clip.
-    forgetting: beta_0 >= 0 of the bounded-gain forgetting with ``gain="rls"`` [1/s].
+    forgetting : float
+        beta_0 >= 0 of the bounded-gain forgetting with ``gain="rls"`` [1/s].
     """
 
     lam: float | np.ndarray = 10.0
@@ -114,6 +123,29 @@ class AdaptiveGains:
     forgetting: float = 0.0
 
 
+@dataclass(frozen=True)
+class CompositeLaw:
+    """The composite adaptation of :func:`default_gains` (fields as in :class:`AdaptiveGains`).
+
+    Attributes
+    ----------
+    kappa : float
+        Weight kappa >= 0 [1/s] of the normalized prediction-error term; 0 gives the plain
+        Slotine-Li law.
+    filter_bandwidth : float
+        lambda_f > 0 of the composite filter lambda_f/(s + lambda_f) [rad/s].
+    gain : str
+        ``"constant"`` (Gamma) or ``"rls"`` (the time-varying P(t); needs ``kappa > 0``).
+    forgetting : float
+        beta_0 >= 0 of the bounded-gain forgetting with ``gain="rls"`` [1/s].
+    """
+
+    kappa: float = 0.0
+    filter_bandwidth: float = 20.0
+    gain: str = "constant"
+    forgetting: float = 0.0
+
+
 def default_gains(
     robot: Robot,
     theta: np.ndarray | None = None,
@@ -122,11 +154,8 @@ def default_gains(
     lam: float = 20.0,
     kd_rate: float = 50.0,
     gamma: float = 1.0,
-    composite: float = 0.0,
-    filter_bandwidth: float = 20.0,
     dead_zone: float = 0.0,
-    gain: str = "constant",
-    forgetting: float = 0.0,
+    composite: float | CompositeLaw = 0.0,
 ) -> AdaptiveGains:
     """Gains scaled to the robot.
 
@@ -136,9 +165,12 @@ def default_gains(
     stiff for the light modes or too soft for the heavy ones of a coupled arm);
     ``Gamma = gamma diag(scale^2)`` with ``scale_i = |theta_i| + floor(unit_i)``
     (floors 1 kg, 0.1 kg m, 0.01 kg m^2, 1 for joint terms, the sizes of an arm's
-    links): each parameter adapts in proportion to its size. ``gain`` and
-    ``forgetting`` as in :class:`AdaptiveGains` (with ``gain="rls"``, Gamma is P(0)).
+    links): each parameter adapts in proportion to its size. ``dead_zone`` as in
+    :class:`AdaptiveGains`. ``composite`` is kappa [1/s] of the composite law with its
+    default filter, or a :class:`CompositeLaw` (filter bandwidth, ``gain="rls"``,
+    forgetting; with ``gain="rls"``, Gamma is P(0)).
     """
+    law = composite if isinstance(composite, CompositeLaw) else CompositeLaw(kappa=composite)
     theta = robot.nominal_parameters if theta is None else as_float_array(theta, "theta", 1)
     q = robot.neutral() if q is None else as_float_array(q, "q", 1)
     model = robot.with_parameters(theta)
@@ -154,11 +186,11 @@ def default_gains(
         lam=lam,
         kd=kd_rate * M,
         gamma=gamma * scale**2,
-        composite=composite,
-        filter_bandwidth=filter_bandwidth,
+        composite=law.kappa,
+        filter_bandwidth=law.filter_bandwidth,
         dead_zone=dead_zone,
-        gain=gain,
-        forgetting=forgetting,
+        gain=law.gain,
+        forgetting=law.forgetting,
     )
 
 
@@ -182,10 +214,14 @@ class SlotineLiController:
 
     Parameters
     ----------
-    robot: the robot (its joint terms define the parameter layout).
-    theta0: initial estimate, shape (p,).
-    gains: :class:`AdaptiveGains`.
-    adapt: False holds ``theta_hat`` fixed at ``theta0`` (computed-torque-like
+    robot : Robot
+        the robot (its joint terms define the parameter layout).
+    theta0 : array_like
+        initial estimate, shape (p,).
+    gains : AdaptiveGains, optional
+        :class:`AdaptiveGains`.
+    adapt : bool
+        False holds ``theta_hat`` fixed at ``theta0`` (computed-torque-like
         tracking with wrong parameters, the comparison baseline).
     """
 
@@ -421,12 +457,21 @@ def lyapunov_function(robot: Robot, theta, gamma: np.ndarray, q, s, theta_hat) -
 
     Parameters
     ----------
-    theta: true parameters, shape (p,) (M includes their armature).
-    gamma: Gamma, shape (p, p) (e.g. ``controller.gamma``).
-    q: positions, shape (N, nq); s: sliding variable, shape (N, nv);
-    theta_hat: estimates, shape (N, p).
+    theta : array_like
+        true parameters, shape (p,) (M includes their armature).
+    gamma : numpy.ndarray
+        Gamma, shape (p, p) (e.g. ``controller.gamma``).
+    q : array_like
+        positions, shape (N, nq).
+    s : array_like
+        sliding variable [rad/s], shape (N, nv).
+    theta_hat : array_like
+        estimates, shape (N, p).
 
-    Returns V, shape (N,) [J].
+    Returns
+    -------
+    numpy.ndarray
+        V [J], shape (N,).
     """
     theta = as_float_array(theta, "theta", 1)
     q = as_float_array(q, "q", 2)

@@ -18,7 +18,8 @@ Noise (seeded, Gaussian, independent per sample and joint)::
     dq_meas_j = dq_j + noise_dq * e                     [rad/s or m/s]
 
 ``noise_tau`` is relative to each joint's noise-free torque RMS over the
-record; ``noise_q`` and ``noise_dq`` are absolute. Noise on a continuous
+record; ``noise_q`` and ``noise_dq`` are absolute (the fields ``tau``, ``q``, ``dq`` of
+:class:`MeasurementNoise`). Noise on a continuous
 joint's position is added to the angle before it is stored as (cos, sin).
 The dataset's ``ddq`` is the exact (analytic) acceleration. The torque, the
 position and the velocity noise, and the parameter perturbation, draw from
@@ -40,15 +41,32 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from ._checks import as_float_array, as_real, check_finite, random_generator
+from ._checks import as_real, memory_budget
 from .datasets import Dataset
-from .errors import InputError
+from .errors import InputError, ResourceError
+from .perturbation import parameter_vector, perturb_parameters, require_physical
 from .regressor import joint_torques
 from .robot import Robot
 from .trajectories import FourierTrajectory, trajectory_to_configuration
 
-#: Joint terms that must stay non-negative (offset may take either sign).
-_POSITIVE_TERMS = ("Ia", "fv", "fc", "k")
+
+@dataclass(frozen=True)
+class MeasurementNoise:
+    """Gaussian noise on the simulated measurements (module docstring), each >= 0.
+
+    Attributes
+    ----------
+    tau : float
+        Torque noise standard deviation, relative to each joint's noise-free torque RMS.
+    q : float
+        Position noise standard deviation [rad or m] (on the angle of a continuous joint).
+    dq : float
+        Velocity noise standard deviation [rad/s or m/s].
+    """
+
+    tau: float = 0.0
+    q: float = 0.0
+    dq: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -57,15 +75,24 @@ class SimulatedData:
 
     Attributes
     ----------
-    dataset: the measurements (noisy ``q``, ``dq``, ``tau``; exact ``ddq``).
-    theta_true: the parameters that produced the torques, shape (p,).
-    tau_true: noise-free torques [N m or N], shape (N, nv).
-    noise_tau: torque noise, relative to each joint's torque RMS.
-    noise_q: position noise standard deviation [rad or m].
-    noise_dq: velocity noise standard deviation [rad/s or m/s].
-    perturb: relative perturbation applied to the parameters.
-    rate: sampling rate [Hz].
-    seed: the seed of every random draw.
+    dataset : Dataset
+        the measurements (noisy ``q``, ``dq``, ``tau``; exact ``ddq``).
+    theta_true : numpy.ndarray
+        the parameters that produced the torques, shape (p,).
+    tau_true : numpy.ndarray
+        noise-free torques [N m or N], shape (N, nv).
+    noise_tau : float
+        torque noise, relative to each joint's torque RMS.
+    noise_q : float
+        position noise standard deviation [rad or m].
+    noise_dq : float
+        velocity noise standard deviation [rad/s or m/s].
+    perturb : float
+        relative perturbation applied to the parameters.
+    rate : float
+        sampling rate [Hz].
+    seed : int
+        the seed of every random draw.
     """
 
     dataset: Dataset
@@ -86,90 +113,8 @@ def _streams(seed: int) -> list[np.random.Generator]:
     return [np.random.default_rng(s) for s in np.random.SeedSequence(int(seed)).spawn(4)]
 
 
-def _check_theta(robot: Robot, theta) -> np.ndarray:
-    theta = as_float_array(theta, "theta", ndim=1)
-    if theta.shape[0] != robot.n_parameters:
-        raise InputError(f"{theta.shape=} but robot.n_parameters={robot.n_parameters}")
-    check_finite(theta, "theta", robot.parameter_names)
-    return theta
-
-
 def _nonnegative(value: float, name: str) -> float:
     return as_real(value, name, minimum=0.0)
-
-
-def _perturb_body(block: np.ndarray, rel: float, rng: np.random.Generator) -> np.ndarray:
-    """One body's 10 parameters, perturbed and kept physically consistent.
-
-    With ``Ic = R diag(lambda) R^T`` at the centre of mass, the second moments
-    of the mass distribution along the principal axes are
-    ``s_i = (lambda_j + lambda_k - lambda_i) / 2`` (>= 0 for a real body;
-    ``lambda_i = s_j + s_k``, which is the triangle inequality). The mass and
-    each ``s_i`` are multiplied by ``exp(rel e)``, the principal axes rotated
-    by ``exp3(rel e)`` [rad] and the centre of mass moved by
-    ``rel max(|c|, r_g) e / sqrt(3)`` (about ``rel max(|c|, r_g)`` in norm),
-    ``r_g = sqrt(trace(Ic) / (2 m))`` the radius of gyration, with ``e``
-    standard normal draws.
-    """
-    inertia = pin.Inertia.FromDynamicParameters(block)
-    mass = inertia.mass
-    if not mass > 0:  # massless placeholder bodies are left as they are
-        return block.copy()
-    com = np.array(inertia.lever)
-    Ic = np.array(inertia.inertia)
-    lam, R = np.linalg.eigh(0.5 * (Ic + Ic.T))
-    s = 0.5 * (lam.sum() - 2.0 * lam)
-    floor = 1e-9 * max(lam.max(), 1e-12)  # descriptions that violate the triangle inequality
-    s = np.maximum(s, floor)
-    e = rng.standard_normal(10)
-    mass_p = mass * math.exp(rel * e[0])
-    # second moments scale with the mass (same shape), then change by exp(rel e) each
-    s_p = s * (mass_p / mass) * np.exp(rel * e[1:4])
-    R_p = pin.exp3(rel * e[4:7]) @ R
-    r_g = math.sqrt(max(lam.sum(), 0.0) / (2.0 * mass))
-    com_p = com + rel * max(float(np.linalg.norm(com)), r_g) * e[7:10] / math.sqrt(3.0)
-    lam_p = s_p.sum() - s_p
-    Ic_p = R_p @ np.diag(lam_p) @ R_p.T
-    return pin.Inertia(mass_p, com_p, 0.5 * (Ic_p + Ic_p.T)).toDynamicParameters()
-
-
-def perturb_parameters(robot: Robot, rel: float, seed: int = 0, theta=None) -> np.ndarray:
-    """Parameters perturbed by a relative amount ``rel`` while staying physically valid.
-
-    Parameters
-    ----------
-    robot: the robot whose layout ``theta`` follows.
-    rel: relative standard deviation of the perturbation (e.g. 0.1 for about 10%).
-    seed: seed of the draws.
-    theta: parameters to perturb, shape (p,); default ``robot.nominal_parameters``.
-
-    Returns
-    -------
-    Perturbed parameters, shape (p,). Per body: mass times ``exp(rel e)``,
-    principal second moments of the mass distribution times ``exp(rel e)``
-    (the principal moments of inertia at the CoM then satisfy the triangle
-    inequalities), principal axes rotated by about ``rel`` [rad], centre of
-    mass moved by about ``rel`` times its distance from the joint (at least
-    the radius of gyration); massless bodies are left unchanged. Joint terms
-    times ``exp(rel e)``, so Ia, fv, fc, k keep their (non-negative) sign; a
-    zero term stays zero.
-    """
-    rel = _nonnegative(rel, "rel")
-    theta = robot.nominal_parameters.copy() if theta is None else _check_theta(robot, theta).copy()
-    if rel == 0.0:
-        return theta
-    rng = random_generator(seed)
-    blocks = robot.layout.rigid_blocks(theta)  # views into theta
-    for i in range(robot.n_bodies):
-        blocks[i] = _perturb_body(blocks[i], rel, rng)
-    terms = robot.terms.enabled
-    if terms:
-        joint = robot.layout.joint_block(theta)
-        joint *= np.exp(rel * rng.standard_normal(joint.shape))
-        for k, t in enumerate(terms):
-            if t in _POSITIVE_TERMS:
-                joint[:, k] = np.abs(joint[:, k])
-    return theta
 
 
 def inverse_dynamics(robot: Robot, theta, q, dq, ddq) -> np.ndarray:
@@ -181,13 +126,15 @@ def inverse_dynamics(robot: Robot, theta, q, dq, ddq) -> np.ndarray:
 
     Parameters
     ----------
-    theta: shape (p,); q: (N, nq) [rad or m]; dq, ddq: (N, nv).
+    theta : array_like
+        shape (p,); q: (N, nq) [rad or m]; dq, ddq: (N, nv).
 
     Returns
     -------
-    tau [N m or N], shape (N, nv).
+    numpy.ndarray
+        tau [N m or N], shape (N, nv).
     """
-    theta = _check_theta(robot, theta)
+    theta = parameter_vector(robot, theta)
     model = robot.with_parameters(theta)
     data = model.createData()
     n = q.shape[0]
@@ -202,9 +149,6 @@ def inverse_dynamics(robot: Robot, theta, q, dq, ddq) -> np.ndarray:
 
 #: Share of the available memory a simulation may take.
 MEMORY_SHARE = 0.5
-#: Relative eigenvalue tolerance: a body's pseudo-inertia may be singular (a point mass,
-#: a massless frame) but not indefinite (``lambda_min < -tol * max |lambda|``).
-PSD_TOLERANCE = 1e-10
 
 
 def simulation_bytes(robot: Robot, n_samples: int) -> int:
@@ -218,52 +162,8 @@ def simulation_bytes(robot: Robot, n_samples: int) -> int:
 
 def check_simulation_memory(robot: Robot, n_samples: int) -> None:
     """Raise :class:`~manip_id.errors.ResourceError` if the simulation would not fit in memory."""
-    import psutil
-
-    from .errors import ResourceError
-
     need = simulation_bytes(robot, n_samples)
-    available = psutil.virtual_memory().available
-    if need > MEMORY_SHARE * available:
-        raise ResourceError(
-            f"a simulation of {n_samples:.3g} samples of {robot.nv} joints needs about "
-            f"{need / 2**30:.3g} GiB, more than {MEMORY_SHARE:.0%} of the "
-            f"{available / 2**30:.3g} GiB available; shorten the duration or lower the rate"
-        )
-
-
-def require_physical(robot: Robot, theta) -> None:
-    """Raise unless ``theta`` can be simulated: every body physically realizable.
-
-    A body fails when its pseudo-inertia has a negative eigenvalue (negative mass,
-    inertia not positive semi-definite about the centre of mass, triangle inequalities
-    broken), and a joint when its armature or viscous / Coulomb friction is negative
-    (:func:`manip_id.consistency.check_consistency`); the message names the body.
-    A singular pseudo-inertia (a point mass, a massless frame) is accepted.
-    """
-    from .consistency import PhysicalConsistencyError, check_consistency
-
-    report = check_consistency(robot, theta)
-    if report.consistent:
-        return
-    indefinite = {
-        name
-        for name, low, high in zip(
-            report.body_names, report.min_eigenvalues, report.max_eigenvalues, strict=True
-        )
-        if low < -PSD_TOLERANCE * max(abs(low), abs(high))
-    }
-    bodies = set(report.body_names)
-    violations = [v for v in report.violations if v.name in indefinite or v.name not in bodies]
-    if violations:
-        named = [b for b in report.body_names if b in {v.name for v in violations}]
-        hint = (
-            f" (bodies {', '.join(named)}; 'manip-id repair ROBOT OUT.urdf' writes the "
-            "nearest physical model)"
-            if named
-            else ""
-        )
-        raise PhysicalConsistencyError(f"robot {robot.name!r} to simulate{hint}", violations)
+    _check_memory(need, f"a simulation of {n_samples:.3g} samples of {robot.nv} joints needs")
 
 
 def simulate(
@@ -274,29 +174,35 @@ def simulate(
     rate: float,
     theta=None,
     perturb: float = 0.0,
-    noise_tau: float = 0.0,
-    noise_q: float = 0.0,
-    noise_dq: float = 0.0,
+    noise: MeasurementNoise | None = None,
     seed: int = 0,
 ) -> SimulatedData:
     """Simulated measurements along a trajectory.
 
     Parameters
     ----------
-    robot: the robot (its joint terms decide which torques are added).
-    trajectory: joint coordinates per DoF (see :mod:`manip_id.trajectories`).
-    duration: length of the record [s].
-    rate: sampling rate [Hz]; samples at ``t_k = k / rate``.
-    theta: true parameters, shape (p,); default the nominal ones.
-    perturb: relative perturbation of ``theta`` (see :func:`perturb_parameters`).
-    noise_tau: torque noise standard deviation relative to each joint's torque RMS.
-    noise_q: position noise standard deviation [rad or m].
-    noise_dq: velocity noise standard deviation [rad/s or m/s].
-    seed: seed of every random draw (module docstring).
+    robot : Robot
+        the robot (its joint terms decide which torques are added).
+    trajectory : FourierTrajectory
+        joint coordinates per DoF (see :mod:`manip_id.trajectories`).
+    duration : float
+        length of the record [s].
+    rate : float
+        sampling rate [Hz]; samples at ``t_k = k / rate``.
+    theta : array_like
+        true parameters, shape (p,); default the nominal ones.
+    perturb : float
+        relative perturbation of ``theta`` (see :func:`perturb_parameters`).
+    noise : MeasurementNoise, optional
+        torque noise relative to each joint's torque RMS, position noise [rad or m] and
+        velocity noise [rad/s or m/s] (:class:`MeasurementNoise`); default none.
+    seed : int
+        seed of every random draw (module docstring).
 
     Returns
     -------
-    :class:`SimulatedData` with the dataset and ``theta_true``.
+    SimulatedData
+        :class:`SimulatedData` with the dataset and ``theta_true``.
     """
     stream = SimulationStream(
         robot,
@@ -305,9 +211,7 @@ def simulate(
         rate=rate,
         theta=theta,
         perturb=perturb,
-        noise_tau=noise_tau,
-        noise_q=noise_q,
-        noise_dq=noise_dq,
+        noise=noise,
         seed=seed,
     )
     check_simulation_memory(robot, stream.n_samples)
@@ -345,11 +249,16 @@ class SimulationStream:
 
     Attributes
     ----------
-    robot, trajectory: as given.
-    theta_true: the parameters that produce the torques, shape (p,).
-    n_samples: number of samples ``N = floor(duration rate) + 1``.
-    rate: sampling rate [Hz]; sample ``k`` is at ``t_k = k / rate`` [s].
-    noise_tau, noise_q, noise_dq, perturb, seed: as given (validated).
+    robot, trajectory
+        as given.
+    theta_true : array_like
+        the parameters that produce the torques, shape (p,).
+    n_samples
+        number of samples ``N = floor(duration rate) + 1``.
+    rate : float
+        sampling rate [Hz]; sample ``k`` is at ``t_k = k / rate`` [s].
+    noise_tau, noise_q, noise_dq, perturb, seed
+        as given (validated).
     """
 
     def __init__(
@@ -361,9 +270,7 @@ class SimulationStream:
         rate: float,
         theta=None,
         perturb: float = 0.0,
-        noise_tau: float = 0.0,
-        noise_q: float = 0.0,
-        noise_dq: float = 0.0,
+        noise: MeasurementNoise | None = None,
         seed: int = 0,
     ):
         if not isinstance(trajectory, FourierTrajectory):
@@ -388,11 +295,12 @@ class SimulationStream:
         self.n_samples = n
         self.rate = rate  # [Hz]
         self.perturb = _nonnegative(perturb, "perturb")
-        self.noise_tau = _nonnegative(noise_tau, "noise_tau")
-        self.noise_q = _nonnegative(noise_q, "noise_q")  # [rad or m]
-        self.noise_dq = _nonnegative(noise_dq, "noise_dq")  # [rad/s or m/s]
+        noise = MeasurementNoise() if noise is None else noise
+        self.noise_tau = _nonnegative(noise.tau, "noise.tau")  # relative
+        self.noise_q = _nonnegative(noise.q, "noise.q")  # [rad or m]
+        self.noise_dq = _nonnegative(noise.dq, "noise.dq")  # [rad/s or m/s]
         self.seed = int(seed)
-        base = robot.nominal_parameters if theta is None else _check_theta(robot, theta)
+        base = robot.nominal_parameters if theta is None else parameter_vector(robot, theta)
         require_physical(robot, base)
         g_theta = _streams(self.seed)[0]
         self.theta_true = perturb_parameters(
@@ -416,7 +324,9 @@ class SimulationStream:
     def tau_true(self) -> np.ndarray:
         """Noise-free torques of the whole record [N m or N], shape (N, nv) (computed once)."""
         if self._tau_true is None:
-            _check_memory(self.nbytes, f"the noise-free torques of {self.n_samples:.3g} samples")
+            _check_memory(
+                self.nbytes, f"the noise-free torques of {self.n_samples:.3g} samples need"
+            )
             tau = np.empty((self.n_samples, self.robot.nv))  # [N m or N]
             batch = _BatchInverseDynamics(self.robot, self.theta_true)
             for lo in range(0, self.n_samples, NOISE_BLOCK):
@@ -457,9 +367,10 @@ class SimulationStream:
 
         Yields
         ------
-        ``(t, q, dq, ddq, tau)``: t [s] of shape (n,), q (n, nq) [rad or m]
-        (noisy), dq (n, nv) (noisy), ddq (n, nv) (exact), tau (n, nv) [N m or N]
-        (noisy), with ``n <= NOISE_BLOCK``.
+        object : array_like
+            ``(t, q, dq, ddq, tau)``: t [s] of shape (n,), q (n, nq) [rad or m]
+            (noisy), dq (n, nv) (noisy), ddq (n, nv) (exact), tau (n, nv) [N m or N]
+            (noisy), with ``n <= NOISE_BLOCK``.
         """
         start, stop = self._range(start, stop)
         nv = self.robot.nv
@@ -567,23 +478,19 @@ class _BatchInverseDynamics:
 
 def _check_memory(need: int, what: str) -> None:
     """Raise :class:`~manip_id.errors.ResourceError` if ``need`` bytes would not fit."""
-    import psutil
-
-    from .errors import ResourceError
-
-    available = psutil.virtual_memory().available
+    available = memory_budget(1.0)  # [bytes] available now
     if need > MEMORY_SHARE * available:
         raise ResourceError(
-            f"{what} need about {need / 2**30:.3g} GiB, more than {MEMORY_SHARE:.0%} of the "
+            f"{what} about {need / 2**30:.3g} GiB, more than {MEMORY_SHARE:.0%} of the "
             f"{available / 2**30:.3g} GiB available; shorten the duration or lower the rate"
         )
 
 
 __all__ = [
     "NOISE_BLOCK",
+    "MeasurementNoise",
     "SimulatedData",
     "SimulationStream",
     "inverse_dynamics",
-    "perturb_parameters",
     "simulate",
 ]

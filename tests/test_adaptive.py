@@ -16,11 +16,13 @@ from conftest import get_robot
 
 from manip_id.adaptive import (
     AdaptiveGains,
+    CompositeLaw,
     SlotineLiController,
     default_gains,
     lyapunov_function,
 )
 from manip_id.closed_loop import (
+    ClosedLoopOptions,
     compare_fixed,
     default_reference,
     simulate,
@@ -88,7 +90,13 @@ def test_adaptation_step_is_minus_gamma_y_transpose_s():
 def test_lyapunov_function_does_not_increase(name, composite):
     robot, theta0, theta = _viscous_robot(name)
     gains = default_gains(robot, theta0, composite=composite)
-    run = simulate(robot, theta, theta0, gains=gains, duration=0.4, rate=5000, integrator="rk4")
+    run = simulate(
+        robot,
+        theta,
+        theta0,
+        gains=gains,
+        options=ClosedLoopOptions(duration=0.4, rate=5000, integrator="rk4"),
+    )
     V = lyapunov_function(robot, theta, run.gamma, run.q, run.s, run.theta_hat)
     assert np.diff(V).max() <= 1e-9 * V[0]  # every step
     drop = V[0] - V[-1]
@@ -103,7 +111,12 @@ def test_composite_filter_identity_holds_on_the_plant(name):
     robot, _, theta = _viscous_robot(name)
     gains = default_gains(robot, theta, composite=50.0)
     run = simulate(
-        robot, theta, theta, gains=gains, duration=1.0, rate=1000, integrator="rk4", adapt=False
+        robot,
+        theta,
+        theta,
+        gains=gains,
+        adapt=False,
+        options=ClosedLoopOptions(duration=1.0, rate=1000, integrator="rk4"),
     )
     scale = np.linalg.norm(run.tau, axis=1).mean()
     assert run.filtered_prediction_error.max() < 1e-5 * scale
@@ -115,7 +128,9 @@ def test_tracking_converges_and_beats_fixed_parameters(name):
     robot = get_robot(name)
     theta0 = robot.nominal_parameters
     theta = with_payload(robot, perturb_parameters(robot, 0.1, seed=1), 1.0)
-    cmp = compare_fixed(robot, theta, theta0, duration=4.0, rate=1000, record_every=50)
+    cmp = compare_fixed(
+        robot, theta, theta0, options=ClosedLoopOptions(duration=4.0, rate=1000, record_every=50)
+    )
     a, f = cmp.adaptive, cmp.fixed
     assert a.final_tracking_error < 0.1 * a.initial_tracking_error
     assert a.rms_tracking_error < f.rms_tracking_error
@@ -128,7 +143,9 @@ def test_continuous_joints_track_with_exact_parameters():
     robot = get_robot("double_pendulum_continuous")
     assert robot.nq != robot.nv
     theta = perturb_parameters(robot, 0.3, seed=0)
-    run = simulate(robot, theta, theta, duration=2.0, rate=1000, adapt=False)
+    run = simulate(
+        robot, theta, theta, adapt=False, options=ClosedLoopOptions(duration=2.0, rate=1000)
+    )
     assert run.final_tracking_error < 0.01 * run.initial_tracking_error
     # cos^2 + sin^2 = 1 is kept by pinocchio.integrate
     np.testing.assert_allclose(run.q[:, 0] ** 2 + run.q[:, 1] ** 2, 1.0, atol=1e-12)
@@ -145,7 +162,11 @@ def test_talos_arm_with_exact_parameters_tracks_to_integration_accuracy():
     theta = robot.nominal_parameters
     tails = [
         simulate(
-            robot, theta, theta, duration=2.0, rate=rate, adapt=False, integrator="rk4"
+            robot,
+            theta,
+            theta,
+            adapt=False,
+            options=ClosedLoopOptions(duration=2.0, rate=rate, integrator="rk4"),
         ).rms_tracking_error_tail
         for rate in (1000, 4000)
     ]
@@ -168,9 +189,7 @@ def test_prediction_converges_and_composite_is_faster(name):
             theta0,
             reference=ref,
             gains=gains,
-            duration=5.0,
-            rate=1000,
-            record_every=10,
+            options=ClosedLoopOptions(duration=5.0, rate=1000, record_every=10),
         )
     plain, comp = runs[0.0], runs[50.0]
     assert plain.initial_prediction_error == comp.initial_prediction_error
@@ -194,7 +213,13 @@ def _msd():
 def test_one_dof_composite_lyapunov_function_does_not_increase(composite):
     robot, theta0, theta = _msd()
     gains = default_gains(robot, theta0, composite=composite)
-    run = simulate(robot, theta, theta0, gains=gains, duration=0.4, rate=10000, integrator="rk4")
+    run = simulate(
+        robot,
+        theta,
+        theta0,
+        gains=gains,
+        options=ClosedLoopOptions(duration=0.4, rate=10000, integrator="rk4"),
+    )
     V = lyapunov_function(robot, theta, run.gamma, run.q, run.s, run.theta_hat)
     assert np.diff(V).max() <= 1e-9 * V[0]  # every step
     drop = V[0] - V[-1]
@@ -206,7 +231,12 @@ def test_one_dof_composite_filter_identity_holds_on_the_plant():
     robot, _, theta = _msd()
     gains = default_gains(robot, theta, composite=50.0)
     run = simulate(
-        robot, theta, theta, gains=gains, duration=1.0, rate=1000, integrator="rk4", adapt=False
+        robot,
+        theta,
+        theta,
+        gains=gains,
+        adapt=False,
+        options=ClosedLoopOptions(duration=1.0, rate=1000, integrator="rk4"),
     )
     scale = np.linalg.norm(run.tau, axis=1).mean()
     assert run.filtered_prediction_error.max() < 1e-5 * scale  # measured 4.6e-6
@@ -215,8 +245,14 @@ def test_one_dof_composite_filter_identity_holds_on_the_plant():
 @pytest.mark.parametrize(("gain", "bound"), [("constant", 0.5), ("rls", 0.05)])
 def test_one_dof_composite_tracks_and_predicts(gain, bound):
     robot, theta0, theta = _msd()
-    gains = default_gains(robot, theta0, composite=50.0, gain=gain)
-    run = simulate(robot, theta, theta0, gains=gains, duration=5.0, rate=1000, record_every=10)
+    gains = default_gains(robot, theta0, composite=CompositeLaw(50.0, gain=gain))
+    run = simulate(
+        robot,
+        theta,
+        theta0,
+        gains=gains,
+        options=ClosedLoopOptions(duration=5.0, rate=1000, record_every=10),
+    )
     assert np.isfinite(run.theta_hat).all()
     assert run.final_tracking_error < 0.01 * run.initial_tracking_error  # measured 4e-4
     # measured 0.41 (constant) and 0.011 (rls) of the initial prediction error
@@ -232,7 +268,9 @@ def test_projection_keeps_the_estimate_within_bounds():
     upper = theta0 + 0.02 * np.abs(theta0)
     gains = default_gains(robot, theta0)
     gains = AdaptiveGains(lam=gains.lam, kd=gains.kd, gamma=gains.gamma, lower=lower, upper=upper)
-    run = simulate(robot, theta, theta0, gains=gains, duration=1.0, record_every=10)
+    run = simulate(
+        robot, theta, theta0, gains=gains, options=ClosedLoopOptions(duration=1.0, record_every=10)
+    )
     assert np.all(run.theta_hat >= lower - 1e-15) and np.all(run.theta_hat <= upper + 1e-15)
     assert np.any(np.isclose(run.theta_hat[-1], upper) | np.isclose(run.theta_hat[-1], lower))
 
@@ -243,7 +281,9 @@ def test_dead_zone_stops_adaptation_inside_it():
     theta = perturb_parameters(robot, 0.3, seed=1)
     g = default_gains(robot, theta0)
     wide = AdaptiveGains(lam=g.lam, kd=g.kd, gamma=g.gamma, dead_zone=10.0)
-    run = simulate(robot, theta, theta0, gains=wide, duration=0.5, record_every=10)
+    run = simulate(
+        robot, theta, theta0, gains=wide, options=ClosedLoopOptions(duration=0.5, record_every=10)
+    )
     assert np.abs(run.s).max() < 10.0
     np.testing.assert_array_equal(run.theta_hat[-1], theta0)
 
@@ -254,7 +294,11 @@ def test_noisy_measurements_still_track():
     theta = perturb_parameters(robot, 0.3, seed=1)
     g = default_gains(robot, theta0, dead_zone=0.01)
     run = simulate(
-        robot, theta, theta0, gains=g, duration=2.0, noise_q=1e-4, noise_dq=1e-3, record_every=20
+        robot,
+        theta,
+        theta0,
+        gains=g,
+        options=ClosedLoopOptions(duration=2.0, noise_q=1e-4, noise_dq=1e-3, record_every=20),
     )
     assert np.isfinite(run.theta_hat).all()
     assert run.final_tracking_error < 0.2 * run.initial_tracking_error
@@ -325,7 +369,7 @@ def test_reference_outside_limits_raises():
     ref = FourierTrajectory(q0=q0, a=a, b=np.zeros((nv, 1)), wf=1.0)
     theta = robot.nominal_parameters
     with pytest.raises(InfeasibleTrajectoryError, match="panda_joint4") as info:
-        simulate(robot, theta, theta, reference=ref, duration=1.0)
+        simulate(robot, theta, theta, reference=ref, options=ClosedLoopOptions(duration=1.0))
     assert info.value.joint == "panda_joint4" and info.value.limit == "position"
     assert info.value.excess > 0
 
@@ -337,7 +381,7 @@ def test_rate_must_divide_duration(duration, rate):
     robot = get_robot("ur5")
     theta = robot.nominal_parameters
     with pytest.raises(InputError):
-        simulate(robot, theta, theta, duration=duration, rate=rate)
+        simulate(robot, theta, theta, options=ClosedLoopOptions(duration=duration, rate=rate))
 
 
 def test_bounds_and_shapes_are_checked():

@@ -7,9 +7,9 @@ import json
 import numpy as np
 import pytest
 
-from manip_id.adaptive import AdaptiveGains, SlotineLiController, default_gains
+from manip_id.adaptive import AdaptiveGains, CompositeLaw, SlotineLiController, default_gains
 from manip_id.cli import main
-from manip_id.closed_loop import default_reference, simulate
+from manip_id.closed_loop import ClosedLoopOptions, default_reference, simulate
 from manip_id.errors import InputError
 from manip_id.robot import load_robot
 from manip_id.simulation import perturb_parameters
@@ -44,7 +44,7 @@ def ur5_loop():
 def test_gain_update_is_the_information_update(ur5_loop):
     """One adaptation step: P_new^-1 = P^-1 + dt kappa Yf^T Yf / m^2 (then no forgetting)."""
     robot, theta0, _, ref, q0 = ur5_loop
-    gains = default_gains(robot, theta0, q0, composite=50.0, gain="rls")
+    gains = default_gains(robot, theta0, q0, composite=CompositeLaw(50.0, gain="rls"))
     ctrl = SlotineLiController(robot, theta0, gains)
     rng = np.random.default_rng(0)
     dt = 1e-3
@@ -68,16 +68,24 @@ def test_gain_update_is_the_information_update(ur5_loop):
 
 def test_bounded_forgetting_keeps_the_gain_bounded(ur5_loop):
     robot, theta0, theta_true, ref, q0 = ur5_loop
-    gains = default_gains(robot, theta0, q0, composite=50.0, gain="rls", forgetting=2.0)
-    run = simulate(robot, theta_true, theta0, reference=ref, gains=gains, duration=2.0, rate=500)
+    gains = default_gains(
+        robot, theta0, q0, composite=CompositeLaw(50.0, gain="rls", forgetting=2.0)
+    )
+    run = simulate(
+        robot,
+        theta_true,
+        theta0,
+        reference=ref,
+        gains=gains,
+        options=ClosedLoopOptions(duration=2.0, rate=500),
+    )
     const = simulate(
         robot,
         theta_true,
         theta0,
         reference=ref,
         gains=default_gains(robot, theta0, q0, composite=50.0),
-        duration=2.0,
-        rate=500,
+        options=ClosedLoopOptions(duration=2.0, rate=500),
     )
     assert run.final_prediction_error < const.final_prediction_error
     # the bound, on a controller driven step by step
@@ -112,7 +120,7 @@ def test_lyapunov_function_with_the_time_varying_gain(monkeypatch):
     theta0 = robot.nominal_parameters.copy()
     theta0[robot.n_rigid :] = 0.05
     theta = perturb_parameters(robot, 0.3, seed=2, theta=theta0)
-    gains = default_gains(robot, theta0, composite=50.0, gain="rls")
+    gains = default_gains(robot, theta0, composite=CompositeLaw(50.0, gain="rls"))
     Ps: list[np.ndarray] = [np.asarray(gains.gamma, dtype=float).copy()]
     if Ps[0].ndim == 1:
         Ps[0] = np.diag(Ps[0])
@@ -123,7 +131,13 @@ def test_lyapunov_function_with_the_time_varying_gain(monkeypatch):
         Ps.append(self.P.copy())
 
     monkeypatch.setattr(SlotineLiController, "_update_gain", recording)
-    run = simulate(robot, theta, theta0, gains=gains, duration=0.4, rate=5000, integrator="rk4")
+    run = simulate(
+        robot,
+        theta,
+        theta0,
+        gains=gains,
+        options=ClosedLoopOptions(duration=0.4, rate=5000, integrator="rk4"),
+    )
     model = robot.with_parameters(theta)
     data = model.createData()
     V = np.empty(run.t.shape[0])

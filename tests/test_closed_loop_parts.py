@@ -13,7 +13,15 @@ import pytest
 from conftest import get_robot
 
 from manip_id.adaptive import SlotineLiController, default_gains
-from manip_id.closed_loop import Plant, Recorder, SensorNoise, simulate, step
+from manip_id.closed_loop import (
+    ClosedLoopOptions,
+    Plant,
+    Recorder,
+    SensorNoise,
+    Setpoint,
+    simulate,
+    step,
+)
 from manip_id.consistency import PhysicalConsistencyError
 from manip_id.errors import InputError, NumericalError
 from manip_id.simulation import perturb_parameters
@@ -85,7 +93,9 @@ def test_recorder_stride_keeps_the_last_step():
     rec = Recorder(robot, 20, 1e-3, record_every=7, damping=np.eye(robot.nv))
     np.testing.assert_array_equal(rec.indices, [0, 7, 14, 19])
     theta = robot.nominal_parameters
-    run = simulate(robot, theta, theta, duration=0.02, rate=1000, record_every=7)
+    run = simulate(
+        robot, theta, theta, options=ClosedLoopOptions(duration=0.02, rate=1000, record_every=7)
+    )
     np.testing.assert_allclose(run.t, np.array([0, 7, 14, 19]) * 1e-3, atol=1e-15)
 
 
@@ -99,7 +109,7 @@ def test_step_raises_numerical_error_on_divergence():
     dq = np.full(robot.nv, 1e300)  # [rad/s]: overflows in one period
     z = np.zeros(robot.nv)
     with np.errstate(over="ignore", invalid="ignore"), pytest.raises(NumericalError):
-        step(plant, ctrl, rec, 0, q, dq, q, z, z)
+        step(plant, ctrl, rec, 0, q, dq, Setpoint(q, z, z))
 
 
 def test_plant_checks_its_inputs():

@@ -19,7 +19,7 @@ from manip_id.datasets import save_dataset
 from manip_id.drift import compare, drift_files
 from manip_id.errors import ModelMismatchError
 from manip_id.fleet import identify_files
-from manip_id.simulation import simulate
+from manip_id.simulation import MeasurementNoise, simulate
 from manip_id.trajectories import random_trajectory
 
 FV = np.array([2.0, 2.0, 1.5, 0.5, 0.5, 0.5])  # [N m s/rad]
@@ -43,7 +43,15 @@ def theta(robot):
 
 def _file(robot, theta, folder, seed):
     traj = random_trajectory(robot, seed=1000 + seed)
-    sim = simulate(robot, traj, duration=10.0, rate=200.0, theta=theta, noise_tau=0.02, seed=seed)
+    sim = simulate(
+        robot,
+        traj,
+        duration=10.0,
+        rate=200.0,
+        theta=theta,
+        noise=MeasurementNoise(tau=0.02),
+        seed=seed,
+    )
     return str(save_dataset(sim.dataset, folder / f"run{seed}.npz"))
 
 

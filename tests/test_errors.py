@@ -56,7 +56,7 @@ def test_format_direction_checks_its_names():
 
 def test_closed_loop_divergence_is_a_numerical_error():
     from manip_id.adaptive import default_gains
-    from manip_id.closed_loop import simulate
+    from manip_id.closed_loop import ClosedLoopOptions, simulate
 
     robot = get_robot("ur5")
     theta = robot.nominal_parameters
@@ -64,7 +64,14 @@ def test_closed_loop_divergence_is_a_numerical_error():
     # a derivative gain far beyond what a 100 Hz loop can integrate: the state blows up
     wild = type(gains)(**{**gains.__dict__, "kd": gains.kd * 1e6})
     with pytest.raises(NumericalError, match="closed-loop simulation: the state diverged"):
-        simulate(robot, theta, theta, gains=wild, duration=1.0, rate=100, adapt=False)
+        simulate(
+            robot,
+            theta,
+            theta,
+            gains=wild,
+            adapt=False,
+            options=ClosedLoopOptions(duration=1.0, rate=100),
+        )
 
 
 def test_moved_errors_live_in_errors_and_keep_their_old_homes():

@@ -32,6 +32,7 @@ import pytest
 
 from manip_id.cli import main
 from manip_id.errors import ManipIdError
+from manip_id.simulation import MeasurementNoise
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
@@ -1229,7 +1230,7 @@ def _api_cases():
         ("trajectory-harmonics-zero", lambda w: _traj(harmonics=0), InputError),
         ("perturb-rel-text", lambda w: _perturb("x"), InputError),
         ("perturb-seed-negative", lambda w: _perturb(0.1, seed=-1), InputError),
-        ("simulate-noise-text", lambda w: sim(noise_tau="x"), InputError),
+        ("simulate-noise-text", lambda w: sim(noise=MeasurementNoise(tau="x")), InputError),
         ("identify-workers-text", lambda w: _identify_kw(run={"workers": "x"}), InputError),
         ("identify-chunk-zero", lambda w: _identify_kw(run={"chunk": 0}), InputError),
         ("structural-seed-negative", lambda w: _structural(seed=-1), InputError),

@@ -23,7 +23,7 @@ from manip_id.models import (
     momentum_rows,
 )
 from manip_id.robot import available_robots
-from manip_id.simulation import simulate
+from manip_id.simulation import MeasurementNoise, simulate
 from manip_id.trajectories import random_trajectory
 
 FRICTION = "viscous,coulomb,offset"
@@ -55,7 +55,7 @@ def _data(panda, trajectory, noise=0.0, seed=0):
         duration=2 * np.pi / WF,
         rate=RATE,
         theta=theta,
-        noise_tau=noise,
+        noise=MeasurementNoise(tau=noise),
         seed=seed,
     )
     return sim.dataset

@@ -8,6 +8,8 @@ import pytest
 from manip_id.datasets import Dataset, Layout
 from manip_id.signals import (
     Lowpass,
+    SignalOptions,
+    StreamStats,
     iter_overlapping,
     overlap_margin,
     preprocess,
@@ -31,19 +33,9 @@ def _blocked(ds, chunk, block, **kw):
     lay = Layout(ds.q.shape[1], ds.nv)
     rows = lay.pack(ds.t, ds.q, ds.dq, ds.tau)
     chunks = [rows[i : i + chunk] for i in range(0, ds.n_samples, chunk)]
-    d = np.diff(ds.t)
-    settings, it = preprocess_blocks(
-        chunks,
-        lay.nq,
-        lay.nv,
-        n=ds.n_samples,
-        t_first=ds.t[0],
-        t_last=ds.t[-1],
-        dt_min=d.min(),
-        dt_max=d.max(),
-        block=block,
-        **kw,
-    )
+    stats = StreamStats.of(ds.t)
+    options = SignalOptions(**kw)
+    settings, it = preprocess_blocks(chunks, lay.nq, lay.nv, stats, options=options, block=block)
     return settings, np.vstack(list(it))
 
 

@@ -13,7 +13,13 @@ from hypothesis import strategies as st
 
 from manip_id import InputError, load_robot, regressor
 from manip_id.datasets import Dataset
-from manip_id.simulation import SimulatedData, inverse_dynamics, perturb_parameters, simulate
+from manip_id.simulation import (
+    MeasurementNoise,
+    SimulatedData,
+    inverse_dynamics,
+    perturb_parameters,
+    simulate,
+)
 from manip_id.trajectories import random_trajectory
 
 ALL = dict(armature=True, friction=("viscous", "coulomb", "offset"))
@@ -142,7 +148,7 @@ def test_noise_statistics_and_independent_streams():
     robot = get_robot("panda")
     traj = random_trajectory(robot, 5, seed=4)
     kw = dict(duration=10.0, rate=500.0, seed=9)
-    sim = simulate(robot, traj, noise_tau=0.05, noise_q=1e-3, noise_dq=2e-3, **kw)
+    sim = simulate(robot, traj, noise=MeasurementNoise(tau=0.05, q=1e-3, dq=2e-3), **kw)
     ds = sim.dataset
     rms = np.sqrt(np.mean(sim.tau_true**2, axis=0))
     e = (ds.tau - sim.tau_true) / rms  # 5001 x 7 standard draws times 0.05
@@ -159,7 +165,7 @@ def test_noise_statistics_and_independent_streams():
     corr = np.corrcoef(e.ravel(), dq_err.ravel())[0, 1]
     assert abs(corr) < 5 / math.sqrt(n)
     # switching the position noise off leaves the torque noise as it was
-    tau_only = simulate(robot, traj, noise_tau=0.05, **kw).dataset
+    tau_only = simulate(robot, traj, noise=MeasurementNoise(tau=0.05), **kw).dataset
     np.testing.assert_array_equal(tau_only.tau, ds.tau)
     np.testing.assert_array_equal(tau_only.q, clean.q)
 
@@ -168,7 +174,7 @@ def test_noise_on_continuous_joints_is_on_the_angle():
     robot = get_robot("double_pendulum_continuous")
     traj = random_trajectory(robot, 2, seed=0)
     kw = dict(duration=20.0, rate=200.0, seed=1)
-    noisy = simulate(robot, traj, noise_q=0.01, **kw).dataset
+    noisy = simulate(robot, traj, noise=MeasurementNoise(q=0.01), **kw).dataset
     clean = simulate(robot, traj, **kw).dataset
     np.testing.assert_allclose(np.linalg.norm(noisy.q.reshape(-1, 2, 2), axis=2), 1.0, atol=1e-12)
     d = np.arctan2(noisy.q[:, [1, 3]], noisy.q[:, [0, 2]]) - np.arctan2(
@@ -185,7 +191,7 @@ def test_noise_on_continuous_joints_is_on_the_angle():
         (dict(duration=0.0, rate=10.0), "duration"),
         (dict(duration=1.0, rate=-1.0), "rate"),
         (dict(duration=0.05, rate=10.0), "fewer than 2"),
-        (dict(duration=1.0, rate=10.0, noise_tau=-0.1), "noise_tau"),
+        (dict(duration=1.0, rate=10.0, noise=MeasurementNoise(tau=-0.1)), "noise.tau"),
         (dict(duration=1.0, rate=10.0, perturb=math.nan), "perturb"),
         (dict(duration=1.0, rate=10.0, theta=np.zeros(3)), "n_parameters"),
     ],

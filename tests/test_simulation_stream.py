@@ -13,7 +13,7 @@ from manip_id import simulation as sim_mod
 from manip_id.cli import main
 from manip_id.errors import InputError
 from manip_id.identification import RunOptions
-from manip_id.simulation import SimulationStream, simulate
+from manip_id.simulation import MeasurementNoise, SimulationStream, simulate
 from manip_id.trajectories import random_trajectory
 
 
@@ -24,7 +24,7 @@ def ur10():
 
 def _stream(robot, **kw):
     traj = random_trajectory(robot, harmonics=5, seed=4)
-    opts = dict(duration=2.0, rate=50.0, noise_tau=0.02, noise_q=1e-3, noise_dq=1e-2, seed=9)
+    opts = dict(duration=2.0, rate=50.0, noise=MeasurementNoise(0.02, 1e-3, 1e-2), seed=9)
     opts.update(kw)
     return SimulationStream(robot, traj, **opts)
 
@@ -55,7 +55,7 @@ def test_any_range_regenerates_the_same_samples(ur10, monkeypatch):
 
 def test_simulate_is_the_materialized_stream(ur10):
     traj = random_trajectory(ur10, harmonics=5, seed=4)
-    kw = dict(duration=3.0, rate=40.0, noise_tau=0.05, noise_q=1e-3, noise_dq=1e-2, seed=2)
+    kw = dict(duration=3.0, rate=40.0, noise=MeasurementNoise(0.05, 1e-3, 1e-2), seed=2)
     a = simulate(ur10, traj, **kw)
     b = SimulationStream(ur10, traj, **kw)
     np.testing.assert_array_equal(a.theta_true, b.theta_true)
@@ -66,7 +66,7 @@ def test_simulate_is_the_materialized_stream(ur10):
 
 def test_noise_free_torques_are_the_dynamics(ur10, monkeypatch):
     monkeypatch.setattr(sim_mod, "NOISE_BLOCK", 16)
-    stream = _stream(ur10, noise_tau=0.0, noise_q=0.0, noise_dq=0.0, perturb=0.2)
+    stream = _stream(ur10, noise=MeasurementNoise(), perturb=0.2)
     (t, q, dq, ddq, tau), *_ = stream.measurements(16, 40)
     # Pinocchio's rnea on the true rigid bodies, plus friction written here
     model = ur10.with_parameters(stream.theta_true)
@@ -90,7 +90,9 @@ def test_noise_free_torques_are_the_dynamics(ur10, monkeypatch):
 def test_torque_noise_scale_and_independence(ur10, monkeypatch):
     monkeypatch.setattr(sim_mod, "NOISE_BLOCK", 500)
     traj = random_trajectory(ur10, harmonics=5, seed=1)
-    stream = SimulationStream(ur10, traj, duration=40.0, rate=100.0, noise_tau=0.1, seed=3)
+    stream = SimulationStream(
+        ur10, traj, duration=40.0, rate=100.0, noise=MeasurementNoise(tau=0.1), seed=3
+    )
     ds = stream.dataset()
     e = (ds.tau - stream.tau_true) / (0.1 * np.sqrt(np.mean(stream.tau_true**2, axis=0)))
     assert e.shape == (4001, 6)
@@ -114,7 +116,7 @@ def test_streamed_least_squares_equal_whole_arrays(ur10):
 
 
 def test_noise_free_stream_recovers_the_truth(ur10):
-    stream = _stream(ur10, duration=20.0, noise_tau=0.0, noise_q=0.0, noise_dq=0.0, perturb=0.3)
+    stream = _stream(ur10, duration=20.0, noise=MeasurementNoise(), perturb=0.3)
     res = identify_chunks(ur10, stream.blocks(), method="ols")
     beta = res.base.to_base(stream.theta_true)
     np.testing.assert_allclose(res.estimate, beta, rtol=1e-7, atol=1e-9)
@@ -129,7 +131,9 @@ def test_cli_streamed_simulation_equals_whole_array_identification(ur10, tmp_pat
     got = json.loads(out.read_text())
     # the same record, made whole with the API, split as Dataset.split does
     traj = random_trajectory(ur10, harmonics=5, seed=5)
-    data = simulate(ur10, traj, duration=30.0, rate=40.0, noise_tau=0.01, seed=5).dataset
+    data = simulate(
+        ur10, traj, duration=30.0, rate=40.0, noise=MeasurementNoise(tau=0.01), seed=5
+    ).dataset
     train, valid = data.split(0.7)
     ref = identify(
         ur10,

@@ -11,6 +11,7 @@ from conftest import get_robot
 from manip_id import InfeasibleTrajectoryError, InputError, regressor
 from manip_id.trajectories import (
     ExcitationObjective,
+    ExcitationSearch,
     FourierTrajectory,
     base_columns,
     check_limits,
@@ -239,11 +240,8 @@ def test_optimizer_beats_random_coefficients(name):
         robot,
         harmonics=3,
         seed=0,
-        n_points=30,
-        maxiter=30,
-        n_constraint_points=100,
-        n_random=5,
         acceleration_limit=20.0,
+        search=ExcitationSearch(n_points=30, maxiter=30, n_constraint_points=100, n_random=5),
     )
     assert res.condition_number < res.condition_number_initial
     assert res.condition_number < res.condition_number_random
@@ -259,7 +257,9 @@ def test_optimizer_beats_random_coefficients(name):
 def test_optimizer_improves_the_panda_in_a_few_iterations():
     robot = get_robot("panda")
     res = optimize_excitation(
-        robot, harmonics=2, n_points=20, maxiter=4, n_random=0, n_constraint_points=60
+        robot,
+        harmonics=2,
+        search=ExcitationSearch(n_points=20, maxiter=4, n_constraint_points=60, n_random=0),
     )
     assert res.condition_number < res.condition_number_initial
     assert math.isnan(res.condition_number_random)
@@ -269,9 +269,9 @@ def test_optimizer_improves_the_panda_in_a_few_iterations():
 def test_optimizer_bad_input():
     robot = get_robot("msd")
     with pytest.raises(InputError, match="n_points"):
-        optimize_excitation(robot, n_points=0)
+        optimize_excitation(robot, search=ExcitationSearch(n_points=0))
     with pytest.raises(InputError, match="maxiter"):
-        optimize_excitation(robot, maxiter=1.5)
+        optimize_excitation(robot, search=ExcitationSearch(maxiter=1.5))
 
 
 @pytest.mark.parametrize(

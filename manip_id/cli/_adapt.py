@@ -8,8 +8,8 @@ import argparse
 
 import numpy as np
 
-from ..adaptive import default_gains
-from ..closed_loop import compare_fixed, default_reference, with_payload
+from ..adaptive import CompositeLaw, default_gains
+from ..closed_loop import ClosedLoopOptions, compare_fixed, default_reference, with_payload
 from ..simulation import perturb_parameters, require_physical
 from ..trajectories import trajectory_to_configuration
 from ..viz.adapt_report import write_adapt_report
@@ -34,11 +34,13 @@ def _compare(robot, args: argparse.Namespace):
         lam=args.lam,
         kd_rate=args.kd_rate,
         gamma=args.gamma,
-        composite=args.kappa if args.composite else 0.0,
-        filter_bandwidth=args.filter,
         dead_zone=args.dead_zone,
-        gain=args.gain if args.composite else "constant",
-        forgetting=args.forgetting,
+        composite=CompositeLaw(
+            kappa=args.kappa if args.composite else 0.0,
+            filter_bandwidth=args.filter,
+            gain=args.gain if args.composite else "constant",
+            forgetting=args.forgetting,
+        ),
     )
     return compare_fixed(
         robot,
@@ -46,14 +48,16 @@ def _compare(robot, args: argparse.Namespace):
         theta0,
         reference=reference,
         gains=gains,
-        duration=args.duration,
-        rate=args.rate,
-        substeps=args.substeps,
-        integrator=args.integrator,
-        noise_q=args.noise_q,
-        noise_dq=args.noise_dq,
-        seed=args.seed,
-        record_every=max(int(round(args.rate / 100.0)), 1),
+        options=ClosedLoopOptions(
+            duration=args.duration,
+            rate=args.rate,
+            substeps=args.substeps,
+            integrator=args.integrator,
+            noise_q=args.noise_q,
+            noise_dq=args.noise_dq,
+            seed=args.seed,
+            record_every=max(int(round(args.rate / 100.0)), 1),
+        ),
     )
 
 

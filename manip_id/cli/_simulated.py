@@ -17,7 +17,7 @@ import numpy as np
 from ..datasets import check_robot, load_dataset
 from ..errors import InputError
 from ..identification import RunOptions, identify, identify_chunks
-from ..simulation import SimulationStream, check_simulation_memory
+from ..simulation import MeasurementNoise, SimulationStream, check_simulation_memory
 from ..trajectories import optimize_excitation, random_trajectory
 from ..viz.report_document import ReportSamples, RunContext, add_raw_reference, result_document
 from ._common import (
@@ -58,7 +58,7 @@ def simulation_stream(robot, args: argparse.Namespace):
         traj,
         duration=opts["duration"],
         rate=opts["rate"],
-        noise_tau=opts["noise"],
+        noise=MeasurementNoise(tau=opts["noise"]),
         seed=seed,
     )
     return stream, opts

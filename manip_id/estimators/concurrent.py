@@ -45,15 +45,23 @@ class ConcurrentLearningEstimator(OnlineEstimator):
 
     Parameters
     ----------
-    theta0: initial estimate, shape (p,)
-    gamma: adaptation gain Gamma, shape (p,) (diagonal, positive) or (p, p) (SPD)
-    stack_size: number of recorded samples kept (>= 1; rank p needs ``m n >= p``)
-    novelty: minimum ``||phi - phi_last||^2 / ||phi||`` for a sample to be
+    theta0 : array_like
+        initial estimate, shape (p,)
+    gamma : array_like
+        adaptation gain Gamma, shape (p,) (diagonal, positive) or (p, p) (SPD)
+    stack_size : int, optional
+        number of recorded samples kept (>= 1; rank p needs ``m n >= p``)
+    novelty : float
+        minimum ``||phi - phi_last||^2 / ||phi||`` for a sample to be
         considered for the stack (``phi`` the flattened ``Y``) [units of Y]
-    normalized: normalize the current-sample term (module docstring)
-    bounds: optional ``(lower, upper)`` box for the projection, shapes (p,)
-    record_every: keep every k-th estimate in :attr:`history` (0: none)
-    t0: initial time [s]
+    normalized : bool
+        normalize the current-sample term (module docstring)
+    bounds : array_like
+        optional ``(lower, upper)`` box for the projection, shapes (p,)
+    record_every : int
+        keep every k-th estimate in :attr:`history` (0: none)
+    t0 : float
+        initial time [s]
     """
 
     def __init__(

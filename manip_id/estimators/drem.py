@@ -59,12 +59,18 @@ class DREMEstimator(OnlineEstimator):
 
     Parameters
     ----------
-    theta0: initial estimate, shape (p,)
-    gamma: per-parameter gains gamma_i > 0, a scalar or shape (p,) [1/(s Delta^2)]
-    alpha: bandwidth of the extension filter [1/s], > 0 (memory about ``1/alpha`` s)
-    bounds: optional ``(lower, upper)`` box for the projection, shapes (p,)
-    record_every: keep every k-th estimate in :attr:`history` (0: none)
-    t0: initial time [s]
+    theta0 : array_like
+        initial estimate, shape (p,)
+    gamma : array_like
+        per-parameter gains gamma_i > 0, a scalar or shape (p,) [1/(s Delta^2)]
+    alpha : float
+        bandwidth of the extension filter [1/s], > 0 (memory about ``1/alpha`` s)
+    bounds : array_like
+        optional ``(lower, upper)`` box for the projection, shapes (p,)
+    record_every : int
+        keep every k-th estimate in :attr:`history` (0: none)
+    t0 : float
+        initial time [s]
 
     ``step(Y, z, dt)`` takes ``Y`` (m, p) and ``z`` (m,), or ``phi`` (p,) and scalar
     ``z``; ``last_error`` is the prediction error ``Y theta_hat - z`` before the update.

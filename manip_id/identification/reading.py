@@ -43,7 +43,14 @@ from ..datasets.quality import DataQuality, QualityAccumulator
 from ..datasets.stream import torque_scale_vector
 from ..errors import DataError, InputError
 from ..robot import Robot
-from ..signals import DEFAULT_CUTOFF, PreprocessSettings, preprocess_blocks, uniform_grid
+from ..signals import (
+    DEFAULT_CUTOFF,
+    PreprocessSettings,
+    SignalOptions,
+    StreamStats,
+    preprocess_blocks,
+    uniform_grid,
+)
 from .options import PreprocessOptions
 
 
@@ -217,15 +224,7 @@ def iter_processed(
     if not options.preprocesses(lay.has_ddq):
         return None, rows
     try:
-        settings, blocks = preprocess_blocks(
-            rows,
-            lay.nq,
-            lay.nv,
-            n=scan.n,
-            t_first=scan.t_first,
-            t_last=scan.t_last,
-            dt_min=scan.dt_min,
-            dt_max=scan.dt_max,
+        signal_options = SignalOptions(
             cutoff=DEFAULT_CUTOFF if options.cutoff is None else options.cutoff,
             order=options.order,
             rate=options.rate,
@@ -233,7 +232,10 @@ def iter_processed(
             trim=options.trim,
             velocity=options.velocity,
             filter_torque=options.filter_torque,
-            block=options.block,
+        )
+        stats = StreamStats(scan.n, scan.t_first, scan.t_last, scan.dt_min, scan.dt_max)
+        settings, blocks = preprocess_blocks(
+            rows, lay.nq, lay.nv, stats, options=signal_options, block=options.block
         )
     except (InputError, DataError) as exc:
         raise type(exc)(f"{spec.label}: {exc}") from exc

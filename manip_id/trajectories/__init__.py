@@ -43,6 +43,7 @@ limits, with SLSQP (linear constraints, objective ``log cond(W)``).
 from .excitation import (
     ExcitationObjective,
     ExcitationResult,
+    ExcitationSearch,
     base_columns,
     excitation_condition_number,
     optimize_excitation,
@@ -56,6 +57,7 @@ __all__ = [
     "DEFAULT_WF",
     "ExcitationObjective",
     "ExcitationResult",
+    "ExcitationSearch",
     "FourierTrajectory",
     "LimitUsage",
     "base_columns",

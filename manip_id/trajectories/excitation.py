@@ -16,6 +16,7 @@ import pinocchio as pin
 
 from .._checks import as_int, as_real, random_generator
 from ..errors import InfeasibleTrajectoryError, InputError, NumericalError
+from ..identifiability import analyze
 from ..regressor import iter_regressor
 from ..robot import Robot
 from .fourier import DEFAULT_WF, FourierTrajectory, trajectory_to_configuration
@@ -97,8 +98,6 @@ def base_columns(robot: Robot, seed: int = 0) -> np.ndarray:
     Those of :func:`manip_id.identifiability.analyze` (structural analysis at
     random states drawn with ``seed``).
     """
-    from ..identifiability import analyze
-
     return np.asarray(analyze(robot, seed=seed).base.independent, dtype=int)
 
 
@@ -298,39 +297,62 @@ class ExcitationObjective:
         return value, np.concatenate([grad_q0, grad_ab.T.ravel()])
 
 
+@dataclass(frozen=True)
+class ExcitationSearch:
+    """The budget of :func:`optimize_excitation`.
+
+    Attributes
+    ----------
+    n_points : int
+        Times of one period at which the base regressor is stacked (the objective).
+    maxiter : int
+        SLSQP iterations at most.
+    n_constraint_points : int
+        Times of one period at which the limits are imposed (linear inequalities).
+    n_random : int
+        Random feasible trajectories whose median condition number is reported beside.
+    """
+
+    n_points: int = 60
+    maxiter: int = 100
+    n_constraint_points: int = 200
+    n_random: int = 10
+
+
 def optimize_excitation(
     robot: Robot,
     harmonics: int = 5,
     wf: float = DEFAULT_WF,
     seed: int = 0,
     *,
-    n_points: int = 60,
-    maxiter: int = 100,
     margin: float = 0.05,
     acceleration_limit=None,
-    n_constraint_points: int = 200,
-    n_random: int = 10,
     base=None,
+    search: ExcitationSearch | None = None,
 ) -> ExcitationResult:
     """Fourier coefficients minimizing the condition number of the base regressor.
 
     Minimizes ``log cond(W(x))`` over ``x = (q0, a, b)``, where ``W`` is the
-    base regressor stacked over ``n_points`` equally spaced times of one
+    base regressor stacked over ``search.n_points`` equally spaced times of one
     period, subject to the position, velocity and (given) acceleration limits
-    sampled at ``n_constraint_points`` times (linear inequalities), with
+    sampled at ``search.n_constraint_points`` times (linear inequalities), with
     ``scipy.optimize.minimize(method="SLSQP")`` and the gradient of
     :class:`ExcitationObjective`, from ``random_trajectory(robot, harmonics,
     wf, seed)``. The result is confirmed with :func:`check_limits` on a dense grid; should the
     optimum overshoot a limit between constraint samples, its coefficients
     are shrunk about ``q0`` until it fits.
 
-    ``condition_number_random`` is the median over ``n_random`` random
+    ``condition_number_random`` is the median over ``search.n_random`` random
     feasible trajectories (seeds ``seed + 1, ...``) for comparison.
     Cost per iteration: about ``n_points (1 + 3 nv)`` regressor calls and a
     small eigen-decomposition (plus line-search evaluations); ``base``
     defaults to :func:`base_columns`. Condition numbers in the result come
-    from an SVD of ``W`` (:func:`excitation_condition_number`).
+    from an SVD of ``W`` (:func:`excitation_condition_number`). ``search``: the
+    budget (:class:`ExcitationSearch`; default 60 points, 100 iterations).
     """
+    search = ExcitationSearch() if search is None else search
+    n_points, maxiter = search.n_points, search.maxiter
+    n_constraint_points, n_random = search.n_constraint_points, search.n_random
     harmonics, wf = _check_design_args(harmonics, wf)
     margin = check_margin(margin)
     _check_counts(n_points=(n_points, 1), maxiter=(maxiter, 0), n_random=(n_random, 0))
@@ -354,17 +376,9 @@ def optimize_excitation(
     cond0 = excitation_condition_number(robot, start, n_points, base)
     cond = excitation_condition_number(robot, traj, n_points, base)
     limits = {"margin": margin, "acceleration_limit": acceleration_limit}
-    randoms = np.array(
-        [
-            excitation_condition_number(
-                robot,
-                random_trajectory(robot, L, wf, s, **limits),
-                n_points,
-                base,
-            )
-            for s in range(seed + 1, seed + 1 + int(n_random))
-        ]
-    )
+    seeds = range(seed + 1, seed + 1 + int(n_random))
+    others = [random_trajectory(robot, L, wf, s, **limits) for s in seeds]
+    randoms = np.array([excitation_condition_number(robot, o, n_points, base) for o in others])
     return ExcitationResult(
         trajectory=traj,
         condition_number_initial=cond0,

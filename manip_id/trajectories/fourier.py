@@ -26,10 +26,14 @@ class FourierTrajectory:
 
     Attributes
     ----------
-    q0: offset per joint [rad or m], shape (nv,)
-    a: sine coefficients [rad/s or m/s], shape (nv, L)
-    b: cosine coefficients [rad/s or m/s], shape (nv, L)
-    wf: base pulsation [rad/s]
+    q0 : numpy.ndarray
+        offset per joint [rad or m], shape (nv,)
+    a : numpy.ndarray
+        sine coefficients [rad/s or m/s], shape (nv, L)
+    b : numpy.ndarray
+        cosine coefficients [rad/s or m/s], shape (nv, L)
+    wf : float
+        base pulsation [rad/s]
     """
 
     q0: np.ndarray
@@ -151,12 +155,14 @@ def trajectory_to_configuration(robot: Robot, angles) -> np.ndarray:
 
     Parameters
     ----------
-    angles: joint coordinates [rad or m], shape (nv,) or (N, nv); for a
+    angles : array_like
+        joint coordinates [rad or m], shape (nv,) or (N, nv); for a
         continuous joint the angle, stored as ``(cos, sin)`` in ``q``.
 
     Returns
     -------
-    q of shape (nq,) or (N, nq).
+    numpy.ndarray
+        q of shape (nq,) or (N, nq).
     """
     x = as_float_array(angles, "angles", ndim=(1, 2))
     if x.shape[-1] != robot.nv:

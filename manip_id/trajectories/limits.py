@@ -115,6 +115,17 @@ def peak_usage(use: np.ndarray) -> np.ndarray:
     return peak
 
 
+def _worst_violation(kinds, uses) -> tuple[float, str, int, int] | None:
+    """``(use, kind, sample, joint)`` of the largest relative use above 1, or None."""
+    worst = None
+    for kind, use in zip(kinds, uses, strict=True):
+        u = np.where(np.isfinite(use), use, -np.inf)
+        kk, jj = np.unravel_index(np.argmax(u), u.shape)
+        if u[kk, jj] > 1.0 + 1e-12 and (worst is None or u[kk, jj] > worst[0]):
+            worst = (float(u[kk, jj]), kind, int(kk), int(jj))
+    return worst
+
+
 def check_limits(
     robot: Robot,
     trajectory: FourierTrajectory,
@@ -128,24 +139,31 @@ def check_limits(
 
     Parameters
     ----------
-    robot: the robot whose URDF limits apply.
-    trajectory: a :class:`FourierTrajectory` with ``nv`` joints.
-    duration: time span checked from t = 0 [s]; default (and at most, since
+    robot : Robot
+        the robot whose URDF limits apply.
+    trajectory : FourierTrajectory
+        a :class:`FourierTrajectory` with ``nv`` joints.
+    duration : float, optional
+        time span checked from t = 0 [s]; default (and at most, since
         the motion is periodic) one period.
-    margin: relative margin, a fraction of each position range and of each
+    margin : float
+        relative margin, a fraction of each position range and of each
         velocity and acceleration limit (see module docstring).
-    acceleration_limit: [rad/s^2 or m/s^2], scalar or shape (nv,); None: unchecked.
-    n_points: number of time samples over the checked span.
+    acceleration_limit : array_like
+        [rad/s^2 or m/s^2], scalar or shape (nv,); None: unchecked.
+    n_points : int
+        number of time samples over the checked span.
 
     Returns
     -------
-    :class:`LimitUsage` (each entry <= 1) when feasible.
+    LimitUsage
+        :class:`LimitUsage` (each entry <= 1) when feasible.
 
     Raises
     ------
-    InfeasibleTrajectoryError naming the joint, the limit ("position",
-    "velocity", "acceleration") and the excess [rad, rad/s, rad/s^2 or m...]
-    of the worst violation (largest relative use).
+    InfeasibleTrajectoryError
+        naming the joint, the limit ("position", "velocity", "acceleration") and the
+        excess [rad, rad/s, rad/s^2 or m...] of the worst violation (largest relative use).
     """
     check_trajectory(robot, trajectory)
     margin = check_margin(margin)
@@ -162,12 +180,7 @@ def check_limits(
     states, uses = limit_usage(trajectory, t, lo_m, hi_m, vel, acc)
     usage = LimitUsage(*(peak_usage(u) for u in uses))
     kinds = ("position", "velocity", "acceleration")
-    worst = None
-    for kind, use in zip(kinds, uses, strict=True):
-        u = np.where(np.isfinite(use), use, -np.inf)
-        kk, jj = np.unravel_index(np.argmax(u), u.shape)
-        if u[kk, jj] > 1.0 + 1e-12 and (worst is None or u[kk, jj] > worst[0]):
-            worst = (float(u[kk, jj]), kind, int(kk), int(jj))
+    worst = _worst_violation(kinds, uses)
     if worst is None:
         return usage
     _, kind, k, j = worst
