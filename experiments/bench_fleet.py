@@ -41,6 +41,8 @@ from pathlib import Path
 
 import numpy as np
 
+from manip_id.identification import PartitionOptions, RunOptions
+
 ROBOT = "ur10"
 FRICTION = ("viscous", "coulomb")
 
@@ -71,7 +73,7 @@ def make_files(cache: Path, n_files: int, n: int) -> list[str]:
 def _warm_worker() -> None:
     """Import what a task needs (run on every worker before the clock)."""
     import manip_id.fleet  # noqa: F401
-    import manip_id.pipeline  # noqa: F401
+    import manip_id.identification  # noqa: F401
 
 
 def run_case(paths: list[str], workers: int, block: int | None) -> dict:
@@ -104,10 +106,18 @@ def run_case(paths: list[str], workers: int, block: int | None) -> dict:
         t0 = time.perf_counter()
         if client is not None:
             client.run(_warm_worker)
-        identify_files(robot, paths[: 2 * max(workers, 1)], scheduler=client, base=base)
+        identify_files(
+            robot, paths[: 2 * max(workers, 1)], base=base, run=RunOptions(scheduler=client)
+        )
         out["warmup_s"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        res = identify_files(robot, paths, scheduler=client, block=block, base=base)
+        res = identify_files(
+            robot,
+            paths,
+            base=base,
+            run=RunOptions(scheduler=client),
+            partition=PartitionOptions(block=block),
+        )
         out["wall_s"] = time.perf_counter() - t0
     finally:
         if client is not None:

@@ -27,7 +27,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from manip_id import load_robot  # noqa: E402
 from manip_id.estimators import InformationAccumulator  # noqa: E402
 from manip_id.identifiability import analyze  # noqa: E402
-from manip_id.identification import identify  # noqa: E402
+from manip_id.identification import (
+    RunOptions,
+    identify,  # noqa: E402
+)
 from manip_id.regressor import iter_regressor  # noqa: E402
 
 
@@ -46,7 +49,7 @@ def main(argv=None) -> int:
 
     tracemalloc.start()
     t0 = time.perf_counter()
-    res = identify(robot, q, dq, ddq, tau, base=base, chunk=args.chunk)
+    res = identify(robot, q, dq, ddq, tau, base=base, run=RunOptions(chunk=args.chunk))
     wall = time.perf_counter() - t0
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()

@@ -47,6 +47,8 @@ from pathlib import Path
 
 import numpy as np
 
+from manip_id.identification import RunOptions
+
 ROBOT = "ur10"
 FRICTION = ("viscous", "coulomb")
 RATE = 1000.0
@@ -150,7 +152,7 @@ def case_manip_id(folder: Path, workers: int) -> dict:
             (read_chunks, (folder, robot.nv, int(a), int(b)))
             for a, b in zip(bounds[:-1], bounds[1:], strict=True)
         ]
-    result = identify_chunks(robot, source, base=base, workers=workers)
+    result = identify_chunks(robot, source, base=base, run=RunOptions(workers=workers))
     seconds = time.perf_counter() - t0
     return {
         "seconds": seconds,

@@ -31,7 +31,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from manip_id import load_robot  # noqa: E402
 from manip_id.identifiability import analyze  # noqa: E402
-from manip_id.identification import identify  # noqa: E402
+from manip_id.identification import (
+    ModelOptions,
+    identify,  # noqa: E402
+)
 from manip_id.models import check_energy_base  # noqa: E402
 from manip_id.robot import available_robots  # noqa: E402
 from manip_id.simulation import MeasurementNoise, simulate  # noqa: E402
@@ -78,9 +81,7 @@ def simulated(seeds: int) -> None:
                     ds.dq,
                     ddq,
                     ds.tau,
-                    model=model,
-                    dt=1 / RATE,
-                    window_length=WINDOW,
+                    model=ModelOptions(name=model, window_length=WINDOW, dt=1 / RATE),
                 )
                 took += time.perf_counter() - t0
                 err = res.estimate - expected
@@ -144,11 +145,9 @@ def real(folder: Path, quick: bool) -> None:
             states.dq,
             None,
             states.tau,
-            model=model,
-            dt=dt,
-            window_length=window,
             validation=validation,
             consistent=consistent,
+            model=ModelOptions(name=model, window_length=window, dt=dt),
         )
         rows = round(states.n_samples * dt / window)
         label = model + ("+SDP" if consistent else "")

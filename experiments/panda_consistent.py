@@ -36,6 +36,7 @@ import numpy as np
 from manip_id import identify, load_robot, regressor
 from manip_id.datasets import load_dataset
 from manip_id.estimators.consistent import DEFAULT_PRIOR_WEIGHT
+from manip_id.identification import ConsistentOptions
 from manip_id.signals import preprocess
 
 DATA = Path(sys.argv[1]) if len(sys.argv) > 1 else Path("/work/shared/data/panda_gaz2019")
@@ -75,7 +76,9 @@ def main() -> None:
     runs = {"OLS": (ols, t_ols)}
     for solver in ("sdp", "logchol"):
         t0 = time.perf_counter()
-        res = identify(*args, validation=v, consistent=True, solver=solver)
+        res = identify(
+            *args, validation=v, consistent=ConsistentOptions(enabled=True, solver=solver)
+        )
         runs[f"consistent {solver}"] = (res, time.perf_counter() - t0)
 
     print("\nvalidation relative torque error [%] per joint")
@@ -162,7 +165,9 @@ def main() -> None:
         "fit beyond feasibility [honest std], largest mass ratio to nominal, masses [kg]"
     )
     for weight in (1e-3 / st.fit_scale, 1e-2, 3e-2, DEFAULT_PRIOR_WEIGHT, 0.3, 1.0):
-        res = identify(*args, validation=v, consistent=True, prior_weight=weight)
+        res = identify(
+            *args, validation=v, consistent=ConsistentOptions(enabled=True, prior_weight=weight)
+        )
         masses = res.standard.values[: robot.n_rigid : 10]
         worst = float(np.max(np.maximum(masses / nom_m, nom_m / masses)))
         print(

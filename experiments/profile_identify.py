@@ -32,6 +32,8 @@ import threading
 import time
 from pathlib import Path
 
+from manip_id.identification import RunOptions
+
 RATE = 200.0  # [Hz]
 
 
@@ -103,7 +105,7 @@ def profile_one(n: int) -> dict:
     phase("simulate", time.perf_counter() - t0, f"tau_true {mib:.0f} MiB")
 
     t0 = time.perf_counter()
-    result = identify_chunks(robot, stream.blocks(), method="ols", chunk=1024)
+    result = identify_chunks(robot, stream.blocks(), method="ols", run=RunOptions(chunk=1024))
     wall = time.perf_counter() - t0
     tm = dict(result.timings)
     inner = ("structural_analysis", "regressor", "accumulate", "rank_analysis", "solve")

@@ -168,8 +168,7 @@ def main() -> None:
             import tempfile
 
             from manip_id.datasets import Dataset, save_dataset
-            from manip_id.identification import identify_datasets
-            from manip_id.pipeline import PreprocessOptions
+            from manip_id.identification import PreprocessOptions, identify_datasets
 
             with tempfile.TemporaryDirectory() as tmp:
                 path = save_dataset(

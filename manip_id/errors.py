@@ -8,6 +8,7 @@ cause.
 
 from __future__ import annotations
 
+import difflib
 import math
 from collections.abc import Sequence
 
@@ -36,6 +37,30 @@ class OutputError(InputError):
 
 class ReportBusyError(OutputError):
     """Another run has claimed the report folder (of two concurrent runs, one wins)."""
+
+
+# --- report folders (manip_id._io.report_folder, manip_id.viz.report) --------------
+class ReportExistsError(InputError):
+    """The report folder exists and is not empty, and ``force`` was not given.
+
+    Attributes
+    ----------
+    path : str
+        The report folder.
+    """
+
+    def __init__(self, path):
+        self.path = str(path)
+        super().__init__(
+            f"report folder {self.path} exists and is not empty "
+            "(use --force / force=True to replace it)"
+        )
+
+    def __reduce__(self):
+        return (type(self), (self.path,))
+
+
+# --- end of report folders ---------------------------------------------------------
 
 
 class ResourceError(InputError):
@@ -152,6 +177,79 @@ class NumericalError(ManipIdError, ArithmeticError):
         return (_rebuild, (type(self), (self.operation, self.reason), {"hint": self.hint}))
 
 
+class ModelMismatchError(InputError):
+    """A model, or thresholds, made for another robot or other joints (the monitor, drift).
+
+    Attributes
+    ----------
+    what: what does not fit, e.g. ``"the model's parameters"`` or ``"the thresholds' joints"``.
+    expected: what the robot has (a short text).
+    got: what came (a short text).
+    """
+
+    def __init__(self, what: str, expected: str, got: str):
+        self.what = what
+        self.expected = expected
+        self.got = got
+        super().__init__(f"{what}: not for this robot: expected {expected}, got {got}")
+
+    def __reduce__(self):
+        return (_rebuild, (type(self), (self.what, self.expected, self.got), {}))
+
+
+class SolverError(ManipIdError):
+    """The consistent solver failed or the problem is infeasible.
+
+    Attributes
+    ----------
+    reason: what happened, e.g. ``"the problem is infeasible"``.
+    solver: "sdp" or "logchol".
+    status: the solver's own status string.
+    """
+
+    def __init__(self, reason: str, solver: str, status: str):
+        self.reason = str(reason)
+        self.solver = str(solver)
+        self.status = str(status)
+        super().__init__(f"{self.solver} solver: {self.reason} (status {self.status!r})")
+
+    def __reduce__(self):
+        return (_rebuild, (type(self), (self.reason, self.solver, self.status), {}))
+
+
+class PhysicalConsistencyError(ManipIdError, ValueError):
+    """A parameter vector that had to be physical is not.
+
+    Attributes
+    ----------
+    what: the vector, e.g. ``"the prior (nominal parameters)"`` (message only).
+    violations: each broken condition (:class:`manip_id.consistency.Violation`: a body
+        or parameter name, the condition, the value); the message shows the first four.
+    """
+
+    #: Violations shown in the message (all are in :attr:`violations`).
+    SHOWN = 4
+
+    def __init__(self, what: str, violations: Sequence[object]):
+        self.what = str(what)
+        self.violations = list(violations)
+        n = self.SHOWN
+        shown = "; ".join(str(v) for v in self.violations[:n])
+        more = f"; ... {len(self.violations) - n} more" if len(self.violations) > n else ""
+        super().__init__(f"{self.what} is not physically consistent: {shown}{more}")
+
+    def __reduce__(self):
+        return (_rebuild, (type(self), (self.what, self.violations), {}))
+
+
+class ManipIdWarning(UserWarning):
+    """Root of the warnings manip_id issues (each also recorded in its result's ``warnings``)."""
+
+
+class PayloadWarning(ManipIdWarning):
+    """A payload or drive-gain result the user should look at (also in ``result.warnings``)."""
+
+
 def _rebuild(cls, args, kwargs):
     return cls(*args, **kwargs)
 
@@ -212,3 +310,48 @@ def format_direction(
         sign = "-" if c[i] < 0 else "+"
         out += f"{coef}{names[i]}" if n == 0 else f" {sign} {coef}{names[i]}"
     return out
+
+
+# ------------------------------------------------------------------ export (helper export)
+class CarriedInertiaError(ManipIdError):
+    """An identified composite body cannot carry the nominal inertias of its rigid links.
+
+    The export gives every link attached rigidly to a joint's body (fixed joints, joints
+    locked for the identification) its nominal inertia and the joint's own link the
+    identified composite minus them; for these bodies that remainder is not physical.
+
+    Attributes
+    ----------
+    bodies: per body (its joint's name), the links it carries.
+    min_eigenvalues: per body, the smallest eigenvalue of the remainder's pseudo-inertia
+        [mixed kg / kg m^2].
+    """
+
+    def __init__(self, bodies: dict[str, list[str]], min_eigenvalues: dict[str, float]):
+        self.bodies = {k: list(v) for k, v in bodies.items()}
+        self.min_eigenvalues = {k: float(v) for k, v in min_eigenvalues.items()}
+        shown = "; ".join(
+            f"{j} (carrying {', '.join(links)}: smallest pseudo-inertia eigenvalue "
+            f"{self.min_eigenvalues.get(j, math.nan):.4g})"
+            for j, links in self.bodies.items()
+        )
+        super().__init__(
+            "the identified bodies cannot carry the nominal inertias of their rigid links: "
+            f"{shown} (export with carried='scaled' to give these links a consistent share)"
+        )
+
+    def __reduce__(self):
+        return (_rebuild, (type(self), (self.bodies, self.min_eigenvalues), {}))
+
+
+class ExportWarning(ManipIdWarning):
+    """An export changed something the user should know of (a scaled share of carried links)."""
+
+
+def did_you_mean(word: str, choices, n: int = 1) -> str:
+    """``" (did you mean 'panda'?)"`` for the ``n`` choices closest to ``word`` (difflib),
+    or ``""`` when none is close: what follows a wrong name in an error message."""
+    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=n, cutoff=0.6)
+    if not close:
+        return ""
+    return " (did you mean " + " or ".join(repr(c) for c in close) + "?)"

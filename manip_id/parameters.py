@@ -33,8 +33,9 @@ infinite or empty one, and a velocity limit that is not positive, infinite or
 above :data:`UNSET_LIMIT` count as *unset* (URDFs write 1e10 or nothing):
 :func:`bounded_range` and :func:`bounded_rate` are that rule.
 
-Standard <-> base. With a :class:`~manip_id.identifiability.BaseParameters`
-``B`` (independent columns ``I``, dependent ``D``, regrouping ``K``)::
+Standard <-> base lives in one place, :class:`~manip_id.identifiability.BaseParameters`
+(``to_base``, ``from_base``): with independent columns ``I``, dependent ``D``,
+regrouping ``K``::
 
     theta_base = theta[I] + K theta[D]                       (standard -> base)
     theta      = P^T [theta_base; 0]                         (base -> standard, minimum
@@ -54,13 +55,15 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ._checks import as_float_array
+from .consistency import ConsistencyReport as ConsistencyReport  # re-exported
+from .consistency import check_consistency as check_consistency  # re-exported
+from .consistency import parameters_from_pseudo_inertia as parameters_from_pseudo_inertia
+from .consistency import pseudo_inertia
+from .consistency import pseudo_inertia_basis as pseudo_inertia_basis  # re-exported
 from .errors import InputError
 
 if TYPE_CHECKING:  # pragma: no cover
     import pinocchio as pin
-
-    from .identifiability import BaseParameters
 
 #: Inertial parameter names of one body, in Pinocchio's order.
 INERTIAL_NAMES: tuple[str, ...] = (
@@ -110,11 +113,16 @@ class JointTerm:
 
     Attributes
     ----------
-    name: short name used in parameter names (``panda_joint3.fv``).
-    flag: the :class:`~manip_id.robot.JointTerms` attribute that enables it.
-    column_text: the regressor entry of row ``j``, as text (``"sign(dq_j)"``).
-    unit_revolute, unit_prismatic: unit of the parameter for a revolute / prismatic DoF.
-    needs_angles: whether the column uses the joint angle ``q_j``.
+    name
+        short name used in parameter names (``panda_joint3.fv``).
+    flag
+        the :class:`~manip_id.robot.JointTerms` attribute that enables it.
+    column_text
+        the regressor entry of row ``j``, as text (``"sign(dq_j)"``).
+    unit_revolute, unit_prismatic
+        unit of the parameter for a revolute / prismatic DoF.
+    needs_angles
+        whether the column uses the joint angle ``q_j``.
     """
 
     name: str
@@ -201,13 +209,19 @@ class DofLayout:
 
     Attributes
     ----------
-    names: one name per DoF: the joint name, with ``[k]`` for multi-DoF joints.
-    joints: the joint owning each DoF, length nv.
-    q_index: index in ``q`` of each DoF's coordinate, shape (nv,) (the cos entry
+    names
+        one name per DoF: the joint name, with ``[k]`` for multi-DoF joints.
+    joints
+        the joint owning each DoF, length nv.
+    q_index
+        index in ``q`` of each DoF's coordinate, shape (nv,) (the cos entry
         of a continuous joint).
-    continuous: whether each DoF is a continuous joint stored as (cos, sin), shape (nv,).
-    prismatic: whether each DoF translates, shape (nv,).
-    unsupported: joints that are neither one coordinate per DoF nor continuous
+    continuous
+        whether each DoF is a continuous joint stored as (cos, sin), shape (nv,).
+    prismatic
+        whether each DoF translates, shape (nv,).
+    unsupported
+        joints that are neither one coordinate per DoF nor continuous
         (``"name (JointModelX)"``); empty for the manipulators we load.
     """
 
@@ -311,9 +325,12 @@ class ParameterLayout:
 
     Parameters
     ----------
-    body_names: the joint carrying each moving body, length nb.
-    dofs: the :class:`DofLayout` of the model.
-    terms: the enabled joint terms, in column order (a subsequence of ``Ia fv fc fo k``).
+    body_names
+        the joint carrying each moving body, length nb.
+    dofs
+        the :class:`DofLayout` of the model.
+    terms
+        the enabled joint terms, in column order (a subsequence of ``Ia fv fc fo k``).
     """
 
     def __init__(self, body_names: Sequence[str], dofs: DofLayout, terms: Sequence[str]):
@@ -465,54 +482,10 @@ class ParameterLayout:
         (:func:`manip_id.consistency.pseudo_inertia`); ``J`` is positive definite for a
         physically realizable body.
         """
-        from .consistency import pseudo_inertia
-
         return pseudo_inertia(self.rigid_blocks(theta))
-
-    # ------------------------------------------------------- standard <-> base
-    def to_base(self, theta: ArrayLike, base: BaseParameters) -> np.ndarray:
-        """Base parameters ``theta[I] + K theta[D]``, (..., p) -> (..., r)."""
-        self._check_base(base)
-        return base.to_base(self._check_theta(theta))
-
-    def from_base(self, theta_base: ArrayLike, base: BaseParameters) -> np.ndarray:
-        """A standard vector with these base parameters, zero on the dependent columns.
-
-        (..., r) -> (..., p); ``to_base(from_base(b)) == b``.
-        """
-        self._check_base(base)
-        arr = as_float_array(theta_base, "theta_base")
-        if arr.ndim == 0 or arr.shape[-1] != base.n_base:
-            raise InputError(f"theta_base.shape={arr.shape} but the base has {base.n_base}")
-        out = np.zeros((*arr.shape[:-1], self.n_parameters))
-        out[..., base.independent] = arr
-        return out
-
-    def _check_base(self, base: BaseParameters) -> None:
-        if tuple(base.names) != self.names:
-            raise InputError("the base parameters belong to another parameter layout")
 
     def __repr__(self) -> str:
         return (
             f"ParameterLayout(bodies={self.n_bodies}, nv={self.nv}, "
             f"terms={self.terms}, p={self.n_parameters})"
         )
-
-
-# -------------------------------------------------------- physical consistency
-_CONSISTENCY_EXPORTS = (
-    "check_consistency",
-    "ConsistencyReport",
-    "pseudo_inertia",
-    "pseudo_inertia_basis",
-    "parameters_from_pseudo_inertia",
-)
-
-
-def __getattr__(name: str):
-    """Re-export the physical-consistency checks of :mod:`manip_id.consistency` lazily."""
-    if name in _CONSISTENCY_EXPORTS:
-        from . import consistency
-
-        return getattr(consistency, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -140,7 +140,14 @@ def require_physical(robot: Robot, theta) -> None:
     bodies = set(report.body_names)
     violations = [v for v in report.violations if v.name in indefinite or v.name not in bodies]
     if violations:
-        raise PhysicalConsistencyError(f"robot {robot.name!r} to simulate", violations)
+        named = [b for b in report.body_names if b in {v.name for v in violations}]
+        hint = (
+            f" (bodies {', '.join(named)}; 'manip-id repair ROBOT OUT.urdf' writes the "
+            "nearest physical model)"
+            if named
+            else ""
+        )
+        raise PhysicalConsistencyError(f"robot {robot.name!r} to simulate{hint}", violations)
 
 
 __all__ = ["PSD_TOLERANCE", "parameter_vector", "perturb_parameters", "require_physical"]

@@ -34,13 +34,17 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
 
 from ._checks import as_float_array, check_finite
+from .compiled_regressor import AUTO_SAMPLES, CompiledModel, compile_model, mode, rigid_block
 from .errors import InputError
-from .robot import Robot
+
+if TYPE_CHECKING:
+    from .robot import Robot
 
 DEFAULT_CHUNK = 1024
 _STACK = 32
@@ -88,6 +92,44 @@ class RegressorEvaluator:
         rows = np.arange(self.nv) * self.p
         self._flat = [(t, rows + self.layout.joint_columns(t.name)) for t in self.layout.term_table]
         self._needs_angles = any(t.needs_angles for t in self.layout.term_table)
+        self._compiled: CompiledModel | None | bool = False  # False: not looked up yet
+        self._seen = 0  # samples evaluated in blocks [-]
+
+    # ------------------------------------------------------------ rigid blocks
+    @property
+    def compiled(self) -> CompiledModel | None:
+        """The compiled block kernel's model, or None (Pinocchio per sample)."""
+        if self._compiled is False:
+            self._compiled = compile_model(self.model)
+        return self._compiled  # type: ignore[return-value]
+
+    def kernel_for(self, n: int) -> CompiledModel | None:
+        """The compiled kernel for a block of ``n`` samples, or None for Pinocchio.
+
+        Mode ``compiled``: whenever the model is covered; ``auto``: once this evaluator
+        has seen :data:`~manip_id.compiled_regressor.AUTO_SAMPLES` samples; ``pinocchio``:
+        never (see :mod:`manip_id.compiled_regressor`).
+        """
+        self._seen += n
+        current = mode()
+        if current == "pinocchio" or (current == "auto" and self._seen < AUTO_SAMPLES):
+            return None
+        return self.compiled
+
+    def rigid_block(self, q, dq, ddq, out: np.ndarray, gravity: bool = True) -> None:
+        """Y_rigid for a block of samples into ``out`` (N, nv, n_rigid), in place.
+
+        The compiled kernel when :meth:`kernel_for` says so, else one Pinocchio call per
+        sample (``gravity=False``: the gravity-free model of the Slotine-Li velocity part).
+        """
+        desc = self.kernel_for(q.shape[0])
+        if desc is not None:
+            rigid_block(desc, q, dq, ddq, out, gravity=gravity)
+            return
+        f = pin.computeJointTorqueRegressor
+        m, d = (self.model, self.data) if gravity else (self.model0, self.data0)
+        for k in range(q.shape[0]):
+            out[k] = f(m, d, q[k], dq[k], ddq[k])
 
     # ------------------------------------------------------------ joint terms
     def joint_angles(self, q: np.ndarray) -> np.ndarray:
@@ -146,11 +188,10 @@ class RegressorEvaluator:
         n = q.shape[0]
         buf = np.zeros((min(chunk, max(n, 1)), self.nv, self.p))
         rigid = buf[:, :, : self.n_rigid]
-        f, m, d = pin.computeJointTorqueRegressor, self.model, self.data
         for start in range(0, n, chunk):
             stop = min(start + chunk, n)
-            for k in range(start, stop):
-                rigid[k - start] = f(m, d, q[k], dq[k], ddq[k])
+            s = slice(start, stop)
+            self.rigid_block(q[s], dq[s], ddq[s], rigid[: stop - start])
             Y = buf[: stop - start]
             self.fill_joint_terms(Y, q[start:stop], dq[start:stop], ddq[start:stop])
             yield RegressorChunk(start, stop, Y)
@@ -179,29 +220,19 @@ class RegressorEvaluator:
         wide_index[columns >= nr] = nr + np.arange(joint_cols.size)
         selections = [wide_index[np.asarray(sj, dtype=np.intp)] for sj in supports]
         size = min(chunk, max(n, 1))
-        # sample-major: the (nv, nr) matrices of consecutive samples are consecutive rows of
-        # ``flat``, so one concatenate per group copies them (cheaper than stacking per joint)
         wide = np.zeros((size, nv, nr + joint_cols.size))
         flat = wide.reshape(size * nv, nr + joint_cols.size)
         outs = [np.empty((size, sel.size)) for sel in selections]
-        f, m, d = pin.computeJointTorqueRegressor, self.model, self.data
         for start in range(0, n, chunk):
             stop = min(start + chunk, n)
             s = slice(start, stop)
             size_k = stop - start
             qs, dqs, ddqs = q[s], dq[s], ddq[s]
-            for i in range(0, size_k, _STACK):
-                mats = [
-                    f(m, d, a, b, c)
-                    for a, b, c in zip(
-                        qs[i : i + _STACK], dqs[i : i + _STACK], ddqs[i : i + _STACK], strict=True
-                    )
-                ]
-                rows = flat[i * nv : (i + len(mats)) * nv, :nr]
-                if nv > 1:
-                    np.concatenate(mats, axis=0, out=rows)
-                else:  # Pinocchio returns a 1-D row for one DoF
-                    np.stack(mats, axis=0, out=rows)
+            desc = self.kernel_for(size_k)
+            if desc is not None:
+                rigid_block(desc, qs, dqs, ddqs, wide[:size_k, :, :nr])
+            else:
+                self._stacked_rigid(qs, dqs, ddqs, flat)
             if joint_cols.size:
                 vals = self.joint_values(qs, dqs, ddqs)
                 for i, (j, t) in enumerate(zip(jc_dof, jc_term, strict=True)):
@@ -213,20 +244,43 @@ class RegressorEvaluator:
                 blocks.append(out)
             yield start, stop, blocks
 
+    def _stacked_rigid(self, qs, dqs, ddqs, flat: np.ndarray) -> None:
+        """Y_rigid by Pinocchio per sample into the rows of ``flat`` (size * nv, >= nr).
+
+        Sample-major: the (nv, nr) matrices of consecutive samples are consecutive rows
+        of ``flat``, so one concatenate per group copies them (cheaper than per joint).
+        """
+        nv, nr = self.nv, self.n_rigid
+        f, m, d = pin.computeJointTorqueRegressor, self.model, self.data
+        for i in range(0, qs.shape[0], _STACK):
+            mats = [
+                f(m, d, a, b, c)
+                for a, b, c in zip(
+                    qs[i : i + _STACK], dqs[i : i + _STACK], ddqs[i : i + _STACK], strict=True
+                )
+            ]
+            rows = flat[i * nv : (i + len(mats)) * nv, :nr]
+            if nv > 1:
+                np.concatenate(mats, axis=0, out=rows)
+            else:  # Pinocchio returns a 1-D row for one DoF
+                np.stack(mats, axis=0, out=rows)
+
     def iter_slotine_li(self, q, dq, v, w, chunk: int) -> Iterator[RegressorChunk]:
         """Chunks of the Slotine-Li regressor over a trajectory (arrays already checked)."""
         n = q.shape[0]
-        buf = np.zeros((min(chunk, max(n, 1)), self.nv, self.p))
+        size = min(chunk, max(n, 1))
+        buf = np.zeros((size, self.nv, self.p))
         rigid = buf[:, :, : self.n_rigid]
-        f = pin.computeJointTorqueRegressor
-        m, d, m0, d0, zero = self.model, self.data, self.model0, self.data0, self._zero
+        velocity = np.empty((size, self.nv, self.n_rigid))
+        zeros = np.zeros((size, self.nv))
         for start in range(0, n, chunk):
             stop = min(start + chunk, n)
-            a = 0.5 * (dq[start:stop] + w[start:stop])
-            b = 0.5 * (dq[start:stop] - w[start:stop])
-            for k in range(start, stop):
-                i = k - start
-                np.subtract(f(m, d, q[k], a[i], v[k]), f(m0, d0, q[k], b[i], zero), out=rigid[i])
+            s, k = slice(start, stop), stop - start
+            a = 0.5 * (dq[s] + w[s])
+            b = 0.5 * (dq[s] - w[s])
+            self.rigid_block(q[s], a, v[s], rigid[:k])
+            self.rigid_block(q[s], b, zeros[:k], velocity[:k], gravity=False)
+            rigid[:k] -= velocity[:k]
             Y = buf[: stop - start]
             self.fill_joint_terms(Y, q[start:stop], w[start:stop], v[start:stop])
             yield RegressorChunk(start, stop, Y)
@@ -270,9 +324,12 @@ def regressor(robot: Robot, q, dq, ddq) -> np.ndarray:
 
     Parameters
     ----------
-    q: joint positions [rad or m], shape (nq,) or (N, nq)
-    dq: joint velocities [rad/s or m/s], shape (nv,) or (N, nv)
-    ddq: joint accelerations [rad/s^2 or m/s^2], shape (nv,) or (N, nv)
+    q
+        joint positions [rad or m], shape (nq,) or (N, nq)
+    dq
+        joint velocities [rad/s or m/s], shape (nv,) or (N, nv)
+    ddq
+        joint accelerations [rad/s^2 or m/s^2], shape (nv,) or (N, nv)
 
     Returns
     -------
@@ -300,10 +357,14 @@ def slotine_li_regressor(robot: Robot, q, dq, v, w) -> np.ndarray:
 
     Parameters
     ----------
-    q: joint positions [rad or m], shape (nq,) or (N, nq)
-    dq: joint velocities [rad/s or m/s], shape (nv,) or (N, nv)
-    v: the vector multiplying M(q) (reference acceleration), shape like dq
-    w: the vector multiplying C(q, dq) (reference velocity), shape like dq
+    q
+        joint positions [rad or m], shape (nq,) or (N, nq)
+    dq
+        joint velocities [rad/s or m/s], shape (nv,) or (N, nv)
+    v
+        the vector multiplying M(q) (reference acceleration), shape like dq
+    w
+        the vector multiplying C(q, dq) (reference velocity), shape like dq
 
     Returns
     -------

@@ -21,15 +21,10 @@ Names read ``<joint>.<parameter>``, e.g. ``panda_joint3.Ixx`` or ``panda_joint3.
 
 from __future__ import annotations
 
-import json
 import math
-import os
-import warnings
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 import pinocchio as pin
@@ -46,10 +41,26 @@ from .parameters import (
     bounded_range,
     bounded_rate,
 )
-from .profiles import RobotProfile, find_profile, load_profile, robots_dir
-
-if TYPE_CHECKING:  # pragma: no cover
-    from .regressor import RegressorEvaluator
+from .profiles import RobotProfile
+from .regressor import RegressorEvaluator
+from .robot_sources import (
+    FLOATING_JOINTS,
+    FRICTION_KINDS,
+    MANIPULATORS,
+    OUR_ROBOTS,
+    JointTerms,
+    Reduction,
+    RobotSource,
+    available_robots,
+    joint_terms,
+    load_source,
+    locked_names,
+    profile_terms,
+    reference_configuration,
+    resolve_profile,
+)
+from .sidecar import apply_identified, identified_options
+from .sidecar import locked_configuration as sidecar_locked
 
 __all__ = [
     "FRICTION_KINDS",
@@ -63,65 +74,6 @@ __all__ = [
     "available_robots",
     "load_robot",
 ]
-
-FRICTION_KINDS: tuple[str, ...] = ("viscous", "coulomb", "offset")
-
-#: Fixed-base manipulators of example-robot-data listed by ``manip-id robots``.
-#: Any other fixed-base name of example-robot-data loads too.
-MANIPULATORS: tuple[str, ...] = (
-    "panda",
-    "ur3",
-    "ur3_gripper",
-    "ur3_limited",
-    "ur5",
-    "ur5_gripper",
-    "ur5_limited",
-    "ur10",
-    "ur10_limited",
-    "talos_arm",
-    "z1",
-    "xarm7",
-    "kinova",
-    "bravo7_no_ee",
-    "bravo7_gripper",
-    "baxter",
-    "tiago_no_hand",
-    "finger_edu",
-    "asr_twodof",
-    "double_pendulum",
-    "double_pendulum_simple",
-    "double_pendulum_continuous",
-)
-OUR_ROBOTS: tuple[str, ...] = ("msd",)
-
-_FLOATING = (
-    "JointModelFreeFlyer",
-    "JointModelPlanar",
-    "JointModelSpherical",
-    "JointModelSphericalZYX",
-)
-
-
-@dataclass(frozen=True)
-class JointTerms:
-    """Which joint-level terms the model carries (for every active joint)."""
-
-    armature: bool = False
-    viscous: bool = False
-    coulomb: bool = False
-    offset: bool = False
-    spring: bool = False
-
-    @property
-    def enabled(self) -> tuple[str, ...]:
-        """Short names of the enabled terms, in column order (subset of ``Ia fv fc fo k``)."""
-        flags = (self.armature, self.viscous, self.coulomb, self.offset, self.spring)
-        return tuple(n for n, f in zip(JOINT_TERM_NAMES, flags, strict=True) if f)
-
-
-def available_robots() -> list[str]:
-    """Names :func:`load_robot` lists: our own robots, then example-robot-data manipulators."""
-    return [*OUR_ROBOTS, *MANIPULATORS]
 
 
 class Robot:
@@ -141,17 +93,12 @@ class Robot:
         model: pin.Model,
         terms: JointTerms,
         *,
-        source: str | None = None,
-        package_dirs: Sequence[str] = (),
-        full_model: pin.Model | None = None,
-        locked_ids: Sequence[int] = (),
-        reference_configuration: np.ndarray | None = None,
-        settings: Mapping | None = None,
-        geometry: Mapping | None = None,
+        origin: RobotSource | None = None,
+        reduction: Reduction | None = None,
         profile: RobotProfile | None = None,
     ):
         kinds = [model.joints[i].shortname() for i in range(1, model.njoints)]
-        floating = [k for k in kinds if k in _FLOATING]
+        floating = [k for k in kinds if k in FLOATING_JOINTS]
         if floating:
             raise RobotError(
                 f"robot {name!r} has a floating or multi-DoF base joint ({floating[0]}): "
@@ -163,15 +110,15 @@ class Robot:
         self.model = model
         self.data = model.createData()
         self.terms = terms
-        self.source = source
-        self.package_dirs = list(package_dirs)
-        self._full_model = full_model if full_model is not None else model
-        self._locked_ids = list(locked_ids)
-        self._qref = reference_configuration
-        self.settings = dict(settings or {})
+        self.source = None if origin is None else origin.source
+        self.package_dirs = [] if origin is None else list(origin.package_dirs)
+        self._full_model = model if reduction is None else reduction.full_model
+        self._locked_ids = [] if reduction is None else list(reduction.locked_ids)
+        self._qref = None if reduction is None else reduction.configuration
+        self.settings = {} if origin is None else dict(origin.settings)
         #: the identification profile the robot was loaded with (``robots/NAME.toml``), or None
         self.profile = profile
-        self._full_geometry = dict(geometry or {})
+        self._full_geometry = {} if origin is None else dict(origin.geometry)
         self.joint_names: list[str] = [model.names[i] for i in range(1, model.njoints)]
         self.dofs = DofLayout.from_model(model)
         self.dof_names: list[str] = list(self.dofs.names)
@@ -210,6 +157,18 @@ class Robot:
     def n_parameters(self) -> int:
         """Total number of standard parameters (columns of the regressor)."""
         return self.layout.n_parameters
+
+    @property
+    def full_model(self) -> pin.Model:
+        """The unreduced model (every joint of the URDF, none locked)."""
+        return self._full_model
+
+    @property
+    def locked_configuration(self) -> np.ndarray:
+        """Configuration of :attr:`full_model` the locked joints are held at, shape (nq_full,)
+        (the neutral configuration when no joint is locked)."""
+        q = self._qref if self._qref is not None else pin.neutral(self._full_model)
+        return np.array(q, dtype=float)
 
     # ---------------------------------------------------------------- limits
     @property
@@ -381,8 +340,6 @@ class Robot:
     @cached_property
     def evaluator(self) -> RegressorEvaluator:
         """The robot's :class:`~manip_id.regressor.RegressorEvaluator` (built on first use)."""
-        from .regressor import RegressorEvaluator
-
         return RegressorEvaluator(self)
 
     @cached_property
@@ -400,50 +357,6 @@ class Robot:
 
 
 # --------------------------------------------------------------------- loading
-def _terms(armature, friction, spring, defaults: JointTerms) -> JointTerms:
-    if friction is None:
-        kinds = {
-            k
-            for k, on in zip(
-                FRICTION_KINDS, (defaults.viscous, defaults.coulomb, defaults.offset), strict=True
-            )
-            if on
-        }
-    else:
-        if isinstance(friction, str):
-            friction = [f for f in friction.replace(",", " ").split() if f]
-        if not isinstance(friction, list | tuple | set | frozenset):
-            raise InputError(
-                f"friction must be a list of kinds or a comma-separated string, got {friction!r}"
-            )
-        kinds = set()
-        for f in friction:
-            if f not in FRICTION_KINDS:
-                raise InputError(
-                    f"unknown friction kind {f!r}; expected some of {list(FRICTION_KINDS)}"
-                )
-            kinds.add(f)
-    return JointTerms(
-        armature=defaults.armature if armature is None else bool(armature),
-        viscous="viscous" in kinds,
-        coulomb="coulomb" in kinds,
-        offset="offset" in kinds,
-        spring=defaults.spring if spring is None else bool(spring),
-    )
-
-
-def _load_urdf(path: Path) -> pin.Model:
-    if not path.is_file():
-        raise RobotError(f"cannot read URDF {path}: no such file")
-    try:
-        with native_stderr_captured("urdfdom", error=RobotError), warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # urdfdom's errors: refused, not a massless body
-            return pin.buildModelFromUrdf(str(path))
-    except Exception as exc:
-        cause = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise RobotError(f"cannot read URDF {path}: {cause}") from exc
-
-
 def load_robot(
     spec: str | Path,
     *,
@@ -460,238 +373,73 @@ def load_robot(
 
     Parameters
     ----------
-    spec: a name of example-robot-data (``"panda"``, ``"ur5"``, ...), a path to a
+    spec
+        a name of example-robot-data (``"panda"``, ``"ur5"``, ...), a path to a
         URDF file, or ``"msd"`` (the one-DoF mass-spring-damper of ``robots/msd.urdf``).
-    armature: model a rotor inertia per joint (column ddq_j). Default: the profile's, else off.
-    friction: friction kinds per joint, some of ``("viscous", "coulomb",
+    armature
+        model a rotor inertia per joint (column ddq_j). Default: the profile's, else off.
+    friction
+        friction kinds per joint, some of ``("viscous", "coulomb",
         "offset")`` (also a comma-separated string). Default: the profile's
         (``"msd"``: viscous), else none.
-    spring: model a linear spring per joint (column q_j). Default: the profile's
+    spring
+        model a linear spring per joint (column q_j). Default: the profile's
         (on for ``"msd"``), else off.
-    active_joints: names of the joints to identify; the others are locked at
+    active_joints
+        names of the joints to identify; the others are locked at
         ``locked_configuration``. Default: the profile's (``robots/panda.toml`` locks
         the two finger joints), else every joint.
-    locked_configuration: positions of the locked joints, a full configuration
+    locked_configuration
+        positions of the locked joints, a full configuration
         vector of the unreduced model (shape (nq,)) or a mapping joint name ->
         position [rad or m]. Default: the neutral configuration clipped to the limits.
-    package_dirs: folders where ``package://`` mesh paths of a URDF are resolved.
-    identified: for a URDF written by :func:`manip_id.export.export_urdf`: ``True`` reads
+    package_dirs
+        folders where ``package://`` mesh paths of a URDF are resolved.
+    identified
+        for a URDF written by :func:`manip_id.export.export_urdf`: ``True`` reads
         its sidecar (``NAME.identified.json`` next to it), or give the sidecar's path.
-        Its joint terms, active joints, armature, offset and spring become the
-        defaults and the nominal parameters (explicit arguments still win).
-    profile: the identification profile (:mod:`manip_id.profiles`): a robot name or a
+        Its joint terms, active joints and the positions of the locked ones, armature,
+        offset and spring become the defaults and the nominal parameters (explicit
+        arguments still win).
+    profile
+        the identification profile (:mod:`manip_id.profiles`): a robot name or a
         ``.toml`` path, a :class:`~manip_id.profiles.RobotProfile`, or False for none.
         Default: ``robots/NAME.toml`` for a robot loaded by name when it exists; a URDF
         loaded by path takes none (its file name decides nothing). Explicit arguments
         override the profile.
     """
     spec_str = str(spec)
-    src = _load_source(spec_str, [str(p) for p in package_dirs])
+    src = load_source(spec_str, [str(p) for p in package_dirs])
     model, name = src.model, src.name
     sidecar = None
     if identified is not None and identified is not False:
-        from .export import identified_options
-
         sidecar, armature, friction, spring, active_joints = identified_options(
             spec_str, identified, armature, friction, spring, active_joints
         )
-    prof = _profile(profile, name, src.by_path)
-    terms = _terms(armature, friction, spring, _profile_terms(prof))
+        if locked_configuration is None:
+            locked_configuration = sidecar_locked(sidecar)
+    prof = resolve_profile(profile, name, src.by_path)
+    terms = joint_terms(armature, friction, spring, profile_terms(prof))
 
     all_joints = [model.names[i] for i in range(1, model.njoints)]
     if active_joints is None and prof is not None:
         active_joints = prof.active_for(all_joints)
-    locked_names = _locked_names(name, all_joints, active_joints)
+    locked = locked_names(name, all_joints, active_joints)
     full_model = model
     locked_ids: list[int] = []
     qref = None
-    if locked_names:
-        qref = _reference_configuration(model, locked_configuration, all_joints)
-        locked_ids = [model.getJointId(j) for j in locked_names]
+    if locked:
+        qref = reference_configuration(model, locked_configuration, all_joints)
+        locked_ids = [model.getJointId(j) for j in locked]
         model = pin.buildReducedModel(model, locked_ids, qref)
     robot = Robot(
         name,
         model,
         terms,
-        source=src.source,
-        package_dirs=src.package_dirs,
-        full_model=full_model,
-        locked_ids=locked_ids,
-        reference_configuration=qref,
-        settings=src.settings,
-        geometry=src.geometry,
+        origin=src,
+        reduction=Reduction(full_model, tuple(locked_ids), qref) if locked_ids else None,
         profile=prof,
     )
     if sidecar is not None:
-        from .export import apply_identified
-
         apply_identified(robot, sidecar)
     return robot
-
-
-@dataclass(frozen=True)
-class _Source:
-    """A loaded (unreduced) model and where it came from."""
-
-    model: pin.Model
-    name: str
-    source: str | None
-    package_dirs: list[str]
-    settings: dict
-    geometry: dict
-    by_path: bool
-
-
-def _load_source(spec: str, pkg: list[str]) -> _Source:
-    """Our robot (``robots/NAME.urdf`` and its ``.json`` settings), a URDF path, or a name
-    of example-robot-data."""
-    if spec in OUR_ROBOTS:
-        base = robots_dir()
-        path = base / f"{spec}.urdf"
-        model = _load_urdf(path)
-        settings_file = base / f"{spec}.json"
-        settings = json.loads(settings_file.read_text()) if settings_file.is_file() else {}
-        return _Source(model, spec, str(path), pkg or [str(path.parent)], settings, {}, False)
-    if spec.endswith(".urdf") or Path(spec).suffix == ".urdf" or "/" in spec:
-        path = Path(spec).expanduser()
-        model = _load_urdf(path)
-        # package://NAME/... resolves in any ancestor folder holding NAME
-        pkg = pkg or [str(d) for d in path.resolve().parents]
-        return _Source(model, path.stem, str(path), pkg, {}, {}, True)
-    model, source, pkg_erd, geometry = _load_erd(spec)
-    return _Source(model, spec, source, pkg or pkg_erd, {}, geometry, False)
-
-
-def _profile_terms(prof: RobotProfile | None) -> JointTerms:
-    """The joint-term defaults of a profile (none without one)."""
-    if prof is None:
-        return JointTerms()
-    friction = prof.friction or ()
-    return JointTerms(
-        armature=bool(prof.armature),
-        viscous="viscous" in friction,
-        coulomb="coulomb" in friction,
-        offset="offset" in friction,
-        spring=bool(prof.spring),
-    )
-
-
-def _locked_names(name: str, all_joints: list[str], active_joints) -> list[str]:
-    """The joints to lock for ``active_joints`` (None: none), checked against the model."""
-    if active_joints is None:
-        return []
-    active_joints = list(active_joints)
-    unknown = [j for j in active_joints if j not in all_joints]
-    if unknown:
-        raise InputError(
-            f"unknown joint {unknown[0]!r} for robot {name!r}; valid joints: {all_joints}"
-        )
-    if not active_joints:
-        raise InputError("active_joints is empty: at least one joint must move")
-    return [j for j in all_joints if j not in active_joints]
-
-
-def _profile(profile, name: str, by_path: bool) -> RobotProfile | None:
-    """The profile asked for: by name for robots loaded by name, none for a URDF path."""
-    if profile is None:
-        return None if by_path else find_profile(name)
-    if profile is False:
-        return None
-    if profile is True:
-        return load_profile(name)
-    if isinstance(profile, RobotProfile):
-        return profile
-    return load_profile(profile)
-
-
-def _reference_configuration(model: pin.Model, locked, all_joints) -> np.ndarray:
-    q = pin.neutral(model)
-    lo, hi = np.asarray(model.lowerPositionLimit), np.asarray(model.upperPositionLimit)
-    finite = np.isfinite(lo) & np.isfinite(hi) & (hi >= lo)
-    q[finite] = np.clip(q[finite], lo[finite], hi[finite])
-    if locked is None:
-        return q
-    if isinstance(locked, Mapping):
-        for joint, value in locked.items():
-            if joint not in all_joints:
-                raise InputError(
-                    f"unknown joint {joint!r} in locked_configuration; valid joints: {all_joints}"
-                )
-            jm = model.joints[model.getJointId(joint)]
-            q[jm.idx_q : jm.idx_q + jm.nq] = value
-        return q
-    arr = as_float_array(locked, "locked_configuration", ndim=1)
-    if arr.shape != (model.nq,):
-        raise InputError(
-            f"locked_configuration.shape={arr.shape} but the full model has nq={model.nq}"
-        )
-    return arr.copy()
-
-
-def _load_erd(name: str):
-    """Model, URDF path, package folders and prebuilt geometry ({}) of an example-robot-data name.
-
-    The kinematic and inertial model only: the URDF is located as the
-    example-robot-data loader does and read by ``pinocchio.buildModelFromUrdf``,
-    then its SRDF (rotor parameters, armature, reference configurations) is
-    applied as the loader applies it. Visual and collision geometry (meshes)
-    are left to :attr:`Robot.visual_model` / :attr:`Robot.collision_model`,
-    built on first use. Loaders with their own ``__init__`` or an SDF model go
-    through the loader itself (geometry included).
-    """
-    try:
-        from example_robot_data.robots_loader import ROBOTS
-        from example_robot_data.utils import RobotLoader, getModelPath, readParamsFromSrdf
-    except ImportError as exc:  # pragma: no cover - dependency of the package
-        raise RobotError("example-robot-data-loaders is not installed") from exc
-    if name not in ROBOTS:
-        raise RobotError(
-            f"unknown robot {name!r}; available: {', '.join(available_robots())} "
-            "or a path to a .urdf file"
-        )
-    cls = ROBOTS[name]
-    floating = RobotError(
-        f"robot {name!r} is a floating-base model: not supported "
-        "(manip_id identifies fixed-base manipulators)"
-    )
-    if getattr(cls, "free_flyer", False):
-        raise floating
-    if cls.__init__ is not RobotLoader.__init__ or not cls.urdf_filename or cls.sdf_filename:
-        return _load_erd_loader(name, cls, floating)
-    relative = os.path.join(cls.path, cls.urdf_subpath, cls.urdf_filename)
-    try:
-        model_dir = cls.model_path or getModelPath(relative)
-        source = os.path.join(model_dir, relative)
-        with native_stderr_captured("urdfdom"), warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            model = pin.buildModelFromUrdf(source)
-            if cls.srdf_filename:
-                srdf = os.path.join(model_dir, cls.path, cls.srdf_subpath, cls.srdf_filename)
-                readParamsFromSrdf(model, srdf, False, cls.has_rotor_parameters, None)
-    except Exception as exc:
-        raise RobotError(f"cannot load robot {name!r} from example-robot-data: {exc}") from exc
-    if model.njoints > 1 and model.joints[1].shortname() in _FLOATING:
-        raise floating
-    return model, source, [str(Path(model_dir).parent.parent)], {}
-
-
-def _load_erd_loader(name: str, cls, floating: RobotError):
-    """:func:`_load_erd` through the example-robot-data loader (builds the geometry too)."""
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            loader = cls()
-            wrapper = loader.robot
-    except Exception as exc:
-        raise RobotError(f"cannot load robot {name!r} from example-robot-data: {exc}") from exc
-    model = wrapper.model
-    if model.njoints > 1 and model.joints[1].shortname() in _FLOATING:
-        raise floating
-    source = getattr(loader, "df_path", None)
-    model_dir = getattr(loader, "model_path", None)
-    pkg = [str(Path(model_dir).parent.parent)] if model_dir else []
-    geometry = {
-        pin.GeometryType.VISUAL: getattr(wrapper, "visual_model", None),
-        pin.GeometryType.COLLISION: getattr(wrapper, "collision_model", None),
-    }
-    return model, (str(source) if source else None), pkg, geometry

@@ -29,6 +29,7 @@ from manip_id.estimators.consistent import (
     solve_consistent,
 )
 from manip_id.identifiability import analyze
+from manip_id.identification import ConsistentOptions
 
 FRICTION = "viscous,coulomb"
 
@@ -113,7 +114,9 @@ def test_noise_free_data_recover_the_base_parameters_exactly(solver, friction, a
     robot = get_robot("panda", friction=friction, armature=armature)
     truth = _truth(robot)
     q, dq, ddq, tau = _data(robot, truth, 1500, 0.0, seed=1)
-    res = identify(robot, q, dq, ddq, tau, consistent=True, solver=solver)
+    res = identify(
+        robot, q, dq, ddq, tau, consistent=ConsistentOptions(enabled=True, solver=solver)
+    )
     beta_true = res.base.to_base(truth)
     err = np.linalg.norm(res.estimate - beta_true) / np.linalg.norm(beta_true)
     assert err < 1e-8
@@ -147,7 +150,13 @@ def test_light_wrist_under_heavy_noise_ols_is_not_physical_consistent_is():
     cons = identify(robot, q, dq, ddq, tau, consistent=True)
     theta = cons.standard.values
     _assert_physical(robot, theta)
-    assert cons.physically_consistent and not cons.warnings
+    assert cons.physically_consistent
+    # the truth's wrist is 50 times lighter than the URDF's: the plausibility check says so,
+    # naming those bodies (and only a light one), and nothing else is wrong
+    assert len(cons.warnings) == 1 and cons.warnings[0].startswith("implausible link")
+    named = {b.name for b in cons.standard.plausibility.implausible}
+    assert named and named <= {"panda_joint6", "panda_joint7"}, cons.warnings
+    assert all(f"{n}: " in cons.warnings[0] for n in named)
     # the residual of the consistent fit is within 5 % of the (unconstrained) OLS minimum
     ratio = cons.relative_error.train / ols.relative_error.train
     assert 1.0 <= ratio < 1.05
@@ -204,7 +213,9 @@ def test_default_prior_weight_moves_a_physical_fit_by_less_than_its_std(seed):
     assert res.standard.fit_scale == 1.0
     assert res.standard.base_shift_std < 1.0
     assert res.standard.prior_shift_std < 1.0
-    assert not res.warnings
+    # nothing is wrong but, where these data leave a link's mass loose (panda_joint2 on
+    # seed 6: 3.4x nominal within a std of the fit), the plausibility check names it
+    assert all(w.startswith("implausible link parameters") for w in res.warnings)
 
 
 def _batch_means_inflation(Y: np.ndarray, tau: np.ndarray, nv: int, blocks: int) -> float:
@@ -250,6 +261,9 @@ def test_real_panda_log_fit_scale_matches_batch_means(panda_split):
     assert bm > 50  # the residuals of the filtered log are strongly correlated
     assert 0.5 * bm <= k <= 2.0 * bm
     assert any("not white noise" in w for w in res.warnings)
+    # the honest (block-score) variance inflation agrees with batch means too
+    assert res.uncertainty["method"] == "hac"
+    assert 0.5 * bm <= res.uncertainty["inflation"] ** 2 <= 2.0 * bm
     # and on white noise of one variance (OLS's model) both are about 1
     sim = get_robot("panda", friction=FRICTION)
     q, dq, ddq, tau_s = _data(sim, _truth(sim), 1500, 0.0, seed=11)
@@ -279,7 +293,7 @@ def test_real_panda_log_default_gives_plausible_link_masses(panda_split, solver)
     v = (valid.q, valid.dq, valid.ddq, valid.tau)
     args = (robot, train.q, train.dq, train.ddq, train.tau)
     ols = identify(*args, validation=v)
-    cons = identify(*args, validation=v, consistent=True, solver=solver)
+    cons = identify(*args, validation=v, consistent=ConsistentOptions(enabled=True, solver=solver))
     _assert_physical(robot, cons.standard.values)
     masses = cons.standard.values[: robot.n_rigid : 10]  # [kg]
     nominal = robot.nominal_parameters[: robot.n_rigid : 10]  # [kg]
@@ -305,11 +319,15 @@ def test_unknown_solver_or_prior_and_bad_weight():
     robot = get_robot("ur5", friction=FRICTION)
     q, dq, ddq, tau = _data(robot, _truth(robot), 200, 0.0, seed=0)
     with pytest.raises(InputError, match="solver must be one of"):
-        identify(robot, q, dq, ddq, tau, consistent=True, solver="mosek")
+        identify(robot, q, dq, ddq, tau, consistent=ConsistentOptions(enabled=True, solver="mosek"))
     with pytest.raises(InputError, match="prior must be one of"):
-        identify(robot, q, dq, ddq, tau, consistent=True, prior="uniform")
+        identify(
+            robot, q, dq, ddq, tau, consistent=ConsistentOptions(enabled=True, prior="uniform")
+        )
     with pytest.raises(InputError, match="prior_weight"):
-        identify(robot, q, dq, ddq, tau, consistent=True, prior_weight=-1.0)
+        identify(
+            robot, q, dq, ddq, tau, consistent=ConsistentOptions(enabled=True, prior_weight=-1.0)
+        )
     with pytest.raises(InputError, match="applies to ols and wls"):
         identify(robot, q, dq, ddq, tau, consistent=True, method="rls")
 

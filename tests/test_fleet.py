@@ -14,6 +14,7 @@ import subprocess
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +25,7 @@ from conftest import get_robot
 from manip_id.datasets import parse_file_spec
 from manip_id.errors import DataError, InputError
 from manip_id.fleet import identify_files, parse_scheduler, portable_robot
-from manip_id.identification import identify
+from manip_id.identification import ModelOptions, PartitionOptions, RunOptions, identify
 
 VENV_BIN = Path(sys.executable).parent
 N_FILES, N_SAMPLES = 6, 1500
@@ -73,11 +74,23 @@ def reference(robot, fleet):
     return {m: identify(robot, q, dq, ddq, tau, method=m) for m in ("ols", "wls")}
 
 
-def _same(res, ref, method="ols", std_rtol=None):
+@pytest.fixture(scope="module")
+def files_reference(robot, fleet):
+    """The files in this process, one task each: the reference of the honest std, whose
+    blocks end at each file's end (the concatenated arrays' blocks run across them)."""
+    return {m: identify_files(robot, fleet[0], method=m) for m in ("ols", "wls")}
+
+
+def _same(res, ref, method="ols", std_rtol=None, honest=None):
+    """Estimate, white-noise std and noise variances as ``ref``; the honest std as
+    ``honest`` (a result of the same files) when given."""
     _close(res.estimate, ref.estimate)
     if std_rtol is None:
         std_rtol = 1e-8 if method == "wls" else 1e-9
-    _close(res.std, ref.std, rtol=std_rtol)
+    _close(res.std_white, ref.std_white, rtol=std_rtol)
+    if honest is not None:
+        assert res.uncertainty["method"] == honest.uncertainty["method"]
+        _close(res.std, honest.std, rtol=100 * std_rtol)
     _close(res.noise_variance, ref.noise_variance, rtol=1e-6)
     assert res.n_samples == ref.n_samples
 
@@ -86,7 +99,7 @@ def _same(res, ref, method="ols", std_rtol=None):
 @pytest.mark.parametrize("method", ["ols", "wls"])
 @pytest.mark.parametrize("block,split_every", [(None, 8), (400, 2), (1, 3), (10**6, 8)])
 def test_serial_any_partition_gives_the_concatenated_result(
-    robot, fleet, reference, method, block, split_every
+    robot, fleet, reference, files_reference, method, block, split_every
 ):
     paths = fleet[0]
     if block == 1:  # one task per sample: only on a short file pair, against its own reference
@@ -102,10 +115,16 @@ def test_serial_any_partition_gives_the_concatenated_result(
         )
         paths = [str(Path(paths[0]).with_name("short.npz"))]
         ref = identify(robot, q, dq, ddq, tau, method=method)
+        honest = ref  # one file: its blocks are the arrays'
     else:
-        ref = reference[method]
-    res = identify_files(robot, paths, method=method, block=block, split_every=split_every)
-    _same(res, ref, method)
+        ref, honest = reference[method], files_reference[method]
+    res = identify_files(
+        robot,
+        paths,
+        method=method,
+        partition=PartitionOptions(block=block, split_every=split_every),
+    )
+    _same(res, ref, method, honest=honest)
 
 
 def test_wls_noise_variances_are_the_per_file_residual_sums(robot, fleet, reference):
@@ -124,7 +143,7 @@ def test_wls_noise_variances_are_the_per_file_residual_sums(robot, fleet, refere
 
 def test_per_file_estimates_are_each_files_own_identification(robot, fleet):
     paths, arrays, _ = fleet
-    res = identify_files(robot, paths, per_file=True, block=500)
+    res = identify_files(robot, paths, partition=PartitionOptions(block=500, per_file=True))
     assert [f.path for f in res.per_file] == paths
     for fe, (q, dq, ddq, tau) in zip(res.per_file, arrays, strict=True):
         own = identify(robot, q, dq, ddq, tau, base=res.base)
@@ -144,7 +163,7 @@ def test_a_file_that_excites_too_little_is_reported_not_fatal(robot, fleet, tmp_
     short = tmp_path / "short.npz"
     q, dq, ddq, tau = (a[:5] for a in arrays[0])  # 30 equations for 48+ parameters
     np.savez(short, t=np.arange(5) * 1e-3, q=q, dq=dq, ddq=ddq, tau=tau)
-    res = identify_files(robot, [*paths[:2], str(short)], per_file=True)
+    res = identify_files(robot, [*paths[:2], str(short)], partition=PartitionOptions(per_file=True))
     assert res.per_file[0].result is not None
     bad = res.per_file[2]
     assert bad.result is None and bad.n_samples == 5 and bad.error
@@ -202,26 +221,35 @@ def test_acceleration_free_models(robot, tmp_path, model):
         path = tmp_path / f"smooth{f}.npz"
         arrays.append(_smooth_file(robot, path, seed=70 + f))
         paths.append(str(path))
-    kw = dict(model=model, window_length=0.02 if model == "energy" else 0.1)
+    kw = dict(model=ModelOptions(model, window_length=0.02 if model == "energy" else 0.1))
     # one file: the local acceleration-free run of identify()
     q, dq, ddq, tau = arrays[0]
-    own = identify(robot, q, dq, None, tau, dt=1 / 500.0, **kw)
+    own = identify(robot, q, dq, None, tau, model=replace(kw["model"], dt=1 / 500.0))
     one = identify_files(robot, paths[:1], **kw)
-    _same(one, own)
+    _same(one, own, honest=own)  # the rows' blocks too
+    assert own.uncertainty["method"] == "hac"
     assert one.model == model and one.n_samples == q.shape[0]
     # several files: any partition of the energy windows gives the same sums
-    whole = identify_files(robot, paths, per_file=True, **kw)
+    whole = identify_files(robot, paths, partition=PartitionOptions(per_file=True), **kw)
     if model == "energy":
         for block in (50, 333):
             # the energy fit is nearly exact: sigma^2 comes from RSS = zz - 2 b.theta +
             # theta.A.theta, a difference of sums 1e7 times larger than itself
-            _same(identify_files(robot, paths, block=block, **kw), whole, std_rtol=1e-6)
+            _same(
+                identify_files(robot, paths, partition=PartitionOptions(block=block), **kw),
+                whole,
+                std_rtol=1e-6,
+                honest=whole,
+            )
     else:
         with pytest.raises(InputError, match="no blocks"):
-            identify_files(robot, paths, block=100, **kw)
+            identify_files(robot, paths, partition=PartitionOptions(block=100), **kw)
     assert whole.n_samples == 3 * 4001
     for fe, (q, dq, _, tau) in zip(whole.per_file, arrays, strict=True):
-        _close(fe.result.estimate, identify(robot, q, dq, None, tau, dt=1 / 500, **kw).estimate)
+        _close(
+            fe.result.estimate,
+            identify(robot, q, dq, None, tau, model=replace(kw["model"], dt=1 / 500)).estimate,
+        )
     # validation: the torque error of the dynamic model, on the validation files' sums
     res = identify_files(robot, paths[1:], validation=paths[:1], **kw)
     err = res.predict(robot, q := arrays[0][0], arrays[0][1], arrays[0][2]) - arrays[0][3]
@@ -248,7 +276,7 @@ def test_preprocessed_files_any_partition(robot, tmp_path):
         blocks.append((ds.q, ds.dq, ds.ddq, ds.tau))
     ref = identify(robot, *(np.concatenate([b[i] for b in blocks]) for i in range(4)))
     for block in (None, 250):
-        res = identify_files(robot, paths, options=opts, block=block)
+        res = identify_files(robot, paths, options=opts, partition=PartitionOptions(block=block))
         _same(res, ref)
 
 
@@ -256,7 +284,7 @@ def test_no_dask_without_a_scheduler(fleet):
     code = (
         "import sys; from manip_id import load_robot; from manip_id.fleet import identify_files;"
         "r = load_robot('ur10', friction='viscous,coulomb');"
-        f"identify_files(r, {fleet[0][:2]!r}, per_file=True, block=700);"
+        f"identify_files(r, {fleet[0][:2]!r}, partition=dict(per_file=True, block=700));"
         "from manip_id.cli import main;"
         f"assert main(['identify', 'ur10', '--friction', 'viscous,coulomb', '--data', "
         f"*{fleet[0][:2]!r}, '--per-file']) == 0;"
@@ -290,7 +318,7 @@ def test_bad_arguments(robot, fleet):
     with pytest.raises(InputError, match="online laws"):
         identify_files(robot, paths, method="rls")
     with pytest.raises(InputError, match="block"):
-        identify_files(robot, paths, block=0)
+        identify_files(robot, paths, partition=PartitionOptions(block=0))
     for spec in ("local:0", "local:x", "tcp://nowhere", "http//x", "missing.json"):
         with pytest.raises(InputError):
             parse_scheduler(spec)
@@ -341,12 +369,20 @@ def local_client():
 
 
 @pytest.mark.parametrize("method", ["ols", "wls"])
-def test_local_cluster_gives_the_local_result(robot, fleet, reference, local_client, method):
+def test_local_cluster_gives_the_local_result(
+    robot, fleet, reference, files_reference, local_client, method
+):
     res = identify_files(
-        robot, fleet[0], scheduler=local_client, method=method, block=700, per_file=True
+        robot,
+        fleet[0],
+        method=method,
+        run=RunOptions(scheduler=local_client),
+        partition=PartitionOptions(block=700, per_file=True),
     )
-    _same(res, reference[method], method)
-    serial = identify_files(robot, fleet[0], method=method, per_file=True)
+    _same(res, reference[method], method, honest=files_reference[method])
+    serial = identify_files(
+        robot, fleet[0], method=method, partition=PartitionOptions(per_file=True)
+    )
     for a, b in zip(res.per_file, serial.per_file, strict=True):
         _close(a.result.estimate, b.result.estimate)
     assert res.timings["distributed"] > 0
@@ -362,7 +398,7 @@ def test_identify_chunks_parts_as_dask_tasks(robot, fleet, reference, local_clie
     from manip_id.identification import identify_chunks
 
     parts = [(_npz_block, (p, a, a + 500)) for p in fleet[0] for a in range(0, N_SAMPLES, 500)]
-    res = identify_chunks(robot, parts, method="wls", scheduler=local_client)
+    res = identify_chunks(robot, parts, method="wls", run=RunOptions(scheduler=local_client))
     _same(res, reference["wls"], "wls")
 
 
@@ -370,7 +406,12 @@ def test_local_cluster_bad_file_no_result(robot, fleet, local_client, tmp_path):
     bad = tmp_path / "broken.npz"
     bad.write_bytes(b"\x00" * 64)
     with pytest.raises(DataError, match="broken.npz"):
-        identify_files(robot, [*fleet[0], str(bad)], scheduler=local_client, block=500)
+        identify_files(
+            robot,
+            [*fleet[0], str(bad)],
+            run=RunOptions(scheduler=local_client),
+            partition=PartitionOptions(block=500),
+        )
     # the rest of the failed run is cancelled: nothing of it is left running
     deadline = time.monotonic() + 30
     while any(local_client.processing().values()) and time.monotonic() < deadline:
@@ -378,12 +419,12 @@ def test_local_cluster_bad_file_no_result(robot, fleet, local_client, tmp_path):
     assert not any(local_client.processing().values())
 
 
-def test_local_spec_starts_and_stops_its_cluster(robot, fleet, reference):
+def test_local_spec_starts_and_stops_its_cluster(robot, fleet, reference, files_reference):
     import psutil
 
     before = {p.pid for p in psutil.Process().children(recursive=True)}
-    res = identify_files(robot, fleet[0], scheduler="local:2")
-    _same(res, reference["ols"])
+    res = identify_files(robot, fleet[0], run=RunOptions(scheduler="local:2"))
+    _same(res, reference["ols"], honest=files_reference["ols"])
     deadline = time.monotonic() + 30
     while time.monotonic() < deadline:
         left = {p.pid for p in psutil.Process().children(recursive=True)} - before
@@ -456,16 +497,24 @@ def dask_cli(tmp_path_factory):
             _stop(p)
 
 
-def test_cli_cluster_by_address_and_by_file(robot, fleet, reference, dask_cli):
+def test_cli_cluster_by_address_and_by_file(robot, fleet, reference, files_reference, dask_cli):
     address = json.loads(dask_cli["file"].read_text())["address"]
     assert address.startswith("tcp://127.0.0.1:")
-    res = identify_files(robot, fleet[0], scheduler=address, method="wls", block=600)
-    _same(res, reference["wls"], "wls")
-    res = identify_files(robot, fleet[0], scheduler=str(dask_cli["file"]))
-    _same(res, reference["ols"])
+    res = identify_files(
+        robot,
+        fleet[0],
+        method="wls",
+        run=RunOptions(scheduler=address),
+        partition=PartitionOptions(block=600),
+    )
+    _same(res, reference["wls"], "wls", honest=files_reference["wls"])
+    res = identify_files(robot, fleet[0], run=RunOptions(scheduler=str(dask_cli["file"])))
+    _same(res, reference["ols"], honest=files_reference["ols"])
 
 
-def test_a_worker_killed_mid_run_changes_nothing(robot, fleet, reference, dask_cli):
+def test_a_worker_killed_mid_run_changes_nothing(
+    robot, fleet, reference, files_reference, dask_cli
+):
     from distributed import Client
 
     sched = dask_cli["file"]
@@ -478,7 +527,12 @@ def test_a_worker_killed_mid_run_changes_nothing(robot, fleet, reference, dask_c
             )
             with ThreadPoolExecutor(1) as pool:
                 job = pool.submit(
-                    identify_files, robot, fleet[0], scheduler=client, block=60, method="wls"
+                    identify_files,
+                    robot,
+                    fleet[0],
+                    run=RunOptions(scheduler=client),
+                    partition=PartitionOptions(block=60),
+                    method="wls",
                 )
                 deadline = time.monotonic() + 120
                 while time.monotonic() < deadline and not job.done():
@@ -490,7 +544,7 @@ def test_a_worker_killed_mid_run_changes_nothing(robot, fleet, reference, dask_c
                 victim.wait(timeout=20)
                 res = job.result(timeout=300)
             assert addr not in client.scheduler_info()["workers"]
-        _same(res, reference["wls"], "wls")
+        _same(res, reference["wls"], "wls", honest=files_reference["wls"])
     finally:
         _stop(victim)
 
@@ -499,7 +553,7 @@ def test_a_worker_killed_mid_run_changes_nothing(robot, fleet, reference, dask_c
 def test_per_file_figure(robot, fleet, tmp_path):
     from manip_id.viz.figures import per_file_parameters, png_size
 
-    res = identify_files(robot, fleet[0][:3], per_file=True)
+    res = identify_files(robot, fleet[0][:3], partition=PartitionOptions(per_file=True))
     out = tmp_path / "per_file.png"
     est = np.array([f.result.estimate for f in res.per_file])
     std = np.array([f.result.std for f in res.per_file])
@@ -641,15 +695,80 @@ def test_cli_energy_model_matches_the_local_energy_path(robot, tmp_path, capsys)
     assert rep["per_file"][0]["n_tasks"] > 1
 
 
+def test_dask_carries_the_deadband_and_raw_torque_sums(robot, local_client, tmp_path):
+    """Filtered files with a deadband: on Dask, in blocks, the same document as serially
+    (the moving-rows and raw-torque errors travel with the sums)."""
+    from manip_id.identification import PreprocessOptions
+
+    paths = [str(tmp_path / f"raw{k}.npz") for k in range(3)]
+    for k, p in enumerate(paths):
+        _make_file(robot, Path(p), seed=90 + k, ddq=False)
+    opts = PreprocessOptions(cutoff=20.0, velocity_deadband=0.05)
+    kw = dict(validation=paths[2:], options=opts, method="wls")
+    serial = identify_files(robot, paths[:2], **kw).to_dict()
+    dask = identify_files(
+        robot,
+        paths[:2],
+        run=RunOptions(scheduler=local_client),
+        partition=PartitionOptions(block=500),
+        **kw,
+    ).to_dict()
+    for key in ("train", "validation", "train_moving", "validation_moving"):
+        assert dask["relative_error"][key] == pytest.approx(serial["relative_error"][key], 1e-7)
+    for key in ("train", "validation", "nominal_train", "nominal_validation"):
+        assert dask["relative_error_raw"][key] == pytest.approx(
+            serial["relative_error_raw"][key], 1e-7
+        )
+    assert serial["relative_error_raw"]["train"] > serial["relative_error"]["train"]
+
+
 def test_identify_datasets_with_a_scheduler(robot, fleet, local_client):
     from manip_id.identification import identify_datasets
 
     local = identify_datasets(robot, fleet[0][:3], validation=fleet[0][3:4], method="wls")
     res = identify_datasets(
-        robot, fleet[0][:3], validation=fleet[0][3:4], method="wls", scheduler=local_client
+        robot,
+        fleet[0][:3],
+        validation=fleet[0][3:4],
+        method="wls",
+        run=RunOptions(scheduler=local_client),
     )
-    _same(res, local, "wls")
+    _same(res, local, "wls", honest=local)
     assert res.relative_error.validation == pytest.approx(local.relative_error.validation, 1e-9)
     joints = list(robot.dof_names)
     for a, b in zip(res.files["train"], local.files["train"], strict=True):
-        assert {k: v for k, v in a.summary(joints).items() if k != "n_tasks"} == b.summary(joints)
+        assert a.summary(joints) == b.summary(joints)
+
+
+def test_identify_files_equals_identify_datasets_nominal_errors_included(tmp_path):
+    """The fleet path and the local file path give the same document (the fleet once
+    rebuilt the validation errors without the nominal model's)."""
+    from manip_id.identification import identify_datasets
+
+    robot = get_robot("double_pendulum", friction=("viscous", "coulomb"))
+    paths, arrays = [], []
+    for f in range(3):
+        q, dq, ddq = robot.random_states(800, seed=40 + f)
+        tau0 = np.array(
+            [pin.rnea(robot.model, robot.data, *x) for x in zip(q, dq, ddq, strict=True)]
+        )
+        tau = tau0 + FV * dq + FC * np.sign(dq)  # [N m]
+        tau += 0.05 * np.random.default_rng(f).standard_normal(tau.shape)
+        np.savez(tmp_path / f"dp{f}.npz", t=np.arange(800) * 1e-3, q=q, dq=dq, ddq=ddq, tau=tau)
+        paths.append(str(tmp_path / f"dp{f}.npz"))
+        fv0 = robot.nominal_parameters[
+            [robot.parameter_names.index(f"{j}.fv") for j in robot.dof_names]
+        ]
+        arrays.append((tau0 + fv0 * dq, tau))  # the nominal model: URDF and its fv
+    kw = dict(validation=paths[2:], method="wls")
+    local = identify_datasets(robot, paths[:2], **kw).to_dict()
+    fleet = identify_files(robot, paths[:2], **kw).to_dict()
+    local.pop("timings"), fleet.pop("timings")
+    assert fleet == local
+    # the nominal model by rnea and numpy on the validation file's arrays
+    tau0, tau = arrays[2]
+    nominal = np.linalg.norm(tau - tau0) / np.linalg.norm(tau)
+    rel = fleet["relative_error"]
+    assert rel["nominal_validation"] == pytest.approx(nominal, rel=1e-6)
+    assert rel["validation_per_file"][0]["nominal_error"] == pytest.approx(nominal, rel=1e-6)
+    assert rel["nominal_train"] is not None and rel["validation"] < 0.5 * nominal

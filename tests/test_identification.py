@@ -13,7 +13,12 @@ from manip_id.datasets import Dataset
 from manip_id.errors import InputError, RankDeficiencyError
 from manip_id.estimators import InformationAccumulator, solve_accumulator
 from manip_id.identifiability import analyze
-from manip_id.identification import identify, identify_dataset
+from manip_id.identification import (
+    RankOptions,
+    RunOptions,
+    identify,
+    identify_dataset,
+)
 from manip_id.regressor import iter_regressor
 from manip_id.trajectories import FourierTrajectory
 
@@ -56,7 +61,7 @@ def noise_free(request):
 @pytest.mark.parametrize("method", ["ols", "wls"])
 def test_noise_free_recovery(noise_free, method):
     robot, theta, data, val = noise_free
-    res = identify(robot, *data, method=method, validation=val, chunk=256)
+    res = identify(robot, *data, method=method, validation=val, run=RunOptions(chunk=256))
     expected = res.base.to_base(theta)
     assert np.linalg.norm(res.estimate - expected) <= 1e-8 * np.linalg.norm(expected)
     vq, vdq, vddq, vtau = val
@@ -128,7 +133,9 @@ def panda_fourier():
 def test_rls_converges_to_the_batch_estimate(panda_fourier):
     robot, theta, data = panda_fourier
     batch = identify(robot, *data)
-    rls = identify(robot, *data, method="rls", online={"P0": 1e4, "record_every": 100}, dt=0.01)
+    rls = identify(
+        robot, *data, method="rls", online={"P0": 10000.0, "record_every": 100, "dt": 0.01}
+    )
     scale = np.linalg.norm(batch.estimate)
     assert np.linalg.norm(rls.estimate - batch.estimate) <= 1e-4 * scale
     assert rls.relative_error.train <= 1e-4
@@ -160,7 +167,7 @@ def test_rank_deficient_data_name_the_unexcited_directions():
     err = info.value
     assert err.rank < err.n_columns and len(err.directions) == err.n_columns - err.rank
     assert "unexcited" in str(err) and err.directions[0].split()[0] in str(err)
-    res = identify(robot, q, dq, ddq, tau, minimum_norm=True)
+    res = identify(robot, q, dq, ddq, tau, rank=RankOptions(minimum_norm=True))
     assert "minimum-norm" in res.solver
     assert res.relative_error.train < 1e-6  # gravity torques are still fitted
     pred = res.predict(
@@ -204,8 +211,12 @@ def test_bad_input():
 def test_progress_and_chunks_do_not_change_the_result(noise_free):
     robot, _, data, _ = noise_free
     calls = []
-    a = identify(robot, *data, chunk=64, progress=lambda done, total: calls.append((done, total)))
-    b = identify(robot, *data, chunk=1000, base=a.base)
+    a = identify(
+        robot,
+        *data,
+        run=RunOptions(chunk=64, progress=lambda done, total: calls.append((done, total))),
+    )
+    b = identify(robot, *data, base=a.base, run=RunOptions(chunk=1000))
     assert calls[0] == (64, 600) and calls[-1] == (600, 600) and len(calls) == 10
     np.testing.assert_allclose(
         a.estimate, b.estimate, rtol=0, atol=1e-12 * np.abs(b.estimate).max()

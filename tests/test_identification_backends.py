@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 from conftest import get_robot
 
+import manip_id.execution as execution
 import manip_id.identification as identification
 from manip_id.errors import InputError
 from manip_id.estimators import GradientEstimator, RLSEstimator
-from manip_id.identification import OnlineOptions, identify
+from manip_id.identification import OnlineOptions, RunOptions, identify
 from manip_id.simulation import inverse_dynamics
 
 
@@ -37,9 +38,9 @@ def _rows(robot, q, dq, ddq, ind):
 @pytest.mark.parametrize("as_dict", [True, False])
 def test_rls_options_match_the_estimator_stepped_by_hand(ur5_data, as_dict):
     robot, q, dq, ddq, tau = ur5_data
-    opts = {"P0": 1e3, "forgetting": 0.999, "record_every": 10}
+    opts = {"P0": 1e3, "forgetting": 0.999, "record_every": 10, "dt": 0.01}
     res = identify(
-        robot, q, dq, ddq, tau, method="rls", dt=0.01,
+        robot, q, dq, ddq, tau, method="rls",
         online=opts if as_dict else OnlineOptions(**opts),
     )  # fmt: skip
     ind = res.base.independent
@@ -81,9 +82,9 @@ def test_bad_online_options_are_input_errors(ur5_data, method, online, match):
 def test_forked_back_end_equals_serial_and_leaves_no_state(ur5_data):
     robot, q, dq, ddq, tau = ur5_data
     serial = identify(robot, q, dq, ddq, tau)
-    forked = identify(robot, q, dq, ddq, tau, workers=2, base=serial.base)
+    forked = identify(robot, q, dq, ddq, tau, base=serial.base, run=RunOptions(workers=2))
     scale = np.abs(serial.estimate).max()
     assert np.abs(forked.estimate - serial.estimate).max() <= 1e-9 * scale
     assert "accumulate_wall" in forked.timings and "accumulate_wall" not in serial.timings
-    assert identification._worker_job is None  # set in the workers only
+    assert execution._forked_job is None  # set in the workers only
     assert not hasattr(identification, "_WORK")

@@ -14,7 +14,7 @@ import pytest
 from manip_id import load_robot
 from manip_id.errors import InputError
 from manip_id.identifiability import analyze
-from manip_id.identification import identify
+from manip_id.identification import ModelOptions, identify
 from manip_id.models import (
     accumulate_energy,
     check_energy_base,
@@ -109,7 +109,14 @@ def test_energy_rows_are_the_power_balance(panda, trajectory):
 def test_noise_free_recovery_without_accelerations(panda, trajectory, model):
     robot, theta = panda
     ds = _data(panda, trajectory)
-    res = identify(robot, ds.q, ds.dq, None, ds.tau, model=model, dt=1 / RATE, window_length=0.05)
+    res = identify(
+        robot,
+        ds.q,
+        ds.dq,
+        None,
+        ds.tau,
+        model=ModelOptions(name=model, window_length=0.05, dt=1 / RATE),
+    )
     base = analyze(robot).base
     expected = base.to_base(theta)
     assert res.model == model
@@ -128,9 +135,16 @@ def test_identify_dataset_takes_the_models_without_ddq(panda, trajectory):
     robot, _ = panda
     ds = _data(panda, trajectory)
     no_ddq = dataclasses.replace(ds, ddq=None)
-    res = identify_dataset(robot, no_ddq, model="energy", window_length=0.05)  # dt from ds.t
+    res = identify_dataset(
+        robot, no_ddq, model=ModelOptions(name="energy", window_length=0.05)
+    )  # dt from ds.t
     ref = identify(
-        robot, ds.q, ds.dq, None, ds.tau, model="energy", dt=1 / RATE, window_length=0.05
+        robot,
+        ds.q,
+        ds.dq,
+        None,
+        ds.tau,
+        model=ModelOptions(name="energy", window_length=0.05, dt=1 / RATE),
     )
     np.testing.assert_allclose(res.estimate, ref.estimate, rtol=1e-9)
 
@@ -143,7 +157,12 @@ def test_noisy_estimates_are_within_their_predicted_std(panda, trajectory, model
     for seed in range(3):
         ds = _data(panda, trajectory, noise=0.02, seed=seed)
         res = identify(
-            robot, ds.q, ds.dq, None, ds.tau, model=model, dt=1 / RATE, window_length=0.05
+            robot,
+            ds.q,
+            ds.dq,
+            None,
+            ds.tau,
+            model=ModelOptions(name=model, window_length=0.05, dt=1 / RATE),
         )
         z.append((res.estimate - expected) / res.std)
     z = np.concatenate(z)  # 3 x 69 normalized errors
@@ -172,15 +191,37 @@ def test_bad_input(panda, trajectory):
     robot, _ = panda
     ds = _data(panda, trajectory)
     with pytest.raises(InputError, match="model must be one of"):
-        identify(robot, ds.q, ds.dq, None, ds.tau, model="lagrange", dt=0.002)
+        identify(robot, ds.q, ds.dq, None, ds.tau, model=ModelOptions(name="lagrange", dt=0.002))
     with pytest.raises(InputError, match="least squares"):
-        identify(robot, ds.q, ds.dq, None, ds.tau, model="energy", method="rls", dt=0.002)
+        identify(
+            robot,
+            ds.q,
+            ds.dq,
+            None,
+            ds.tau,
+            method="rls",
+            model=ModelOptions(name="energy", dt=0.002),
+        )
     with pytest.raises(InputError, match="window_length must be a positive"):
         accumulate_energy(robot, ds.q, ds.dq, ds.tau, dt=0.002, window_length=-1.0)
     with pytest.raises(InputError, match="give more samples or a shorter window_length"):
-        identify(robot, ds.q[:2000], ds.dq[:2000], None, ds.tau[:2000], model="energy", dt=0.002)
+        identify(
+            robot,
+            ds.q[:2000],
+            ds.dq[:2000],
+            None,
+            ds.tau[:2000],
+            model=ModelOptions(name="energy", dt=0.002),
+        )
     with pytest.raises(InputError, match=r"tau.shape=\(10, 7\) but expected \(20, robot.nv=7\)"):
-        identify(robot, ds.q[:20], ds.dq[:20], None, ds.tau[:10], model="momentum", dt=0.002)
+        identify(
+            robot,
+            ds.q[:20],
+            ds.dq[:20],
+            None,
+            ds.tau[:10],
+            model=ModelOptions(name="momentum", dt=0.002),
+        )
 
 
 # ------------------------------------------------------------------ real data
@@ -219,11 +260,9 @@ def test_real_panda_log_momentum_and_energy(panda_real):
             states.dq,
             None,
             states.tau,
-            model=model,
-            dt=dt,
-            window_length=window,
             validation=validation,
             consistent=consistent,
+            model=ModelOptions(name=model, window_length=window, dt=dt),
         )
         assert len(res.estimate) == len(dynamic.estimate) == 64
         errors[label] = res.relative_error.validation
@@ -250,7 +289,8 @@ def test_cli_model_option(tmp_path, capsys):
     assert report["window_length"] == 0.05
     assert report["n_base"] == len(report["true_base_parameters"])
     assert report["parameter_error_in_std"] < 4.5  # 1 % torque noise, within its std
-    assert "relative error: train" in capsys.readouterr().out
+    out_text = capsys.readouterr().out  # the one rendering: the model's own outputs
+    assert "(energy model)" in out_text and "train error per joint: energy" in out_text
     assert main([*args, "--model", "momentum", "--workers", "2"]) == 2
     assert "one process" in capsys.readouterr().err
     assert main([*args, "--model", "energy", "--window-length", "-1"]) == 2

@@ -18,8 +18,14 @@ from manip_id.cli import main
 from manip_id.datasets import Dataset, save_dataset
 from manip_id.errors import DataError, InputError
 from manip_id.identifiability import analyze
-from manip_id.identification import identify, identify_datasets
-from manip_id.pipeline import PreprocessOptions, accumulate_file, scan_file
+from manip_id.identification import (
+    PreprocessOptions,
+    RunOptions,
+    accumulate_file,
+    identify,
+    identify_datasets,
+    scan_file,
+)
 from manip_id.signals import preprocess
 
 ROBOT = ["ur5", "--friction", "viscous,coulomb"]
@@ -207,7 +213,9 @@ def test_quality_summary(robot, tmp_path):
     integral = cumulative_trapezoid(dq_bad, t, axis=0, initial=0)
     dqw, diw = np.diff(q[::m], axis=0), np.diff(integral[::m], axis=0)
     want = np.linalg.norm(dqw - diw, axis=0) / np.linalg.norm(diw, axis=0)
-    np.testing.assert_allclose(qual.velocity_mismatch, want, rtol=1e-9)
+    # windows moving less than 10 encoder steps (here the smallest step of q, ~1e-7 rad,
+    # near turning points) are left out: a few windows of negligible weight
+    np.testing.assert_allclose(qual.velocity_mismatch, want, rtol=1e-6)
     clean = save_npz(tmp_path / "clean.npz", robot, *log(robot, n=2000, seed=6))
     good = scan_file(robot, clean).quality
     assert max(good.velocity_mismatch) < 1e-3 and not good.warnings
@@ -303,7 +311,10 @@ def test_cli_windows_scale_deadband_validation(robot, two_logs, tmp_path, capsys
     assert left == dict(
         zip(robot.dof_names, map(int, (np.abs(dq[:800]) < 0.02).sum(0)), strict=True)
     )
-    assert rep["relative_error"]["validation"] < 1e-6  # noise-free, right scale
+    # noise-free, right scale: exact on the moving rows; over all rows the standstill
+    # rows are predicted with the deadband (no Coulomb term), the data have it
+    assert rep["relative_error"]["validation_moving"] < 1e-6
+    assert rep["relative_error"]["validation"] > rep["relative_error"]["validation_moving"]
     assert "rows left out per joint" in cap.out
 
 
@@ -392,7 +403,7 @@ def test_parts_and_workers_add_up_to_the_whole_file(robot, base, tmp_path):
     A = sum(p.accumulator.A for p in parts)
     np.testing.assert_allclose(A, whole.accumulator.A, rtol=1e-10, atol=1e-8 * np.abs(A).max())
     serial = identify_datasets(robot, [path], options=opts, base=base)
-    forked = identify_datasets(robot, [path], options=opts, base=base, workers=2)
+    forked = identify_datasets(robot, [path], options=opts, base=base, run=RunOptions(workers=2))
     assert forked.n_samples == serial.n_samples
     scale = np.abs(serial.estimate).max()
     np.testing.assert_allclose(forked.estimate, serial.estimate, rtol=0, atol=1e-9 * scale)

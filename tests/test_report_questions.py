@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from matplotlib.patches import Rectangle
 
-from manip_id.cli import identify as identify_cli
+from manip_id.cli import _common as cli_common
 from manip_id.cli import main
 from manip_id.robot import load_robot
 from manip_id.viz import figures
@@ -88,8 +88,8 @@ def test_torque_figure_panels(tmp_path):
         pred,
         nom,
         validation_start=7.0,
-        zoom=1.0,
         errors=[(0.01, 0.2), (0.02, 0.2)],
+        options=figures.FigureOptions(zoom=1.0),
     )
     axes = fig.axes
     assert len(axes) == 6  # per joint: record, zoom, histogram
@@ -144,7 +144,7 @@ def test_real_panda_report(panda_log, tmp_path, capsys):
     assert sorted(bad) == ["panda_joint6.fv", "panda_joint7.Izz"]
     first_flagged = min(i for i, r in enumerate(rows) if r[1])
     assert all(not r[1] for r in rows[:first_flagged]) and names.index(bad[0]) > first_flagged
-    assert "0.741 % (nominal URDF model 18 %)" in index
+    assert "0.741 % (nominal model 18.009 %)" in index  # summary_rows, the one rendering
     assert "low-pass 3 Hz" in index and "trimmed" in index
     assert "<h2>Data quality</h2>" in index
     assert (rep / "scene.html").stat().st_size < 5_000_000  # decimated meshes
@@ -180,7 +180,7 @@ class _Terminal(io.StringIO):
 
 
 def test_progress_bar_on_a_terminal_and_quiet(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(identify_cli, "PROGRESS_DELAY", 0.0)
+    monkeypatch.setattr(cli_common, "PROGRESS_DELAY", 0.0)
     term = _Terminal()
     monkeypatch.setattr(sys, "stderr", term)
     assert main(["identify", "double_pendulum", *SIM]) == 0
@@ -190,5 +190,7 @@ def test_progress_bar_on_a_terminal_and_quiet(tmp_path, capsys, monkeypatch):
     term.truncate()
     out = tmp_path / "r.json"
     assert main(["identify", "double_pendulum", *SIM, "--quiet", "--json", str(out)]) == 0
-    assert capsys.readouterr().out == "" and term.getvalue() == ""
-    assert json.loads(out.read_text())["robot"] == "double_pendulum"
+    doc = json.loads(out.read_text())
+    assert capsys.readouterr().out == ""  # quiet: no bar, no table; the warnings remain
+    assert term.getvalue().splitlines() == [f"manip-id: warning: {w}" for w in doc["warnings"]]
+    assert doc["robot"] == "double_pendulum"

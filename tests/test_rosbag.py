@@ -10,8 +10,7 @@ from conftest import get_robot
 from manip_id.datasets import load_dataset
 from manip_id.errors import DataError
 from manip_id.identifiability import analyze
-from manip_id.identification import identify_datasets
-from manip_id.pipeline import PreprocessOptions, scan_file
+from manip_id.identification import PreprocessOptions, identify_datasets, scan_file
 
 rosbags = pytest.importorskip("rosbags")
 from rosbags.rosbag2 import StoragePlugin, Writer  # noqa: E402

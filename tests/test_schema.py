@@ -16,15 +16,14 @@ from conftest import get_robot
 
 from manip_id.cli import main
 from manip_id.errors import DataError
-from manip_id.identification import identify
-from manip_id.results import (
-    NON_PHYSICAL,
-    POORLY,
+from manip_id.identification import (
+    RankOptions,
+    identify,
     load_result,
     result_from_dict,
     result_text,
-    single_standard,
 )
+from manip_id.identification.document import NON_PHYSICAL, POORLY, single_standard
 
 PANDA_ARGS = ["identify", "panda", "--friction", "viscous,coulomb,offset", "--split", "0.7"]
 
@@ -71,9 +70,21 @@ def test_schema_keys_and_names(ur5_result):
         "value",
         "std",
         "std_percent",
+        "std_white",
         "unit",
         "nominal",
         "flags",
+    }
+    # 800 independent samples: 25 blocks of 32, the autocorrelation-consistent std
+    assert d["uncertainty"]["method"] == "hac" and d["uncertainty"]["n_blocks"] == 25
+    assert set(d["uncertainty"]) == {
+        "method",
+        "requested",
+        "bandwidth",
+        "inflation",
+        "n_blocks",
+        "block_samples",
+        "reason",
     }
     for p, i in zip(d["base_parameters"], res.base.independent, strict=True):
         assert p["unit"] == robot.parameter_units[i]
@@ -261,7 +272,7 @@ def test_not_excited_flags_the_columns_these_data_leave_zero():
     model = robot.with_parameters(robot.nominal_parameters)
     data = model.createData()
     tau = np.array([pin.rnea(model, data, q[k], dq[k], ddq[k]) for k in range(200)])
-    res = identify(robot, q, dq, ddq, tau, minimum_norm=True)
+    res = identify(robot, q, dq, ddq, tau, rank=RankOptions(minimum_norm=True))
     assert res.rank_analysis.rank < res.base.n_base
     Y = np.stack([robot.evaluator.regressor(q[k], dq[k], ddq[k]) for k in range(200)])
     zero = np.abs(Y[:, :, res.base.independent]).max(axis=(0, 1)) == 0

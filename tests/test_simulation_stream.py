@@ -12,6 +12,7 @@ from manip_id import identify, identify_chunks, load_robot, regressor
 from manip_id import simulation as sim_mod
 from manip_id.cli import main
 from manip_id.errors import InputError
+from manip_id.identification import RunOptions
 from manip_id.simulation import MeasurementNoise, SimulationStream, simulate
 from manip_id.trajectories import random_trajectory
 
@@ -106,9 +107,11 @@ def test_streamed_least_squares_equal_whole_arrays(ur10):
     stream = _stream(ur10, duration=20.0, rate=50.0)
     ds = stream.dataset()
     whole = identify(ur10, ds.q, ds.dq, ds.ddq, ds.tau, method="ols")
-    blocks = identify_chunks(ur10, stream.blocks(), method="ols", chunk=100)
+    blocks = identify_chunks(ur10, stream.blocks(), method="ols", run=RunOptions(chunk=100))
     np.testing.assert_allclose(blocks.estimate, whole.estimate, rtol=1e-9, atol=1e-12)
-    parallel = identify_chunks(ur10, stream.parts(2), method="ols", chunk=100, workers=2)
+    parallel = identify_chunks(
+        ur10, stream.parts(2), method="ols", run=RunOptions(chunk=100, workers=2)
+    )
     np.testing.assert_allclose(parallel.estimate, whole.estimate, rtol=1e-9, atol=1e-12)
 
 

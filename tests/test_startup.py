@@ -138,10 +138,11 @@ def test_model_without_geometry_matches_the_loader(name):
     import numpy as np
     from example_robot_data.robots_loader import ROBOTS
 
-    from manip_id.robot import _load_erd, load_robot
+    from manip_id.robot import load_robot
+    from manip_id.robot_sources import load_erd
 
     ref = ROBOTS[name]().robot
-    model, source, _, geometry = _load_erd(name)
+    model, source, _, geometry = load_erd(name)
     assert geometry == {}
     assert source == ref.urdf or source.endswith(ref.urdf.split("/robots/")[-1])
     r = ref.model

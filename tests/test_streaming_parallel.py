@@ -7,7 +7,7 @@ import pytest
 from conftest import get_robot
 
 from manip_id import InputError
-from manip_id.identification import identify, identify_chunks
+from manip_id.identification import RunOptions, identify, identify_chunks
 from manip_id.simulation import inverse_dynamics
 
 
@@ -30,13 +30,13 @@ def _close(a, b, rtol=1e-9):
 @pytest.fixture(scope="module")
 def serial(ur10_data):
     robot, q, dq, ddq, tau = ur10_data
-    return identify(robot, q, dq, ddq, tau, chunk=1024)
+    return identify(robot, q, dq, ddq, tau, run=RunOptions(chunk=1024))
 
 
 @pytest.mark.parametrize("chunk", [1, 7, 500, 5000])
 def test_chunk_size_does_not_change_the_result(ur10_data, serial, chunk):
     robot, q, dq, ddq, tau = ur10_data
-    res = identify(robot, q, dq, ddq, tau, chunk=chunk, base=serial.base)
+    res = identify(robot, q, dq, ddq, tau, base=serial.base, run=RunOptions(chunk=chunk))
     _close(serial.estimate, res.estimate)
     _close(serial.std, res.std)
     assert res.relative_error.train == pytest.approx(serial.relative_error.train, rel=1e-9)
@@ -47,7 +47,9 @@ def test_chunk_size_does_not_change_the_result(ur10_data, serial, chunk):
 def test_workers_give_the_serial_result(ur10_data, method, workers):
     robot, q, dq, ddq, tau = ur10_data
     ref = identify(robot, q, dq, ddq, tau, method=method)
-    res = identify(robot, q, dq, ddq, tau, method=method, workers=workers, base=ref.base)
+    res = identify(
+        robot, q, dq, ddq, tau, method=method, base=ref.base, run=RunOptions(workers=workers)
+    )
     _close(ref.estimate, res.estimate)
     # WLS weights come from residual sums (see below), which carry more round-off
     _close(ref.std, res.std, rtol=1e-8 if method == "wls" else 1e-9)
@@ -70,26 +72,26 @@ def test_blocks_from_a_stream_and_parts_in_processes(ur10_data, serial):
         robot,
         _blocks(arrays, [0, 100, 101, 1700, 3000]),
         base=serial.base,
-        chunk=256,
         validation=_blocks(arrays, [0, 3000]),
+        run=RunOptions(chunk=256),
     )
     _close(serial.estimate, res.estimate)
     assert res.n_samples == 3000
     # validation on the training data equals the training error computed from the sums
     assert res.relative_error.validation == pytest.approx(res.relative_error.train, rel=1e-6)
     parts = [(_blocks, (arrays, [0, 1000, 1500])), (_blocks, (arrays, [1500, 3000]))]
-    par = identify_chunks(robot, parts, base=serial.base, workers=2)
+    par = identify_chunks(robot, parts, base=serial.base, run=RunOptions(workers=2))
     _close(serial.estimate, par.estimate)
 
 
 def test_bad_sources(ur10_data):
     robot, q, dq, ddq, tau = ur10_data
     with pytest.raises(InputError, match="parts"):
-        identify_chunks(robot, [(q, dq, ddq, tau)], workers=2)
+        identify_chunks(robot, [(q, dq, ddq, tau)], run=RunOptions(workers=2))
     with pytest.raises(InputError, match="tuple"):
         identify_chunks(robot, [q])
     with pytest.raises(InputError, match="workers"):
-        identify(robot, q, dq, ddq, tau, workers=0)
+        identify(robot, q, dq, ddq, tau, run=RunOptions(workers=0))
     with pytest.raises(InputError, match="ols, wls"):
         identify_chunks(robot, [(q, dq, ddq, tau)], method="rls")
 
@@ -98,7 +100,7 @@ def test_bad_sources(ur10_data):
 def test_row_supports_give_the_full_information_sums(name):
     """Accumulating each row on its non-zero columns equals the dense per-joint sums."""
     from manip_id.estimators import InformationAccumulator
-    from manip_id.identification import _accumulate_blocks, row_supports
+    from manip_id.identification import accumulate_blocks, row_supports
     from manip_id.regressor import regressor
 
     robot = get_robot(name, friction=("viscous", "coulomb"))
@@ -112,7 +114,7 @@ def test_row_supports_give_the_full_information_sums(name):
         mask[sj] = False
         assert not np.any(Y[:, j, mask])
     dense = InformationAccumulator(ind.size, robot.nv).add(Y, tau)
-    sparse, _ = _accumulate_blocks(robot, [(q, dq, ddq, tau)], ind, chunk=64)
+    sparse, _ = accumulate_blocks(robot, [(q, dq, ddq, tau)], ind, chunk=64)
     np.testing.assert_allclose(sparse.A_joint, dense.A_joint, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(sparse.b_joint, dense.b_joint, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(sparse.zz_joint, dense.zz_joint, rtol=1e-12)

@@ -94,3 +94,26 @@ def test_robot_is_drawn_and_moves(name, amplitude, tmp_path):
     # what changed between the frames is robot, not background noise
     moved_robot = (moved & (robot_px | _changed(quarter, background))).sum()
     assert moved_robot / moved.sum() > 0.95
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5"])
+def test_robot_fills_the_view_beside_the_legend(name, tmp_path):
+    """At its start pose the robot spans >= 60 % of the view height, and the legend (a
+    side panel) never covers it: the robot's pixels all lie right of the panel."""
+    robot = load_robot(name)
+    t, q = swing(robot, 0.2)
+    scene = RobotScene(robot, title=f"{name}: a long title " * 4).animate(t, q)
+    page, page_empty = tmp_path / "scene.html", tmp_path / "empty.html"
+    scene.write_html(page)
+    scene._vis["robot"].set_property("visible", False)  # the same camera, no robot
+    scene.write_html(page_empty)
+    start = screenshot(page, tmp_path / "t0.png", tmp_path, "#t=0")
+    background = screenshot(page_empty, tmp_path / "e0.png", tmp_path, "#t=0")
+    panel = min(270, int(0.32 * WIDTH))  # the legend's width (scene_page's CSS)
+    robot_px = _changed(start, background)
+    rows, cols = np.nonzero(robot_px)
+    assert rows.size > 0.005 * robot_px.size
+    height = (rows.max() - rows.min() + 1) / HEIGHT
+    assert height >= 0.6, f"the robot spans {height:.2f} of the view height"
+    assert scene.camera.fill >= 0.6
+    assert cols.min() > panel, cols.min()  # nothing of the robot under the legend panel

@@ -30,12 +30,18 @@ import argparse
 import importlib
 import os
 import pkgutil
+import re
 import signal
 import sys
 import traceback
 import warnings
 
-from ..errors import ManipIdError
+import psutil
+
+from .._io import OutputSet, remove_temporaries
+from .._native import native_stderr_captured  # noqa: F401 (re-exported, as earlier)
+from ..errors import ManipIdError, did_you_mean
+from ._common import warn  # noqa: F401 (the commands' warnings, as earlier releases had it)
 
 PROG = "manip-id"
 
@@ -49,9 +55,33 @@ class Terminated(BaseException):
 
 
 class OneLineParser(argparse.ArgumentParser):
-    """An ``ArgumentParser`` whose errors are one line (``manip-id CMD: error: ...``), exit 2."""
+    """An ``ArgumentParser`` whose errors are one line (``manip-id CMD: error: ...``), exit 2,
+    with "did you mean" for a misspelt option, command or choice."""
+
+    def parse_args(self, args=None, namespace=None):
+        namespace, extras = self.parse_known_args(args, namespace)
+        if extras:
+            options = self._options_of(namespace)
+            hints = "".join(
+                did_you_mean(x.split("=", 1)[0], options) for x in extras if x[:1] == "-"
+            )
+            self.error(f"unrecognized arguments: {' '.join(extras)}{hints}")
+        return namespace
+
+    def _options_of(self, namespace) -> list[str]:
+        """The option strings of this parser and of the command ``namespace`` chose."""
+        options = [o for a in self._actions for o in a.option_strings]
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                command = action.choices.get(getattr(namespace, action.dest, None) or "")
+                if command is not None:
+                    options += [o for a in command._actions for o in a.option_strings]
+        return [o for o in options if o.startswith("--")]
 
     def error(self, message: str):
+        bad = re.search(r"invalid choice: '([^']*)' \(choose from (.*)\)", message)
+        if bad:
+            message += did_you_mean(bad.group(1), re.findall(r"'([^']*)'", bad.group(2)))
         self.exit(2, f"{self.prog}: error: {_one_line(message)} (see {self.prog} --help)\n")
 
 
@@ -118,22 +148,9 @@ def _library(filename: str) -> str:
     return ""
 
 
-def warn(message: str) -> None:
-    """Print ``manip-id: warning: message`` (once; the commands' own warnings)."""
-    warnings.warn(message, UserWarning, stacklevel=2)
-
-
-# ------------------------------------------------------- native stderr (fd 2)
-from .._native import native_stderr_captured  # noqa: E402, F401 (re-exported for commands)
-
-
 # ---------------------------------------------------------- child processes
 def stop_children(timeout: float = 3.0) -> None:
     """Terminate (then kill) every process this process started, recursively."""
-    try:
-        import psutil
-    except ImportError:  # pragma: no cover - psutil is a dependency
-        return
     try:
         children = psutil.Process().children(recursive=True)
     except psutil.Error:  # pragma: no cover
@@ -177,7 +194,6 @@ def _install_signal_handlers():
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the console script; returns the exit status (see the module docstring)."""
-    from .._io import OutputSet, remove_temporaries
 
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv[: argv.index("--")] if "--" in argv else "--debug" in argv

@@ -1,14 +1,28 @@
-"""Options and helpers shared by the subcommands."""
+"""Options and helpers shared by the subcommands.
+
+Robot options and loading, output reservation, progress bars, CSV column maps, the
+data-file options of identify (specs, preprocessing options), the consistency options,
+the URDF export and the end of a run (publish the outputs, say where they are).
+
+Nothing here loads Pinocchio: ``manip-id --help`` builds every parser from this module.
+What the commands share once they run is in :mod:`._runtime`; a command's run function
+is imported by :func:`command` when the command runs.
+"""
 
 from __future__ import annotations
 
 import argparse
-from typing import TYPE_CHECKING
+import importlib
+import math
+import os
+import sys
+import warnings
 
-from .._io import write_json  # noqa: F401 (the commands import it from here)
-
-if TYPE_CHECKING:
-    from ..robot import Robot
+from .._io import OutputSet, write_json  # noqa: F401 (the commands import write_json here)
+from ..datasets import parse_file_spec
+from ..errors import InputError
+from ..profiles import find_profile, load_profile
+from ..signals import DEFAULT_CUTOFF, preprocess
 
 
 def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
@@ -21,19 +35,26 @@ def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--friction",
         default=None,
-        help="comma-separated friction terms per joint: viscous,coulomb,offset",
+        help="comma-separated friction terms per joint, some of viscous,coulomb,offset "
+        "[default: the robot profile's (robots/ROBOT.toml), else none]",
     )
     parser.add_argument(
         "--armature",
         action="store_true",
         default=None,
-        help="model a rotor inertia (armature) per joint",
+        help="model a rotor inertia (armature) per joint [default: the robot profile's, else off]",
     )
     parser.add_argument(
-        "--spring", action="store_true", default=None, help="model a linear spring per joint"
+        "--spring",
+        action="store_true",
+        default=None,
+        help="model a linear spring per joint [default: the robot profile's, else off]",
     )
     parser.add_argument(
-        "--joints", default=None, help="comma-separated active joints (the others are locked)"
+        "--joints",
+        default=None,
+        help="comma-separated active joints, the others locked [default: the robot profile's, "
+        "else every joint]",
     )
     parser.add_argument(
         "--profile",
@@ -49,25 +70,8 @@ def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def robot_from_args(args: argparse.Namespace) -> Robot:
-    """Load the robot named by :func:`add_robot_arguments` options."""
-    from ..robot import load_robot
-    from . import native_stderr_captured
-
-    joints = [j for j in args.joints.split(",") if j] if getattr(args, "joints", None) else None
-    with native_stderr_captured("urdfdom"):  # its C++ messages become one warning line
-        return load_robot(
-            args.robot,
-            armature=args.armature,
-            friction=args.friction,
-            spring=args.spring,
-            active_joints=joints,
-            package_dirs=args.package_dir,
-            profile=_profile_option(args),
-        )
-
-
-def _profile_option(args: argparse.Namespace):
+def profile_option(args: argparse.Namespace):
+    """``--profile``: a name or path, False for ``none``, None when not given."""
     value = getattr(args, "profile", None)
     return False if value == "none" else value
 
@@ -78,9 +82,7 @@ def profile_from_args(args: argparse.Namespace):
     ``--profile`` when given (``none``: no profile), else ``robots/ROBOT.toml`` for a
     robot given by name; None when there is none.
     """
-    from ..profiles import find_profile, load_profile
-
-    value = _profile_option(args)
+    value = profile_option(args)
     if value is False:
         return None
     if value is not None:
@@ -96,8 +98,6 @@ FILE_OUTPUT_OPTIONS = ("json", "html", "export_urdf")
 
 def input_paths(args: argparse.Namespace) -> list[str]:
     """Every existing path among the input options of ``args`` (``FILE@WINDOW``: FILE)."""
-    import os
-
     paths = []
     for name in INPUT_OPTIONS + ("torque_scale_from", "known_base", "input"):
         value = getattr(args, name, None)
@@ -120,8 +120,6 @@ def reserve_outputs(args: argparse.Namespace):
     them with ``outputs.write_json(...)`` / ``claim.write(...)`` and publishes them all
     with ``outputs.publish()`` at the end. Also checks ``--seed`` and caps ``--workers``.
     """
-    from .._io import OutputSet
-
     check_seed_and_workers(args)
     outputs = getattr(args, "outputs", None)
     if outputs is None:
@@ -139,10 +137,6 @@ def reserve_outputs(args: argparse.Namespace):
 
 def check_seed_and_workers(args: argparse.Namespace) -> None:
     """A negative ``--seed`` is an error; ``--workers`` above the core count is capped."""
-    import os
-
-    from ..errors import InputError
-
     seed = getattr(args, "seed", None)
     if seed is not None and not 0 <= seed < 2**63:
         raise InputError(f"--seed must be an integer in [0, 2**63), got {seed}")
@@ -153,7 +147,255 @@ def check_seed_and_workers(args: argparse.Namespace) -> None:
         affinity = getattr(os, "sched_getaffinity", None)  # the cores this process may use
         cores = len(affinity(0)) if affinity is not None else (os.cpu_count() or 1)
         if workers > cores:
-            from . import warn
-
             warn(f"--workers {workers} capped at the {cores} cores of this machine")
             args.workers = cores
+
+
+def warn(message: str) -> None:
+    """``manip-id: warning: message`` on stderr, once (the CLI's warning printer)."""
+    warnings.warn(message, UserWarning, stacklevel=2)
+
+
+# ------------------------------------------------------------------ progress
+#: A progress bar appears on stderr (a terminal, without --quiet) once a run passes this [s].
+PROGRESS_DELAY = 2.0
+
+
+def progress(args: argparse.Namespace, total_hint: int = 0, desc: str = "identify"):
+    """A callable(done, total) drawing a tqdm bar on stderr, or None.
+
+    The bar shows when stderr is a terminal and ``--quiet`` was not given, and only
+    once the run has taken :data:`PROGRESS_DELAY` seconds; otherwise nothing is
+    printed (logs and pipes stay clean).
+    """
+    if getattr(args, "quiet", False) or not sys.stderr.isatty():
+        return None
+    state: dict = {"bar": None}
+
+    def report(done: int, total: int) -> None:
+        bar = state["bar"]
+        if bar is None:
+            from tqdm import tqdm  # loaded only when a bar is drawn
+
+            bar = state["bar"] = tqdm(
+                total=max(total, total_hint, 1),
+                desc=desc,
+                unit=" samples",
+                file=sys.stderr,
+                delay=PROGRESS_DELAY,
+                leave=False,
+                dynamic_ncols=True,
+            )
+        if total > bar.total:
+            bar.total = total
+        bar.update(max(done - bar.n, 0))
+        if done >= total:
+            bar.close()
+
+    return report
+
+
+# ------------------------------------------------------- numbers and columns
+def parse_floats(text: str, what: str, n: int | None = None) -> list[float]:
+    """``"1.5,2,3"`` -> [1.5, 2.0, 3.0] (``n`` values when given), with a clear error."""
+    try:
+        values = [float(x) for x in str(text).split(",") if x.strip()]
+    except ValueError:
+        raise InputError(f"{what} expects numbers separated by commas, got {text!r}") from None
+    if not values:
+        raise InputError(f"{what} expects at least one number, got {text!r}")
+    if n is not None and len(values) != n:
+        raise InputError(f"{what} takes {n} comma-separated numbers, got {len(values)}: {text!r}")
+    if not all(math.isfinite(v) for v in values):
+        raise InputError(f"{what} takes finite numbers, got {text!r}")
+    return values
+
+
+def column_map(specs: list[str]) -> dict | None:
+    """``["t=stamp", "q=pos*", "tau=3,4,5"]`` -> a column map for :func:`load_dataset`."""
+    if not specs:
+        return None
+    out: dict = {}
+    for spec in specs:
+        field, sep, cols = spec.partition("=")
+        if not sep or not field.strip() or not cols.strip():
+            raise InputError(f"--column expects FIELD=COLUMNS, e.g. q='pos*', got {spec!r}")
+        names = [c.strip() for c in cols.split(",") if c.strip()]
+        items: list[int | str] = [int(c) if c.lstrip("-").isdigit() else c for c in names]
+        field = field.strip()
+        out[field] = items if field in ("joint_names",) or len(items) > 1 else items[0]
+    return out
+
+
+# ------------------------------------------------------------------ Dask
+def add_scheduler_argument(parser, what: str) -> None:
+    """``--scheduler SPEC`` (shared by the commands that accumulate on Dask); ``what``
+    ends the help: what one task is and where the solve happens."""
+    parser.add_argument(
+        "--scheduler",
+        metavar="SPEC",
+        default=None,
+        help="accumulate on Dask: local[:N] (a local cluster of N workers on 127.0.0.1, default "
+        "2), tcp://HOST:PORT (a running scheduler) or SCHEDULER.json (its scheduler file); " + what,
+    )
+
+
+# ---------------------------------------------------- data files of identify
+def add_file_arguments(parser: argparse.ArgumentParser) -> None:
+    """The data-file options of ``manip-id identify`` (besides --data and --validate)."""
+    g = parser.add_argument_group("data files (--data, --validate)")
+    g.add_argument(
+        "--window",
+        metavar="START:STOP",
+        default=None,
+        help="window of every file given without one: seconds from the file's first stamp "
+        "(2.5:30, :30, 2.5:) or rows (#1000:#5000); a file takes its own as FILE@START:STOP",
+    )
+    g.add_argument(
+        "--torque-scale",
+        metavar="G[,G...]",
+        default=None,
+        help="multiply the torque columns: one gain, or one per joint (drive gains from "
+        "current [A] to torque [N m], gear ratios); recorded in the JSON",
+    )
+    g.add_argument(
+        "--torque-scale-from",
+        metavar="RESULT.json",
+        default=None,
+        help="the drive gains of 'manip-id drive-gains --json' as --torque-scale",
+    )
+    g.add_argument(
+        "--velocity-deadband",
+        type=float,
+        metavar="EPS",
+        default=None,
+        help="leave out the rows of joint j where |dq_j| < EPS [rad/s] (standstill, where the "
+        "Coulomb term sign(dq) is noise); the JSON counts them per joint",
+    )
+    g.add_argument(
+        "--topic",
+        default=None,
+        help="ROS bags: the sensor_msgs/msg/JointState topic [default: the only one]",
+    )
+    g.add_argument(
+        "--drop-bad-rows",
+        action="store_true",
+        help="drop (and count) bad rows instead of refusing the file: NaN/Inf, values beyond "
+        "the plausible magnitudes of their unit, malformed CSV lines [default: refuse]",
+    )
+
+
+def add_stream_arguments(parser: argparse.ArgumentParser, trim: bool = True) -> None:
+    """``--delay``, ``--time-unit`` and (``trim``) ``--trim-standstill``."""
+    g = parser.add_argument_group("streams (the audit's findings)")
+    g.add_argument(
+        "--delay",
+        metavar="SECONDS[,...]",
+        default=None,
+        help="the torque stream lags the motion stream by SECONDS (one value, or one per "
+        "joint): each row takes the torque logged SECONDS later (interpolated)",
+    )
+    g.add_argument(
+        "--time-unit",
+        choices=("s", "ms", "us", "ns"),
+        default=None,
+        help="unit of the files' time stamps [default s]",
+    )
+    if trim:
+        g.add_argument(
+            "--trim-standstill",
+            action="store_true",
+            help="keep each file from the first to the last row where a joint moves "
+            "(the JSON records the windows kept)",
+        )
+
+
+def spec_options(args: argparse.Namespace) -> dict:
+    """The :class:`~manip_id.datasets.FileSpec` keywords of the stream options."""
+    delay = getattr(args, "delay", None)
+    values = None if delay is None else parse_floats(delay, "--delay")
+    return {
+        "time_unit": getattr(args, "time_unit", None),
+        "delay": None if values is None else tuple(values),
+    }
+
+
+def file_specs(values, args: argparse.Namespace, colmap) -> list:
+    """The file specs (path, window, columns, topic, time unit, delay) of ``--data`` /
+    ``--validate`` values."""
+    extra = spec_options(args)  # --time-unit, --delay
+    return [
+        parse_file_spec(v, window=args.window, columns=colmap, topic=args.topic, **extra)
+        for v in values or []
+    ]
+
+
+def data_column_map(args: argparse.Namespace, profile) -> dict | None:
+    """``--column`` maps, else the robot profile's [data] columns, else None."""
+    colmap = column_map(args.column)
+    if colmap is None and profile is not None and profile.columns:
+        colmap = dict(profile.columns)
+    return colmap
+
+
+# ------------------------------------------------------- consistent, export
+
+
+def finish(args: argparse.Namespace, outputs, report_path=None) -> int:
+    """Publish every output together, then say where they are; the exit status (0)."""
+    outputs.publish()  # all outputs appear together, once all are complete
+    if getattr(args, "json", None):
+        print(f"wrote {args.json}")
+    for value in (getattr(args, "export_urdf", None), getattr(args, "export_mjcf", None)):
+        if value:
+            print(f"wrote {value} and its sidecar")
+    if report_path is not None:
+        print(f"wrote the report to {report_path}/index.html")
+    return 0
+
+
+#: The simulation's defaults of ``identify --simulate`` (duration [s], rate [Hz], noise, seed).
+SIM_DEFAULTS = {"duration": 20.0, "rate": 200.0, "noise": 0.01, "seed": 0}
+#: The estimators that accumulate sums (files on Dask, --per-file).
+FLEET_METHODS = ("ols", "wls")
+
+
+def exports_wanted(args: argparse.Namespace) -> bool:
+    """Whether the run writes a URDF or an MJCF export."""
+    return bool(getattr(args, "export_urdf", None) or getattr(args, "export_mjcf", None))
+
+
+def fleet_wanted(args: argparse.Namespace) -> bool:
+    """Whether an identify run goes through :func:`manip_id.fleet.identify_files`."""
+    return getattr(args, "scheduler", None) is not None or bool(getattr(args, "per_file", False))
+
+
+def print_warnings(document: dict) -> None:
+    """Every warning of the document (its JSON ``warnings``), once each, on stderr as
+    ``manip-id: warning: ...``: what is saved is what is printed."""
+    for text in document.get("warnings") or []:
+        warn(str(text))
+
+
+def prepare(ds, args: argparse.Namespace, what: str):
+    """The dataset preprocessed when ddq is missing or a cut-off was asked for."""
+    if ds.ddq is not None and args.cutoff is None and args.decimate == 1 and args.trim is None:
+        return ds
+    cutoff = DEFAULT_CUTOFF if args.cutoff is None else args.cutoff
+    try:
+        return preprocess(
+            ds, cutoff=cutoff, order=args.order, decimate=args.decimate, trim=args.trim
+        )
+    except InputError as exc:
+        raise InputError(f"{what}: {exc}") from exc
+
+
+def command(module: str):
+    """The run function of a command, in ``module`` (``manip_id.cli._identify``),
+    imported when the command runs: that module loads Pinocchio and the identification,
+    which ``manip-id --help`` never needs."""
+
+    def run(args: argparse.Namespace) -> int:
+        return importlib.import_module(module).run(args)
+
+    return run

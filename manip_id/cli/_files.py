@@ -20,135 +20,36 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ..datasets import load_dataset
 from ..errors import InputError
+from ..identification import (
+    RunOptions,
+    identify,
+    identify_datasets,
+    iter_processed,
+    scan_file,
+    split_file,
+)
+from ..viz.report_document import (
+    ReportSamples,
+    RunContext,
+    add_file_info,
+    add_raw_reference,
+    result_document,
+)
+from ._common import data_column_map, file_specs, profile_from_args, progress
+from ._runtime import (
+    before_fit,
+    consistent_kwargs,
+    preprocess_options,
+    print_result,
+    robot_from_args,
+    write_outputs,
+)
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The data-file options of ``manip-id identify`` (besides --data and --validate)."""
-    g = parser.add_argument_group("data files (--data, --validate)")
-    g.add_argument(
-        "--window",
-        metavar="START:STOP",
-        default=None,
-        help="window of every file given without one: seconds from the file's first stamp "
-        "(2.5:30, :30, 2.5:) or rows (#1000:#5000); a file takes its own as FILE@START:STOP",
-    )
-    g.add_argument(
-        "--torque-scale",
-        metavar="G[,G...]",
-        default=None,
-        help="multiply the torque columns: one gain, or one per joint (drive gains from "
-        "current [A] to torque [N m], gear ratios); recorded in the JSON",
-    )
-    g.add_argument(
-        "--torque-scale-from",
-        metavar="RESULT.json",
-        default=None,
-        help="the drive gains of 'manip-id drive-gains --json' as --torque-scale",
-    )
-    g.add_argument(
-        "--velocity-deadband",
-        type=float,
-        metavar="EPS",
-        default=None,
-        help="leave out the rows of joint j where |dq_j| < EPS [rad/s] (standstill, where the "
-        "Coulomb term sign(dq) is noise); the JSON counts them per joint",
-    )
-    g.add_argument(
-        "--topic",
-        default=None,
-        help="ROS bags: the sensor_msgs/msg/JointState topic [default: the only one]",
-    )
-    g.add_argument(
-        "--drop-bad-rows",
-        action="store_true",
-        help="drop (and count) rows holding NaN/Inf instead of refusing the file",
-    )
-
-
-def parse_floats(text: str, what: str) -> list[float]:
-    """``"1.5,2,3"`` -> [1.5, 2.0, 3.0], with a clear error."""
-    try:
-        values = [float(x) for x in str(text).split(",") if x.strip()]
-    except ValueError:
-        raise InputError(f"{what} expects numbers separated by commas, got {text!r}") from None
-    if not values:
-        raise InputError(f"{what} expects at least one number, got {text!r}")
-    return values
-
-
-def check(args: argparse.Namespace) -> None:
-    """Refuse option combinations the file path does not do, before any work."""
-    if getattr(args, "torque_scale_from", None) is not None:  # manip-id drive-gains --json
-        from ..payload import load_torque_scale
-
-        if args.simulate or args.torque_scale is not None:
-            raise InputError("--torque-scale-from applies to --data files, without --torque-scale")
-        gains = load_torque_scale(args.torque_scale_from)
-        args.torque_scale = ",".join(repr(float(g)) for g in gains)
-    if args.simulate:
-        for name in ("window", "torque_scale", "velocity_deadband", "topic"):
-            if getattr(args, name) is not None:
-                raise InputError(f"--{name.replace('_', '-')} applies to --data files")
-        if args.drop_bad_rows:
-            raise InputError("--drop-bad-rows applies to --data files")
-        return
-    if args.velocity_deadband is not None:
-        eps = args.velocity_deadband
-        if not (np.isfinite(eps) and eps > 0):
-            raise InputError(f"--velocity-deadband must be positive [rad/s], got {eps}")
-        if args.method in ("rls", "gradient"):
-            raise InputError(
-                "--velocity-deadband applies to ols and wls (the online laws take every sample)"
-            )
-    if args.torque_scale is not None:
-        parse_floats(args.torque_scale, "--torque-scale")
-    if args.window is not None:
-        from ..datasets import Window
-
-        Window.parse(args.window, "--window")
-    if args.split is not None and args.data is not None and len(args.data) > 1:
-        raise InputError(
-            "--split cuts one file; with several --data files give --validate files "
-            "(or windows FILE@START:STOP)"
-        )
-
-
-def _options(args, nv: int, profile_scale=None):
-    from ..datasets.stream import torque_scale_vector
-    from ..pipeline import PreprocessOptions
-
-    scale = None
-    if args.torque_scale is not None:
-        scale = torque_scale_vector(
-            parse_floats(args.torque_scale, "--torque-scale"), nv, "--torque-scale"
-        )
-    elif profile_scale is not None:  # the robot profile's [data] torque_scale
-        scale = torque_scale_vector(profile_scale, nv, "the profile's torque_scale")
-    return PreprocessOptions(
-        cutoff=args.cutoff,
-        order=args.order,
-        trim=args.trim,
-        decimate=args.decimate,
-        torque_scale=None if scale is None else tuple(scale.tolist()),
-        velocity_deadband=args.velocity_deadband,
-        drop_bad_rows=args.drop_bad_rows,
-    )
-
-
-def _specs(values, args, colmap):
-    from ..datasets import parse_file_spec
-
-    return [
-        parse_file_spec(v, window=args.window, columns=colmap, topic=args.topic)
-        for v in values or []
-    ]
-
-
-def _collect(robot, specs, options, scans) -> SimpleNamespace:
+def collect(robot, specs, options, scans) -> SimpleNamespace:
     """The preprocessed files in memory, one after the other (time shifted to increase)."""
-    from ..pipeline import iter_processed
-
     nq, nv = robot.nq, robot.nv
     parts: list[np.ndarray] = []
     settings, shift = None, 0.0
@@ -177,22 +78,13 @@ def _collect(robot, specs, options, scans) -> SimpleNamespace:
     )
 
 
-def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
-    """``manip-id identify --data ...`` (after the outputs were reserved)."""
-    from ..identification import identify, identify_datasets
-    from ..pipeline import scan_file, split_file
-    from . import identify as cmd
-    from ._common import profile_from_args, robot_from_args
-
-    timings: dict[str, float] = {}
-    profile = profile_from_args(args)  # robots/ROBOT.toml [data]: defaults of the options
-    colmap = cmd._column_map(args.column)
-    if colmap is None and profile is not None and profile.columns:
-        colmap = dict(profile.columns)
-    specs = _specs(args.data, args, colmap)
-    vspecs = _specs(args.validate, args, colmap) if args.validate is not None else None
-    robot = robot or robot_from_args(args)
-    options = _options(args, robot.nv, None if profile is None else profile.torque_scale)
+def _scan(robot, args: argparse.Namespace, specs, vspecs, options, timings: dict):
+    """The pre-fit audit (printed), then each training and validation file scanned
+    (``--split``: the one file cut first)."""
+    t0 = time.perf_counter()
+    audited, audit = before_fit(robot, specs + (vspecs or []), options, args)
+    specs, vspecs = audited[: len(specs)], (None if vspecs is None else audited[len(specs) :])
+    timings["audit"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     scans = {s: scan_file(robot, s, options) for s in specs + (vspecs or [])}
     source: dict = {"data": [s.label for s in specs]}
@@ -210,104 +102,32 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
         print(scans[s].quality.text())
     for s in vspecs or []:
         print("validation " + scans[s].quality.text())
+    return SimpleNamespace(specs=specs, vspecs=vspecs, scans=scans, source=source, audit=audit)
 
-    if args.method in ("rls", "gradient"):  # sample order, in memory
-        t0 = time.perf_counter()
-        train = _collect(robot, specs, options, scans)
-        valid = None if vspecs is None else _collect(robot, vspecs, options, scans)
-        timings["preprocess"] = time.perf_counter() - t0
-        result = identify(
-            robot,
-            train.q,
-            train.dq,
-            train.ddq,
-            train.tau,
-            method=args.method,
-            validation=None if valid is None else (valid.q, valid.dq, valid.ddq, valid.tau),
-            chunk=args.chunk,
-            progress=cmd._progress(train.n_samples),
-        )
-        files = None
-        settings = train.settings
-        n_valid = None if valid is None else valid.n_samples
-    else:
-        result = identify_datasets(
-            robot,
-            specs,
-            validation=vspecs,
-            options=options,
-            method=args.method,
-            chunk=args.chunk,
-            workers=args.workers,
-            scans=scans,
-            progress=cmd._progress(sum(scans[s].n for s in specs)),
-            **cmd._consistent_kwargs(args),
-        )
-        files = result.files or {}
-        settings = files["train"][0].settings
-        n_valid = None if vspecs is None else sum(f.n_samples for f in files["validation"])
-        train = valid = None  # type: ignore[assignment]
-    timings.update({k: float(v) for k, v in dict(result.timings).items() if k != "scan"})
-    timings["total"] = time.perf_counter() - t_start
-    valid_count = None if n_valid is None else SimpleNamespace(n_samples=n_valid)
-    report = cmd._result_document(
+
+def _identify_online(robot, args, options, files: SimpleNamespace, timings: dict):
+    """rls / gradient: the files in memory, in sample order; (result, train, valid)."""
+    t0 = time.perf_counter()
+    train = collect(robot, files.specs, options, files.scans)
+    valid = None if files.vspecs is None else collect(robot, files.vspecs, options, files.scans)
+    timings["preprocess"] = time.perf_counter() - t0
+    result = identify(
         robot,
-        result,
-        SimpleNamespace(n_samples=result.n_samples),
-        valid_count,
-        None,
-        timings,
-        args,
-        source,
-        settings,
+        train.q,
+        train.dq,
+        train.ddq,
+        train.tau,
+        method=args.method,
+        validation=None if valid is None else (valid.q, valid.dq, valid.ddq, valid.tau),
+        run=RunOptions(chunk=args.chunk, progress=progress(args, train.n_samples)),
+        uncertainty=args.uncertainty,
     )
-    _add_file_info(report, robot, specs, vspecs, scans, files, options, result)
-    if args.report is not None or train is not None:  # the samples are in memory anyway
-        if train is None:
-            train = _collect(robot, specs, options, scans)
-            valid = None if vspecs is None else _collect(robot, vspecs, options, scans)
-        cmd.add_raw_reference(
-            report, robot, result, _raw_parts(specs, vspecs, train, valid, options), args.chunk
-        )
-    print(result.table())
-    print(cmd._summary(robot, report))
-    if files is not None and args.velocity_deadband is not None:
-        left = report["velocity_deadband"]["excluded_rows"]
-        print(
-            f"velocity deadband {args.velocity_deadband:g} rad/s: rows left out per joint: "
-            + ", ".join(f"{j} {n}" for j, n in left.items())
-        )
-    per_file = report["relative_error"].get("validation_per_file")
-    if per_file and len(per_file) > 1:
-        print(
-            "validation per file: "
-            + ", ".join(f"{e['file']} {100 * (e['error'] or np.nan):.3f} %" for e in per_file)
-        )
-    if args.json:
-        outputs.write_json(args.json, report)
-    path = None
-    if args.report is not None:
-        if train is None:
-            train = _collect(robot, specs, options, scans)
-            valid = None if vspecs is None else _collect(robot, vspecs, options, scans)
-        path = cmd._write_report(robot, result, train, train, valid, report, args)
-    if args.export_urdf:
-        cmd._export(robot, result, args, outputs)
-    outputs.publish()
-    if args.json:
-        print(f"wrote {args.json}")
-    if args.export_urdf:
-        print(f"wrote {args.export_urdf} and its sidecar")
-    if path is not None:
-        print(f"wrote the report to {path}/index.html")
-    return 0
+    return result, train, valid
 
 
 def _raw_parts(specs, vspecs, train, valid, options) -> list:
     """``(name, processed, t_raw, tau_raw)`` of one training (and one validation) file for
-    :func:`manip_id.cli.identify.add_raw_reference`; [] for several files."""
-    from ..datasets import load_dataset
-
+    :func:`manip_id.viz.report_document.add_raw_reference`; [] for several files."""
     if len(specs) != 1 or (vspecs is not None and len(vspecs) != 1):
         return []
     parts, raws = [], {}
@@ -328,32 +148,76 @@ def _raw_parts(specs, vspecs, train, valid, options) -> list:
     return parts
 
 
-def _add_file_info(report, robot, specs, vspecs, scans, files, options, result) -> None:
-    joints = list(robot.dof_names)
-    report["data_quality"] = [scans[s].quality.to_dict() for s in specs]
-    if vspecs is not None:
-        report["validation_data_quality"] = [scans[s].quality.to_dict() for s in vspecs]
-    report["torque_scale"] = None if options.torque_scale is None else list(options.torque_scale)
-    if files is not None:
-        report["files"] = [f.summary(joints) for f in files["train"]]
-        if files["validation"] is not None:
-            report["validation_files"] = [f.summary(joints) for f in files["validation"]]
-        if options.velocity_deadband is not None:
-            left = np.sum([f.excluded for f in files["train"]], axis=0)
-            vleft = (
-                None
-                if files["validation"] is None
-                else np.sum([f.excluded for f in files["validation"]], axis=0)
-            )
-            report["velocity_deadband"] = {
-                "eps": options.velocity_deadband,
-                "excluded_rows": dict(zip(joints, map(int, left), strict=True)),
-                "excluded_rows_validation": None
-                if vleft is None
-                else dict(zip(joints, map(int, vleft), strict=True)),
-            }
-    vpf = result.relative_error.validation_per_file
-    if vpf is not None:
-        report["relative_error"]["validation_per_file"] = vpf
-    warnings_ = [w for s in list(specs) + list(vspecs or []) for w in scans[s].quality.warnings]
-    report["data_warnings"] = warnings_
+def _print_files(args, report: dict, accumulated: bool) -> None:
+    """The deadband's left-out rows and the validation error per file, when there are any."""
+    if accumulated and args.velocity_deadband is not None:
+        left = report["velocity_deadband"]["excluded_rows"]
+        print(
+            f"velocity deadband {args.velocity_deadband:g} rad/s: rows left out per joint: "
+            + ", ".join(f"{j} {n}" for j, n in left.items())
+        )
+    per_file = report["relative_error"].get("validation_per_file")
+    if per_file and len(per_file) > 1:
+        print(
+            "validation per file: "
+            + ", ".join(f"{e['file']} {100 * (e['error'] or np.nan):.3f} %" for e in per_file)
+        )
+
+
+def run(args: argparse.Namespace, outputs, t_start: float) -> int:
+    """``manip-id identify --data ...`` (after the outputs were reserved)."""
+    timings: dict[str, float] = {}
+    profile = profile_from_args(args)  # robots/ROBOT.toml [data]: defaults of the options
+    colmap = data_column_map(args, profile)
+    specs = file_specs(args.data, args, colmap)  # bad specs fail before the robot loads
+    vspecs = file_specs(args.validate, args, colmap) if args.validate is not None else None
+    robot = robot_from_args(args)
+    options = preprocess_options(args, robot.nv, None if profile is None else profile.torque_scale)
+    f = _scan(robot, args, specs, vspecs, options, timings)
+    train = valid = None
+    if args.method in ("rls", "gradient"):  # sample order, in memory
+        result, train, valid = _identify_online(robot, args, options, f, timings)
+        files, settings = None, train.settings
+        n_valid = 0 if valid is None else valid.n_samples
+    else:
+        result = identify_datasets(
+            robot,
+            f.specs,
+            validation=f.vspecs,
+            options=options,
+            method=args.method,
+            run=RunOptions(
+                chunk=args.chunk,
+                workers=args.workers,
+                progress=progress(args, sum(f.scans[s].n for s in f.specs)),
+            ),
+            scans=f.scans,
+            uncertainty=args.uncertainty,
+            **consistent_kwargs(args),
+        )
+        files = result.files or {}
+        settings = files["train"][0].settings
+        n_valid = 0 if f.vspecs is None else sum(x.n_samples for x in files["validation"])
+    timings.update({k: float(v) for k, v in dict(result.timings).items() if k != "scan"})
+    timings["total"] = time.perf_counter() - t_start
+    ctx = RunContext(
+        method=args.method,
+        source=f.source,
+        n_validation=n_valid,
+        settings=settings,
+        timings=timings,
+        poorly_identified=getattr(args, "poorly_identified", None),
+        condition_limit=getattr(args, "condition_limit", None),
+    )
+    report = result_document(robot, result, ctx)
+    add_file_info(report, robot, f.specs, f.vspecs, f.scans, files, options, result)
+    report["audit"] = f.audit.to_dict()
+    if args.report is not None and train is None:  # the report draws the samples
+        train = collect(robot, f.specs, options, f.scans)
+        valid = None if f.vspecs is None else collect(robot, f.vspecs, options, f.scans)
+    if train is not None:  # the samples are in memory anyway
+        parts = _raw_parts(f.specs, f.vspecs, train, valid, options)
+        add_raw_reference(report, robot, result, parts, args.chunk)
+    print_result(report)
+    _print_files(args, report, files is not None)
+    return write_outputs(args, outputs, robot, result, report, ReportSamples(train, valid, train))

@@ -13,6 +13,13 @@ from __future__ import annotations
 
 import argparse
 
+from .._io import OutputSet
+from ..datasets import RowCounts, iter_rows, open_source, parse_file_spec
+from ..datasets.io import output_format, write_rows_to
+from ..datasets.stream import torque_scale_vector
+from ..errors import DataError
+from ._common import column_map, parse_floats
+
 
 def register(sub) -> None:
     p = sub.add_parser(
@@ -24,8 +31,15 @@ def register(sub) -> None:
     )
     p.add_argument("input", metavar="IN", help="input file or folder, optionally IN@WINDOW")
     p.add_argument("output", metavar="OUT", help="output file: .npz, .csv or .mcap")
-    p.add_argument("--format", choices=("npz", "csv", "mcap"), default=None)
-    p.add_argument("--topic", default=None, help="ROS bags: the JointState topic")
+    p.add_argument(
+        "--format",
+        choices=("npz", "csv", "mcap"),
+        default=None,
+        help="output format [default: from OUT's suffix]",
+    )
+    p.add_argument(
+        "--topic", default=None, help="ROS bags: the JointState topic [default: the only one]"
+    )
     p.add_argument(
         "--column",
         action="append",
@@ -33,21 +47,23 @@ def register(sub) -> None:
         metavar="FIELD=COLUMNS",
         help="CSV column map (as for manip-id identify)",
     )
-    p.add_argument("--torque-scale", metavar="G[,G...]", default=None)
-    p.add_argument("--drop-bad-rows", action="store_true")
+    p.add_argument(
+        "--torque-scale",
+        metavar="G[,G...]",
+        default=None,
+        help="multiply the torque columns: one gain, or one per joint (e.g. drive gains from "
+        "current [A] to torque [N m]) [default: 1, the torques as recorded]",
+    )
+    p.add_argument(
+        "--drop-bad-rows",
+        action="store_true",
+        help="drop (and count) rows holding NaN/Inf instead of refusing the file [default: refuse]",
+    )
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from .._io import OutputSet
-    from ..datasets import RowCounts, iter_rows, open_source, parse_file_spec
-    from ..datasets.io import output_format, write_rows_to
-    from ..datasets.stream import torque_scale_vector
-    from ..errors import DataError
-    from ._files import parse_floats
-    from .identify import _column_map
-
-    spec = parse_file_spec(args.input, columns=_column_map(args.column), topic=args.topic)
+    spec = parse_file_spec(args.input, columns=column_map(args.column), topic=args.topic)
     outputs = getattr(args, "outputs", None) or OutputSet()
     outputs.add_inputs([spec.path])
     out = outputs.file(args.output, "OUT")

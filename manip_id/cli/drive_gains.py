@@ -12,21 +12,9 @@ The JSON's ``drive_gains`` feed ``manip-id identify --torque-scale-from RESULT.j
 
 from __future__ import annotations
 
-import argparse
-import math
-import time
-
-from ..errors import InputError
-from ._common import add_robot_arguments, robot_from_args
+from ._common import add_robot_arguments, command
 from .payload import (
     add_run_arguments,
-    check_run_args,
-    input_paths,
-    parse_floats,
-    preprocess_settings,
-    publish_json,
-    read_runs,
-    reserve_json,
 )
 
 
@@ -66,40 +54,4 @@ def register(sub) -> None:
         "joint; tls: total least squares. ols/wls/tls shrink the gain of a joint whose current "
         "is small against its noise",
     )
-    p.set_defaults(func=run)
-
-
-def run(args: argparse.Namespace) -> int:
-    t_start = time.perf_counter()
-    check_run_args(args)
-    if not (math.isfinite(args.payload_mass) and args.payload_mass > 0):
-        raise InputError(f"--payload-mass must be > 0 [kg], got {args.payload_mass}")
-    com = parse_floats(args.payload_com, "--payload-com", 3)
-    inertia = parse_floats(args.payload_inertia, "--payload-inertia", 6)
-    if inertia is not None and com is None:
-        raise InputError("--payload-inertia (about the centre of mass) needs --payload-com")
-    reserve_json(args, input_paths(args))
-    from ..payload import identify_drive_gains
-
-    robot = robot_from_args(args)
-    unloaded, loaded, source = read_runs(args, robot)
-    result = identify_drive_gains(
-        robot,
-        unloaded,
-        loaded,
-        args.frame,
-        args.payload_mass,
-        payload_com=com,
-        payload_inertia=inertia,
-        method=args.method,
-        velocity_deadband=args.velocity_deadband,
-        chunk=args.chunk,
-    )
-    doc = result.to_dict()
-    doc["data_quality"] = source.pop("data_quality")
-    doc["source"] = source
-    doc["preprocess"] = preprocess_settings(unloaded + loaded)
-    doc["timings"]["command_total"] = round(time.perf_counter() - t_start, 6)
-    print(result.table())
-    publish_json(args, doc)
-    return 0
+    p.set_defaults(func=command("manip_id.cli._drive_gains"))

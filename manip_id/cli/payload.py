@@ -1,9 +1,9 @@
 """``manip-id payload``: the inertial parameters of a payload from unloaded and loaded runs.
 
 Pipeline: scan every ``--unloaded`` and ``--loaded`` file first with the real-log
-readers (:func:`manip_id.pipeline.scan_file`: its window, ``FILE@START:STOP`` or
+readers (:func:`manip_id.identification.scan_file`: its window, ``FILE@START:STOP`` or
 ``--window``, ``--torque-scale``, checks and the data-quality summary, printed), then
-stream each file's rows (:func:`manip_id.pipeline.iter_processed`: preprocessed on its
+stream each file's rows (:func:`manip_id.identification.iter_processed`: preprocessed on its
 own in overlapping blocks when it has no accelerations) into
 :func:`manip_id.payload.identify_payload`, memory bounded whatever the files' length:
 the robot's base
@@ -18,13 +18,13 @@ The helpers here (reading the runs, the shared options) serve ``manip-id drive-g
 from __future__ import annotations
 
 import argparse
-import math
-import time
-from pathlib import Path
-from typing import Any
 
-from ..errors import DataError, InputError
-from ._common import add_robot_arguments, robot_from_args, write_json
+from ._common import (
+    add_robot_arguments,
+    add_scheduler_argument,
+    add_stream_arguments,
+    command,
+)
 
 
 # ------------------------------------------------------------------ options
@@ -90,8 +90,11 @@ def add_run_arguments(p: argparse.ArgumentParser, *, unloaded_required: bool) ->
         help="seconds dropped at each end of each file [default: the filter's edge transient]",
     )
     sig.add_argument("--decimate", type=int, default=1, help="keep every D-th sample [default 1]")
-    p.add_argument("--chunk", type=int, default=1024, help="samples per regressor chunk")
+    p.add_argument(
+        "--chunk", type=int, default=1024, help="samples per regressor chunk [default 1024]"
+    )
     p.add_argument("--json", metavar="OUT", help="write the result as JSON to OUT")
+    add_stream_arguments(p)
 
 
 def register(sub) -> None:
@@ -128,293 +131,21 @@ def register(sub) -> None:
         metavar="G[,G...]",
         help="multiply the torque columns of every file (one value, or one per joint)",
     )
-    from ._fleet import add_scheduler_argument
-
+    p.add_argument(
+        "--export-urdf",
+        metavar="OUT.urdf",
+        default=None,
+        help="write the robot's URDF with the payload as a fixed link at FRAME (needs "
+        "--consistent); sidecar OUT.identified.json [default: no export]",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing --export-urdf file [default: refuse]",
+    )
     add_scheduler_argument(
         p,
         "each file is one task (read, preprocessed and accumulated on a worker), the sums "
         "are added on the cluster and the payload is solved here",
     )
-    p.set_defaults(func=run)
-
-
-# ------------------------------------------------------------------ reading
-def parse_floats(text: str | None, what: str, n: int | None = None) -> list[float] | None:
-    """``"1,2,3"`` -> [1.0, 2.0, 3.0]; ``n`` values when given; None passes through."""
-    if text is None:
-        return None
-    try:
-        values = [float(v) for v in str(text).split(",") if v.strip()]
-    except ValueError as exc:
-        raise InputError(f"{what} takes comma-separated numbers, got {text!r}") from exc
-    if n is not None and len(values) != n:
-        raise InputError(f"{what} takes {n} comma-separated numbers, got {len(values)}: {text!r}")
-    if not values or not all(math.isfinite(v) for v in values):
-        raise InputError(f"{what} takes finite numbers, got {text!r}")
-    return values
-
-
-def check_run_args(args) -> None:
-    """Option checks that need no data."""
-    if args.cutoff is not None and not (math.isfinite(args.cutoff) and args.cutoff > 0):
-        raise InputError(f"--cutoff must be a positive frequency [Hz], got {args.cutoff}")
-    if args.trim is not None and not (math.isfinite(args.trim) and args.trim >= 0):
-        raise InputError(f"--trim must be >= 0 seconds, got {args.trim}")
-    if args.decimate < 1:
-        raise InputError(f"--decimate must be >= 1, got {args.decimate}")
-    if args.order < 1:
-        raise InputError(f"--order must be >= 1, got {args.order}")
-    if args.chunk < 1:
-        raise InputError(f"--chunk must be >= 1, got {args.chunk}")
-    d = args.velocity_deadband
-    if d is not None and not (math.isfinite(d) and d >= 0):
-        raise InputError(f"--velocity-deadband must be >= 0 [rad/s], got {d}")
-
-
-def _column_map(specs: list[str]):
-    from .identify import _column_map as column_map
-
-    return column_map(specs)
-
-
-def _spec(text: str, args, colmap=None):
-    """A file spec (path and window) of the real-log readers."""
-    from ..datasets import parse_file_spec
-
-    return parse_file_spec(text, window=args.window, columns=colmap, topic=args.topic)
-
-
-def _options(args, scale=None):
-    from ..pipeline import PreprocessOptions
-
-    eps = args.velocity_deadband
-    return PreprocessOptions(
-        cutoff=args.cutoff,
-        order=args.order,
-        trim=args.trim,
-        decimate=args.decimate,
-        torque_scale=None if scale is None else tuple(scale),
-        velocity_deadband=eps if eps else None,
-        drop_bad_rows=args.drop_bad_rows,
-    )
-
-
-class StreamedRun:
-    """One file read by the real-log pipeline: scanned once (quality summary, checks),
-    then its preprocessed rows streamed block by block as ``(q, dq, ddq, tau)``.
-
-    ``scan=False``: the file is scanned when the blocks are first asked for, where the
-    run is accumulated (a Dask worker with ``--scheduler``: give a light robot,
-    :func:`manip_id.fleet.portable_robot`, so the run pickles small); its quality and
-    preprocessing come back through :meth:`summary`.
-    """
-
-    def __init__(self, robot, spec, options, scan: bool = True):
-        from ..pipeline import scan_file
-
-        self.robot, self.spec, self.options = robot, spec, options
-        # bad files fail here, named
-        self.scan = scan_file(robot, spec, options) if scan else None
-        self.settings: Any = None  # PreprocessSettings once streamed (None: ddq as is)
-
-    @property
-    def label(self) -> str:
-        """The file spec as written: ``path[@window]``."""
-        return self.spec.label
-
-    def summary(self) -> dict:
-        """The file, its data quality and the preprocessing applied (after the blocks)."""
-        return {
-            "file": self.spec.label,
-            "quality": None if self.scan is None else self.scan.quality,
-            "settings": self.settings,
-        }
-
-    def __call__(self):
-        from ..pipeline import iter_processed, scan_file
-
-        nq, nv = self.robot.nq, self.robot.nv
-        if self.scan is None:
-            self.scan = scan_file(self.robot, self.spec, self.options)
-        try:
-            self.settings, rows = iter_processed(self.robot, self.spec, self.options, self.scan)
-            for r in rows:
-                yield (
-                    r[:, 1 : 1 + nq],
-                    r[:, 1 + nq : 1 + nq + nv],
-                    r[:, 1 + nq + 2 * nv : 1 + nq + 3 * nv],
-                    r[:, 1 + nq + nv : 1 + nq + 2 * nv],
-                )
-        finally:
-            self.scan.discard()
-
-
-def read_runs(args, robot, scale=None, scan: bool = True) -> tuple[list, list, dict]:
-    """The unloaded and loaded runs as streamed runs, and a description of their sources.
-
-    Every file is scanned first (checks and the data-quality summary, printed), so that a
-    bad file fails, named, before the long work; ``scan=False`` (``--scheduler``): the
-    files are scanned by the tasks that accumulate them (quality: :func:`run_quality`).
-    """
-    colmap = _column_map(args.column)
-    specs_u = [_spec(t, args, colmap) for t in args.unloaded]
-    specs_l = [_spec(t, args, colmap) for t in args.loaded]
-    for sl in specs_l:
-        for su in specs_u:
-            same_path = Path(sl.path).resolve() == Path(su.path).resolve()
-            if same_path and sl.window == su.window:
-                raise DataError(
-                    f"{sl.label} is given as both an unloaded and a loaded run: the loaded runs "
-                    "must be recorded with the payload mounted"
-                )
-    options = _options(args, scale)
-    runs: dict[str, list] = {"unloaded": [], "loaded": []}
-    quality: dict[str, list] = {"unloaded": [], "loaded": []}
-    for what, specs in (("unloaded", specs_u), ("loaded", specs_l)):
-        for spec in specs:
-            run = StreamedRun(robot, spec, options, scan=scan)
-            if run.scan is not None:
-                print(f"{what} " + run.scan.quality.text())
-                quality[what].append(run.scan.quality.to_dict())
-            runs[what].append(run)
-    source = {
-        "unloaded": [s.label for s in specs_u],
-        "loaded": [s.label for s in specs_l],
-        "data_quality": quality,
-        "options": options.to_dict(),
-    }
-    return runs["unloaded"], runs["loaded"], source
-
-
-def reserve_json(args, inputs: list[str]):
-    """Check the --json output before the work (the command's OutputSet when there is one)."""
-    if not args.json:
-        return None
-    outputs = getattr(args, "outputs", None)
-    if outputs is not None:
-        outputs.add_inputs(inputs)
-        outputs.file(args.json, "--json")
-    else:
-        for i in inputs:
-            if Path(i).exists() and Path(i).resolve() == Path(args.json).resolve():
-                raise InputError(f"--json {args.json} is one of the inputs")
-    return args.json
-
-
-def publish_json(args, doc: dict) -> None:
-    """Write the --json output (through the OutputSet when there is one)."""
-    if not args.json:
-        return
-    outputs = getattr(args, "outputs", None)
-    if outputs is not None:
-        outputs.write_json(args.json, doc)
-        outputs.publish()
-    else:
-        write_json(args.json, doc)
-    print(f"wrote {args.json}")
-
-
-def input_paths(args) -> list[str]:
-    """The input files (paths without their windows), for the output checks."""
-    out = []
-    for t in [*args.unloaded, *args.loaded, getattr(args, "known_base", None)]:
-        if t is None:
-            continue
-        p = Path(t)
-        if not p.exists() and "@" in t:
-            p = Path(t.rpartition("@")[0])
-        out.append(str(p))
-    return out
-
-
-def run_quality(result) -> tuple[dict, list]:
-    """From the runs' summaries a result brings back (files scanned on the workers): the
-    data quality per kind of run (printed) and the preprocessing per run."""
-    quality: dict[str, list] = {"unloaded": [], "loaded": []}
-    settings = []
-    for what in ("unloaded", "loaded"):
-        for info in result.runs.get(what, []):
-            q, s = info["quality"], info["settings"]
-            print(f"{what} " + q.text())
-            quality[what].append(q.to_dict())
-            settings.append(
-                {
-                    "file": info["file"],
-                    "preprocess": None
-                    if s is None
-                    else {k: getattr(s, k) for k in s.__dataclass_fields__},
-                }
-            )
-    return quality, settings
-
-
-def preprocess_settings(runs: list) -> list:
-    """Per run, the preprocessing applied (None: the file's own ddq used as is)."""
-    out = []
-    for run in runs:
-        s = run.settings
-        out.append(
-            {
-                "file": run.spec.label,
-                "preprocess": None
-                if s is None
-                else {k: getattr(s, k) for k in s.__dataclass_fields__},
-            }
-        )
-    return out
-
-
-# ---------------------------------------------------------------------- run
-def run(args: argparse.Namespace) -> int:
-    t_start = time.perf_counter()
-    check_run_args(args)
-    if args.known_base is not None and args.unloaded:
-        raise InputError("give --unloaded runs or --known-base RESULT.json, not both")
-    if args.known_base is None and not args.unloaded:
-        raise InputError("give the --unloaded runs (or --known-base RESULT.json)")
-    from ._fleet import check_scheduler
-
-    check_scheduler(args)
-    reserve_json(args, input_paths(args))
-    from ..payload import identify_payload, load_known_base
-
-    known = load_known_base(args.known_base) if args.known_base is not None else None
-    robot = robot_from_args(args)
-    scale = None
-    if args.torque_scale is not None:
-        scale = parse_floats(args.torque_scale, "--torque-scale")
-    distributed = args.scheduler is not None
-    if distributed:  # the tasks read the files: send them a light robot
-        from ..fleet import portable_robot
-
-        unloaded, loaded, source = read_runs(args, portable_robot(robot), scale, scan=False)
-    else:
-        unloaded, loaded, source = read_runs(args, robot, scale)
-    if args.known_base is not None:
-        source["known_base"] = str(args.known_base)
-    source["scheduler"] = args.scheduler or "this process"
-    result = identify_payload(
-        robot,
-        unloaded,
-        loaded,
-        args.frame,
-        known_base=known,
-        method=args.method,
-        consistent=args.consistent,
-        velocity_deadband=args.velocity_deadband,
-        chunk=args.chunk,
-        scheduler=args.scheduler,
-    )
-    doc = result.to_dict()
-    quality = source.pop("data_quality")
-    settings = None
-    if distributed:
-        quality, settings = run_quality(result)
-    doc["data_quality"] = quality
-    doc["source"] = source
-    doc["torque_scale"] = scale
-    doc["preprocess"] = settings if distributed else preprocess_settings(unloaded + loaded)
-    doc["timings"]["command_total"] = round(time.perf_counter() - t_start, 6)
-    print(result.table())
-    publish_json(args, doc)
-    return 0
+    p.set_defaults(func=command("manip_id.cli._payload"))

@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import argparse
-
-from ..errors import RobotError
+from ._common import command
 
 
 def register(sub) -> None:
@@ -17,20 +15,4 @@ def register(sub) -> None:
     p.add_argument(
         "names", nargs="*", metavar="ROBOT", help="list only these robots [default: all]"
     )
-    p.set_defaults(func=run)
-
-
-def run(args: argparse.Namespace) -> int:
-    from ..robot import available_robots, load_robot
-
-    print(f"{'name':28s} {'nq':>4s} {'nv':>4s} {'parameters':>11s}  profile")
-    for name in getattr(args, "names", None) or available_robots():
-        try:
-            robot = load_robot(name)
-        except RobotError as exc:
-            print(f"{name:28s} unavailable: {exc}")
-            continue
-        profile = f"{robot.profile.name}.toml" if robot.profile is not None else "-"
-        print(f"{name:28s} {robot.nq:4d} {robot.nv:4d} {robot.n_parameters:11d}  {profile}")
-    print("any fixed-base URDF also loads by path; 'msd' is the mass-spring-damper")
-    return 0
+    p.set_defaults(func=command("manip_id.cli._robots"))

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import argparse
+from ._common import command
 
 
 def register(sub) -> None:
@@ -18,20 +18,4 @@ def register(sub) -> None:
     p.add_argument(
         "--rows", type=int, default=None, metavar="N", help="show the first N parameters only"
     )
-    p.set_defaults(func=run)
-
-
-def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    from ..errors import InputError
-    from ..results import load_result, result_text
-
-    path = Path(args.result)
-    if path.is_dir():
-        path = path / "result.json"
-    if args.rows is not None and args.rows < 1:
-        raise InputError(f"--rows must be >= 1, got {args.rows}")
-    doc = load_result(path).to_dict()  # read through the result type: the one schema
-    print(result_text(doc, max_rows=args.rows))
-    return 0
+    p.set_defaults(func=command("manip_id.cli._show"))

@@ -12,13 +12,7 @@ the robot (number of positions, position limits) is an error.
 
 from __future__ import annotations
 
-import argparse
-import math
-import sys
-import time
-
-from ..errors import InputError
-from ._common import add_robot_arguments, reserve_outputs, robot_from_args
+from ._common import add_robot_arguments, command
 
 
 def register(sub) -> None:
@@ -40,7 +34,9 @@ def register(sub) -> None:
         "--duration", type=float, default=10.0, help="seconds of --simulate motion [default 10]"
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the --simulate excitation")
-    p.add_argument("--fps", type=float, default=30.0, help="animation frames per second")
+    p.add_argument(
+        "--fps", type=float, default=30.0, help="animation frames per second [default 30]"
+    )
     p.add_argument(
         "--no-inertia", action="store_true", help="do not draw the nominal inertia ellipsoids"
     )
@@ -56,75 +52,4 @@ def register(sub) -> None:
         help="address the --serve web server listens on [default 127.0.0.1]; any other "
         "than a loopback address makes the viewer reachable from the network",
     )
-    p.set_defaults(func=run)
-
-
-def _motion(robot, args):
-    """``(t, q, what)`` to animate along, or None for a still robot."""
-    if args.data is not None:
-        from ..datasets import load_dataset
-
-        ds = load_dataset(args.data)
-        return ds.t, ds.q, f"data {args.data} ({ds.n_samples} samples)"
-    if args.simulate:
-        from ..simulation import simulate
-        from ..trajectories import random_trajectory
-
-        traj = random_trajectory(robot, harmonics=5, seed=args.seed)
-        sim = simulate(robot, traj, duration=args.duration, rate=max(2 * args.fps, 50.0))
-        ds = sim.dataset
-        return ds.t, ds.q, f"random excitation (seed {args.seed}, {args.duration:g} s)"
-    return None
-
-
-def run(args: argparse.Namespace) -> int:
-    if not args.html and not args.serve:
-        raise InputError("nothing to do: give --html OUT and/or --serve")
-    if args.simulate and not (math.isfinite(args.duration) and args.duration > 0):
-        raise InputError(f"--duration must be positive, got {args.duration}")
-    if not (math.isfinite(args.fps) and args.fps > 0):
-        raise InputError(f"--fps must be positive, got {args.fps}")
-    if args.host is not None and not args.serve:
-        raise InputError("--host applies to --serve only")
-    host = "127.0.0.1"
-    if args.host is not None:
-        from ..viz.meshcat_server import check_host, is_loopback
-
-        host = check_host(args.host)
-        if not is_loopback(host):
-            from . import warn
-
-            warn(f"--host {host}: the viewer is reachable from the network, without authentication")
-    outputs = reserve_outputs(args)  # --html checked before the work
-    from ..viz.meshcat_scene import RobotScene, check_trajectory
-
-    robot = robot_from_args(args)
-    motion = _motion(robot, args)
-    title = f"manip-id view {robot.name}"
-    if motion is not None:
-        t, q, what = motion
-        t, q = check_trajectory(robot, t, q)  # width and limits: an error, not a warning
-        title += f": {what}"
-    scene = RobotScene(robot, title=title)
-    if motion is not None:
-        scene.animate(t, q, fps=args.fps)
-    if not args.no_inertia:
-        scene.add_inertia(robot.nominal_parameters, label="nominal")
-    for note in scene.notes:
-        print(f"note: {note}", file=sys.stderr)
-    if args.html:
-        outputs.write_text(args.html, scene.html())
-        outputs.publish()
-        print(f"wrote {args.html}")
-    if args.serve:
-        with scene.serve(host=host) as view:  # the server stops on leaving, signal or not
-            print(f"meshcat viewer at {view.url} (Ctrl-C ends)", flush=True)
-            try:
-                while view.server.process.poll() is None:
-                    time.sleep(0.5)
-            except KeyboardInterrupt:
-                return 0
-            raise InputError(
-                f"the meshcat server stopped (exit status {view.server.process.returncode})"
-            )
-    return 0
+    p.set_defaults(func=command("manip_id.cli._view"))

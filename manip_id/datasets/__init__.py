@@ -5,7 +5,8 @@ optionally ``ddq`` (N, nv), validated on construction (:mod:`~.core`). Formats:
 NPZ (:mod:`~.npz`), CSV (:mod:`~.csv`), ROS 2 bags of JointState
 (:mod:`~.rosbag`), the real Panda log (:mod:`~.panda`). Whole-file access:
 :func:`load_dataset`, :func:`save_dataset`. Streamed access for long logs:
-a :class:`FileSpec` (path and optional window, :mod:`~.spec`) opened with
+a :class:`FileSpec` (path, optional window, the unit of its stamps and the
+delay of its torque stream, :mod:`~.spec`, :mod:`~.adjust`) opened with
 :func:`open_source` and read with :func:`iter_rows` as packed row blocks
 (:mod:`~.layout`, :mod:`~.stream`), with a data-quality summary per file
 (:mod:`~.quality`).

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import fnmatch
 import itertools
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -116,7 +116,10 @@ def resolve_columns(path: Path, columns: Mapping | None, width: int | None = Non
             if header is not None
             else "no header row: give a column map with 0-based indices"
         )
-        raise DataError(f"{path}: cannot find column(s) for {', '.join(missing)} ({layout})")
+        raise DataError(
+            f"{path}: cannot find column(s) for {', '.join(missing)} ({layout})"
+            + ("" if header is None else _column_hint(header))
+        )
     if len(idx["t"]) != 1:
         raise DataError(f"{path}: 't' must be one column, got {len(idx['t'])}")
     if width is None:
@@ -149,28 +152,44 @@ def resolve_columns(path: Path, columns: Mapping | None, width: int | None = Non
     )
 
 
-def _parse(lines: list[str], delimiter, path: Path, first_line: int) -> np.ndarray:
+def _parse(
+    lines: list[str], delimiter, path: Path, first_line: int, width: int | None
+) -> tuple[np.ndarray, dict[int, str]]:
+    """The lines as a float table, and the malformed ones: ``{k: message}``.
+
+    A malformed line (a cell that is not a number, a field count other than ``width``,
+    e.g. a truncated last line) becomes a row of NaN; empty cells read as NaN. ``width``
+    None: the first line's field count.
+    """
     try:
-        return np.loadtxt(lines, delimiter=delimiter, ndmin=2, dtype=np.float64)
+        table = np.loadtxt(lines, delimiter=delimiter, ndmin=2, dtype=np.float64)
+        if width is None or table.shape[1] == width:
+            return table, {}
     except ValueError:
         pass
-    rows = []  # slow path: find the bad line, empty cells read as NaN
+    rows: list[list[float] | None] = []  # slow path: find the bad lines
+    bad: dict[int, str] = {}
     for k, line in enumerate(lines):
         cells = line.strip().split(delimiter) if delimiter else line.split()
         try:
             rows.append([float(c) if c.strip() else np.nan for c in cells])
         except ValueError as exc:
-            raise DataError(
-                f"cannot read {path} as a numeric CSV table: line {first_line + k + 1}: {exc}"
-            ) from exc
-    widths = {len(r) for r in rows}
-    if len(widths) > 1:
-        k = next(i for i, r in enumerate(rows) if len(r) != len(rows[0]))
-        raise DataError(
-            f"{path}: line {first_line + k + 1} has {len(rows[k])} cells but line "
-            f"{first_line + 1} has {len(rows[0])}"
-        )
-    return np.array(rows, dtype=np.float64).reshape(len(rows), -1)
+            rows.append(None)
+            bad[k] = f"cannot read {path} as a numeric CSV table: line {first_line + k + 1}: {exc}"
+    if width is None:
+        width = next((len(r) for r in rows if r is not None), 0)
+        first = next((k for k, r in enumerate(rows) if r is not None), 0)
+    else:
+        first = None
+    for k, r in enumerate(rows):
+        if r is not None and len(r) != width:
+            where = f"line {first_line + first + 1} has" if first is not None else "the file has"
+            bad[k] = f"{path}: line {first_line + k + 1} has {len(r)} cells but {where} {width}"
+    table = np.full((len(rows), width), np.nan)
+    for k, r in enumerate(rows):
+        if k not in bad and r is not None:
+            table[k] = r
+    return table, bad
 
 
 class CsvSource:
@@ -188,6 +207,8 @@ class CsvSource:
         self.columns = resolve_columns(self.path, columns)
         self.layout = self.columns.layout
         self.joint_names = self.columns.joint_names
+        #: data row (0-based) -> why it could not be read; such rows are NaN
+        self.malformed: dict[int, str] = {}
 
     def _tables(self, chunk: int) -> Iterator[tuple[int, np.ndarray]]:
         c = self.columns
@@ -197,11 +218,14 @@ class CsvSource:
             for _ in range(skip):
                 fh.readline()
             line_no = skip
+            row = 0
             while True:
                 lines = [ln for ln in itertools.islice(fh, chunk) if ln.strip()]
                 if not lines:
                     return
-                table = _parse(lines, c.delimiter, self.path, line_no)
+                table, bad = _parse(lines, c.delimiter, self.path, line_no, width)
+                self.malformed.update({row + k: msg for k, msg in bad.items()})
+                row += len(lines)
                 line_no += len(lines)
                 if width is None:
                     width = table.shape[1]
@@ -211,17 +235,12 @@ class CsvSource:
                             f"have {width}"
                         )
                     for name, cols in c.index.items():
-                        bad = [i for i in cols if not -width <= i < width]
-                        if bad:
+                        outside = [i for i in cols if not -width <= i < width]
+                        if outside:
                             raise DataError(
-                                f"column map: {name!r} refers to column {bad[0]} but "
+                                f"column map: {name!r} refers to column {outside[0]} but "
                                 f"{self.path} has {width} columns"
                             )
-                elif table.shape[1] != width:
-                    raise DataError(
-                        f"{self.path}: rows near line {line_no} have {table.shape[1]} cells, "
-                        f"earlier rows {width}"
-                    )
                 yield line_no - len(lines), table
 
     def _pack(self, table: np.ndarray) -> np.ndarray:
@@ -294,6 +313,8 @@ def load_csv(path: Path, columns: Mapping | None = None) -> Dataset:
     """The CSV dataset ``path`` in memory (see the module docstring)."""
     src = CsvSource(path, columns)
     blocks = list(src.chunks(1 << 16))
+    if src.malformed:  # read whole: refused (the streamed reader may drop them)
+        raise DataError(src.malformed[min(src.malformed)])
     if not blocks:
         raise DataError(f"{path} holds no data rows")
     rows = np.vstack(blocks)
@@ -331,3 +352,15 @@ def write_csv(fh, blocks, layout: Layout, joint_names=None) -> None:
     fh.write(",".join(csv_header(layout, joint_names)) + "\n")
     for block in blocks:
         np.savetxt(fh, block, delimiter=",", fmt="%.17g")
+
+
+def _column_hint(header: Sequence[str]) -> str:
+    """What to do about a CSV whose header is not ours: its columns, and how to map them
+    (``--column FIELD=COLUMNS`` on the command line, ``columns=`` in the API)."""
+    shown = ", ".join(header[:10]) + (", ..." if len(header) > 10 else "")
+    first = header[0] if header else "stamp"
+    return (
+        f"; this file's columns are {shown}: map them with --column FIELD=COLUMNS "
+        f"(columns={{...}} in the API), e.g. --column t={first} --column q='pos*' "
+        "--column dq='vel*' --column tau='eff*'"
+    )

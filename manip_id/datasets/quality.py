@@ -13,7 +13,13 @@ For the rows a fit would see (after the window, bad rows and the torque scale):
   q_{k+m} - q_k`` and ``Delta I`` the trapezoid integral of dq over the same
   samples (``q(t) = int dq dt``; over a window, sensor noise in q enters only
   at its two ends and noise in dq averages out, so the figure reflects units,
-  lags or swapped columns rather than noise), and the sign of their correlation;
+  lags or swapped columns rather than noise), and the sign of their correlation.
+  Quantization-aware: the encoder's resolution ``r_j`` is estimated as the smallest
+  non-zero step of ``q_j``, and only windows whose motion ``max(|Delta q|, |Delta I|)``
+  exceeds ``MOTION_STEPS r_j`` count (a histogram of the windows' motion per joint, so
+  the threshold applies after the pass). A *static* file (every joint's span of q
+  within ``max(STATIC_STEPS r_j, STATIC_SPAN)``) gets no velocity warnings: its motion
+  of q is quantization noise;
 - standstill share per joint: samples with ``|dq_j| < eps``;
 - torque saturation per joint: share of samples at ``>= 99 %`` of the effort
   limit, and share sitting exactly at the largest ``|tau_j|`` (a clipped signal).
@@ -39,6 +45,28 @@ VELOCITY_WINDOW = 0.02
 #: Share of samples at the largest |tau| above which a joint looks clipped.
 CLIPPED_SHARE = 1e-3
 _BINS = np.linspace(-9.0, 3.0, 2401)  # log10 of the step [s], 0.005-decade bins
+#: A velocity window counts when its motion exceeds this many encoder steps.
+MOTION_STEPS = 10.0
+#: A file is static when no joint's q spans more than this many encoder steps ...
+STATIC_STEPS = 10.0
+#: ... or, for finer (or unquantized) positions, more than this [rad or m].
+STATIC_SPAN = 1e-3
+_MOTION_BINS = 4 * 20  # windows' motion: quarter decades from 1e-15 to 1e5
+
+
+def encoder_resolution(q) -> np.ndarray:
+    """Per column, the smallest non-zero step ``|q_{k+1} - q_k|`` [rad or m]; inf when q
+    never changes. Shape (nq,) from q of shape (N, nq)."""
+    steps = np.abs(np.diff(np.asarray(q, dtype=float), axis=0))
+    steps[steps == 0] = np.inf
+    return steps.min(axis=0) if steps.shape[0] else np.full(steps.shape[1], np.inf)
+
+
+def static_span(resolution) -> np.ndarray:
+    """The span of q [rad or m] within which a joint counts as still, per column:
+    ``max(STATIC_STEPS r_j, STATIC_SPAN)`` for the encoder resolution ``r_j``."""
+    res = np.asarray(resolution, dtype=float)
+    return np.maximum(STATIC_STEPS * np.where(np.isfinite(res), res, 0.0), STATIC_SPAN)
 
 
 @dataclass
@@ -68,6 +96,12 @@ class DataQuality:
     saturated_share: list[float] | None = None
     clipped_share: list[float] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    #: rows dropped per reason ("non-finite", "implausible", "malformed line")
+    dropped: dict[str, int] = field(default_factory=dict)
+    #: encoder resolution per joint: smallest non-zero step of q (None: q never moved)
+    resolution: list[float] = field(default_factory=list)
+    #: no joint moved beyond the encoder's noise: velocity checks skipped
+    static: bool = False
 
     @property
     def duration(self) -> float:
@@ -88,6 +122,9 @@ class DataQuality:
             "n_samples": self.n_samples,
             "n_dropped": self.n_dropped,
             "first_dropped": self.first_dropped,
+            "dropped": dict(self.dropped),
+            "static": self.static,
+            "resolution": per(self.resolution) if self.resolution else None,
             "t_start": f(self.t_start),
             "duration": f(self.duration),
             "rate": f(self.rate),
@@ -117,10 +154,13 @@ class DataQuality:
             f"{self.rate:.6g} Hz (jitter {100 * self.jitter:.2g} %, {self.n_gaps} gaps, "
             f"largest step {1e3 * self.dt_max:.3g} ms)"
             + (
-                f", {self.n_dropped} bad rows dropped (first row {self.first_dropped})"
+                f", {self.n_dropped} bad rows dropped (first row {self.first_dropped}"
+                + "".join(f"; {n} {why}" for why, n in self.dropped.items())
+                + ")"
                 if self.n_dropped
                 else ""
-            ),
+            )
+            + (", static" if self.static else ""),
             f"  standstill (|dq| < {self.standstill_eps:g}): {still}",
         ]
         lines += [f"  warning: {w}" for w in self.warnings]
@@ -164,9 +204,12 @@ class QualityAccumulator:
         self.hist = np.zeros(_BINS.size - 1, dtype=np.int64)
         self.q_min = np.full(nq, np.inf)
         self.q_max = np.full(nq, -np.inf)
-        self.fd_sq = np.zeros(nv)  # sum of (Delta q - Delta I)^2
-        self.mid_sq = np.zeros(nv)  # sum of Delta I^2
-        self.cross = np.zeros(nv)  # sum of Delta q Delta I
+        # per bin of the windows' motion (rows) and joint: sums of (Delta q - Delta I)^2,
+        # Delta I^2 and Delta q Delta I
+        self.fd_sq = np.zeros((_MOTION_BINS, nv))
+        self.mid_sq = np.zeros((_MOTION_BINS, nv))
+        self.cross = np.zeros((_MOTION_BINS, nv))
+        self.step = np.full(nq, np.inf)  # smallest non-zero |q_{k+1} - q_k|
         self.m: int | None = None  # samples per velocity window
         self.integral = np.zeros(nv)  # trapezoid integral of dq up to the last row
         self.mark: tuple[int, np.ndarray, np.ndarray] | None = (
@@ -198,6 +241,8 @@ class QualityAccumulator:
             if self.lay.nq == self.lay.nv:
                 self._velocity(ext, dt)
         q = rows[:, s["q"]]
+        if ext.shape[0] > 1:
+            self.step = np.minimum(self.step, encoder_resolution(ext[:, s["q"]]))
         self.q_min = np.minimum(self.q_min, q.min(axis=0))
         self.q_max = np.maximum(self.q_max, q.max(axis=0))
         dq = rows[:, s["dq"]]
@@ -236,17 +281,24 @@ class QualityAccumulator:
             qs = np.vstack([self.mark[1], q[pick]])
             Is = np.vstack([self.mark[2], integ[pick]])
             dqw, diw = np.diff(qs, axis=0), np.diff(Is, axis=0)
-            self.fd_sq += np.einsum("kj,kj->j", dqw - diw, dqw - diw)
-            self.mid_sq += np.einsum("kj,kj->j", diw, diw)
-            self.cross += np.einsum("kj,kj->j", dqw, diw)
+            with np.errstate(divide="ignore"):
+                level = np.log10(np.maximum(np.abs(dqw), np.abs(diw)))
+            b = np.clip(np.floor(4 * (level + 15)), 0, _MOTION_BINS - 1).astype(np.intp)
+            cols = np.broadcast_to(np.arange(dqw.shape[1]), b.shape)
+            np.add.at(self.fd_sq, (b, cols), (dqw - diw) ** 2)
+            np.add.at(self.mid_sq, (b, cols), diw**2)
+            np.add.at(self.cross, (b, cols), dqw * diw)
             self.mark = (int(idx[pick[-1]]), q[pick[-1]].copy(), integ[pick[-1]].copy())
         self.integral = integ[-1].copy()
 
-    def finish(self, n_dropped: int = 0, first_dropped: int | None = None) -> DataQuality:
-        """The summary, with its warnings."""
+    def finish(
+        self, n_dropped: int = 0, first_dropped: int | None = None, dropped=None
+    ) -> DataQuality:
+        """The summary, with its warnings; ``dropped``: rows dropped per reason."""
         out = self.out
         n = self.n
         out.n_samples, out.n_dropped, out.first_dropped = n, n_dropped, first_dropped
+        out.dropped = dict(dropped or {})
         out.t_start, out.t_end = self.t0, self.t_last
         joints = out.joints
         if n >= 2:
@@ -283,12 +335,23 @@ class QualityAccumulator:
                         f"joint {name}: positions reach {self.q_max[i]:.4g}, "
                         f"{self.q_max[i] - hi:.3g} above its upper limit {hi:.4g}"
                     )
-        with np.errstate(divide="ignore", invalid="ignore"):
-            mism = np.sqrt(self.fd_sq / self.mid_sq)
-        out.velocity_mismatch = mism.tolist() if self.lay.nq == self.lay.nv else []
+        res = self.step  # [rad or m], inf: q never changed
+        out.resolution = [float(r) if np.isfinite(r) else math.nan for r in res]
+        span = self.q_max - self.q_min
+        out.static = bool(n >= 2 and np.all(span <= static_span(res)))
         if self.lay.nq == self.lay.nv:
+            edges = 10.0 ** (np.arange(_MOTION_BINS) / 4.0 - 15.0)  # lower edge of each bin
+            thr = MOTION_STEPS * np.where(np.isfinite(res), res, 0.0)
+            use = edges[:, None] >= thr[None, :]  # (bins, nv)
+            fd, mid, cross = ((x * use).sum(axis=0) for x in (self.fd_sq, self.mid_sq, self.cross))
+        else:
+            fd = mid = cross = np.zeros(self.lay.nv)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            mism = np.sqrt(fd / mid)
+        out.velocity_mismatch = mism.tolist() if self.lay.nq == self.lay.nv else []
+        if self.lay.nq == self.lay.nv and not out.static:
             for j, name in enumerate(joints):
-                if self.mid_sq[j] > 0 and self.cross[j] < 0:
+                if mid[j] > 0 and cross[j] < 0:
                     out.warnings.append(
                         f"joint {name}: dq has the opposite sign of the motion of q: "
                         "are velocity columns negated or swapped?"
@@ -304,6 +367,8 @@ class QualityAccumulator:
         clipped = self.at_max / max(n, 1)
         out.clipped_share = clipped.tolist()
         for j, name in enumerate(joints):
+            if out.static:  # a still robot's torque sits at one value: not a clipped signal
+                break
             if clipped[j] > CLIPPED_SHARE and self.at_max[j] > 2 and self.tau_max[j] > 0:
                 out.warnings.append(
                     f"joint {name}: {100 * clipped[j]:.2g} % of the torques sit at the "

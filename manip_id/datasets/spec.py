@@ -17,10 +17,13 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import InputError
+from .adjust import check_time_unit
 
 _NUM = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
 _TIME = re.compile(rf"^\s*({_NUM})?\s*:\s*({_NUM})?\s*$")
@@ -91,6 +94,10 @@ class FileSpec:
     format: "npz", "csv", "panda_gaz2019", "rosbag"; default from the path.
     columns: CSV column map (see :func:`~manip_id.datasets.load_dataset`).
     topic: ROS bag topic of ``sensor_msgs/msg/JointState``; default the only one.
+    time_unit: unit of the stamps, "s", "ms", "us" or "ns" (None: seconds); see
+        :mod:`~.adjust`.
+    delay: lag [s] of the torque stream behind the motion stream, one value or one per
+        joint; the rows pair the motion of ``t`` with the torque of ``t + delay``.
     """
 
     path: Path
@@ -98,9 +105,18 @@ class FileSpec:
     format: str | None = None
     columns: Mapping | None = field(default=None, compare=False)
     topic: str | None = None
+    time_unit: str | None = None
+    delay: float | tuple[float, ...] | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "path", Path(self.path).expanduser())
+        object.__setattr__(self, "time_unit", check_time_unit(self.time_unit))
+        d = self.delay
+        if d is not None:
+            values = tuple(float(x) for x in np.ravel(np.asarray(d, dtype=float)))
+            if not values or not all(math.isfinite(x) for x in values):
+                raise InputError(f"a delay must be finite seconds, got {d!r}")
+            object.__setattr__(self, "delay", values[0] if len(values) == 1 else values)
         if self.window is not None and not isinstance(self.window, Window):
             object.__setattr__(self, "window", Window.parse(self.window))
 
@@ -111,7 +127,7 @@ class FileSpec:
 
     def with_window(self, window: Window | None) -> FileSpec:
         """The same file with another window."""
-        return FileSpec(self.path, window, self.format, self.columns, self.topic)
+        return replace(self, window=window)
 
 
 def parse_file_spec(text, *, window=None, **kwargs) -> FileSpec:

@@ -9,8 +9,11 @@ an object with ``path``, ``format``, ``layout`` (:class:`~.layout.Layout`),
 
 1. the window: rows ``#A:#B``, or ``START <= t - t_0 < STOP`` [s] with ``t_0``
    the first stamp;
-2. non-finite rows: refused (the error names the file, field, row and joint)
-   or, with ``drop_bad_rows``, dropped and counted;
+2. bad rows: refused (the error names the file, field, row and joint, or the CSV
+   line) or, with ``drop_bad_rows``, dropped and counted per reason
+   (:attr:`RowCounts.reasons`): non-finite values, malformed CSV lines (a wrong
+   field count, a truncated last line) and values beyond the magnitude bounds that
+   would refuse the file (:data:`~manip_id._checks.MEASURED_LIMITS`, e.g. 1e184);
 3. the value checks of :func:`~.core.check_values` on every field, and time
    increasing strictly across blocks;
 4. the torque scale: ``tau_j <- G_j tau_j`` (drive gains [N m / A], gear ratios).
@@ -27,7 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
+from .._checks import MEASURED_LIMITS
 from ..errors import DataError, InputError
+from .adjust import TIME_UNITS, AdjustedSource, delay_vector
 from .core import Dataset, check_time, check_values
 from .layout import Layout
 from .spec import FileSpec, Window
@@ -109,6 +114,15 @@ def open_source(spec: FileSpec, joint_names=None):
         raise DataError(f"a column map applies to CSV files only, not to format {fmt!r} ({path})")
     if spec.topic is not None and fmt != "rosbag":
         raise DataError(f"a topic applies to ROS bags only, not to {path} (format {fmt!r})")
+    src = _raw_source(spec, fmt, joint_names)
+    if spec.time_unit is None and spec.delay is None:
+        return src
+    delay = delay_vector(spec.delay, src.layout.nv, f"the delay of {spec.label}")
+    return AdjustedSource(src, TIME_UNITS[spec.time_unit or "s"], delay)
+
+
+def _raw_source(spec: FileSpec, fmt: str, joint_names):
+    path = spec.path
     if fmt == "npz":
         from .npz import NpzSource
 
@@ -136,6 +150,18 @@ class RowCounts:
     dropped_fields: dict[str, int] = field(default_factory=dict)
     t_file_start: float | None = None
     n_file_rows: int | None = None
+    #: rows dropped per reason: "non-finite", "implausible" (beyond the magnitude bounds
+    #: of :data:`~manip_id._checks.MEASURED_LIMITS`), "malformed line" (CSV)
+    reasons: dict[str, int] = field(default_factory=dict)
+
+    def drop(self, reason: str, rows: np.ndarray) -> None:
+        """Count the raw ``rows`` dropped for ``reason``."""
+        if not rows.size:
+            return
+        self.n_dropped += int(rows.size)
+        self.reasons[reason] = self.reasons.get(reason, 0) + int(rows.size)
+        first = int(rows.min())
+        self.first_dropped = first if self.first_dropped is None else min(self.first_dropped, first)
 
 
 def torque_scale_vector(scale, nv: int, what: str = "torque scale") -> np.ndarray | None:
@@ -148,6 +174,20 @@ def torque_scale_vector(scale, nv: int, what: str = "torque scale") -> np.ndarra
     if not np.isfinite(arr).all() or np.any(arr == 0):
         raise InputError(f"{what} must be finite and non-zero, got {arr.tolist()}")
     return np.broadcast_to(arr, (nv,)).copy()
+
+
+def _implausible_cells(block: np.ndarray, layout: Layout) -> np.ndarray:
+    """Cells beyond the magnitude bounds of their field (``MEASURED_LIMITS``), (k, width)."""
+    out = np.zeros(block.shape, dtype=bool)
+    for name, s in layout.slices.items():
+        if name != "t" and name in MEASURED_LIMITS:
+            out[:, s] = np.abs(block[:, s]) > MEASURED_LIMITS[name][1]
+    return out
+
+
+def _implausible(block: np.ndarray, layout: Layout) -> np.ndarray:
+    """Rows holding a value beyond the magnitude bounds of its field, shape (k,)."""
+    return np.asarray(_implausible_cells(block, layout).any(axis=1))
 
 
 def _field_of(layout: Layout, col: int) -> tuple[str, int]:
@@ -200,26 +240,37 @@ def iter_rows(
                 t0 = float(block[ft[0], t_col])
                 counts.t_file_start = t0
         if not finite.all():
+            malformed = getattr(source, "malformed", None) or {}
+            bad = np.flatnonzero(~finite)
             if not drop_bad_rows:
+                hint = " (pass --drop-bad-rows / drop_bad_rows=True to drop such rows)"
+                lines = [int(r) for r in raw[bad] if int(r) in malformed]
+                if lines:
+                    raise DataError(malformed[lines[0]] + hint)
                 for name, s in lay.slices.items():
                     cols = names if name != "t" and name != "q" else None
                     try:
                         arr = block[:, s] if name != "t" else block[:, 0]
                         check_values(name, arr, arr.ndim, cols, offset=int(raw[0]))
                     except DataError as exc:
-                        raise DataError(
-                            f"{path}: {exc} (pass --drop-bad-rows / drop_bad_rows=True to "
-                            "drop such rows)"
-                        ) from exc
-            bad = np.flatnonzero(~finite)
-            if counts.first_dropped is None:
-                counts.first_dropped = int(raw[bad[0]])
-            for b in bad:
+                        raise DataError(f"{path}: {exc}{hint}") from exc
+            is_line = np.array([int(r) in malformed for r in raw[bad]], dtype=bool)
+            counts.drop("malformed line", raw[bad[is_line]])
+            counts.drop("non-finite", raw[bad[~is_line]])
+            for b in bad[~is_line]:
                 col = int(np.flatnonzero(~np.isfinite(block[b]))[0])
                 fname, _ = _field_of(lay, col)
                 counts.dropped_fields[fname] = counts.dropped_fields.get(fname, 0) + 1
-            counts.n_dropped += bad.size
             block, raw = block[finite], raw[finite]
+        if drop_bad_rows and block.shape[0]:
+            wild = _implausible(block, lay)
+            if wild.any():
+                counts.drop("implausible", raw[wild])
+                for b in np.flatnonzero(wild):
+                    col = int(np.flatnonzero(_implausible_cells(block[b : b + 1], lay)[0])[0])
+                    fname, _ = _field_of(lay, col)
+                    counts.dropped_fields[fname] = counts.dropped_fields.get(fname, 0) + 1
+                block, raw = block[~wild], raw[~wild]
         if window is not None and window.unit == "s" and block.shape[0]:
             rel = block[:, t_col] - t0
             inside = np.ones(rel.shape, dtype=bool)

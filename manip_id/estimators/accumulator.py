@@ -11,6 +11,12 @@ least-squares problem over N samples only needs, per joint ``j``::
 where ``Y_kj`` is row ``j`` of ``Y_k``. Keeping the joints apart costs
 O(nv p^2) memory and lets weighted least squares re-weight joints without a
 second pass over the data. Accumulators of disjoint data merge by addition.
+
+Optionally (``blocks=True``) the same sums are also kept per block of contiguous
+samples (:class:`~manip_id.estimators.blocks.ScoreBlocks`, memory bounded), for the
+covariance that holds for correlated residuals
+(:mod:`manip_id.estimators.uncertainty`); the totals are accumulated exactly as
+without blocks, so the estimate does not depend on whether blocks are recorded.
 """
 
 from __future__ import annotations
@@ -20,6 +26,7 @@ from scipy.linalg.blas import dsyrk
 
 from .._checks import as_float_array
 from ..errors import InputError
+from .blocks import ScoreBlocks
 
 
 class InformationAccumulator:
@@ -27,8 +34,14 @@ class InformationAccumulator:
 
     Parameters
     ----------
-    p: number of parameters (columns accumulated).
-    nv: number of outputs per sample (joints).
+    p : int
+        Number of parameters (columns accumulated).
+    nv : int
+        Number of outputs per sample (joints).
+    blocks : bool or ScoreBlocks
+        Also record the sums per block of contiguous samples (:attr:`blocks`): True
+        for the default :class:`~manip_id.estimators.blocks.ScoreBlocks`, or an empty
+        one of given settings (e.g. the stream and offset of a part of a record).
 
     ``add(Y, tau)`` takes Y of shape (n, nv, P) and tau of shape (n, nv); with
     ``columns`` (P >= p) only those columns of Y are accumulated (e.g. the
@@ -37,7 +50,13 @@ class InformationAccumulator:
     place; :attr:`A_joint` returns the symmetrized matrices.
     """
 
-    def __init__(self, p: int, nv: int):
+    def __init__(
+        self,
+        p: int,
+        nv: int,
+        *,
+        blocks: bool | ScoreBlocks = False,
+    ):
         p, nv = int(p), int(nv)
         if p < 1 or nv < 1:
             raise InputError(f"an accumulator needs p >= 1 and nv >= 1, got p={p}, nv={nv}")
@@ -47,6 +66,16 @@ class InformationAccumulator:
         self._b = np.zeros((nv, p))
         self._zz = np.zeros(nv)
         self.n = 0
+        #: The per-block sums (None when not recorded, or after merging data without them).
+        self.blocks: ScoreBlocks | None = None
+        if isinstance(blocks, ScoreBlocks):
+            if (blocks.p, blocks.nv, blocks.n_blocks) != (p, nv, 0):
+                raise InputError(
+                    f"blocks must be empty ScoreBlocks of p={p}, nv={nv}; got {blocks!r}"
+                )
+            self.blocks = blocks
+        elif blocks:
+            self.blocks = ScoreBlocks(p, nv)
 
     # ------------------------------------------------------------- adding
     def add(self, Y, tau, *, columns=None, check: bool = True) -> InformationAccumulator:
@@ -94,6 +123,8 @@ class InformationAccumulator:
             self._b[j] += tau[:, j] @ Yt[j]
         self._zz += np.einsum("nj,nj->j", tau, tau)
         self.n += n
+        if self.blocks is not None:
+            self.blocks.add(Yt, tau)
         return self
 
     def add_sums(self, A_joint, b_joint, zz_joint, n: int, supports=None) -> InformationAccumulator:
@@ -101,8 +132,12 @@ class InformationAccumulator:
 
         ``A_joint[j]`` (r_j, r_j) with a valid lower triangle, ``b_joint[j]`` (r_j,)
         are the sums over the columns ``supports[j]`` of this accumulator (all
-        columns when ``supports`` is None); ``zz_joint`` (nv,), ``n`` samples.
+        columns when ``supports`` is None); ``zz_joint`` (nv,), ``n`` samples. With
+        :attr:`blocks`, the sums count as one contiguous run of samples (one block, or
+        part of the open one when it has room).
         """
+        if self.blocks is not None:
+            self.blocks.add_sums(A_joint, b_joint, zz_joint, n, supports)
         for j in range(self.nv):
             if supports is None:
                 self._A[j] += np.tril(A_joint[j])
@@ -129,6 +164,12 @@ class InformationAccumulator:
         self._A += other._A
         self._b += other._b
         self._zz += other._zz
+        if self.blocks is not None and other.blocks is not None:
+            self.blocks.merge(other.blocks)
+        elif other.n > 0 and self.blocks is not None:
+            self.blocks = None  # data without blocks: no block scores for the whole
+        elif self.n == 0 and other.blocks is not None:
+            self.blocks = other.blocks.copy()
         self.n += other.n
         return self
 
@@ -136,13 +177,31 @@ class InformationAccumulator:
         return self.copy().merge(other)
 
     def copy(self) -> InformationAccumulator:
-        """An independent copy."""
+        """An independent copy (with a copy of the blocks)."""
         out = InformationAccumulator(self.p, self.nv)
         out._A[:] = self._A
         out._b[:] = self._b
         out._zz[:] = self._zz
         out.n = self.n
+        out.blocks = None if self.blocks is None else self.blocks.copy()
         return out
+
+    def attach_blocks(self, blocks: ScoreBlocks) -> InformationAccumulator:
+        """Use ``blocks``, recorded by the caller over the same samples, as :attr:`blocks`.
+
+        For callers that accumulate the totals themselves (on each joint's non-zero
+        columns, :meth:`add_sums`) and the blocks alongside (:meth:`ScoreBlocks.add_rows`).
+        Returns ``self``.
+        """
+        if not isinstance(blocks, ScoreBlocks):
+            raise InputError(f"expected ScoreBlocks, got {type(blocks).__name__}")
+        if (blocks.p, blocks.nv) != (self.p, self.nv) or int(blocks.counts.sum()) != self.n:
+            raise InputError(
+                f"blocks of (p={blocks.p}, nv={blocks.nv}, n={int(blocks.counts.sum())}) do "
+                f"not match the accumulator's (p={self.p}, nv={self.nv}, n={self.n})"
+            )
+        self.blocks = blocks
+        return self
 
     # ---------------------------------------------------------- read back
     @property
@@ -201,7 +260,8 @@ class InformationAccumulator:
         return np.maximum(self._zz - 2.0 * self._b @ theta + quad, 0.0)
 
     def __repr__(self) -> str:
-        return f"InformationAccumulator(p={self.p}, nv={self.nv}, n={self.n})"
+        blocks = "" if self.blocks is None else f", blocks={self.blocks.n_blocks}"
+        return f"InformationAccumulator(p={self.p}, nv={self.nv}, n={self.n}{blocks})"
 
 
 def check_finite_rows(arr: np.ndarray, name: str, offset: int) -> None:

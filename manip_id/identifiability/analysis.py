@@ -15,6 +15,8 @@ import numpy as np
 
 from .._checks import as_float_array, as_int, as_real
 from ..errors import InputError
+from ..regressor import iter_regressor
+from ..robot import Robot
 from .accumulator import RFactorAccumulator
 from .notes import robot_notes, zero_columns
 from .qr import EPS, analyze_factor, default_tolerance
@@ -67,8 +69,6 @@ def structural_analysis(
     from ``robot.random_states(n_samples, seed)``, streamed through
     :func:`manip_id.regressor.iter_regressor` into a (p, p) factor.
     """
-    from ..regressor import iter_regressor
-
     p, nv = robot.n_parameters, robot.nv
     if n_samples is None:
         n_samples = max(MIN_SAMPLES, math.ceil(ROWS_PER_PARAMETER * p / nv))
@@ -112,15 +112,20 @@ def analyze(
 
     Parameters
     ----------
-    source: a :class:`~manip_id.robot.Robot` (structural analysis, see
+    source
+        a :class:`~manip_id.robot.Robot` (structural analysis, see
         :func:`structural_analysis`; ``seed`` and ``n_samples`` apply), a
         regressor ``Y`` of shape (M, p) or (N, nv, p) (sample-major), or a
         :class:`~manip_id.datasets.Dataset` with accelerations (``robot`` required).
-    names: parameter names, length p (for an array; taken from ``robot`` when given).
-    robot: the robot the array belongs to; then the structural analysis is run too
+    names
+        parameter names, length p (for an array; taken from ``robot`` when given).
+    robot
+        the robot the array belongs to; then the structural analysis is run too
         (unless ``structural`` is given) and the unexcited directions are reported.
-    structural: a structural :class:`RankAnalysis` to compare the data with.
-    tolerance: relative rank tolerance (module docstring); default
+    structural
+        a structural :class:`RankAnalysis` to compare the data with.
+    tolerance
+        relative rank tolerance (module docstring); default
         :func:`default_tolerance`, ``max(max(M, p) * eps, 1e-8)``.
 
     Returns
@@ -128,8 +133,6 @@ def analyze(
     :class:`RankAnalysis`. A regressor with NaN/Inf, no rows, fewer rows than
     columns, all zeros, or a width other than ``len(names)`` raises :class:`InputError`.
     """
-    from ..robot import Robot
-
     if isinstance(source, Robot):
         return structural_analysis(source, seed=seed, n_samples=n_samples, tolerance=tolerance)
     if hasattr(source, "q") and hasattr(source, "dq"):  # a Dataset (duck-typed: no import)
@@ -179,8 +182,6 @@ def analyze_trajectory(
     ``q`` (N, nq) [rad or m], ``dq``, ``ddq`` (N, nv); the structural analysis
     of ``robot`` is computed when not given, and the unexcited directions reported.
     """
-    from ..regressor import iter_regressor
-
     tol = _check_tolerance(tolerance)
     acc = RFactorAccumulator(robot.n_parameters, robot.parameter_names)
     for c in iter_regressor(robot, q, dq, ddq, chunk=chunk):

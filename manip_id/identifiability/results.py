@@ -7,13 +7,13 @@ holds rank, conditioning, null space and readable directions, with a JSON-ready
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .._checks import as_float_array
 from ..errors import InputError, RankDeficiencyError
+from ..metrics import finite_or_none
 
 
 @dataclass(frozen=True)
@@ -22,14 +22,21 @@ class BaseParameters:
 
     Attributes
     ----------
-    independent: indices of the kept columns, shape (r,), ascending.
-    dependent: indices of the regrouped columns, shape (p - r,), ascending.
-    K: regrouping matrix, shape (r, p - r): ``theta_base = theta[independent] + K theta[dependent]``
-        and ``Y[:, dependent] = Y[:, independent] K``.
-    names: the standard parameter names, length p.
-    base_names: one name per base parameter: the name of its independent
+    independent
+        indices of the kept columns, shape (r,), ascending.
+    dependent
+        indices of the regrouped columns, shape (p - r,), ascending.
+    K
+        regrouping matrix, shape (r, p - r):
+        ``theta_base = theta[independent] + K theta[dependent]`` and
+        ``Y[:, dependent] = Y[:, independent] K``.
+    names
+        the standard parameter names, length p.
+    base_names
+        one name per base parameter: the name of its independent
         parameter, with a trailing ``R`` (regrouped) when other parameters join it.
-    expressions: each base parameter in parameter names, e.g.
+    expressions
+        each base parameter in parameter names, e.g.
         ``panda_joint2.Izz + 0.0841*panda_joint3.m``.
     """
 
@@ -52,6 +59,18 @@ class BaseParameters:
             raise InputError(f"theta.shape={theta.shape} but n_parameters={len(self.names)}")
         return theta[..., self.independent] + theta[..., self.dependent] @ self.K.T
 
+    def from_base(self, theta_base) -> np.ndarray:
+        """A standard vector with these base parameters, zero on the dependent columns.
+
+        (..., r) -> (..., p); ``to_base(from_base(b)) == b``.
+        """
+        arr = as_float_array(theta_base, "theta_base")
+        if arr.ndim == 0 or arr.shape[-1] != self.n_base:
+            raise InputError(f"theta_base.shape={arr.shape} but the base has {self.n_base}")
+        out = np.zeros((*arr.shape[:-1], len(self.names)))
+        out[..., self.independent] = arr
+        return out
+
     def regressor(self, Y) -> np.ndarray:
         """The base regressor ``Y[..., independent]``: ``Y theta == Y_base theta_base``."""
         Y = np.asarray(Y)
@@ -73,29 +92,46 @@ class RankAnalysis:
 
     Attributes
     ----------
-    names: parameter names, length p.
-    n_parameters: p.
-    n_rows: number of stacked rows M the analysis saw.
-    rank: numerical rank r (= number of base parameters).
-    tolerance: the relative tolerance used (module docstring).
-    singular_values: of the raw regressor Y, shape (p,), descending [units of Y].
-    singular_values_scaled: of the column-scaled regressor, shape (p,), descending.
-    condition_number: sigma_max / sigma_min of the base regressor Y[:, independent].
-    condition_number_scaled: the same with unit-norm columns.
-    base: the base parameters.
-    null_space: shape (p, p - r), one unidentifiable direction per column
+    names
+        parameter names, length p.
+    n_parameters
+        p.
+    n_rows
+        number of stacked rows M the analysis saw.
+    rank
+        numerical rank r (= number of base parameters).
+    tolerance
+        the relative tolerance used (module docstring).
+    singular_values
+        of the raw regressor Y, shape (p,), descending [units of Y].
+    singular_values_scaled
+        of the column-scaled regressor, shape (p,), descending.
+    condition_number
+        sigma_max / sigma_min of the base regressor Y[:, independent].
+    condition_number_scaled
+        the same with unit-norm columns.
+    base
+        the base parameters.
+    null_space
+        shape (p, p - r), one unidentifiable direction per column
         (``Y @ null_space == 0``), unit coefficient on its dependent parameter.
-    unidentifiable: each null-space column as an expression in parameter names.
-    unexcited: directions these data fail to excite although they are structurally
+    unidentifiable
+        each null-space column as an expression in parameter names.
+    unexcited
+        directions these data fail to excite although they are structurally
         identifiable (only when a structural analysis was given), each a vector that
         is zero on the structurally dependent parameters.
-    unexcited_vectors: those directions, shape (p, n_unexcited).
-    information_eigenvalues: eigenvalues of the information matrix of the base
+    unexcited_vectors
+        those directions, shape (p, n_unexcited).
+    information_eigenvalues
+        eigenvalues of the information matrix of the base
         regressor, ``Y_1^T Y_1`` with ``Y_1 = Y[:, independent]``, ascending, shape (r,)
         [units of Y squared]; with a structural analysis given, its independent
         columns are used, so that only what the data fail to excite shows.
-    notes: explanations (why some parameters never enter the dynamics, fallbacks).
-    source: where the regressor came from.
+    notes
+        explanations (why some parameters never enter the dynamics, fallbacks).
+    source
+        where the regressor came from.
     """
 
     names: list[str]
@@ -149,8 +185,8 @@ class RankAnalysis:
             "n_rows": self.n_rows,
             "rank": self.rank,
             "tolerance": self.tolerance,
-            "condition_number": _finite_or_none(self.condition_number),
-            "condition_number_scaled": _finite_or_none(self.condition_number_scaled),
+            "condition_number": finite_or_none(self.condition_number),
+            "condition_number_scaled": finite_or_none(self.condition_number_scaled),
             "base_parameters": self.base.to_dict(),
             "unidentifiable": list(self.unidentifiable),
             "unexcited": list(self.unexcited),
@@ -229,7 +265,3 @@ class RankAnalysis:
             lines.append("notes:")
             lines += [f"  - {n}" for n in self.notes]
         return "\n".join(lines)
-
-
-def _finite_or_none(x: float):
-    return float(x) if math.isfinite(x) else None

@@ -23,8 +23,11 @@ import pinocchio as pin
 from .._checks import as_float_array
 from ..errors import InputError
 from ..estimators import InformationAccumulator
-from ..regressor import check_states
+from ..estimators.blocks import ScoreBlocks
+from ..identifiability import analyze
+from ..regressor import check_states, iter_regressor
 from ..robot import Robot
+from ..trajectories import random_trajectory, trajectory_to_configuration
 
 #: Default window (energy) and row spacing (momentum) [s].
 DEFAULT_WINDOW = 0.2
@@ -56,7 +59,8 @@ def _simpson_weights(w: int, dt: float) -> np.ndarray:
     return c * (dt / 3.0)
 
 
-def _states(robot: Robot, q, dq, tau):
+def check_model_states(robot: Robot, q, dq, tau):
+    """``(q, dq, tau)`` of N samples checked for the acceleration-free models."""
     batched, (q, dq) = check_states(robot, q=q, dq=dq)
     if not batched:
         raise InputError(f"the energy model takes N samples (2-D arrays), got q.shape={q.shape}")
@@ -102,15 +106,20 @@ def energy_rows(
 
     Parameters
     ----------
-    robot: the robot (its joint terms decide the columns)
-    q: positions [rad or m], shape (N, nq); dq [rad/s or m/s] and tau [N m or N], (N, nv)
-    dt: sample time [s] (uniform sampling)
-    window_length: window [s] (default :data:`DEFAULT_WINDOW`), rounded to an even
+    robot
+        the robot (its joint terms decide the columns)
+    q
+        positions [rad or m], shape (N, nq); dq [rad/s or m/s] and tau [N m or N], (N, nv)
+    dt
+        sample time [s] (uniform sampling)
+    window_length
+        window [s] (default :data:`DEFAULT_WINDOW`), rounded to an even
         number of sampling intervals ``w``; windows ``[k w, (k + 1) w]`` follow each
         other, ``floor((N - 1) / w)`` of them
-    chunk: windows per yielded block (default: about 4096 samples' worth)
+    chunk
+        windows per yielded block (default: about 4096 samples' worth)
     """
-    q, dq, tau = _states(robot, q, dq, tau)
+    q, dq, tau = check_model_states(robot, q, dq, tau)
     w = window_samples(window_length, dt)
     n = q.shape[0]
     n_win = (n - 1) // w
@@ -152,10 +161,12 @@ def accumulate_energy(
     dt: float,
     window_length: float | None = None,
     columns=None,
+    blocks: ScoreBlocks | None = None,
 ) -> InformationAccumulator:
-    """The energy rows' information on ``columns`` (default all), one output (``nv = 1``)."""
+    """The energy rows' information on ``columns`` (default all), one output (``nv = 1``);
+    with ``blocks`` (empty, of ``nv = 1``) also per block of consecutive windows."""
     cols = np.arange(robot.n_parameters) if columns is None else np.asarray(columns, np.intp)
-    acc = InformationAccumulator(cols.size, 1)
+    acc = InformationAccumulator(cols.size, 1, blocks=False if blocks is None else blocks)
     for E, z in energy_rows(robot, q, dq, tau, dt=dt, window_length=window_length):
         acc.add(E[:, None, :], z[:, None], columns=cols, check=False)
     return acc
@@ -167,15 +178,22 @@ class EnergyBaseCheck:
 
     Attributes
     ----------
-    robot_name: the robot
-    n_base_dynamic: number of base parameters of the dynamic model (structural)
-    rank_dynamic: rank of the dynamic regressor on the check trajectory
-    rank_energy: rank of the energy regressor on the same trajectory's windows
-    rank_on_base_columns: rank of the energy regressor restricted to the dynamic
+    robot_name
+        the robot
+    n_base_dynamic
+        number of base parameters of the dynamic model (structural)
+    rank_dynamic
+        rank of the dynamic regressor on the check trajectory
+    rank_energy
+        rank of the energy regressor on the same trajectory's windows
+    rank_on_base_columns
+        rank of the energy regressor restricted to the dynamic
         model's independent columns (== n_base_dynamic when they are identifiable)
-    regrouping_residual: ``max |E_dep - E_ind K| / max |E|`` with the dynamic K
+    regrouping_residual
+        ``max |E_dep - E_ind K| / max |E|`` with the dynamic K
         (0 up to round-off when the regrouping is the same)
-    same: the energy regressor has full rank on the dynamic model's independent
+    same
+        the energy regressor has full rank on the dynamic model's independent
         columns and the same regrouping (``rank_on_base_columns == n_base_dynamic``
         and a residual below 1e-8): the same base parameters. The two trajectory
         ranks are for information: at ``tolerance`` they may count a direction the
@@ -225,10 +243,6 @@ def check_energy_base(
     one scalar per instant, and a few harmonics leave some of its directions
     unexcited where the dynamic model's are not (e.g. 3 harmonics on the Panda).
     """
-    from ..identifiability import analyze
-    from ..regressor import iter_regressor
-    from ..trajectories import random_trajectory, trajectory_to_configuration
-
     if base is None:
         base = analyze(robot).base
     if harmonics is None:

@@ -35,8 +35,9 @@ import pinocchio as pin
 
 from ..errors import InputError
 from ..estimators import InformationAccumulator
+from ..estimators.blocks import ScoreBlocks
 from ..robot import Robot
-from .energy import _states, window_samples
+from .energy import check_model_states, window_samples
 
 _CHUNK = 1024
 
@@ -60,7 +61,7 @@ def momentum_regressors(robot: Robot, q, dq) -> tuple[np.ndarray, np.ndarray]:
     ``q`` [rad or m] (N, nq), ``dq`` [rad/s or m/s] (N, nv).
     ``Y_p theta = M(q) dq`` [N m s], ``Y_h theta = g(q) - C(q, dq)^T dq + tau_joint`` [N m].
     """
-    q, dq, _ = _states(robot, q, dq, np.zeros_like(np.asarray(dq, dtype=float)))
+    q, dq, _ = check_model_states(robot, q, dq, np.zeros_like(np.asarray(dq, dtype=float)))
     return _regressors(robot, q, dq)
 
 
@@ -192,14 +193,19 @@ def momentum_rows(
 
     Parameters
     ----------
-    q: positions [rad or m], shape (N, nq); dq [rad/s or m/s] and tau [N m or N], (N, nv)
-    dt: sample time [s] (uniform sampling)
-    window_length: spacing of the rows [s] (default :data:`~manip_id.models.DEFAULT_WINDOW`):
+    q
+        positions [rad or m], shape (N, nq); dq [rad/s or m/s] and tau [N m or N], (N, nv)
+    dt
+        sample time [s] (uniform sampling)
+    window_length
+        spacing of the rows [s] (default :data:`~manip_id.models.DEFAULT_WINDOW`):
         samples ``k = s, 2 s, ...`` with ``s = round(window_length / dt)``
-    bandwidth: lambda of the filter [rad/s]; default ``3 / window_length``
-    chunk: samples per regressor chunk
+    bandwidth
+        lambda of the filter [rad/s]; default ``3 / window_length``
+    chunk
+        samples per regressor chunk
     """
-    q, dq, tau = _states(robot, q, dq, tau)
+    q, dq, tau = check_model_states(robot, q, dq, tau)
     stride = window_samples(window_length, dt, even=False)
     lam = 3.0 / (stride * float(dt)) if bandwidth is None else float(bandwidth)
     if not (math.isfinite(lam) and lam > 0):
@@ -239,10 +245,12 @@ def accumulate_momentum(
     window_length: float | None = None,
     bandwidth: float | None = None,
     columns=None,
+    blocks: ScoreBlocks | None = None,
 ) -> InformationAccumulator:
-    """The momentum rows' information on ``columns`` (default all), per joint (``nv`` outputs)."""
+    """The momentum rows' information on ``columns`` (default all), per joint (``nv`` outputs);
+    with ``blocks`` (empty) also per block of consecutive rows."""
     cols = np.arange(robot.n_parameters) if columns is None else np.asarray(columns, np.intp)
-    acc = InformationAccumulator(cols.size, robot.nv)
+    acc = InformationAccumulator(cols.size, robot.nv, blocks=False if blocks is None else blocks)
     for W, z in momentum_rows(
         robot, q, dq, tau, dt=dt, window_length=window_length, bandwidth=bandwidth
     ):

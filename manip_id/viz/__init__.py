@@ -8,7 +8,7 @@ identification. Shapes follow the package: ``t`` [s] of shape (N,), ``q`` of
 shape (N, nq) [rad or m], torques of shape (N, nv) [N m or N], parameter
 vectors of shape (p,) in :attr:`manip_id.robot.Robot.parameter_names` order.
 
-**Equivalent inertia ellipsoid** (:mod:`.meshcat_scene`). A body block
+**Equivalent inertia ellipsoid** (:mod:`.inertia_ellipsoid`). A body block
 ``[m, mcx, mcy, mcz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]`` (first moment and inertia
 about the joint origin) is drawn as the homogeneous solid ellipsoid with the
 same mass, centre of mass and rotational inertia::
@@ -45,15 +45,15 @@ from typing import Any
 #: first use (PEP 562): ``import manip_id.viz`` loads neither matplotlib nor meshcat.
 _WHERE: dict[str, tuple[str, str | None]] = {
     "figures": (".figures", None),
-    "EquivalentEllipsoid": (".meshcat_scene", "EquivalentEllipsoid"),
-    "LinkIdentifiability": (".meshcat_scene", "LinkIdentifiability"),
+    "EquivalentEllipsoid": (".inertia_ellipsoid", "EquivalentEllipsoid"),
+    "LinkIdentifiability": (".link_colors", "LinkIdentifiability"),
     "RobotScene": (".meshcat_scene", "RobotScene"),
-    "check_trajectory": (".meshcat_scene", "check_trajectory"),
-    "equivalent_ellipsoid": (".meshcat_scene", "equivalent_ellipsoid"),
-    "inertia_ellipsoids": (".meshcat_scene", "inertia_ellipsoids"),
-    "link_identifiability": (".meshcat_scene", "link_identifiability"),
-    "ReportExistsError": (".report", "ReportExistsError"),
-    "check_report_target": (".report", "check_report_target"),
+    "check_trajectory": (".trajectory_check", "check_trajectory"),
+    "equivalent_ellipsoid": (".inertia_ellipsoid", "equivalent_ellipsoid"),
+    "inertia_ellipsoids": (".inertia_ellipsoid", "inertia_ellipsoids"),
+    "link_identifiability": (".link_colors", "link_identifiability"),
+    "ReportExistsError": ("..errors", "ReportExistsError"),
+    "check_report_target": ("manip_id._io", "check_report_target"),
     "write_report": (".report", "write_report"),
 }
 

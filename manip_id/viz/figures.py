@@ -1,22 +1,19 @@
-"""Figures of identification and adaptive-control runs (matplotlib, Agg, PNG, no screen).
+"""Figures of identification runs (matplotlib, Agg, PNG, no screen).
 
 Every function takes plain arrays (and names and units), writes one PNG
 atomically (temporary file, then rename: :func:`manip_id._io.atomic_write`)
 and returns the :class:`matplotlib.figure.Figure` it drew, so that callers and
-tests can inspect its axes. Figures are built without ``pyplot`` (no global
-state, no display); the PNG has exactly ``figsize * dpi`` pixels.
-
-Long signals are thinned for drawing: at most :data:`MAX_POINTS` points per
-line, taken at an even stride (the arrays themselves are not copied).
+tests can inspect its axes (:mod:`.plotting`: the canvas they share).
 
 Shapes: ``t`` [s] (N,); per-joint signals (N, n) with one column per joint;
-parameter histories (K, p).
+parameter histories (K, p). The figures of a motion over time (parameter
+histories, tracking errors, trajectories against limits) are in
+:mod:`.history_figures` and re-exported here.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from pathlib import Path
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -25,108 +22,43 @@ from matplotlib.figure import Figure
 from .._checks import as_float_array, check_finite
 from .._io import atomic_write
 from ..errors import InputError
-from ..parameters import bounded_range
+from .history_figures import online_history, parameter_history, tracking_error, trajectory_limits
+from .plotting import (
+    DPI,
+    MAX_POINTS,
+    NOM,
+    PRED,
+    TRAIN,
+    VAL,
+    VPRED,
+    FigureOptions,
+    names_for,
+    new_figure,
+    no_mathtext,
+    png_size,
+    save,
+    series,
+    stride,
+    units_for,
+)
 
-#: Points drawn per line at most (longer signals are strided).
-MAX_POINTS = 4000
-#: Resolution of the PNG files [dots per inch].
-DPI = 100
-
-_TRAIN, _PRED, _VAL, _VPRED = "#7f7f7f", "#1f77b4", "#bcbd22", "#d62728"
-
-
-# ------------------------------------------------------------------ helpers
-def _stride(n: int) -> int:
-    return max(1, int(np.ceil(n / MAX_POINTS)))
-
-
-def _series(t, y, name_t: str, name_y: str, width: int | None = None):
-    """Validated ``t`` (N,) and ``y`` (N, n) (a 1-D ``y`` is one column)."""
-    t = as_float_array(t, name_t, ndim=1)
-    y = as_float_array(y, name_y, ndim=(1, 2))
-    if y.ndim == 1:
-        y = y[:, None]
-    if y.shape[0] != t.shape[0]:
-        raise InputError(f"{name_t}.shape={t.shape} but {name_y}.shape={y.shape}: one row per time")
-    if y.shape[0] < 1:
-        raise InputError(f"{name_y} has no samples ({name_y}.shape={y.shape})")
-    if width is not None and y.shape[1] != width:
-        raise InputError(f"{name_y}.shape={y.shape} but {width} columns were expected")
-    check_finite(t, name_t)
-    check_finite(y, name_y)
-    return t, y
-
-
-def _names(names: Sequence[str] | None, n: int, what: str, default: str) -> list[str]:
-    if names is None:
-        return [f"{default} {i + 1}" for i in range(n)]
-    names = [str(x) for x in names]
-    if len(names) != n:
-        raise InputError(f"{len(names)} {what} given for {n} columns")
-    return names
+__all__ = [
+    "DPI",
+    "FigureOptions",
+    "MAX_POINTS",
+    "online_history",
+    "parameter_history",
+    "per_file_parameters",
+    "png_size",
+    "residuals",
+    "singular_values",
+    "torque_comparison",
+    "torque_fit",
+    "tracking_error",
+    "trajectory_limits",
+]
 
 
-def _units(units, n: int) -> list[str]:
-    if isinstance(units, str):
-        return [units] * n
-    units = [str(u) for u in units]
-    if len(units) != n:
-        raise InputError(f"{len(units)} units given for {n} columns")
-    return units
-
-
-def _figure(
-    n_axes: int,
-    *,
-    cols: int = 1,
-    width: float = 10.0,
-    row_height: float = 1.9,
-    min_height: float = 3.5,
-):
-    """A Figure with ``n_axes`` subplots on a grid of ``cols`` columns; returns (fig, axes)."""
-    cols = max(1, min(cols, n_axes))
-    rows = int(np.ceil(n_axes / cols))
-    height = max(min_height, row_height * rows + 1.0)
-    fig = Figure(figsize=(width, height), dpi=DPI)
-    FigureCanvasAgg(fig)
-    axes = [fig.add_subplot(rows, cols, i + 1) for i in range(n_axes)]
-    return fig, axes
-
-
-def _no_mathtext(fig: Figure) -> None:
-    """Show every title, label, legend and annotation literally: user strings (joint and
-    file names, titles) never go through mathtext, so ``$`` is just a character, and bytes
-    of a file name that are not UTF-8 show as ``\udcff``. Tick labels (matplotlib's own,
-    e.g. ``10^{-2}`` on log axes) keep their formatting."""
-    from matplotlib.text import Text
-
-    texts: list[Text] = list(fig.texts)  # suptitle, supxlabel, supylabel and fig.text's
-    for ax in fig.axes:
-        # the axes' Text children: its three titles (center, left, right) and ax.texts
-        texts += [a for a in ax.get_children() if isinstance(a, Text)]
-        texts += [ax.xaxis.label, ax.yaxis.label]
-        legend = ax.get_legend()
-        if legend is not None:
-            texts += list(legend.get_texts())
-            texts.append(legend.get_title())
-    for legend in fig.legends:
-        texts += list(legend.get_texts())
-    for text in texts:
-        text.set_parse_math(False)
-        raw = text.get_text()
-        safe = raw.encode("utf-8", "backslashreplace").decode("utf-8")  # undecodable file names
-        if safe != raw:
-            text.set_text(safe)
-
-
-def _save(fig: Figure, path) -> Figure:
-    _no_mathtext(fig)
-    fig.tight_layout()
-    atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=DPI))
-    return fig
-
-
-# ------------------------------------------------------------------ figures
 def torque_fit(
     path,
     t,
@@ -146,24 +78,24 @@ def torque_fit(
     (``Y_b(q, dq, ddq) theta_b``) torques, shape (N, n) [units]. The validation
     triple, when given, has shapes (M,), (M, n), (M, n). One axes per joint.
     """
-    t, tau = _series(t, tau, "t", "tau")
+    t, tau = series(t, tau, "t", "tau")
     n = tau.shape[1]
-    _, tau_pred = _series(t, tau_pred, "t", "tau_pred", width=n)
+    _, tau_pred = series(t, tau_pred, "t", "tau_pred", width=n)
     val = _validation(t_validation, tau_validation, tau_validation_pred, n, "tau")
-    names, units = _names(joint_names, n, "joint names", "joint"), _units(units, n)
-    fig, axes = _figure(n, row_height=1.7)
+    names, units = names_for(joint_names, n, "joint names", "joint"), units_for(units, n)
+    fig, axes = new_figure(n, row_height=1.7)
     for j, ax in enumerate(axes):
-        k = _stride(len(t))
-        ax.plot(t[::k], tau[::k, j], color=_TRAIN, lw=2.4, alpha=0.45, label="measured (training)")
-        ax.plot(t[::k], tau_pred[::k, j], color=_PRED, lw=0.9, label="predicted (training)")
+        k = stride(len(t))
+        ax.plot(t[::k], tau[::k, j], color=TRAIN, lw=2.4, alpha=0.45, label="measured (training)")
+        ax.plot(t[::k], tau_pred[::k, j], color=PRED, lw=0.9, label="predicted (training)")
         if val is not None:
             tv, mv, pv = val
-            k = _stride(len(tv))
+            k = stride(len(tv))
             ax.plot(
-                tv[::k], mv[::k, j], color=_VAL, lw=2.4, alpha=0.6, label="measured (validation)"
+                tv[::k], mv[::k, j], color=VAL, lw=2.4, alpha=0.6, label="measured (validation)"
             )
             ax.plot(
-                tv[::k], pv[::k, j], color=_VPRED, lw=0.9, ls="--", label="predicted (validation)"
+                tv[::k], pv[::k, j], color=VPRED, lw=0.9, ls="--", label="predicted (validation)"
             )
         ax.set_ylabel(f"{names[j]}\n[{units[j]}]", fontsize=8)
         ax.tick_params(labelsize=7)
@@ -171,7 +103,7 @@ def torque_fit(
     axes[-1].set_xlabel("time [s]")
     axes[0].legend(loc="upper right", fontsize=7, ncol=4)
     fig.suptitle(title)
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def residuals(
@@ -190,26 +122,26 @@ def residuals(
     t: [s], shape (N,); residual: shape (N, n) [units]; the validation pair has
     shapes (M,), (M, n). One axes per joint.
     """
-    t, res = _series(t, residual, "t", "residual")
+    t, res = series(t, residual, "t", "residual")
     n = res.shape[1]
     val = None
     if (t_validation is None) != (residual_validation is None):
         raise InputError("give both t_validation and residual_validation, or neither")
     if t_validation is not None:
-        val = _series(
+        val = series(
             t_validation, residual_validation, "t_validation", "residual_validation", width=n
         )
-    names, units = _names(joint_names, n, "joint names", "joint"), _units(units, n)
-    fig, axes = _figure(n, row_height=1.5)
+    names, units = names_for(joint_names, n, "joint names", "joint"), units_for(units, n)
+    fig, axes = new_figure(n, row_height=1.5)
     for j, ax in enumerate(axes):
-        k = _stride(len(t))
+        k = stride(len(t))
         rms = float(np.sqrt(np.mean(res[:, j] ** 2)))
-        ax.plot(t[::k], res[::k, j], color=_PRED, lw=0.7, label=f"training, RMS {rms:.3g}")
+        ax.plot(t[::k], res[::k, j], color=PRED, lw=0.7, label=f"training, RMS {rms:.3g}")
         if val is not None:
             tv, rv = val
-            k = _stride(len(tv))
+            k = stride(len(tv))
             rms = float(np.sqrt(np.mean(rv[:, j] ** 2)))
-            ax.plot(tv[::k], rv[::k, j], color=_VPRED, lw=0.7, label=f"validation, RMS {rms:.3g}")
+            ax.plot(tv[::k], rv[::k, j], color=VPRED, lw=0.7, label=f"validation, RMS {rms:.3g}")
         ax.axhline(0.0, color="k", lw=0.5)
         ax.set_ylabel(f"{names[j]}\n[{units[j]}]", fontsize=8)
         ax.tick_params(labelsize=7)
@@ -217,7 +149,7 @@ def residuals(
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel("time [s]")
     fig.suptitle(title)
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def _validation(t, measured, predicted, n: int, what: str):
@@ -228,8 +160,8 @@ def _validation(t, measured, predicted, n: int, what: str):
         raise InputError(
             f"validation needs t_validation, {what}_validation and {what}_validation_pred together"
         )
-    t, measured = _series(t, measured, "t_validation", f"{what}_validation", width=n)
-    _, predicted = _series(t, predicted, "t_validation", f"{what}_validation_pred", width=n)
+    t, measured = series(t, measured, "t_validation", f"{what}_validation", width=n)
+    _, predicted = series(t, predicted, "t_validation", f"{what}_validation_pred", width=n)
     return t, measured, predicted
 
 
@@ -266,14 +198,14 @@ def singular_values(
     floor = min(tolerance, rel[rel > 0].min()) * 1e-2
     shown = np.maximum(rel, floor)
     idx = np.arange(1, s.size + 1)
-    fig, (ax,) = _figure(1, width=9.0, min_height=4.5)
-    ax.semilogy(idx[above], shown[above], "o", color=_PRED, ms=4, label=f"above threshold ({r})")
+    fig, (ax,) = new_figure(1, width=9.0, min_height=4.5)
+    ax.semilogy(idx[above], shown[above], "o", color=PRED, ms=4, label=f"above threshold ({r})")
     if (~above).any():
         ax.semilogy(
             idx[~above],
             shown[~above],
             "x",
-            color=_VPRED,
+            color=VPRED,
             ms=5,
             label=f"below threshold ({int((~above).sum())})",
         )
@@ -286,167 +218,7 @@ def singular_values(
     ax.grid(alpha=0.3, which="both")
     ax.legend(loc="lower left", fontsize=8)
     ax.set_title(title)
-    return _save(fig, path)
-
-
-def parameter_history(
-    path,
-    t,
-    theta_hat,
-    *,
-    names: Sequence[str],
-    units: Sequence[str] | None = None,
-    theta_true=None,
-    max_parameters: int = 12,
-    title: str = "parameter estimates",
-) -> Figure:
-    """Estimates over time of an online law or adaptive controller, with the truth when known.
-
-    t: [s], shape (K,); theta_hat: shape (K, p); names (and units): length p;
-    theta_true: shape (p,) or None. At most ``max_parameters`` parameters are
-    drawn, one axes each: those whose estimate moved the most relative to its
-    scale (``|theta_hat[-1] - theta_hat[0]| / max(|theta_hat|, |theta_true|)``),
-    ties broken by the initial error relative to the same scale.
-    """
-    t, th = _series(t, theta_hat, "t", "theta_hat")
-    p = th.shape[1]
-    names = _names(names, p, "parameter names", "parameter")
-    units = _units(units if units is not None else [""] * p, p)
-    true = None
-    if theta_true is not None:
-        true = as_float_array(theta_true, "theta_true", ndim=1)
-        if true.shape != (p,):
-            raise InputError(f"theta_true.shape={true.shape} but theta_hat.shape={th.shape}")
-        check_finite(true, "theta_true")
-    if int(max_parameters) < 1:
-        raise InputError(f"max_parameters must be >= 1, got {max_parameters}")
-    scale = np.abs(th).max(axis=0)
-    if true is not None:
-        scale = np.maximum(scale, np.abs(true))
-    scale = np.maximum(scale, 1e-12)
-    moved = np.abs(th[-1] - th[0]) / scale
-    error = np.zeros(p) if true is None else np.abs(th[0] - true) / scale
-    order = np.lexsort((-error, -moved))[: min(int(max_parameters), p)]
-    fig, axes = _figure(len(order), cols=3, width=12.0, row_height=2.2)
-    k = _stride(len(t))
-    for ax, i in zip(axes, order, strict=True):
-        ax.plot(t[::k], th[::k, i], color=_PRED, lw=1.0, label="estimate")
-        if true is not None:
-            ax.axhline(true[i], color=_VPRED, ls="--", lw=1.0, label="true")
-        unit = f" [{units[i]}]" if units[i] else ""
-        ax.set_title(names[i], fontsize=8)
-        ax.set_ylabel(f"value{unit}", fontsize=7)
-        ax.tick_params(labelsize=7)
-        ax.grid(alpha=0.3)
-    for ax in axes[-min(3, len(axes)) :]:
-        ax.set_xlabel("time [s]", fontsize=8)
-    axes[0].legend(fontsize=7)
-    shown = f"{len(order)} of {p} parameters" if len(order) < p else f"{p} parameters"
-    fig.suptitle(f"{title} ({shown})")
-    return _save(fig, path)
-
-
-def tracking_error(
-    path,
-    t,
-    error,
-    *,
-    joint_names: Sequence[str] | None = None,
-    units: str = "rad",
-    baseline=None,
-    labels: tuple[str, str] = ("adaptive", "fixed parameters"),
-    title: str = "tracking error",
-) -> Figure:
-    """Tracking error ``q - q_d`` per joint, and its norm against a baseline run.
-
-    t: [s], shape (K,); error: shape (K, n) [units]; baseline: the error of a
-    comparison run (e.g. fixed parameters) on the same times, shape (K, n), or
-    None. Two axes: per-joint error (top), ``|q - q_d|`` (bottom, log scale).
-    """
-    t, err = _series(t, error, "t", "error")
-    n = err.shape[1]
-    base = None
-    if baseline is not None:
-        _, base = _series(t, baseline, "t", "baseline", width=n)
-    names = _names(joint_names, n, "joint names", "joint")
-    fig, (top, bottom) = _figure(2, width=10.0, row_height=2.6)
-    k = _stride(len(t))
-    for j in range(n):
-        top.plot(t[::k], err[::k, j], lw=0.9, label=names[j])
-    top.set_ylabel(f"q - q_d [{units}]")
-    top.legend(fontsize=7, ncol=min(n, 7), loc="upper right")
-    top.set_title(f"per joint ({labels[0]})", fontsize=9)
-    top.grid(alpha=0.3)
-    floor = 1e-12
-    bottom.semilogy(
-        t[::k], np.maximum(np.linalg.norm(err, axis=1)[::k], floor), color=_PRED, label=labels[0]
-    )
-    if base is not None:
-        bottom.semilogy(
-            t[::k],
-            np.maximum(np.linalg.norm(base, axis=1)[::k], floor),
-            color=_VPRED,
-            ls="--",
-            label=labels[1],
-        )
-    bottom.set_ylabel(f"|q - q_d| [{units}]")
-    bottom.set_xlabel("time [s]")
-    bottom.legend(fontsize=8)
-    bottom.grid(alpha=0.3, which="both")
-    fig.suptitle(title)
-    return _save(fig, path)
-
-
-def trajectory_limits(
-    path,
-    t,
-    q,
-    *,
-    lower,
-    upper,
-    joint_names: Sequence[str] | None = None,
-    units: str | Sequence[str] = "rad",
-    title: str = "excitation trajectory",
-) -> Figure:
-    """Joint positions over time against their limits (shaded outside), one axes per joint.
-
-    t: [s], shape (N,); q: shape (N, n) [units]; lower, upper: shape (n,)
-    (infinite or absurdly wide limits, over 1e3, are not drawn).
-    """
-    t, q = _series(t, q, "t", "q")
-    n = q.shape[1]
-    lo = as_float_array(lower, "lower", ndim=1)
-    hi = as_float_array(upper, "upper", ndim=1)
-    if lo.shape != (n,) or hi.shape != (n,):
-        raise InputError(f"lower.shape={lo.shape}, upper.shape={hi.shape} but q.shape={q.shape}")
-    names, units = _names(joint_names, n, "joint names", "joint"), _units(units, n)
-    cols = 2 if n > 3 else 1
-    fig, axes = _figure(n, cols=cols, width=11.0 if cols == 2 else 9.0, row_height=1.9)
-    k = _stride(len(t))
-    for j, ax in enumerate(axes):
-        ax.plot(t[::k], q[::k, j], color=_PRED, lw=1.0, label="q")
-        bounded = bool(bounded_range(lo[j], hi[j]))
-        if bounded:
-            span = hi[j] - lo[j]
-            ymin = min(lo[j], q[:, j].min()) - 0.12 * span
-            ymax = max(hi[j], q[:, j].max()) + 0.12 * span
-            ax.axhspan(ymin, lo[j], color=_VPRED, alpha=0.15)
-            ax.axhspan(hi[j], ymax, color=_VPRED, alpha=0.15)
-            ax.axhline(lo[j], color=_VPRED, lw=1.0, label="limits")
-            ax.axhline(hi[j], color=_VPRED, lw=1.0)
-            ax.set_ylim(ymin, ymax)
-            used = (q[:, j].max() - q[:, j].min()) / span
-            ax.set_title(f"{names[j]}: {100 * used:.0f} % of the range used", fontsize=8)
-        else:
-            ax.set_title(f"{names[j]}: no finite limits", fontsize=8)
-        ax.set_ylabel(f"q [{units[j]}]", fontsize=8)
-        ax.tick_params(labelsize=7)
-        ax.grid(alpha=0.3)
-    for ax in axes[-cols:]:
-        ax.set_xlabel("time [s]", fontsize=8)
-    axes[0].legend(fontsize=7, loc="upper right")
-    fig.suptitle(title)
-    return _save(fig, path)
+    return save(fig, path)
 
 
 def per_file_parameters(
@@ -485,8 +257,8 @@ def per_file_parameters(
             f"estimates.shape={est.shape}, stds.shape={std.shape}, pooled.shape={ref.shape}: "
             "expected (F, p), (F, p) and (p,)"
         )
-    names = _names(names, p, "names", "theta")
-    files = _names(files, n_files, "file labels", "file")
+    names = names_for(names, p, "names", "theta")
+    files = names_for(files, n_files, "file labels", "file")
     check_finite(ref, "pooled")
     if int(max_parameters) < 1:
         raise InputError(f"max_parameters must be >= 1, got {max_parameters}")
@@ -495,7 +267,7 @@ def per_file_parameters(
     if shown.size == 0:
         raise InputError("every pooled parameter is zero: nothing to normalize by")
     scale = np.abs(ref[shown])
-    fig, (ax,) = _figure(1, width=max(8.0, 0.6 * shown.size + 3.0), min_height=4.5)
+    fig, (ax,) = new_figure(1, width=max(8.0, 0.6 * shown.size + 3.0), min_height=4.5)
     x = np.arange(shown.size, dtype=float)
     offsets = (np.arange(n_files) - (n_files - 1) / 2) * min(0.8 / max(n_files, 1), 0.15)
     for f in range(n_files):
@@ -518,19 +290,7 @@ def per_file_parameters(
     if n_files <= 12:
         ax.legend(loc="best", fontsize=7)
     ax.set_title(title)
-    return _save(fig, path)
-
-
-def png_size(path) -> tuple[int, int]:
-    """(width, height) [px] of a PNG file, read from its header; InputError if not a PNG."""
-    head = Path(path).read_bytes()[:24]
-    if len(head) < 24 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
-        raise InputError(f"{path} is not a PNG file")
-    return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
-
-
-# ------------------------------------------------------- the report's questions
-_NOM = "#2ca02c"
+    return save(fig, path)
 
 
 def _zoom_window(t: np.ndarray, errors: np.ndarray, span: float) -> tuple[float, float]:
@@ -553,13 +313,9 @@ def torque_comparison(
     tau_nominal,
     *,
     validation_start: float | None = None,
-    joint_names: Sequence[str] | None = None,
-    units: str | Sequence[str] = "N m",
-    zoom: float = 2.0,
     errors: Sequence[tuple[float | None, float | None]] | None = None,
     reference: str = "measured",
-    title: str = "torques",
-    bins: int = 60,
+    options: FigureOptions | None = None,
 ) -> Figure:
     """Per joint: measured, identified and nominal torques over time, a zoom, the residuals.
 
@@ -572,13 +328,17 @@ def torque_comparison(
 
     t: [s], shape (N,); tau, tau_pred, tau_nominal: shape (N, n) [units];
     errors: per joint ``(identified, nominal)`` relative errors shown in the
-    titles (fractions); reference: what "measured" is (e.g. "filtered at 3 Hz").
+    titles (fractions); reference: what "measured" is (e.g. "filtered at 3 Hz");
+    options: title, joint names, units, the zoom's span [s] and the histograms' bins.
     """
-    t, tau = _series(t, tau, "t", "tau")
+    o = options or FigureOptions()
+    joint_names, units, zoom, bins = o.joint_names, o.units, o.zoom, o.bins
+    title = o.title or "torques"
+    t, tau = series(t, tau, "t", "tau")
     n = tau.shape[1]
-    _, pred = _series(t, tau_pred, "t", "tau_pred", width=n)
-    _, nom = _series(t, tau_nominal, "t", "tau_nominal", width=n)
-    names, units = _names(joint_names, n, "joint names", "joint"), _units(units, n)
+    _, pred = series(t, tau_pred, "t", "tau_pred", width=n)
+    _, nom = series(t, tau_nominal, "t", "tau_nominal", width=n)
+    names, units = names_for(joint_names, n, "joint names", "joint"), units_for(units, n)
     if errors is not None and len(errors) != n:
         raise InputError(f"{len(errors)} error pairs given for {n} joints")
     if not (np.isfinite(zoom) and zoom > 0):
@@ -588,72 +348,21 @@ def torque_comparison(
     grid = fig.add_gridspec(n, 3, width_ratios=(3.2, 1.6, 1.2))
     step = np.diff(t)
     gap = np.flatnonzero(step > 5.0 * np.median(step)) if len(t) > 2 else np.array([], int)
-
-    def broken(x, y):  # NaN at the gaps, so lines do not bridge left-out samples
-        if gap.size == 0 or len(x) < 3:
-            return x, y
-        dx = np.diff(x)
-        at = np.flatnonzero(dx > 5.0 * np.median(dx)) + 1
-        return np.insert(x, at, np.nan), np.insert(y, at, np.nan)
-
-    k = _stride(len(t))
     in_val = t >= validation_start if validation_start is not None else np.zeros(len(t), bool)
     pick = in_val if in_val.any() else np.ones(len(t), bool)
     for j in range(n):
+        curves = (tau[:, j], nom[:, j], pred[:, j])
         ax = fig.add_subplot(grid[j, 0])
-        for y, color, lw, label in (
-            (tau[:, j], _TRAIN, 2.2, f"measured ({reference})"),
-            (nom[:, j], _NOM, 0.9, "nominal model (URDF)"),
-            (pred[:, j], _PRED, 0.9, "identified model"),
-        ):
-            ax.plot(
-                *broken(t[::k], y[::k]),
-                color=color,
-                lw=lw,
-                alpha=0.55 if lw > 2 else 1.0,
-                label=label,
-            )
-        if validation_start is not None and in_val.any():
-            ax.axvspan(
-                validation_start, t[-1], color=_VAL, alpha=0.12, lw=0, label="validation part"
-            )
-        for m, g in enumerate(gap):
-            ax.axvspan(
-                t[g],
-                t[g + 1],
-                color="k",
-                alpha=0.07,
-                lw=0,
-                label="left out (trimmed filter edges, windows)" if m == 0 else None,
-            )
-        head = names[j]
-        if errors is not None:
-            e_id, e_nom = errors[j]
-            head += "   error: identified " + ("n/a" if e_id is None else f"{100 * e_id:.2f} %")
-            head += ", nominal " + ("n/a" if e_nom is None else f"{100 * e_nom:.1f} %")
-        ax.set_title(head, fontsize=8, loc="left")
+        _record_panel(ax, t, curves, gap, validation_start if in_val.any() else None, reference)
+        ax.set_title(
+            _joint_title(names[j], None if errors is None else errors[j]), fontsize=8, loc="left"
+        )
         ax.set_ylabel(f"[{units[j]}]", fontsize=8)
-        ax.tick_params(labelsize=7)
-        ax.grid(alpha=0.3)
         a, b = _zoom_window(t[pick], (pred - nom)[pick, j], zoom)
         ax.axvspan(a, b, fill=False, ec="k", lw=0.6, ls=":")
-        zx = fig.add_subplot(grid[j, 1])
-        sel = (t >= a) & (t <= b)
-        zx.plot(t[sel], tau[sel, j], color=_TRAIN, lw=2.2, alpha=0.55)
-        zx.plot(t[sel], nom[sel, j], color=_NOM, lw=1.0)
-        zx.plot(t[sel], pred[sel, j], color=_PRED, lw=1.0)
-        zx.set_title(f"zoom {a:.1f}-{b:.1f} s", fontsize=8)
-        zx.tick_params(labelsize=7)
-        zx.grid(alpha=0.3)
+        _zoom_panel(fig.add_subplot(grid[j, 1]), t, curves, a, b)
         hx = fig.add_subplot(grid[j, 2])
-        r_id, r_nom = tau[:, j] - pred[:, j], tau[:, j] - nom[:, j]
-        lim = float(np.percentile(np.abs(np.concatenate([r_id, r_nom])), 99.5)) or 1.0
-        edges = np.linspace(-lim, lim, int(bins) + 1).tolist()
-        hx.hist(r_nom, bins=edges, color=_NOM, alpha=0.5, label="nominal")
-        hx.hist(r_id, bins=edges, color=_PRED, alpha=0.7, label="identified")
-        hx.set_title(f"residual [{units[j]}]", fontsize=8)
-        hx.tick_params(labelsize=7)
-        hx.set_yticks([])
+        _residual_panel(hx, curves, units[j], bins)
         if j == 0:
             handles, labels = ax.get_legend_handles_labels()
             hx.legend(fontsize=7)
@@ -668,100 +377,82 @@ def torque_comparison(
         bbox_to_anchor=(0.5, 1.0 - 0.42 / height),
     )
     fig.suptitle(title, y=1.0 - 0.08 / height)
-    _no_mathtext(fig)
+    no_mathtext(fig)
     fig.tight_layout(rect=(0, 0, 1, 1.0 - 0.75 / height))
     atomic_write(path, lambda tmp: fig.savefig(tmp, format="png", dpi=DPI))
     return fig
 
 
-def online_history(
-    path,
-    t,
-    theta_hat,
-    *,
-    names: Sequence[str],
-    reference,
-    reference_label: str = "final estimate",
-    prediction_error=None,
-    torque_rms: float | None = None,
-    error_label: str = "prediction error [N m]",
-    max_lines: int = 12,
-    title: str = "online estimate",
-) -> Figure:
-    """Convergence of an online law: base-parameter relative errors and prediction error.
+def _broken(x: np.ndarray, y: np.ndarray, gaps: bool):
+    """NaN at the gaps, so lines do not bridge left-out samples."""
+    if not gaps or len(x) < 3:
+        return x, y
+    dx = np.diff(x)
+    at = np.flatnonzero(dx > 5.0 * np.median(dx)) + 1
+    return np.insert(x, at, np.nan), np.insert(y, at, np.nan)
 
-    Top: ``|theta_hat_i(t) - ref_i| / max(|ref_i|, 1e-3 max|ref|)`` [-] on a log scale for
-    the ``max_lines`` parameters that end farthest from ``reference`` (plus the median
-    over all of them, black); the last 10 % of the time is shaded, where a converged
-    estimate no longer moves. Bottom: the prediction-error norm ``|eps(t)|`` [N m]
-    (its moving median), relative to ``torque_rms`` when given (``error_label`` names it
-    otherwise, e.g. an error that is already relative).
 
-    t: [s], shape (K,); theta_hat: shape (K, r); reference: shape (r,) (the truth of
-    a simulation, or the batch / final estimate); prediction_error: shape (K,).
-    """
-    t, th = _series(t, theta_hat, "t", "theta_hat")
-    r = th.shape[1]
-    names = _names(names, r, "parameter names", "parameter")
-    ref = as_float_array(reference, "reference", ndim=1)
-    if ref.shape != (r,):
-        raise InputError(f"reference.shape={ref.shape} but theta_hat.shape={th.shape}")
-    check_finite(ref, "reference")
-    scale = np.maximum(np.abs(ref), 1e-3 * max(float(np.abs(ref).max()), 1e-300))
-    rel = np.abs(th - ref) / scale  # (K, r)
-    order = np.argsort(-rel[-1])[: min(int(max_lines), r)]
-    n_axes = 2 if prediction_error is not None else 1
-    fig, axes = _figure(n_axes, width=11.0, row_height=3.0)
-    ax = axes[0]
-    k = _stride(len(t))
-    floor = 1e-6
-    for i in order:
-        ax.semilogy(t[::k], np.maximum(rel[::k, i], floor), lw=0.8, label=names[i])
-    ax.semilogy(
-        t[::k],
-        np.maximum(np.median(rel[::k], axis=1), floor),
-        color="k",
-        lw=1.8,
-        label=f"median of {r}",
+def _record_panel(ax, t, curves, gap, validation_start, reference: str) -> None:
+    """The whole record: measured, nominal and identified ``curves``, validation shaded
+    from ``validation_start`` [s] (None: none), the left-out samples (``gap``) greyed."""
+    k = stride(len(t))
+    styles = (
+        (TRAIN, 2.2, f"measured ({reference})"),
+        (NOM, 0.9, "nominal model (URDF)"),
+        (PRED, 0.9, "identified model"),
     )
-    tail = t[0] + 0.9 * (t[-1] - t[0])
-    for a in axes:
-        a.axvspan(tail, t[-1], color=_VAL, alpha=0.15, lw=0)
-        a.grid(alpha=0.3, which="both")
-        a.tick_params(labelsize=7)
-    ax.set_ylabel(f"relative error vs {reference_label} [-]", fontsize=8)
-    ax.legend(fontsize=6, ncol=1, loc="upper left", bbox_to_anchor=(1.01, 1.0))
-    ax.set_title(
-        f"base-parameter estimates: the {len(order)} farthest from the {reference_label} at "
-        "the end, and the median (last 10 % of the data shaded)",
-        fontsize=9,
-    )
-    if prediction_error is not None:
-        e = as_float_array(prediction_error, "prediction_error", ndim=1)
-        if e.shape != t.shape:
-            raise InputError(f"prediction_error.shape={e.shape} but t.shape={t.shape}")
-        ok = np.isfinite(e)
-        w = max(len(t) // 100, 1)
-        ee = e[ok]
-        smooth = np.array([np.median(ee[max(0, i - w) : i + 1]) for i in range(len(ee))])
-        label = error_label
-        if torque_rms:
-            ee, smooth = ee / torque_rms, smooth / torque_rms
-            label = "prediction error relative to the torque RMS [-]"
-        bx = axes[1]
-        bx.semilogy(
-            t[ok][::k],
-            np.maximum(ee[::k], 1e-12),
-            color=_PRED,
-            lw=0.4,
-            alpha=0.5,
-            label="|eps| per sample",
+    for y, (color, lw, label) in zip(curves, styles, strict=True):
+        ax.plot(
+            *_broken(t[::k], y[::k], gap.size > 0),
+            color=color,
+            lw=lw,
+            alpha=0.55 if lw > 2 else 1.0,
+            label=label,
         )
-        bx.semilogy(
-            t[ok][::k], np.maximum(smooth[::k], 1e-12), color=_VPRED, lw=1.4, label="moving median"
+    if validation_start is not None:
+        ax.axvspan(validation_start, t[-1], color=VAL, alpha=0.12, lw=0, label="validation part")
+    for m, g in enumerate(gap):
+        ax.axvspan(
+            t[g],
+            t[g + 1],
+            color="k",
+            alpha=0.07,
+            lw=0,
+            label="left out (trimmed filter edges, windows)" if m == 0 else None,
         )
-        bx.set_ylabel(label, fontsize=8)
-        bx.legend(fontsize=7)
-    axes[-1].set_xlabel("time [s]")
-    fig.suptitle(title)
-    return _save(fig, path)
+    ax.tick_params(labelsize=7)
+    ax.grid(alpha=0.3)
+
+
+def _joint_title(name: str, errors) -> str:
+    """``name   error: identified x %, nominal y %`` (errors: a pair of fractions or None)."""
+    if errors is None:
+        return name
+    e_id, e_nom = errors
+    head = name + "   error: identified " + ("n/a" if e_id is None else f"{100 * e_id:.2f} %")
+    return head + ", nominal " + ("n/a" if e_nom is None else f"{100 * e_nom:.1f} %")
+
+
+def _zoom_panel(zx, t, curves, a: float, b: float) -> None:
+    """The window [a, b] [s] of the measured, nominal and identified ``curves``."""
+    tau, nom, pred = curves
+    sel = (t >= a) & (t <= b)
+    zx.plot(t[sel], tau[sel], color=TRAIN, lw=2.2, alpha=0.55)
+    zx.plot(t[sel], nom[sel], color=NOM, lw=1.0)
+    zx.plot(t[sel], pred[sel], color=PRED, lw=1.0)
+    zx.set_title(f"zoom {a:.1f}-{b:.1f} s", fontsize=8)
+    zx.tick_params(labelsize=7)
+    zx.grid(alpha=0.3)
+
+
+def _residual_panel(hx, curves, unit: str, bins: int) -> None:
+    """Histograms of the residuals ``tau - tau_nominal`` and ``tau - tau_pred`` [unit]."""
+    tau, nom, pred = curves
+    r_id, r_nom = tau - pred, tau - nom
+    lim = float(np.percentile(np.abs(np.concatenate([r_id, r_nom])), 99.5)) or 1.0
+    edges = np.linspace(-lim, lim, int(bins) + 1).tolist()
+    hx.hist(r_nom, bins=edges, color=NOM, alpha=0.5, label="nominal")
+    hx.hist(r_id, bins=edges, color=PRED, alpha=0.7, label="identified")
+    hx.set_title(f"residual [{unit}]", fontsize=8)
+    hx.tick_params(labelsize=7)
+    hx.set_yticks([])

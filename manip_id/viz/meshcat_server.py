@@ -11,6 +11,9 @@ pid elsewhere); :meth:`MeshcatServer.stop` ends it explicitly.
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
+import io
 import ipaddress
 import os
 import signal
@@ -19,7 +22,11 @@ import subprocess
 import sys
 import threading
 import time
+import webbrowser
 from dataclasses import dataclass, field
+from typing import Any
+
+import umsgpack
 
 from ..errors import InputError, ManipIdError
 
@@ -111,12 +118,64 @@ def start_server(host: str = LOOPBACK, timeout: float = 30.0) -> MeshcatServer:
     return MeshcatServer(proc, urls["zmq_url"], urls["web_url"], host)
 
 
+def webbrowser_open(url: str) -> None:  # pragma: no cover - interactive
+    webbrowser.open(url, new=2)
+
+
+@dataclass
+class LiveView:
+    """A scene replayed into a running meshcat server (see :meth:`RobotScene.serve`)."""
+
+    visualizer: Any  # meshcat.Visualizer
+    server: MeshcatServer
+
+    @property
+    def url(self) -> str:
+        """The viewer's address, on the server's host."""
+        return self.server.web_url
+
+    def stop(self) -> None:
+        """Close the connection and stop the server process."""
+        try:
+            self.visualizer.window.zmq_socket.close(linger=0)
+        finally:
+            self.server.stop()
+
+    def __enter__(self) -> LiveView:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+
+def replay(commands, host: str = LOOPBACK, open_browser: bool = False) -> LiveView:
+    """Start a server on ``host`` (:func:`start_server`) and replay the packed meshcat
+    ``commands`` into it; returns the :class:`LiveView` (stop it when done)."""
+    import meshcat  # optional heavy library: only for a live view
+
+    server = start_server(host)
+    try:
+        with contextlib.redirect_stdout(io.StringIO()):  # meshcat prints its URL
+            vis = meshcat.Visualizer(zmq_url=server.zmq_url)
+        for packed in commands:
+            data = umsgpack.unpackb(packed)
+            vis.window.zmq_socket.send_multipart(
+                [data["type"].encode(), data.get("path", "").encode(), packed]
+            )
+            vis.window.zmq_socket.recv()
+    except BaseException:
+        server.stop()
+        raise
+    view = LiveView(vis, server)
+    if open_browser:
+        webbrowser_open(view.url)
+    return view
+
+
 def _die_with_parent(parent: int) -> None:
     """End this process when ``parent`` ends (PR_SET_PDEATHSIG, plus a watchdog)."""
     if sys.platform.startswith("linux"):
         try:
-            import ctypes
-
             libc = ctypes.CDLL(None, use_errno=True)
             libc.prctl(1, signal.SIGTERM, 0, 0, 0)  # PR_SET_PDEATHSIG = 1
         except (OSError, AttributeError):  # pragma: no cover
@@ -136,7 +195,7 @@ def _die_with_parent(parent: int) -> None:
 def _serve(http_host: str, parent: int) -> None:  # pragma: no cover - runs in the child
     _die_with_parent(parent)
     signal.signal(signal.SIGTERM, lambda *_: os._exit(0))
-    from meshcat.servers.zmqserver import ZMQWebSocketBridge
+    from meshcat.servers.zmqserver import ZMQWebSocketBridge  # meshcat: heavy, the child only
 
     class Bridge(ZMQWebSocketBridge):
         """The ZeroMQ socket on 127.0.0.1 (self.host); the web server on ``http_host``."""

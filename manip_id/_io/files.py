@@ -1,15 +1,12 @@
-"""File output shared by the package: checked before the work, published together at the end.
-
-Three mechanisms, used by every command and by the API writers:
+"""Files written by the package: checked before the work, written to a temporary, renamed.
 
 - **Checks before the work** (:func:`check_output_file`, :func:`check_output_dir`): the
   parent folder exists and takes a new file (proved by creating the temporary there), a
   file output is not a folder nor a special file, no output is one of the inputs (same
   resolved path, or same device and inode: hard and symbolic links), and a folder output
   is neither the current directory nor an ancestor of it or of an input.
-- **Publication together** (:class:`OutputSet`): every output is written to a temporary
-  next to its target; :meth:`OutputSet.publish` renames them all into place once all are
-  complete; :meth:`OutputSet.discard` (also on any exception) removes them.
+- **Staged files** (:class:`StagedFile`, :func:`atomic_write`): every output is written to
+  a temporary next to its target and renamed into place once complete.
 - **A cleanup registry** (:func:`register_temporary`, :func:`remove_temporaries`): every
   temporary file or folder the package creates is registered until it is renamed into
   place, so that an interrupted command (SIGINT, SIGTERM) removes them all.
@@ -17,7 +14,6 @@ Three mechanisms, used by every command and by the API writers:
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import shutil
@@ -26,11 +22,10 @@ import tempfile
 import threading
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Protocol
 
 import numpy as np
 
-from .errors import OutputError
+from ..errors import OutputError
 
 # ------------------------------------------------------------ cleanup registry
 _TEMPORARIES: dict[str, int] = {}  # path -> pid of the process that created it
@@ -89,20 +84,20 @@ def _stat(path: Path) -> os.stat_result | None:
         return None
 
 
-def _same_file(a: Path, b: Path) -> bool:
+def same_file(a: Path, b: Path) -> bool:
     if a.resolve() == b.resolve():
         return True
     sa, sb = _stat(a), _stat(b)
     return sa is not None and sb is not None and (sa.st_dev, sa.st_ino) == (sb.st_dev, sb.st_ino)
 
 
-def _is_ancestor(folder: Path, path: Path) -> bool:
+def is_ancestor(folder: Path, path: Path) -> bool:
     """True if ``folder`` is ``path`` or contains it (resolved paths)."""
     f, p = folder.resolve(), path.resolve()
     return f == p or f in p.parents
 
 
-def _as_path(path, what: str) -> Path:
+def as_path(path, what: str) -> Path:
     if isinstance(path, bytes):
         raise OutputError(f"{what} must be a path given as text, got bytes")
     try:
@@ -128,9 +123,9 @@ def _check_not_input(p: Path, inputs: Iterable, what: str) -> None:
         if item is None:
             continue
         src = Path(item)
-        if _same_file(p, src):
+        if same_file(p, src):
             raise OutputError(f"{what} {p} is one of the inputs ({src}); choose another path")
-        if src.is_dir() and _is_ancestor(src, p):
+        if src.is_dir() and is_ancestor(src, p):
             # an input folder (a log of several files) owns every file in it
             raise OutputError(
                 f"{what} {p} is inside the input folder {src}; choose a path outside it"
@@ -159,7 +154,7 @@ def check_output_file(path, *, inputs: Iterable = (), what: str = "output") -> P
 
 def _check_output_file(path, *, inputs: Iterable = (), what: str = "output") -> Path:
     """The checks of :func:`check_output_file` (operating-system errors pass up)."""
-    p = _as_path(path, what)
+    p = as_path(path, what)
     st = _stat(p)
     if st is not None:
         if stat.S_ISDIR(st.st_mode):
@@ -183,10 +178,10 @@ def check_output_dir(path, *, inputs: Iterable = (), what: str = "output folder"
 
 def _check_output_dir(path, *, inputs: Iterable = (), what: str = "output folder") -> Path:
     """The checks of :func:`check_output_dir` (operating-system errors pass up)."""
-    p = _as_path(path, what)
+    p = as_path(path, what)
     if p.exists() and not p.is_dir():
         raise OutputError(f"{what} {p} exists and is not a folder")
-    if _is_ancestor(p, Path.cwd()):
+    if is_ancestor(p, Path.cwd()):
         raise OutputError(
             f"{what} {p} is the current directory or one of its ancestors; give a new folder"
         )
@@ -195,18 +190,9 @@ def _check_output_dir(path, *, inputs: Iterable = (), what: str = "output folder
         if item is None:
             continue
         src = Path(item)
-        if _is_ancestor(p, src) or _same_file(p, src):
+        if is_ancestor(p, src) or same_file(p, src):
             raise OutputError(f"{what} {p} holds the input {src}; give another folder")
     return p
-
-
-# -------------------------------------------------------------- publishing
-class Pending(Protocol):
-    """An output staged in a temporary: published by renaming, or discarded."""
-
-    def publish(self) -> None: ...
-
-    def discard(self) -> None: ...
 
 
 class StagedFile:
@@ -259,123 +245,6 @@ class StagedFile:
         unregister_temporary(self.tmp)
 
 
-class OutputSet:
-    """The outputs of one command: checked at once, published together, or none at all.
-
-    >>> with OutputSet(inputs=[data_path]) as out:     # doctest: +SKIP
-    ...     js = out.file(json_path, "--json")          # checked now, before the work
-    ...     rep = out.report(report_dir, "--report", force=False)
-    ...     ...                                          # the work
-    ...     out.write_json(json_path, result)
-    ...     rep.write(title=..., ...)
-    ...     out.publish()                                # every output appears now
-
-    Leaving the ``with`` block without :meth:`publish` (an exception, a signal)
-    discards every temporary.
-    """
-
-    def __init__(self, inputs: Iterable = ()):
-        self.inputs = [Path(p) for p in inputs if p is not None]
-        self._items: list[Pending] = []
-        self._files: dict[Path, StagedFile] = {}
-        self.published = False
-
-    def add_inputs(self, inputs: Iterable) -> None:
-        """More input paths to protect (checked by the outputs reserved afterwards)."""
-        self.inputs += [Path(p) for p in inputs if p is not None]
-
-    def _check_distinct(self, path: Path, what: str) -> None:
-        for other in self._files:
-            if _same_file(other, path) or _is_ancestor(other, path) or _is_ancestor(path, other):
-                raise OutputError(f"{what} {path} collides with another output ({other})")
-
-    def file(self, path, what: str = "output") -> Path:
-        """Check and reserve a file output (its temporary is created now)."""
-        p = _as_path(path, what)
-        self._check_distinct(p, what)
-        staged = StagedFile(p, inputs=self.inputs, what=what)
-        self._files[p] = staged
-        self._items.append(staged)
-        return p
-
-    def report(self, directory, what: str = "--report", force: bool = False):
-        """Check and claim a report folder (see :func:`manip_id.viz.report.claim_report`)."""
-        from .viz.report import claim_report
-
-        p = _as_path(directory, what)
-        self._check_distinct(p, what)
-        claim = claim_report(p, force=force, inputs=self.inputs, what=what)
-        self._files[p] = claim  # type: ignore[assignment]
-        self._items.append(claim)
-        return claim
-
-    def add(self, pending: Pending) -> None:
-        """Publish or discard ``pending`` with the others."""
-        self._items.append(pending)
-
-    def _staged(self, path) -> StagedFile:
-        staged = self._files.get(Path(path))
-        if not isinstance(staged, StagedFile):
-            raise OutputError(f"output {path} was not reserved before the work")
-        return staged
-
-    def write(self, path, write: Callable[[Path], object]) -> None:
-        self._staged(path).write(write)
-
-    def write_text(self, path, text: str) -> None:
-        self._staged(path).write_text(text)
-
-    def write_json(self, path, obj) -> None:
-        self._staged(path).write_text(json_text(obj))
-
-    def publish(self) -> None:
-        """Rename every complete output into place (in the order they were reserved).
-
-        SIGINT, SIGTERM and SIGHUP are held back during the renames (they take effect
-        right after), so an interrupt never publishes half of the outputs.
-        """
-        with _signals_held():
-            try:
-                for item in self._items:
-                    item.publish()
-            except BaseException:
-                self.discard()
-                raise
-            self.published = True
-            self._items = []
-
-    def discard(self) -> None:
-        """Remove every temporary not yet published."""
-        for item in self._items:
-            try:
-                item.discard()
-            except OSError:  # pragma: no cover - best effort
-                pass
-        self._items = []
-
-    def __enter__(self) -> OutputSet:
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        self.discard()
-
-
-@contextlib.contextmanager
-def _signals_held():
-    """Block SIGINT, SIGTERM and SIGHUP in this thread meanwhile (POSIX; else nothing)."""
-    import signal
-
-    held = {getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n)}
-    if not hasattr(signal, "pthread_sigmask"):  # pragma: no cover - not POSIX
-        yield
-        return
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, held)
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
-
-
 # ---------------------------------------------------------- atomic writers
 def atomic_write(path, write: Callable[[Path], object]) -> Path:
     """Call ``write(tmp)`` on a temporary file next to ``path``, then rename it to ``path``.
@@ -385,7 +254,7 @@ def atomic_write(path, write: Callable[[Path], object]) -> Path:
     folders are created. A folder or a special file at ``path`` is an
     :class:`~manip_id.errors.OutputError`, as is any operating-system error.
     """
-    path = _as_path(path, "output")
+    path = as_path(path, "output")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

@@ -1,0 +1,136 @@
+"""The delay of a file's torque stream behind its motion stream, by cross-validation."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..regressor import regressor
+
+#: Rows of the motion stream the delay search fits (evenly spaced over the file).
+LAG_ROWS = 12000
+#: Rows per block of the two interleaved halves of the delay search's cross-validation.
+LAG_BLOCK = 200
+
+
+def stream_lags(robot, proc, eps: float, max_lag: int, gains: np.ndarray):
+    """``(common, gain, own)``: the lag [samples] of the whole torque stream, the share of
+    the held-out error it removes against lag 0, and per joint the lag of its own torque
+    (the others at the common lag); lags are None when not determined.
+
+    The lag is the one whose torques (each divided by its scale at lag 0, ``gains``) one
+    rigid-body model predicts best on held-out rows.
+    The model is the robot's full regressor with parameters shared by all joints, plus
+    per joint ``dq_j``, ``sgn_eps(dq_j)`` and 1 (friction, offset). The rows are cut into
+    two interleaved halves of :data:`LAG_BLOCK` rows; the parameters fitted on one half
+    for lags ``L`` (``beta = G^+ b``, ``G = sum_j Y_j^T Y_j`` fixed by the motion stream,
+    ``b = sum_j Y_j^T tau_j[k + L_j]``) predict the other, and the two prediction errors
+    add up (two-fold cross-validation: an in-sample residual lets the lag fit the model's
+    own errors). The common lag is swept for all joints at once, on a grid of ``g =
+    max_lag // COARSE`` samples and then sample by sample around the best, and refined to
+    a sub-sample by the parabola through the neighbours of the best lag. Each joint's own
+    lag (informative only) is swept on the coarse grid with the others held at the common
+    lag, refined the same way.
+    """
+    n, nv = proc.n_samples, robot.nv
+    if max_lag < 1:
+        return None, 0.0, [None] * nv
+    k = np.arange(max_lag, n - max_lag)
+    k = k[:: max(1, k.size // LAG_ROWS)]
+    Y = _columns(robot, proc, k, eps)
+    half = (np.arange(k.size) // LAG_BLOCK) % 2 == 0
+    tau = proc.tau / gains  # currents and flipped signs undone: one model fits all joints
+    g = max(1, max_lag // COARSE)
+    coarse = np.arange(-(max_lag // g), max_lag // g + 1) * g  # holds lag 0
+    masks = (half, ~half)
+    grams = [gram(Y[m]) for m in masks]
+    parts = [lag_sums(Y[m], tau, k[m], coarse, gm) for m, gm in zip(masks, grams, strict=True)]
+    curve = _both(parts, None, None)  # the held-out SSE of all joints
+    zero = float(curve[coarse.size // 2])
+    best = int(coarse[int(np.argmin(curve))])
+    fine = np.arange(max(best - g, -max_lag), min(best + g, max_lag) + 1)
+    fine_parts = [lag_sums(Y[m], tau, k[m], fine, gm) for m, gm in zip(masks, grams, strict=True)]
+    fine_curve = _both(fine_parts, None, None)
+    v = vertex(fine_curve)
+    common = None if v is None else float(fine[0] + v)
+    gain = float((zero - fine_curve.min()) / zero) if zero > 0 else 0.0
+    at = np.full(nv, int(np.argmin(np.abs(coarse - (0 if common is None else common)))))
+    own = []
+    for j in range(nv):
+        w = vertex(_both(parts, j, at))
+        own.append(None if w is None else float(coarse[0] + w * g))
+    return common, gain, own
+
+
+#: Lags on each side of zero in the coarse sweep of the delay search.
+COARSE = 20
+
+
+def _columns(robot, proc, k: np.ndarray, eps: float) -> np.ndarray:
+    """The regressor rows ``k`` with per-joint friction and offset columns, each column
+    scaled to unit norm (zero columns dropped), shape (N', nv, c)."""
+    nv = robot.nv
+    Y = regressor(robot, proc.q[k], proc.dq[k], proc.ddq[k])  # (N', nv, p)
+    F = np.zeros((k.size, nv, 3 * nv))
+    for j in range(nv):
+        dq = proc.dq[k, j]
+        F[:, j, 3 * j : 3 * j + 3] = np.column_stack(
+            [dq, np.where(np.abs(dq) >= eps, np.sign(dq), 0.0), np.ones(k.size)]
+        )
+    Y = np.concatenate([Y, F], axis=2)
+    norm = np.sqrt(np.einsum("njc,njc->c", Y, Y))
+    return np.ascontiguousarray(Y[:, :, norm > 0] / norm[norm > 0])
+
+
+def _both(parts, j: int | None, at: np.ndarray | None) -> np.ndarray:
+    """The two-fold cross-validated prediction error (see :func:`held_out`)."""
+    return held_out(parts[0], parts[1], j, at) + held_out(parts[1], parts[0], j, at)
+
+
+def vertex(curve: np.ndarray) -> float | None:
+    """Index of the minimum of ``curve``, refined by the parabola through its neighbours;
+    None when the curve is flat."""
+    c = curve
+    if c.max() - c.min() <= 1e-9 * max(abs(c.max()), 1e-300):
+        return None
+    i = int(np.argmin(c))
+    frac = 0.0
+    if 0 < i < c.size - 1:
+        den = c[i - 1] - 2 * c[i] + c[i + 1]
+        if den > 0:
+            frac = float(np.clip(0.5 * (c[i - 1] - c[i + 1]) / den, -0.5, 0.5))
+    return i + frac
+
+
+def gram(Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(G, G^+)`` with ``G = sum_j Y_j^T Y_j`` of regressor rows Y, shape (N, nv, c)."""
+    flat = Y.reshape(-1, Y.shape[2])
+    G = flat.T @ flat
+    return G, np.linalg.pinv(G, rcond=1e-10, hermitian=True)
+
+
+def lag_sums(Y: np.ndarray, tau: np.ndarray, k: np.ndarray, sweep: np.ndarray, grams):
+    """``(G, G^+, B, yy)`` of rows ``k`` (``grams``: their :func:`gram`):
+    ``B[j, :, i] = Y_j^T tau_j[k + sweep_i]``, ``yy[j, i] = ||tau_j[k + sweep_i]||^2``."""
+    nv = Y.shape[1]
+    idx = k[:, None] + sweep[None, :]
+    B = np.stack([np.ascontiguousarray(Y[:, j, :].T) @ tau[idx, j] for j in range(nv)])
+    yy = np.stack([np.sum(tau[idx, j] ** 2, axis=0) for j in range(nv)])
+    return grams[0], grams[1], B, yy
+
+
+def held_out(train, valid, j: int | None, at: np.ndarray | None) -> np.ndarray:
+    """Prediction error on ``valid`` of the fit on ``train`` over the lags: of joint ``j``
+    (the other joints at the indices ``at``), or of all joints together (``j`` None); up to
+    a constant, shape (lags,)."""
+    _, Gp, Bt, yyt = train
+    Gv, _, Bv, yyv = valid
+    if j is None or at is None:
+        bt, bv, yy = Bt.sum(axis=0), Bv.sum(axis=0), yyv.sum(axis=0)
+    else:
+        nv = Bt.shape[0]
+        others = np.flatnonzero(np.arange(nv) != j)
+        bt = Bt[others, :, at[others]].sum(axis=0)[:, None] + Bt[j]  # (c, lags)
+        bv = Bv[others, :, at[others]].sum(axis=0)[:, None] + Bv[j]
+        yy = yyv[j]
+    beta = Gp @ bt
+    return yy - 2 * np.einsum("cl,cl->l", bv, beta) + np.einsum("cl,cl->l", beta, Gv @ beta)

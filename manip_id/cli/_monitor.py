@@ -1,0 +1,257 @@
+"""``manip-id monitor`` once it runs (the options are declared in :mod:`.monitor`)."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import numpy as np
+
+from .._io import OutputSet
+from .._native import native_stderr_captured
+from ..errors import InputError
+from ._common import (
+    reserve_outputs,
+)
+from ._runtime import (
+    robot_from_args,
+)
+
+
+def _floats(text, what: str, *, none: bool = False):
+    if text is None:
+        return None
+    if none and str(text).strip().lower() == "none":
+        return "none"
+    try:
+        vals = [float(x) for x in str(text).split(",") if x.strip()]
+    except ValueError:
+        raise InputError(f"{what} expects numbers separated by commas, got {text!r}") from None
+    if not vals:
+        raise InputError(f"{what} expects at least one number, got {text!r}")
+    return vals[0] if len(vals) == 1 else np.asarray(vals)
+
+
+def _columns(items: list[str]):
+    """``["t=stamp", "q=pos*", "tau=3,4,5"]`` -> a column map, as ``identify --column`` reads
+    it (a copy of its private helper: the cli package has no public one yet)."""
+    if not items:
+        return None
+    out: dict = {}
+    for spec in items:
+        field, sep, cols = spec.partition("=")
+        if not sep or not field.strip() or not cols.strip():
+            raise InputError(f"--column expects FIELD=COLUMNS, e.g. q='pos*', got {spec!r}")
+        names = [c.strip() for c in cols.split(",") if c.strip()]
+        vals: list[int | str] = [int(c) if c.lstrip("-").isdigit() else c for c in names]
+        field = field.strip()
+        out[field] = vals if field == "joint_names" or len(vals) > 1 else vals[0]
+    return out
+
+
+def _reserve(args):
+    """The outputs, checked against every input (the --calibrate and --model files too)."""
+    if getattr(args, "outputs", None) is None:
+        args.outputs = OutputSet()
+    files = [*(args.calibrate or []), *args.data, args.model, args.thresholds]
+    args.outputs.add_inputs(
+        f if os.path.exists(f) or "@" not in f else f.rsplit("@", 1)[0] for f in files if f
+    )
+    return reserve_outputs(args)
+
+
+def _robot(args):
+    if not args.identified:
+        return robot_from_args(args)
+    from ..robot import load_robot  # robot loading waits for the command (--help stays light)
+
+    with native_stderr_captured("urdfdom"):
+        return load_robot(args.robot, identified=True, package_dirs=args.package_dir)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..monitor import (  # the package loads with the command, not with --help
+        DEFAULT_FILTER_GAIN,
+        DEFAULT_GAIN,
+        CollisionMonitor,
+        ReadOptions,
+        as_logs,
+        calibrate_thresholds,
+        load_model,
+        load_thresholds,
+        model_from_robot,
+    )
+
+    t_start = time.perf_counter()
+    gain = _floats(args.gain, "--gain")
+    fgain = _floats(args.filter_gain, "--filter-gain", none=True)
+    if args.thresholds is not None and (gain is not None or fgain is not None):
+        raise InputError("--thresholds carry the observer gains they hold for: no --gain then")
+    gain = DEFAULT_GAIN if gain is None else gain
+    fgain = DEFAULT_FILTER_GAIN if fgain is None else (None if fgain == "none" else fgain)
+    scale = _floats(args.torque_scale, "--torque-scale")
+    options = ReadOptions(
+        torque_scale=None if scale is None else tuple(np.atleast_1d(scale).tolist()),
+        drop_bad_rows=args.drop_bad_rows,
+        window=args.window,
+        columns=_columns(args.column),
+        topic=args.topic,
+    )
+    outputs = _reserve(args)
+    robot = _robot(args)
+    if args.model is None and not args.identified:
+        raise InputError(
+            "give the identified model: --model RESULT.json, or an exported URDF as ROBOT "
+            "with --identified"
+        )
+    model = load_model(robot, args.model) if args.model else model_from_robot(robot)
+    if args.thresholds is not None:
+        th = load_thresholds(args.thresholds)
+        gain, fgain = th.gain, th.filter_gain
+    else:
+        calib = as_logs(robot, args.calibrate, options)
+        th = calibrate_thresholds(
+            robot, model, calib, false_alarm=args.false_alarm, gain=gain, filter_gain=fgain
+        )
+    logs = as_logs(robot, args.data, options)
+    mon = CollisionMonitor(robot, model, th, gain=gain, filter_gain=fgain)
+    runs = [mon.run(lg.t, lg.q, lg.dq, lg.tau, file=lg.file) for lg in logs]
+    detections = [d for run in runs for d in run.detections()]
+    doc = {
+        "robot": robot.name,
+        "model": model.source,
+        "thresholds": th.to_dict(),
+        "detections": [d.to_dict() for d in detections],
+        "files": [
+            {
+                "file": run.file,
+                "n_samples": int(run.t.size),
+                "alarm_rate": run.alarm_rate,
+                "alarm_rate_per_joint": dict(
+                    zip(run.dof_names, run.alarm_rate_per_joint.tolist(), strict=True)
+                ),
+                "n_detections": len(run.detections()),
+                "max_residual": dict(
+                    zip(run.dof_names, np.abs(run.residual).max(axis=0).tolist(), strict=True)
+                ),
+            }
+            for run in runs
+        ],
+        "timings": {"total": time.perf_counter() - t_start},
+    }
+    print(_summary(th, runs, detections))
+    if args.json is not None:
+        outputs.write_json(args.json, doc)
+    if args.report is not None:
+        _write_report(robot, th, runs, doc, args)
+    outputs.publish()
+    if args.json is not None:
+        print(f"wrote {args.json}")
+    if args.report is not None:
+        print(f"wrote the report to {args.report}/index.html")
+    return 0
+
+
+def _summary(th, runs, detections) -> str:
+    lines = [
+        f"bounds at a false-alarm rate {th.false_alarm:g} per sample ({th.n_samples} "
+        f"calibration samples, measured rate there {th.rate:.3g}):",
+        "  "
+        + ", ".join(
+            f"{n} {b:.3g} N m" for n, b in zip(th.dof_names, th.bound.tolist(), strict=True)
+        ),
+    ]
+    for run in runs:
+        n = sum(1 for d in detections if d.file == run.file)
+        lines.append(f"{run.file}: {n} detection(s), alarm rate {run.alarm_rate:.3g}")
+    for d in detections:
+        lines.append(
+            f"  {d.start:.4f} .. {d.stop:.4f} s: {', '.join(d.joints)} "
+            f"(peak {d.peak:.3g} N m on {d.peak_joint})"
+        )
+    return "\n".join(lines)
+
+
+def residual_figure(path, run, title: str) -> None:
+    """Residuals (estimated external torques) of one run with their bounds, one axis per joint."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # optional heavy library
+    from matplotlib.figure import Figure
+    from matplotlib.text import Text  # (matplotlib: optional heavy library)
+
+    nv = run.residual.shape[1]
+    fig = Figure(figsize=(10.0, 1.8 * nv + 1.0), dpi=100)
+    FigureCanvasAgg(fig)
+    stride = max(1, run.t.size // 4000)
+    for j in range(nv):
+        ax = fig.add_subplot(nv, 1, j + 1)
+        ax.plot(run.t[::stride], run.residual[::stride, j], lw=0.8, label="residual r")
+        b = run.bounds[j]
+        if np.isfinite(b):
+            ax.axhline(b, color="r", lw=0.8, ls="--", label="bound")
+            ax.axhline(-b, color="r", lw=0.8, ls="--")
+        flags = run.detected[:, j]
+        if flags.any():
+            ax.fill_between(
+                run.t, 0, 1, where=flags, color="orange", alpha=0.3,
+                transform=ax.get_xaxis_transform(), label="detected",
+            )  # fmt: skip
+        ax.set_ylabel(f"{run.dof_names[j]}\n[N m]", fontsize=7)
+        if j == 0:
+            ax.set_title(title, fontsize=9)
+            ax.legend(fontsize=7, loc="upper right")
+    fig.axes[-1].set_xlabel("t [s]")
+    for text in fig.findobj(Text):
+        text.set_parse_math(False)  # file names are shown literally
+    fig.tight_layout()
+    fig.savefig(path, format="png")
+
+
+def _write_report(robot, th, runs, doc, args):
+    from ..viz.report import write_report  # the report machinery, for --report only
+
+    figs = {
+        f"residuals_{i}": (
+            lambda path, run=run: residual_figure(
+                path, run, f"estimated external torque, {run.file}"
+            )
+        )
+        for i, run in enumerate(runs)
+    }
+    rows = [
+        {
+            "joint": j["name"],
+            "bound [N m]": f"{j['bound']:.4g}",
+            "noise part": f"{j['noise_bound']:.4g}",
+            "model part": f"{j['model_bound']:.4g}",
+            "method": j["method"],
+            "calibration rate": f"{j['rate']:.3g}",
+        }
+        for j in th.to_dict()["joints"]
+    ]
+    det_rows = [
+        {
+            "file": d["file"],
+            "start [s]": f"{d['start']:.4f}",
+            "stop [s]": f"{d['stop']:.4f}",
+            "joints": ", ".join(d["joints"]),
+            "peak [N m]": f"{d['peak']:.4g}",
+        }
+        for d in doc["detections"]
+    ]
+    return write_report(
+        args.report_claim,
+        title=f"manip-id monitor {robot.name}",
+        summary={
+            "robot": robot.name,
+            "model": doc["model"],
+            "false-alarm rate": th.false_alarm,
+            "calibration samples": th.n_samples,
+            "detections": len(doc["detections"]),
+        },
+        parameter_table=rows,
+        figures=figs,
+        json_result=doc,
+        tables={"detections": det_rows} if det_rows else None,
+        force=args.force,
+    )

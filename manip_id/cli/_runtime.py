@@ -1,0 +1,203 @@
+"""What the commands share once they run: the robot, the library's option objects, the
+result printed, the outputs staged and published.
+
+The command modules declare their options with :mod:`._common` (light: ``manip-id
+--help`` builds every parser from it); this module loads Pinocchio and the
+identification, and is imported by the modules that run the commands.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from .._native import native_stderr_captured
+from ..audit import AuditOptions, audit_files
+from ..datasets.stream import torque_scale_vector
+from ..errors import InputError, did_you_mean
+from ..execution import parse_scheduler
+from ..export import export_texts, mjcf_text, sidecar_path
+from ..export.sidecar import identification_provenance
+from ..identification import ConsistentOptions, PreprocessOptions, result_text
+from ..robot import Robot, load_robot
+from ..viz.identify_report import write_identify_report
+from ..viz.report_document import ReportOptions
+from ._common import exports_wanted, finish, parse_floats, print_warnings, profile_option
+
+
+def robot_from_args(args: argparse.Namespace) -> Robot:
+    """Load the robot named by :func:`add_robot_arguments` options."""
+
+    joints = [j for j in args.joints.split(",") if j] if getattr(args, "joints", None) else None
+    with native_stderr_captured("urdfdom"):  # its C++ messages become one warning line
+        return load_robot(
+            args.robot,
+            armature=args.armature,
+            friction=args.friction,
+            spring=args.spring,
+            active_joints=joints,
+            package_dirs=args.package_dir,
+            profile=profile_option(args),
+        )
+
+
+def check_frame(robot, frame: str) -> None:
+    """A misspelt ``--frame``: an error naming the closest frame (and the frames on moving
+    joints); other frames are left to the library's own checks."""
+    model = robot.model
+    if model.existFrame(frame):
+        return
+    hint = did_you_mean(frame, [f.name for f in model.frames])
+    if hint:
+        moving = [f.name for f in model.frames if int(f.parentJoint) > 0]
+        raise InputError(
+            f"robot {robot.name!r} has no frame {frame!r}{hint}; frames on moving joints: "
+            + ", ".join(moving)
+        )
+
+
+def check_scheduler(args: argparse.Namespace) -> None:
+    """Refuse a malformed ``--scheduler`` before any work (nothing of Dask imported)."""
+    if getattr(args, "scheduler", None) is not None:
+        parse_scheduler(args.scheduler)
+
+
+def preprocess_options(args: argparse.Namespace, nv: int, profile_scale=None):
+    """The :class:`~manip_id.identification.PreprocessOptions` of identify's data-file options.
+
+    ``--torque-scale`` (one gain or one per joint), else the profile's [data] torque_scale.
+    """
+
+    scale = None
+    if args.torque_scale is not None:
+        scale = torque_scale_vector(
+            parse_floats(args.torque_scale, "--torque-scale"), nv, "--torque-scale"
+        )
+    elif profile_scale is not None:  # the robot profile's [data] torque_scale
+        scale = torque_scale_vector(profile_scale, nv, "the profile's torque_scale")
+    return PreprocessOptions(
+        cutoff=args.cutoff,
+        order=args.order,
+        trim=args.trim,
+        decimate=args.decimate,
+        torque_scale=None if scale is None else tuple(scale.tolist()),
+        velocity_deadband=args.velocity_deadband,
+        drop_bad_rows=args.drop_bad_rows,
+    )
+
+
+def consistent_kwargs(args: argparse.Namespace) -> dict:
+    """The physically consistent estimation options of identify, as keyword arguments."""
+
+    return dict(
+        consistent=ConsistentOptions(
+            enabled=args.consistent,
+            solver=args.solver,
+            prior=args.prior,
+            prior_weight=args.prior_weight,
+            bounds=args.bound_options.bounds,
+            mass_range=args.bound_options.mass_range,
+            total_mass=args.bound_options.total_mass,
+        )
+    )
+
+
+def stage_export(robot, result, args: argparse.Namespace, outputs) -> None:
+    """Stage the exported URDF / MJCF and their sidecars (published with the other outputs)."""
+    prov = identification_provenance("manip-id identify", vars(args), result)
+    theta = result.standard.values
+    if getattr(args, "export_urdf", None):
+        texts = export_texts(robot, theta, args.export_urdf, provenance=prov)
+        outputs.write_text(args.export_urdf, texts.urdf)
+        outputs.write_json(sidecar_path(args.export_urdf), texts.sidecar)
+    if getattr(args, "export_mjcf", None):
+        mj = mjcf_text(robot, theta, args.export_mjcf, provenance=prov)
+        outputs.write_text(args.export_mjcf, mj.xml)
+        outputs.write_json(sidecar_path(args.export_mjcf), mj.sidecar)
+
+
+def before_fit(robot, specs, options, args, *, currents: bool = False):
+    """The pre-fit audit of ``specs``: printed, and the specs to fit.
+
+    ``options``: the run's :class:`~manip_id.identification.PreprocessOptions` (torque
+    scale, bad rows, deadband, cut-off). ``currents``: the torque columns are expected
+    to hold currents (``drive-gains``): no torque-scale finding. With
+    ``--trim-standstill`` the specs come back with the windows the audit keeps.
+    Returns ``(specs, audit)``.
+    """
+    audit = audit_files(robot, specs, _audit_options(options, currents))
+    print(audit.table())
+    if getattr(args, "trim_standstill", False):
+        specs = audit.trimmed()
+        kept = [s.label for s in specs]
+        print("--trim-standstill: " + ", ".join(kept))
+    return specs, audit
+
+
+def _audit_options(options, currents: bool):
+    return AuditOptions(
+        torque_scale=options.torque_scale,
+        drop_bad_rows=options.drop_bad_rows,
+        standstill=options.velocity_deadband,
+        cutoff=options.cutoff,
+        currents=currents,
+    )
+
+
+def report_options(args: argparse.Namespace, source: str | None = None):
+    """The :class:`~manip_id.viz.report_document.ReportOptions` of identify's options."""
+
+    if source is None:
+        source = "simulated" if args.simulate else ", ".join(map(str, args.data))
+    return ReportOptions(
+        source=source,
+        simulated=bool(args.simulate),
+        chunk=args.chunk,
+        scene_assets=getattr(args, "scene_assets", "inline"),
+        force=args.force,
+    )
+
+
+def print_result(report: dict) -> None:
+    """The run's result on stdout: the one text rendering of its document
+    (:func:`manip_id.identification.result_text`; the warnings go to stderr,
+    :func:`print_warnings`), then a simulation's base-parameter error against its truth."""
+
+    print(result_text({**report, "warnings": []}))
+    if report.get("parameter_error") is not None:
+        worst = report.get("parameter_error_in_std")
+        print(
+            f"base parameter error vs truth: {100 * report['parameter_error']:.3f} %"
+            + ("" if worst is None else f" (max {worst:.2f} std)")
+        )
+
+
+def note_exports(args: argparse.Namespace, report: dict) -> None:
+    """Record in the document the files ``--export-urdf`` / ``--export-mjcf`` write (the
+    report links them)."""
+    if not exports_wanted(args):
+        return
+    report["exported"] = {}
+    if getattr(args, "export_urdf", None):
+        report["exported"]["URDF"] = str(args.export_urdf)
+        report["exported"]["sidecar (armature, offsets)"] = str(sidecar_path(args.export_urdf))
+    if getattr(args, "export_mjcf", None):
+        report["exported"]["MJCF"] = str(args.export_mjcf)
+        report["exported"]["MJCF sidecar"] = str(sidecar_path(args.export_mjcf))
+
+
+def write_outputs(args: argparse.Namespace, outputs, robot, result, report: dict, samples) -> int:
+    """Print the warnings of ``report``, stage ``--json``, ``--report`` (``samples``: what it
+    draws) and ``--export-urdf``, then publish them all together (:func:`finish`); the exit
+    status (0)."""
+    print_warnings(report)
+    note_exports(args, report)
+    if args.json:
+        outputs.write_json(args.json, report)
+    path = None
+    if args.report is not None:
+        path = write_identify_report(
+            args.report_claim, robot, result, report, samples, options=report_options(args)
+        )
+    if exports_wanted(args):
+        stage_export(robot, result, args, outputs)
+    return finish(args, outputs, path)

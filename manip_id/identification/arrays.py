@@ -1,0 +1,406 @@
+"""In-memory entry points: arrays, blocks and datasets -> a problem -> :func:`solve`.
+
+For N samples ``(q, dq, ddq, tau)`` (or blocks of them) the base-regressor rows are
+accumulated (:mod:`~manip_id.identification.problem`: serially, in forked parts, or
+as Dask tasks), or one pass of an online law runs over them in order; the energy and
+momentum models (:mod:`manip_id.models`) replace ``ddq`` by integrals of the data.
+Every path ends in the same :func:`~manip_id.identification.solve`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from ..errors import InputError
+from ..estimators import GradientEstimator, RLSEstimator
+from ..estimators.consistent.terms import missing_term_warnings
+from ..execution import open_backend, portable_robot, reduce_tree
+from ..identifiability import BaseParameters
+from ..models import accumulate_energy, accumulate_momentum
+from ..regressor import check_states
+from ..robot import Robot
+from .options import (
+    ONLINE,
+    ConsistentOptions,
+    ModelOptions,
+    OnlineOptions,
+    RankOptions,
+    RunOptions,
+    UncertaintyOptions,
+    check_least_squares,
+    check_method,
+)
+from .problem import (
+    OnlineRun,
+    Problem,
+    accumulate_arrays,
+    accumulate_blocks,
+    accumulate_forked,
+    accumulate_online,
+    check_equations,
+    check_samples,
+    check_tau,
+    resolve_base,
+    validation_blocks,
+)
+from .result import IdentificationResult
+from .solve import solve
+from .tasks import PartSums, blocks_sums
+
+
+def online_estimator(method: str, r: int, options: OnlineOptions, n: int):
+    """The online law of ``method`` over ``n`` samples, and a text naming it."""
+    options.check_method(method)
+    theta0 = np.zeros(r) if options.theta0 is None else options.theta0
+    record = max(1, n // 1000) if options.record_every is None else options.record_every
+    common = dict(bounds=options.bounds, record_every=record, t0=options.t0)
+    if method == "rls":
+        P0 = 1e6 if options.P0 is None else options.P0
+        forgetting = 1.0 if options.forgetting is None else options.forgetting
+        est = RLSEstimator(
+            theta0, P0, forgetting=forgetting, p_min=options.p_min, p_max=options.p_max, **common
+        )
+        what = f"RLS (P0={P0 if np.ndim(P0) == 0 else 'given'}, forgetting {est.forgetting:g})"
+    else:
+        gamma = 1.0 if options.gamma is None else options.gamma
+        normalized = True if options.normalized is None else options.normalized
+        est = GradientEstimator(theta0, gamma, normalized=normalized, **common)
+        what = ("normalized " if normalized else "") + "gradient law"
+    return est, what
+
+
+def identify(
+    robot: Robot,
+    q,
+    dq,
+    ddq,
+    tau,
+    *,
+    method: str = "ols",
+    validation: tuple | None = None,
+    base: BaseParameters | None = None,
+    consistent: ConsistentOptions | bool | dict | None = None,
+    online: OnlineOptions | dict | None = None,
+    model: ModelOptions | str | dict | None = None,
+    rank: RankOptions | dict | None = None,
+    run: RunOptions | dict | None = None,
+    uncertainty: UncertaintyOptions | str | dict | None = None,
+) -> IdentificationResult:
+    """Identify the base parameters of ``robot`` from N samples, streamed.
+
+    Parameters
+    ----------
+    robot : Robot
+        The robot (its joint terms decide the columns).
+    q, dq, ddq, tau : array_like
+        Positions [rad or m], shape (N, nq); velocities [rad/s], accelerations
+        [rad/s^2] and torques [N m], shape (N, nv). ``ddq`` may be None for the
+        energy and momentum models.
+    method : str
+        "ols" (ordinary least squares), "wls" (weighted by per-joint noise variances
+        from the OLS residuals), "rls" (one pass of recursive least squares),
+        "gradient" (one pass of the normalized gradient law); see :data:`METHODS`.
+    validation : tuple or None
+        ``(q, dq, ddq, tau)`` for the validation error.
+    base : BaseParameters or None
+        Base parametrization; default the structural one of ``analyze(robot)``.
+    consistent : ConsistentOptions, bool or None
+        Physically consistent standard parameters ("ols"/"wls"); True: the defaults.
+    online : OnlineOptions or dict or None
+        Options of the online law (an unknown key is an :class:`InputError`).
+    model : ModelOptions, str or None
+        "dynamic" (default, needs ``ddq``), "energy" or "momentum", with the window
+        length and the sample time ``dt`` [s] (default 1).
+    rank : RankOptions or None
+        ``minimum_norm=True`` solves rank-deficient data instead of raising.
+    run : RunOptions or None
+        ``chunk``, ``workers`` (forked contiguous parts for "ols"/"wls", equal to the
+        serial result to round-off) and ``progress(done, total)``.
+    uncertainty : UncertaintyOptions, str, dict or None
+        The covariance behind ``std``: "auto" (default: autocorrelation-consistent,
+        from per-block sums of the accumulation, when the data give at least 16
+        blocks; else white), "white" (``sigma^2 (Y^T Y)^-1``) or "hac"; see
+        :mod:`manip_id.estimators.uncertainty`. ``std_white`` keeps the white one.
+
+    Returns
+    -------
+    IdentificationResult
+    """
+    t_start = time.perf_counter()
+    timings: dict[str, float] = {}
+    check_method(method)
+    opts = _Opts(consistent, model, rank, run, uncertainty)
+    online_options = OnlineOptions.from_value(online)
+    if opts.model.name != "dynamic":
+        return _identify_acceleration_free(robot, (q, dq, tau), method, validation, base, opts)
+    q, dq, ddq, tau = check_samples(robot, q, dq, ddq, tau)
+    n = q.shape[0]
+    blocks = validation_blocks(robot, validation)
+    timings["checks"] = time.perf_counter() - t_start
+    base = resolve_base(robot, base, timings)
+    ind, r = base.independent, base.n_base
+    check_equations(n * robot.nv, r, f"{n} samples")
+    run_o = opts.run
+    dt = 1.0 if online_options.dt is None else float(online_options.dt)
+    online_run = None
+    if method in ONLINE:
+        est, what = online_estimator(method, r, online_options, n)
+        acc, times = accumulate_online(
+            robot, q, dq, ddq, tau, ind, est, dt, run=run_o, uncertainty=opts.uncertainty
+        )
+        online_run = OnlineRun(est, what)
+    else:
+        acc, times = accumulate_arrays(
+            robot, q, dq, ddq, tau, ind, run=run_o, uncertainty=opts.uncertainty
+        )
+    timings.update(times)
+    problem = Problem(
+        robot,
+        base,
+        acc,
+        n,
+        timings,
+        t_start,
+        validation_blocks=blocks,
+        online=online_run,
+        chunk=run_o.chunk,
+    )
+    result = _solve(problem, method, opts)
+    # an implausible consistent fit: would a joint term the model lacks lower the error?
+    result.warnings.extend(
+        missing_term_warnings(robot, result.standard, [(q, dq, ddq, tau)], blocks, ind, run_o.chunk)
+    )
+    return result
+
+
+class _Opts:
+    """The option objects of one call, each from its value (None: the defaults)."""
+
+    def __init__(self, consistent, model, rank, run, uncertainty=None):
+        self.consistent = ConsistentOptions.from_value(consistent)
+        self.model = ModelOptions.from_value(model)
+        self.rank = RankOptions.from_value(rank)
+        self.run = RunOptions.from_value(run)
+        self.uncertainty = UncertaintyOptions.from_value(uncertainty)
+
+
+def _solve(problem: Problem, method: str, opts: _Opts) -> IdentificationResult:
+    """:func:`solve` with the call's options."""
+    return solve(
+        problem,
+        method,
+        consistent=opts.consistent,
+        minimum_norm=opts.rank.minimum_norm,
+        uncertainty=opts.uncertainty,
+    )
+
+
+def _identify_acceleration_free(
+    robot: Robot, data: tuple, method: str, validation, base, opts: _Opts
+) -> IdentificationResult:
+    """The energy / momentum path of :func:`identify`: their rows, the usual solve."""
+    t_start = time.perf_counter()
+    timings: dict[str, float] = {}
+    model = opts.model
+    check_least_squares(method, f"the {model.name} model is solved by")
+    q, dq, tau = data
+    batched, (q, dq) = check_states(robot, q=q, dq=dq)
+    if not batched:
+        raise InputError(f"identification takes N samples (2-D arrays), got q.shape={q.shape}")
+    tau = check_tau(robot, tau, q.shape[0])
+    blocks = validation_blocks(robot, validation)
+    timings["checks"] = time.perf_counter() - t_start
+    base = resolve_base(robot, base, timings)
+    t0 = time.perf_counter()
+    accumulate = accumulate_energy if model.name == "energy" else accumulate_momentum
+    dt = 1.0 if model.dt is None else float(model.dt)
+    nv_rows = 1 if model.name == "energy" else robot.nv
+    rows_unc = replace(opts.uncertainty, block_length=1)  # rows span windows: start at one
+    acc = accumulate(
+        robot,
+        q,
+        dq,
+        tau,
+        dt=dt,
+        window_length=model.window_length,
+        columns=base.independent,
+        blocks=rows_unc.blocks(base.n_base, nv_rows),
+    )
+    timings["accumulate"] = time.perf_counter() - t0
+    if acc.n_rows <= base.n_base:
+        raise InputError(
+            f"{acc.n} {model.name}-model rows ({acc.n_rows} equations) for {base.n_base} base "
+            "parameters: give more samples or a shorter window_length"
+        )
+    problem = Problem(
+        robot,
+        base,
+        acc,
+        q.shape[0],
+        timings,
+        t_start,
+        validation_blocks=blocks,
+        model=model.name,
+        chunk=opts.run.chunk,
+    )
+    return _solve(problem, method, opts)
+
+
+def _check_parts(parts: list) -> None:
+    for k, part in enumerate(parts):
+        if not (isinstance(part, tuple) and len(part) == 2 and callable(part[0])):
+            raise InputError(
+                f"with workers > 1 or a scheduler, source must be parts (func, args); "
+                f"part {k} is {type(part).__name__}"
+            )
+
+
+def accumulate_parts(
+    robot: Robot,
+    parts,
+    columns,
+    run: RunOptions,
+    split_every: int = 8,
+    *,
+    uncertainty: UncertaintyOptions | None = None,
+):
+    """Parts ``(func, args)`` (``func(*args)`` yielding blocks ``(q, dq, ddq, tau)``), each one
+    task on the run's back-end (:func:`manip_id.execution.open_backend`), the sums added in a
+    tree. ``func`` must be importable on Dask workers and ``args`` picklable. Each part is a
+    record of its own for the per-block sums of ``uncertainty``. Returns the sums and the
+    task times summed."""
+    parts = list(parts)
+    if not parts:
+        raise InputError("no parts to accumulate")
+    unc = UncertaintyOptions.from_value(uncertainty)
+    if run.scheduler is None:
+        r, nv = len(columns), robot.nv
+        records = [unc.blocks(r, nv, stream=k) for k in range(len(parts))]
+        return accumulate_forked(
+            robot, parts, columns, run.chunk, run.workers, run.progress, records=records
+        )
+    light = portable_robot(robot)
+    with open_backend(scheduler=run.scheduler) as backend:
+        leaves = backend.map(
+            blocks_sums,
+            [
+                (light, func, tuple(args), columns, run.chunk, unc, k)
+                for k, (func, args) in enumerate(parts)
+            ],
+        )
+        (total,) = backend.gather([reduce_tree(backend, leaves, split_every)])
+    assert isinstance(total, PartSums)
+    return total.acc, dict(total.timings)
+
+
+def identify_chunks(
+    robot: Robot,
+    source,
+    *,
+    method: str = "ols",
+    validation=None,
+    base: BaseParameters | None = None,
+    consistent: ConsistentOptions | bool | dict | None = None,
+    rank: RankOptions | dict | None = None,
+    run: RunOptions | dict | None = None,
+    uncertainty: UncertaintyOptions | str | dict | None = None,
+) -> IdentificationResult:
+    """Least-squares identification from data that arrive in blocks (files, logs, streams).
+
+    ``source`` is either an iterable of blocks ``(q, dq, ddq, tau)`` (shapes
+    (n, nq), (n, nv), (n, nv), (n, nv); processed in one process), or, with
+    ``run.workers > 1`` or ``run.scheduler``, a sequence of parts ``(func, args)`` where
+    ``func(*args)`` yields such blocks: each part is accumulated in its own forked
+    process (or Dask task) and the accumulators merge by addition. Memory stays
+    O(chunk nv p + nv r^2) per process however many samples flow through.
+    ``validation`` is an iterable of blocks too. Methods: "ols" and "wls" (the online
+    laws need the samples in order: use :func:`identify`). Options as :func:`identify`;
+    for ``uncertainty`` the blocks of one iterable follow each other, each part is a
+    record of its own.
+    """
+    t_start = time.perf_counter()
+    timings: dict[str, float] = {}
+    check_least_squares(method, "identify_chunks solves")
+    opts = _Opts(consistent, None, rank, run, uncertainty)
+    base = resolve_base(robot, base, timings)
+    ind = base.independent
+    t0 = time.perf_counter()
+    run_o = opts.run
+    if run_o.workers > 1 or run_o.scheduler is not None:
+        parts = list(source)
+        _check_parts(parts)
+        acc, times = accumulate_parts(robot, parts, ind, run_o, uncertainty=opts.uncertainty)
+        timings["accumulate_wall"] = time.perf_counter() - t0
+    else:
+        record = opts.uncertainty.blocks(len(ind), robot.nv)
+        acc, times = accumulate_blocks(
+            robot, source, ind, run_o.chunk, progress=run_o.progress, record=record
+        )
+    timings.update(times)
+    check_equations(acc.n * robot.nv, base.n_base, f"{acc.n} samples")
+    problem = Problem(
+        robot,
+        base,
+        acc,
+        acc.n,
+        timings,
+        t_start,
+        validation_blocks=validation,
+        chunk=run_o.chunk,
+    )
+    return _solve(problem, method, opts)
+
+
+def identify_dataset(robot: Robot, dataset, *, ddq=None, validation=None, **kwargs):
+    """:func:`identify` on a :class:`~manip_id.datasets.Dataset` (``ddq`` from the dataset
+    unless given); ``validation`` may be another Dataset. Other keywords as :func:`identify`.
+    With the energy or momentum model no ddq is needed and the model's ``dt`` defaults to
+    the dataset's mean sample time."""
+    if validation is not None and hasattr(validation, "tau"):
+        if validation.ddq is None:
+            raise InputError("the validation dataset has no accelerations (ddq)")
+        validation = (validation.q, validation.dq, validation.ddq, validation.tau)
+    model = ModelOptions.from_value(kwargs.pop("model", None))
+    if model.name != "dynamic":
+        if model.dt is None:
+            model = ModelOptions(
+                model.name, model.window_length, float(np.mean(np.diff(dataset.t)))
+            )
+        return identify(
+            robot,
+            dataset.q,
+            dataset.dq,
+            None,
+            dataset.tau,
+            validation=validation,
+            model=model,
+            **kwargs,
+        )
+    acc_arr = dataset.ddq if ddq is None else ddq
+    if acc_arr is None:
+        raise InputError(
+            "the dataset has no accelerations (ddq): estimate them first "
+            "(manip_id.signals) or pass ddq="
+        )
+    return identify(
+        robot,
+        dataset.q,
+        dataset.dq,
+        acc_arr,
+        dataset.tau,
+        validation=validation,
+        model=model,
+        **kwargs,
+    )
+
+
+__all__ = [
+    "accumulate_parts",
+    "identify",
+    "identify_chunks",
+    "identify_dataset",
+    "online_estimator",
+]

@@ -1,0 +1,396 @@
+"""The generalized-momentum observer on an identified model (De Luca's residual).
+
+With the identified dynamics ``M(q) ddq + C(q, dq) dq + g(q) + f(q, dq) = tau + tau_ext``
+(``f``: viscous, Coulomb, offset and spring terms; the armature belongs to ``M``), the
+generalized momentum ``p = M(q) dq`` obeys ``dp/dt = tau + C^T(q, dq) dq - g - f + tau_ext``
+(because ``dM/dt = C + C^T``). The residual::
+
+    r(t) = K (p(t) - p(0) - int_0^t (tau + C^T dq - g - f + r) ds)
+
+satisfies ``dr/dt = K (tau_ext - r)``: each joint's ``r_j`` is the external torque
+through a first-order low-pass of bandwidth ``K_j`` [1/s], and needs no acceleration.
+
+Discrete form (what :meth:`CollisionMonitor.step` computes). Let ``u = tau + C^T dq - g - f``
+and, between samples ``k-1`` and ``k`` (step ``dt``), ``ds = (p_k - p_{k-1}) - dt (u_k +
+u_{k-1}) / 2``, the increment of ``int tau_ext`` (momentum exactly, the rest by the
+trapezoidal rule). Holding ``tau_ext`` constant over the step, the filter
+``dr/dt = K (ds/dt - r)`` is solved exactly::
+
+    r_k = a r_{k-1} + (1 - a) ds / dt,        a = exp(-K dt)
+
+so the discrete observer is stable for every gain and step (the Euler form ``r_k = K (p_k -
+p_0 - I_k)`` is not for ``K dt > 2``) and tends to the continuous one as ``dt -> 0``.
+
+Velocity noise. ``p = M dq`` enters ``r`` unfiltered: a velocity error ``e`` shows as
+``K M e`` at once. With ``filter_gain=K2`` the residual is low-passed once more,
+``dr_f/dt = K2 (r - r_f)`` (same exact discretization), so that ``r_f`` follows ``tau_ext``
+through ``K K2 / ((s + K)(s + K2))``: unit gain at rest, noise above ``K2`` attenuated, a
+longer delay (default ``K2 = K = 25`` [1/s], which on the real Panda log at 1 kHz keeps the
+velocity glitches under the bounds); ``filter_gain=None`` is the first-order observer above.
+
+The model is the robot's Pinocchio model with the identified inertias and armature
+(:meth:`~manip_id.robot.Robot.with_parameters`) and the identified joint terms. A standard
+vector that has the identified base parameters gives the same ``M``, ``C^T dq``, ``g`` and
+``f`` whatever its values on the regrouped directions (a direction with ``Y theta = 0`` for
+every ``q, dq, ddq`` has ``M = 0`` and ``g = 0``, hence ``C^T dq = dM/dt dq - C dq = 0``), so
+:func:`model_from_result` builds it from any result's base parameters, plain or consistent.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import ArrayLike
+
+from .._checks import as_float_array, check_finite, positive_vector
+from ..errors import InputError, ModelMismatchError
+from ..identification import load_result
+from ..robot import Robot, available_robots
+from .detections import MonitorRun
+
+#: Default observer gain [1/s]: a 25 rad/s bandwidth (time constant 40 ms).
+DEFAULT_GAIN = 25.0
+#: Default bandwidth of the residual's second low-pass [1/s] (None: the first-order observer).
+DEFAULT_FILTER_GAIN = 25.0
+
+
+@dataclass(frozen=True)
+class MonitorModel:
+    """The identified model the observer runs on.
+
+    Attributes
+    ----------
+    robot_name: the robot the parameters were identified for.
+    theta: standard parameters, shape (p,) [units of ``robot.parameter_units``].
+    covariance: covariance of the base parameters, shape (r, r), or None.
+    covariance_kind: what that covariance is (``"white-noise"``: ``sigma2 (Y_b^T Y_b)^-1``,
+        too small on correlated residuals; the result's own name when it gives one), or None.
+    base: the base parametrization the covariance refers to, or None.
+    source: where the model came from (a result file, ``"robot"`` for its own parameters).
+    """
+
+    robot_name: str
+    theta: np.ndarray
+    covariance: np.ndarray | None = None
+    covariance_kind: str | None = None
+    base: object | None = None
+    source: str = ""
+
+
+def check_parameters(robot: Robot, theta: ArrayLike) -> np.ndarray:
+    """``theta`` as a finite (p,) vector of ``robot``, or :class:`ModelMismatchError`."""
+    arr = as_float_array(theta, "theta", ndim=1)
+    if arr.shape[0] != robot.n_parameters:
+        raise ModelMismatchError(
+            "the model's parameters",
+            f"{robot.n_parameters} standard parameters of {robot.name!r} (terms "
+            f"{','.join(robot.terms.enabled) or 'none'})",
+            f"{arr.shape[0]}",
+        )
+    check_finite(arr, "theta")
+    return arr
+
+
+def covariance_kind(result) -> str:
+    """What a result's ``covariance`` is: its ``covariance_kind`` (attribute, or key of the
+    saved JSON) when it says, else ``"white-noise"`` (``sigma2 (Y_b^T Y_b)^-1``, what
+    results hold before they carry an honest one)."""
+    kind = getattr(result, "covariance_kind", None)
+    if kind is None:
+        kind = (getattr(result, "context", None) or {}).get("covariance_kind")
+    if kind is None and isinstance(getattr(result, "uncertainty", None), dict):
+        method = result.uncertainty.get("method")  # "hac": honest std, white correlations
+        kind = {"hac": "honest (hac std, white-noise correlations)"}.get(method, kind)
+    return str(kind) if kind else "white-noise"
+
+
+def model_from_result(robot: Robot, result, source: str = "") -> MonitorModel:
+    """The :class:`MonitorModel` of an identification result (plain, consistent, fleet).
+
+    The standard vector is :func:`standard_from_base` of the result's base parameters
+    (exact for the observer, module docstring). The covariance is the result's ``covariance`` as
+    given: today the white-noise one ``sigma2 (Y_b^T Y_b)^-1`` (OLS; WLS its weighted form),
+    which is too small when the residuals are correlated; a result that says which kind it
+    carries (``context["covariance_kind"]``) is taken at its word.
+
+    Raises :class:`ModelMismatchError` when the result was identified for another robot
+    (two different robots known by name, e.g. ``ur10`` for ``ur5``; a robot loaded from a
+    URDF file is checked by its parameter names only) or other joint terms (its base
+    parameters name other standard parameters).
+    """
+    base = result.base
+    known = set(available_robots())
+    if result.robot_name != robot.name and {result.robot_name, robot.name} <= known:
+        raise ModelMismatchError(
+            "the model", f"a model of {robot.name!r}", f"a model of {result.robot_name!r}"
+        )
+    if list(base.names) != list(robot.parameter_names):
+        theirs = sorted(set(base.names) - set(robot.parameter_names))
+        raise ModelMismatchError(
+            "the model's parameters",
+            f"the {robot.n_parameters} parameters of {robot.name!r} "
+            f"({robot.parameter_names[0]}, ...)",
+            f"{len(base.names)} parameters of {result.robot_name!r}"
+            + (f" (e.g. {theirs[0]})" if theirs else ""),
+        )
+    theta = standard_from_base(robot, result.estimate, base)
+    test = getattr(result, "test_covariance", None)
+    cov = np.asarray(test() if callable(test) else result.covariance, dtype=float)
+    ok = cov.shape == (len(result.estimate),) * 2 and bool(np.isfinite(cov).all())
+    kind = covariance_kind(result) if ok else None
+    return MonitorModel(
+        robot_name=str(result.robot_name),
+        theta=check_parameters(robot, theta),
+        covariance=cov if ok else None,
+        covariance_kind=kind,
+        base=base,
+        source=source,
+    )
+
+
+def standard_from_base(robot: Robot, theta_base: ArrayLike, base) -> np.ndarray:
+    """A standard vector with base parameters ``theta_base``: the robot's nominal values on
+    the regrouped (dependent) columns, ``theta[I] = theta_b - K theta_nom[D]`` on the others.
+
+    (Zero on the dependent columns would leave bodies of zero mass, which a Pinocchio
+    inertia cannot hold.) Exact: ``base.to_base(theta) == theta_base``.
+    """
+    nominal = robot.nominal_parameters
+    theta = nominal.copy()
+    dep, ind = base.dependent, base.independent
+    theta[ind] = np.asarray(theta_base, dtype=float) - base.K @ nominal[dep]
+    return theta
+
+
+def load_model(robot: Robot, path) -> MonitorModel:
+    """The :class:`MonitorModel` of a saved result (``manip-id identify --json``, a report's
+    result.json); :class:`~manip_id.errors.DataError` for a file that is not one."""
+    return model_from_result(robot, load_result(path), source=str(path))
+
+
+def model_from_robot(robot: Robot) -> MonitorModel:
+    """The robot's own parameters as the model (an exported URDF loaded with its sidecar,
+    ``load_robot(URDF, identified=True)``); no covariance."""
+    return MonitorModel(robot.name, robot.nominal_parameters.copy(), source="robot")
+
+
+@dataclass(frozen=True)
+class MonitorStep:
+    """One observer step: ``residual`` [N m or N] and ``detected`` per joint, shape (nv,)."""
+
+    residual: np.ndarray
+    detected: np.ndarray
+
+
+class CollisionMonitor:
+    """The momentum observer (module docstring) with per-joint detection bounds.
+
+    Parameters
+    ----------
+    robot: the robot (its joint terms decide which friction terms ``theta`` holds).
+    theta: standard parameters, shape (p,), or a :class:`MonitorModel`.
+    thresholds: detection bounds [N m or N]: a scalar or shape (nv,), a
+        :class:`~manip_id.monitor.Thresholds` (its joints must be the robot's), or None
+        (no detection: every flag False).
+    gain: observer gain ``K`` [1/s], a scalar or one per joint (nv,).
+    filter_gain: bandwidth ``K2`` [1/s] of a second low-pass of the residual (module
+        docstring), scalar or (nv,); None: none (the first-order observer).
+
+    Use :meth:`step` once per sample (the first call only initializes, ``r = 0``) and
+    :meth:`reset` between runs; :meth:`run` runs a whole log.
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        theta,
+        thresholds=None,
+        *,
+        gain: ArrayLike = DEFAULT_GAIN,
+        filter_gain: ArrayLike | None = DEFAULT_FILTER_GAIN,
+    ):
+        if isinstance(theta, MonitorModel):
+            theta = theta.theta
+        self.robot = robot
+        self.theta = check_parameters(robot, theta)
+        self.gain = positive_vector(gain, "gain", robot.nv, "1/s")
+        self.filter_gain = (
+            None
+            if filter_gain is None
+            else positive_vector(filter_gain, "filter_gain", robot.nv, "1/s")
+        )
+        self.thresholds = _bounds(robot, thresholds)
+        _check_gains(thresholds, self.gain, self.filter_gain)
+        self.model = robot.with_parameters(self.theta)
+        self.data = self.model.createData()
+        self._model0 = self.model.copy()  # gravity-free: rnea(q, 0, dq) = M(q) dq
+        self._model0.gravity = pin.Motion.Zero()
+        self._data0 = self._model0.createData()
+        self.nq, self.nv = robot.nq, robot.nv
+        self._zero = np.zeros(self.nv)
+        self._terms = _friction_terms(robot, self.theta)
+        self._spring = robot.layout.has_term("k")
+        self._dt = -1.0  # the step of the cached decay factors [s]
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the past: the next :meth:`step` starts a new run."""
+        self._p: np.ndarray | None = None
+        self._u = np.zeros(self.nv)
+        self._r = np.zeros(self.nv)  # the first-order residual [N m or N]
+        self.residual = np.zeros(self.nv)  # the output (filtered when filter_gain) [N m or N]
+
+    # ------------------------------------------------------------- the model
+    def momentum_and_input(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray):
+        """``p = M(q) dq`` and ``u = tau + C^T(q, dq) dq - g(q) - f(q, dq)``, shape (nv,) each."""
+        model, data = self.model, self.data
+        p = pin.rnea(self._model0, self._data0, q, self._zero, dq)  # M(q) dq, armature too
+        C = pin.computeCoriolisMatrix(model, data, q, dq)
+        g = pin.computeGeneralizedGravity(model, data, q)
+        u = tau + C.T @ dq - g
+        if self._terms:
+            angles = self.robot.dofs.angles(q) if self._spring else None
+            for term, coef in self._terms:
+                u -= term.torque(coef, angles, dq, None)
+        return p.copy(), u
+
+    # ------------------------------------------------------------------ steps
+    def step(self, q: ArrayLike, dq: ArrayLike, tau: ArrayLike, dt: float) -> MonitorStep:
+        """Advance the observer by one sample (module docstring, discrete form).
+
+        Parameters
+        ----------
+        q: joint positions, shape (nq,) [rad or m]
+        dq: joint velocities, shape (nv,) [rad/s or m/s]
+        tau: measured joint torques, shape (nv,) [N m or N]
+        dt: time since the previous sample [s] (ignored on the first call)
+
+        Returns
+        -------
+        :class:`MonitorStep`: the residual (the estimated external torque) and
+        ``|r_j| > bound_j`` per joint.
+        """
+        q = np.asarray(q, dtype=float)
+        dq = np.asarray(dq, dtype=float)
+        tau = np.asarray(tau, dtype=float)
+        if q.shape != (self.nq,) or dq.shape != (self.nv,) or tau.shape != (self.nv,):
+            raise InputError(
+                f"step takes one sample: {q.shape=}, {dq.shape=}, {tau.shape=} but "
+                f"robot.nq={self.nq}, robot.nv={self.nv}"
+            )
+        p, u = self.momentum_and_input(q, dq, tau)
+        if self._p is not None:
+            if not dt > 0:
+                raise InputError(f"dt must be a positive time step [s], got {dt}")
+            if dt != self._dt:  # decay factors, recomputed when the step changes
+                self._dt = dt
+                self._a = np.exp(-self.gain * dt)
+                if self.filter_gain is not None:
+                    self._b = np.exp(-self.filter_gain * dt)
+            a = self._a
+            ds = (p - self._p) - 0.5 * dt * (u + self._u)  # [N m s]
+            self._r = a * self._r + (1.0 - a) * (ds / dt)
+            if self.filter_gain is None:
+                self.residual = self._r
+            else:
+                b = self._b
+                self.residual = b * self.residual + (1.0 - b) * self._r
+        self._p, self._u = p, u
+        return MonitorStep(self.residual.copy(), np.abs(self.residual) > self.thresholds)
+
+    def run(
+        self, t: ArrayLike, q: ArrayLike, dq: ArrayLike, tau: ArrayLike, file: str = ""
+    ) -> MonitorRun:
+        """The observer over one log (it is :meth:`reset` first).
+
+        ``t`` (N,) [s], increasing; ``q`` (N, nq); ``dq``, ``tau`` (N, nv); ``file`` the
+        log's label. Returns the :class:`~manip_id.monitor.MonitorRun` (residuals, flags,
+        detection intervals).
+        """
+        ts, qs, dqs, taus = _check_log(self.robot, t, q, dq, tau)
+        self.reset()
+        r = np.empty((ts.size, self.nv))
+        dts = np.diff(ts, prepend=ts[0])
+        for k in range(ts.size):
+            r[k] = self.step(qs[k], dqs[k], taus[k], float(dts[k]) if k else 1.0).residual
+        return MonitorRun(
+            t=ts,
+            residual=r,
+            bounds=self.thresholds.copy(),
+            dof_names=list(self.robot.dof_names),
+            file=file,
+        )
+
+
+def _friction_terms(robot: Robot, theta: np.ndarray) -> list:
+    """(term, coefficients (nv,)) of the enabled joint terms except the armature (in M)."""
+    lay = robot.layout
+    return [(t, theta[lay.joint_columns(t.name)].copy()) for t in lay.term_table if t.name != "Ia"]
+
+
+def _bounds(robot: Robot, thresholds) -> np.ndarray:
+    """Detection bounds (nv,) [N m or N] from None, a scalar, an array or a Thresholds."""
+    if thresholds is None:
+        return np.full(robot.nv, np.inf)
+    names = getattr(thresholds, "dof_names", None)
+    if names is not None:
+        if list(names) != list(robot.dof_names):
+            raise ModelMismatchError(
+                "the thresholds' joints", f"{list(robot.dof_names)}", f"{list(names)}"
+            )
+        thresholds = thresholds.bound
+    arr = as_float_array(thresholds, "thresholds", ndim=(0, 1))
+    if arr.ndim == 1 and arr.shape != (robot.nv,):
+        raise ModelMismatchError(
+            "the thresholds", f"one per joint ({robot.nv})", f"shape {arr.shape}"
+        )
+    arr = np.broadcast_to(arr, (robot.nv,)).copy()
+    if np.isnan(arr).any() or np.any(arr <= 0):
+        raise InputError(f"thresholds must be positive [N m], got {arr.tolist()}")
+    return arr
+
+
+def _check_gains(thresholds, gain: np.ndarray, filter_gain: np.ndarray | None) -> None:
+    """Bounds calibrated with other gains do not hold for this observer."""
+    if not hasattr(thresholds, "gain"):
+        return
+    theirs = thresholds.filter_gain
+    same = np.allclose(thresholds.gain, gain) and (
+        (theirs is None and filter_gain is None)
+        or (theirs is not None and filter_gain is not None and np.allclose(theirs, filter_gain))
+    )
+    if not same:
+
+        def text(g, f):
+            return f"gain {np.asarray(g).tolist()}, filter_gain " + (
+                "None" if f is None else f"{np.asarray(f).tolist()}"
+            )
+
+        raise InputError(
+            f"the thresholds were calibrated with {text(thresholds.gain, theirs)}, but this "
+            f"monitor has {text(gain, filter_gain)}: calibrate with the monitor's gains"
+        )
+
+
+def _check_log(robot: Robot, t, q, dq, tau) -> tuple[np.ndarray, ...]:
+    t = as_float_array(t, "t", ndim=1)
+    q = as_float_array(q, "q", ndim=2)
+    dq = as_float_array(dq, "dq", ndim=2)
+    tau = as_float_array(tau, "tau", ndim=2)
+    n = t.size
+    if q.shape != (n, robot.nq) or dq.shape != (n, robot.nv) or tau.shape != (n, robot.nv):
+        raise InputError(
+            f"{t.shape=}, {q.shape=}, {dq.shape=}, {tau.shape=} but robot.nq={robot.nq}, "
+            f"robot.nv={robot.nv}"
+        )
+    if n < 2:
+        raise InputError(f"a log needs at least 2 samples, got {n}")
+    for arr, name in ((t, "t"), (q, "q"), (dq, "dq"), (tau, "tau")):
+        check_finite(arr, name)
+    steps = np.diff(t)
+    if not np.all(steps > 0):
+        k = int(np.flatnonzero(~(steps > 0))[0])
+        raise InputError(f"t must increase, but t[{k + 1}]={t[k + 1]} after t[{k}]={t[k]}")
+    return t, q, dq, tau

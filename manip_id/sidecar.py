@@ -1,0 +1,106 @@
+"""Reading the sidecar JSON of an export back into a robot (the model layer's half).
+
+:mod:`manip_id.export` writes ``OUT.identified.json`` next to an exported ``OUT.urdf``
+(``OUT.xml.identified.json`` next to an MJCF file): the identified parameters, the joint
+terms a URDF has no field for (armature ``Ia``, offset ``fo``, spring ``k``), the active
+and locked joints. ``load_robot(OUT.urdf, identified=True)`` reads it with the functions
+here (:func:`identified_options`, :func:`locked_configuration`, :func:`apply_identified`).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import InputError
+
+#: ``format`` field of the sidecar JSON.
+SIDECAR_FORMAT = "manip_id identified parameters"
+SIDECAR_VERSION = 2
+
+_TERM_FLAGS = {"Ia": "armature", "fv": "viscous", "fc": "coulomb", "fo": "offset", "k": "spring"}
+
+
+def sidecar_path(path) -> Path:
+    """The sidecar JSON of an exported file: ``robot.urdf`` -> ``robot.identified.json``,
+    any other (``robot.xml``) -> ``robot.xml.identified.json`` (so that a URDF and an MJCF
+    export of one name do not share a sidecar)."""
+    p = Path(path)
+    if p.suffix.lower() == ".urdf":
+        return p.with_name(p.stem + ".identified.json")
+    return p.with_name(p.name + ".identified.json")
+
+
+def read_sidecar(path) -> dict:
+    """Read and check a sidecar JSON written by an export."""
+    p = Path(path)
+    try:
+        data = json.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError as exc:
+        raise InputError(f"no identified-parameter sidecar at {p}") from exc
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read the identified-parameter sidecar {p}: {exc}") from exc
+    if not isinstance(data, dict) or data.get("format") != SIDECAR_FORMAT:
+        raise InputError(f"{p} is not a manip_id sidecar (expected format {SIDECAR_FORMAT!r})")
+    if not isinstance(data.get("joints"), dict) or not isinstance(data.get("active_joints"), list):
+        raise InputError(f"{p}: the sidecar misses 'joints' or 'active_joints'")
+    return data
+
+
+def identified_options(spec: str, identified, armature, friction, spring, active_joints):
+    """The sidecar of an exported URDF and the load options it implies (explicit ones win).
+
+    Returns ``(sidecar, armature, friction, spring, active_joints)`` for
+    :func:`manip_id.robot.load_robot`; :func:`locked_configuration` gives the positions
+    of the locked joints.
+    """
+    path = sidecar_path(spec) if identified is True else Path(identified)
+    data = read_sidecar(path)
+    terms = [t for t in data.get("joint_terms", []) if t in _TERM_FLAGS]
+    if armature is None:
+        armature = "Ia" in terms
+    if friction is None:
+        friction = [_TERM_FLAGS[t] for t in terms if t in ("fv", "fc", "fo")]
+    if spring is None:
+        spring = "k" in terms
+    if active_joints is None:
+        active_joints = list(data["active_joints"])
+    return data, armature, friction, spring, active_joints
+
+
+def locked_configuration(sidecar: dict) -> dict[str, Any] | None:
+    """The sidecar's locked joints as ``load_robot(locked_configuration=...)`` takes them
+    (None for a sidecar without them, version 1)."""
+    locked = sidecar.get("locked_joints")
+    if not isinstance(locked, dict) or not locked:
+        return None
+    out: dict[str, Any] = {}
+    for name, value in locked.items():
+        try:
+            coords = np.asarray(value, dtype=float)
+        except (TypeError, ValueError) as exc:
+            what = f"the sidecar's locked joint {name!r}"
+            raise InputError(f"{what} has no position in [rad or m]: {value!r}") from exc
+        out[str(name)] = float(coords) if coords.ndim == 0 else coords.tolist()
+    return out
+
+
+def apply_identified(robot, sidecar: dict) -> None:
+    """Put the sidecar's armature into ``robot.model`` and its offset and spring into
+    ``robot.settings`` (so that ``robot.nominal_parameters`` holds them)."""
+    joints = sidecar["joints"]
+    arm = np.array(robot.model.armature, dtype=float)
+    offset, spring = np.zeros(robot.nv), np.zeros(robot.nv)
+    for k, dof in enumerate(robot.dof_names):
+        terms = joints.get(dof, {})
+        if "Ia" in terms:
+            arm[k] = float(terms["Ia"])
+        offset[k] = float(terms.get("fo", 0.0))
+        spring[k] = float(terms.get("k", 0.0))
+    robot.model.armature = arm
+    robot.settings["offset"] = offset
+    if any("k" in joints.get(d, {}) for d in robot.dof_names):
+        robot.settings["spring"] = spring

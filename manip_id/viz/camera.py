@@ -1,0 +1,112 @@
+"""Where the scene's camera stands so that the robot fills the view.
+
+A pinhole camera with vertical field of view ``fov`` looks from ``position`` at the
+world origin, world ``z`` up. A point ``x`` [m] has camera coordinates
+``(x_r, x_u, x_f) = ((x - p) . r, (x - p) . u, (x - p) . f)`` with ``f = -p / |p|``,
+``r = f x z / |f x z|``, ``u = r x f``, and normalized image coordinates
+``y = x_u / (x_f tan(fov / 2))`` (vertical, in [-1, 1] on screen) and
+``x = x_r / (x_f tan(fov / 2) aspect)``. The *fill* of a set of points is the share of
+the view height their image spans, ``(max y - min y) / 2``; it decreases with the
+distance ``|p|`` along a fixed direction, which :func:`place_camera` finds by bisection.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import InputError
+
+#: meshcat's default camera: vertical field of view [deg].
+FOV = 75.0
+#: Width over height of the view the placement assumes (a report's scene panel).
+ASPECT = 1.2
+#: The default viewing direction, from the target towards the camera (world, z up).
+DIRECTION = (1.0, 0.7, 0.45)
+
+
+@dataclass(frozen=True)
+class CameraPlacement:
+    """A camera looking at the world origin.
+
+    Attributes
+    ----------
+    position : numpy.ndarray
+        Camera position [m], shape (3,), world frame (z up).
+    fill : float
+        Share of the view height the start pose spans [-].
+    width_fill : float
+        Share of the view width it spans [-].
+    """
+
+    position: np.ndarray
+    fill: float
+    width_fill: float
+
+
+def image_extent(points, position, *, fov: float = FOV, aspect: float = ASPECT):
+    """``(height share, width share)`` of the view that ``points`` (shape (n, 3)) span,
+    seen from ``position`` towards the origin; ``(inf, inf)`` when a point is behind
+    the camera or on its plane."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 3)
+    p = np.asarray(position, dtype=float)
+    f = -p / np.linalg.norm(p)
+    up = np.array([0.0, 0.0, 1.0])
+    r = np.cross(f, up)
+    r = r / np.linalg.norm(r) if np.linalg.norm(r) > 1e-12 else np.array([1.0, 0.0, 0.0])
+    u = np.cross(r, f)
+    rel = pts - p
+    depth = rel @ f
+    if np.any(depth <= 1e-9):
+        return np.inf, np.inf
+    t = np.tan(np.radians(fov) / 2)
+    y = (rel @ u) / (depth * t)
+    x = (rel @ r) / (depth * t * aspect)
+    return float(np.ptp(y)) / 2.0, float(np.ptp(x)) / 2.0
+
+
+def _distance(points, direction, share: float, *, fov: float, aspect: float) -> float:
+    """The distance along ``direction`` where ``points`` span ``share`` of the view in
+    height and at most ``share`` in width (bisection on a decreasing function)."""
+    lo, hi = 1e-6, 1.0
+    while max(image_extent(points, hi * direction, fov=fov, aspect=aspect)) > share:
+        hi *= 2.0
+        if hi > 1e9:
+            raise InputError("the scene's points do not fit any camera distance")
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if max(image_extent(points, mid * direction, fov=fov, aspect=aspect)) > share:
+            lo = mid
+        else:
+            hi = mid
+    return hi
+
+
+def place_camera(
+    start,
+    motion=None,
+    *,
+    direction=DIRECTION,
+    fill: float = 0.8,
+    min_fill: float = 0.68,
+    motion_fill: float = 0.98,
+    fov: float = FOV,
+    aspect: float = ASPECT,
+) -> CameraPlacement:
+    """The camera for points ``start`` (the start pose, shape (n, 3) [m], centred on the
+    origin) and ``motion`` (every pose of an animation, or None).
+
+    The start pose spans ``fill`` of the view (height, or width when it is wider); the
+    camera backs off to keep the whole motion within ``motion_fill`` of the view, but
+    never so far that the start pose spans less than ``min_fill``.
+    """
+    d = np.asarray(direction, dtype=float)
+    d = d / np.linalg.norm(d)
+    kw = dict(fov=fov, aspect=aspect)
+    dist = _distance(start, d, fill, **kw)
+    if motion is not None and len(motion):
+        dist = max(dist, _distance(motion, d, motion_fill, **kw))
+        dist = min(dist, _distance(start, d, min_fill, **kw))
+    h, w = image_extent(start, dist * d, **kw)
+    return CameraPlacement(position=dist * d, fill=h, width_fill=w)

@@ -1,0 +1,35 @@
+"""The scene camera's distance (manip_id.viz.camera) against the pinhole formula."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from manip_id.viz.camera import FOV, image_extent, place_camera
+
+
+def _rod(h: float) -> np.ndarray:
+    """A vertical rod of height ``h`` [m] through the origin, as points."""
+    return np.column_stack([np.zeros(11), np.zeros(11), np.linspace(-h / 2, h / 2, 11)])
+
+
+@pytest.mark.parametrize("h, fill", [(1.0, 0.8), (0.2, 0.7), (3.0, 0.62)])
+def test_a_vertical_rod_seen_side_on(h, fill):
+    # seen along x, the rod's ends are at +-h/2 over a distance D: fill = h / (2 D tan(fov/2))
+    cam = place_camera(_rod(h), direction=(1.0, 0.0, 0.0), fill=fill)
+    want = h / (2 * fill * np.tan(np.radians(FOV) / 2))
+    assert np.linalg.norm(cam.position) == pytest.approx(want, rel=1e-6)
+    assert cam.fill == pytest.approx(fill, rel=1e-6)
+
+
+def test_the_motion_never_pushes_the_start_pose_below_min_fill():
+    start = _rod(1.0)
+    motion = np.vstack([start, [[0.0, 5.0, 0.0], [0.0, -5.0, 4.0]]])  # a wide sweep
+    cam = place_camera(start, motion, direction=(1.0, 0.0, 0.0), fill=0.8, min_fill=0.65)
+    assert cam.fill == pytest.approx(0.65, rel=1e-6)
+    small = np.vstack([start, [[0.0, 0.0, 0.6]]])  # a motion inside the view
+    assert place_camera(start, small, direction=(1.0, 0.0, 0.0)).fill == pytest.approx(0.8)
+
+
+def test_points_behind_the_camera_have_no_extent():
+    assert image_extent(_rod(1.0), (0.0, 0.0, 0.2)) == (np.inf, np.inf)
