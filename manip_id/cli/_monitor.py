@@ -208,8 +208,7 @@ def residual_figure(path, run, title: str) -> None:
 
 
 def _write_report(robot, th, runs, doc, args):
-    # the report machinery (matplotlib), for --report only
-    from ..viz.report import ReportContent, write_report
+    from ..viz.report import ReportContent, write_report  # the report machinery, --report only
 
     figs = {
         f"residuals_{i}": (
