@@ -23,6 +23,7 @@ from manip_id.consistency import (
 from manip_id.errors import InputError
 from manip_id.estimators import InformationAccumulator, solve_accumulator
 from manip_id.estimators.consistent import (
+    PriorOptions,
     SolverError,
     build_problem,
     log_cholesky,
@@ -308,7 +309,7 @@ def test_real_panda_log_default_gives_plausible_link_masses(panda_split, solver)
 
 def test_prior_none_is_feasibility_alone():
     robot = get_robot("panda", friction=FRICTION)
-    pr, _ = _problem(robot, 0.3, seed=7, prior="none")
+    pr, _ = _problem(robot, 0.3, seed=7, prior=PriorOptions("none"))
     assert pr.J0 is None and pr.weight == 0
     sol = solve_consistent(robot, pr, solver="sdp")
     _assert_physical(robot, sol.theta)
@@ -339,7 +340,7 @@ def test_non_physical_prior_names_the_body():
     prior[robot.parameter_index("panda_joint3.m")] = -1.0
     A, b = np.eye(base.n_base), np.zeros(base.n_base)
     with pytest.raises(PhysicalConsistencyError, match="panda_joint3") as info:
-        build_problem(robot, base, A, b, variance=1.0, prior_parameters=prior)
+        build_problem(robot, base, A, b, variance=1.0, prior=PriorOptions(parameters=prior))
     assert isinstance(info.value, ManipIdError)
     assert any(v.name == "panda_joint3" for v in info.value.violations)
 

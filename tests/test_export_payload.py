@@ -21,7 +21,7 @@ from manip_id import load_robot
 from manip_id.cli import main
 from manip_id.consistency import PhysicalConsistencyError
 from manip_id.errors import InputError
-from manip_id.export import export_payload_urdf, sidecar_path
+from manip_id.export import PayloadLink, export_payload_urdf, sidecar_path
 from manip_id.payload import payload_regressor, standard_from_quantities
 
 MASS, COM = 1.3, np.array([0.02, -0.03, 0.08])  # [kg], [m]
@@ -46,7 +46,7 @@ def _no_armature(model: pin.Model) -> pin.Model:
 def test_exported_payload_link_gives_robot_plus_payload_torques(tmp_path, spec, frame):
     robot = get_robot(spec)
     out = tmp_path / "with_payload.urdf"
-    result = export_payload_urdf(robot, frame, MASS, COM, INERTIA, out)
+    result = export_payload_urdf(robot, PayloadLink(frame, MASS, COM, INERTIA), out)
     assert result.path == out and result.unresolved == []
     loaded = load_robot(
         out, active_joints=robot.joint_names, locked_configuration=robot.locked_configuration
@@ -73,18 +73,18 @@ def test_payload_export_refuses_a_non_physical_payload_and_bad_input(tmp_path):
     flat = INERTIA.copy()
     flat[5] = -0.001  # Izz < 0
     with pytest.raises(PhysicalConsistencyError, match="tool0"):
-        export_payload_urdf(robot, "tool0", MASS, COM, flat, out)
+        export_payload_urdf(robot, PayloadLink("tool0", MASS, COM, flat), out)
     with pytest.raises(PhysicalConsistencyError, match="m > 0"):
-        export_payload_urdf(robot, "tool0", 0.0, COM, INERTIA, out)
+        export_payload_urdf(robot, PayloadLink("tool0", 0.0, COM, INERTIA), out)
     with pytest.raises(InputError, match="no frame 'nowhere'"):
-        export_payload_urdf(robot, "nowhere", MASS, COM, INERTIA, out)
+        export_payload_urdf(robot, PayloadLink("nowhere", MASS, COM, INERTIA), out)
     with pytest.raises(InputError, match="already"):
-        export_payload_urdf(robot, "tool0", MASS, COM, INERTIA, out, name="tool0")
+        export_payload_urdf(robot, PayloadLink("tool0", MASS, COM, INERTIA, name="tool0"), out)
     assert not out.exists() and not sidecar_path(out).exists()
-    export_payload_urdf(robot, "tool0", MASS, COM, INERTIA, out)
+    export_payload_urdf(robot, PayloadLink("tool0", MASS, COM, INERTIA), out)
     with pytest.raises(InputError, match="exists"):
-        export_payload_urdf(robot, "tool0", MASS, COM, INERTIA, out)
-    export_payload_urdf(robot, "tool0", MASS, COM, INERTIA, out, force=True)
+        export_payload_urdf(robot, PayloadLink("tool0", MASS, COM, INERTIA), out)
+    export_payload_urdf(robot, PayloadLink("tool0", MASS, COM, INERTIA), out, force=True)
 
 
 def test_cli_payload_export_urdf(tmp_path, capsys):

@@ -1167,12 +1167,12 @@ def _api_cases():
         args.update(kw)
         return ident(robot(), args["q"], args["dq"], args["ddq"], args["tau"])
 
-    def report(w, **kw):
-        from manip_id.viz.report import write_report
+    def report(w, *, force=False, **kw):
+        from manip_id.viz.report import ReportContent, write_report
 
         args = dict(title="t", summary={}, parameter_table=[], figures={})
         args.update(kw)
-        return write_report(w / "rep", **args)
+        return write_report(w / "rep", ReportContent(**args), force=force)
 
     def foreign(w):
         (w / "rep").mkdir()
@@ -1325,9 +1325,8 @@ def test_matplotlib_shows_dollars_literally(tmp_path):
 
     t = np.linspace(0, 1, 50)
     tau = np.column_stack([np.sin(t), np.cos(t)])
-    fig = figures.torque_fit(
-        tmp_path / "f.png", t, tau, tau, joint_names=["j$1", "$x^{"], title="file we$ird_$x$.npz $"
-    )
+    labels = figures.FigureOptions(title="file we$ird_$x$.npz $", joint_names=["j$1", "$x^{"])
+    fig = figures.torque_fit(tmp_path / "f.png", t, tau, tau, options=labels)
     assert (tmp_path / "f.png").is_file()
     texts = [fig.axes[0].get_title(), *(ax.get_ylabel() for ax in fig.axes)]
     assert any("j$1" in s for s in texts) or any("$" in s for s in texts)
@@ -1335,11 +1334,10 @@ def test_matplotlib_shows_dollars_literally(tmp_path):
 
 
 def test_report_manifest_and_json(tmp_path):
-    from manip_id.viz.report import MANIFEST, write_report
+    from manip_id.viz.report import MANIFEST, ReportContent, write_report
 
-    out = write_report(
-        tmp_path / "rep", title="t", summary={"a": 1}, parameter_table=[], figures={}
-    )
+    content = ReportContent(title="t", summary={"a": 1}, parameter_table=[], figures={})
+    out = write_report(tmp_path / "rep", content)
     manifest = json.loads((out / MANIFEST).read_text())
     assert manifest["written_by"] == "manip_id"
     assert sorted(manifest["files"]) == sorted(p.name for p in out.iterdir() if p.name != MANIFEST)

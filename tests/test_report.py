@@ -10,7 +10,7 @@ import pytest
 
 from manip_id.errors import InputError, ManipIdError
 from manip_id.viz import figures
-from manip_id.viz.report import ReportExistsError, check_report_target, write_report
+from manip_id.viz.report import ReportContent, ReportExistsError, check_report_target, write_report
 
 T = np.linspace(0, 1, 50)
 
@@ -44,7 +44,7 @@ def _fig(path):
     figures.residuals(path, T, np.sin(T)[:, None], title="sine")
 
 
-def _report(directory, **kw):
+def _report(directory, *, force=False, inputs=(), **kw):
     args = dict(
         title="test report",
         summary={"robot": "x", "error": 0.0123},
@@ -54,7 +54,7 @@ def _report(directory, **kw):
         json_result={"answer": 42, "array": np.arange(3)},
     )
     args.update(kw)
-    return write_report(directory, **args)
+    return write_report(directory, ReportContent(**args), force=force, inputs=inputs)
 
 
 def test_report_folder_contents(tmp_path):

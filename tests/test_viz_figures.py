@@ -43,11 +43,10 @@ def test_torque_fit_one_axes_per_joint_with_the_given_data(tmp_path):
         T,
         TAU,
         PRED,
-        joint_names=NAMES,
         t_validation=tv,
         tau_validation=TAU,
         tau_validation_pred=PRED,
-        title="torque fit: test",
+        options=figures.FigureOptions(title="torque fit: test", joint_names=NAMES),
     )
     _check_png(path, fig)
     axes = fig.get_axes()
@@ -151,7 +150,12 @@ def test_trajectory_limits_reports_the_range_used(tmp_path):
 BAD = [
     (figures.torque_fit, (T, TAU, PRED[:, :2]), {}, "tau_pred.shape=(300, 2)"),
     (figures.torque_fit, (T[:-1], TAU, PRED), {}, "t.shape=(299,)"),
-    (figures.torque_fit, (T, TAU, PRED), {"joint_names": ["a"]}, "1 joint names given for 4"),
+    (
+        figures.torque_fit,
+        (T, TAU, PRED),
+        {"options": figures.FigureOptions(joint_names=["a"])},
+        "1 joint names given for 4",
+    ),
     (figures.torque_fit, (T, TAU, PRED), {"t_validation": T}, "validation needs"),
     (figures.residuals, (T, np.full((N, 2), np.nan)), {}, "residual"),
     (figures.singular_values, (np.array([1.0, -1.0]),), {"tolerance": 1e-6}, ">= 0"),

@@ -30,7 +30,7 @@ class OutputSet:
     ...     rep = out.report(report_dir, "--report", force=False)
     ...     ...                                          # the work
     ...     out.write_json(json_path, result)
-    ...     write_report(rep, title=..., ...)
+    ...     write_report(rep, ReportContent(title=..., ...))
     ...     out.publish()                                # every output appears now
 
     Leaving the ``with`` block without :meth:`publish` (an exception, a signal)

@@ -208,7 +208,7 @@ def residual_figure(path, run, title: str) -> None:
 
 
 def _write_report(robot, th, runs, doc, args):
-    from ..viz.report import write_report  # the report machinery, for --report only
+    from ..viz.report import ReportContent, write_report  # the report machinery, --report only
 
     figs = {
         f"residuals_{i}": (
@@ -239,8 +239,7 @@ def _write_report(robot, th, runs, doc, args):
         }
         for d in doc["detections"]
     ]
-    return write_report(
-        args.report_claim,
+    content = ReportContent(
         title=f"manip-id monitor {robot.name}",
         summary={
             "robot": robot.name,
@@ -253,5 +252,5 @@ def _write_report(robot, th, runs, doc, args):
         figures=figs,
         json_result=doc,
         tables={"detections": det_rows} if det_rows else None,
-        force=args.force,
     )
+    return write_report(args.report_claim, content, force=args.force)

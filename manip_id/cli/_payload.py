@@ -15,7 +15,7 @@ from .._io import OutputSet
 from ..datasets import parse_file_spec
 from ..errors import DataError, InputError
 from ..execution import portable_robot
-from ..export import check_output, payload_urdf_texts, sidecar_path
+from ..export import PayloadLink, check_output, payload_urdf_texts, sidecar_path
 from ..export.sidecar import identification_provenance
 from ..identification import PreprocessOptions, iter_processed, scan_file
 from ..payload import identify_payload, load_known_base
@@ -319,8 +319,7 @@ def _stage_export(args, robot, result) -> None:
     p = result.payload
     prov = identification_provenance("manip-id payload", vars(args))
     prov["uncertainty"] = p.to_dict()
-    texts = payload_urdf_texts(
-        robot, args.frame, p.mass, p.com, p.inertia, args.export_urdf, provenance=prov
-    )
+    link = PayloadLink(args.frame, p.mass, p.com, p.inertia)
+    texts = payload_urdf_texts(robot, link, args.export_urdf, provenance=prov)
     args.outputs.write_text(args.export_urdf, texts.urdf)
     args.outputs.write_json(sidecar_path(args.export_urdf), texts.sidecar)

@@ -26,6 +26,7 @@ import numpy as np
 
 from .._checks import as_float_array, as_int, as_real, check_finite, check_magnitude
 from ..errors import DataError, InputError
+from ..parameters import bounded_range
 
 #: Largest |q| [rad] taken as radians; beyond it positions look like degrees.
 DEGREES_THRESHOLD = 8 * np.pi
@@ -265,8 +266,6 @@ def check_position_range(robot, q_min, q_max, label: str, margin: float = LIMIT_
 
 def _far_outside(robot, q_min: np.ndarray, q_max: np.ndarray, margin: float):
     """``(column, lower, upper, below?)`` of the first column far outside its limits, or None."""
-    from ..parameters import bounded_range
-
     lo, hi = robot.lower, robot.upper  # [rad or m], shape (nq,)
     for i in np.flatnonzero(bounded_range(lo, hi)):
         slack = margin * (hi[i] - lo[i])

@@ -17,8 +17,12 @@ from .._checks import memory_budget
 from .._io import atomic_write
 from ..errors import DataError
 from .core import Dataset
+from .csv import load_csv, write_csv
 from .layout import Layout
-from .stream import FORMATS, MemorySource, infer_format
+from .npz import load_npz, write_npz
+from .panda import load_panda_gaz2019
+from .rosbag import BagSource, write_bag
+from .stream import FORMATS, MemorySource, collect, infer_format, iter_rows
 
 #: Largest memory budget of a whole-file NPZ read [bytes] (also at most half the free memory).
 MEMORY_BUDGET = 8 * 2**30
@@ -70,17 +74,10 @@ def load_dataset(
     if columns is not None and fmt != "csv":
         raise DataError(f"a column map applies to CSV files only, not to format {fmt!r}")
     if fmt == "npz":
-        from .npz import load_npz
-
         return load_npz(path, memory_budget(cap=MEMORY_BUDGET))  # and half the free memory
     if fmt == "csv":
-        from .csv import load_csv
-
         return load_csv(path, columns)
     if fmt == "rosbag":
-        from .rosbag import BagSource
-        from .stream import collect, iter_rows
-
         src = BagSource(path, topic, joint_names)
         try:
             return collect(
@@ -91,8 +88,6 @@ def load_dataset(
             )
         except DataError as exc:
             raise DataError(f"{path}: {exc}") from exc
-    from .panda import load_panda_gaz2019
-
     return load_panda_gaz2019(path)
 
 
@@ -139,8 +134,6 @@ def write_rows(blocks, n: int, layout: Layout, joint_names, path, format=None) -
     path = Path(path).expanduser()
     fmt = output_format(path, format)
     if fmt == "mcap" and path.suffix.lower() != ".mcap":
-        from .rosbag import write_bag
-
         return write_bag(path, blocks, layout, joint_names, bare=False)
     atomic_write(path, lambda tmp: write_rows_to(tmp, fmt, blocks, n, layout, joint_names))
     return path
@@ -153,18 +146,12 @@ def write_rows_to(tmp: Path, fmt: str, blocks, n: int, layout: Layout, joint_nam
     """
     tmp = Path(tmp)
     if fmt == "npz":
-        from .npz import write_npz
-
         with open(tmp, "wb") as fh:
             write_npz(fh, blocks, n, layout, joint_names)
     elif fmt == "csv":
-        from .csv import write_csv
-
         with open(tmp, "w") as fh:
             write_csv(fh, blocks(), layout, joint_names)
     elif fmt == "mcap":
-        from .rosbag import write_bag
-
         write_bag(tmp, blocks, layout, joint_names, bare=True)
     else:
         raise DataError(f"unknown output format {fmt!r}; expected npz, csv or mcap")

@@ -20,6 +20,7 @@ members decompress as a stream), so memory is O(chunk) whatever N.
 
 from __future__ import annotations
 
+import struct
 import zipfile
 import zlib
 from collections.abc import Iterator
@@ -170,8 +171,6 @@ def _stored_offsets(zf: zipfile.ZipFile, infos, path: Path) -> dict[str, int]:
     Such a member is read with plain file reads, without the zip layer's buffering
     and CRC pass (the scan and the accumulation read every byte once each).
     """
-    import struct
-
     out: dict[str, int] = {}
     fp = zf.fp
     if fp is None:

@@ -178,11 +178,12 @@ class QualityAccumulator:
         file: str,
         format: str,
         window: str | None = None,
-        lower=None,
-        upper=None,
-        effort_limit=None,
+        robot=None,
         standstill_eps: float | None = None,
     ):
+        """``robot``: an object with ``lower``, ``upper`` [rad or m], shape (nq,), and
+        ``effort_limit`` [N m or N], shape (nv,) (a :class:`~manip_id.robot.Robot`), whose
+        limits the data are checked against; None: no limit checks."""
         self.lay = layout
         nq, nv = layout.nq, layout.nv
         self.q_names = list(joints) if nq == nv else [f"q[{i}]" for i in range(nq)]
@@ -192,6 +193,9 @@ class QualityAccumulator:
             window=window,
             joints=list(joints),
             standstill_eps=STANDSTILL if standstill_eps is None else float(standstill_eps),
+        )
+        lower, upper, effort_limit = (
+            (None, None, None) if robot is None else (robot.lower, robot.upper, robot.effort_limit)
         )
         self.lower = None if lower is None else np.asarray(lower, dtype=float)
         self.upper = None if upper is None else np.asarray(upper, dtype=float)
@@ -296,26 +300,38 @@ class QualityAccumulator:
     ) -> DataQuality:
         """The summary, with its warnings; ``dropped``: rows dropped per reason."""
         out = self.out
-        n = self.n
-        out.n_samples, out.n_dropped, out.first_dropped = n, n_dropped, first_dropped
+        out.n_samples, out.n_dropped, out.first_dropped = self.n, n_dropped, first_dropped
         out.dropped = dict(dropped or {})
         out.t_start, out.t_end = self.t0, self.t_last
-        joints = out.joints
-        if n >= 2:
-            mean = self.dt_sum / (n - 1)
-            var = max(self.dt_sq / (n - 1) - mean * mean, 0.0)
-            out.rate = 1.0 / mean if mean > 0 else math.nan
-            out.jitter = math.sqrt(var) / mean if mean > 0 else math.nan
-            out.dt_min, out.dt_max = self.dt_min, self.dt_max
-            cdf = np.cumsum(self.hist)
-            median = 10 ** _BINS[int(np.searchsorted(cdf, cdf[-1] / 2)) + 1]
-            edge = int(np.searchsorted(_BINS, math.log10(GAP_FACTOR * median)))
-            out.n_gaps = int(self.hist[edge:].sum())
-            if out.n_gaps:
-                out.warnings.append(
-                    f"{out.n_gaps} gaps in time (steps over {GAP_FACTOR:g} x the median "
-                    f"{1e3 * median:.3g} ms; largest {1e3 * self.dt_max:.3g} ms)"
-                )
+        self._finish_time(out)
+        self._finish_positions(out)
+        self._finish_velocity(out)
+        self._finish_torques(out)
+        return out
+
+    def _finish_time(self, out: DataQuality) -> None:
+        """Rate, jitter, extreme steps and gaps (from the histogram of log10 steps)."""
+        n = self.n
+        if n < 2:
+            return
+        mean = self.dt_sum / (n - 1)
+        var = max(self.dt_sq / (n - 1) - mean * mean, 0.0)
+        out.rate = 1.0 / mean if mean > 0 else math.nan
+        out.jitter = math.sqrt(var) / mean if mean > 0 else math.nan
+        out.dt_min, out.dt_max = self.dt_min, self.dt_max
+        cdf = np.cumsum(self.hist)
+        median = 10 ** _BINS[int(np.searchsorted(cdf, cdf[-1] / 2)) + 1]
+        edge = int(np.searchsorted(_BINS, math.log10(GAP_FACTOR * median)))
+        out.n_gaps = int(self.hist[edge:].sum())
+        if out.n_gaps:
+            out.warnings.append(
+                f"{out.n_gaps} gaps in time (steps over {GAP_FACTOR:g} x the median "
+                f"{1e3 * median:.3g} ms; largest {1e3 * self.dt_max:.3g} ms)"
+            )
+
+    def _finish_positions(self, out: DataQuality) -> None:
+        """Position range, degree hint, limit warnings, encoder resolution, static file."""
+        n = self.n
         out.q_min, out.q_max = self.q_min.tolist(), self.q_max.tolist()
         if n and np.abs(np.concatenate([self.q_min, self.q_max])).max() > 8 * math.pi:
             out.warnings.append(
@@ -339,6 +355,10 @@ class QualityAccumulator:
         out.resolution = [float(r) if np.isfinite(r) else math.nan for r in res]
         span = self.q_max - self.q_min
         out.static = bool(n >= 2 and np.all(span <= static_span(res)))
+
+    def _finish_velocity(self, out: DataQuality) -> None:
+        """Velocity mismatch per joint over the windows that moved beyond the encoder's steps."""
+        res = self.step
         if self.lay.nq == self.lay.nv:
             edges = 10.0 ** (np.arange(_MOTION_BINS) / 4.0 - 15.0)  # lower edge of each bin
             thr = MOTION_STEPS * np.where(np.isfinite(res), res, 0.0)
@@ -350,7 +370,7 @@ class QualityAccumulator:
             mism = np.sqrt(fd / mid)
         out.velocity_mismatch = mism.tolist() if self.lay.nq == self.lay.nv else []
         if self.lay.nq == self.lay.nv and not out.static:
-            for j, name in enumerate(joints):
+            for j, name in enumerate(out.joints):
                 if mid[j] > 0 and cross[j] < 0:
                     out.warnings.append(
                         f"joint {name}: dq has the opposite sign of the motion of q: "
@@ -362,6 +382,10 @@ class QualityAccumulator:
                         f"{100 * mism[j]:.0f} % (RMS over {1e3 * VELOCITY_WINDOW:g} ms windows): "
                         "other units, a lag, or columns of another joint?"
                     )
+
+    def _finish_torques(self, out: DataQuality) -> None:
+        """Standstill shares, largest torques, clipped and saturated shares."""
+        n, joints = self.n, out.joints
         out.standstill_share = (self.still / max(n, 1)).tolist()
         out.tau_max = self.tau_max.tolist()
         clipped = self.at_max / max(n, 1)
@@ -383,4 +407,3 @@ class QualityAccumulator:
                         f"joint {name}: {100 * sat[j]:.2g} % of the torques at >= 99 % of the "
                         f"effort limit {self.effort[j]:.4g}"
                     )
-        return out

@@ -34,7 +34,11 @@ from .._checks import MEASURED_LIMITS
 from ..errors import DataError, InputError
 from .adjust import TIME_UNITS, AdjustedSource, delay_vector
 from .core import Dataset, check_time, check_values
+from .csv import CsvSource
 from .layout import Layout
+from .npz import NpzSource
+from .panda import PANDA_FILES, is_panda_log, load_panda_gaz2019
+from .rosbag import BagSource, is_bag
 from .spec import FileSpec, Window
 
 #: Rows per block read from a file.
@@ -46,9 +50,6 @@ FORMATS: tuple[str, ...] = ("npz", "csv", "panda_gaz2019", "rosbag")
 
 def infer_format(path: Path) -> str:
     """The format of ``path`` from its suffix or folder contents."""
-    from .panda import PANDA_FILES, is_panda_log
-    from .rosbag import is_bag
-
     if path.is_dir():
         if is_panda_log(path):
             return "panda_gaz2019"
@@ -124,19 +125,11 @@ def open_source(spec: FileSpec, joint_names=None):
 def _raw_source(spec: FileSpec, fmt: str, joint_names):
     path = spec.path
     if fmt == "npz":
-        from .npz import NpzSource
-
         return NpzSource(path)
     if fmt == "csv":
-        from .csv import CsvSource
-
         return CsvSource(path, spec.columns)
     if fmt == "rosbag":
-        from .rosbag import BagSource
-
         return BagSource(path, spec.topic, joint_names)
-    from .panda import load_panda_gaz2019
-
     return MemorySource(load_panda_gaz2019(path), path, "panda_gaz2019")
 
 
@@ -197,6 +190,54 @@ def _field_of(layout: Layout, col: int) -> tuple[str, int]:
     return "?", col
 
 
+def _count_field(counts: RowCounts, layout: Layout, col: int) -> None:
+    """One more dropped row whose first bad cell is in column ``col``."""
+    fname, _ = _field_of(layout, col)
+    counts.dropped_fields[fname] = counts.dropped_fields.get(fname, 0) + 1
+
+
+def _drop_non_finite(source, block, raw, finite, drop_bad_rows: bool, counts: RowCounts):
+    """``(block, raw)`` without the rows holding NaN/Inf (counted per reason and field).
+
+    Without ``drop_bad_rows`` the first bad row is refused instead: its malformed CSV
+    line, else the value check naming the field, row and joint (and the file).
+    """
+    lay: Layout = source.layout
+    malformed = getattr(source, "malformed", None) or {}
+    bad = np.flatnonzero(~finite)
+    if not drop_bad_rows:
+        hint = " (pass --drop-bad-rows / drop_bad_rows=True to drop such rows)"
+        lines = [int(r) for r in raw[bad] if int(r) in malformed]
+        if lines:
+            raise DataError(malformed[lines[0]] + hint)
+        for name, s in lay.slices.items():
+            cols = source.joint_names if name != "t" and name != "q" else None
+            try:
+                arr = block[:, s] if name != "t" else block[:, 0]
+                check_values(name, arr, arr.ndim, cols, offset=int(raw[0]))
+            except DataError as exc:
+                raise DataError(f"{source.path}: {exc}{hint}") from exc
+    is_line = np.array([int(r) in malformed for r in raw[bad]], dtype=bool)
+    counts.drop("malformed line", raw[bad[is_line]])
+    counts.drop("non-finite", raw[bad[~is_line]])
+    for b in bad[~is_line]:
+        _count_field(counts, lay, int(np.flatnonzero(~np.isfinite(block[b]))[0]))
+    return block[finite], raw[finite]
+
+
+def _drop_implausible(lay: Layout, block, raw, counts: RowCounts):
+    """``(block, raw)`` without the rows beyond the magnitude bounds (counted)."""
+    wild = _implausible(block, lay)
+    if not wild.any():
+        return block, raw
+    counts.drop("implausible", raw[wild])
+    for b in np.flatnonzero(wild):
+        _count_field(
+            counts, lay, int(np.flatnonzero(_implausible_cells(block[b : b + 1], lay)[0])[0])
+        )
+    return block[~wild], raw[~wild]
+
+
 def iter_rows(
     source,
     window: Window | None = None,
@@ -240,37 +281,9 @@ def iter_rows(
                 t0 = float(block[ft[0], t_col])
                 counts.t_file_start = t0
         if not finite.all():
-            malformed = getattr(source, "malformed", None) or {}
-            bad = np.flatnonzero(~finite)
-            if not drop_bad_rows:
-                hint = " (pass --drop-bad-rows / drop_bad_rows=True to drop such rows)"
-                lines = [int(r) for r in raw[bad] if int(r) in malformed]
-                if lines:
-                    raise DataError(malformed[lines[0]] + hint)
-                for name, s in lay.slices.items():
-                    cols = names if name != "t" and name != "q" else None
-                    try:
-                        arr = block[:, s] if name != "t" else block[:, 0]
-                        check_values(name, arr, arr.ndim, cols, offset=int(raw[0]))
-                    except DataError as exc:
-                        raise DataError(f"{path}: {exc}{hint}") from exc
-            is_line = np.array([int(r) in malformed for r in raw[bad]], dtype=bool)
-            counts.drop("malformed line", raw[bad[is_line]])
-            counts.drop("non-finite", raw[bad[~is_line]])
-            for b in bad[~is_line]:
-                col = int(np.flatnonzero(~np.isfinite(block[b]))[0])
-                fname, _ = _field_of(lay, col)
-                counts.dropped_fields[fname] = counts.dropped_fields.get(fname, 0) + 1
-            block, raw = block[finite], raw[finite]
+            block, raw = _drop_non_finite(source, block, raw, finite, drop_bad_rows, counts)
         if drop_bad_rows and block.shape[0]:
-            wild = _implausible(block, lay)
-            if wild.any():
-                counts.drop("implausible", raw[wild])
-                for b in np.flatnonzero(wild):
-                    col = int(np.flatnonzero(_implausible_cells(block[b : b + 1], lay)[0])[0])
-                    fname, _ = _field_of(lay, col)
-                    counts.dropped_fields[fname] = counts.dropped_fields.get(fname, 0) + 1
-                block, raw = block[~wild], raw[~wild]
+            block, raw = _drop_implausible(lay, block, raw, counts)
         if window is not None and window.unit == "s" and block.shape[0]:
             rel = block[:, t_col] - t0
             inside = np.ones(rel.shape, dtype=bool)

@@ -17,7 +17,7 @@ JSON (:mod:`~manip_id.export.sidecar`) next to its file.
 from .links import CARRIED_POLICIES, Composite
 from .meshes import MESH_POLICIES
 from .mjcf import export_mjcf, mjcf_text
-from .payload_link import export_payload_urdf, payload_urdf_texts
+from .payload_link import PayloadLink, export_payload_urdf, payload_urdf_texts
 from .sidecar import (
     SIDECAR_FORMAT,
     SIDECAR_VERSION,
@@ -37,6 +37,7 @@ __all__ = [
     "Composite",
     "ExportResult",
     "ExportTexts",
+    "PayloadLink",
     "apply_identified",
     "check_output",
     "export_mjcf",

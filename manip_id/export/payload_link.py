@@ -11,7 +11,8 @@
 
 where ``L`` is the link ``FRAME`` belongs to (the frame itself when it is a link; the child
 link of a joint frame; the link an operational frame hangs on) and ``(p, r)`` the frame
-in that link. The payload is given as ``manip-id payload`` reports it: mass ``m`` [kg],
+in that link. The payload is a :class:`PayloadLink`, as ``manip-id payload`` reports it:
+mass ``m`` [kg],
 centre of mass ``c`` (3,) [m] in FRAME and inertia about the centre of mass ``I_c``
 (6,: ``Ixx, Ixy, Iyy, Ixz, Iyz, Izz``, or (3, 3)) [kg m^2] in FRAME's axes. Its
 pseudo-inertia must be positive definite (a consistent estimate,
@@ -26,6 +27,7 @@ import xml.etree.ElementTree as ET
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -96,6 +98,35 @@ def _checked_payload(frame: str, mass, com, inertia) -> tuple[float, np.ndarray,
 
 
 @dataclass(frozen=True)
+class PayloadLink:
+    """A payload to fix to the robot as a link, as ``manip-id payload`` reports it.
+
+    Checked when exported: mass positive, centre of mass of 3 entries, the pseudo-inertia
+    positive definite.
+
+    Attributes
+    ----------
+    frame : str
+        The frame the payload is fixed to (a link, a joint, an operational frame).
+    mass : float
+        Payload mass [kg].
+    com : array_like, shape (3,)
+        Centre of mass in ``frame`` [m].
+    inertia : array_like, shape (6,) or (3, 3)
+        Inertia about the centre of mass, ``frame`` axes, (6,) as ``Ixx, Ixy, Iyy, Ixz,
+        Iyz, Izz`` [kg m^2].
+    name : str
+        Name of the new link (its joint is ``NAME_joint``).
+    """
+
+    frame: str
+    mass: float
+    com: Any
+    inertia: Any
+    name: str = "payload"
+
+
+@dataclass(frozen=True)
 class PayloadTexts:
     """The URDF with the payload link, its sidecar object and where the link went."""
 
@@ -106,18 +137,15 @@ class PayloadTexts:
 
 def payload_urdf_texts(
     robot,
-    frame: str,
-    mass: float,
-    com,
-    inertia,
+    payload: PayloadLink,
     urdf_name: str = "robot.urdf",
     *,
-    name: str = "payload",
     source=None,
     provenance: Mapping | None = None,
 ) -> PayloadTexts:
     """The texts of :func:`export_payload_urdf`, without writing them."""
-    m, c, Ic = _checked_payload(frame, mass, com, inertia)
+    frame, name = payload.frame, payload.name
+    m, c, Ic = _checked_payload(frame, payload.mass, payload.com, payload.inertia)
     src, root = read_urdf(robot, source)
     taken = {str(e.get("name")) for e in root if e.tag in ("link", "joint")}
     if name in taken or f"{name}_joint" in taken:
@@ -159,14 +187,10 @@ def payload_urdf_texts(
 
 def export_payload_urdf(
     robot,
-    frame: str,
-    mass: float,
-    com,
-    inertia,
+    payload: PayloadLink,
     path,
     *,
     force: bool = False,
-    name: str = "payload",
     provenance: Mapping | None = None,
 ) -> ExportResult:
     """Write the robot's URDF with the payload as a fixed link at ``frame``, and its sidecar.
@@ -175,19 +199,11 @@ def export_payload_urdf(
     ----------
     robot : Robot
         The robot the payload was identified on (its URDF is copied).
-    frame : str
-        The frame the payload is fixed to (a link, a joint, an operational frame).
-    mass : float
-        Payload mass [kg].
-    com : array_like, shape (3,)
-        Centre of mass in ``frame`` [m].
-    inertia : array_like, shape (6,) or (3, 3)
-        Inertia about the centre of mass, ``frame`` axes, (6,) as ``Ixx, Ixy, Iyy, Ixz,
-        Iyz, Izz`` [kg m^2].
+    payload : PayloadLink
+        The frame, mass [kg], centre of mass [m] and inertia about it [kg m^2], and the
+        new link's name.
     path : path
         The ``.urdf`` to write; refused if it exists unless ``force`` (checked first).
-    name : str
-        Name of the new link (its joint is ``NAME_joint``).
     provenance : mapping, optional
         Command, source data and uncertainty for the sidecar.
     """
@@ -195,9 +211,7 @@ def export_payload_urdf(
     src = Path(robot.source or "")
     if src.is_file() and src.resolve() == out.resolve():
         raise InputError(f"{out} is the robot's own URDF: write the export elsewhere")
-    texts = payload_urdf_texts(
-        robot, frame, mass, com, inertia, out.name, name=name, provenance=provenance
-    )
+    texts = payload_urdf_texts(robot, payload, out.name, provenance=provenance)
     atomic_write_text(out, texts.urdf)
     atomic_write_text(side, json_text(texts.sidecar))
     unresolved = texts.sidecar["meshes"]["unresolved"]

@@ -141,9 +141,7 @@ def scan_file(robot: Robot, spec, options: PreprocessOptions | None = None) -> F
         file=str(spec.path),
         format=src.format,
         window=None if spec.window is None else str(spec.window),
-        lower=robot.lower,
-        upper=robot.upper,
-        effort_limit=robot.effort_limit,
+        robot=robot,
         standstill_eps=options.velocity_deadband,
     )
     counts = RowCounts()

@@ -55,6 +55,7 @@ _WHERE: dict[str, tuple[str, str | None]] = {
     "ReportExistsError": ("..errors", "ReportExistsError"),
     "check_report_target": ("manip_id._io", "check_report_target"),
     "write_report": (".report", "write_report"),
+    "ReportContent": (".report", "ReportContent"),
 }
 
 
@@ -86,5 +87,6 @@ __all__ = [
     "figures",
     "ReportExistsError",
     "check_report_target",
+    "ReportContent",
     "write_report",
 ]

@@ -14,7 +14,7 @@ from ..errors import InfeasibleTrajectoryError
 from ..identifiability import analyze
 from . import figures
 from .meshcat_scene import RobotScene
-from .report import write_report
+from .report import ReportContent, write_report
 
 
 def _figures(robot, cmp, run_name: str, base) -> dict:
@@ -96,8 +96,7 @@ def write_adapt_report(
         f"regressor can determine); the {robot.n_parameters} standard parameters in the table "
         "need not converge"
     )
-    return write_report(
-        folder,
+    content = ReportContent(
         title=f"manip-id adapt: {run_name}",
         summary=summary,
         parameter_table=rows,
@@ -105,5 +104,5 @@ def write_adapt_report(
         scene=scene,
         json_result=document,
         notes=notes,
-        force=force,
     )
+    return write_report(folder, content, force=force)

@@ -65,24 +65,25 @@ def torque_fit(
     tau,
     tau_pred,
     *,
-    joint_names: Sequence[str] | None = None,
-    units: str | Sequence[str] = "N m",
     t_validation=None,
     tau_validation=None,
     tau_validation_pred=None,
-    title: str = "torque fit",
+    options: FigureOptions | None = None,
 ) -> Figure:
     """Measured and predicted torque per joint, training (and validation) data.
 
     t: training times [s], shape (N,); tau, tau_pred: measured and predicted
     (``Y_b(q, dq, ddq) theta_b``) torques, shape (N, n) [units]. The validation
     triple, when given, has shapes (M,), (M, n), (M, n). One axes per joint.
+    options: title (default "torque fit"), joint names and units.
     """
+    o = options or FigureOptions()
+    title = o.title or "torque fit"
     t, tau = series(t, tau, "t", "tau")
     n = tau.shape[1]
     _, tau_pred = series(t, tau_pred, "t", "tau_pred", width=n)
     val = _validation(t_validation, tau_validation, tau_validation_pred, n, "tau")
-    names, units = names_for(joint_names, n, "joint names", "joint"), units_for(units, n)
+    names, units = names_for(o.joint_names, n, "joint names", "joint"), units_for(o.units, n)
     fig, axes = new_figure(n, row_height=1.7)
     for j, ax in enumerate(axes):
         k = stride(len(t))

@@ -18,7 +18,7 @@ import numpy as np
 from ..errors import InfeasibleTrajectoryError
 from . import figures
 from .meshcat_scene import RobotScene, link_identifiability
-from .report import write_report
+from .report import ReportContent, write_report
 from .report_answers import identify_answers
 from .report_document import ReportOptions, ReportSamples
 from .report_tables import report_parameter_rows, report_quality_rows, report_summary
@@ -193,8 +193,7 @@ def write_identify_report(
     title = f"manip-id identify: {run_name}"
     scene = build_scene(robot, result, full, title, notes, options.scene_assets)
     quality = report_quality_rows(report)
-    return write_report(
-        folder,
+    content = ReportContent(
         title=title,
         summary=report_summary(report, options.source),
         parameter_table=report_parameter_rows(report),
@@ -202,10 +201,10 @@ def write_identify_report(
         scene=scene,
         json_result=report,
         notes=notes,
-        force=options.force,
         tables={"Data quality": quality} if quality else None,
         questions=identify_answers(report, getattr(folder, "path", folder)),
     )
+    return write_report(folder, content, force=options.force)
 
 
 def write_fleet_report(
@@ -248,15 +247,14 @@ def write_fleet_report(
         if f.result is None
     ]
     quality = report_quality_rows(report)
-    return write_report(
-        folder,
+    content = ReportContent(
         title=f"manip-id identify: {run_name}",
         summary=summary,
         parameter_table=report_parameter_rows(report),
         figures=figs,
         json_result=report,
         notes=notes,
-        force=options.force,
         tables={"Data quality": quality} if quality else None,
         questions=identify_answers(report, getattr(folder, "path", folder)),
     )
+    return write_report(folder, content, force=options.force)

@@ -15,7 +15,7 @@ import numpy as np
 from ..errors import InfeasibleTrajectoryError
 from . import figures
 from .meshcat_scene import RobotScene, link_identifiability
-from .report import write_report
+from .report import ReportContent, write_report
 
 
 def _individually_identifiable(base) -> np.ndarray:
@@ -92,8 +92,7 @@ def write_rank_report(
         summary["data"] = source
         summary["data rank"] = data.rank
         summary["unexcited directions"] = len(data.unexcited)
-    return write_report(
-        folder,
+    content = ReportContent(
         title=f"manip-id rank {robot.name}",
         summary=summary,
         parameter_table=rows,
@@ -101,5 +100,5 @@ def write_rank_report(
         scene=scene,
         json_result=document,
         notes=notes,
-        force=force,
     )
+    return write_report(folder, content, force=force)

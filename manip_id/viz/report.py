@@ -12,7 +12,7 @@ import html as html_lib
 import os
 import shutil
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +34,7 @@ INDEX, RESULT, SCENE = "index.html", "result.json", "scene.html"
 
 @dataclass(frozen=True)
 class ReportContent:
-    """What a report page shows (the arguments of :func:`write_report`)."""
+    """What a report page shows (see :func:`write_report`)."""
 
     title: str
     summary: Mapping
@@ -54,6 +54,7 @@ __all__ = [
     "MANIFEST",
     "RESULT",
     "SCENE",
+    "ReportContent",
     "ReportExistsError",
     "ReportFolder",
     "check_report_target",
@@ -157,53 +158,38 @@ p.verdict {{ font-size: 1.1em; margin: 0.3em 0 1em 0; }}
 
 
 def write_report(
-    directory,
-    *,
-    title: str,
-    summary: Mapping,
-    parameter_table: Sequence[Mapping],
-    figures: Mapping[str, Callable[[Path], object] | str | os.PathLike],
-    scene=None,
-    json_result=None,
-    notes: Sequence[str] = (),
-    force: bool = False,
-    inputs: Sequence = (),
-    tables: Mapping[str, Sequence[Mapping]] | None = None,
-    questions: Sequence[tuple[str, str]] = (),
+    directory, content: ReportContent, *, force: bool = False, inputs: Sequence = ()
 ) -> Path:
     """Write a report folder and return its path.
 
     directory: the report folder (created; see the module docstring for overwriting).
-    title: page title; summary: name -> value pairs shown first;
-    parameter_table: rows (dicts, same keys) of the parameter table;
-    figures: name -> a callable that writes a PNG to the path it is given, or
-        the path of an existing PNG (copied); saved as ``<name>.png``;
-    scene: a :class:`~manip_id.viz.meshcat_scene.RobotScene` or its HTML as a string;
-    json_result: written to result.json (default: ``{"summary", "parameters"}``);
-    notes: lines shown under the summary;
-    tables: more sections after the parameters, title -> rows (as ``parameter_table``;
-        a row's ``_class`` key, e.g. ``"bad"``, highlights it);
-    questions: sections shown first, ``(question, answer HTML)`` pairs (the answer is
-        markup built by the caller, escaped there), e.g. "How good is the model?";
+    content: what the page shows, a :class:`ReportContent`:
+
+    - title: page title; summary: name -> value pairs shown first;
+    - parameter_table: rows (dicts, same keys) of the parameter table;
+    - figures: name -> a callable that writes a PNG to the path it is given, or
+      the path of an existing PNG (copied); saved as ``<name>.png``;
+    - scene: a :class:`~manip_id.viz.meshcat_scene.RobotScene` or its HTML as a string;
+    - json_result: written to result.json (default: ``{"summary", "parameters"}``);
+    - notes: lines shown under the summary;
+    - tables: more sections after the parameters, title -> rows (as ``parameter_table``;
+      a row's ``_class`` key, e.g. ``"bad"``, highlights it);
+    - questions: sections shown first, ``(question, answer HTML)`` pairs (the answer is
+      markup built by the caller, escaped there), e.g. "How good is the model?".
+
+    force: replace a report folder manip_id wrote;
     inputs: paths the report must not replace or contain (see :func:`check_report_target`).
 
     ``directory`` may also be a :class:`ReportFolder` from :func:`claim_report`: the
     report is then built but left for its :meth:`ReportFolder.publish` (with the other
     outputs of a command).
     """
-    _check_content(title, summary, parameter_table, figures, notes)
-    content = ReportContent(
-        title=title,
-        summary=summary,
-        parameter_table=parameter_table,
-        figures=figures,
-        scene=scene,
-        json_result=json_result,
-        notes=notes,
-        tables=tables,
-        questions=tuple(questions),
-    )
-    _check_names(figures, scene)
+    if not isinstance(content, ReportContent):
+        raise InputError(f"content must be a ReportContent, got {type(content).__name__}")
+    c = content
+    _check_content(c.title, c.summary, c.parameter_table, c.figures, c.notes)
+    content = replace(c, questions=tuple(c.questions))
+    _check_names(c.figures, c.scene)
 
     def fill(tmp: Path) -> None:
         _fill(tmp, content)

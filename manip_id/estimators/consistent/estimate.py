@@ -23,6 +23,7 @@ from .bounds import BodyBounds, BoundsOptions, body_bounds
 from .problem import (
     DEFAULT_PRIOR_WEIGHT,
     SCALE_WEIGHT,
+    PriorOptions,
     base_map,
     build_problem,
     check_options,
@@ -180,11 +181,11 @@ def consistent_estimate(
         A,
         b,
         variance=variance,
-        prior=prior,
-        prior_weight=SCALE_WEIGHT if prior != "none" else 0.0,
-        prior_parameters=prior_parameters,
         n_rows=acc.n_rows,
         zz=zz,
+        prior=PriorOptions(
+            prior, SCALE_WEIGHT if prior != "none" else 0.0, parameters=prior_parameters
+        ),
     )
     problem = replace(problem, bounds=body_bounds(robot, bounds))
     feas = solve_consistent(robot, problem, solver=solver)

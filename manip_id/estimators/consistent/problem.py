@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..._checks import as_float_array
 from ...consistency import (
@@ -39,6 +40,25 @@ MARGIN = 1e-6
 #: Relative floor of the residual variance used to measure the fit, ``(FLOOR * rms tau)^2``:
 #: the round-off level of a residual computed from the sums.
 VARIANCE_FLOOR = 1e-8
+
+
+@dataclass(frozen=True)
+class PriorOptions:
+    """The prior of a consistent problem.
+
+    Attributes
+    ----------
+    prior : str
+        "nominal" (the log-det divergence from ``parameters``) or "none".
+    weight : float
+        Its weight ``w >= 0`` against the fit.
+    parameters : array_like of shape (p,) or None
+        Standard parameters to use as the prior instead of the robot's nominal ones.
+    """
+
+    prior: str = "nominal"
+    weight: float = DEFAULT_PRIOR_WEIGHT
+    parameters: ArrayLike | None = None
 
 
 @dataclass(frozen=True)
@@ -172,11 +192,9 @@ def build_problem(
     b,
     *,
     variance: float,
-    prior: str = "nominal",
-    prior_weight: float = DEFAULT_PRIOR_WEIGHT,
-    prior_parameters=None,
     n_rows: int | None = None,
     zz: float | None = None,
+    prior: PriorOptions | None = None,
 ) -> ConsistentProblem:
     """The consistent problem of ``robot`` from the information of its base regressor.
 
@@ -195,13 +213,12 @@ def build_problem(
         the residual variance ``s`` with ``C^-1 = A / s`` (1 for weighted least
         squares whose weights are inverse variances) [(N m)^2]; floored at
         ``VARIANCE_FLOOR^2 zz / n_rows`` when ``zz`` and ``n_rows`` are given.
-    prior
-        "nominal" or "none"; prior_weight: ``w`` >= 0.
-    prior_parameters
-        standard parameters (p,) to use as the prior instead of the
-        robot's nominal ones.
     n_rows
         number of stacked equations; zz: ``tau^T W tau`` [(N m)^2].
+    prior
+        the prior (:class:`PriorOptions`: kind, weight ``w`` >= 0, parameters instead
+        of the robot's nominal ones); default the nominal prior of weight
+        :data:`DEFAULT_PRIOR_WEIGHT`.
 
     Raises
     ------
@@ -210,7 +227,8 @@ def build_problem(
     PhysicalConsistencyError
         the prior itself is not physical (names the body).
     """
-    w = _prior_weight(prior, prior_weight)
+    prior = PriorOptions() if prior is None else prior
+    w = _prior_weight(prior.prior, prior.weight)
     p = robot.n_parameters
     A, b = _checked_information(robot, base, A, b)
     beta_ls, W = _whitened_fit(A, b, variance, zz, n_rows)
@@ -219,12 +237,12 @@ def build_problem(
     nonneg = nonnegative_terms(robot)
     theta0 = (
         np.array(robot.nominal_parameters, dtype=float)
-        if prior_parameters is None
-        else as_float_array(prior_parameters, "prior_parameters", ndim=1).copy()
+        if prior.parameters is None
+        else as_float_array(prior.parameters, "prior_parameters", ndim=1).copy()
     )
     if theta0.shape != (p,):
         raise InputError(f"prior_parameters.shape={theta0.shape} but robot has p={p}")
-    J0, margin = _prior_margins(robot, theta0, prior, nonneg)
+    J0, margin = _prior_margins(robot, theta0, prior.prior, nonneg)
     term_scale = _term_scales(P, 0.5 * (A + A.T), nb, beta_ls, theta0, zz)
     return ConsistentProblem(
         P=P,
