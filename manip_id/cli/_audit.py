@@ -4,7 +4,11 @@ from __future__ import annotations
 
 import argparse
 
+from ..audit import AuditOptions, audit_files
+from ..datasets import Window, parse_file_spec
+from ..datasets.stream import torque_scale_vector
 from ..errors import InputError
+from ..payload import load_torque_scale
 from ._common import (
     column_map,
     input_paths,
@@ -19,9 +23,6 @@ from ._runtime import (
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..audit import AuditOptions, audit_files
-    from ..datasets import Window, parse_file_spec
-    from ..datasets.stream import torque_scale_vector
 
     if args.torque_scale is not None and args.torque_scale_from is not None:
         raise InputError("give --torque-scale or --torque-scale-from, not both")
@@ -41,8 +42,6 @@ def run(args: argparse.Namespace) -> int:
     robot = robot_from_args(args)
     given: object = None
     if args.torque_scale_from is not None:
-        from ..payload import load_torque_scale
-
         given = load_torque_scale(args.torque_scale_from)
     elif args.torque_scale is not None:
         given = parse_floats(args.torque_scale, "--torque-scale")

@@ -6,7 +6,9 @@ import argparse
 import os
 
 from .._io import OutputSet
+from ..drift import drift_files
 from ..errors import InputError
+from ..identification import PreprocessOptions, load_result
 from ._common import (
     reserve_outputs,
 )
@@ -17,8 +19,6 @@ from ._runtime import (
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..drift import drift_files  # the fleet path loads with the command, not with --help
-    from ..identification import PreprocessOptions, load_result
 
     if not 0.0 < args.alpha < 1.0:
         raise InputError(f"--alpha must be a level in (0, 1), got {args.alpha}")

@@ -11,6 +11,19 @@ import numpy as np
 from .._io import OutputSet
 from .._native import native_stderr_captured
 from ..errors import InputError
+from ..monitor import (  # the package loads with the command, not with --help
+    DEFAULT_FILTER_GAIN,
+    DEFAULT_GAIN,
+    CollisionMonitor,
+    ReadOptions,
+    as_logs,
+    calibrate_thresholds,
+    load_model,
+    load_thresholds,
+    model_from_robot,
+)
+from ..robot import load_robot
+from ..viz.report import ReportContent, write_report
 from ._common import (
     reserve_outputs,
 )
@@ -64,24 +77,12 @@ def _reserve(args):
 def _robot(args):
     if not args.identified:
         return robot_from_args(args)
-    from ..robot import load_robot  # robot loading waits for the command (--help stays light)
 
     with native_stderr_captured("urdfdom"):
         return load_robot(args.robot, identified=True, package_dirs=args.package_dir)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..monitor import (  # the package loads with the command, not with --help
-        DEFAULT_FILTER_GAIN,
-        DEFAULT_GAIN,
-        CollisionMonitor,
-        ReadOptions,
-        as_logs,
-        calibrate_thresholds,
-        load_model,
-        load_thresholds,
-        model_from_robot,
-    )
 
     t_start = time.perf_counter()
     gain = _floats(args.gain, "--gain")
@@ -208,7 +209,6 @@ def residual_figure(path, run, title: str) -> None:
 
 
 def _write_report(robot, th, runs, doc, args):
-    from ..viz.report import ReportContent, write_report  # the report machinery, --report only
 
     figs = {
         f"residuals_{i}": (

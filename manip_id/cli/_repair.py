@@ -3,19 +3,18 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
+from ..errors import InputError
+from ..export import check_output, export_urdf, sidecar_path
+from ..repair import repair_nominal
+from ._common import reserve_outputs
 from ._runtime import (
     robot_from_args,
 )
 
 
 def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    from ..errors import InputError
-    from ..export import check_output, export_urdf, sidecar_path
-    from ..repair import repair_nominal
-    from ._common import reserve_outputs
 
     check_output(args.out, args.force)  # before the work
     if args.json and Path(args.json).resolve() == Path(args.out).resolve():
