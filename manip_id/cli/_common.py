@@ -49,6 +49,63 @@ def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def workers_value(text: str) -> int | str:
+    """``--workers``: ``auto`` or a positive number of processes (argparse type)."""
+    from ..errors import InputError
+    from ..execution import check_workers
+
+    try:
+        return check_workers(text)
+    except InputError as exc:
+        message = f"expected 'auto' or a positive integer, got {text!r}"
+        raise argparse.ArgumentTypeError(message) from exc
+
+
+class RegressorMode(argparse.Action):
+    """``--regressor MODE``: sets the regressor mode of this process and of the workers it
+    starts (:func:`manip_id.compiled_regressor.set_mode`)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        from ..compiled_regressor import set_mode
+
+        set_mode(str(values))
+        setattr(namespace, self.dest, values)
+
+
+def add_execution_arguments(parser: argparse.ArgumentParser, *, workers: bool = True) -> None:
+    """Add how the work runs: ``--chunk``, ``--workers`` (when ``workers``), ``--regressor``."""
+    from ..compiled_regressor import MODES
+    from ..execution import FORK_MIN_SAMPLES
+
+    parser.add_argument("--chunk", type=int, default=1024, help="samples per regressor chunk")
+    if workers:
+        parser.add_argument(
+            "--workers",
+            type=workers_value,
+            default="auto",
+            help="processes accumulating parts of the data (ols, wls): a number, or 'auto' "
+            f"(default: every core this process may use from {FORK_MIN_SAMPLES} samples on, "
+            "else 1)",
+        )
+    parser.add_argument(
+        "--regressor",
+        choices=MODES,
+        action=RegressorMode,
+        default=None,
+        help="rigid-body regressor: 'compiled' (numba, a block of samples per call), "
+        "'pinocchio' (one computeJointTorqueRegressor call per sample, the reference) or "
+        "'auto' (compiled for large inputs when numba is installed) [default: "
+        "$MANIP_ID_REGRESSOR, else auto]",
+    )
+
+
+def explicit_workers(args: argparse.Namespace) -> int:
+    """``--workers`` as a number of processes; ``auto`` counts as 1 (it never forks for
+    work that must run in order or in one process) [-]."""
+    workers = getattr(args, "workers", 1)
+    return 1 if workers == "auto" else int(workers)
+
+
 def robot_from_args(args: argparse.Namespace) -> Robot:
     """Load the robot named by :func:`add_robot_arguments` options."""
     from ..robot import load_robot
@@ -147,7 +204,7 @@ def check_seed_and_workers(args: argparse.Namespace) -> None:
     if seed is not None and not 0 <= seed < 2**63:
         raise InputError(f"--seed must be an integer in [0, 2**63), got {seed}")
     workers = getattr(args, "workers", None)
-    if workers is not None:
+    if workers is not None and workers != "auto":
         if workers < 1:
             raise InputError(f"--workers must be >= 1, got {workers}")
         affinity = getattr(os, "sched_getaffinity", None)  # the cores this process may use

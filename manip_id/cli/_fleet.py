@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 from ..errors import InputError
+from ._common import explicit_workers
 
 FLEET_METHODS = ("ols", "wls")
 
@@ -79,7 +80,7 @@ def check(args: argparse.Namespace) -> None:
         )
     if args.split is not None:
         raise InputError(f"{opt} identifies whole files: give validation files with --validate")
-    if args.workers > 1:
+    if explicit_workers(args) > 1:
         raise InputError("--workers forks local processes; with --scheduler use local:N")
     if args.block is not None and args.block < 1:
         raise InputError(f"--block must be >= 1 samples, got {args.block}")

@@ -20,7 +20,13 @@ from ..datasets import Dataset, check_robot, load_dataset
 from ..errors import InputError
 from ..signals import DEFAULT_CUTOFF, DEFAULT_ORDER, preprocess
 from . import _files, _fleet
-from ._common import add_robot_arguments, reserve_outputs, robot_from_args
+from ._common import (
+    add_execution_arguments,
+    add_robot_arguments,
+    explicit_workers,
+    reserve_outputs,
+    robot_from_args,
+)
 
 METHODS = ("ols", "wls", "rls", "gradient")
 SIM_DEFAULTS = {"duration": 20.0, "rate": 200.0, "noise": 0.01, "seed": 0}
@@ -187,13 +193,7 @@ def register(sub) -> None:
         metavar="C",
         help="warn when the condition number exceeds C [default 100]",
     )
-    p.add_argument("--chunk", type=int, default=1024, help="samples per regressor chunk")
-    p.add_argument(
-        "--workers",
-        type=int,
-        default=1,
-        help="processes accumulating parts of the data (ols, wls; default 1)",
-    )
+    add_execution_arguments(p)
     phys = p.add_argument_group("physically consistent estimation (ols, wls)")
     phys.add_argument(
         "--consistent",
@@ -341,9 +341,7 @@ def _check_args(args) -> None:
         value = getattr(args, name, None)
         if value is not None and not (math.isfinite(value) and value > 0):
             raise InputError(f"--{name.replace('_', '-')} must be positive, got {value}")
-    if args.workers < 1:
-        raise InputError(f"--workers must be >= 1, got {args.workers}")
-    if args.workers > 1 and args.method in ("rls", "gradient"):
+    if explicit_workers(args) > 1 and args.method in ("rls", "gradient"):
         raise InputError(f"--workers applies to ols and wls; {args.method} runs in sample order")
     _check_consistent_args(args)
     _fleet.check(args)
@@ -480,6 +478,7 @@ def _run_stream(robot, args, outputs, timings: dict, t_start: float) -> int:
     """
     from types import SimpleNamespace
 
+    from ..execution import resolve_workers
     from ..identification import RunOptions, identify_chunks
 
     t0 = time.perf_counter()
@@ -494,17 +493,19 @@ def _run_stream(robot, args, outputs, timings: dict, t_start: float) -> int:
         source["split"] = args.split
     report_progress = _progress(n)
 
+    workers = resolve_workers(args.workers, k)
+
     def progress(done: int, total: int) -> None:  # serial: samples of k; workers: parts
         if report_progress is not None:
-            report_progress(done, total if args.workers > 1 else k)
+            report_progress(done, total if workers > 1 else k)
 
-    train = stream.parts(args.workers, 0, k) if args.workers > 1 else stream.blocks(0, k)
+    train = stream.parts(workers, 0, k) if workers > 1 else stream.blocks(0, k)
     result = identify_chunks(
         robot,
         train,
         method=args.method,
         validation=stream.blocks(k, n) if k < n else None,
-        run=RunOptions(chunk=args.chunk, workers=args.workers, progress=progress),
+        run=RunOptions(chunk=args.chunk, workers=workers, progress=progress),
         **_consistent_kwargs(args),
     )
     timings.update({name: float(v) for name, v in dict(result.timings).items()})
@@ -640,7 +641,7 @@ def _run_acceleration_free(args, outputs, t_start: float) -> int:
     """``--model energy|momentum``: one file or a simulation, whole; q, dq filtered only."""
     from ..identification import ModelOptions, RunOptions, identify
 
-    if args.workers > 1 or _fleet.wanted(args):
+    if explicit_workers(args) > 1 or _fleet.wanted(args):
         raise InputError(f"--model {args.model} runs in one process (no --workers, --scheduler)")
     if args.data is not None and len(args.data) > 1:
         raise InputError(f"--model {args.model} takes one --data file, got {len(args.data)}")

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import DataError, InputError
-from ._common import add_robot_arguments, robot_from_args, write_json
+from ._common import add_execution_arguments, add_robot_arguments, robot_from_args, write_json
 
 
 # ------------------------------------------------------------------ options
@@ -90,7 +90,7 @@ def add_run_arguments(p: argparse.ArgumentParser, *, unloaded_required: bool) ->
         help="seconds dropped at each end of each file [default: the filter's edge transient]",
     )
     sig.add_argument("--decimate", type=int, default=1, help="keep every D-th sample [default 1]")
-    p.add_argument("--chunk", type=int, default=1024, help="samples per regressor chunk")
+    add_execution_arguments(p, workers=False)
     p.add_argument("--json", metavar="OUT", help="write the result as JSON to OUT")
     from .audit import add_stream_arguments
 

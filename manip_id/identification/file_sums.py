@@ -236,9 +236,8 @@ def _file_task(robot, spec, options, ind, chunk, scan, part=None):
     return accumulate_file(robot, spec, options, ind, chunk=chunk, scan=scan, part=part)
 
 
-def _one_file_in_parts(robot, spec, options, ind, run: RunOptions, scan) -> FileAccumulation:
-    """One file's samples in ``run.workers`` contiguous parts, in forked processes."""
-    k_parts = int(run.workers)
+def _one_file_in_parts(robot, spec, options, ind, run: RunOptions, scan, k_parts: int):
+    """One file's samples in ``k_parts`` contiguous parts, in forked processes."""
     try:
         with ForkBackend(k_parts) as backend:
             parts = backend.map(
@@ -270,8 +269,9 @@ def accumulate_files(
     """:func:`accumulate_file` for every file of ``files`` (specs or their texts), in order.
 
     ``window`` (text or :class:`~manip_id.datasets.Window`) applies to each file that
-    has none. With ``run.workers > 1`` and several files, the files are accumulated in
-    up to that many forked processes (one file per task); with one file, each process
+    has none. With ``run.workers_for(total) > 1`` (``total``: the files' samples) and
+    several files, the files are accumulated in up to that many forked processes (one
+    file per task); with one file, each process
     accumulates one contiguous part of its preprocessed samples, the parts merged by
     addition. Every file is scanned (checked against ``robot``, its quality summary
     made) before any is accumulated, so a bad file fails first, naming it.
@@ -294,15 +294,16 @@ def accumulate_files(
             scans[spec] = scan_file(robot, spec, options)
     total = sum(scans[s].n for s in specs)
     progress = run.progress
-    if run.workers > 1 and len(specs) == 1:  # one file: its samples in parts
-        out = [_one_file_in_parts(robot, specs[0], options, ind, run, scans[specs[0]])]
-    elif run.workers > 1:
+    workers = run.workers_for(total)
+    if workers > 1 and len(specs) == 1:  # one file: its samples in parts
+        out = [_one_file_in_parts(robot, specs[0], options, ind, run, scans[specs[0]], workers)]
+    elif workers > 1:
 
         def report(k: int, _value) -> None:
             if progress is not None:
                 progress(sum(scans[s].n for s in specs[: k + 1]), total)
 
-        with ForkBackend(run.workers) as backend:
+        with ForkBackend(workers) as backend:
             args = [(robot, s, options, ind, run.chunk, scans[s]) for s in specs]
             return backend.map(_file_task, args, on_result=report)
     else:

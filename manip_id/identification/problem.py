@@ -462,9 +462,10 @@ def array_part(q, dq, ddq, tau, start: int, stop: int):
 
 
 def accumulate_arrays(robot: Robot, q, dq, ddq, tau, ind, *, run: RunOptions):
-    """The samples' information: in this process, or in ``run.workers`` contiguous parts
-    in forked processes merged by addition (equal to the serial sums to round-off)."""
-    n, workers, chunk, progress = q.shape[0], run.workers, run.chunk, run.progress
+    """The samples' information: in this process, or in ``run.workers_for(n)`` contiguous
+    parts in forked processes merged by addition (equal to the serial sums to round-off)."""
+    n, chunk, progress = q.shape[0], run.chunk, run.progress
+    workers = run.workers_for(n)
     if workers > 1 and n >= 2 * workers:
         t0 = time.perf_counter()
         cuts = np.linspace(0, n, workers + 1).astype(int)
