@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from ..compiled_regressor import planned_samples
 from ..datasets import FileSpec, parse_file_spec
 from ..datasets.stream import torque_scale_vector
 from ..errors import DataError, InputError
@@ -293,6 +294,12 @@ def accumulate_files(
         if spec not in scans:
             scans[spec] = scan_file(robot, spec, options)
     total = sum(scans[s].n for s in specs)
+    with planned_samples(total):
+        return _accumulate_specs(robot, specs, options, ind, run, scans, total)
+
+
+def _accumulate_specs(robot, specs, options, ind, run: RunOptions, scans, total: int):
+    """The body of :func:`accumulate_files` (the files scanned, ``total`` their rows)."""
     progress = run.progress
     workers = run.workers_for(total)
     if workers > 1 and len(specs) == 1:  # one file: its samples in parts

@@ -24,6 +24,7 @@ import numpy as np
 from scipy.linalg.blas import dsyrk
 
 from .._checks import as_float_array, check_finite, check_magnitude
+from ..compiled_regressor import planned_samples
 from ..datasets import FileSpec
 from ..errors import InputError
 from ..estimators import InformationAccumulator
@@ -465,7 +466,15 @@ def accumulate_arrays(robot: Robot, q, dq, ddq, tau, ind, *, run: RunOptions):
     """The samples' information: in this process, or in ``run.workers_for(n)`` contiguous
     parts in forked processes merged by addition (equal to the serial sums to round-off)."""
     n, chunk, progress = q.shape[0], run.chunk, run.progress
-    workers = run.workers_for(n)
+    with planned_samples(n):
+        return _accumulate_arrays(
+            robot, (q, dq, ddq, tau), ind, run.workers_for(n), chunk, progress
+        )
+
+
+def _accumulate_arrays(robot: Robot, arrays, ind, workers: int, chunk: int, progress):
+    q, dq, ddq, tau = arrays
+    n = q.shape[0]
     if workers > 1 and n >= 2 * workers:
         t0 = time.perf_counter()
         cuts = np.linspace(0, n, workers + 1).astype(int)
