@@ -21,13 +21,12 @@ Joint terms: armature ``Ia``, viscous ``fv`` and Coulomb ``fc`` friction must be
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ._checks import as_float_array, check_finite
-from .errors import InputError, ManipIdError
+from .errors import InputError, PhysicalConsistencyError
 
 #: Relative eigenvalue tolerance of the consistency check (``lambda_min > tol * lambda_max``).
 EIG_TOLERANCE = 1e-10
@@ -104,13 +103,19 @@ class ConsistencyReport:
 
     Attributes
     ----------
-    consistent: every body's ``J`` positive definite and every ``Ia, fv, fc >= 0``.
-    body_names: one per moving body (its joint's name).
-    min_eigenvalues: smallest eigenvalue of each body's ``J``, shape (n_bodies,) [mixed
+    consistent
+        every body's ``J`` positive definite and every ``Ia, fv, fc >= 0``.
+    body_names
+        one per moving body (its joint's name).
+    min_eigenvalues
+        smallest eigenvalue of each body's ``J``, shape (n_bodies,) [mixed
         kg / kg m^2: the eigenvalue of a matrix holding both].
-    max_eigenvalues: largest eigenvalue of each ``J``, shape (n_bodies,).
-    violations: each broken condition, by body or parameter name.
-    tolerance: relative eigenvalue tolerance used.
+    max_eigenvalues
+        largest eigenvalue of each ``J``, shape (n_bodies,).
+    violations
+        each broken condition, by body or parameter name.
+    tolerance
+        relative eigenvalue tolerance used.
     """
 
     consistent: bool
@@ -145,16 +150,6 @@ class ConsistencyReport:
                 for v in self.violations
             ],
         }
-
-
-class PhysicalConsistencyError(ManipIdError, ValueError):
-    """A parameter vector that had to be physical is not; ``violations`` says where."""
-
-    def __init__(self, what: str, violations: Sequence[Violation]):
-        self.violations = list(violations)
-        shown = "; ".join(str(v) for v in self.violations[:4])
-        more = f"; ... {len(self.violations) - 4} more" if len(self.violations) > 4 else ""
-        super().__init__(f"{what} is not physically consistent: {shown}{more}")
 
 
 def _body_violations(name: str, pi: np.ndarray, lam: np.ndarray, tol: float) -> list[Violation]:
@@ -232,3 +227,182 @@ def require_consistent(robot, theta, what: str = "the parameter vector") -> Cons
     if not report.consistent:
         raise PhysicalConsistencyError(what, report.violations)
     return report
+
+
+# ------------------------------------------------------------------ plausibility
+#: A body is implausible when its mass is more than this factor from its nominal mass.
+MASS_RATIO_LIMIT = 3.0
+
+
+def ellipsoid_matrix(center, shape) -> np.ndarray:
+    """``Q_bar`` (4, 4) of the ellipsoid ``{x : (x - c)^T Q^-1 (x - c) <= 1}``.
+
+    ``Q_bar = [[-Q^-1, Q^-1 c], [c^T Q^-1, 1 - c^T Q^-1 c]]``, so that
+    ``[x; 1]^T Q_bar [x; 1] = 1 - (x - c)^T Q^-1 (x - c)`` (>= 0 inside) and, for a body
+    of pseudo-inertia ``J``, ``tr(J Q_bar) = int rho (1 - (x - c)^T Q^-1 (x - c)) dV``
+    (Wensing, Kim & Slotine 2017). ``center`` (3,) [m], ``shape`` ``Q`` (3, 3) positive
+    definite [m^2] (semi-axes: square roots of its eigenvalues).
+    """
+    c = as_float_array(center, "center", ndim=1)
+    Q = as_float_array(shape, "shape", ndim=2)
+    if c.shape != (3,) or Q.shape != (3, 3):
+        raise InputError(
+            f"an ellipsoid needs center (3,) and shape (3, 3), got {c.shape}, {Q.shape}"
+        )
+    if np.linalg.eigvalsh(0.5 * (Q + Q.T))[0] <= 0:
+        raise InputError("the ellipsoid's shape matrix Q must be positive definite")
+    Qi = np.linalg.inv(0.5 * (Q + Q.T))
+    out = np.empty((4, 4))
+    out[:3, :3] = -Qi
+    out[:3, 3] = out[3, :3] = Qi @ c
+    out[3, 3] = 1.0 - c @ Qi @ c
+    return out
+
+
+def ellipsoid_rows(Qbar) -> np.ndarray:
+    """``d`` with ``tr(J(pi) Q_bar) = d . pi`` (the ellipsoid LMI is linear in ``pi``):
+    (4, 4) -> (10,), (..., 4, 4) -> (..., 10)."""
+    return np.einsum("kab,...ab->...k", _BASIS, as_float_array(Qbar, "Qbar"))
+
+
+@dataclass(frozen=True)
+class BodyPlausibility:
+    """How plausible one body's parameters are against its nominal body and its link.
+
+    Attributes
+    ----------
+    name
+        str
+        The body (its joint's name).
+    mass, nominal_mass
+        float
+        [kg].
+    mass_ratio
+        float or None
+        ``mass / nominal_mass`` [-] (None for a massless nominal body).
+    com_inside
+        bool or None
+        Whether the centre of mass lies inside the bounding ellipsoid (None: no ellipsoid).
+    inside
+        bool or None
+        Whether the mass distribution fits the ellipsoid (``tr(J Q_bar) >= 0``).
+    flags
+        list of str
+        What is implausible, e.g. ``"mass 3.4x nominal"``.
+    """
+
+    name: str
+    mass: float
+    nominal_mass: float
+    mass_ratio: float | None
+    com_inside: bool | None
+    inside: bool | None
+    flags: list[str] = field(default_factory=list)
+
+    def message(self) -> str:
+        """``"shoulder_lift_joint: 43.7 kg, 3.4x nominal (12.9 kg); ..."``."""
+        text = f"{self.name}: {self.mass:.3g} kg"
+        if self.mass_ratio is not None:
+            text += f", {self.mass_ratio:.2g}x nominal ({self.nominal_mass:.3g} kg)"
+        rest = [f for f in self.flags if not f.startswith("mass ")]
+        return text + ("; " + "; ".join(rest) if rest else "")
+
+    def to_dict(self) -> dict:
+        def num(x):
+            return None if x is None or not np.isfinite(x) else float(x)
+
+        return {
+            "name": self.name,
+            "mass": num(self.mass),
+            "nominal_mass": num(self.nominal_mass),
+            "mass_ratio": num(self.mass_ratio),
+            "com_inside_ellipsoid": self.com_inside,
+            "inside_ellipsoid": self.inside,
+            "plausible": not self.flags,
+            "flags": list(self.flags),
+        }
+
+
+@dataclass(frozen=True)
+class PlausibilityReport:
+    """Per body, mass against nominal and position against its link; the total mass.
+
+    Attributes
+    ----------
+    bodies
+        list of BodyPlausibility
+    total_mass, nominal_total_mass
+        float
+        Sums over the moving bodies [kg].
+    ratio_limit
+        float
+        Masses beyond ``[1/limit, limit]`` times nominal are flagged.
+    """
+
+    bodies: list[BodyPlausibility]
+    total_mass: float
+    nominal_total_mass: float
+    ratio_limit: float = MASS_RATIO_LIMIT
+
+    @property
+    def plausible(self) -> bool:
+        return not any(b.flags for b in self.bodies)
+
+    @property
+    def implausible(self) -> list[BodyPlausibility]:
+        return [b for b in self.bodies if b.flags]
+
+    def messages(self) -> list[str]:
+        """One line per implausible body (:meth:`BodyPlausibility.message`)."""
+        return [b.message() for b in self.implausible]
+
+    def to_dict(self) -> dict:
+        return {
+            "plausible": self.plausible,
+            "mass_ratio_limit": float(self.ratio_limit),
+            "total_mass": float(self.total_mass),
+            "nominal_total_mass": float(self.nominal_total_mass),
+            "bodies": [b.to_dict() for b in self.bodies],
+        }
+
+
+def check_plausibility(
+    robot, theta, ellipsoids=None, *, ratio_limit: float = MASS_RATIO_LIMIT
+) -> PlausibilityReport:
+    """Masses against the nominal ones and bodies against their bounding ellipsoids.
+
+    A body is flagged when its mass is outside ``[1/ratio_limit, ratio_limit]`` times
+    its nominal mass, when its centre of mass ``c_m = h / m`` is outside its ellipsoid
+    (``[c_m; 1]^T Q_bar [c_m; 1] < 0``) or its mass distribution does not fit in it
+    (``tr(J Q_bar) < 0``, :func:`ellipsoid_matrix`). ``ellipsoids``: ``Q_bar`` per
+    body, shape (n_bodies, 4, 4), or None (masses only).
+    """
+    theta = as_float_array(theta, "theta", ndim=1)
+    if theta.shape != (robot.n_parameters,):
+        raise InputError(f"{theta.shape=} but robot.n_parameters={robot.n_parameters}")
+    nb = robot.n_bodies
+    pi = theta[: 10 * nb].reshape(nb, 10)
+    pi0 = np.asarray(robot.nominal_parameters, dtype=float)[: 10 * nb].reshape(nb, 10)
+    E = None if ellipsoids is None else as_float_array(ellipsoids, "ellipsoids", ndim=3)
+    bodies = []
+    for i, name in enumerate(robot.joint_names):
+        m, m0 = float(pi[i, 0]), float(pi0[i, 0])
+        ratio = m / m0 if m0 > 0 else None
+        flags = []
+        if ratio is not None and not (1.0 / ratio_limit <= ratio <= ratio_limit):
+            flags.append(f"mass {ratio:.2g}x nominal")
+        com_in = inside = None
+        if E is not None:
+            slack = float(ellipsoid_rows(E[i]) @ pi[i])
+            inside = bool(slack >= -1e-9 * max(abs(m), 1e-12))
+            if m > 0:
+                x = np.r_[pi[i, 1:4] / m, 1.0]
+                com_in = bool(x @ E[i] @ x >= -1e-9)
+            if com_in is False:
+                flags.append("centre of mass outside its link's bounding ellipsoid")
+            elif not inside:
+                flags.append("mass spread beyond its link's bounding ellipsoid")
+        bodies.append(BodyPlausibility(name, m, m0, ratio, com_in, inside, flags))
+    return PlausibilityReport(
+        bodies, float(pi[:, 0].sum()), float(pi0[:, 0].sum()), float(ratio_limit)
+    )

@@ -172,6 +172,59 @@ class ModelMismatchError(InputError):
         return (_rebuild, (type(self), (self.what, self.expected, self.got), {}))
 
 
+class SolverError(ManipIdError):
+    """The consistent solver failed or the problem is infeasible.
+
+    Attributes
+    ----------
+    reason: what happened, e.g. ``"the problem is infeasible"``.
+    solver: "sdp" or "logchol".
+    status: the solver's own status string.
+    """
+
+    def __init__(self, reason: str, solver: str, status: str):
+        self.reason = str(reason)
+        self.solver = str(solver)
+        self.status = str(status)
+        super().__init__(f"{self.solver} solver: {self.reason} (status {self.status!r})")
+
+    def __reduce__(self):
+        return (_rebuild, (type(self), (self.reason, self.solver, self.status), {}))
+
+
+class PhysicalConsistencyError(ManipIdError, ValueError):
+    """A parameter vector that had to be physical is not.
+
+    Attributes
+    ----------
+    what: the vector, e.g. ``"the prior (nominal parameters)"`` (message only).
+    violations: each broken condition (:class:`manip_id.consistency.Violation`: a body
+        or parameter name, the condition, the value); the message shows the first four.
+    """
+
+    #: Violations shown in the message (all are in :attr:`violations`).
+    SHOWN = 4
+
+    def __init__(self, what: str, violations: Sequence[object]):
+        self.what = str(what)
+        self.violations = list(violations)
+        n = self.SHOWN
+        shown = "; ".join(str(v) for v in self.violations[:n])
+        more = f"; ... {len(self.violations) - n} more" if len(self.violations) > n else ""
+        super().__init__(f"{self.what} is not physically consistent: {shown}{more}")
+
+    def __reduce__(self):
+        return (_rebuild, (type(self), (self.what, self.violations), {}))
+
+
+class ManipIdWarning(UserWarning):
+    """Root of the warnings manip_id issues (each also recorded in its result's ``warnings``)."""
+
+
+class PayloadWarning(ManipIdWarning):
+    """A payload or drive-gain result the user should look at (also in ``result.warnings``)."""
+
+
 def _rebuild(cls, args, kwargs):
     return cls(*args, **kwargs)
 

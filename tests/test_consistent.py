@@ -150,7 +150,13 @@ def test_light_wrist_under_heavy_noise_ols_is_not_physical_consistent_is():
     cons = identify(robot, q, dq, ddq, tau, consistent=True)
     theta = cons.standard.values
     _assert_physical(robot, theta)
-    assert cons.physically_consistent and not cons.warnings
+    assert cons.physically_consistent
+    # the truth's wrist is 50 times lighter than the URDF's: the plausibility check says so,
+    # naming those bodies (and only a light one), and nothing else is wrong
+    assert len(cons.warnings) == 1 and cons.warnings[0].startswith("implausible link")
+    named = {b.name for b in cons.standard.plausibility.implausible}
+    assert named and named <= {"panda_joint6", "panda_joint7"}, cons.warnings
+    assert all(f"{n}: " in cons.warnings[0] for n in named)
     # the residual of the consistent fit is within 5 % of the (unconstrained) OLS minimum
     ratio = cons.relative_error.train / ols.relative_error.train
     assert 1.0 <= ratio < 1.05
@@ -207,7 +213,9 @@ def test_default_prior_weight_moves_a_physical_fit_by_less_than_its_std(seed):
     assert res.standard.fit_scale == 1.0
     assert res.standard.base_shift_std < 1.0
     assert res.standard.prior_shift_std < 1.0
-    assert not res.warnings
+    # nothing is wrong but, where these data leave a link's mass loose (panda_joint2 on
+    # seed 6: 3.4x nominal within a std of the fit), the plausibility check names it
+    assert all(w.startswith("implausible link parameters") for w in res.warnings)
 
 
 def _batch_means_inflation(Y: np.ndarray, tau: np.ndarray, nv: int, blocks: int) -> float:

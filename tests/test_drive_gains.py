@@ -123,6 +123,36 @@ def test_ols_shrinks_a_noisy_small_current_ml_does_not(ur5, ur5_base):
     assert np.all(np.abs(z_ml[:, 5]) < 3.5)
 
 
+def test_a_gain_far_from_the_ml_gain_is_named(ur5, ur5_base):
+    """OLS/WLS/TLS with 0.02 A of noise on wrist_3's 0.07 A current: its gain is more than 3
+    of its std from the ML gain of the same data, and the warning names wrist_3_joint
+    (and only it); where OLS's assumptions hold (0.002 N m of torque noise), none."""
+    payload = make_payload(2.0, (0.03, -0.02, 0.1))
+    m0, m1 = loaded_model(ur5, "tool0", payload)
+    u0 = rnea_run(ur5, m0, 500, 10, gains=GAINS_UR5)
+    l0 = rnea_run(ur5, m1, 500, 11, gains=GAINS_UR5)
+    rng = np.random.default_rng(7)
+
+    def noisy(run, sigma):
+        return (*run[:3], run[3] + sigma * rng.standard_normal(run[3].shape))
+
+    for method in ("ols", "wls", "tls"):
+        with pytest.warns(PayloadWarning, match="maximum-likelihood") as record:
+            res = identify_drive_gains(
+                ur5, noisy(u0, 0.02), noisy(l0, 0.02), "tool0", 2.0, method=method, base=ur5_base
+            )
+        text = [str(w.message) for w in record if "maximum-likelihood" in str(w.message)]
+        assert len(text) == 1 and "wrist_3_joint" in text[0] and "shoulder_pan" not in text[0]
+        assert text[0] in res.warnings
+    small = 0.002 / GAINS_UR5
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", PayloadWarning)
+        res = identify_drive_gains(
+            ur5, noisy(u0, small), noisy(l0, small), "tool0", 2.0, method="ols", base=ur5_base
+        )
+    assert res.warnings == []
+
+
 def _planar_with_turntable() -> Robot:
     """A vertical turntable (z) carrying a two-link arm whose axes are horizontal (y);
     diagonal inertias, centres of mass in the arm's x-z plane."""

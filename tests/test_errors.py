@@ -65,3 +65,30 @@ def test_closed_loop_divergence_is_a_numerical_error():
     wild = type(gains)(**{**gains.__dict__, "kd": gains.kd * 1e6})
     with pytest.raises(NumericalError, match="closed-loop simulation: the state diverged"):
         simulate(robot, theta, theta, gains=wild, duration=1.0, rate=100, adapt=False)
+
+
+def test_moved_errors_live_in_errors_and_keep_their_old_homes():
+    """SolverError, PhysicalConsistencyError and PayloadWarning are defined in
+    manip_id.errors, carry their data through pickling, and import from where they did."""
+    from manip_id import errors
+    from manip_id.consistency import PhysicalConsistencyError as PC
+    from manip_id.consistency import Violation
+    from manip_id.estimators.consistent import SolverError as SE
+    from manip_id.payload import PayloadWarning as PW
+
+    assert (PC, SE, PW) == (
+        errors.PhysicalConsistencyError,
+        errors.SolverError,
+        errors.PayloadWarning,
+    )
+    assert issubclass(PW, errors.ManipIdWarning) and issubclass(PW, UserWarning)
+    err = SE("the problem is infeasible", "sdp", "scale 1: infeasible")
+    back = pickle.loads(pickle.dumps(err))
+    assert str(back) == "sdp solver: the problem is infeasible (status 'scale 1: infeasible')"
+    assert (back.reason, back.solver, back.status) == (err.reason, "sdp", err.status)
+    vs = [Violation(f"j{i}", "mass m > 0 [kg]", -1.0 * i) for i in range(6)]
+    pc = pickle.loads(pickle.dumps(PC("the prior", vs)))
+    assert isinstance(pc, ManipIdError) and isinstance(pc, ValueError)
+    assert pc.what == "the prior" and [v.name for v in pc.violations] == [v.name for v in vs]
+    assert "j3: mass m > 0 [kg] (got -3)" in str(pc) and "... 2 more" in str(pc)
+    assert "j4" not in str(pc)

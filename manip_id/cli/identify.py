@@ -225,6 +225,24 @@ def register(sub) -> None:
         "residuals are not white [default 0.1]",
     )
     phys.add_argument(
+        "--bounds",
+        default="geometry",
+        choices=("geometry", "none"),
+        help="geometry: each body's mass inside a bounding ellipsoid of its link (collision "
+        "or visual geometry, else its kinematic segment); none: consistency alone "
+        "[default geometry]",
+    )
+    phys.add_argument(
+        "--mass-range",
+        metavar="LO,HI",
+        help="each body's mass within LO..HI times its nominal mass, e.g. 0.33,3",
+    )
+    phys.add_argument(
+        "--total-mass",
+        metavar="KG[+-TOL]",
+        help="the moving bodies' total mass [kg], within +-TOL (default 5 %%)",
+    )
+    phys.add_argument(
         "--export-urdf",
         metavar="OUT.urdf",
         help="write the robot's URDF with the identified inertias and friction (needs "
@@ -349,17 +367,27 @@ def _check_args(args) -> None:
 
 
 def _check_consistent_args(args) -> None:
-    """--consistent, --solver, --prior, --prior-weight, --export-urdf (before any work)."""
+    """--consistent, --solver, --prior, --prior-weight, --bounds, --mass-range, --total-mass,
+    --export-urdf (before any work)."""
     from ..estimators.consistent import DEFAULT_PRIOR_WEIGHT, check_options
+    from ..estimators.consistent.bounds import bound_options
 
     given = [
         f"--{n.replace('_', '-')}"
-        for n, default in (("solver", "sdp"), ("prior", "nominal"), ("prior_weight", None))
+        for n, default in (
+            ("solver", "sdp"),
+            ("prior", "nominal"),
+            ("prior_weight", None),
+            ("bounds", "geometry"),
+            ("mass_range", None),
+            ("total_mass", None),
+        )
         if getattr(args, n) != default
     ]
     if args.prior_weight is None:
         args.prior_weight = DEFAULT_PRIOR_WEIGHT
     check_options(args.solver, args.prior, args.prior_weight)
+    args.bound_options = bound_options(args.bounds, args.mass_range, args.total_mass)
     if not args.consistent:
         for flag, value in (
             ("--export-urdf", args.export_urdf),
@@ -416,6 +444,9 @@ def _consistent_kwargs(args) -> dict:
             solver=args.solver,
             prior=args.prior,
             prior_weight=args.prior_weight,
+            bounds=args.bound_options.bounds,
+            mass_range=args.bound_options.mass_range,
+            total_mass=args.bound_options.total_mass,
         )
     )
 

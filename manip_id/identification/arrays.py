@@ -15,6 +15,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..estimators import GradientEstimator, RLSEstimator
+from ..estimators.consistent.terms import missing_term_warnings
 from ..execution import AUTO, available_cores, open_backend, portable_robot, reduce_tree
 from ..identifiability import BaseParameters
 from ..models import accumulate_energy, accumulate_momentum
@@ -155,7 +156,12 @@ def identify(
         online=online_run,
         chunk=run_o.chunk,
     )
-    return solve(problem, method, consistent=opts.consistent, minimum_norm=opts.rank.minimum_norm)
+    result = solve(problem, method, consistent=opts.consistent, minimum_norm=opts.rank.minimum_norm)
+    # an implausible consistent fit: would a joint term the model lacks lower the error?
+    result.warnings.extend(
+        missing_term_warnings(robot, result.standard, [(q, dq, ddq, tau)], blocks, ind, run_o.chunk)
+    )
+    return result
 
 
 class _Opts:

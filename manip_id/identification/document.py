@@ -482,6 +482,17 @@ def _standard_lines(doc: dict) -> list[str]:
             "min eigenvalue of each pseudo-inertia J: "
             + ", ".join(f"{b['name']} {b['min_eigenvalue']:.3g}" for b in bodies)
         )
+    plaus = doc.get("plausibility")
+    if plaus:  # the consistent estimate's masses against the nominal ones
+        lines.append(
+            "link masses [kg] (x nominal): "
+            + ", ".join(
+                f"{b['name']} {b['mass']:.3g}"
+                + ("" if b.get("mass_ratio") is None else f" ({b['mass_ratio']:.2g}x)")
+                for b in plaus["bodies"]
+            )
+            + f"; total {plaus['total_mass']:.3g} (nominal {plaus['nominal_total_mass']:.3g})"
+        )
     return lines
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import time
 
+from ..estimators.consistent.terms import missing_term_warnings
 from ..identifiability import BaseParameters
 from ..robot import Robot
 from .file_sums import accumulate_files, merge_accumulations
@@ -22,6 +23,7 @@ from .options import (
     check_least_squares,
 )
 from .problem import Problem, check_equations, resolve_base
+from .reading import iter_processed
 from .result import IdentificationResult
 from .solve import solve
 from .tasks import distributed_problem
@@ -122,7 +124,31 @@ def identify_datasets(
         still=sums.still,
         raw=sums.raw,
     )
-    return solve(problem, method, consistent=copts, minimum_norm=minimum_norm)
+    result = solve(problem, method, consistent=copts, minimum_norm=minimum_norm)
+    if window is None:  # an implausible fit: would a joint term the model lacks lower the error?
+        vblocks = None if validation is None else _file_blocks(robot, validation, options, scans)
+        result.warnings.extend(
+            missing_term_warnings(
+                robot,
+                result.standard,
+                _file_blocks(robot, files, options, scans),
+                vblocks,
+                ind,
+                run_o.chunk,
+            )
+        )
+    return result
+
+
+def _file_blocks(robot: Robot, files, options, scans):
+    """The files' blocks ``(q, dq, ddq, tau)`` as the fit sees them, read again (one pass)."""
+    nq, nv = robot.nq, robot.nv
+    for spec in files:
+        _, blocks = iter_processed(robot, spec, options, (scans or {}).get(spec))
+        for b in blocks:  # packed t | q | dq | tau | ddq
+            q, dq = b[:, 1 : 1 + nq], b[:, 1 + nq : 1 + nq + nv]
+            tau, ddq = b[:, 1 + nq + nv : 1 + nq + 2 * nv], b[:, 1 + nq + 2 * nv :]
+            yield q, dq, ddq, tau
 
 
 __all__ = ["identify_datasets"]

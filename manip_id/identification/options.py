@@ -24,6 +24,7 @@ from ..datasets.stream import READ_CHUNK
 from ..errors import InputError
 from ..estimators.consistent import DEFAULT_PRIOR_WEIGHT
 from ..estimators.consistent import check_options as check_consistent_options
+from ..estimators.consistent.bounds import BoundsOptions
 from ..execution import AUTO, check_workers, resolve_workers
 from ..regressor import DEFAULT_CHUNK
 from ..signals import DEFAULT_BLOCK, DEFAULT_ORDER
@@ -173,18 +174,33 @@ class ConsistentOptions:
         "nominal" (the URDF parameters, log-det divergence) or "none".
     prior_weight : float
         Weight of the prior against the fit, in standard deviations [-].
+    bounds : str
+        "geometry" (each body's mass inside a bounding ellipsoid of its link) or "none"
+        (:mod:`manip_id.estimators.consistent.bounds`).
+    mass_range : tuple of float or None
+        ``(lo, hi)``: each body's mass within ``[lo, hi]`` times its nominal mass [-].
+    total_mass : tuple of float or None
+        ``(kg, tol)``: the moving bodies' total mass within ``kg +- tol`` [kg].
     """
 
     enabled: bool = True
     solver: str = "sdp"
     prior: str = "nominal"
     prior_weight: float = DEFAULT_PRIOR_WEIGHT
+    bounds: str = "geometry"
+    mass_range: tuple[float, float] | None = None
+    total_mass: tuple[float, float] | None = None
 
     def __post_init__(self):
         if self.prior_weight is None:  # the default weight
             object.__setattr__(self, "prior_weight", DEFAULT_PRIOR_WEIGHT)
         if self.enabled:
             check_consistent_options(self.solver, self.prior, self.prior_weight)
+            self.bound_options()  # checks them
+
+    def bound_options(self) -> BoundsOptions:
+        """The plausibility bounds of the estimate, as the solver takes them."""
+        return BoundsOptions(self.bounds, mass_range=self.mass_range, total_mass=self.total_mass)
 
     @classmethod
     def from_value(cls, value) -> ConsistentOptions:

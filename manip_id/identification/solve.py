@@ -199,13 +199,14 @@ def _consistent(problem: Problem, ls: LeastSquaresSolution, opts: ConsistentOpti
         solver=opts.solver,
         prior=opts.prior,
         prior_weight=opts.prior_weight,
+        bounds=opts.bound_options(),
     )
     kind = "wls" if method == "wls" else "ols"
     solver = (
         f"physically consistent ({opts.solver}, {standard.status}, prior {opts.prior}) on the "
         f"{kind.upper()} information; covariance of the {kind.upper()} fit ({ls.solver})"
     )
-    warnings_ = []
+    warnings_ = list(standard.warnings)  # implausible bodies, named
     if not standard.physically_consistent:
         warnings_.append(
             "the consistent estimate fails the eigenvalue test: "
