@@ -18,7 +18,8 @@ import pytest
 import manip_id.execution as execution
 from manip_id import load_robot
 from manip_id.cli import main
-from manip_id.compiled_regressor import ENV, numba_available
+from manip_id.cli._common import REGRESSOR_MODES
+from manip_id.compiled_regressor import ENV, MODES, numba_available
 from manip_id.datasets import Dataset, save_dataset
 from manip_id.errors import InputError
 from manip_id.identification import RunOptions, identify
@@ -117,3 +118,7 @@ def test_cli_regressor_option_sets_the_mode(monkeypatch, tmp_path):
     assert main([*argv, "--json", str(out)]) == 0
     assert __import__("os").environ[ENV] == "compiled"
     assert main(["identify", "ur5", "--simulate", "--regressor", "numba"]) == 2
+
+
+def test_cli_modes_are_the_regressor_modes():
+    assert REGRESSOR_MODES == MODES

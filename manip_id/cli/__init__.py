@@ -35,7 +35,16 @@ import sys
 import traceback
 import warnings
 
-from ..errors import ManipIdError
+#: BLAS threads of the command, unless the environment sets them (read when NumPy loads,
+#: so set before the first import of it): one. The command's matrices are small (a few
+#: hundred parameters at most), its parallel work runs in processes (``--workers``), and
+#: threaded BLAS on such matrices, on a busy machine, made the log-Cholesky solve of the
+#: Panda log 90x slower (60 iterations: 14.7 s against 0.16 s; see CHANGELOG).
+BLAS_THREADS = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+for _name, _value in BLAS_THREADS.items():
+    os.environ.setdefault(_name, _value)
+
+from ..errors import ManipIdError  # noqa: E402 (after the BLAS threads are set)
 
 PROG = "manip-id"
 

@@ -61,6 +61,11 @@ def workers_value(text: str) -> int | str:
         raise argparse.ArgumentTypeError(message) from exc
 
 
+#: ``manip_id.compiled_regressor.MODES``, spelled here so that ``--help`` does not load
+#: Pinocchio (tests/test_workers_auto.py checks that they agree).
+REGRESSOR_MODES = ("auto", "compiled", "pinocchio")
+
+
 class RegressorMode(argparse.Action):
     """``--regressor MODE``: sets the regressor mode of this process and of the workers it
     starts (:func:`manip_id.compiled_regressor.set_mode`)."""
@@ -74,9 +79,6 @@ class RegressorMode(argparse.Action):
 
 def add_execution_arguments(parser: argparse.ArgumentParser, *, workers: bool = True) -> None:
     """Add how the work runs: ``--chunk``, ``--workers`` (when ``workers``), ``--regressor``."""
-    from ..compiled_regressor import MODES
-    from ..execution import FORK_MIN_SAMPLES
-
     parser.add_argument("--chunk", type=int, default=1024, help="samples per regressor chunk")
     if workers:
         parser.add_argument(
@@ -84,12 +86,12 @@ def add_execution_arguments(parser: argparse.ArgumentParser, *, workers: bool = 
             type=workers_value,
             default="auto",
             help="processes accumulating parts of the data (ols, wls): a number, or 'auto' "
-            f"(default: every core this process may use from {FORK_MIN_SAMPLES} samples on, "
-            "else 1)",
+            "(default: every core this process may use for large inputs, from "
+            "manip_id.execution.FORK_MIN_SAMPLES samples on, else 1)",
         )
     parser.add_argument(
         "--regressor",
-        choices=MODES,
+        choices=REGRESSOR_MODES,
         action=RegressorMode,
         default=None,
         help="rigid-body regressor: 'compiled' (numba, a block of samples per call), "
