@@ -46,10 +46,11 @@ from .robot_sources import RobotSource
 
 #: The automatic number of workers (:func:`resolve_workers`).
 AUTO = "auto"
-#: Samples from which ``workers="auto"`` forks one process per core. Measured with
-#: ``experiments/bench_workers.py`` (ur10 with friction, the compiled regressor and the
-#: per-sample Pinocchio one, 2 cores): forking two parts costs about 0.1 s of start-up
-#: and merging, and pays off from about 2e4 samples; below this, serial.
+#: Samples from which ``workers="auto"`` forks one process per core. From
+#: ``experiments/bench_workers.py`` (ur10 with friction, 2 cores): a forked pool costs
+#: about 0.03 s (start, pickled sums back), a sample about 1.2 us with the compiled
+#: regressor and 3.5 us with Pinocchio's, so halving the samples' time pays from about
+#: 5e4 samples (compiled) and 2e4 (Pinocchio); below this, serial.
 FORK_MIN_SAMPLES = 50_000
 #: Parts added together by one reduction task.
 SPLIT_EVERY = 8
