@@ -91,12 +91,13 @@ def resolve_workers(workers, n_samples: int | None) -> int:
     """The processes of a run over ``n_samples`` samples (None: not known in advance).
 
     An integer is taken as it is; ``"auto"`` gives :func:`available_cores` when
-    ``n_samples >= FORK_MIN_SAMPLES`` and 1 otherwise (also when the size is unknown).
+    ``n_samples >= FORK_MIN_SAMPLES`` and 1 otherwise (also when the size is unknown, and
+    in a daemonic process, such as a pool's or a Dask worker, which may not fork).
     """
     value = check_workers(workers)
     if value != AUTO:
         return int(value)
-    if n_samples is None or int(n_samples) < FORK_MIN_SAMPLES:
+    if n_samples is None or int(n_samples) < FORK_MIN_SAMPLES or mp.current_process().daemon:
         return 1
     return available_cores()
 

@@ -122,3 +122,17 @@ def test_cli_regressor_option_sets_the_mode(monkeypatch, tmp_path):
 
 def test_cli_modes_are_the_regressor_modes():
     assert REGRESSOR_MODES == MODES
+
+
+def _auto_in_a_daemon(n):
+    return execution.resolve_workers("auto", n)
+
+
+def test_auto_is_serial_in_a_daemonic_process(monkeypatch):
+    import multiprocessing as mp
+
+    monkeypatch.setattr(execution, "available_cores", lambda: 2)
+    n = 10 * execution.FORK_MIN_SAMPLES
+    assert execution.resolve_workers("auto", n) == 2
+    with mp.get_context("fork").Pool(1) as pool:  # pool workers are daemonic
+        assert pool.apply(_auto_in_a_daemon, (n,)) == 1
