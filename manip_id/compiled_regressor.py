@@ -172,11 +172,25 @@ def set_mode(value: str) -> None:
 
 #: samples announced by :func:`planned_samples` for the current run (0: none)
 _planned = 0
+#: samples evaluated in blocks by this process, every evaluator together
+_seen = 0
 
 
 def planned() -> int:
     """Samples announced for the current run by :func:`planned_samples` [-]."""
     return _planned
+
+
+def count_samples(n: int) -> int:
+    """Add ``n`` samples to those this process has evaluated in blocks; the new total.
+
+    The kernel's cost is paid once per process (importing numba, loading its code), so
+    ``auto`` counts a process's samples, not an evaluator's: a Dask worker gets a new
+    robot (and evaluator) with every task, and would otherwise never reach the kernel.
+    """
+    global _seen
+    _seen += int(n)
+    return _seen
 
 
 @contextmanager
