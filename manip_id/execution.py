@@ -22,12 +22,20 @@ round-off.
   ``LocalCluster`` of N single-threaded worker processes on 127.0.0.1, stopped on
   close), ``"tcp://HOST:PORT"``, a scheduler JSON file, or a ``distributed.Client``
   used as it is. Only the reduced sums come back to the client.
+
+How many processes: ``workers="auto"`` (the default of
+:class:`~manip_id.identification.RunOptions` and of ``--workers``) is resolved by
+:func:`resolve_workers` from the size of the input: every core this process may use
+(:func:`available_cores`) once there are at least :data:`FORK_MIN_SAMPLES` samples,
+else one (serial), because starting a forked pool and bringing its sums back costs
+more than the samples save below that size.
 """
 
 from __future__ import annotations
 
 import multiprocessing as mp
 import os
+import signal
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
@@ -36,6 +44,14 @@ from .errors import InputError
 from .robot import Robot
 from .robot_sources import RobotSource
 
+#: The automatic number of workers (:func:`resolve_workers`).
+AUTO = "auto"
+#: Samples from which ``workers="auto"`` forks one process per core. From
+#: ``experiments/bench_workers.py`` (ur10 with friction, 2 cores): a forked pool costs
+#: about 0.03 s (start, pickled sums back), a sample about 1.2 us with the compiled
+#: regressor and 3.5 us with Pinocchio's, so halving the samples' time pays from about
+#: 5e4 samples (compiled) and 2e4 (Pinocchio); below this, serial.
+FORK_MIN_SAMPLES = 50_000
 #: Parts added together by one reduction task.
 SPLIT_EVERY = 8
 #: Worker processes of ``scheduler="local"``.
@@ -48,6 +64,42 @@ WORKER_ENV = {
     "OMP_NUM_THREADS": "1",
     "DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED": "False",
 }
+
+
+def available_cores() -> int:
+    """The cores this process may use (its CPU affinity, else the machine's count) [-]."""
+    affinity = getattr(os, "sched_getaffinity", None)
+    return len(affinity(0)) if affinity is not None else (os.cpu_count() or 1)
+
+
+def check_workers(value) -> int | str:
+    """``"auto"`` or a positive number of processes; raises :class:`InputError` otherwise."""
+    if isinstance(value, str) and value.strip().lower() == AUTO:
+        return AUTO
+    if isinstance(value, bool) or not isinstance(value, (int, str)):
+        raise InputError(f"workers must be 'auto' or a positive integer, got {value!r}")
+    try:
+        n = int(value)
+    except ValueError:
+        raise InputError(f"workers must be 'auto' or a positive integer, got {value!r}") from None
+    if n < 1:
+        raise InputError(f"workers must be a positive number of processes, got {value}")
+    return n
+
+
+def resolve_workers(workers, n_samples: int | None) -> int:
+    """The processes of a run over ``n_samples`` samples (None: not known in advance).
+
+    An integer is taken as it is; ``"auto"`` gives :func:`available_cores` when
+    ``n_samples >= FORK_MIN_SAMPLES`` and 1 otherwise (also when the size is unknown, and
+    in a daemonic process, such as a pool's or a Dask worker, which may not fork).
+    """
+    value = check_workers(workers)
+    if value != AUTO:
+        return int(value)
+    if n_samples is None or int(n_samples) < FORK_MIN_SAMPLES or mp.current_process().daemon:
+        return 1
+    return available_cores()
 
 
 def portable_robot(robot: Robot) -> Robot:
@@ -129,8 +181,15 @@ _forked_job: tuple | None = None
 
 
 def _set_job(fn: Callable, arguments: list) -> None:
-    """Pool initializer: the function and its arguments, inherited through fork."""
+    """Pool initializer: the function and its arguments, inherited through fork.
+
+    The worker also gets the default SIGTERM and SIGINT back: a handler inherited from
+    the parent (the CLI raises on SIGTERM) would leave a worker that waits on the pool's
+    queue deaf to the pool's own ``terminate``.
+    """
     global _forked_job
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C
     _forked_job = (fn, arguments)
 
 
@@ -167,6 +226,8 @@ class ForkBackend(Backend):
                 out.append(value)
                 if on_result is not None:
                     on_result(k, value)
+            pool.close()  # the workers end on their own; terminate() only on an error
+            pool.join()
         return out
 
 
@@ -280,13 +341,15 @@ class DaskBackend(Backend):
                 self._cluster = None
 
 
-def open_backend(*, workers: int = 1, scheduler=None) -> Backend:
-    """The back-end of a run: Dask with ``scheduler``, else forked with ``workers > 1``,
-    else serial. Use it as a context manager (``with open_backend(...) as backend:``)."""
+def open_backend(*, workers: int | str = 1, scheduler=None, n_samples=None) -> Backend:
+    """The back-end of a run: Dask with ``scheduler``, else forked with more than one
+    worker (``"auto"`` resolved against ``n_samples`` by :func:`resolve_workers`), else
+    serial. Use it as a context manager (``with open_backend(...) as backend:``)."""
     if scheduler is not None:
         return DaskBackend(scheduler)
-    if int(workers) > 1:
-        return ForkBackend(int(workers))
+    n = resolve_workers(workers, n_samples)
+    if n > 1:
+        return ForkBackend(n)
     return SerialBackend()
 
 
@@ -307,7 +370,9 @@ def reduce_tree(backend: Backend, items: Sequence, split_every: int = SPLIT_EVER
 
 
 __all__ = [
+    "AUTO",
     "DEFAULT_LOCAL_WORKERS",
+    "FORK_MIN_SAMPLES",
     "SPLIT_EVERY",
     "WORKER_ENV",
     "Backend",
@@ -315,9 +380,12 @@ __all__ = [
     "ForkBackend",
     "SerialBackend",
     "add_values",
+    "available_cores",
+    "check_workers",
     "connect",
     "open_backend",
     "parse_scheduler",
     "portable_robot",
     "reduce_tree",
+    "resolve_workers",
 ]

@@ -40,7 +40,15 @@ import numpy as np
 import pinocchio as pin
 
 from ._checks import as_float_array, check_finite
-from .compiled_regressor import AUTO_SAMPLES, CompiledModel, compile_model, mode, rigid_block
+from .compiled_regressor import (
+    AUTO_SAMPLES,
+    CompiledModel,
+    compile_model,
+    count_samples,
+    mode,
+    planned,
+    rigid_block,
+)
 from .errors import InputError
 
 if TYPE_CHECKING:
@@ -106,13 +114,15 @@ class RegressorEvaluator:
     def kernel_for(self, n: int) -> CompiledModel | None:
         """The compiled kernel for a block of ``n`` samples, or None for Pinocchio.
 
-        Mode ``compiled``: whenever the model is covered; ``auto``: once this evaluator
-        has seen :data:`~manip_id.compiled_regressor.AUTO_SAMPLES` samples; ``pinocchio``:
-        never (see :mod:`manip_id.compiled_regressor`).
+        Mode ``compiled``: whenever the model is covered; ``auto``: once this process
+        has seen :data:`~manip_id.compiled_regressor.AUTO_SAMPLES` samples, or from the
+        start of a run announced that large (:func:`~manip_id.compiled_regressor.
+        planned_samples`); ``pinocchio``: never (see :mod:`manip_id.compiled_regressor`).
         """
         self._seen += n
         current = mode()
-        if current == "pinocchio" or (current == "auto" and self._seen < AUTO_SAMPLES):
+        large = max(count_samples(n), planned()) >= AUTO_SAMPLES
+        if current == "pinocchio" or (current == "auto" and not large):
             return None
         return self.compiled
 

@@ -43,6 +43,7 @@ HEAVY = {
     "scipy.interpolate",
     "mujoco",
     "numba",
+    "threadpoolctl",  # one BLAS thread in the log-Cholesky solver (optional)
     "tqdm",
     "psutil",  # memory budgets
     "example_robot_data",  # its robot index, for robots loaded by name

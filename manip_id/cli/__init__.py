@@ -36,12 +36,21 @@ import sys
 import traceback
 import warnings
 
-import psutil
+#: BLAS threads of the command, unless the environment sets them (read when NumPy loads,
+#: so set before the first import of it): one. The command's matrices are small (a few
+#: hundred parameters at most), its parallel work runs in processes (``--workers``), and
+#: threaded BLAS on such matrices, on a busy machine, made the log-Cholesky solve of the
+#: Panda log 90x slower (60 iterations: 14.7 s against 0.16 s; see CHANGELOG).
+BLAS_THREADS = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+for _name, _value in BLAS_THREADS.items():
+    os.environ.setdefault(_name, _value)
 
-from .._io import OutputSet, remove_temporaries
-from .._native import native_stderr_captured  # noqa: F401 (re-exported, as earlier)
-from ..errors import ManipIdError, did_you_mean
-from ._common import warn  # noqa: F401 (the commands' warnings, as earlier releases had it)
+import psutil  # noqa: E402 (after the BLAS threads are set)
+
+from .._io import OutputSet, remove_temporaries  # noqa: E402
+from .._native import native_stderr_captured  # noqa: F401, E402 (re-exported, as earlier)
+from ..errors import ManipIdError, did_you_mean  # noqa: E402
+from ._common import warn  # noqa: F401, E402 (the commands' warnings, as earlier releases)
 
 PROG = "manip-id"
 

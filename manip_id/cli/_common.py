@@ -70,6 +70,64 @@ def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def workers_value(text: str) -> int | str:
+    """``--workers``: ``auto`` or a positive number of processes (argparse type)."""
+    value = str(text).strip().lower()
+    if value == "auto":
+        return "auto"
+    if value.isdigit() and int(value) >= 1:
+        return int(value)
+    raise argparse.ArgumentTypeError(f"expected 'auto' or a positive integer, got {text!r}")
+
+
+#: ``manip_id.compiled_regressor.MODES`` and its environment variable, spelled here so that
+#: ``--help`` does not load Pinocchio (tests/test_workers_auto.py checks that they agree).
+REGRESSOR_MODES = ("auto", "compiled", "pinocchio")
+REGRESSOR_ENV = "MANIP_ID_REGRESSOR"
+
+
+class RegressorMode(argparse.Action):
+    """``--regressor MODE``: sets the regressor mode of this process and of the workers it
+    starts (``MANIP_ID_REGRESSOR``, read by :mod:`manip_id.compiled_regressor`)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        os.environ[REGRESSOR_ENV] = str(values)
+        setattr(namespace, self.dest, values)
+
+
+def add_execution_arguments(parser: argparse.ArgumentParser, *, workers: bool = True) -> None:
+    """Add how the work runs: ``--chunk``, ``--workers`` (when ``workers``), ``--regressor``."""
+    parser.add_argument(
+        "--chunk", type=int, default=1024, help="samples per regressor chunk [default 1024]"
+    )
+    if workers:
+        parser.add_argument(
+            "--workers",
+            type=workers_value,
+            default="auto",
+            help="processes accumulating parts of the data (ols, wls): a number, or 'auto' "
+            "[default auto: every core this process may use for large inputs, from "
+            "manip_id.execution.FORK_MIN_SAMPLES samples on, else 1]",
+        )
+    parser.add_argument(
+        "--regressor",
+        choices=REGRESSOR_MODES,
+        action=RegressorMode,
+        default=None,
+        help="rigid-body regressor: 'compiled' (numba, a block of samples per call), "
+        "'pinocchio' (one computeJointTorqueRegressor call per sample, the reference) or "
+        "'auto' (compiled for large inputs when numba is installed) [default: "
+        "$MANIP_ID_REGRESSOR, else auto]",
+    )
+
+
+def explicit_workers(args: argparse.Namespace) -> int:
+    """``--workers`` as a number of processes; ``auto`` counts as 1 (it never forks for
+    work that must run in order or in one process) [-]."""
+    workers = getattr(args, "workers", 1)
+    return 1 if workers == "auto" else int(workers)
+
+
 def profile_option(args: argparse.Namespace):
     """``--profile``: a name or path, False for ``none``, None when not given."""
     value = getattr(args, "profile", None)
@@ -141,7 +199,7 @@ def check_seed_and_workers(args: argparse.Namespace) -> None:
     if seed is not None and not 0 <= seed < 2**63:
         raise InputError(f"--seed must be an integer in [0, 2**63), got {seed}")
     workers = getattr(args, "workers", None)
-    if workers is not None:
+    if workers is not None and workers != "auto":
         if workers < 1:
             raise InputError(f"--workers must be >= 1, got {workers}")
         affinity = getattr(os, "sched_getaffinity", None)  # the cores this process may use

@@ -19,7 +19,7 @@ from ..estimators.consistent.bounds import bound_options
 from ..export import check_output, sidecar_path
 from ..payload import load_torque_scale
 from . import _acceleration_free, _files, _fleet, _simulated
-from ._common import FLEET_METHODS, fleet_wanted, parse_floats, reserve_outputs
+from ._common import FLEET_METHODS, explicit_workers, fleet_wanted, parse_floats, reserve_outputs
 from ._runtime import check_scheduler
 
 
@@ -52,9 +52,7 @@ def _check_args(args) -> None:
         value = getattr(args, name, None)
         if value is not None and not (math.isfinite(value) and value > 0):
             raise InputError(f"--{name.replace('_', '-')} must be positive, got {value}")
-    if args.workers < 1:
-        raise InputError(f"--workers must be >= 1, got {args.workers}")
-    if args.workers > 1 and args.method in ("rls", "gradient"):
+    if explicit_workers(args) > 1 and args.method in ("rls", "gradient"):
         raise InputError(f"--workers applies to ols and wls; {args.method} runs in sample order")
     _check_consistent_args(args)
     _check_fleet(args)
@@ -155,7 +153,7 @@ def _check_fleet(args: argparse.Namespace) -> None:
         )
     if args.split is not None:
         raise InputError(f"{opt} identifies whole files: give validation files with --validate")
-    if args.workers > 1:
+    if explicit_workers(args) > 1:
         raise InputError("--workers forks local processes; with --scheduler use local:N")
     if args.block is not None and args.block < 1:
         raise InputError(f"--block must be >= 1 samples, got {args.block}")

@@ -16,6 +16,7 @@ import numpy as np
 
 from ..datasets import check_robot, load_dataset
 from ..errors import InputError
+from ..execution import resolve_workers
 from ..identification import RunOptions, identify, identify_chunks
 from ..simulation import MeasurementNoise, SimulationStream, check_simulation_memory
 from ..trajectories import optimize_excitation, random_trajectory
@@ -113,18 +114,19 @@ def _run_stream(robot, args, outputs, timings: dict, t_start: float) -> int:
         k = min(max(int(round(args.split * n)), 2), n - 2)
         source["split"] = args.split
     report_progress = progress(args, n)
+    workers = resolve_workers(args.workers, k)
 
     def on_progress(done: int, total: int) -> None:  # serial: samples of k; workers: parts
         if report_progress is not None:
-            report_progress(done, total if args.workers > 1 else k)
+            report_progress(done, total if workers > 1 else k)
 
-    train = stream.parts(args.workers, 0, k) if args.workers > 1 else stream.blocks(0, k)
+    train = stream.parts(workers, 0, k) if workers > 1 else stream.blocks(0, k)
     result = identify_chunks(
         robot,
         train,
         method=args.method,
         validation=stream.blocks(k, n) if k < n else None,
-        run=RunOptions(chunk=args.chunk, workers=args.workers, progress=on_progress),
+        run=RunOptions(chunk=args.chunk, workers=workers, progress=on_progress),
         uncertainty=args.uncertainty,
         **consistent_kwargs(args),
     )

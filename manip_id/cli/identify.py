@@ -20,6 +20,7 @@ import argparse
 from ..signals import DEFAULT_CUTOFF, DEFAULT_ORDER
 from ._common import (
     SIM_DEFAULTS,
+    add_execution_arguments,
     add_file_arguments,
     add_robot_arguments,
     add_scheduler_argument,
@@ -195,15 +196,7 @@ def register(sub) -> None:
         metavar="C",
         help="warn when the condition number exceeds C [default 100]",
     )
-    p.add_argument(
-        "--chunk", type=int, default=1024, help="samples per regressor chunk [default 1024]"
-    )
-    p.add_argument(
-        "--workers",
-        type=int,
-        default=1,
-        help="processes accumulating parts of the data (ols, wls; default 1)",
-    )
+    add_execution_arguments(p)
     phys = p.add_argument_group("physically consistent estimation (ols, wls)")
     phys.add_argument(
         "--consistent",

@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 
 from ._common import (
+    add_execution_arguments,
     add_robot_arguments,
     add_scheduler_argument,
     add_stream_arguments,
@@ -90,9 +91,7 @@ def add_run_arguments(p: argparse.ArgumentParser, *, unloaded_required: bool) ->
         help="seconds dropped at each end of each file [default: the filter's edge transient]",
     )
     sig.add_argument("--decimate", type=int, default=1, help="keep every D-th sample [default 1]")
-    p.add_argument(
-        "--chunk", type=int, default=1024, help="samples per regressor chunk [default 1024]"
-    )
+    add_execution_arguments(p, workers=False)
     p.add_argument("--json", metavar="OUT", help="write the result as JSON to OUT")
     add_stream_arguments(p)
 

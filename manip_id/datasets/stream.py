@@ -347,10 +347,21 @@ def _check_window(source, window, counts: RowCounts, rows_seen: int, t0, t_last,
 
 
 def collect(rows: Iterator[np.ndarray], layout: Layout, joint_names, meta=None) -> Dataset:
-    """A :class:`~.core.Dataset` from packed row blocks (everything in memory)."""
-    blocks = list(rows)
-    data = np.vstack(blocks) if blocks else np.empty((0, layout.width))
-    f = layout.unpack(data)
+    """A :class:`~.core.Dataset` from packed row blocks (everything in memory).
+
+    Each block is split into its fields as it comes, and each field is joined into one
+    contiguous array on its own, so that the peak is about one copy of the data plus one
+    field (not the blocks, their stack and the fields' contiguous copies at once).
+    """
+    parts: dict[str, list[np.ndarray]] = {}
+    for block in rows:
+        for name, view in layout.unpack(block).items():
+            parts.setdefault(name, []).append(np.array(view, dtype=float, order="C"))
+    if not parts:
+        parts = {name: [v] for name, v in layout.unpack(np.empty((0, layout.width))).items()}
+    f = {}
+    for name in list(parts):
+        f[name] = np.concatenate(parts.pop(name), axis=0)
     return Dataset(
         t=f["t"],
         q=f["q"],

@@ -17,7 +17,7 @@ import numpy as np
 from ..errors import InputError
 from ..estimators import GradientEstimator, RLSEstimator
 from ..estimators.consistent.terms import missing_term_warnings
-from ..execution import open_backend, portable_robot, reduce_tree
+from ..execution import AUTO, available_cores, open_backend, portable_robot, reduce_tree
 from ..identifiability import BaseParameters
 from ..models import accumulate_energy, accumulate_momentum
 from ..regressor import check_states
@@ -249,6 +249,21 @@ def _identify_acceleration_free(
     return _solve(problem, method, opts)
 
 
+def _are_parts(items: list) -> bool:
+    """Whether every item is a part ``(func, args)`` (not a block of arrays)."""
+    return all(isinstance(p, tuple) and len(p) == 2 and callable(p[0]) for p in items)
+
+
+def _takes_parts(source, run: RunOptions) -> bool:
+    """Whether :func:`identify_chunks` reads ``source`` as parts: with a scheduler, with
+    ``workers > 1``, and with ``"auto"`` when it is a non-empty list or tuple of parts."""
+    if run.scheduler is not None:
+        return True
+    if run.workers == AUTO:
+        return isinstance(source, (list, tuple)) and bool(source) and _are_parts(list(source))
+    return int(run.workers) > 1
+
+
 def _check_parts(parts: list) -> None:
     for k, part in enumerate(parts):
         if not (isinstance(part, tuple) and len(part) == 2 and callable(part[0])):
@@ -277,10 +292,11 @@ def accumulate_parts(
         raise InputError("no parts to accumulate")
     unc = UncertaintyOptions.from_value(uncertainty)
     if run.scheduler is None:
+        workers = available_cores() if run.workers == AUTO else int(run.workers)
         r, nv = len(columns), robot.nv
         records = [unc.blocks(r, nv, stream=k) for k in range(len(parts))]
         return accumulate_forked(
-            robot, parts, columns, run.chunk, run.workers, run.progress, records=records
+            robot, parts, columns, run.chunk, workers, run.progress, records=records
         )
     light = portable_robot(robot)
     with open_backend(scheduler=run.scheduler) as backend:
@@ -312,7 +328,7 @@ def identify_chunks(
 
     ``source`` is either an iterable of blocks ``(q, dq, ddq, tau)`` (shapes
     (n, nq), (n, nv), (n, nv), (n, nv); processed in one process), or, with
-    ``run.workers > 1`` or ``run.scheduler``, a sequence of parts ``(func, args)`` where
+    ``run.workers > 1``, ``"auto"`` or ``run.scheduler``, a list of parts ``(func, args)`` where
     ``func(*args)`` yields such blocks: each part is accumulated in its own forked
     process (or Dask task) and the accumulators merge by addition. Memory stays
     O(chunk nv p + nv r^2) per process however many samples flow through.
@@ -329,7 +345,7 @@ def identify_chunks(
     ind = base.independent
     t0 = time.perf_counter()
     run_o = opts.run
-    if run_o.workers > 1 or run_o.scheduler is not None:
+    if _takes_parts(source, run_o):
         parts = list(source)
         _check_parts(parts)
         acc, times = accumulate_parts(robot, parts, ind, run_o, uncertainty=opts.uncertainty)

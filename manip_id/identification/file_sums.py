@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from ..compiled_regressor import planned_samples
 from ..datasets import FileSpec, parse_file_spec
 from ..datasets.stream import torque_scale_vector
 from ..errors import DataError, InputError
@@ -250,10 +251,9 @@ def _file_task(robot, spec, options, ind, chunk, scan, part=None, uncertainty=No
 
 
 def _one_file_in_parts(
-    robot, spec, options, ind, run: RunOptions, scan, uncertainty=None
+    robot, spec, options, ind, run: RunOptions, scan, k_parts: int, uncertainty=None
 ) -> FileAccumulation:
-    """One file's samples in ``run.workers`` contiguous parts, in forked processes."""
-    k_parts = int(run.workers)
+    """One file's samples in ``k_parts`` contiguous parts, in forked processes."""
     try:
         with ForkBackend(k_parts) as backend:
             parts = backend.map(
@@ -286,8 +286,9 @@ def accumulate_files(
     """:func:`accumulate_file` for every file of ``files`` (specs or their texts), in order.
 
     ``window`` (text or :class:`~manip_id.datasets.Window`) applies to each file that
-    has none. With ``run.workers > 1`` and several files, the files are accumulated in
-    up to that many forked processes (one file per task); with one file, each process
+    has none. With ``run.workers_for(total) > 1`` (``total``: the files' samples) and
+    several files, the files are accumulated in up to that many forked processes (one
+    file per task); with one file, each process
     accumulates one contiguous part of its preprocessed samples, the parts merged by
     addition. Every file is scanned (checked against ``robot``, its quality summary
     made) before any is accumulated, so a bad file fails first, naming it.
@@ -311,16 +312,28 @@ def accumulate_files(
         if spec not in scans:
             scans[spec] = scan_file(robot, spec, options)
     total = sum(scans[s].n for s in specs)
+    with planned_samples(total):
+        return _accumulate_specs(robot, specs, options, ind, run, scans, total, uncertainty)
+
+
+def _accumulate_specs(
+    robot, specs, options, ind, run: RunOptions, scans, total: int, uncertainty=None
+):
+    """The body of :func:`accumulate_files` (the files scanned, ``total`` their rows)."""
     progress = run.progress
-    if run.workers > 1 and len(specs) == 1:  # one file: its samples in parts
-        out = [_one_file_in_parts(robot, specs[0], options, ind, run, scans[specs[0]], uncertainty)]
-    elif run.workers > 1:
+    workers = run.workers_for(total)
+    if workers > 1 and len(specs) == 1:  # one file: its samples in parts
+        spec = specs[0]
+        out = [
+            _one_file_in_parts(robot, spec, options, ind, run, scans[spec], workers, uncertainty)
+        ]
+    elif workers > 1:
 
         def report(k: int, _value) -> None:
             if progress is not None:
                 progress(sum(scans[s].n for s in specs[: k + 1]), total)
 
-        with ForkBackend(run.workers) as backend:
+        with ForkBackend(workers) as backend:
             args = [(robot, s, options, ind, run.chunk, scans[s], None, uncertainty) for s in specs]
             return _numbered(backend.map(_file_task, args, on_result=report))
     else:

@@ -28,6 +28,7 @@ from ..estimators.consistent import DEFAULT_PRIOR_WEIGHT
 from ..estimators.consistent import check_options as check_consistent_options
 from ..estimators.consistent.bounds import BoundsOptions
 from ..estimators.uncertainty import UncertaintyOptions
+from ..execution import AUTO, check_workers, resolve_workers
 from ..regressor import DEFAULT_CHUNK
 from ..signals import DEFAULT_BLOCK, DEFAULT_ORDER
 
@@ -277,8 +278,12 @@ class RunOptions:
     ----------
     chunk : int
         Samples per regressor chunk.
-    workers : int
+    workers : int or "auto"
         Forked processes for least squares (contiguous parts, or one file per task).
+        ``"auto"`` (default): one per core this process may use for inputs of at least
+        :data:`~manip_id.execution.FORK_MIN_SAMPLES` samples, else one
+        (:func:`~manip_id.execution.resolve_workers`); an iterable of blocks, whose size
+        is not known in advance, is accumulated in this process.
     scheduler : str, distributed.Client or None
         A Dask scheduler (:func:`manip_id.execution.open_backend`): each part or file is
         one task and the sums are added in a tree on the cluster.
@@ -287,15 +292,18 @@ class RunOptions:
     """
 
     chunk: int = DEFAULT_CHUNK
-    workers: int = 1
+    workers: int | str = AUTO
     scheduler: Any = None
     progress: Callable[[int, int], None] | None = None
 
     def __post_init__(self):
         if as_int(self.chunk, "chunk") < 1:
             raise InputError(f"chunk must be a positive number of samples, got {self.chunk}")
-        if as_int(self.workers, "workers") < 1:
-            raise InputError(f"workers must be a positive number of processes, got {self.workers}")
+        object.__setattr__(self, "workers", check_workers(self.workers))
+
+    def workers_for(self, n_samples: int | None) -> int:
+        """The forked processes of a run over ``n_samples`` samples (None: unknown) [-]."""
+        return resolve_workers(self.workers, n_samples)
 
     @classmethod
     def from_value(cls, value) -> RunOptions:

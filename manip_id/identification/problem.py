@@ -24,6 +24,7 @@ import numpy as np
 from scipy.linalg.blas import dsyrk
 
 from .._checks import as_float_array, check_finite, check_magnitude
+from ..compiled_regressor import planned_samples
 from ..datasets import FileSpec
 from ..errors import InputError
 from ..estimators import InformationAccumulator
@@ -490,11 +491,18 @@ def accumulate_arrays(
     run: RunOptions,
     uncertainty: UncertaintyOptions | None = None,
 ):
-    """The samples' information: in this process, or in ``run.workers`` contiguous parts
-    in forked processes merged by addition (equal to the serial sums to round-off, the
-    per-block sums of ``uncertainty`` too)."""
-    n, workers, chunk, progress = q.shape[0], run.workers, run.chunk, run.progress
+    """The samples' information: in this process, or in ``run.workers_for(n)`` contiguous
+    parts in forked processes merged by addition (equal to the serial sums to round-off,
+    the per-block sums of ``uncertainty`` too)."""
+    n = q.shape[0]
     unc = UncertaintyOptions.from_value(uncertainty)
+    with planned_samples(n):
+        return _accumulate_arrays(robot, (q, dq, ddq, tau), ind, run, run.workers_for(n), unc)
+
+
+def _accumulate_arrays(robot: Robot, arrays, ind, run: RunOptions, workers: int, unc):
+    q, dq, ddq, tau = arrays
+    n, chunk, progress = q.shape[0], run.chunk, run.progress
     r, nv = len(ind), robot.nv
     if workers > 1 and n >= 2 * workers:
         t0 = time.perf_counter()

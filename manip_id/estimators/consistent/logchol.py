@@ -11,6 +11,8 @@ steps on the stiff fit, and QR solves (no normal equations).
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 import pinocchio as pin
 import scipy.linalg as sla
@@ -272,8 +274,22 @@ def solve_logchol(
         x = model.start(moved)
     else:
         x = model.start(as_float_array(theta_start, "theta_start", ndim=1))
-    with np.errstate(over="ignore", invalid="ignore"):  # trial steps may overflow exp()
-        return _lm(model, pr, x, max_iter, tolerance)
+    with np.errstate(over="ignore", invalid="ignore"), _one_blas_thread():  # trial steps
+        return _lm(model, pr, x, max_iter, tolerance)  # may overflow exp()
+
+
+def _one_blas_thread():
+    """BLAS on one thread for the solve (threadpoolctl, when installed; else as it is).
+
+    Every matrix of the iteration is small (p x p, p < a few hundred): threaded BLAS
+    only adds synchronization, which on a busy machine made the solve of the Panda
+    log 90x slower (60 iterations: 14.7 s on 2 threads, 0.16 s on one).
+    """
+    try:
+        from threadpoolctl import threadpool_limits  # optional (the fast extra)
+    except ImportError:
+        return contextlib.nullcontext()
+    return threadpool_limits(limits=1, user_api="blas")
 
 
 def _lm(model: _LogChol, pr: ConsistentProblem, x: np.ndarray, max_iter: int, tolerance: float):
