@@ -21,7 +21,7 @@ from manip_id import load_robot
 from manip_id.compiled_regressor import set_mode
 from manip_id.execution import available_cores
 from manip_id.identification import RunOptions, identify
-from manip_id.simulation import simulate
+from manip_id.simulation import MeasurementNoise, simulate
 from manip_id.trajectories import random_trajectory
 
 
@@ -36,7 +36,8 @@ def main() -> None:
     cores = available_cores()
     n_max = max(args.sizes)
     traj = random_trajectory(robot, harmonics=5, seed=0)
-    d = simulate(robot, traj, duration=n_max / 1000.0, rate=1000.0, noise_tau=0.01).dataset
+    noise = MeasurementNoise(tau=0.01)
+    d = simulate(robot, traj, duration=n_max / 1000.0, rate=1000.0, noise=noise).dataset
     base = identify(robot, d.q[:2000], d.dq[:2000], d.ddq[:2000], d.tau[:2000]).base
     print(f"ur10 + friction, {cores} cores, regressor {args.regressor}; median of {args.repeat}")
     print(f"{'samples':>9s} {'1 process s':>12s} {f'{cores} processes s':>14s} {'speed-up':>9s}")

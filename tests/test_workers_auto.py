@@ -23,7 +23,7 @@ from manip_id.compiled_regressor import ENV, MODES, numba_available
 from manip_id.datasets import Dataset, save_dataset
 from manip_id.errors import InputError
 from manip_id.identification import RunOptions, identify
-from manip_id.simulation import simulate
+from manip_id.simulation import MeasurementNoise, simulate
 from manip_id.trajectories import random_trajectory
 
 
@@ -39,7 +39,8 @@ def large_input_path(monkeypatch):
 
 def _data(robot, duration=4.0, rate=200.0, seed=3):
     traj = random_trajectory(robot, harmonics=4, seed=seed)
-    return simulate(robot, traj, duration=duration, rate=rate, noise_tau=0.01, seed=seed)
+    noise = MeasurementNoise(tau=0.01)
+    return simulate(robot, traj, duration=duration, rate=rate, noise=noise, seed=seed)
 
 
 def test_resolve_workers(monkeypatch):

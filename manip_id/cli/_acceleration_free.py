@@ -18,13 +18,13 @@ from ..errors import InputError
 from ..identification import ModelOptions, RunOptions, identify
 from ..signals import DEFAULT_CUTOFF, preprocess
 from ..viz.report_document import ReportSamples, RunContext, result_document
-from ._common import column_map, fleet_wanted, prepare
+from ._common import column_map, explicit_workers, fleet_wanted, prepare
 from ._runtime import consistent_kwargs, print_result, robot_from_args, write_outputs
 from ._simulated import simulate_record
 
 
 def _check(args: argparse.Namespace) -> None:
-    if args.workers > 1 or fleet_wanted(args):
+    if explicit_workers(args) > 1 or fleet_wanted(args):
         raise InputError(f"--model {args.model} runs in one process (no --workers, --scheduler)")
     if args.data is not None and len(args.data) > 1:
         raise InputError(f"--model {args.model} takes one --data file, got {len(args.data)}")
