@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
@@ -357,14 +358,31 @@ class Robot:
 
 
 # --------------------------------------------------------------------- loading
+@dataclass(frozen=True)
+class JointSelection:
+    """The joints :func:`load_robot` identifies and where it locks the others.
+
+    Attributes
+    ----------
+    active : sequence of str or None
+        Names of the joints to identify; None: the profile's, else every joint.
+    locked_configuration : mapping or sequence or None
+        Positions of the locked joints: a full configuration vector of the unreduced
+        model (shape (nq,)) or a mapping joint name -> position [rad or m]; None: the
+        neutral configuration clipped to the limits.
+    """
+
+    active: Sequence[str] | None = None
+    locked_configuration: Mapping[str, float] | Sequence[float] | None = None
+
+
 def load_robot(
     spec: str | Path,
     *,
     armature: bool | None = None,
     friction: Iterable[str] | str | None = None,
     spring: bool | None = None,
-    active_joints: Sequence[str] | None = None,
-    locked_configuration: Mapping[str, float] | Sequence[float] | None = None,
+    active_joints: Sequence[str] | JointSelection | None = None,
     package_dirs: Sequence[str | Path] = (),
     identified: bool | str | Path | None = None,
     profile: str | Path | RobotProfile | bool | None = None,
@@ -386,13 +404,10 @@ def load_robot(
         model a linear spring per joint (column q_j). Default: the profile's
         (on for ``"msd"``), else off.
     active_joints
-        names of the joints to identify; the others are locked at
-        ``locked_configuration``. Default: the profile's (``robots/panda.toml`` locks
-        the two finger joints), else every joint.
-    locked_configuration
-        positions of the locked joints, a full configuration
-        vector of the unreduced model (shape (nq,)) or a mapping joint name ->
-        position [rad or m]. Default: the neutral configuration clipped to the limits.
+        names of the joints to identify, the others locked at the neutral configuration
+        clipped to the limits; or a :class:`JointSelection` that also says where the
+        others are locked. Default: the profile's (``robots/panda.toml`` locks the two
+        finger joints), else every joint.
     package_dirs
         folders where ``package://`` mesh paths of a URDF are resolved.
     identified
@@ -408,6 +423,12 @@ def load_robot(
         loaded by path takes none (its file name decides nothing). Explicit arguments
         override the profile.
     """
+    selection = (
+        active_joints
+        if isinstance(active_joints, JointSelection)
+        else JointSelection(active=active_joints)
+    )
+    active_joints, locked_configuration = selection.active, selection.locked_configuration
     spec_str = str(spec)
     src = load_source(spec_str, [str(p) for p in package_dirs])
     model, name = src.model, src.name

@@ -72,8 +72,8 @@ def identified_options(spec: str, identified, armature, friction, spring, active
 
 
 def locked_configuration(sidecar: dict) -> dict[str, Any] | None:
-    """The sidecar's locked joints as ``load_robot(locked_configuration=...)`` takes them
-    (None for a sidecar without them, version 1)."""
+    """The sidecar's locked joints as ``JointSelection(locked_configuration=...)`` of
+    :func:`manip_id.robot.load_robot` takes them (None for a sidecar without them, version 1)."""
     locked = sidecar.get("locked_joints")
     if not isinstance(locked, dict) or not locked:
         return None

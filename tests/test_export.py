@@ -22,6 +22,7 @@ from manip_id.consistency import PhysicalConsistencyError, pseudo_inertia
 from manip_id.errors import CarriedInertiaError, ExportWarning, InputError
 from manip_id.export import export_urdf, sidecar_path
 from manip_id.export.links import SHARE_MARGIN
+from manip_id.robot import JointSelection
 
 
 def _consistent_theta(robot, seed: int = 0) -> np.ndarray:
@@ -209,7 +210,10 @@ def test_cli_export_mjcf_checks_before_the_work(tmp_path, capsys):
 def test_sidecar_reads_armature_and_offset_back(tmp_path):
     opened = {"panda_finger_joint1": 0.03, "panda_finger_joint2": 0.03}  # [m], not the default
     robot = load_robot(
-        "panda", friction="viscous,coulomb,offset", armature=True, locked_configuration=opened
+        "panda",
+        friction="viscous,coulomb,offset",
+        armature=True,
+        active_joints=JointSelection(locked_configuration=opened),
     )
     theta = _consistent_theta(robot, seed=1)
     out = tmp_path / "panda_id.urdf"

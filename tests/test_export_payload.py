@@ -23,6 +23,7 @@ from manip_id.consistency import PhysicalConsistencyError
 from manip_id.errors import InputError
 from manip_id.export import PayloadLink, export_payload_urdf, sidecar_path
 from manip_id.payload import payload_regressor, standard_from_quantities
+from manip_id.robot import JointSelection
 
 MASS, COM = 1.3, np.array([0.02, -0.03, 0.08])  # [kg], [m]
 INERTIA = np.array([0.010, 0.001, 0.012, -0.0005, 0.0008, 0.006])  # about the CoM [kg m^2]
@@ -49,7 +50,8 @@ def test_exported_payload_link_gives_robot_plus_payload_torques(tmp_path, spec, 
     result = export_payload_urdf(robot, PayloadLink(frame, MASS, COM, INERTIA), out)
     assert result.path == out and result.unresolved == []
     loaded = load_robot(
-        out, active_joints=robot.joint_names, locked_configuration=robot.locked_configuration
+        out,
+        active_joints=JointSelection(robot.joint_names, robot.locked_configuration),
     )
     m0, m1 = _no_armature(robot.model), _no_armature(loaded.model)
     d0, d1 = m0.createData(), m1.createData()

@@ -9,7 +9,7 @@ from conftest import get_robot
 
 from manip_id import InputError, RobotError, available_robots, load_robot
 from manip_id.regressor import regressor
-from manip_id.robot import INERTIAL_NAMES, MANIPULATORS
+from manip_id.robot import INERTIAL_NAMES, MANIPULATORS, JointSelection
 from manip_id.simulation import perturb_parameters
 
 REQUIRED = ["panda", "ur3", "ur5", "ur10", "talos_arm", "z1", "xarm7", "kinova", "double_pendulum"]
@@ -125,8 +125,9 @@ def test_urdf_by_path_matches_name():
 def test_active_joints_and_locked_configuration():
     robot = load_robot(
         "ur5",
-        active_joints=["shoulder_lift_joint", "elbow_joint"],
-        locked_configuration={"wrist_1_joint": 0.3},
+        active_joints=JointSelection(
+            ["shoulder_lift_joint", "elbow_joint"], locked_configuration={"wrist_1_joint": 0.3}
+        ),
     )
     assert robot.nv == 2
     assert robot.joint_names == ["shoulder_lift_joint", "elbow_joint"]

@@ -124,21 +124,7 @@ def run(args: argparse.Namespace) -> int:
         "model": model.source,
         "thresholds": th.to_dict(),
         "detections": [d.to_dict() for d in detections],
-        "files": [
-            {
-                "file": run.file,
-                "n_samples": int(run.t.size),
-                "alarm_rate": run.alarm_rate,
-                "alarm_rate_per_joint": dict(
-                    zip(run.dof_names, run.alarm_rate_per_joint.tolist(), strict=True)
-                ),
-                "n_detections": len(run.detections()),
-                "max_residual": dict(
-                    zip(run.dof_names, np.abs(run.residual).max(axis=0).tolist(), strict=True)
-                ),
-            }
-            for run in runs
-        ],
+        "files": [_file_summary(run) for run in runs],
         "timings": {"total": time.perf_counter() - t_start},
     }
     print(_summary(th, runs, detections))
@@ -152,6 +138,22 @@ def run(args: argparse.Namespace) -> int:
     if args.report is not None:
         print(f"wrote the report to {args.report}/index.html")
     return 0
+
+
+def _file_summary(run) -> dict:
+    """The JSON ``files[i]`` of one monitored run: samples, alarm rates, detections, peaks."""
+    return {
+        "file": run.file,
+        "n_samples": int(run.t.size),
+        "alarm_rate": run.alarm_rate,
+        "alarm_rate_per_joint": dict(
+            zip(run.dof_names, run.alarm_rate_per_joint.tolist(), strict=True)
+        ),
+        "n_detections": len(run.detections()),
+        "max_residual": dict(
+            zip(run.dof_names, np.abs(run.residual).max(axis=0).tolist(), strict=True)
+        ),
+    }
 
 
 def _summary(th, runs, detections) -> str:

@@ -106,14 +106,7 @@ def identify_datasets(
     train = accumulate_files(
         robot, files, options, ind, window=window, run=run_o, scans=scans, uncertainty=uopts
     )
-    valid = None
-    if validation is not None:
-        vrun = RunOptions(chunk=run_o.chunk, workers=run_o.workers)
-        white = UncertaintyOptions(method="white")  # validation: errors only, no blocks
-        valid = accumulate_files(
-            robot, validation, options, ind, window=window, run=vrun, scans=scans,
-            uncertainty=white,
-        )  # fmt: skip
+    valid = _validation_sums(robot, validation, options, ind, window, run_o, scans)
     timings["accumulate_wall"] = time.perf_counter() - t0
     for fa in train + (valid or []):
         for k, v in fa.timings.items():
@@ -162,6 +155,17 @@ def _file_blocks(robot: Robot, files, options, scans):
             q, dq = b[:, 1 : 1 + nq], b[:, 1 + nq : 1 + nq + nv]
             tau, ddq = b[:, 1 + nq + nv : 1 + nq + 2 * nv], b[:, 1 + nq + 2 * nv :]
             yield q, dq, ddq, tau
+
+
+def _validation_sums(robot: Robot, validation, options, ind, window, run: RunOptions, scans):
+    """The validation files' sums (errors only: white, no per-block sums), or None."""
+    if validation is None:
+        return None
+    vrun = RunOptions(chunk=run.chunk, workers=run.workers)
+    white = UncertaintyOptions(method="white")
+    return accumulate_files(
+        robot, validation, options, ind, window=window, run=vrun, scans=scans, uncertainty=white
+    )
 
 
 __all__ = ["identify_datasets"]

@@ -243,16 +243,15 @@ def accumulate_momentum(
     *,
     dt: float,
     window_length: float | None = None,
-    bandwidth: float | None = None,
     columns=None,
     blocks: ScoreBlocks | None = None,
 ) -> InformationAccumulator:
     """The momentum rows' information on ``columns`` (default all), per joint (``nv`` outputs);
-    with ``blocks`` (empty) also per block of consecutive rows."""
+    with ``blocks`` (empty) also per block of consecutive rows. The rows are
+    :func:`momentum_rows` at its default filter bandwidth (the same keywords as
+    :func:`~manip_id.models.energy.accumulate_energy`, so the two are interchangeable)."""
     cols = np.arange(robot.n_parameters) if columns is None else np.asarray(columns, np.intp)
     acc = InformationAccumulator(cols.size, robot.nv, blocks=False if blocks is None else blocks)
-    for W, z in momentum_rows(
-        robot, q, dq, tau, dt=dt, window_length=window_length, bandwidth=bandwidth
-    ):
+    for W, z in momentum_rows(robot, q, dq, tau, dt=dt, window_length=window_length):
         acc.add(W, z, columns=cols, check=False)
     return acc
