@@ -36,8 +36,9 @@ ADVICE: tuple[tuple[str, str], ...] = (
     ("not physical", "add --consistent to estimate a physical model"),
     (
         "residuals are not white",
-        "read the standard deviations as lower bounds (an honest uncertainty: --uncertainty "
-        "auto where available); a model term may be missing (--friction, --armature)",
+        "the reported standard deviations already hold for correlated residuals (--uncertainty "
+        "auto: autocorrelation-consistent); so large a misfit says a model term may be missing "
+        "(--friction, --armature)",
     ),
     ("low-pass filtered", "compare the raw-torque errors below: they are what a paper reports"),
     ("repeat the training motion", "validate on another trajectory: --validate FILE"),
