@@ -42,7 +42,7 @@ STANDSTILL = 1e-2
 VELOCITY_MISMATCH = 0.2
 #: Length [s] of the windows over which q increments are compared with the integral of dq.
 VELOCITY_WINDOW = 0.02
-#: Share of samples at the largest |tau| above which a joint looks clipped.
+#: Share of samples at the largest ``|tau|`` above which a joint looks clipped.
 CLIPPED_SHARE = 1e-3
 _BINS = np.linspace(-9.0, 3.0, 2401)  # log10 of the step [s], 0.005-decade bins
 #: A velocity window counts when its motion exceeds this many encoder steps.

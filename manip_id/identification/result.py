@@ -42,7 +42,7 @@ class RelativeError:
     nominal_train_per_joint: np.ndarray | None = None
     nominal_validation: float | None = None
     nominal_validation_per_joint: np.ndarray | None = None
-    #: with a velocity deadband: the errors over the moving rows only (|dq_j| >= eps);
+    #: with a velocity deadband: the errors over the moving rows only (``|dq_j| >= eps``);
     #: ``train`` and ``validation`` are always over all rows
     train_moving: float | None = None
     validation_moving: float | None = None

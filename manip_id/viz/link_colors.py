@@ -40,13 +40,23 @@ def link_identifiability(
 ) -> LinkIdentifiability:
     """Share of each link's parameters that the data determine.
 
-    identifiable: per standard parameter, bool, shape (p,): whether it is
-        identifiable (e.g. a base parameter on its own, or excited by the data).
-    relative_std: per standard parameter, shape (p,): ``std / |value|`` [-];
-        infinite or NaN counts as undetermined.
-    threshold: a parameter is determined when its relative std is at most this.
+    Parameters
+    ----------
+    robot : Robot
+        The robot.
+    identifiable : array_like of bool, shape (p,), optional
+        Per standard parameter, whether it is identifiable (e.g. a base parameter on its
+        own, or excited by the data).
+    relative_std : array_like, shape (p,), optional
+        Per standard parameter, ``std / |value|`` [-]; infinite or NaN counts as
+        undetermined.
+    threshold : float
+        A parameter is determined when its relative std is at most this.
 
-    At least one of the two is needed; with both, a parameter must pass both.
+    Notes
+    -----
+    At least one of ``identifiable`` and ``relative_std`` is needed; with both, a parameter
+    must pass both.
     """
     p = robot.n_parameters
     if identifiable is None and relative_std is None:
