@@ -685,7 +685,10 @@ def _run_acceleration_free(args, outputs, t_start: float) -> int:
         robot, result, train, valid, theta_true, timings, args, source, settings
     )
     report["model"] = args.model
-    report["window_length"] = args.window_length
+    window = result.context.get("window") or {}
+    report["window_length"] = window.get("length", args.window_length)  # the one used [s]
+    if window:
+        report["window"] = window
     report["outputs"] = list(result.output_names)
     print(result.table())
     rel = report["relative_error"]
@@ -694,6 +697,9 @@ def _run_acceleration_free(args, outputs, t_start: float) -> int:
     else:
         shown = report
     print(_summary(robot, shown).replace("relative torque error: train", "relative error: train"))
+    if window:
+        how = "chosen from the data: " + window["rule"] if window["chosen"] else "given"
+        print(f"window: {window['length']:.4g} s, {window['samples']} samples, ({how})")
     if args.json:
         outputs.write_json(args.json, report)
     if args.report is not None:

@@ -10,6 +10,7 @@ Every path ends in the same :func:`~manip_id.identification.solve`.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -17,7 +18,13 @@ from ..errors import InputError
 from ..estimators import GradientEstimator, RLSEstimator
 from ..execution import open_backend, portable_robot, reduce_tree
 from ..identifiability import BaseParameters
-from ..models import accumulate_energy, accumulate_momentum
+from ..models import (
+    WindowChoice,
+    accumulate_energy,
+    accumulate_momentum,
+    choose_window,
+    window_samples,
+)
 from ..regressor import check_states
 from ..robot import Robot
 from .options import (
@@ -191,8 +198,9 @@ def _identify_acceleration_free(
     t0 = time.perf_counter()
     accumulate = accumulate_energy if model.name == "energy" else accumulate_momentum
     dt = 1.0 if model.dt is None else float(model.dt)
+    window = model_window(model, q.shape[0], dt, base.n_base, robot.nv)
     acc = accumulate(
-        robot, q, dq, tau, dt=dt, window_length=model.window_length, columns=base.independent
+        robot, q, dq, tau, dt=dt, window_length=window.length, columns=base.independent
     )
     timings["accumulate"] = time.perf_counter() - t0
     if acc.n_rows <= base.n_base:
@@ -211,7 +219,8 @@ def _identify_acceleration_free(
         model=model.name,
         chunk=opts.run.chunk,
     )
-    return solve(problem, method, consistent=opts.consistent, minimum_norm=opts.rank.minimum_norm)
+    result = solve(problem, method, consistent=opts.consistent, minimum_norm=opts.rank.minimum_norm)
+    return replace(result, context={**result.context, "window": window.to_dict()})
 
 
 def _check_parts(parts: list) -> None:
@@ -293,6 +302,20 @@ def identify_chunks(
         chunk=run_o.chunk,
     )
     return solve(problem, method, consistent=opts.consistent, minimum_norm=opts.rank.minimum_norm)
+
+
+def model_window(model: ModelOptions, n_samples: int, dt: float, n_base: int, nv: int):
+    """The energy / momentum window: the given ``model.window_length``, or one chosen from
+    the data (:func:`~manip_id.models.choose_window`), as a
+    :class:`~manip_id.models.WindowChoice`."""
+    energy = model.name == "energy"
+    if model.window_length is None:
+        return choose_window(
+            n_samples, dt, n_base, rows_per_window=1 if energy else nv, even=energy
+        )
+    w = window_samples(model.window_length, dt, even=energy)
+    rows = (max(n_samples - 1, 0) // w) * (1 if energy else nv)
+    return WindowChoice(w * dt, w, rows, False, "given")
 
 
 def identify_dataset(robot: Robot, dataset, *, ddq=None, validation=None, **kwargs):
