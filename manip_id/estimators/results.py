@@ -6,6 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..metrics import relative_error
+
 
 @dataclass(frozen=True)
 class LeastSquaresSolution:
@@ -69,11 +71,9 @@ class LeastSquaresSolution:
     @property
     def relative_error(self) -> float:
         """``||z - Phi theta_hat|| / ||z||`` over all rows."""
-        zz = float(self.zz_per_joint.sum())
-        return float(np.sqrt(self.rss / zz)) if zz > 0 else float("nan")
+        return relative_error(self.rss_per_joint, self.zz_per_joint).total
 
     @property
     def relative_error_per_joint(self) -> np.ndarray:
         """``||z_j - Phi_j theta_hat|| / ||z_j||`` per output, shape (nv,)."""
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return np.sqrt(self.rss_per_joint / self.zz_per_joint)
+        return relative_error(self.rss_per_joint, self.zz_per_joint).per_joint

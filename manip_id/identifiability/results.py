@@ -7,13 +7,13 @@ holds rank, conditioning, null space and readable directions, with a JSON-ready
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .._checks import as_float_array
 from ..errors import InputError, RankDeficiencyError
+from ..metrics import finite_or_none
 
 
 @dataclass(frozen=True)
@@ -161,8 +161,8 @@ class RankAnalysis:
             "n_rows": self.n_rows,
             "rank": self.rank,
             "tolerance": self.tolerance,
-            "condition_number": _finite_or_none(self.condition_number),
-            "condition_number_scaled": _finite_or_none(self.condition_number_scaled),
+            "condition_number": finite_or_none(self.condition_number),
+            "condition_number_scaled": finite_or_none(self.condition_number_scaled),
             "base_parameters": self.base.to_dict(),
             "unidentifiable": list(self.unidentifiable),
             "unexcited": list(self.unexcited),
@@ -241,7 +241,3 @@ class RankAnalysis:
             lines.append("notes:")
             lines += [f"  - {n}" for n in self.notes]
         return "\n".join(lines)
-
-
-def _finite_or_none(x: float):
-    return float(x) if math.isfinite(x) else None

@@ -146,14 +146,10 @@ def identify(
     online_run = None
     if method in ONLINE:
         est, what = online_estimator(method, r, online_options, n)
-        acc, times = accumulate_online(
-            robot, q, dq, ddq, tau, ind, run_o.chunk, est, dt, run_o.progress
-        )
+        acc, times = accumulate_online(robot, q, dq, ddq, tau, ind, est, dt, run=run_o)
         online_run = OnlineRun(est, what)
     else:
-        acc, times = accumulate_arrays(
-            robot, q, dq, ddq, tau, ind, run_o.chunk, run_o.workers, run_o.progress
-        )
+        acc, times = accumulate_arrays(robot, q, dq, ddq, tau, ind, run=run_o)
     timings.update(times)
     problem = Problem(
         robot,

@@ -244,30 +244,14 @@ def result_to_dict(
     """The JSON-ready dictionary of an :class:`~manip_id.identification.IdentificationResult`
     (module docstring; lists and floats, inf/NaN as None)."""
     ctx = dict(result.context)
-    th = dict(ctx.pop("thresholds", None) or {})
-    poorly = float(
-        th.get("poorly_identified", POORLY_IDENTIFIED)
-        if poorly_identified is None
-        else poorly_identified
+    poorly, cond, conv_lim = _limits(
+        dict(ctx.pop("thresholds", None) or {}),
+        poorly_identified,
+        condition_limit,
+        convergence_limit,
     )
-    cond = float(
-        th.get("condition_number", CONDITION_LIMIT) if condition_limit is None else condition_limit
-    )
-    conv_lim = float(
-        th.get("convergence", CONVERGENCE_LIMIT) if convergence_limit is None else convergence_limit
-    )
-    for name, value in (
-        ("poorly_identified", poorly),
-        ("condition_limit", cond),
-        ("convergence_limit", conv_lim),
-    ):
-        if not (math.isfinite(value) and value > 0):
-            raise InputError(f"{name} must be a positive number, got {value}")
     flags = parameter_flags(result, poorly)
-    re = result.relative_error
     outputs = list(result.output_names or result.dof_names)
-    nominal = result.nominal if result.nominal is not None else [None] * len(result.names)
-    units = result.units or [""] * len(result.names)
     ra = result.rank_analysis
     base = result.base
     doc = {
@@ -280,29 +264,7 @@ def result_to_dict(
         "n_base": len(result.names),
         "joints": list(result.dof_names),
         "outputs": outputs,
-        "base_parameters": [
-            {
-                "name": n,
-                "expression": e,
-                "value": finite_or_none(x),
-                "std": finite_or_none(s),
-                "std_percent": finite_or_none(sp),
-                "unit": u,
-                "nominal": finite_or_none(x0),
-                "flags": fl,
-            }
-            for n, e, x, s, sp, u, x0, fl in zip(
-                result.names,
-                result.expressions,
-                result.estimate,
-                result.std,
-                result.std_percent,
-                units,
-                nominal,
-                flags,
-                strict=True,
-            )
-        ],
+        "base_parameters": _parameter_rows(result, flags),
         "sigma2": finite_or_none(result.sigma2),
         "noise_variance": dict(
             zip(outputs, map(finite_or_none, result.noise_variance), strict=True)
@@ -311,7 +273,7 @@ def result_to_dict(
         "rank": int(ra.rank),
         "unidentifiable": structural_directions(base),
         "unexcited": list(ra.unidentifiable) + list(ra.unexcited),
-        "relative_error": errors_to_dict(re),
+        "relative_error": errors_to_dict(result.relative_error),
         "covariance": [[finite_or_none(v) for v in row] for row in np.asarray(result.covariance)],
         "timings": {k: round(float(v), 6) for k, v in result.timings.items()},
         "solver": result.solver,
@@ -327,19 +289,76 @@ def result_to_dict(
             "dependent": [int(i) for i in base.dependent],
             "K": np.asarray(base.K, dtype=float).tolist(),
         },
-        "rank_analysis": {
-            "n_rows": int(ra.n_rows),
-            "tolerance": float(ra.tolerance),
-            "singular_values": finite_list(ra.singular_values),
-            "singular_values_scaled": finite_list(ra.singular_values_scaled),
-            "condition_number_scaled": finite_or_none(ra.condition_number_scaled),
-            "null_space": np.asarray(ra.null_space, dtype=float).tolist(),
-            "unidentifiable": list(ra.unidentifiable),
-            "unexcited": list(ra.unexcited),
-            "notes": list(ra.notes),
-            "source": ra.source,
-        },
+        "rank_analysis": _rank_dict(ra),
     }
+    _add_parts(doc, result, ctx)
+    extra = list(ctx.get("warnings", []))
+    warnings_ = result_warnings(result, flags, cond, conv_lim)
+    doc["warnings"] = warnings_ + [w for w in extra if w not in warnings_]
+    return doc
+
+
+def _limits(saved: dict, poorly, cond, conv) -> tuple[float, float, float]:
+    """The flag and warning limits: those asked for, else those saved, else the defaults."""
+    out = (
+        float(saved.get("poorly_identified", POORLY_IDENTIFIED) if poorly is None else poorly),
+        float(saved.get("condition_number", CONDITION_LIMIT) if cond is None else cond),
+        float(saved.get("convergence", CONVERGENCE_LIMIT) if conv is None else conv),
+    )
+    for name, value in zip(
+        ("poorly_identified", "condition_limit", "convergence_limit"), out, strict=True
+    ):
+        if not (math.isfinite(value) and value > 0):
+            raise InputError(f"{name} must be a positive number, got {value}")
+    return out
+
+
+def _parameter_rows(result, flags) -> list[dict]:
+    nominal = result.nominal if result.nominal is not None else [None] * len(result.names)
+    units = result.units or [""] * len(result.names)
+    return [
+        {
+            "name": n,
+            "expression": e,
+            "value": finite_or_none(x),
+            "std": finite_or_none(s),
+            "std_percent": finite_or_none(sp),
+            "unit": u,
+            "nominal": finite_or_none(x0),
+            "flags": fl,
+        }
+        for n, e, x, s, sp, u, x0, fl in zip(
+            result.names,
+            result.expressions,
+            result.estimate,
+            result.std,
+            result.std_percent,
+            units,
+            nominal,
+            flags,
+            strict=True,
+        )
+    ]
+
+
+def _rank_dict(ra) -> dict:
+    return {
+        "n_rows": int(ra.n_rows),
+        "tolerance": float(ra.tolerance),
+        "singular_values": finite_list(ra.singular_values),
+        "singular_values_scaled": finite_list(ra.singular_values_scaled),
+        "condition_number_scaled": finite_or_none(ra.condition_number_scaled),
+        "null_space": np.asarray(ra.null_space, dtype=float).tolist(),
+        "unidentifiable": list(ra.unidentifiable),
+        "unexcited": list(ra.unexcited),
+        "notes": list(ra.notes),
+        "source": ra.source,
+    }
+
+
+def _add_parts(doc: dict, result, ctx: dict) -> None:
+    """The keys of other parts: raw-torque errors, per-file results, files, standard
+    parameters, and the caller's keys (source, preprocessing, quality, ...)."""
     raw = result.raw_error
     if raw is not None:
         doc["relative_error_raw"] = errors_to_dict(raw)
@@ -358,10 +377,6 @@ def result_to_dict(
     for k, v in ctx.items():  # the caller's keys (source, preprocessing, quality, ...)
         if k not in OWN_KEYS:
             doc[k] = v
-    extra = list(ctx.get("warnings", []))
-    warnings_ = result_warnings(result, flags, cond, conv_lim)
-    doc["warnings"] = warnings_ + [w for w in extra if w not in warnings_]
-    return doc
 
 
 def read_result_json(path, what: str = "result") -> dict:

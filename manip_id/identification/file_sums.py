@@ -13,7 +13,8 @@ the validation error of a file for any estimate follows from its sums alone.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -25,8 +26,8 @@ from ..execution import ForkBackend
 from ..identifiability import analyze
 from ..regressor import DEFAULT_CHUNK
 from ..robot import Robot
-from .options import PreprocessOptions
-from .problem import FileRecord, FileSums, accumulate_blocks
+from .options import PreprocessOptions, RunOptions
+from .problem import FileRecord, FileSums, RowSums, accumulate_rows
 from .reading import FileScan, iter_processed, processed_count, scan_file
 
 
@@ -37,26 +38,129 @@ class FileAccumulation(FileRecord):
     Attributes
     ----------
     accumulator : InformationAccumulator
-        Per-joint sums of the base-column regressor rows (r columns).
+        Per-joint sums of the base-column regressor rows of the fit (r columns).
+    still, raw : InformationAccumulator or None
+        The rows inside the velocity deadband (Coulomb column zero), and every row
+        against the raw torques when the fit's were filtered
+        (:class:`~manip_id.identification.problem.RowSums`).
     timings : dict
         Seconds per stage ("scan", "accumulate", ...) [s].
     """
 
     accumulator: InformationAccumulator
+    still: InformationAccumulator | None = None
+    raw: InformationAccumulator | None = None
     timings: dict = field(default_factory=dict)
 
     def validation_sums(self, estimate) -> tuple[np.ndarray, np.ndarray]:
-        """Per joint ``||tau_j - Y_j theta||^2`` and ``||tau_j||^2`` on this file, each (nv,).
-
-        From the sums alone (``zz_j - 2 b_j.theta + theta.A_j.theta``): no pass
-        over the data, floor about 1e-8 relative on the error.
-        """
+        """Per joint ``||tau_j - Y_j theta||^2`` and ``||tau_j||^2`` on this file's fit rows,
+        each (nv,), from the sums alone (floor about 1e-8 relative on the error)."""
         acc = self.accumulator
         return acc.residual_sum_of_squares(estimate), acc.zz_joint
 
     def sums(self) -> FileSums:
         """The record and the sums (what a problem keeps of a validation file)."""
-        return FileSums(self.record(), self.accumulator)
+        return FileSums(self.record(), self.accumulator, self.still, self.raw)
+
+    def merged(self, other: FileRecord) -> FileAccumulation:
+        """Two parts of the same file, their sums added."""
+        assert isinstance(other, FileAccumulation)
+        times = dict(self.timings)
+        for k, v in other.timings.items():
+            times[k] = times.get(k, 0.0) + v
+        rows = RowSums(self.accumulator, self.still, self.raw) + RowSums(
+            other.accumulator, other.still, other.raw
+        )
+        return FileAccumulation(
+            **vars(FileRecord.merged(self, other)),
+            accumulator=rows.fit,
+            still=rows.still,
+            raw=rows.raw,
+            timings=times,
+        )
+
+
+def file_stream(robot: Robot, spec: FileSpec, options: PreprocessOptions, scan: FileScan):
+    """``(settings, blocks)``: the file's packed rows ``t | q | dq | tau | ddq`` as the fit
+    sees them, each block paired with the same rows' raw torques (nv columns) when the
+    preprocessing filters the torques (a second, unfiltered preprocessing of the same
+    rows: the states are the same), else with None."""
+    settings, blocks = iter_processed(robot, spec, options, scan)
+    if settings is None or not options.filter_torque:
+        return settings, ((b, None) for b in blocks)
+    _, raw = iter_processed(robot, spec, replace(options, filter_torque=False), scan)
+    nq, nv = robot.nq, robot.nv
+    tau = slice(1 + nq + nv, 1 + nq + 2 * nv)
+
+    def pairs():
+        for b, r in zip(blocks, raw, strict=True):
+            if b.shape != r.shape or not np.array_equal(b[:, : 1 + nq], r[:, : 1 + nq]):
+                raise DataError(f"{spec.label}: the raw-torque pass gave other samples")
+            yield b, r[:, tau]
+
+    return settings, pairs()
+
+
+def _span_states(pairs, robot: Robot, span, deadband, counts: dict, progress=None):
+    """The states ``(q, dq, ddq, tau[, tau_raw])`` of rows ``[lo, hi)`` of a file stream;
+    counts the samples and the rows the deadband leaves out."""
+    nq, nv = robot.nq, robot.nv
+    lo, hi = span
+    seen = 0
+    for rows, raw in pairs:
+        g0, seen = seen, seen + rows.shape[0]
+        if hi is not None and g0 >= hi:
+            break
+        a, b = max(lo - g0, 0), rows.shape[0] if hi is None else min(hi - g0, rows.shape[0])
+        if a >= b:
+            continue
+        rows = rows[a:b]
+        q, dq = rows[:, 1 : 1 + nq], rows[:, 1 + nq : 1 + nq + nv]
+        tau, ddq = rows[:, 1 + nq + nv : 1 + nq + 2 * nv], rows[:, 1 + nq + 2 * nv :]
+        if deadband is not None:
+            counts["excluded"] += (np.abs(dq) < deadband).sum(axis=0)
+        counts["n"] += rows.shape[0]
+        yield (q, dq, ddq, tau) if raw is None else (q, dq, ddq, tau, raw[a:b])
+        if progress is not None:
+            progress(counts["n"])
+
+
+def accumulate_span(
+    robot: Robot,
+    spec: FileSpec,
+    options: PreprocessOptions,
+    ind: np.ndarray,
+    *,
+    run: RunOptions,
+    scan: FileScan,
+    span: tuple[int, int | None] = (0, None),
+) -> FileAccumulation:
+    """The sums of rows ``[lo, hi)`` of one scanned file's preprocessed stream (the file is
+    preprocessed whole, so spans add up to the file); ``run.progress(samples_done)``."""
+    t0 = time.perf_counter()
+    settings, pairs = file_stream(robot, spec, options, scan)
+    eps = options.velocity_deadband
+    deadband = None if eps is None else np.full(robot.nv, float(eps))
+    counts: dict[str, Any] = {"n": 0, "excluded": np.zeros(robot.nv, dtype=np.int64)}
+    states = _span_states(pairs, robot, span, deadband, counts, run.progress)
+    try:
+        sums = accumulate_rows(robot, states, ind, int(run.chunk), deadband=deadband)
+    except (InputError, DataError) as exc:
+        msg = str(exc)
+        raise DataError(msg if str(spec.path) in msg else f"{spec.label}: {msg}") from exc
+    timings = {**sums.timings, "accumulate_total": time.perf_counter() - t0}
+    return FileAccumulation(
+        spec,
+        counts["n"],
+        counts["excluded"],
+        scan.quality,
+        settings,
+        torque_scale_vector(options.torque_scale, robot.nv, "--torque-scale"),
+        accumulator=sums.fit,
+        still=sums.still,
+        raw=sums.raw,
+        timings=timings,
+    )
 
 
 def accumulate_file(
@@ -69,105 +173,88 @@ def accumulate_file(
     scan: FileScan | None = None,
     progress=None,
     part: tuple[int, int] | None = None,
-    discard: bool = True,
 ) -> FileAccumulation:
     """The information sums of one file (see the module docstring).
 
     Parameters
     ----------
-    robot: the robot (its joint terms decide the columns).
-    spec: a :class:`~manip_id.datasets.FileSpec`, or its text ``PATH[@START:STOP|@#A:#B]``.
-    options: :class:`PreprocessOptions` (default: all defaults).
-    base_columns: indices of the regressor columns to accumulate, shape (r,)
-        (``analyze(robot).base.independent``); default the structural base.
-    chunk: samples per regressor chunk.
-    scan: the file's :func:`scan_file`, when already made.
-    progress: called as ``progress(samples_done)`` after each block.
-    part: ``(k, K)``: accumulate only the k-th of K contiguous parts of the
-        file's preprocessed samples (the file is still preprocessed whole, so
-        the K parts add up to the whole file's sums); for workers sharing a file.
-    discard: remove the scan's spill file afterwards (keep it for other parts).
+    robot : Robot
+        The robot (its joint terms decide the columns).
+    spec : FileSpec or str
+        The file, or its text ``PATH[@START:STOP|@#A:#B]``.
+    options : PreprocessOptions or None
+        Preprocessing (default: all defaults).
+    base_columns : array_like or None
+        Indices of the regressor columns to accumulate, shape (r,); default the
+        structural base's ``independent``.
+    chunk : int
+        Samples per regressor chunk.
+    scan : FileScan or None
+        The file's :func:`scan_file`, when already made.
+    progress : callable or None
+        Called as ``progress(samples_done)`` after each block.
+    part : tuple or None
+        ``(k, K)``: only the k-th of K contiguous parts of the file's preprocessed
+        samples (the K parts add up to the whole file's sums); the scan's spill file
+        is then kept for the other parts (else removed at the end).
 
     Returns
     -------
-    :class:`FileAccumulation`. Raises :class:`DataError` naming the file.
+    FileAccumulation
+        Raises :class:`DataError` naming the file.
     """
-    timings: dict[str, float] = {}
     spec = parse_file_spec(spec)
     options = options or PreprocessOptions()
     if base_columns is None:
         base_columns = analyze(robot).base.independent
     ind = np.asarray(base_columns, dtype=np.intp)
-    if scan is None:
-        t0 = time.perf_counter()
-        scan = scan_file(robot, spec, options)
-        timings["scan"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    settings, blocks = iter_processed(robot, spec, options, scan)
-    nv, nq = robot.nv, robot.nq
-    eps = options.velocity_deadband
-    deadband = None if eps is None else np.full(nv, float(eps))
-    excluded = np.zeros(nv, dtype=np.int64)
-    state = {"n": 0}
-
-    lo, hi = 0, None
-    if part is not None:
-        k, parts = int(part[0]), int(part[1])
-        if not 0 <= k < parts:
-            raise InputError(f"part must be (k, K) with 0 <= k < K, got {part}")
-        total = processed_count(scan, settings, options)
-        lo, hi = (k * total) // parts, ((k + 1) * total) // parts
-    seen = [0]
-
-    def states():
-        for rows in blocks:
-            g0 = seen[0]
-            seen[0] += rows.shape[0]
-            if part is not None:
-                if hi is not None and g0 >= hi:
-                    break
-                rows = rows[max(lo - g0, 0) : (hi if hi is not None else g0 + len(rows)) - g0]
-                if not rows.shape[0]:
-                    continue
-            q = rows[:, 1 : 1 + nq]
-            dq = rows[:, 1 + nq : 1 + nq + nv]
-            tau = rows[:, 1 + nq + nv : 1 + nq + 2 * nv]
-            ddq = rows[:, 1 + nq + 2 * nv : 1 + nq + 3 * nv]
-            if deadband is not None:
-                excluded[:] += (np.abs(dq) < deadband).sum(axis=0)
-            state["n"] += rows.shape[0]
-            yield q, dq, ddq, tau
-            if progress is not None:
-                progress(state["n"])
-
+    scanned = scan is None
+    scan = scan_file(robot, spec, options) if scan is None else scan
+    t_scan = time.perf_counter() - t0
+    span: tuple[int, int | None] = (0, None)
     try:
-        acc, times = accumulate_blocks(robot, states(), ind, int(chunk), deadband=deadband)
-    except (InputError, DataError) as exc:
-        msg = str(exc)
-        raise DataError(msg if str(spec.path) in msg else f"{spec.label}: {msg}") from exc
+        if part is not None:
+            k, parts = int(part[0]), int(part[1])
+            if not 0 <= k < parts:
+                raise InputError(f"part must be (k, K) with 0 <= k < K, got {part}")
+            settings, _ = iter_processed(robot, spec, options, scan)
+            total = processed_count(scan, settings, options)
+            span = ((k * total) // parts, ((k + 1) * total) // parts)
+        run = RunOptions(chunk=int(chunk), progress=progress)
+        fa = accumulate_span(robot, spec, options, ind, run=run, scan=scan, span=span)
     finally:
-        if discard:
+        if part is None:
             scan.discard()
-    timings.update(times)
-    timings["accumulate_total"] = time.perf_counter() - t0
-    scale = torque_scale_vector(options.torque_scale, nv, "--torque-scale")
-    return FileAccumulation(
-        spec=spec,
-        accumulator=acc,
-        quality=scan.quality,
-        n_samples=state["n"],
-        excluded=excluded,
-        settings=settings,
-        torque_scale=scale,
-        timings=timings,
-    )
+    if scanned:
+        fa.timings["scan"] = t_scan
+    return fa
 
 
-def _file_task(robot, spec, options, ind, chunk, scan, part=None, discard=True):
+def _file_task(robot, spec, options, ind, chunk, scan, part=None):
     """One task of :func:`accumulate_files`: one file, or one part of it."""
-    return accumulate_file(
-        robot, spec, options, ind, chunk=chunk, scan=scan, part=part, discard=discard
-    )
+    return accumulate_file(robot, spec, options, ind, chunk=chunk, scan=scan, part=part)
+
+
+def _one_file_in_parts(robot, spec, options, ind, run: RunOptions, scan) -> FileAccumulation:
+    """One file's samples in ``run.workers`` contiguous parts, in forked processes."""
+    k_parts = int(run.workers)
+    try:
+        with ForkBackend(k_parts) as backend:
+            parts = backend.map(
+                _file_task,
+                [
+                    (robot, spec, options, ind, run.chunk, scan, (i, k_parts))
+                    for i in range(k_parts)
+                ],
+            )
+    finally:
+        scan.discard()
+    first = parts[0]
+    for other in parts[1:]:
+        first = first.merged(other)
+    first.n_tasks = 1
+    return first
 
 
 def accumulate_files(
@@ -177,24 +264,21 @@ def accumulate_files(
     base_columns=None,
     *,
     window=None,
-    chunk: int = DEFAULT_CHUNK,
-    workers: int = 1,
-    progress=None,
+    run: RunOptions | None = None,
     scans: dict | None = None,
 ) -> list[FileAccumulation]:
     """:func:`accumulate_file` for every file of ``files`` (specs or their texts), in order.
 
-    ``window`` (text or :class:`~manip_id.datasets.Window`) applies to each file
-    that has none. With ``workers > 1`` and several files, the files are
-    accumulated in up to ``workers`` forked processes (one file per task); with
-    one file, each process accumulates one contiguous part of its preprocessed
-    samples (``part=``), the parts merged by addition.
-    Every file is scanned (checked against ``robot``, its quality summary made)
-    before any is accumulated, so a bad file fails first, naming it (a file of
-    another robot, other joints, NaN rows, a window outside it). ``progress(done,
-    total)`` is called as samples go by (total: the rows the scans counted).
-    ``scans``: :class:`FileSpec` -> :class:`FileScan` of files already scanned.
+    ``window`` (text or :class:`~manip_id.datasets.Window`) applies to each file that
+    has none. With ``run.workers > 1`` and several files, the files are accumulated in
+    up to that many forked processes (one file per task); with one file, each process
+    accumulates one contiguous part of its preprocessed samples, the parts merged by
+    addition. Every file is scanned (checked against ``robot``, its quality summary
+    made) before any is accumulated, so a bad file fails first, naming it.
+    ``run.progress(done, total)`` is called as samples go by (total: the rows the scans
+    counted). ``scans``: :class:`FileSpec` -> :class:`FileScan` of files already scanned.
     """
+    run = run or RunOptions()
     scans = dict(scans or {})
     if isinstance(files, (str, FileSpec)) or not hasattr(files, "__iter__"):
         files = [files]
@@ -209,76 +293,56 @@ def accumulate_files(
         if spec not in scans:
             scans[spec] = scan_file(robot, spec, options)
     total = sum(scans[s].n for s in specs)
-    if int(workers) > 1 and len(specs) == 1:  # one file: its samples in parts
-        spec = specs[0]
-        scan = scans.get(spec) or scan_file(robot, spec, options)
-        k_parts = int(workers)
-        try:
-            with ForkBackend(k_parts) as backend:
-                parts = backend.map(
-                    _file_task,
-                    [
-                        (robot, spec, options, ind, int(chunk), scan, (i, k_parts), False)
-                        for i in range(k_parts)
-                    ],
-                )
-        finally:
-            scan.discard()
-        first = parts[0]
-        for other in parts[1:]:
-            first.accumulator.merge(other.accumulator)
-            first.excluded += other.excluded
-            first.n_samples += other.n_samples
-            for key, v in other.timings.items():
-                first.timings[key] = first.timings.get(key, 0.0) + v
-        if progress is not None:
-            progress(total, total)
-        return [first]
-    if int(workers) > 1 and len(specs) > 1:
+    progress = run.progress
+    if run.workers > 1 and len(specs) == 1:  # one file: its samples in parts
+        out = [_one_file_in_parts(robot, specs[0], options, ind, run, scans[specs[0]])]
+    elif run.workers > 1:
 
         def report(k: int, _value) -> None:
             if progress is not None:
                 progress(sum(scans[s].n for s in specs[: k + 1]), total)
 
-        with ForkBackend(int(workers)) as backend:
-            return backend.map(
-                _file_task,
-                [(robot, s, options, ind, int(chunk), scans.get(s)) for s in specs],
-                on_result=report,
+        with ForkBackend(run.workers) as backend:
+            args = [(robot, s, options, ind, run.chunk, scans[s]) for s in specs]
+            return backend.map(_file_task, args, on_result=report)
+    else:
+        out = [
+            _serial_file(
+                robot, s, options, ind, run, scans[s], sum(scans[x].n for x in specs[:i]), total
             )
-    out: list[FileAccumulation] = []
-    done = 0
-    last = [0]
-
-    def report_samples(n: int, before: int) -> None:
-        last[0] = min(before + n, total)
-        if last[0] < total:  # the end is reported once, below
-            progress(last[0], total)
-
-    for spec in specs:
-        report = None if progress is None else (lambda n, d=done: report_samples(n, d))
-        out.append(
-            accumulate_file(
-                robot, spec, options, ind, chunk=chunk, scan=scans[spec], progress=report
-            )
-        )
-        done += scans[spec].n
+            for i, s in enumerate(specs)
+        ]
     if progress is not None:
         progress(total, total)
     return out
 
 
-def merge_accumulations(parts: list[FileAccumulation]) -> InformationAccumulator:
-    """The sum of the files' accumulators (the information of their concatenation)."""
-    acc = parts[0].accumulator.copy()
+def _serial_file(robot, spec, options, ind, run: RunOptions, scan, before: int, total: int):
+    """One file in this process, its progress reported as samples of all files (the end
+    is reported once, by the caller)."""
+    progress = run.progress
+
+    def report(n: int) -> None:
+        done = min(before + n, total)
+        if progress is not None and done < total:
+            progress(done, total)
+
+    return accumulate_file(robot, spec, options, ind, chunk=run.chunk, scan=scan, progress=report)
+
+
+def merge_accumulations(parts: list[FileAccumulation]) -> RowSums:
+    """The sum of the files' sums (the information of their concatenation)."""
+    total = RowSums(parts[0].accumulator.copy(), parts[0].still, parts[0].raw)
     for p in parts[1:]:
-        acc.merge(p.accumulator)
-    return acc
+        total = total + RowSums(p.accumulator, p.still, p.raw)
+    return total
 
 
 __all__ = [
     "FileAccumulation",
     "accumulate_file",
     "accumulate_files",
+    "accumulate_span",
+    "file_stream",
     "merge_accumulations",
 ]

@@ -92,14 +92,19 @@ def identify_datasets(
         return solve(problem, method, consistent=copts, minimum_norm=minimum_norm)
     ind = base.independent
     t0 = time.perf_counter()
-    kw = dict(window=window, chunk=run_o.chunk, workers=run_o.workers, scans=scans)
-    train = accumulate_files(robot, files, options, ind, progress=run_o.progress, **kw)
-    valid = None if validation is None else accumulate_files(robot, validation, options, ind, **kw)
+    train = accumulate_files(robot, files, options, ind, window=window, run=run_o, scans=scans)
+    valid = None
+    if validation is not None:
+        vrun = RunOptions(chunk=run_o.chunk, workers=run_o.workers)
+        valid = accumulate_files(
+            robot, validation, options, ind, window=window, run=vrun, scans=scans
+        )
     timings["accumulate_wall"] = time.perf_counter() - t0
     for fa in train + (valid or []):
         for k, v in fa.timings.items():
             timings[k] = timings.get(k, 0.0) + float(v)
-    acc = merge_accumulations(train)
+    sums = merge_accumulations(train)
+    acc = sums.fit
     check_equations(acc.n * robot.nv, base.n_base, f"{acc.n} samples")
     problem = Problem(
         robot,
@@ -114,6 +119,8 @@ def identify_datasets(
             "validation": None if valid is None else [fa.record() for fa in valid],
         },
         chunk=run_o.chunk,
+        still=sums.still,
+        raw=sums.raw,
     )
     return solve(problem, method, consistent=copts, minimum_norm=minimum_norm)
 

@@ -31,6 +31,7 @@ from ..execution import ForkBackend
 from ..identifiability import BaseParameters, analyze
 from ..regressor import DEFAULT_CHUNK, check_states, iter_regressor
 from ..robot import Robot
+from .options import RunOptions
 
 
 @dataclass
@@ -113,11 +114,16 @@ class FileSums:
     record : FileRecord
         The file.
     accumulator : InformationAccumulator
-        Its sums over the base columns.
+        Its sums over the base columns (the fit's rows).
+    still, raw : InformationAccumulator or None
+        The rows inside the deadband, and every row against the raw torques
+        (:class:`RowSums`).
     """
 
     record: FileRecord
     accumulator: InformationAccumulator
+    still: InformationAccumulator | None = None
+    raw: InformationAccumulator | None = None
 
 
 @dataclass
@@ -166,6 +172,9 @@ class Problem:
         The online law's pass, for ``rls`` / ``gradient``.
     chunk : int
         Samples per regressor chunk of a streamed validation pass.
+    still, raw : InformationAccumulator or None
+        The training rows inside the velocity deadband (Coulomb column zero), and every
+        training row against the raw, unfiltered torques (:class:`RowSums`).
     """
 
     robot: Robot
@@ -180,6 +189,8 @@ class Problem:
     model: str = "dynamic"
     online: OnlineRun | None = None
     chunk: int = DEFAULT_CHUNK
+    still: InformationAccumulator | None = None
+    raw: InformationAccumulator | None = None
 
 
 # ------------------------------------------------------------------ checks
@@ -257,6 +268,149 @@ def row_supports(robot: Robot, columns, n_states: int = 16, seed: int = 12345) -
     return [np.flatnonzero(row) for row in nonzero]
 
 
+@dataclass
+class RowSums:
+    """The sums of some rows, split as the error figures need them.
+
+    Attributes
+    ----------
+    fit : InformationAccumulator
+        The rows the fit sees (with a velocity deadband: the moving rows only,
+        ``|dq_j| >= eps_j``); ``fit.n`` counts every sample.
+    still : InformationAccumulator or None
+        With a deadband: the rows inside it, their Coulomb column ``sign(dq_j)`` set to
+        zero (the model predicts them with the same deadband); ``still.n`` is 0.
+    raw : InformationAccumulator or None
+        Every row (as in ``fit`` and ``still``) against the raw, unfiltered torques,
+        when the fit's torques were filtered and the raw ones were read again.
+    timings : dict
+        Seconds spent in the regressor and in the updates [s].
+    """
+
+    fit: InformationAccumulator
+    still: InformationAccumulator | None = None
+    raw: InformationAccumulator | None = None
+    timings: dict = field(default_factory=dict)
+
+    def __add__(self, other: RowSums) -> RowSums:
+        def add(a, b):
+            return None if a is None or b is None else a + b
+
+        times = dict(self.timings)
+        for k, v in other.timings.items():
+            times[k] = times.get(k, 0.0) + v
+        return RowSums(
+            self.fit + other.fit, add(self.still, other.still), add(self.raw, other.raw), times
+        )
+
+
+def _coulomb_positions(robot: Robot, ind: np.ndarray, supports) -> list[int | None]:
+    """Per joint, the position of its Coulomb column ``sign(dq_j)`` in its row support."""
+    names = robot.parameter_names
+    out: list[int | None] = []
+    for j, dof in enumerate(robot.dof_names):
+        key = f"{dof}.fc"
+        pos = None
+        if key in names:
+            col = np.flatnonzero(ind == names.index(key))
+            if col.size:
+                hit = np.flatnonzero(supports[j] == col[0])
+                pos = int(hit[0]) if hit.size else None
+        out.append(pos)
+    return out
+
+
+class _Sums:
+    """Per-joint sums on each joint's row support (lower triangles of A)."""
+
+    def __init__(self, supports, nv: int):
+        self.A = [np.zeros((sj.size, sj.size)) for sj in supports]
+        self.b = [np.zeros(sj.size) for sj in supports]
+        self.zz = np.zeros(nv)
+
+    def add(self, j: int, rows: np.ndarray, tau_j: np.ndarray, gram: bool = True) -> None:
+        if gram:  # lower triangle of A[j] (C order) == upper of its Fortran view
+            dsyrk(1.0, rows.T, beta=1.0, c=self.A[j].T, trans=0, lower=0, overwrite_c=1)
+        self.b[j] += tau_j @ rows
+        self.zz[j] += tau_j @ tau_j
+
+    def accumulator(self, r: int, nv: int, n: int, supports, A=None) -> InformationAccumulator:
+        return InformationAccumulator(r, nv).add_sums(
+            self.A if A is None else A, self.b, self.zz, n, supports
+        )
+
+
+def accumulate_rows(
+    robot: Robot,
+    blocks,
+    ind: np.ndarray,
+    chunk: int,
+    *,
+    deadband: np.ndarray | None = None,
+    progress=None,
+    total: int = 0,
+) -> RowSums:
+    """Accumulate the base-column information of blocks ``(q, dq, ddq, tau[, tau_raw])``.
+
+    Row ``j`` of the regressor is accumulated on its non-zero columns only
+    (:func:`row_supports`): in a serial chain that about halves the work of the
+    symmetric rank-k updates. ``deadband`` (nv,) [rad/s or m/s]: the rows of joint ``j``
+    of samples with ``|dq_j| < deadband_j`` are left out of the fit (standstill, where
+    the Coulomb column sign(dq_j) is noise) and summed apart with that column zero
+    (:class:`RowSums`); a block's fifth array, the raw torques (N, nv) [N m], is summed
+    against every row for the raw-torque errors. Each block is checked.
+    """
+    ev, nv, r = robot.evaluator, robot.nv, len(ind)
+    supports = row_supports(robot, ind)
+    fc = _coulomb_positions(robot, np.asarray(ind), supports)
+    fit, still, raw = _Sums(supports, nv), _Sums(supports, nv), _Sums(supports, nv)
+    t_reg = t_acc = 0.0
+    done, with_raw = 0, None
+    for block in blocks:
+        if not isinstance(block, (tuple, list)) or len(block) not in (4, 5):
+            raise InputError("each data block must be a tuple (q, dq, ddq, tau)")
+        with_raw = len(block) == 5 if with_raw is None else with_raw
+        prefix = f"block at sample {done}: "
+        q, dq, ddq, tau = block[0], block[1], block[2], block[3]
+        bq, bdq, bddq, btau = check_samples(robot, q, dq, ddq, tau, prefix=prefix)
+        braw = check_tau(robot, block[4], bq.shape[0], "tau_raw") if with_raw else None
+        t0 = time.perf_counter()
+        for start, stop, rows in ev.iter_row_supports(bq, bdq, bddq, ind, supports, chunk):
+            t1 = time.perf_counter()
+            t_reg += t1 - t0
+            tau = btau[start:stop]
+            keep = None if deadband is None else np.abs(bdq[start:stop]) >= deadband
+            for j in range(nv):
+                rj, tj = rows[j], tau[:, j]
+                rawj = None if braw is None else braw[start:stop, j]
+                if keep is not None:  # the moving rows to the fit, the others apart
+                    k = keep[:, j]
+                    rs = rj[~k].copy()
+                    if fc[j] is not None:
+                        rs[:, fc[j]] = 0.0  # the deadband's prediction: no sign term
+                    still.add(j, rs, tj[~k])
+                    if rawj is not None:
+                        raw.add(j, rs, rawj[~k], gram=False)
+                    rj, tj = rj[k], tj[k]
+                    rawj = None if rawj is None else rawj[k]
+                fit.add(j, rj, tj)
+                if rawj is not None:
+                    raw.add(j, rj, rawj, gram=False)
+            t0 = time.perf_counter()
+            t_acc += t0 - t1
+            if progress is not None:
+                progress(done + stop, total)
+        done += bq.shape[0]
+    out = RowSums(fit.accumulator(r, nv, done, supports))
+    if deadband is not None:
+        out.still = still.accumulator(r, nv, 0, supports)
+    if with_raw:
+        gram = [a + b for a, b in zip(fit.A, still.A, strict=True)]
+        out.raw = raw.accumulator(r, nv, done, supports, A=gram)
+    out.timings = {"regressor": t_reg, "accumulate": t_acc}
+    return out
+
+
 def accumulate_blocks(
     robot: Robot,
     blocks,
@@ -264,55 +418,11 @@ def accumulate_blocks(
     chunk: int,
     progress=None,
     total: int = 0,
-    deadband: np.ndarray | None = None,
 ) -> tuple[InformationAccumulator, dict[str, float]]:
-    """Accumulate the base-column information of blocks ``(q, dq, ddq, tau)``, each checked.
-
-    Row ``j`` of the regressor is accumulated on its non-zero columns only
-    (:func:`row_supports`): in a serial chain that about halves the work of the
-    symmetric rank-k updates. ``deadband`` (nv,) [rad/s or m/s]: the rows of
-    joint ``j`` of samples with ``|dq_j| < deadband_j`` are left out of the sums
-    (standstill, where the Coulomb column sign(dq_j) is noise); the sample
-    count ``n`` still counts every sample. Returns the sums and the seconds spent
-    in the regressor and in the updates.
-    """
-    ev = robot.evaluator
-    nv = robot.nv
-    supports = row_supports(robot, ind)
-    A_c = [np.zeros((sj.size, sj.size)) for sj in supports]
-    b_c = [np.zeros(sj.size) for sj in supports]
-    zz = np.zeros(nv)
-    t_reg = t_acc = 0.0
-    done = 0
-    for block in blocks:
-        try:
-            bq, bdq, bddq, btau = block
-        except (TypeError, ValueError) as exc:
-            raise InputError("each data block must be a tuple (q, dq, ddq, tau)") from exc
-        bq, bdq, bddq, btau = check_samples(
-            robot, bq, bdq, bddq, btau, prefix=f"block at sample {done}: "
-        )
-        t0 = time.perf_counter()
-        for start, stop, rows in ev.iter_row_supports(bq, bdq, bddq, ind, supports, chunk):
-            t1 = time.perf_counter()
-            t_reg += t1 - t0
-            tau = btau[start:stop]
-            if deadband is not None:  # per-joint row mask: moving samples only
-                keep = np.abs(bdq[start:stop]) >= deadband
-                tau = np.where(keep, tau, 0.0)
-            for j in range(nv):
-                rj = rows[j] if deadband is None else rows[j][keep[:, j]]
-                # lower triangle of A_c[j] (C order) == upper of its Fortran view
-                dsyrk(1.0, rj.T, beta=1.0, c=A_c[j].T, trans=0, lower=0, overwrite_c=1)
-                b_c[j] += (tau[:, j] if deadband is None else tau[keep[:, j], j]) @ rj
-            zz += np.einsum("nj,nj->j", tau, tau)
-            t0 = time.perf_counter()
-            t_acc += t0 - t1
-            if progress is not None:
-                progress(done + stop, total)
-        done += bq.shape[0]
-    acc = InformationAccumulator(len(ind), nv).add_sums(A_c, b_c, zz, done, supports)
-    return acc, {"regressor": t_reg, "accumulate": t_acc}
+    """The fit's sums of blocks ``(q, dq, ddq, tau)`` (:func:`accumulate_rows` without a
+    deadband) and the seconds spent."""
+    sums = accumulate_rows(robot, blocks, ind, chunk, progress=progress, total=total)
+    return sums.fit, sums.timings
 
 
 def _part_accumulate(robot: Robot, func, args, ind, chunk: int):
@@ -351,12 +461,10 @@ def array_part(q, dq, ddq, tau, start: int, stop: int):
     yield q[start:stop], dq[start:stop], ddq[start:stop], tau[start:stop]
 
 
-def accumulate_arrays(
-    robot: Robot, q, dq, ddq, tau, ind, chunk: int, workers: int = 1, progress=None
-):
-    """The samples' information: in this process, or in ``workers`` contiguous parts in
-    forked processes merged by addition (equal to the serial sums to round-off)."""
-    n = q.shape[0]
+def accumulate_arrays(robot: Robot, q, dq, ddq, tau, ind, *, run: RunOptions):
+    """The samples' information: in this process, or in ``run.workers`` contiguous parts
+    in forked processes merged by addition (equal to the serial sums to round-off)."""
+    n, workers, chunk, progress = q.shape[0], run.workers, run.chunk, run.progress
     if workers > 1 and n >= 2 * workers:
         t0 = time.perf_counter()
         cuts = np.linspace(0, n, workers + 1).astype(int)
@@ -370,12 +478,11 @@ def accumulate_arrays(
     return accumulate_blocks(robot, [(q, dq, ddq, tau)], ind, chunk, progress=progress, total=n)
 
 
-def accumulate_online(
-    robot: Robot, q, dq, ddq, tau, ind, chunk: int, est, dt: float, progress=None
-):
-    """One pass of the online law ``est`` over the samples in order, with the information
-    accumulated in the same pass (for the covariance and the errors)."""
-    n, nv = q.shape[0], robot.nv
+def accumulate_online(robot: Robot, q, dq, ddq, tau, ind, est, dt: float, *, run: RunOptions):
+    """One pass of the online law ``est`` over the samples in order (Euler step ``dt``
+    [s]), with the information accumulated in the same pass (for the covariance and the
+    errors); ``run.chunk``, ``run.progress(done, total)``."""
+    n, nv, chunk, progress = q.shape[0], robot.nv, run.chunk, run.progress
     acc = InformationAccumulator(len(ind), nv)
     t_reg = t_acc = t_onl = 0.0
     t0 = time.perf_counter()
@@ -400,11 +507,13 @@ __all__ = [
     "FileRecord",
     "FileSums",
     "OnlineRun",
+    "RowSums",
     "Problem",
     "accumulate_arrays",
     "accumulate_blocks",
     "accumulate_forked",
     "accumulate_online",
+    "accumulate_rows",
     "array_part",
     "check_equations",
     "check_samples",

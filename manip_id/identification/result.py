@@ -246,31 +246,9 @@ def result_from_dict(doc: dict) -> IdentificationResult:
         std = _array([r["std"] for r in rows])
         std_pct = _array([np.inf if r["std_percent"] is None else r["std_percent"] for r in rows])
         cov = _array([v for row in doc["covariance"] for v in row]).reshape(len(rows), len(rows))
-        rd = doc["rank_analysis"]
+        ra = _rank_from_dict(doc, base, names)
         joints = list(doc.get("joints", []))
         outputs = list(doc.get("outputs", joints))
-        ns = np.asarray(rd["null_space"], dtype=float).reshape(len(rows), -1)
-        ra = RankAnalysis(
-            names=names,
-            n_parameters=len(rows),
-            n_rows=int(rd["n_rows"]),
-            rank=int(doc["rank"]),
-            tolerance=float(rd["tolerance"]),
-            singular_values=_array(rd["singular_values"]),
-            singular_values_scaled=_array(rd["singular_values_scaled"]),
-            condition_number=np.inf
-            if doc["condition_number"] is None
-            else float(doc["condition_number"]),
-            condition_number_scaled=np.inf
-            if rd["condition_number_scaled"] is None
-            else float(rd["condition_number_scaled"]),
-            base=base,
-            null_space=ns,
-            unidentifiable=list(rd["unidentifiable"]),
-            unexcited=list(rd["unexcited"]),
-            notes=list(rd["notes"]),
-            source=str(rd["source"]),
-        )
         re = errors_from_dict(doc["relative_error"])
         raw = doc.get("relative_error_raw")
         nominal = [r.get("nominal") for r in rows]
@@ -307,6 +285,35 @@ def result_from_dict(doc: dict) -> IdentificationResult:
         )
     except (KeyError, TypeError, ValueError, IndexError) as exc:
         raise DataError(f"a malformed identification result: {type(exc).__name__}: {exc}") from exc
+
+
+def _rank_from_dict(doc: dict, base: BaseParameters, names: list[str]) -> RankAnalysis:
+    """The :class:`RankAnalysis` of a saved result (its ``rank_analysis`` section)."""
+    rows = doc["base_parameters"]
+    rd = doc["rank_analysis"]
+    ns = np.asarray(rd["null_space"], dtype=float).reshape(len(rows), -1)
+    ra = RankAnalysis(
+        names=names,
+        n_parameters=len(rows),
+        n_rows=int(rd["n_rows"]),
+        rank=int(doc["rank"]),
+        tolerance=float(rd["tolerance"]),
+        singular_values=_array(rd["singular_values"]),
+        singular_values_scaled=_array(rd["singular_values_scaled"]),
+        condition_number=np.inf
+        if doc["condition_number"] is None
+        else float(doc["condition_number"]),
+        condition_number_scaled=np.inf
+        if rd["condition_number_scaled"] is None
+        else float(rd["condition_number_scaled"]),
+        base=base,
+        null_space=ns,
+        unidentifiable=list(rd["unidentifiable"]),
+        unexcited=list(rd["unexcited"]),
+        notes=list(rd["notes"]),
+        source=str(rd["source"]),
+    )
+    return ra
 
 
 def _recomputed_warnings(doc: dict) -> set[str]:

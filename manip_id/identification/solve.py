@@ -21,8 +21,8 @@ import numpy as np
 
 from ..errors import InputError, RankDeficiencyError
 from ..estimators import InformationAccumulator, LeastSquaresSolution, solve_accumulator
-from ..estimators.consistent import consistent_estimate, minimum_norm_standard
-from ..identifiability import analyze_information
+from ..estimators.consistent import StandardEstimate, consistent_estimate, minimum_norm_standard
+from ..identifiability import RankAnalysis, analyze_information
 from ..metrics import finite_or_none, relative_error
 from ..robot import Robot
 from .options import LEAST_SQUARES, ConsistentOptions, check_method
@@ -71,47 +71,94 @@ def estimate_uncertainty(
     return Uncertainty(cov, sigma2, rss_j / max(acc.n - ls.rank / acc.nv, 1e-300))
 
 
+def _rss(acc: InformationAccumulator, still: InformationAccumulator | None, theta):
+    """Per-joint residual and torque sums of squares over all rows (fit and deadband rows)."""
+    rss, zz = acc.residual_sum_of_squares(theta), acc.zz_joint.copy()
+    if still is not None:
+        rss, zz = rss + still.residual_sum_of_squares(theta), zz + still.zz_joint
+    return rss, zz
+
+
+def _file_entry(fs: FileSums, estimate, nominal, joints) -> dict:
+    rec = fs.record
+    err = relative_error(*_rss(fs.accumulator, fs.still, estimate))
+    nom = relative_error(*_rss(fs.accumulator, fs.still, nominal))
+    entry = {
+        "file": str(rec.spec.path),
+        "window": None if rec.spec.window is None else str(rec.spec.window),
+        "n_samples": int(rec.n_samples),
+        "error": finite_or_none(err.total),
+        "per_joint": dict(zip(joints, map(finite_or_none, err.per_joint), strict=True)),
+        "nominal_error": finite_or_none(nom.total),
+        "nominal_per_joint": dict(zip(joints, map(finite_or_none, nom.per_joint), strict=True)),
+    }
+    if fs.still is not None:
+        moving = relative_error(
+            fs.accumulator.residual_sum_of_squares(estimate), fs.accumulator.zz_joint
+        )
+        entry["error_moving"] = finite_or_none(moving.total)
+    return entry
+
+
 def validation_errors(files: list[FileSums], estimate, nominal, joints) -> RelativeError:
     """Pooled and per-file validation errors of ``estimate`` and ``nominal``, from sums.
 
-    ``||tau_j - Y_j theta||^2 = zz_j - 2 b_j.theta + theta.A_j.theta`` per file; the pooled
-    error is ``sqrt(sum_files SSE / sum_files ||tau||^2)`` (every sample weighs the same).
+    ``||tau_j - Y_j theta||^2 = zz_j - 2 b_j.theta + theta.A_j.theta`` per file, over all
+    rows (the rows inside a velocity deadband predicted with the same deadband); the
+    pooled error is ``sqrt(sum_files SSE / sum_files ||tau||^2)`` (every sample weighs the
+    same). With a deadband, ``validation_moving`` is the same over the moving rows only.
     Returns a :class:`RelativeError` holding only the validation fields (train NaN).
     """
     nv = len(joints)
     sse, sse_nom, zz = np.zeros(nv), np.zeros(nv), np.zeros(nv)
-    per_file = []
+    sse_mov, zz_mov = np.zeros(nv), np.zeros(nv)
     for fs in files:
-        acc, rec = fs.accumulator, fs.record
-        s, s0, z = (
-            acc.residual_sum_of_squares(estimate),
-            acc.residual_sum_of_squares(nominal),
-            acc.zz_joint,
-        )
+        s, z = _rss(fs.accumulator, fs.still, estimate)
+        s0, _ = _rss(fs.accumulator, fs.still, nominal)
         sse, sse_nom, zz = sse + s, sse_nom + s0, zz + z
-        err, err_nom = relative_error(s, z), relative_error(s0, z)
-        per_file.append(
-            {
-                "file": str(rec.spec.path),
-                "window": None if rec.spec.window is None else str(rec.spec.window),
-                "n_samples": int(rec.n_samples),
-                "error": finite_or_none(err.total),
-                "per_joint": dict(zip(joints, map(finite_or_none, err.per_joint), strict=True)),
-                "nominal_error": finite_or_none(err_nom.total),
-                "nominal_per_joint": dict(
-                    zip(joints, map(finite_or_none, err_nom.per_joint), strict=True)
-                ),
-            }
-        )
+        sse_mov += fs.accumulator.residual_sum_of_squares(estimate)
+        zz_mov += fs.accumulator.zz_joint
     val, nom = relative_error(sse, zz), relative_error(sse_nom, zz)
+    moving = any(fs.still is not None for fs in files)
     return RelativeError(
         float("nan"),
         np.full(nv, np.nan),
         val.total,
         val.per_joint,
-        validation_per_file=per_file,
+        validation_per_file=[_file_entry(fs, estimate, nominal, joints) for fs in files],
         nominal_validation=nom.total,
         nominal_validation_per_joint=nom.per_joint,
+        validation_moving=relative_error(sse_mov, zz_mov).total if moving else None,
+    )
+
+
+def raw_errors(problem: Problem, estimate, nominal) -> RelativeError | None:
+    """The errors against the raw (unfiltered) torques, from the raw-torque sums of the
+    training rows and of the validation files (None when they were not read)."""
+    if problem.raw is None:
+        return None
+    train = relative_error(problem.raw.residual_sum_of_squares(estimate), problem.raw.zz_joint)
+    nom = relative_error(problem.raw.residual_sum_of_squares(nominal), problem.raw.zz_joint)
+    val = nval = None
+    vfiles = problem.validation_files
+    if vfiles and all(fs.raw is not None for fs in vfiles):
+        nv = problem.robot.nv
+        sse, sse0, zz = np.zeros(nv), np.zeros(nv), np.zeros(nv)
+        for fs in vfiles:
+            assert fs.raw is not None
+            sse += fs.raw.residual_sum_of_squares(estimate)
+            sse0 += fs.raw.residual_sum_of_squares(nominal)
+            zz += fs.raw.zz_joint
+        val, nval = relative_error(sse, zz), relative_error(sse0, zz)
+    return RelativeError(
+        train.total,
+        train.per_joint,
+        None if val is None else val.total,
+        None if val is None else val.per_joint,
+        nominal_train=nom.total,
+        nominal_train_per_joint=nom.per_joint,
+        nominal_validation=None if nval is None else nval.total,
+        nominal_validation_per_joint=None if nval is None else nval.per_joint,
     )
 
 
@@ -256,15 +303,70 @@ def solve(
         raise InputError(f"consistent=True applies to ols and wls, got method {method!r}")
     if (method in LEAST_SQUARES) == (problem.online is not None):
         raise InputError(f"method {method!r} does not match the problem's online pass")
+    robot, base, timings = problem.robot, problem.base, problem.timings
+    fit = _fit(problem, method, copts, minimum_norm)
+    nominal_b = np.asarray(base.to_base(robot.nominal_parameters), dtype=float)
+    errors = _errors(problem, fit.estimate, nominal_b, int(chunk or problem.chunk))
+    std = fit.uncertainty.std
+    with np.errstate(divide="ignore", invalid="ignore"):
+        std_pct = 100.0 * std / np.abs(fit.estimate)
+    std_pct = np.where(np.isnan(std_pct), np.inf, std_pct)
+    timings["total"] = time.perf_counter() - problem.t_start
+    est_online = None if problem.online is None else problem.online.estimator
+    return IdentificationResult(
+        method=method,
+        robot_name=robot.name,
+        names=list(base.base_names),
+        expressions=list(base.expressions),
+        estimate=fit.estimate,
+        std=std,
+        std_percent=std_pct,
+        covariance=fit.uncertainty.covariance,
+        sigma2=fit.uncertainty.sigma2,
+        noise_variance=fit.uncertainty.noise_variance,
+        condition_number=float(fit.rank_analysis.condition_number),
+        rank_analysis=fit.rank_analysis,
+        relative_error=errors,
+        n_samples=int(problem.n_samples),
+        timings=timings,
+        solver=fit.solver,
+        base=base,
+        dof_names=list(robot.dof_names),
+        history=est_online.history if est_online is not None and est_online.record_every else None,
+        standard=fit.standard,
+        warnings=fit.warnings,
+        units=[robot.parameter_units[i] for i in base.independent],
+        nominal=nominal_b,
+        convergence=_convergence(problem, fit.estimate),
+        model=problem.model,
+        output_names=[] if problem.model == "dynamic" else _outputs(robot, problem.model),
+        files=problem.files,
+        raw_error=raw_errors(problem, fit.estimate, nominal_b),
+    )
+
+
+@dataclass
+class _Fit:
+    """The estimate of a problem and how it was obtained."""
+
+    estimate: np.ndarray
+    solver: str
+    uncertainty: Uncertainty
+    rank_analysis: RankAnalysis
+    standard: StandardEstimate | None
+    warnings: list[str]
+
+
+def _fit(problem: Problem, method: str, copts: ConsistentOptions, minimum_norm: bool) -> _Fit:
+    """Rank check, least squares (or the online law's estimate), the consistent estimate."""
     robot, acc, base, timings = problem.robot, problem.accumulator, problem.base, problem.timings
-    r = base.n_base
     t0 = time.perf_counter()
     ra = analyze_information(acc.A, base.base_names, n_rows=acc.n_rows)
     timings["rank_analysis"] = time.perf_counter() - t0
-    if ra.rank < r and not minimum_norm:
+    if ra.rank < base.n_base and not minimum_norm:
         raise RankDeficiencyError(
             ra.rank,
-            r,
+            base.n_base,
             ra.unidentifiable,
             subject=f"these data of {robot.name}",
             what="base parameter directions",
@@ -287,27 +389,31 @@ def solve(
             f"(Y^T Y)^-1 at the final estimate ({ls.solver})"
         )
     unc = estimate_uncertainty(acc, ls, None if online is None else estimate)
+    standard: StandardEstimate | None = None
+    warnings_: list[str] = []
     if copts.enabled:  # beta = P theta of consistent standard parameters
         standard, estimate, solver, warnings_ = _consistent(problem, ls, copts, method)
         timings["consistent"] = standard.time
     elif online is None:
         standard, warnings_ = _minimum_norm_check(problem, estimate)
-    else:
-        standard, warnings_ = None, []
     timings["solve"] = time.perf_counter() - t0
-    zz_j = acc.zz_joint
-    train = relative_error(acc.residual_sum_of_squares(estimate), zz_j)
-    nominal_b = np.asarray(base.to_base(robot.nominal_parameters), dtype=float)
-    nom = relative_error(acc.residual_sum_of_squares(nominal_b), zz_j)
+    return _Fit(estimate, solver, unc, ra, standard, warnings_)
+
+
+def _errors(problem: Problem, estimate, nominal, chunk: int) -> RelativeError:
+    """Training errors from the sums over all rows (identified and nominal model; with a
+    deadband also over the moving rows), and the validation errors."""
+    acc, still = problem.accumulator, problem.still
+    train = relative_error(*_rss(acc, still, estimate))
+    nom = relative_error(*_rss(acc, still, nominal))
+    moving = None
+    if still is not None:
+        moving = relative_error(acc.residual_sum_of_squares(estimate), acc.zz_joint).total
     t0 = time.perf_counter()
-    val = _validation(problem, estimate, nominal_b, int(chunk or problem.chunk))
+    val = _validation(problem, estimate, nominal, chunk)
     if val is not None:
-        timings["validation"] = time.perf_counter() - t0
-    std = unc.std
-    with np.errstate(divide="ignore", invalid="ignore"):
-        std_pct = 100.0 * std / np.abs(estimate)
-    std_pct = np.where(np.isnan(std_pct), np.inf, std_pct)
-    errors = RelativeError(
+        problem.timings["validation"] = time.perf_counter() - t0
+    return RelativeError(
         train.total,
         train.per_joint,
         None if val is None else val.validation,
@@ -317,38 +423,8 @@ def solve(
         nominal_train_per_joint=nom.per_joint,
         nominal_validation=None if val is None else val.nominal_validation,
         nominal_validation_per_joint=None if val is None else val.nominal_validation_per_joint,
-    )
-    timings["total"] = time.perf_counter() - problem.t_start
-    est_online = None if online is None else online.estimator
-    outputs = [] if problem.model == "dynamic" else _outputs(robot, problem.model)
-    return IdentificationResult(
-        method=method,
-        robot_name=robot.name,
-        names=list(base.base_names),
-        expressions=list(base.expressions),
-        estimate=estimate,
-        std=std,
-        std_percent=std_pct,
-        covariance=unc.covariance,
-        sigma2=unc.sigma2,
-        noise_variance=unc.noise_variance,
-        condition_number=float(ra.condition_number),
-        rank_analysis=ra,
-        relative_error=errors,
-        n_samples=int(problem.n_samples),
-        timings=timings,
-        solver=solver,
-        base=base,
-        dof_names=list(robot.dof_names),
-        history=est_online.history if est_online is not None and est_online.record_every else None,
-        standard=standard,
-        warnings=warnings_,
-        units=[robot.parameter_units[i] for i in base.independent],
-        nominal=nominal_b,
-        convergence=_convergence(problem, estimate),
-        model=problem.model,
-        output_names=outputs,
-        files=problem.files,
+        train_moving=moving,
+        validation_moving=None if val is None else val.validation_moving,
     )
 
 
@@ -359,6 +435,7 @@ def _outputs(robot: Robot, model: str) -> list[str]:
 __all__ = [
     "Uncertainty",
     "estimate_uncertainty",
+    "raw_errors",
     "solve",
     "stream_validation",
     "validation_errors",

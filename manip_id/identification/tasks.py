@@ -30,7 +30,6 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..datasets import FileSpec, Layout, parse_file_spec
-from ..datasets.stream import torque_scale_vector
 from ..errors import DataError, InputError, ManipIdError
 from ..estimators import InformationAccumulator
 from ..execution import SPLIT_EVERY, Backend, open_backend, portable_robot, reduce_tree
@@ -38,9 +37,16 @@ from ..identifiability import BaseParameters
 from ..models import accumulate_energy, accumulate_momentum, window_samples
 from ..regressor import DEFAULT_CHUNK
 from ..robot import Robot
-from .file_sums import accumulate_file
+from .file_sums import accumulate_file, accumulate_span
 from .options import ModelOptions, PreprocessOptions, RunOptions
-from .problem import FileRecord, FileSums, Problem, accumulate_blocks, check_equations
+from .problem import (
+    FileRecord,
+    FileSums,
+    Problem,
+    RowSums,
+    accumulate_blocks,
+    check_equations,
+)
 from .reading import iter_processed, scan_file
 
 
@@ -64,23 +70,27 @@ class PartSums:
 
     Attributes
     ----------
-    acc: the accumulated base-column information (``acc.n`` samples)
+    acc: the accumulated base-column information of the fit's rows (``acc.n`` samples)
     files: per file index, what is known of it (:class:`~.problem.FileRecord`)
     timings: seconds per stage, summed over the tasks [s]
+    still, raw: the rows inside the deadband and the raw-torque sums
+        (:class:`~.problem.RowSums`), when the parts have them
     """
 
     acc: InformationAccumulator
     files: dict[int, FileRecord] = field(default_factory=dict)
     timings: dict[str, float] = field(default_factory=dict)
+    still: InformationAccumulator | None = None
+    raw: InformationAccumulator | None = None
 
     def __add__(self, other: PartSums) -> PartSums:
-        times = dict(self.timings)
-        for k, v in other.timings.items():
-            times[k] = times.get(k, 0.0) + v
+        rows = RowSums(self.acc, self.still, self.raw, self.timings) + RowSums(
+            other.acc, other.still, other.raw, other.timings
+        )
         files = dict(self.files)
         for i, info in other.files.items():
             files[i] = files[i].merged(info) if i in files else info
-        return PartSums(self.acc + other.acc, files, times)
+        return PartSums(rows.fit, files, rows.timings, rows.still, rows.raw)
 
     @property
     def n_parts(self) -> int:
@@ -105,46 +115,6 @@ def file_length(robot: Robot, spec: FileSpec, options: PreprocessOptions) -> int
         return int(sum(b.shape[0] for b in blocks))
     except Exception as exc:
         raise named_error(spec.label, exc) from exc
-
-
-def _block_accumulation(robot, spec, options, ind, chunk, start: int, stop: int | None):
-    """Rows ``[start, stop)`` of the file's preprocessed stream, accumulated.
-
-    The stream is the one :func:`~manip_id.identification.file_sums.accumulate_file` accumulates
-    (:func:`~manip_id.identification.reading.iter_processed`); only the rows of this block
-    enter the sums. Returns (accumulator, samples, excluded rows (nv,), quality,
-    settings, torque scale, timings).
-    """
-    t0 = time.perf_counter()
-    scan = scan_file(robot, spec, options)
-    settings, blocks = iter_processed(robot, spec, options, scan)
-    lay = Layout(robot.nq, robot.nv, True)
-    eps = options.velocity_deadband
-    deadband = None if eps is None else np.full(robot.nv, float(eps))
-    excluded = np.zeros(robot.nv, dtype=np.int64)
-    count = {"n": 0}
-
-    def states():
-        pos = 0
-        for rows in blocks:
-            a = max(start - pos, 0)
-            b = rows.shape[0] if stop is None else min(stop - pos, rows.shape[0])
-            pos += rows.shape[0]
-            if a < b:
-                f = lay.unpack(rows[a:b])
-                if deadband is not None:
-                    excluded[:] += (np.abs(f["dq"]) < deadband).sum(axis=0)
-                count["n"] += b - a
-                yield f["q"], f["dq"], f["ddq"], f["tau"]
-            if stop is not None and pos >= stop:
-                return
-
-    acc, times = accumulate_blocks(robot, states(), ind, int(chunk), deadband=deadband)
-    if count["n"] == 0:
-        raise DataError(f"block [{start}, {stop}) holds no samples of the file")
-    times["accumulate_total"] = time.perf_counter() - t0
-    scale = torque_scale_vector(options.torque_scale, robot.nv, "--torque-scale")
-    return acc, count["n"], excluded, scan.quality, settings, scale, times
 
 
 def part_sums(
@@ -173,17 +143,19 @@ def part_sums(
     try:
         if part.start == 0 and part.stop is None:
             fa = accumulate_file(robot, part.spec, options, ind, chunk=int(chunk))
-            acc, n, excluded = fa.accumulator, fa.n_samples, fa.excluded
-            quality, settings, scale = fa.quality, fa.settings, fa.torque_scale
-            times = dict(fa.timings)
-        else:
-            acc, n, excluded, quality, settings, scale, times = _block_accumulation(
-                robot, part.spec, options, ind, chunk, part.start, part.stop
-            )
+        else:  # a block of the file's preprocessed stream: only its rows enter the sums
+            scan = scan_file(robot, part.spec, options)
+            try:
+                run = RunOptions(chunk=int(chunk))
+                span = (part.start, part.stop)
+                fa = accumulate_span(robot, part.spec, options, ind, run=run, scan=scan, span=span)
+            finally:
+                scan.discard()
+            if fa.n_samples == 0:
+                raise DataError(f"block [{part.start}, {part.stop}) holds no samples of the file")
     except Exception as exc:
         raise named_error(part.spec.label, exc) from exc
-    info = FileRecord(part.spec, int(n), np.asarray(excluded), quality, settings, scale)
-    return PartSums(acc, {part.file: info}, times)
+    return PartSums(fa.accumulator, {part.file: fa.record()}, dict(fa.timings), fa.still, fa.raw)
 
 
 def _processed_rows(robot: Robot, spec: FileSpec, options: PreprocessOptions):
@@ -403,7 +375,7 @@ def distributed_problem(
     records = [sums.files[i] for i in range(len(specs))]
     vfiles = None
     if vspecs is not None:
-        vfiles = [FileSums(vs.files[i], vs.acc) for i, vs in enumerate(vsums)]
+        vfiles = [FileSums(vs.files[i], vs.acc, vs.still, vs.raw) for i, vs in enumerate(vsums)]
     problem = Problem(
         robot,
         base,
@@ -418,6 +390,8 @@ def distributed_problem(
         },
         model=model.name,
         chunk=chunk,
+        still=sums.still,
+        raw=sums.raw,
     )
     return DistributedSums(problem, fetched[1 + len(vparts) :] if partition.per_file else None)
 
