@@ -113,8 +113,9 @@ class RegressorEvaluator:
         if Y.ndim == 2:  # one sample: a few flat writes into the diagonal entries
             flat = Y.reshape(-1)
             angles = self.joint_angles(q) if self._needs_angles else None
-            for term, idx in self._flat:
-                flat[idx] = term.column(angles, vel, acc)
+            vals = self.layout.joint_values(angles, vel, acc)  # (nv, nt): shapes, mask
+            for i, (_, idx) in enumerate(self._flat):
+                flat[idx] = vals[:, i]
             return
         vals = self.joint_values(q, vel, acc)
         Y[:, self._rows, self._cols] = vals.reshape(vals.shape[0], -1)
