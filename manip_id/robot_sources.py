@@ -103,6 +103,8 @@ class JointTerms:
         """Short names of the enabled terms, in column order (subset of
         :data:`~manip_id.parameters.JOINT_TERM_NAMES`)."""
         names = friction_columns(self.friction)
+        if self.per_dof is not None:  # a per-joint model: the union of the joints' terms
+            names = set().union(*self.per_dof)
         if self.armature:
             names.add("Ia")
         if self.spring:

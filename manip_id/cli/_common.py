@@ -21,7 +21,9 @@ def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--friction",
         default=None,
-        help="comma-separated friction terms per joint: viscous,coulomb,offset",
+        help="comma-separated friction laws per joint: viscous, coulomb, offset, asymmetric, "
+        "stribeck, sigmoid, position[:K] (docs/friction.md); 'auto' (identify --data): "
+        "chosen per joint by validation error, else BIC",
     )
     parser.add_argument(
         "--armature",
@@ -59,7 +61,7 @@ def robot_from_args(args: argparse.Namespace) -> Robot:
         return load_robot(
             args.robot,
             armature=args.armature,
-            friction=args.friction,
+            friction=None if args.friction == "auto" else args.friction,
             spring=args.spring,
             active_joints=joints,
             package_dirs=args.package_dir,

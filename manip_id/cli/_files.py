@@ -210,6 +210,12 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
     for s in vspecs or []:
         print("validation " + scans[s].quality.text())
 
+    selection = None
+    if args.friction == "auto":  # one fit per candidate and shape, then the chosen model
+        t0 = time.perf_counter()
+        robot, selection = _select_friction(robot, specs, vspecs, options, scans, args)
+        timings["friction_selection"] = time.perf_counter() - t0
+        print(selection.text())
     if args.method in ("rls", "gradient"):  # sample order, in memory
         t0 = time.perf_counter()
         train = _collect(robot, specs, options, scans)
@@ -262,6 +268,14 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
         settings,
     )
     _add_file_info(report, robot, specs, vspecs, scans, files, options, result)
+    if selection is not None:
+        report["friction_selection"] = selection.to_dict()
+        report["friction_criterion"] = selection.criterion
+        report["joint_terms_per_joint"] = dict(
+            zip(robot.dof_names, map(list, selection.terms.per_dof or ()), strict=True)
+        )
+        if selection.terms.shapes is not None:
+            report["friction_shapes"] = selection.terms.shapes.to_dict()
     if args.report is not None or train is not None:  # the samples are in memory anyway
         if train is None:
             train = _collect(robot, specs, options, scans)
@@ -301,6 +315,29 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
     if path is not None:
         print(f"wrote the report to {path}/index.html")
     return 0
+
+
+def _select_friction(robot, specs, vspecs, options, scans, args):
+    """``--friction auto``: :func:`manip_id.identification.selection.select_model` on these
+    files; returns the robot with the chosen per-joint model and the selection."""
+    from ..identification import RunOptions, identify_datasets
+    from ..identification.selection import select_model
+    from . import identify as cmd
+
+    def fit(r):
+        return identify_datasets(
+            r,
+            specs,
+            validation=vspecs,
+            options=options,
+            method=args.method,
+            run=RunOptions(chunk=args.chunk, workers=args.workers),
+            scans=scans,
+            **cmd._consistent_kwargs(args),
+        )
+
+    _, selection = select_model(fit, robot)
+    return robot.with_terms(selection.terms), selection
 
 
 def _raw_parts(specs, vspecs, train, valid, options) -> list:

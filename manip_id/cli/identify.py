@@ -336,6 +336,12 @@ def _check_args(args) -> None:
         raise InputError(f"--workers must be >= 1, got {args.workers}")
     if args.workers > 1 and args.method in ("rls", "gradient"):
         raise InputError(f"--workers applies to ols and wls; {args.method} runs in sample order")
+    if getattr(args, "friction", None) == "auto" and (
+        args.simulate or args.model != "dynamic" or args.method not in ("ols", "wls")
+    ):
+        raise InputError(
+            "--friction auto applies to --data files with --method ols or wls and the dynamic model"
+        )
     _check_consistent_args(args)
     _fleet.check(args)
     _files.check(args)

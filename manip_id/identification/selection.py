@@ -1,0 +1,403 @@
+"""Friction model selection per joint, and the shapes of the nonlinear laws by variable
+projection.
+
+Candidates (:data:`CANDIDATES`; every one with the offset ``fo`` when
+``SelectionOptions.offset``, the torque sensor's bias), in the laws of
+:mod:`manip_id.friction`::
+
+    linear       fv dq + fc sign(dq)
+    asymmetric   fvp, fvn, and fcp, fcn (fc with the offset)
+    stribeck     fv dq + (fc + fs' exp(-(dq/vs)^2)) sign(dq)        vs per joint
+    sigmoid      fv dq + fsg (S(a dq) - 1/2)                         a per joint
+    position     fv dq + fc sign(dq) + sum_k hks sin(k q) + hkc cos(k q)
+
+Each fit is the usual one (``fit(robot) -> IdentificationResult``: the same accumulated
+sums, streamed, forked or on Dask, whichever path ``fit`` takes), with one candidate on
+every joint at once: a joint's friction columns appear only in its own torque row, so
+each joint is scored on its own row by
+
+    validation error  ||tau_j - tau_hat_j|| / ||tau_j|| on the validation data, or
+    BIC_j = n ln(sigma_j^2) + k_j ln(n)           (training sums: sigma_j^2 the joint's
+                                                   residual variance, k_j its base
+                                                   joint-term parameters, n samples)
+
+when no validation data are given. The shapes (Stribeck ``vs``, sigmoid slope ``a``)
+are chosen by variable projection: the linear coefficients are solved for every value
+of a grid (one fit per value), each joint keeps its best value, then the best is refined
+once on each side at the geometric mid-points (two fits, each joint its own value). The
+chosen per-joint models make one :class:`~manip_id.robot.JointTerms` with ``per_dof``
+(the terms each joint keeps) and ``shapes``; :func:`select_model` fits it last, and its
+result carries ``context["friction_selection"]``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from ..errors import InputError, RankDeficiencyError
+from ..friction import DEFAULT_SIGMOID_SLOPE, DEFAULT_STRIBECK_VELOCITY, FrictionShapes
+from ..robot import JointTerms, Robot
+from .result import IdentificationResult
+
+#: The candidate models, in the order they are tried.
+CANDIDATES: tuple[str, ...] = ("linear", "asymmetric", "stribeck", "sigmoid", "position")
+_KINDS = {
+    "linear": ("viscous", "coulomb"),
+    "asymmetric": ("asymmetric",),
+    "stribeck": ("viscous", "coulomb", "stribeck"),
+    "sigmoid": ("viscous", "sigmoid"),
+    "position": ("viscous", "coulomb", "position"),
+}
+#: Default grids: Stribeck velocities vs [rad/s], sigmoid slopes a [s/rad].
+STRIBECK_GRID = (0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5)
+SIGMOID_GRID = (5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0)
+
+
+@dataclass(frozen=True)
+class SelectionOptions:
+    """What :func:`select_model` tries.
+
+    Attributes
+    ----------
+    candidates : tuple of str
+        Models to try, some of :data:`CANDIDATES`.
+    offset : bool
+        Every candidate carries the offset ``fo``.
+    harmonics : int
+        Order K of the ``position`` candidate.
+    stribeck_grid : tuple of float
+        Stribeck velocities vs to try [rad/s], ascending.
+    sigmoid_grid : tuple of float
+        Sigmoid slopes a to try [s/rad], ascending.
+    refine : bool
+        Refine the grid's best shape at the geometric mid-points.
+    """
+
+    candidates: tuple[str, ...] = CANDIDATES
+    offset: bool = True
+    harmonics: int = 2
+    stribeck_grid: tuple[float, ...] = STRIBECK_GRID
+    sigmoid_grid: tuple[float, ...] = SIGMOID_GRID
+    refine: bool = True
+
+    def __post_init__(self):
+        bad = [c for c in self.candidates if c not in CANDIDATES]
+        if bad or not self.candidates:
+            raise InputError(f"candidates must be some of {list(CANDIDATES)}, got {bad or '[]'}")
+        for name in ("stribeck_grid", "sigmoid_grid"):
+            g = getattr(self, name)
+            if not g or any(not (math.isfinite(x) and x > 0) for x in g) or list(g) != sorted(g):
+                raise InputError(f"{name} must be positive values in ascending order, got {g}")
+
+
+@dataclass
+class Candidate:
+    """One candidate model of one joint: its fitted shape and scores."""
+
+    model: str
+    parameters: dict
+    validation_error: float | None
+    bic: float
+
+    def to_dict(self) -> dict:
+        """JSON-ready."""
+        return {
+            "model": self.model,
+            "parameters": self.parameters,
+            "validation_error": self.validation_error,
+            "bic": self.bic,
+        }
+
+
+@dataclass
+class JointSelection:
+    """The candidates of one joint and the chosen one."""
+
+    joint: str
+    chosen: str
+    candidates: list[Candidate] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        """JSON-ready: ``joint``, ``chosen``, ``candidates``."""
+        return {
+            "joint": self.joint,
+            "chosen": self.chosen,
+            "candidates": [c.to_dict() for c in self.candidates],
+        }
+
+
+@dataclass
+class FrictionSelection:
+    """The outcome of :func:`select_model`.
+
+    Attributes
+    ----------
+    joints : list of JointSelection
+        Per joint its candidates and the chosen model.
+    criterion : str
+        "validation error" or "BIC".
+    terms : JointTerms
+        The chosen per-joint model (``per_dof`` and ``shapes``).
+    n_fits : int
+        Fits run (grid points and refinements included).
+    """
+
+    joints: list[JointSelection]
+    criterion: str
+    terms: JointTerms
+    n_fits: int
+
+    def to_dict(self) -> list[dict]:
+        """The JSON ``friction_selection``: per joint ``joint``, ``chosen``, ``candidates``."""
+        return [j.to_dict() for j in self.joints]
+
+    def text(self) -> str:
+        """One line per joint: the chosen model and the candidates' scores."""
+        lines = [f"friction model per joint (by {self.criterion}):"]
+        for j in self.joints:
+            cells = []
+            for c in j.candidates:
+                score = (
+                    f"{100 * c.validation_error:.3f} %"
+                    if c.validation_error is not None
+                    else f"BIC {c.bic:.1f}"
+                )
+                cells.append(f"{c.model} {score}")
+            lines.append(f"  {j.joint}: {j.chosen} ({', '.join(cells)})")
+        return "\n".join(lines)
+
+
+# ------------------------------------------------------------------- terms
+def candidate_terms(
+    base: JointTerms, model: str, opts: SelectionOptions, shapes: FrictionShapes | None = None
+) -> JointTerms:
+    """The joint terms of one candidate on every joint (``base``'s armature and spring)."""
+    kinds = set(_KINDS[model]) | ({"offset"} if opts.offset else set())
+    return JointTerms(
+        armature=base.armature,
+        spring=base.spring,
+        viscous="viscous" in kinds,
+        coulomb="coulomb" in kinds,
+        offset="offset" in kinds,
+        asymmetric="asymmetric" in kinds,
+        stribeck="stribeck" in kinds,
+        sigmoid="sigmoid" in kinds,
+        harmonics=opts.harmonics if "position" in kinds else 0,
+        shapes=shapes,
+    )
+
+
+def combined_terms(base: JointTerms, per_joint: list[JointTerms], shapes) -> JointTerms:
+    """One :class:`JointTerms` holding each joint's own model (``per_dof``)."""
+    flags = {
+        k: any(getattr(t, k) for t in per_joint)
+        for k in ("viscous", "coulomb", "offset", "asymmetric", "stribeck", "sigmoid")
+    }
+    return JointTerms(
+        armature=base.armature,
+        spring=base.spring,
+        harmonics=max(t.harmonics for t in per_joint),
+        shapes=shapes,
+        per_dof=tuple(t.enabled for t in per_joint),
+        **flags,
+    )
+
+
+# ----------------------------------------------------------------- scoring
+def joint_scores(
+    robot: Robot, result: IdentificationResult
+) -> tuple[np.ndarray | None, np.ndarray]:
+    """Per joint ``(validation_error, bic)`` of one fit (module docstring), shapes (nv,)."""
+    n = max(int(result.n_samples), 1)
+    k = np.zeros(robot.nv)
+    for c in result.base.independent:
+        owner = robot.layout.owner(int(c))
+        if owner.kind == "joint":
+            k[owner.index] += 1
+    var = np.maximum(np.asarray(result.noise_variance, dtype=float), 1e-300)
+    bic = n * np.log(var) + k * math.log(n)
+    v = result.relative_error.validation_per_joint
+    return (None if v is None else np.asarray(v, dtype=float)), bic
+
+
+def _score(val, bic):
+    return val if val is not None else bic
+
+
+@dataclass
+class _Trial:
+    """One fit with one candidate on every joint (shapes per joint)."""
+
+    shape: np.ndarray | None  # per joint, the shape value of this trial
+    val: np.ndarray | None
+    bic: np.ndarray
+
+
+# ------------------------------------------------------------------ search
+def _shape_field(model: str) -> str:
+    return "stribeck_velocity" if model == "stribeck" else "sigmoid_slope"
+
+
+def _fit_trial(fit, robot, model, opts, shape: np.ndarray | None) -> _Trial:
+    """One fit; a joint whose law column these data do not excite (a Stribeck velocity
+    below every velocity it reached) drops it and scores inf for this trial."""
+    shapes = None if shape is None else FrictionShapes(**{_shape_field(model): tuple(shape)})
+    terms = candidate_terms(robot.terms, model, opts, shapes)
+    dropped: set[int] = set()
+    for _ in range(3):
+        r = robot.with_terms(terms)
+        try:
+            val, bic = joint_scores(r, fit(r))
+            break
+        except RankDeficiencyError as exc:
+            lost = _unexcited_terms(r, exc.directions)
+            if lost is None:
+                raise
+            keep = [list(terms.enabled) for _ in range(robot.nv)]
+            for j, t in lost:
+                dropped.add(j)
+                keep[j].remove(t)
+            terms = replace(terms, per_dof=tuple(tuple(k) for k in keep))
+    else:  # pragma: no cover - three rounds drop every law column
+        raise InputError(f"the {model} candidate is not excited by these data")
+    for j in dropped:
+        bic[j] = np.inf
+        if val is not None:
+            val[j] = np.inf
+    return _Trial(shape, val, bic)
+
+
+def _unexcited_terms(robot: Robot, directions) -> list[tuple[int, str]] | None:
+    """``(dof, term)`` of directions that are one friction-law column alone, else None."""
+    out = []
+    for d in directions:
+        dof, _, term = str(d).rpartition(".")
+        if dof not in robot.dof_names or term not in ("fs", "fsg", "fvp", "fvn", "fcp", "fcn"):
+            return None
+        out.append((robot.dof_names.index(dof), term))
+    return out or None
+
+
+def _best(trials: list[_Trial]) -> list[int]:
+    """Per joint the index of its best trial."""
+    scores = np.array([_score(t.val, t.bic) for t in trials])  # (n_trials, nv)
+    return list(np.nanargmin(np.where(np.isfinite(scores), scores, np.inf), axis=0))
+
+
+def _search(fit, robot: Robot, model: str, opts: SelectionOptions) -> tuple[_Trial, int]:
+    """The per-joint best shape of a nonlinear law: grid, then one refinement."""
+    nv = robot.nv
+    grid = opts.stribeck_grid if model == "stribeck" else opts.sigmoid_grid
+    trials = [_fit_trial(fit, robot, model, opts, np.full(nv, g)) for g in grid]
+    best = _best(trials)
+    n = len(trials)
+    if opts.refine and len(grid) > 1:
+        lo = np.array([math.sqrt(grid[i] * grid[max(i - 1, 0)]) for i in best])
+        hi = np.array([math.sqrt(grid[i] * grid[min(i + 1, len(grid) - 1)]) for i in best])
+        trials += [_fit_trial(fit, robot, model, opts, s) for s in (lo, hi)]
+        n += 2
+        best = _best(trials)
+    # the per-joint winners as one trial (each joint its own shape and scores)
+    pick = [trials[b] for b in best]
+    shape = np.array([t.shape[j] for j, t in enumerate(pick)])  # type: ignore[index]
+    val = None if pick[0].val is None else np.array([t.val[j] for j, t in enumerate(pick)])  # type: ignore[index]
+    bic = np.array([t.bic[j] for j, t in enumerate(pick)])
+    return _Trial(shape, val, bic), n
+
+
+def select_model(
+    fit: Callable[[Robot], IdentificationResult],
+    robot: Robot,
+    options: SelectionOptions | None = None,
+) -> tuple[IdentificationResult, FrictionSelection]:
+    """Choose each joint's friction model (module docstring) and fit the chosen model.
+
+    Parameters
+    ----------
+    fit : callable
+        ``fit(robot) -> IdentificationResult``: the identification of the caller's data
+        (with validation data when the choice should use them) for a robot's joint terms.
+    robot : Robot
+        The robot; its armature and spring are kept, its friction terms replaced.
+    options : SelectionOptions or None
+        The candidates and grids (None: the defaults).
+
+    Returns
+    -------
+    (result, selection)
+        The chosen model's result (``context["friction_selection"]`` holds the table)
+        and the :class:`FrictionSelection`.
+    """
+    opts = options or SelectionOptions()
+    trials: dict[str, _Trial] = {}
+    n_fits = 0
+    for model in opts.candidates:
+        if model in ("stribeck", "sigmoid"):
+            trials[model], n = _search(fit, robot, model, opts)
+        else:
+            trials[model], n = _fit_trial(fit, robot, model, opts, None), 1
+        n_fits += n
+    models = list(trials)
+    use_val = all(t.val is not None for t in trials.values())
+    joints, per_joint = [], []
+    vs = np.full(robot.nv, np.nan)
+    slope = np.full(robot.nv, np.nan)
+    for j, name in enumerate(robot.dof_names):
+        cands = []
+        for m in models:
+            t = trials[m]
+            params = {}
+            if t.shape is not None:
+                params = {"vs" if m == "stribeck" else "slope": float(t.shape[j])}
+            val = None if t.val is None else float(t.val[j])
+            cands.append(Candidate(m, params, val, float(t.bic[j])))
+        scores = [c.validation_error if use_val else c.bic for c in cands]
+        chosen = models[int(np.nanargmin(np.array(scores, dtype=float)))]
+        joints.append(JointSelection(name, chosen, cands))
+        per_joint.append(candidate_terms(robot.terms, chosen, opts))
+        if chosen == "stribeck":
+            vs[j] = trials["stribeck"].shape[j]  # type: ignore[index]
+        if chosen == "sigmoid":
+            slope[j] = trials["sigmoid"].shape[j]  # type: ignore[index]
+    shapes = _shapes(vs, slope)
+    terms = combined_terms(robot.terms, per_joint, shapes)
+    final = robot.with_terms(terms)
+    result = fit(final)
+    selection = FrictionSelection(
+        joints, "validation error" if use_val else "BIC", terms, n_fits + 1
+    )
+    ctx = {**result.context, "friction_selection": selection.to_dict()}
+    if shapes is not None:
+        ctx["friction_shapes"] = shapes.to_dict()
+    return replace(result, context=ctx), selection
+
+
+def _shapes(vs: np.ndarray, slope: np.ndarray) -> FrictionShapes | None:
+    """Shapes of the chosen laws; joints without the law keep the default (unused)."""
+    if np.isnan(vs).all() and np.isnan(slope).all():
+        return None
+    return FrictionShapes(
+        stribeck_velocity=None
+        if np.isnan(vs).all()
+        else tuple(np.where(np.isnan(vs), DEFAULT_STRIBECK_VELOCITY, vs).tolist()),
+        sigmoid_slope=None
+        if np.isnan(slope).all()
+        else tuple(np.where(np.isnan(slope), DEFAULT_SIGMOID_SLOPE, slope).tolist()),
+    )
+
+
+__all__ = [
+    "CANDIDATES",
+    "Candidate",
+    "FrictionSelection",
+    "JointSelection",
+    "SelectionOptions",
+    "candidate_terms",
+    "combined_terms",
+    "joint_scores",
+    "select_model",
+]
