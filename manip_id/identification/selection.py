@@ -10,6 +10,7 @@ Candidates (:data:`CANDIDATES`; every one with the offset ``fo`` when
     stribeck     fv dq + (fc + fs' exp(-(dq/vs)^2)) sign(dq)        vs per joint
     sigmoid      fv dq + fsg (S(a dq) - 1/2)                         a per joint
     position     fv dq + fc sign(dq) + sum_k hks sin(k q) + hkc cos(k q)
+    X+position   a joint's best of asymmetric / stribeck / sigmoid, plus the harmonics
 
 Each fit is the usual one (``fit(robot) -> IdentificationResult``: the same accumulated
 sums, streamed, forked or on Dask, whichever path ``fit`` takes), with one candidate on
@@ -39,7 +40,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import InputError, RankDeficiencyError
-from ..friction import DEFAULT_SIGMOID_SLOPE, DEFAULT_STRIBECK_VELOCITY, FrictionShapes
+from ..friction import FrictionShapes
 from ..robot import JointTerms, Robot
 from .result import IdentificationResult
 
@@ -75,6 +76,9 @@ class SelectionOptions:
         Sigmoid slopes a to try [s/rad], ascending.
     refine : bool
         Refine the grid's best shape at the geometric mid-points.
+    combine : bool
+        Also try, per joint, its best nonlinear law plus the ``position`` harmonics
+        (one more fit; candidates ``"<law>+position"``).
     """
 
     candidates: tuple[str, ...] = CANDIDATES
@@ -83,6 +87,7 @@ class SelectionOptions:
     stribeck_grid: tuple[float, ...] = STRIBECK_GRID
     sigmoid_grid: tuple[float, ...] = SIGMOID_GRID
     refine: bool = True
+    combine: bool = True
 
     def __post_init__(self):
         bad = [c for c in self.candidates if c not in CANDIDATES]
@@ -341,32 +346,21 @@ def select_model(
         else:
             trials[model], n = _fit_trial(fit, robot, model, opts, None), 1
         n_fits += n
-    models = list(trials)
     use_val = all(t.val is not None for t in trials.values())
-    joints, per_joint = [], []
-    vs = np.full(robot.nv, np.nan)
-    slope = np.full(robot.nv, np.nan)
-    for j, name in enumerate(robot.dof_names):
-        cands = []
-        for m in models:
-            t = trials[m]
-            params = {}
-            if t.shape is not None:
-                params = {"vs" if m == "stribeck" else "slope": float(t.shape[j])}
-            val = None if t.val is None else float(t.val[j])
-            cands.append(Candidate(m, params, val, float(t.bic[j])))
-        scores = [c.validation_error if use_val else c.bic for c in cands]
-        chosen = models[int(np.nanargmin(np.array(scores, dtype=float)))]
-        joints.append(JointSelection(name, chosen, cands))
-        per_joint.append(candidate_terms(robot.terms, chosen, opts))
-        if chosen == "stribeck":
-            vs[j] = trials["stribeck"].shape[j]  # type: ignore[index]
-        if chosen == "sigmoid":
-            slope[j] = trials["sigmoid"].shape[j]  # type: ignore[index]
-    shapes = _shapes(vs, slope)
+    shapes = _shapes(trials)
+    joints = [
+        JointSelection(name, "", [_candidate(m, t, j) for m, t in trials.items()])
+        for j, name in enumerate(robot.dof_names)
+    ]
+    if opts.combine and "position" in trials and len(trials) > 1:
+        n_fits += _combine(fit, robot, opts, joints, shapes, use_val)
+    per_joint = []
+    for js in joints:
+        scores = [c.validation_error if use_val else c.bic for c in js.candidates]
+        js.chosen = js.candidates[int(np.nanargmin(np.array(scores, dtype=float)))].model
+        per_joint.append(_model_terms(robot.terms, js.chosen, opts, shapes))
     terms = combined_terms(robot.terms, per_joint, shapes)
-    final = robot.with_terms(terms)
-    result = fit(final)
+    result = fit(robot.with_terms(terms))
     selection = FrictionSelection(
         joints, "validation error" if use_val else "BIC", terms, n_fits + 1
     )
@@ -376,17 +370,51 @@ def select_model(
     return replace(result, context=ctx), selection
 
 
-def _shapes(vs: np.ndarray, slope: np.ndarray) -> FrictionShapes | None:
-    """Shapes of the chosen laws; joints without the law keep the default (unused)."""
-    if np.isnan(vs).all() and np.isnan(slope).all():
+def _candidate(model: str, trial: _Trial, j: int, name: str | None = None) -> Candidate:
+    params = {}
+    if trial.shape is not None:
+        params = {"vs" if model == "stribeck" else "slope": float(trial.shape[j])}
+    val = None if trial.val is None else float(trial.val[j])
+    return Candidate(name or model, params, val, float(trial.bic[j]))
+
+
+def _model_terms(base: JointTerms, name: str, opts: SelectionOptions, shapes) -> JointTerms:
+    """The terms of a candidate name, ``"stribeck"`` or a combination ``"stribeck+position"``."""
+    law, _, extra = name.partition("+")
+    terms = candidate_terms(base, law, opts, shapes)
+    return replace(terms, harmonics=opts.harmonics) if extra == "position" else terms
+
+
+def _combine(fit, robot, opts, joints: list[JointSelection], shapes, use_val) -> int:
+    """Each joint's best law other than ``linear``/``position`` plus the harmonics, in one
+    fit (each joint its own law); adds the candidates ``"<law>+position"``. Returns 1."""
+    names = []
+    for js in joints:
+        laws = [c for c in js.candidates if c.model not in ("linear", "position")]
+        if not laws:
+            return 0
+        best = min(laws, key=lambda c: c.validation_error if use_val else c.bic)
+        names.append(best)
+    per_joint = [_model_terms(robot.terms, c.model + "+position", opts, shapes) for c in names]
+    r = robot.with_terms(combined_terms(robot.terms, per_joint, shapes))
+    try:
+        val, bic = joint_scores(r, fit(r))
+    except RankDeficiencyError:  # the combination over-fits these data: not a candidate
+        return 1
+    for j, (js, c) in enumerate(zip(joints, names, strict=True)):
+        v = None if val is None else float(val[j])
+        js.candidates.append(Candidate(c.model + "+position", c.parameters, v, float(bic[j])))
+    return 1
+
+
+def _shapes(trials: dict[str, _Trial]) -> FrictionShapes | None:
+    """The per-joint best shapes of the nonlinear laws tried (None: neither was)."""
+    vs, slope = trials.get("stribeck"), trials.get("sigmoid")
+    if vs is None and slope is None:
         return None
     return FrictionShapes(
-        stribeck_velocity=None
-        if np.isnan(vs).all()
-        else tuple(np.where(np.isnan(vs), DEFAULT_STRIBECK_VELOCITY, vs).tolist()),
-        sigmoid_slope=None
-        if np.isnan(slope).all()
-        else tuple(np.where(np.isnan(slope), DEFAULT_SIGMOID_SLOPE, slope).tolist()),
+        stribeck_velocity=None if vs is None else tuple(map(float, vs.shape)),  # type: ignore[arg-type]
+        sigmoid_slope=None if slope is None else tuple(map(float, slope.shape)),  # type: ignore[arg-type]
     )
 
 
