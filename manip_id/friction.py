@@ -29,6 +29,7 @@ projection (a grid, each point solved from its accumulated sums, then refined).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
@@ -120,14 +121,13 @@ def sigmoid_column(vel, shapes: FrictionShapes | None):
     return _sigmoid(a * (vel + c)) - _sigmoid(a * c)
 
 
+def _harmonic(angles, vel, acc, shapes=None, *, order: int, cosine: bool):
+    return np.cos(order * angles) if cosine else np.sin(order * angles)
+
+
 def harmonic_column(order: int, cosine: bool):
-    """The column function of ``sin(k q)`` or ``cos(k q)`` (``k = order``)."""
-    f = np.cos if cosine else np.sin
-
-    def column(angles, vel, acc, shapes=None):
-        return f(order * angles)
-
-    return column
+    """The column function of ``sin(k q)`` or ``cos(k q)`` (``k = order``; picklable)."""
+    return partial(_harmonic, order=int(order), cosine=bool(cosine))
 
 
 @dataclass(frozen=True)

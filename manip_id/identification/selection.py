@@ -25,7 +25,7 @@ each joint is scored on its own row by
 when no validation data are given. The shapes (Stribeck ``vs``, sigmoid slope ``a``)
 are chosen by variable projection: the linear coefficients are solved for every value
 of a grid (one fit per value), each joint keeps its best value, then the best is refined
-once on each side at the geometric mid-points (two fits, each joint its own value). The
+by a bisection in log(shape) (two fits per round, each joint its own value). The
 chosen per-joint models make one :class:`~manip_id.robot.JointTerms` with ``per_dof``
 (the terms each joint keeps) and ``shapes``; :func:`select_model` fits it last, and its
 result carries ``context["friction_selection"]``.
@@ -74,8 +74,9 @@ class SelectionOptions:
         Stribeck velocities vs to try [rad/s], ascending.
     sigmoid_grid : tuple of float
         Sigmoid slopes a to try [s/rad], ascending.
-    refine : bool
-        Refine the grid's best shape at the geometric mid-points.
+    refine : int
+        Rounds of refinement of the grid's best shape (a bisection in log(shape):
+        half the grid step, then a quarter, ...; two fits per round).
     combine : bool
         Also try, per joint, its best nonlinear law plus the ``position`` harmonics
         (one more fit; candidates ``"<law>+position"``).
@@ -86,10 +87,12 @@ class SelectionOptions:
     harmonics: int = 2
     stribeck_grid: tuple[float, ...] = STRIBECK_GRID
     sigmoid_grid: tuple[float, ...] = SIGMOID_GRID
-    refine: bool = True
+    refine: int = 3
     combine: bool = True
 
     def __post_init__(self):
+        if int(self.refine) < 0:
+            raise InputError(f"refine must be a number of rounds >= 0, got {self.refine}")
         bad = [c for c in self.candidates if c not in CANDIDATES]
         if bad or not self.candidates:
             raise InputError(f"candidates must be some of {list(CANDIDATES)}, got {bad or '[]'}")
@@ -294,24 +297,32 @@ def _best(trials: list[_Trial]) -> list[int]:
 
 
 def _search(fit, robot: Robot, model: str, opts: SelectionOptions) -> tuple[_Trial, int]:
-    """The per-joint best shape of a nonlinear law: grid, then one refinement."""
+    """The per-joint best shape of a nonlinear law: the grid, then ``opts.refine`` rounds
+    of a bisection in log(shape) around each joint's best (two fits per round)."""
     nv = robot.nv
     grid = opts.stribeck_grid if model == "stribeck" else opts.sigmoid_grid
     trials = [_fit_trial(fit, robot, model, opts, np.full(nv, g)) for g in grid]
-    best = _best(trials)
+    winner = _winners(trials)
     n = len(trials)
-    if opts.refine and len(grid) > 1:
-        lo = np.array([math.sqrt(grid[i] * grid[max(i - 1, 0)]) for i in best])
-        hi = np.array([math.sqrt(grid[i] * grid[min(i + 1, len(grid) - 1)]) for i in best])
-        trials += [_fit_trial(fit, robot, model, opts, s) for s in (lo, hi)]
-        n += 2
-        best = _best(trials)
-    # the per-joint winners as one trial (each joint its own shape and scores)
-    pick = [trials[b] for b in best]
+    h = math.log(grid[-1] / grid[0]) / max(len(grid) - 1, 1)  # grid step in log(shape)
+    for _ in range(opts.refine if len(grid) > 1 else 0):
+        h /= 2
+        for sign in (-1.0, 1.0):
+            trial = _fit_trial(fit, robot, model, opts, winner.shape * math.exp(sign * h))
+            winner = _winners([winner, trial])
+            n += 1
+    return winner, n
+
+
+def _winners(trials: list[_Trial]) -> _Trial:
+    """The per-joint winners of some trials as one trial (each joint its own shape)."""
+    pick = [trials[b] for b in _best(trials)]
     shape = np.array([t.shape[j] for j, t in enumerate(pick)])  # type: ignore[index]
-    val = None if pick[0].val is None else np.array([t.val[j] for j, t in enumerate(pick)])  # type: ignore[index]
+    val = None
+    if pick[0].val is not None:
+        val = np.array([t.val[j] for j, t in enumerate(pick)])  # type: ignore[index]
     bic = np.array([t.bic[j] for j, t in enumerate(pick)])
-    return _Trial(shape, val, bic), n
+    return _Trial(shape, val, bic)
 
 
 def select_model(
