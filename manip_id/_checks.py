@@ -85,7 +85,7 @@ def random_generator(seed, name: str = "seed") -> np.random.Generator:
 
 def memory_budget(share: float = 0.5, cap: int | None = None) -> int:
     """``share`` of the memory available now [bytes] (at most ``cap``): what one job may take."""
-    import psutil
+    import psutil  # optional heavy library, asked only when a memory budget is needed
 
     budget = int(share * psutil.virtual_memory().available)
     return budget if cap is None else min(budget, int(cap))

@@ -34,6 +34,7 @@ from typing import Any
 
 from .errors import InputError
 from .robot import Robot
+from .robot_sources import RobotSource
 
 #: Parts added together by one reduction task.
 SPLIT_EVERY = 8
@@ -55,14 +56,10 @@ def portable_robot(robot: Robot) -> Robot:
     The Pinocchio model and the joint terms (about 0.2 MB pickled), without any
     geometry or cached evaluator: what is sent to the workers.
     """
-    return Robot(
-        robot.name,
-        robot.model,
-        robot.terms,
-        source=robot.source,
-        package_dirs=robot.package_dirs,
-        settings=robot.settings,
+    origin = RobotSource(
+        robot.model, robot.name, robot.source, list(robot.package_dirs), robot.settings, {}, False
     )
+    return Robot(robot.name, robot.model, robot.terms, origin=origin)
 
 
 def add_values(*values):

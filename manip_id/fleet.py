@@ -94,13 +94,19 @@ class FileEstimate:
 
     Attributes
     ----------
-    path: the file (spec label)
-    n_samples: samples accumulated from it (after preprocessing)
-    n_tasks: tasks (blocks) it was cut into
-    result: its identification (same base parameters and method as the pooled
+    path
+        the file (spec label)
+    n_samples
+        samples accumulated from it (after preprocessing)
+    n_tasks
+        tasks (blocks) it was cut into
+    result
+        its identification (same base parameters and method as the pooled
         one), or None when the file alone cannot be solved
-    error: why it cannot (e.g. it does not excite every base parameter), else None
-    summary: samples, rows left out, preprocessing and data quality (:meth:`FileInfo.summary`)
+    error
+        why it cannot (e.g. it does not excite every base parameter), else None
+    summary
+        samples, rows left out, preprocessing and data quality (:meth:`FileInfo.summary`)
     """
 
     path: str

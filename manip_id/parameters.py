@@ -153,11 +153,16 @@ class JointTerm:
 
     Attributes
     ----------
-    name: short name used in parameter names (``panda_joint3.fv``).
-    flag: the :class:`~manip_id.robot.JointTerms` attribute that enables it.
-    column_text: the regressor entry of row ``j``, as text (``"sign(dq_j)"``).
-    unit_revolute, unit_prismatic: unit of the parameter for a revolute / prismatic DoF.
-    needs_angles: whether the column uses the joint angle ``q_j``.
+    name
+        short name used in parameter names (``panda_joint3.fv``).
+    flag
+        the :class:`~manip_id.robot.JointTerms` attribute that enables it.
+    column_text
+        the regressor entry of row ``j``, as text (``"sign(dq_j)"``).
+    unit_revolute, unit_prismatic
+        unit of the parameter for a revolute / prismatic DoF.
+    needs_angles
+        whether the column uses the joint angle ``q_j``.
     """
 
     name: str
@@ -270,13 +275,19 @@ class DofLayout:
 
     Attributes
     ----------
-    names: one name per DoF: the joint name, with ``[k]`` for multi-DoF joints.
-    joints: the joint owning each DoF, length nv.
-    q_index: index in ``q`` of each DoF's coordinate, shape (nv,) (the cos entry
+    names
+        one name per DoF: the joint name, with ``[k]`` for multi-DoF joints.
+    joints
+        the joint owning each DoF, length nv.
+    q_index
+        index in ``q`` of each DoF's coordinate, shape (nv,) (the cos entry
         of a continuous joint).
-    continuous: whether each DoF is a continuous joint stored as (cos, sin), shape (nv,).
-    prismatic: whether each DoF translates, shape (nv,).
-    unsupported: joints that are neither one coordinate per DoF nor continuous
+    continuous
+        whether each DoF is a continuous joint stored as (cos, sin), shape (nv,).
+    prismatic
+        whether each DoF translates, shape (nv,).
+    unsupported
+        joints that are neither one coordinate per DoF nor continuous
         (``"name (JointModelX)"``); empty for the manipulators we load.
     """
 
@@ -380,12 +391,17 @@ class ParameterLayout:
 
     Parameters
     ----------
-    body_names: the joint carrying each moving body, length nb.
-    dofs: the :class:`DofLayout` of the model.
-    terms: the enabled joint terms, in column order (a subsequence of
+    body_names
+        the joint carrying each moving body, length nb.
+    dofs
+        the :class:`DofLayout` of the model.
+    terms
+        the enabled joint terms, in column order (a subsequence of
         :data:`JOINT_TERM_NAMES`).
-    shapes: the per-DoF shapes of the nonlinear laws (None: their defaults).
-    mask: which terms each DoF carries, bool shape (nv, nt) (None: all); a masked-out
+    shapes
+        the per-DoF shapes of the nonlinear laws (None: their defaults).
+    mask
+        which terms each DoF carries, bool shape (nv, nt) (None: all); a masked-out
         entry's column is identically zero.
     """
 

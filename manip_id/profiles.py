@@ -150,7 +150,7 @@ def load_profile(spec: str | Path) -> RobotProfile:
     if not path.is_file():
         where = f"no file {path}" if path != profile_path(s) else f"no {path.name} in {path.parent}"
         raise RobotError(f"cannot read the robot profile {s!r}: {where}")
-    if sys.version_info >= (3, 11):
+    if sys.version_info >= (3, 11):  # the TOML reader, imported when a profile is read
         import tomllib
     else:  # pragma: no cover - Python 3.10 (the tomli backport is a dependency there)
         import tomli as tomllib

@@ -274,9 +274,12 @@ def regressor(robot: Robot, q, dq, ddq) -> np.ndarray:
 
     Parameters
     ----------
-    q: joint positions [rad or m], shape (nq,) or (N, nq)
-    dq: joint velocities [rad/s or m/s], shape (nv,) or (N, nv)
-    ddq: joint accelerations [rad/s^2 or m/s^2], shape (nv,) or (N, nv)
+    q
+        joint positions [rad or m], shape (nq,) or (N, nq)
+    dq
+        joint velocities [rad/s or m/s], shape (nv,) or (N, nv)
+    ddq
+        joint accelerations [rad/s^2 or m/s^2], shape (nv,) or (N, nv)
 
     Returns
     -------
@@ -304,10 +307,14 @@ def slotine_li_regressor(robot: Robot, q, dq, v, w) -> np.ndarray:
 
     Parameters
     ----------
-    q: joint positions [rad or m], shape (nq,) or (N, nq)
-    dq: joint velocities [rad/s or m/s], shape (nv,) or (N, nv)
-    v: the vector multiplying M(q) (reference acceleration), shape like dq
-    w: the vector multiplying C(q, dq) (reference velocity), shape like dq
+    q
+        joint positions [rad or m], shape (nq,) or (N, nq)
+    dq
+        joint velocities [rad/s or m/s], shape (nv,) or (N, nv)
+    v
+        the vector multiplying M(q) (reference acceleration), shape like dq
+    w
+        the vector multiplying C(q, dq) (reference velocity), shape like dq
 
     Returns
     -------

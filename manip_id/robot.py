@@ -49,6 +49,8 @@ from .robot_sources import (
     MANIPULATORS,
     OUR_ROBOTS,
     JointTerms,
+    Reduction,
+    RobotSource,
     available_robots,
     joint_terms,
     load_source,
@@ -89,13 +91,8 @@ class Robot:
         model: pin.Model,
         terms: JointTerms,
         *,
-        source: str | None = None,
-        package_dirs: Sequence[str] = (),
-        full_model: pin.Model | None = None,
-        locked_ids: Sequence[int] = (),
-        reference_configuration: np.ndarray | None = None,
-        settings: Mapping | None = None,
-        geometry: Mapping | None = None,
+        origin: RobotSource | None = None,
+        reduction: Reduction | None = None,
         profile: RobotProfile | None = None,
     ):
         kinds = [model.joints[i].shortname() for i in range(1, model.njoints)]
@@ -111,15 +108,16 @@ class Robot:
         self.model = model
         self.data = model.createData()
         self.terms = terms
-        self.source = source
-        self.package_dirs = list(package_dirs)
-        self._full_model = full_model if full_model is not None else model
-        self._locked_ids = list(locked_ids)
-        self._qref = reference_configuration
-        self.settings = dict(settings or {})
+        self._origin, self._reduction = origin, reduction  # for with_terms
+        self.source = None if origin is None else origin.source
+        self.package_dirs = [] if origin is None else list(origin.package_dirs)
+        self._full_model = model if reduction is None else reduction.full_model
+        self._locked_ids = [] if reduction is None else list(reduction.locked_ids)
+        self._qref = None if reduction is None else reduction.configuration
+        self.settings = {} if origin is None else dict(origin.settings)
         #: the identification profile the robot was loaded with (``robots/NAME.toml``), or None
         self.profile = profile
-        self._full_geometry = dict(geometry or {})
+        self._full_geometry = {} if origin is None else dict(origin.geometry)
         self.joint_names: list[str] = [model.names[i] for i in range(1, model.njoints)]
         self.dofs = DofLayout.from_model(model)
         self.dof_names: list[str] = list(self.dofs.names)
@@ -229,13 +227,8 @@ class Robot:
             self.name,
             self.model,
             terms,
-            source=self.source,
-            package_dirs=self.package_dirs,
-            full_model=self._full_model,
-            locked_ids=self._locked_ids,
-            reference_configuration=self._qref,
-            settings=self.settings,
-            geometry=self._full_geometry,
+            origin=self._origin,
+            reduction=self._reduction,
             profile=self.profile,
         )
 
@@ -383,26 +376,35 @@ def load_robot(
 
     Parameters
     ----------
-    spec: a name of example-robot-data (``"panda"``, ``"ur5"``, ...), a path to a
+    spec
+        a name of example-robot-data (``"panda"``, ``"ur5"``, ...), a path to a
         URDF file, or ``"msd"`` (the one-DoF mass-spring-damper of ``robots/msd.urdf``).
-    armature: model a rotor inertia per joint (column ddq_j). Default: the profile's, else off.
-    friction: friction kinds per joint, some of ``("viscous", "coulomb",
+    armature
+        model a rotor inertia per joint (column ddq_j). Default: the profile's, else off.
+    friction
+        friction kinds per joint, some of ``("viscous", "coulomb",
         "offset")`` (also a comma-separated string). Default: the profile's
         (``"msd"``: viscous), else none.
-    spring: model a linear spring per joint (column q_j). Default: the profile's
+    spring
+        model a linear spring per joint (column q_j). Default: the profile's
         (on for ``"msd"``), else off.
-    active_joints: names of the joints to identify; the others are locked at
+    active_joints
+        names of the joints to identify; the others are locked at
         ``locked_configuration``. Default: the profile's (``robots/panda.toml`` locks
         the two finger joints), else every joint.
-    locked_configuration: positions of the locked joints, a full configuration
+    locked_configuration
+        positions of the locked joints, a full configuration
         vector of the unreduced model (shape (nq,)) or a mapping joint name ->
         position [rad or m]. Default: the neutral configuration clipped to the limits.
-    package_dirs: folders where ``package://`` mesh paths of a URDF are resolved.
-    identified: for a URDF written by :func:`manip_id.export.export_urdf`: ``True`` reads
+    package_dirs
+        folders where ``package://`` mesh paths of a URDF are resolved.
+    identified
+        for a URDF written by :func:`manip_id.export.export_urdf`: ``True`` reads
         its sidecar (``NAME.identified.json`` next to it), or give the sidecar's path.
         Its joint terms, active joints, armature, offset and spring become the
         defaults and the nominal parameters (explicit arguments still win).
-    profile: the identification profile (:mod:`manip_id.profiles`): a robot name or a
+    profile
+        the identification profile (:mod:`manip_id.profiles`): a robot name or a
         ``.toml`` path, a :class:`~manip_id.profiles.RobotProfile`, or False for none.
         Default: ``robots/NAME.toml`` for a robot loaded by name when it exists; a URDF
         loaded by path takes none (its file name decides nothing). Explicit arguments
@@ -436,13 +438,8 @@ def load_robot(
         name,
         model,
         terms,
-        source=src.source,
-        package_dirs=src.package_dirs,
-        full_model=full_model,
-        locked_ids=locked_ids,
-        reference_configuration=qref,
-        settings=src.settings,
-        geometry=src.geometry,
+        origin=src,
+        reduction=Reduction(full_model, tuple(locked_ids), qref) if locked_ids else None,
         profile=prof,
     )
     if sidecar is not None:

@@ -173,6 +173,25 @@ class RobotSource:
     by_path: bool
 
 
+@dataclass(frozen=True)
+class Reduction:
+    """The joints locked out of a loaded model.
+
+    Attributes
+    ----------
+    full_model : pinocchio.Model
+        The model before the reduction (all joints).
+    locked_ids : tuple of int
+        Joint ids of ``full_model`` held fixed.
+    configuration : numpy.ndarray or None
+        The configuration of ``full_model`` they are held at [rad or m], shape (nq,).
+    """
+
+    full_model: pin.Model
+    locked_ids: tuple[int, ...] = ()
+    configuration: np.ndarray | None = None
+
+
 def load_source(spec: str, pkg: list[str]) -> RobotSource:
     """Our robot (``robots/NAME.urdf`` and its ``.json`` settings), a URDF path, or a name
     of example-robot-data."""
@@ -272,6 +291,7 @@ def load_erd(name: str):
     through the loader itself (geometry included).
     """
     try:
+        # heavy (its package index): imported only to load a robot by name
         from example_robot_data.robots_loader import ROBOTS
         from example_robot_data.utils import RobotLoader, getModelPath, readParamsFromSrdf
     except ImportError as exc:  # pragma: no cover - dependency of the package

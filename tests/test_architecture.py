@@ -30,28 +30,25 @@ PACKAGE = Path(__file__).resolve().parent.parent / "manip_id"
 #: Libraries a function may import locally: optional, heavy, or slow to import (the
 #: CLI's ``--help`` should cost little more than ``import pinocchio``).
 HEAVY = {
-    "matplotlib",
-    "meshcat",
-    "cvxpy",
-    "clarabel",
-    "dask",
+    "matplotlib",  # figures
+    "meshcat",  # 3-D scenes
+    "pinocchio.visualize",  # the meshcat visualizer
+    "cvxpy",  # the SDP of the consistent estimate
+    "dask",  # fleet back-end
     "distributed",
-    "rosbags",
+    "rosbags",  # ROS 2 bags
     "scipy.signal",
     "scipy.optimize",
     "scipy.stats",
+    "scipy.interpolate",
     "mujoco",
     "numba",
     "tqdm",
-    "psutil",
-    "example_robot_data",
-    "PIL",
-    "hppfcl",
-    "coal",
-    "tomllib",
+    "psutil",  # memory budgets
+    "example_robot_data",  # its robot index, for robots loaded by name
+    "tomllib",  # profiles (the tomli backport on Python 3.10)
     "tomli",
-    "webbrowser",
-    "http.server",
+    "webbrowser",  # opening a report only when asked
 }
 MAX_MODULE_LINES = 600
 MAX_FUNCTION_LINES = 80

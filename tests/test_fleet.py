@@ -676,6 +676,33 @@ def test_cli_energy_model_matches_the_local_energy_path(robot, tmp_path, capsys)
     assert rep["per_file"][0]["n_tasks"] > 1
 
 
+def test_dask_carries_the_deadband_and_raw_torque_sums(robot, local_client, tmp_path):
+    """Filtered files with a deadband: on Dask, in blocks, the same document as serially
+    (the moving-rows and raw-torque errors travel with the sums)."""
+    from manip_id.identification import PreprocessOptions
+
+    paths = [str(tmp_path / f"raw{k}.npz") for k in range(3)]
+    for k, p in enumerate(paths):
+        _make_file(robot, Path(p), seed=90 + k, ddq=False)
+    opts = PreprocessOptions(cutoff=20.0, velocity_deadband=0.05)
+    kw = dict(validation=paths[2:], options=opts, method="wls")
+    serial = identify_files(robot, paths[:2], **kw).to_dict()
+    dask = identify_files(
+        robot,
+        paths[:2],
+        run=RunOptions(scheduler=local_client),
+        partition=PartitionOptions(block=500),
+        **kw,
+    ).to_dict()
+    for key in ("train", "validation", "train_moving", "validation_moving"):
+        assert dask["relative_error"][key] == pytest.approx(serial["relative_error"][key], 1e-7)
+    for key in ("train", "validation", "nominal_train", "nominal_validation"):
+        assert dask["relative_error_raw"][key] == pytest.approx(
+            serial["relative_error_raw"][key], 1e-7
+        )
+    assert serial["relative_error_raw"]["train"] > serial["relative_error"]["train"]
+
+
 def test_identify_datasets_with_a_scheduler(robot, fleet, local_client):
     from manip_id.identification import identify_datasets
 

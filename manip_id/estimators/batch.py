@@ -224,27 +224,8 @@ def _weights(var: np.ndarray, zz: np.ndarray, n: int) -> np.ndarray:
 
 
 # -------------------------------------------------------------------- stacked
-def solve_stacked(
-    Phi,
-    z,
-    *,
-    nv: int = 1,
-    weights=None,
-    names: Sequence[str] | None = None,
-    minimum_norm: bool = False,
-    cond_limit: float = COND_LIMIT,
-    rank_rtol: float = STACKED_RANK_RTOL,
-) -> LeastSquaresSolution:
-    """Least squares on a stacked regressor through QR (and SVD when needed).
-
-    Parameters
-    ----------
-    Phi: stacked regressor, shape (n_rows, p), sample-major (row ``k*nv + j``).
-    z: stacked outputs, shape (n_rows,).
-    nv: outputs per sample, for the per-joint statistics (``n_rows % nv == 0``).
-    weights: per-output weights ``1/sigma_j^2``, shape (nv,), for weighted least
-        squares with known variances; the covariance is then ``(Phi^T W Phi)^-1``.
-    """
+def _stacked_inputs(Phi, z, nv: int, weights, names):
+    """``Phi`` (n_rows, p) and ``z`` (n_rows,) checked, and the row weights ``sqrt(w_j)``."""
     Phi = as_float_array(Phi, "Phi", ndim=2)
     z = as_float_array(z, "z", ndim=1)
     n_rows, p = Phi.shape
@@ -261,6 +242,36 @@ def solve_stacked(
         if w.shape != (nv,) or np.any(w <= 0):
             raise InputError(f"weights must be {nv} positive numbers, got weights.shape={w.shape}")
         w_rows = np.tile(np.sqrt(w), n_rows // nv)
+    return Phi, z, w_rows
+
+
+def solve_stacked(
+    Phi,
+    z,
+    *,
+    nv: int = 1,
+    weights=None,
+    names: Sequence[str] | None = None,
+    minimum_norm: bool = False,
+    cond_limit: float = COND_LIMIT,
+    rank_rtol: float = STACKED_RANK_RTOL,
+) -> LeastSquaresSolution:
+    """Least squares on a stacked regressor through QR (and SVD when needed).
+
+    Parameters
+    ----------
+    Phi
+        stacked regressor, shape (n_rows, p), sample-major (row ``k*nv + j``).
+    z
+        stacked outputs, shape (n_rows,).
+    nv
+        outputs per sample, for the per-joint statistics (``n_rows % nv == 0``).
+    weights
+        per-output weights ``1/sigma_j^2``, shape (nv,), for weighted least
+        squares with known variances; the covariance is then ``(Phi^T W Phi)^-1``.
+    """
+    Phi, z, w_rows = _stacked_inputs(Phi, z, nv, weights, names)
+    n_rows, p = Phi.shape
     Pw = Phi if w_rows is None else Phi * w_rows[:, None]
     zw = z if w_rows is None else z * w_rows
     norms = np.linalg.norm(Pw, axis=0)

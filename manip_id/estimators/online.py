@@ -56,9 +56,12 @@ class OnlineHistory:
 
     Attributes
     ----------
-    t: time stamps [s], shape (K,) (the first is the initial estimate)
-    theta: estimates, shape (K, p)
-    error: norm of the prediction error before the update, shape (K,) (NaN at the start)
+    t
+        time stamps [s], shape (K,) (the first is the initial estimate)
+    theta
+        estimates, shape (K, p)
+    error
+        norm of the prediction error before the update, shape (K,) (NaN at the start)
     """
 
     t: np.ndarray
@@ -164,11 +167,16 @@ class GradientEstimator(OnlineEstimator):
 
     Parameters
     ----------
-    theta0: initial estimate, shape (p,)
-    gamma: adaptation gain Gamma, shape (p,) (diagonal, positive) or (p, p) (SPD)
-    normalized: divide by ``m^2 = 1 + trace(Y Gamma Y^T)`` (see module docstring)
-    bounds: optional ``(lower, upper)`` box for the projection, shapes (p,)
-    record_every: keep every k-th estimate in :attr:`history` (0: none)
+    theta0
+        initial estimate, shape (p,)
+    gamma
+        adaptation gain Gamma, shape (p,) (diagonal, positive) or (p, p) (SPD)
+    normalized
+        divide by ``m^2 = 1 + trace(Y Gamma Y^T)`` (see module docstring)
+    bounds
+        optional ``(lower, upper)`` box for the projection, shapes (p,)
+    record_every
+        keep every k-th estimate in :attr:`history` (0: none)
     """
 
     def __init__(
@@ -228,13 +236,19 @@ class RLSEstimator(OnlineEstimator):
 
     Parameters
     ----------
-    theta0: initial estimate, shape (p,)
-    P0: initial covariance: scalar (times I), shape (p,) (diagonal) or (p, p) (SPD)
-    forgetting: lambda in (0, 1]; 1 means no forgetting
-    p_min, p_max: bounds on trace(P) (see module docstring); ``p_max`` defaults to
+    theta0
+        initial estimate, shape (p,)
+    P0
+        initial covariance: scalar (times I), shape (p,) (diagonal) or (p, p) (SPD)
+    forgetting
+        lambda in (0, 1]; 1 means no forgetting
+    p_min, p_max
+        bounds on trace(P) (see module docstring); ``p_max`` defaults to
         trace(P0) when ``forgetting < 1``, otherwise none
-    bounds: optional ``(lower, upper)`` box for the projection, shapes (p,)
-    record_every: keep every k-th estimate in :attr:`history` (0: none)
+    bounds
+        optional ``(lower, upper)`` box for the projection, shapes (p,)
+    record_every
+        keep every k-th estimate in :attr:`history` (0: none)
     """
 
     _SYMMETRIZE_EVERY = 64

@@ -15,22 +15,32 @@ class LeastSquaresSolution:
 
     Attributes
     ----------
-    estimate: theta_hat, shape (p,)
-    covariance: covariance of theta_hat, shape (p, p): ``sigma2 (Phi^T Phi)^-1`` for
+    estimate
+        theta_hat, shape (p,)
+    covariance
+        covariance of theta_hat, shape (p, p): ``sigma2 (Phi^T Phi)^-1`` for
         ordinary least squares, ``(Phi^T W Phi)^-1`` with ``W = diag(1/sigma_j^2)`` for
         weighted least squares (pseudo-inverse on the excited subspace for a
         minimum-norm solution).
-    sigma2: residual variance ``RSS / (n_rows - rank)`` [(N m)^2]; for weighted
+    sigma2
+        residual variance ``RSS / (n_rows - rank)`` [(N m)^2]; for weighted
         least squares the weighted one, ``sum_j RSS_j / sigma_j^2 / dof`` (about 1).
-    noise_variance: per-output residual variance ``RSS_j / (n - rank / nv)``, shape (nv,)
-    rss_per_joint: residual sum of squares per output, shape (nv,) [(N m)^2]
-    zz_per_joint: sum of squared outputs per output, shape (nv,) [(N m)^2]
-    n_rows: number of stacked equations; dof: ``n_rows - rank``
-    rank: numerical rank; condition_number: 2-norm condition number of the
+    noise_variance
+        per-output residual variance ``RSS_j / (n - rank / nv)``, shape (nv,)
+    rss_per_joint
+        residual sum of squares per output, shape (nv,) [(N m)^2]
+    zz_per_joint
+        sum of squared outputs per output, shape (nv,) [(N m)^2]
+    n_rows
+        number of stacked equations; dof: ``n_rows - rank``
+    rank
+        numerical rank; condition_number: 2-norm condition number of the
         regressor (unscaled); scaled_condition_number: the same after scaling
         every column to unit norm (what the solver sees).
-    solver: how it was solved, including any fallback and why.
-    weights: per-output weights ``1/sigma_j^2`` of weighted least squares, else None.
+    solver
+        how it was solved, including any fallback and why.
+    weights
+        per-output weights ``1/sigma_j^2`` of weighted least squares, else None.
     """
 
     estimate: np.ndarray

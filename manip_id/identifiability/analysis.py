@@ -112,15 +112,20 @@ def analyze(
 
     Parameters
     ----------
-    source: a :class:`~manip_id.robot.Robot` (structural analysis, see
+    source
+        a :class:`~manip_id.robot.Robot` (structural analysis, see
         :func:`structural_analysis`; ``seed`` and ``n_samples`` apply), a
         regressor ``Y`` of shape (M, p) or (N, nv, p) (sample-major), or a
         :class:`~manip_id.datasets.Dataset` with accelerations (``robot`` required).
-    names: parameter names, length p (for an array; taken from ``robot`` when given).
-    robot: the robot the array belongs to; then the structural analysis is run too
+    names
+        parameter names, length p (for an array; taken from ``robot`` when given).
+    robot
+        the robot the array belongs to; then the structural analysis is run too
         (unless ``structural`` is given) and the unexcited directions are reported.
-    structural: a structural :class:`RankAnalysis` to compare the data with.
-    tolerance: relative rank tolerance (module docstring); default
+    structural
+        a structural :class:`RankAnalysis` to compare the data with.
+    tolerance
+        relative rank tolerance (module docstring); default
         :func:`default_tolerance`, ``max(max(M, p) * eps, 1e-8)``.
 
     Returns

@@ -22,14 +22,21 @@ class BaseParameters:
 
     Attributes
     ----------
-    independent: indices of the kept columns, shape (r,), ascending.
-    dependent: indices of the regrouped columns, shape (p - r,), ascending.
-    K: regrouping matrix, shape (r, p - r): ``theta_base = theta[independent] + K theta[dependent]``
-        and ``Y[:, dependent] = Y[:, independent] K``.
-    names: the standard parameter names, length p.
-    base_names: one name per base parameter: the name of its independent
+    independent
+        indices of the kept columns, shape (r,), ascending.
+    dependent
+        indices of the regrouped columns, shape (p - r,), ascending.
+    K
+        regrouping matrix, shape (r, p - r):
+        ``theta_base = theta[independent] + K theta[dependent]`` and
+        ``Y[:, dependent] = Y[:, independent] K``.
+    names
+        the standard parameter names, length p.
+    base_names
+        one name per base parameter: the name of its independent
         parameter, with a trailing ``R`` (regrouped) when other parameters join it.
-    expressions: each base parameter in parameter names, e.g.
+    expressions
+        each base parameter in parameter names, e.g.
         ``panda_joint2.Izz + 0.0841*panda_joint3.m``.
     """
 
@@ -85,29 +92,46 @@ class RankAnalysis:
 
     Attributes
     ----------
-    names: parameter names, length p.
-    n_parameters: p.
-    n_rows: number of stacked rows M the analysis saw.
-    rank: numerical rank r (= number of base parameters).
-    tolerance: the relative tolerance used (module docstring).
-    singular_values: of the raw regressor Y, shape (p,), descending [units of Y].
-    singular_values_scaled: of the column-scaled regressor, shape (p,), descending.
-    condition_number: sigma_max / sigma_min of the base regressor Y[:, independent].
-    condition_number_scaled: the same with unit-norm columns.
-    base: the base parameters.
-    null_space: shape (p, p - r), one unidentifiable direction per column
+    names
+        parameter names, length p.
+    n_parameters
+        p.
+    n_rows
+        number of stacked rows M the analysis saw.
+    rank
+        numerical rank r (= number of base parameters).
+    tolerance
+        the relative tolerance used (module docstring).
+    singular_values
+        of the raw regressor Y, shape (p,), descending [units of Y].
+    singular_values_scaled
+        of the column-scaled regressor, shape (p,), descending.
+    condition_number
+        sigma_max / sigma_min of the base regressor Y[:, independent].
+    condition_number_scaled
+        the same with unit-norm columns.
+    base
+        the base parameters.
+    null_space
+        shape (p, p - r), one unidentifiable direction per column
         (``Y @ null_space == 0``), unit coefficient on its dependent parameter.
-    unidentifiable: each null-space column as an expression in parameter names.
-    unexcited: directions these data fail to excite although they are structurally
+    unidentifiable
+        each null-space column as an expression in parameter names.
+    unexcited
+        directions these data fail to excite although they are structurally
         identifiable (only when a structural analysis was given), each a vector that
         is zero on the structurally dependent parameters.
-    unexcited_vectors: those directions, shape (p, n_unexcited).
-    information_eigenvalues: eigenvalues of the information matrix of the base
+    unexcited_vectors
+        those directions, shape (p, n_unexcited).
+    information_eigenvalues
+        eigenvalues of the information matrix of the base
         regressor, ``Y_1^T Y_1`` with ``Y_1 = Y[:, independent]``, ascending, shape (r,)
         [units of Y squared]; with a structural analysis given, its independent
         columns are used, so that only what the data fail to excite shows.
-    notes: explanations (why some parameters never enter the dynamics, fallbacks).
-    source: where the regressor came from.
+    notes
+        explanations (why some parameters never enter the dynamics, fallbacks).
+    source
+        where the regressor came from.
     """
 
     names: list[str]

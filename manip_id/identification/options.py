@@ -83,22 +83,34 @@ class PreprocessOptions:
 
     Attributes
     ----------
-    cutoff: low-pass cut-off [Hz]; None: :data:`~manip_id.signals.DEFAULT_CUTOFF`
+    cutoff
+        low-pass cut-off [Hz]; None: :data:`~manip_id.signals.DEFAULT_CUTOFF`
         when the file has no ddq, no filtering when it has.
-    order: Butterworth order of the one-way filter.
-    trim: seconds dropped at each end of each file (window); None: the filter's
+    order
+        Butterworth order of the one-way filter.
+    trim
+        seconds dropped at each end of each file (window); None: the filter's
         edge transient.
-    decimate: keep every D-th sample after filtering.
-    rate: resampling rate [Hz]; None: the file's mean rate when its steps jitter.
-    velocity: "measured" (filter the logged dq) or "differentiate" (dq from q).
-    filter_torque: low-pass the torques too.
-    torque_scale: one gain, or one per joint (nv): ``tau_j <- G_j tau_j``
+    decimate
+        keep every D-th sample after filtering.
+    rate
+        resampling rate [Hz]; None: the file's mean rate when its steps jitter.
+    velocity
+        "measured" (filter the logged dq) or "differentiate" (dq from q).
+    filter_torque
+        low-pass the torques too.
+    torque_scale
+        one gain, or one per joint (nv): ``tau_j <- G_j tau_j``
         (drive gains [N m/A] from currents, gear ratios); None: 1.
-    velocity_deadband: eps [rad/s or m/s]; the rows of joint j with
+    velocity_deadband
+        eps [rad/s or m/s]; the rows of joint j with
         ``|dq_j| < eps`` are left out of the fit and of the error figures.
-    drop_bad_rows: drop (and count) rows holding NaN/Inf instead of refusing the file.
-    read_chunk: rows per block read from the file.
-    block: rows per block of the blocked preprocessing.
+    drop_bad_rows
+        drop (and count) rows holding NaN/Inf instead of refusing the file.
+    read_chunk
+        rows per block read from the file.
+    block
+        rows per block of the blocked preprocessing.
     """
 
     cutoff: float | None = None
@@ -283,17 +295,27 @@ class OnlineOptions:
 
     Attributes
     ----------
-    theta0: initial estimate, shape (r,) [units of the base parameters]; default zeros
-    record_every: keep every k-th estimate in the history (0: none); default
+    theta0
+        initial estimate, shape (r,) [units of the base parameters]; default zeros
+    record_every
+        keep every k-th estimate in the history (0: none); default
         ``max(1, N // 1000)``, the record the convergence check reads
-    bounds: ``(lower, upper)`` box on the estimate, shapes (r,); default none
-    t0: time of the first sample [s]
-    dt: sample time [s] given to the law (the gradient law's Euler step); default 1
-    P0: RLS initial covariance: scalar (times I), (r,) or (r, r); default 1e6
-    forgetting: RLS forgetting factor lambda in (0, 1]; default 1 (none)
-    p_min, p_max: RLS bounds on trace(P)
-    gamma: gradient gain: scalar, (r,) or (r, r) SPD; default 1
-    normalized: normalized gradient law; default True
+    bounds
+        ``(lower, upper)`` box on the estimate, shapes (r,); default none
+    t0
+        time of the first sample [s]
+    dt
+        sample time [s] given to the law (the gradient law's Euler step); default 1
+    P0
+        RLS initial covariance: scalar (times I), (r,) or (r, r); default 1e6
+    forgetting
+        RLS forgetting factor lambda in (0, 1]; default 1 (none)
+    p_min, p_max
+        RLS bounds on trace(P)
+    gamma
+        gradient gain: scalar, (r,) or (r, r) SPD; default 1
+    normalized
+        normalized gradient law; default True
     """
 
     theta0: ArrayLike | None = None
@@ -318,7 +340,8 @@ class OnlineOptions:
 
         Raises
         ------
-        InputError: a key that is not a field, or a value that is neither.
+        InputError
+            a key that is not a field, or a value that is neither.
         """
         return options_from(cls, online, "online")
 

@@ -54,39 +54,63 @@ class IdentificationResult:
 
     Attributes
     ----------
-    method: "ols", "wls", "rls" or "gradient"
-    robot_name: name of the robot
-    names: one name per base parameter (its independent column, ``R`` if regrouped)
-    expressions: each base parameter in standard parameter names
-    estimate: base parameters theta_b, shape (r,) [units of the independent columns]
-    std: standard deviations, shape (r,); std_percent: ``100 std / |estimate|`` [%]
-    covariance: shape (r, r): ``sigma2 (Y_b^T Y_b)^-1`` (OLS, and RLS/gradient at their
+    method
+        "ols", "wls", "rls" or "gradient"
+    robot_name
+        name of the robot
+    names
+        one name per base parameter (its independent column, ``R`` if regrouped)
+    expressions
+        each base parameter in standard parameter names
+    estimate
+        base parameters theta_b, shape (r,) [units of the independent columns]
+    std
+        standard deviations, shape (r,); std_percent: ``100 std / |estimate|`` [%]
+    covariance
+        shape (r, r): ``sigma2 (Y_b^T Y_b)^-1`` (OLS, and RLS/gradient at their
         final estimate), ``(Y_b^T W Y_b)^-1`` for WLS
-    sigma2: residual variance [(N m)^2] (weighted, about 1, for WLS)
-    noise_variance: per-joint residual variance, shape (nv,) [(N m)^2]
-    condition_number: 2-norm condition number of the base regressor on these data
-    rank_analysis: what these data excite (analysis of the accumulated information)
-    relative_error: train / validation relative torque errors
-    n_samples: number of training samples N
-    timings: seconds per stage
-    solver: how the estimate was computed, including any fallback
-    base: the base parametrization used
-    dof_names: joint names, length nv
-    history: record of the online law (``rls``/``gradient``), else None
-    standard: the standard parameters with their eigenvalue test
+    sigma2
+        residual variance [(N m)^2] (weighted, about 1, for WLS)
+    noise_variance
+        per-joint residual variance, shape (nv,) [(N m)^2]
+    condition_number
+        2-norm condition number of the base regressor on these data
+    rank_analysis
+        what these data excite (analysis of the accumulated information)
+    relative_error
+        train / validation relative torque errors
+    n_samples
+        number of training samples N
+    timings
+        seconds per stage
+    solver
+        how the estimate was computed, including any fallback
+    base
+        the base parametrization used
+    dof_names
+        joint names, length nv
+    history
+        record of the online law (``rls``/``gradient``), else None
+    standard
+        the standard parameters with their eigenvalue test
         (:class:`~manip_id.estimators.consistent.StandardEstimate`): the consistent
         estimate (``consistent=True``; then ``estimate`` holds the base parameters it
         implies, ``P theta``), or for plain OLS/WLS the minimum-norm standard vector
-    warnings: e.g. the physical-consistency violations of a plain least-squares fit
-    per_file: each file's own estimate (:class:`manip_id.fleet.FileEstimate`) when
+    warnings
+        e.g. the physical-consistency violations of a plain least-squares fit
+    per_file
+        each file's own estimate (:class:`manip_id.fleet.FileEstimate`) when
         :func:`manip_id.fleet.identify_files` was asked ``per_file=True``, else None
-    model: "dynamic" (tau = Y(q, dq, ddq) theta), "energy" or "momentum"
+    model
+        "dynamic" (tau = Y(q, dq, ddq) theta), "energy" or "momentum"
         (:mod:`manip_id.models`); the training errors, ``sigma2`` and
         ``noise_variance`` are those of the model's own equation (per output of
         ``output_names``), the validation error is always the torque error
-    output_names: names of the model's outputs (default ``dof_names``; "energy"
+    output_names
+        names of the model's outputs (default ``dof_names``; "energy"
         for the energy model's one scalar row per window)
-    files: :func:`identify_datasets` only: ``{"train": [...], "validation": [...]}``,
+    files
+        :func:`identify_datasets` only: ``{"train": [...], "validation": [...]}``,
         the :class:`~manip_id.pipeline.FileAccumulation` of each file (its
         data-quality summary, samples, rows left out by the deadband)
     """

@@ -70,10 +70,14 @@ class PartSums:
 
     Attributes
     ----------
-    acc: the accumulated base-column information of the fit's rows (``acc.n`` samples)
-    files: per file index, what is known of it (:class:`~.problem.FileRecord`)
-    timings: seconds per stage, summed over the tasks [s]
-    still, raw: the rows inside the deadband and the raw-torque sums
+    acc
+        the accumulated base-column information of the fit's rows (``acc.n`` samples)
+    files
+        per file index, what is known of it (:class:`~.problem.FileRecord`)
+    timings
+        seconds per stage, summed over the tasks [s]
+    still, raw
+        the rows inside the deadband and the raw-torque sums
         (:class:`~.problem.RowSums`), when the parts have them
     """
 
@@ -128,15 +132,21 @@ def part_sums(
 
     Parameters
     ----------
-    robot: the robot (:func:`portable_robot` for a worker)
-    part: the file and the block of its preprocessed samples
-    columns: the base parameters' independent columns, shape (r,)
-    chunk: samples per regressor chunk
-    options: how files are read and preprocessed (:class:`~.options.PreprocessOptions`)
+    robot
+        the robot (:func:`portable_robot` for a worker)
+    part
+        the file and the block of its preprocessed samples
+    columns
+        the base parameters' independent columns, shape (r,)
+    chunk
+        samples per regressor chunk
+    options
+        how files are read and preprocessed (:class:`~.options.PreprocessOptions`)
 
     Raises
     ------
-    DataError: naming the file, whatever went wrong with it.
+    DataError
+        naming the file, whatever went wrong with it.
     """
     options = options or PreprocessOptions()
     ind = np.asarray(columns, dtype=np.intp)

@@ -105,13 +105,18 @@ def energy_rows(
 
     Parameters
     ----------
-    robot: the robot (its joint terms decide the columns)
-    q: positions [rad or m], shape (N, nq); dq [rad/s or m/s] and tau [N m or N], (N, nv)
-    dt: sample time [s] (uniform sampling)
-    window_length: window [s] (default :data:`DEFAULT_WINDOW`), rounded to an even
+    robot
+        the robot (its joint terms decide the columns)
+    q
+        positions [rad or m], shape (N, nq); dq [rad/s or m/s] and tau [N m or N], (N, nv)
+    dt
+        sample time [s] (uniform sampling)
+    window_length
+        window [s] (default :data:`DEFAULT_WINDOW`), rounded to an even
         number of sampling intervals ``w``; windows ``[k w, (k + 1) w]`` follow each
         other, ``floor((N - 1) / w)`` of them
-    chunk: windows per yielded block (default: about 4096 samples' worth)
+    chunk
+        windows per yielded block (default: about 4096 samples' worth)
     """
     q, dq, tau = check_model_states(robot, q, dq, tau)
     w = window_samples(window_length, dt)
@@ -170,15 +175,22 @@ class EnergyBaseCheck:
 
     Attributes
     ----------
-    robot_name: the robot
-    n_base_dynamic: number of base parameters of the dynamic model (structural)
-    rank_dynamic: rank of the dynamic regressor on the check trajectory
-    rank_energy: rank of the energy regressor on the same trajectory's windows
-    rank_on_base_columns: rank of the energy regressor restricted to the dynamic
+    robot_name
+        the robot
+    n_base_dynamic
+        number of base parameters of the dynamic model (structural)
+    rank_dynamic
+        rank of the dynamic regressor on the check trajectory
+    rank_energy
+        rank of the energy regressor on the same trajectory's windows
+    rank_on_base_columns
+        rank of the energy regressor restricted to the dynamic
         model's independent columns (== n_base_dynamic when they are identifiable)
-    regrouping_residual: ``max |E_dep - E_ind K| / max |E|`` with the dynamic K
+    regrouping_residual
+        ``max |E_dep - E_ind K| / max |E|`` with the dynamic K
         (0 up to round-off when the regrouping is the same)
-    same: the energy regressor has full rank on the dynamic model's independent
+    same
+        the energy regressor has full rank on the dynamic model's independent
         columns and the same regrouping (``rank_on_base_columns == n_base_dynamic``
         and a residual below 1e-8): the same base parameters. The two trajectory
         ranks are for information: at ``tolerance`` they may count a direction the

@@ -192,12 +192,17 @@ def momentum_rows(
 
     Parameters
     ----------
-    q: positions [rad or m], shape (N, nq); dq [rad/s or m/s] and tau [N m or N], (N, nv)
-    dt: sample time [s] (uniform sampling)
-    window_length: spacing of the rows [s] (default :data:`~manip_id.models.DEFAULT_WINDOW`):
+    q
+        positions [rad or m], shape (N, nq); dq [rad/s or m/s] and tau [N m or N], (N, nv)
+    dt
+        sample time [s] (uniform sampling)
+    window_length
+        spacing of the rows [s] (default :data:`~manip_id.models.DEFAULT_WINDOW`):
         samples ``k = s, 2 s, ...`` with ``s = round(window_length / dt)``
-    bandwidth: lambda of the filter [rad/s]; default ``3 / window_length``
-    chunk: samples per regressor chunk
+    bandwidth
+        lambda of the filter [rad/s]; default ``3 / window_length``
+    chunk
+        samples per regressor chunk
     """
     q, dq, tau = check_model_states(robot, q, dq, tau)
     stride = window_samples(window_length, dt, even=False)
