@@ -308,7 +308,8 @@ def _search(fit, robot: Robot, model: str, opts: SelectionOptions) -> tuple[_Tri
     for _ in range(opts.refine if len(grid) > 1 else 0):
         h /= 2
         for sign in (-1.0, 1.0):
-            trial = _fit_trial(fit, robot, model, opts, winner.shape * math.exp(sign * h))
+            shape = np.asarray(winner.shape, dtype=float) * math.exp(sign * h)
+            trial = _fit_trial(fit, robot, model, opts, shape)
             winner = _winners([winner, trial])
             n += 1
     return winner, n
@@ -404,7 +405,7 @@ def _combine(fit, robot, opts, joints: list[JointSelection], shapes, use_val) ->
         laws = [c for c in js.candidates if c.model not in ("linear", "position")]
         if not laws:
             return 0
-        best = min(laws, key=lambda c: c.validation_error if use_val else c.bic)
+        best = min(laws, key=lambda c: float(c.validation_error if use_val else c.bic))  # type: ignore[arg-type]
         names.append(best)
     per_joint = [_model_terms(robot.terms, c.model + "+position", opts, shapes) for c in names]
     r = robot.with_terms(combined_terms(robot.terms, per_joint, shapes))
