@@ -271,6 +271,8 @@ class Plant:
         self._lie = robot.nq != robot.nv
         # joint terms other than armature (which is in the model's mass matrix)
         coef = robot.layout.joint_block(theta)
+        if robot.layout.mask is not None:  # a per-joint model: the terms a joint lacks are 0
+            coef = coef * robot.layout.mask
         self._joint_terms = [
             (term, coef[:, i].copy())
             for i, term in enumerate(robot.layout.term_table)
@@ -291,7 +293,7 @@ class Plant:
         angles = self.robot.dofs.angles(q) if self._needs_angles else None
         out = np.zeros(self.robot.nv)
         for term, c in self._joint_terms:
-            out += term.torque(c, angles, dq, None)
+            out += term.torque(c, angles, dq, None, self.robot.layout.shapes)
         return out
 
     def acceleration(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray) -> np.ndarray:

@@ -253,3 +253,28 @@ def test_dask_path_agrees_for_every_new_term(robot, tmp_path):
         cluster.close()
     scale = np.abs(serial.estimate).max()
     assert np.abs(dask.estimate - serial.estimate).max() <= 1e-9 * scale
+
+
+def test_simulator_evaluates_shaped_and_per_joint_laws(robot):
+    from manip_id.closed_loop import Plant
+    from manip_id.regressor import joint_torques
+
+    shapes = FrictionShapes(stribeck_velocity=(0.08, 0.2), sigmoid_slope=(30.0, 10.0))
+    per_dof = (("fv", "fc", "fs"), ("fv", "fsg"))  # joint 1 Stribeck, joint 2 sigmoid
+    terms = JointTerms(
+        viscous=True, coulomb=True, stribeck=True, sigmoid=True, shapes=shapes, per_dof=per_dof
+    )
+    r = robot.with_terms(terms)
+    theta = r.nominal_parameters.copy()
+    theta[r.layout.joint_columns("fv")] = [0.3, 0.2]
+    theta[r.layout.joint_columns("fc")] = [0.5, 9.0]  # joint 2 has no fc: 9 is ignored
+    theta[r.layout.joint_columns("fs")] = [0.7, 9.0]
+    theta[r.layout.joint_columns("fsg")] = [9.0, 1.2]
+    dq = np.array([0.05, -0.3])
+    expected = [
+        0.3 * 0.05 + (0.5 + 0.7 * np.exp(-((0.05 / 0.08) ** 2))) * 1.0,
+        0.2 * -0.3 + 1.2 * (1 / (1 + np.exp(10.0 * 0.3)) - 0.5),
+    ]
+    plant = Plant(r, theta, rate=100.0)
+    np.testing.assert_allclose(plant.joint_torque(np.zeros(2), dq), expected, rtol=1e-12)
+    np.testing.assert_allclose(joint_torques(r, theta, np.zeros(2), dq), expected, rtol=1e-12)
