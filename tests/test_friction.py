@@ -278,3 +278,48 @@ def test_simulator_evaluates_shaped_and_per_joint_laws(robot):
     plant = Plant(r, theta, rate=100.0)
     np.testing.assert_allclose(plant.joint_torque(np.zeros(2), dq), expected, rtol=1e-12)
     np.testing.assert_allclose(joint_torques(r, theta, np.zeros(2), dq), expected, rtol=1e-12)
+
+
+# ----------------------------------------------------------------------- CLI
+def test_cli_friction_auto_on_data_files(robot, tmp_path, capsys):
+    import json
+
+    from manip_id.cli import main
+
+    paths = []
+    for k, seed in enumerate((11, 12)):
+        (q, dq, ddq, tau), _ = _data(robot, "sigmoid", seed=seed, duration=20.0)
+        t = np.arange(q.shape[0]) / RATE + 30.0 * k
+        path = tmp_path / f"part{k}.npz"
+        np.savez(path, t=t, q=q, dq=dq, ddq=ddq, tau=tau, joint_names=np.array(robot.dof_names))
+        paths.append(str(path))
+    out = tmp_path / "auto.json"
+    argv = ["identify", "double_pendulum", "--data", paths[0], "--validate", paths[1]]
+    assert main([*argv, "--friction", "auto", "--json", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "friction model per joint (by validation error):" in text
+    report = json.loads(out.read_text())
+    table = report["friction_selection"]
+    assert [j["joint"] for j in table] == robot.dof_names
+    for j in table:
+        assert j["chosen"] in ("sigmoid", "sigmoid+position")
+        assert {"model", "parameters", "validation_error", "bic"} <= set(j["candidates"][0])
+    assert set(report["joint_terms_per_joint"]) == set(robot.dof_names)
+    assert len(report["friction_shapes"]["sigmoid_slope"]) == 2
+    assert report["relative_error"]["validation"] < 1.5 * NOISE  # 20 s of training data
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--simulate", "--friction", "auto"], "--friction auto applies to --data files"),
+        (["--simulate", "--friction", "position:9"], "order 1..4"),
+        (["--simulate", "--friction", "stiction"], "unknown friction kind 'stiction'"),
+    ],
+)
+def test_cli_bad_friction_one_line_exit_2(capsys, args, message):
+    from manip_id.cli import main
+
+    assert main(["identify", "double_pendulum", *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("manip-id: error:") and message in err[0]

@@ -337,10 +337,14 @@ def _check_args(args) -> None:
     if args.workers > 1 and args.method in ("rls", "gradient"):
         raise InputError(f"--workers applies to ols and wls; {args.method} runs in sample order")
     if getattr(args, "friction", None) == "auto" and (
-        args.simulate or args.model != "dynamic" or args.method not in ("ols", "wls")
+        args.simulate
+        or args.model != "dynamic"
+        or args.method not in ("ols", "wls")
+        or _fleet.wanted(args)
     ):
         raise InputError(
-            "--friction auto applies to --data files with --method ols or wls and the dynamic model"
+            "--friction auto applies to --data files with --method ols or wls and the "
+            "dynamic model, without --scheduler or --per-file"
         )
     _check_consistent_args(args)
     _fleet.check(args)
