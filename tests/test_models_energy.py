@@ -323,3 +323,17 @@ def test_default_window_runs_where_the_default_gives_too_few_rows(panda, traject
     window = res.context["window"]
     assert window["chosen"] and window["rows"] >= 5 * len(res.names)
     assert res.relative_error.train < 1e-3  # noise-free: the fit is exact up to Simpson
+
+
+def test_files_path_chooses_the_same_window(panda, trajectory, tmp_path):
+    from manip_id.fleet import identify_files
+
+    robot, _ = panda
+    ds = _data(panda, trajectory, noise=0.01)
+    path = tmp_path / "log.npz"
+    np.savez(path, t=ds.t, q=ds.q, dq=ds.dq, ddq=ds.ddq, tau=ds.tau)
+    own = identify(robot, ds.q, ds.dq, None, ds.tau, model=ModelOptions("energy", dt=1 / RATE))
+    assert own.context["window"]["chosen"]  # the default 0.2 s gives too few rows here
+    files = identify_files(robot, [str(path)], model=ModelOptions("energy"))
+    scale = np.abs(own.estimate).max()
+    assert np.abs(files.estimate - own.estimate).max() <= 1e-8 * scale
