@@ -216,13 +216,18 @@ def profile_terms(prof: RobotProfile | None) -> JointTerms:
     """The joint-term defaults of a profile (none without one)."""
     if prof is None:
         return JointTerms()
-    friction = prof.friction or ()
+    spec = parse_friction(list(prof.friction or ()))
+    k = spec.kinds
     return JointTerms(
         armature=bool(prof.armature),
-        viscous="viscous" in friction,
-        coulomb="coulomb" in friction,
-        offset="offset" in friction,
+        viscous="viscous" in k,
+        coulomb="coulomb" in k,
+        offset="offset" in k,
         spring=bool(prof.spring),
+        asymmetric="asymmetric" in k,
+        stribeck="stribeck" in k,
+        sigmoid="sigmoid" in k,
+        harmonics=spec.harmonics,
     )
 
 

@@ -323,3 +323,13 @@ def test_cli_bad_friction_one_line_exit_2(capsys, args, message):
     assert main(["identify", "double_pendulum", *args]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("manip-id: error:") and message in err[0]
+
+
+def test_profile_takes_the_laws(tmp_path):
+    path = tmp_path / "pendulum.toml"
+    path.write_text('[model]\nfriction = ["viscous", "coulomb", "stribeck", "position:3"]\n')
+    r = load_robot("double_pendulum", profile=path)
+    assert r.terms.enabled == ("fv", "fc", "fs", "h1s", "h1c", "h2s", "h2c", "h3s", "h3c")
+    path.write_text('[model]\nfriction = ["stiction"]\n')
+    with pytest.raises(InputError, match="model.friction holds 'stiction'"):
+        load_robot("double_pendulum", profile=path)
