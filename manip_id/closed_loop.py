@@ -260,6 +260,7 @@ class Plant:
         from .simulation import require_physical
 
         require_physical(robot, theta)  # a message naming the body
+        robot.evaluator.refuse_load("the closed-loop plant (forward dynamics)")
         self.robot = robot
         self.theta = theta
         self.integrator = integrator

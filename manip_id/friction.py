@@ -12,6 +12,7 @@ enters the regressor as columns of joint ``j``'s row (``dq = dq_j``, ``q = q_j``
                   = fc sign(dq) + fs' exp(-(dq/vs)^2) sign(dq)     fs' = fs - fc [N m]
     sigmoid       fsg (S(a (dq + c)) - S(a c)),  S(x) = 1/(1 + e^-x)  fsg [N m]
     position      sum_k hks sin(k q) + hkc cos(k q),  k = 1..K      hks, hkc [N m]
+    load          fl |tau_load| sign(dq)                             fl [1]
 
 (prismatic joints: N, N s/m). ``asymmetric`` replaces ``viscous`` and ``coulomb``; with
 ``offset`` its Coulomb pair is ``coulomb`` + ``offset`` (torque ``fc + fo`` for dq > 0
@@ -19,6 +20,12 @@ and ``-fc + fo`` for dq < 0: the same span away from rest), so it keeps ``fc`` t
 ``stribeck`` adds ``fs'`` to ``coulomb`` (the static friction is ``fs = fc + fs'``).
 ``sigmoid`` is the per-joint form of Gaz et al. (2019, the Panda's published model):
 ``phi1 = fsg``, ``phi2 = a``, ``phi3 = c``; the ``- S(a c)`` makes it zero at rest.
+
+``load`` is Coulomb friction growing with the joint's load (strain-wave gears):
+``tau_load = rnea(q, dq, ddq)`` of the *nominal* rigid-body model (the robot's URDF
+inertias), a known signal, so the law stays linear in ``fl``. It needs the measured
+acceleration: the dynamic model only (not the Slotine-Li regressor, the energy and
+momentum models or the closed-loop plant, which refuse it).
 
 Shapes (:class:`FrictionShapes`): the Stribeck velocity ``vs`` [rad/s], the sigmoid
 slope ``a`` [s/rad] and shift ``c`` [rad/s], per DoF. They are fixed when the linear
@@ -44,6 +51,7 @@ FRICTION_KINDS: tuple[str, ...] = (
     "stribeck",
     "sigmoid",
     "position",
+    "load",
 )
 #: Highest harmonic order of the ``position`` law.
 MAX_HARMONICS = 4
@@ -121,6 +129,11 @@ def sigmoid_column(vel, shapes: FrictionShapes | None):
     return _sigmoid(a * (vel + c)) - _sigmoid(a * c)
 
 
+def load_column(load, vel, *_):
+    """``|tau_load| sign(dq)``, shape like ``vel`` (..., nv); ``load`` [N m or N]."""
+    return np.abs(load) * np.sign(vel)
+
+
 def _harmonic(angles, vel, acc, shapes=None, *, order: int, cosine: bool):
     return np.cos(order * angles) if cosine else np.sin(order * angles)
 
@@ -190,6 +203,8 @@ def friction_columns(spec: FrictionSpec) -> set[str]:
         out |= {"fs"} | ({"fcp", "fcn"} if "fcp" in out else {"fc"})
     if "sigmoid" in k:
         out.add("fsg")
+    if "load" in k:
+        out.add("fl")
     for order in range(1, spec.harmonics + 1):
         out |= {f"h{order}s", f"h{order}c"}
     return out

@@ -29,6 +29,7 @@ regressor column (only row ``j`` is non-zero), its units and its torque
     fs  Stribeck   exp(-(dq_j/vs_j)^2) sign(dq_j)           [N m | N]
     fsg sigmoid    S(a_j (dq_j + c_j)) - S(a_j c_j)         [N m | N]
     hks, hkc       sin(k q_j), cos(k q_j), k = 1..4         [N m | N]
+    fl  load       |tau_load_j| sign(dq_j)                  [1]
 
 (the friction laws, their shapes ``vs, a, c`` and how they combine:
 :mod:`manip_id.friction`). A layout may switch terms off for some DoFs
@@ -74,6 +75,7 @@ from .friction import (
     MAX_HARMONICS,
     FrictionShapes,
     harmonic_column,
+    load_column,
     sigmoid_column,
     stribeck_column,
 )
@@ -172,22 +174,33 @@ class JointTerm:
     unit_prismatic: str
     needs_angles: bool
     _column: Callable[..., Any]
+    needs_load: bool = False
 
-    def column(self, angles, vel, acc, shapes: FrictionShapes | None = None) -> np.ndarray:
+    def column(
+        self, angles, vel, acc, shapes: FrictionShapes | None = None, load=None
+    ) -> np.ndarray:
         """Regressor entries of this term, shape like ``vel`` (..., nv).
 
         ``angles``: joint angles (..., nv) [rad or m], used by ``k`` and the harmonics
         only (may be None otherwise); ``vel``: velocity [rad/s or m/s]; ``acc``:
         acceleration [rad/s^2 or m/s^2], used by ``Ia`` only; ``shapes``: the per-DoF
-        shapes of ``fs`` and ``fsg`` (None: their defaults, :mod:`manip_id.friction`).
+        shapes of ``fs`` and ``fsg`` (None: their defaults, :mod:`manip_id.friction`);
+        ``load``: the nominal rigid-body torque (..., nv) [N m or N], used by ``fl`` only.
         """
+        if self.needs_load:
+            if load is None:
+                raise InputError(
+                    f"the {self.name} term ({self.column_text}) needs the load torque "
+                    "(positions, velocities and accelerations of every joint)"
+                )
+            return load_column(load, vel)
         return self._column(angles, vel, acc, shapes)
 
     def torque(
-        self, coefficient, angles, vel, acc, shapes: FrictionShapes | None = None
+        self, coefficient, angles, vel, acc, shapes: FrictionShapes | None = None, load=None
     ) -> np.ndarray:
         """``coefficient * column`` [N m or N], shape like ``vel``."""
-        return coefficient * self._column(angles, vel, acc, shapes)
+        return coefficient * self.column(angles, vel, acc, shapes, load)
 
     def unit(self, prismatic: bool) -> str:
         """Unit of this term's parameter for a prismatic or revolute DoF."""
@@ -224,6 +237,7 @@ JOINT_TERMS: tuple[JointTerm, ...] = (
         for k in range(1, MAX_HARMONICS + 1)
         for cos in (False, True)
     ),
+    JointTerm("fl", "load", "|tau_load_j| sign(dq_j)", "1", "1", False, load_column, True),
 )
 #: Joint-level term names, in the order their columns appear for each joint.
 JOINT_TERM_NAMES: tuple[str, ...] = tuple(t.name for t in JOINT_TERMS)
@@ -558,10 +572,17 @@ class ParameterLayout:
         return tuple(self.owner(c).joint for c in range(self.n_parameters))
 
     # ------------------------------------------------------------ joint terms
-    def joint_values(self, angles, vel, acc) -> np.ndarray:
+    @cached_property
+    def needs_load(self) -> bool:
+        """Whether a term needs the load torque (the ``load`` law)."""
+        return any(t.needs_load for t in self.term_table)
+
+    def joint_values(self, angles, vel, acc, load=None) -> np.ndarray:
         """Joint-term regressor entries, shape (..., nv, nt) (see :data:`JOINT_TERMS`),
-        with the layout's shapes, zero where the mask switches a term off."""
-        vals = np.stack([t.column(angles, vel, acc, self.shapes) for t in self.term_table], -1)
+        with the layout's shapes, zero where the mask switches a term off; ``load`` the
+        nominal rigid-body torque (..., nv) [N m or N] when :attr:`needs_load`."""
+        shapes = self.shapes
+        vals = np.stack([t.column(angles, vel, acc, shapes, load) for t in self.term_table], -1)
         return vals if self.mask is None else vals * self.mask
 
     # ------------------------------------------------------- physical consistency

@@ -66,8 +66,8 @@ FLOATING_JOINTS = (
 class JointTerms:
     """Which joint-level terms the model carries (for every active joint).
 
-    ``asymmetric``, ``stribeck``, ``sigmoid`` and ``harmonics`` (the order of the
-    ``position`` law) are the friction laws of :mod:`manip_id.friction`; ``shapes``
+    ``asymmetric``, ``stribeck``, ``sigmoid``, ``harmonics`` (the order of the
+    ``position`` law) and ``load`` are the friction laws of :mod:`manip_id.friction`; ``shapes``
     their per-DoF shape parameters; ``per_dof`` (None: all) the terms each DoF keeps,
     one tuple of term names per DoF (the others' columns are zero: a per-joint model).
     """
@@ -81,6 +81,7 @@ class JointTerms:
     stribeck: bool = False
     sigmoid: bool = False
     harmonics: int = 0
+    load: bool = False
     shapes: FrictionShapes | None = None
     per_dof: tuple[tuple[str, ...], ...] | None = None
 
@@ -95,6 +96,7 @@ class JointTerms:
             ("stribeck", self.stribeck),
             ("sigmoid", self.sigmoid),
             ("position", self.harmonics > 0),
+            ("load", self.load),
         )
         return FrictionSpec(frozenset(k for k, on in flags if on), int(self.harmonics))
 
@@ -143,6 +145,7 @@ def joint_terms(armature, friction, spring, defaults: JointTerms) -> JointTerms:
         stribeck="stribeck" in k,
         sigmoid="sigmoid" in k,
         harmonics=spec.harmonics,
+        load="load" in k,
         shapes=defaults.shapes if friction is None else None,
     )
 
@@ -228,6 +231,7 @@ def profile_terms(prof: RobotProfile | None) -> JointTerms:
         stribeck="stribeck" in k,
         sigmoid="sigmoid" in k,
         harmonics=spec.harmonics,
+        load="load" in k,
     )
 
 

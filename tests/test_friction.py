@@ -26,8 +26,9 @@ SLOPE = np.array([30.0, 12.0])  # true sigmoid slopes [s/rad]
 
 
 # ------------------------------------------------------------------ formulas
-def _friction(law: str, q, dq) -> tuple[np.ndarray, dict]:
-    """The true joint torque of one law [N m], (N, 2), and its coefficients by name."""
+def _friction(law: str, q, dq, rigid) -> tuple[np.ndarray, dict]:
+    """The true joint torque of one law [N m], (N, 2), and its coefficients by name
+    (``rigid``: the rigid-body torque of the nominal model, the load of the load law)."""
     fv, fc, fo = np.array([0.3, 0.2]), np.array([0.8, 0.5]), np.array([0.1, -0.2])
     tau = fv * dq + fo
     coef = {"fv": fv, "fo": fo}
@@ -50,6 +51,10 @@ def _friction(law: str, q, dq) -> tuple[np.ndarray, dict]:
         h1s, h1c, h2s = np.array([0.3, -0.2]), np.array([0.2, 0.25]), np.array([-0.15, 0.1])
         tau = tau + fc * np.sign(dq) + h1s * np.sin(q) + h1c * np.cos(q) + h2s * np.sin(2 * q)
         coef.update(fc=fc, h1s=h1s, h1c=h1c, h2s=h2s, h2c=np.zeros(2))
+    elif law == "load":
+        fl = np.array([0.08, 0.05])  # [1]: Coulomb friction of 8 and 5 % of the load
+        tau = tau + fc * np.sign(dq) + fl * np.abs(rigid) * np.sign(dq)
+        coef.update(fc=fc, fl=fl)
     return tau, coef
 
 
@@ -64,7 +69,7 @@ def _data(robot, law: str, seed: int, duration: float = 40.0):
     q, dq, ddq = traj.sample(t)
     m, d = robot.model, robot.model.createData()
     tau = np.array([pin.rnea(m, d, a, b, c) for a, b, c in zip(q, dq, ddq, strict=True)])
-    fr, coef = _friction(law, q, dq)
+    fr, coef = _friction(law, q, dq, tau)
     tau = tau + fr
     rng = np.random.default_rng(seed + 100)
     tau = tau + NOISE * np.sqrt(np.mean(tau**2, axis=0)) * rng.standard_normal(tau.shape)
@@ -133,7 +138,7 @@ def test_parse_friction():
 
 
 # ----------------------------------------------------------------- recovery
-@pytest.mark.parametrize("law", ["linear", "asymmetric", "position"])
+@pytest.mark.parametrize("law", ["linear", "asymmetric", "position", "load"])
 def test_linear_laws_recover_their_coefficients(robot, law):
     train, coef = _data(robot, law, seed=1)
     terms = candidate_terms(robot.terms, law, SelectionOptions())
@@ -162,7 +167,7 @@ def test_nonlinear_laws_recover_shape_and_coefficients(robot, law, true_shape):
     assert res.relative_error.validation < 1.2 * NOISE  # the noise, little more
 
 
-@pytest.mark.parametrize("law", ["asymmetric", "stribeck", "sigmoid", "position"])
+@pytest.mark.parametrize("law", ["asymmetric", "stribeck", "sigmoid", "position", "load"])
 def test_selection_picks_the_true_law_on_validation_data(robot, law):
     train, _ = _data(robot, law, seed=3)
     valid, _ = _data(robot, law, seed=4, duration=20.0)
@@ -200,7 +205,7 @@ def test_bic_without_validation_data(robot):
 
 
 # ------------------------------------------------------------------ back-ends
-@pytest.mark.parametrize("law", ["asymmetric", "stribeck", "sigmoid", "position"])
+@pytest.mark.parametrize("law", ["asymmetric", "stribeck", "sigmoid", "position", "load"])
 def test_streamed_and_forked_paths_agree(robot, law):
     from manip_id.identification import identify_chunks
 
@@ -234,7 +239,13 @@ def test_dask_path_agrees_for_every_new_term(robot, tmp_path):
     np.savez(path, **dict(zip(("q", "dq", "ddq", "tau"), train, strict=True)))
     shapes = FrictionShapes(stribeck_velocity=tuple(VS), sigmoid_slope=tuple(SLOPE))
     terms = JointTerms(
-        offset=True, asymmetric=True, stribeck=True, sigmoid=True, harmonics=2, shapes=shapes
+        offset=True,
+        asymmetric=True,
+        stribeck=True,
+        sigmoid=True,
+        harmonics=2,
+        load=True,
+        shapes=shapes,
     )
     r = robot.with_terms(terms)
     serial = identify(r, *train)
@@ -333,3 +344,19 @@ def test_profile_takes_the_laws(tmp_path):
     path.write_text('[model]\nfriction = ["stiction"]\n')
     with pytest.raises(InputError, match="model.friction holds 'stiction'"):
         load_robot("double_pendulum", profile=path)
+
+
+def test_load_law_is_refused_where_there_is_no_acceleration(robot):
+    from manip_id.closed_loop import Plant
+    from manip_id.models import accumulate_energy
+    from manip_id.regressor import slotine_li_regressor
+
+    r = robot.with_terms(JointTerms(viscous=True, load=True))
+    (q, dq, ddq, tau), _ = _data(robot, "linear", seed=13, duration=2.0)
+    for call in (
+        lambda: accumulate_energy(r, q, dq, tau, dt=1 / RATE),
+        lambda: slotine_li_regressor(r, q[0], dq[0], ddq[0], dq[0]),
+        lambda: Plant(r, r.nominal_parameters, rate=100.0),
+    ):
+        with pytest.raises(InputError, match="load friction law"):
+            call()

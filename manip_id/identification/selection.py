@@ -10,6 +10,7 @@ Candidates (:data:`CANDIDATES`; every one with the offset ``fo`` when
     stribeck     fv dq + (fc + fs' exp(-(dq/vs)^2)) sign(dq)        vs per joint
     sigmoid      fv dq + fsg (S(a dq) - 1/2)                         a per joint
     position     fv dq + fc sign(dq) + sum_k hks sin(k q) + hkc cos(k q)
+    load         fv dq + fc sign(dq) + fl |tau_load| sign(dq)      (nominal tau_load)
     X+position   a joint's best of asymmetric / stribeck / sigmoid, plus the harmonics
 
 Each fit is the usual one (``fit(robot) -> IdentificationResult``: the same accumulated
@@ -45,13 +46,21 @@ from ..robot import JointTerms, Robot
 from .result import IdentificationResult
 
 #: The candidate models, in the order they are tried.
-CANDIDATES: tuple[str, ...] = ("linear", "asymmetric", "stribeck", "sigmoid", "position")
+CANDIDATES: tuple[str, ...] = (
+    "linear",
+    "asymmetric",
+    "stribeck",
+    "sigmoid",
+    "position",
+    "load",
+)
 _KINDS = {
     "linear": ("viscous", "coulomb"),
     "asymmetric": ("asymmetric",),
     "stribeck": ("viscous", "coulomb", "stribeck"),
     "sigmoid": ("viscous", "sigmoid"),
     "position": ("viscous", "coulomb", "position"),
+    "load": ("viscous", "coulomb", "load"),
 }
 #: Default grids: Stribeck velocities vs [rad/s], sigmoid slopes a [s/rad].
 STRIBECK_GRID = (0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5)
@@ -195,6 +204,7 @@ def candidate_terms(
         stribeck="stribeck" in kinds,
         sigmoid="sigmoid" in kinds,
         harmonics=opts.harmonics if "position" in kinds else 0,
+        load="load" in kinds,
         shapes=shapes,
     )
 
@@ -203,7 +213,7 @@ def combined_terms(base: JointTerms, per_joint: list[JointTerms], shapes) -> Joi
     """One :class:`JointTerms` holding each joint's own model (``per_dof``)."""
     flags = {
         k: any(getattr(t, k) for t in per_joint)
-        for k in ("viscous", "coulomb", "offset", "asymmetric", "stribeck", "sigmoid")
+        for k in ("viscous", "coulomb", "offset", "asymmetric", "stribeck", "sigmoid", "load")
     }
     return JointTerms(
         armature=base.armature,
