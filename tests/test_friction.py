@@ -180,6 +180,9 @@ def test_selection_picks_the_true_law_on_validation_data(robot, law):
     doc = res.to_dict()["friction_selection"]
     assert [d["chosen"] for d in doc] == [law, law]
     assert {c["model"] for c in doc[0]["candidates"]} == set(opts.candidates)
+    assert res.context["joint_terms_per_joint"] == {
+        name: list(keep) for name, keep in zip(robot.dof_names, sel.terms.per_dof, strict=True)
+    }
 
 
 def test_linear_truth_is_not_fitted_worse(robot):

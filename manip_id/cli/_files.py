@@ -268,7 +268,7 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
         settings,
     )
     _add_file_info(report, robot, specs, vspecs, scans, files, options, result)
-    if selection is not None:
+    if selection is not None:  # the same keys as select_model's result context
         report["friction_selection"] = selection.to_dict()
         report["friction_criterion"] = selection.criterion
         report["joint_terms_per_joint"] = dict(

@@ -386,7 +386,15 @@ def select_model(
     selection = FrictionSelection(
         joints, "validation error" if use_val else "BIC", terms, n_fits + 1
     )
-    ctx = {**result.context, "friction_selection": selection.to_dict()}
+    ctx = {
+        **result.context,
+        "friction_selection": selection.to_dict(),
+        "friction_criterion": selection.criterion,
+        "joint_terms_per_joint": {
+            name: list(keep)
+            for name, keep in zip(robot.dof_names, terms.per_dof or (), strict=True)
+        },
+    }
     if shapes is not None:
         ctx["friction_shapes"] = shapes.to_dict()
     return replace(result, context=ctx), selection
