@@ -363,3 +363,18 @@ def test_load_law_is_refused_where_there_is_no_acceleration(robot):
     ):
         with pytest.raises(InputError, match="load friction law"):
             call()
+
+
+def test_a_law_the_data_cannot_carry_is_no_candidate(robot):
+    # 0.07 and 0.1 rad of motion: four harmonics and the offset are not independent there
+    traj = random_trajectory(robot, harmonics=5, wf=0.3, seed=1).scaled(0.02)
+    q, dq, ddq = traj.sample(np.arange(4000) / RATE)
+    m, d = robot.model, robot.model.createData()
+    tau = np.array([pin.rnea(m, d, a, b, c) for a, b, c in zip(q, dq, ddq, strict=True)])
+    tau += 0.3 * dq + 0.5 * np.sign(dq) + 1e-3 * np.random.default_rng(0).standard_normal(tau.shape)
+    opts = SelectionOptions(candidates=("linear", "position"), harmonics=4, combine=False)
+    res, sel = select_model(lambda r: identify(r, q, dq, ddq, tau), robot, opts)
+    assert [j.chosen for j in sel.joints] == ["linear", "linear"]
+    position = res.context["friction_selection"][0]["candidates"][1]
+    assert position["model"] == "position" and position["bic"] is None
+    assert "position n/a (not excited)" in sel.text()

@@ -42,6 +42,7 @@ import numpy as np
 
 from ..errors import InputError, RankDeficiencyError
 from ..friction import FrictionShapes
+from ..metrics import finite_or_none
 from ..robot import JointTerms, Robot
 from .result import IdentificationResult
 
@@ -125,8 +126,8 @@ class Candidate:
         return {
             "model": self.model,
             "parameters": self.parameters,
-            "validation_error": self.validation_error,
-            "bic": self.bic,
+            "validation_error": finite_or_none(self.validation_error),
+            "bic": finite_or_none(self.bic),
         }
 
 
@@ -178,11 +179,12 @@ class FrictionSelection:
         for j in self.joints:
             cells = []
             for c in j.candidates:
-                score = (
-                    f"{100 * c.validation_error:.3f} %"
-                    if c.validation_error is not None
-                    else f"BIC {c.bic:.1f}"
-                )
+                if not math.isfinite(c.bic):
+                    score = "n/a (not excited)"
+                elif c.validation_error is not None:
+                    score = f"{100 * c.validation_error:.3f} %"
+                else:
+                    score = f"BIC {c.bic:.1f}"
                 cells.append(f"{c.model} {score}")
             lines.append(f"  {j.joint}: {j.chosen} ({', '.join(cells)})")
         return "\n".join(lines)
@@ -262,7 +264,9 @@ def _shape_field(model: str) -> str:
 
 def _fit_trial(fit, robot, model, opts, shape: np.ndarray | None) -> _Trial:
     """One fit; a joint whose law column these data do not excite (a Stribeck velocity
-    below every velocity it reached) drops it and scores inf for this trial."""
+    below every velocity it reached) drops it and scores inf for this trial; a law that
+    leaves other directions unexcited (too many harmonics for a joint's range) scores inf
+    on every joint (the linear candidate must fit)."""
     shapes = None if shape is None else FrictionShapes(**{_shape_field(model): tuple(shape)})
     terms = candidate_terms(robot.terms, model, opts, shapes)
     dropped: set[int] = set()
@@ -273,8 +277,10 @@ def _fit_trial(fit, robot, model, opts, shape: np.ndarray | None) -> _Trial:
             break
         except RankDeficiencyError as exc:
             lost = _unexcited_terms(r, exc.directions)
-            if lost is None:
+            if lost is None and model == "linear":
                 raise
+            if lost is None:  # the law over-fits these data as a whole: not a candidate
+                return _Trial(shape, np.full(robot.nv, np.inf), np.full(robot.nv, np.inf))
             keep = [list(terms.enabled) for _ in range(robot.nv)]
             for j, t in lost:
                 dropped.add(j)
@@ -368,7 +374,7 @@ def select_model(
         else:
             trials[model], n = _fit_trial(fit, robot, model, opts, None), 1
         n_fits += n
-    use_val = all(t.val is not None for t in trials.values())
+    use_val = all(t.val is not None for t in trials.values() if np.isfinite(t.bic).any())
     shapes = _shapes(trials)
     joints = [
         JointSelection(name, "", [_candidate(m, t, j) for m, t in trials.items()])
