@@ -180,6 +180,7 @@ def _collect(robot, specs, options, scans) -> SimpleNamespace:
 def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
     """``manip-id identify --data ...`` (after the outputs were reserved)."""
     from ..identification import RunOptions, identify, identify_datasets, scan_file, split_file
+    from ..identification.selection import select_model_files
     from . import identify as cmd
     from ._common import profile_from_args, robot_from_args
 
@@ -213,7 +214,16 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
     selection = None
     if args.friction == "auto":  # one fit per candidate and shape, then the chosen model
         t0 = time.perf_counter()
-        robot, selection = _select_friction(robot, specs, vspecs, options, scans, args)
+        robot, _, selection = select_model_files(
+            robot,
+            specs,
+            validation=vspecs,
+            options=options,
+            method=args.method,
+            run=RunOptions(chunk=args.chunk, workers=args.workers),
+            scans=scans,
+            **cmd._consistent_kwargs(args),
+        )
         timings["friction_selection"] = time.perf_counter() - t0
         print(selection.text())
     if args.method in ("rls", "gradient"):  # sample order, in memory
@@ -315,29 +325,6 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
     if path is not None:
         print(f"wrote the report to {path}/index.html")
     return 0
-
-
-def _select_friction(robot, specs, vspecs, options, scans, args):
-    """``--friction auto``: :func:`manip_id.identification.selection.select_model` on these
-    files; returns the robot with the chosen per-joint model and the selection."""
-    from ..identification import RunOptions, identify_datasets
-    from ..identification.selection import select_model
-    from . import identify as cmd
-
-    def fit(r):
-        return identify_datasets(
-            r,
-            specs,
-            validation=vspecs,
-            options=options,
-            method=args.method,
-            run=RunOptions(chunk=args.chunk, workers=args.workers),
-            scans=scans,
-            **cmd._consistent_kwargs(args),
-        )
-
-    _, selection = select_model(fit, robot)
-    return robot.with_terms(selection.terms), selection
 
 
 def _raw_parts(specs, vspecs, train, valid, options) -> list:

@@ -44,6 +44,7 @@ from ..errors import InputError, RankDeficiencyError
 from ..friction import FrictionShapes
 from ..metrics import finite_or_none
 from ..robot import JointTerms, Robot
+from .files import identify_datasets
 from .result import IdentificationResult
 
 #: The candidate models, in the order they are tried.
@@ -443,6 +444,21 @@ def _combine(fit, robot, opts, joints: list[JointSelection], shapes, use_val) ->
     return 1
 
 
+def select_model_files(
+    robot: Robot, files, *, selection: SelectionOptions | None = None, **kwargs
+) -> tuple[Robot, IdentificationResult, FrictionSelection]:
+    """:func:`select_model` on log files: each fit is
+    :func:`~manip_id.identification.identify_datasets` ``(robot, files, **kwargs)``
+    (give ``validation=`` files for the validation error). Returns the robot with the
+    chosen per-joint model, its result and the selection."""
+
+    def fit(r: Robot) -> IdentificationResult:
+        return identify_datasets(r, files, **kwargs)
+
+    result, chosen = select_model(fit, robot, selection)
+    return robot.with_terms(chosen.terms), result, chosen
+
+
 def _shapes(trials: dict[str, _Trial]) -> FrictionShapes | None:
     """The per-joint best shapes of the nonlinear laws tried (None: neither was)."""
     vs, slope = trials.get("stribeck"), trials.get("sigmoid")
@@ -464,4 +480,5 @@ __all__ = [
     "combined_terms",
     "joint_scores",
     "select_model",
+    "select_model_files",
 ]
