@@ -709,7 +709,7 @@ def _run_acceleration_free(args, outputs, t_start: float) -> int:
     print(_summary(robot, shown).replace("relative torque error: train", "relative error: train"))
     if window:
         how = "chosen from the data: " + window["rule"] if window["chosen"] else "given"
-        print(f"window: {window['length']:.4g} s, {window['samples']} samples, ({how})")
+        print(f"window: {window['length']:.4g} s ({window['samples']} sampling intervals; {how})")
     if args.json:
         outputs.write_json(args.json, report)
     if args.report is not None:
