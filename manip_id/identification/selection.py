@@ -8,7 +8,7 @@ Candidates (:data:`CANDIDATES`; every one with the offset ``fo`` when
     linear       fv dq + fc sign(dq)
     asymmetric   fvp, fvn, and fcp, fcn (fc with the offset)
     stribeck     fv dq + (fc + fs' exp(-(dq/vs)^2)) sign(dq)        vs per joint
-    sigmoid      fv dq + fsg (S(a dq) - 1/2)                         a per joint
+    sigmoid      fv dq + fsg (S(a (dq + c)) - S(a c))                a, c per joint
     position     fv dq + fc sign(dq) + sum_k hks sin(k q) + hkc cos(k q)
     load         fv dq + fc sign(dq) + fl |tau_load| sign(dq)      (nominal tau_load)
     X+position   a joint's best of asymmetric / stribeck / sigmoid, plus the harmonics
@@ -26,7 +26,8 @@ each joint is scored on its own row by
 when no validation data are given. The shapes (Stribeck ``vs``, sigmoid slope ``a``)
 are chosen by variable projection: the linear coefficients are solved for every value
 of a grid (one fit per value), each joint keeps its best value, then the best is refined
-by a bisection in log(shape) (two fits per round, each joint its own value). The
+by a bisection in log(shape) (two fits per round, each joint its own value); the
+sigmoid's shift ``c`` is then chosen among :data:`SIGMOID_SHIFTS` and 0. The
 chosen per-joint models make one :class:`~manip_id.robot.JointTerms` with ``per_dof``
 (the terms each joint keeps) and ``shapes``; :func:`select_model` fits it last, and its
 result carries ``context["friction_selection"]``.
@@ -67,6 +68,8 @@ _KINDS = {
 #: Default grids: Stribeck velocities vs [rad/s], sigmoid slopes a [s/rad].
 STRIBECK_GRID = (0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5)
 SIGMOID_GRID = (5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0)
+#: Sigmoid shifts c [rad/s] tried at the chosen slopes (besides 0).
+SIGMOID_SHIFTS = (-0.04, -0.02, -0.01, 0.01, 0.02, 0.04)
 
 
 @dataclass(frozen=True)
@@ -88,6 +91,8 @@ class SelectionOptions:
     refine : int
         Rounds of refinement of the grid's best shape (a bisection in log(shape):
         half the grid step, then a quarter, ...; two fits per round).
+    sigmoid_shifts : tuple of float
+        Sigmoid shifts c [rad/s] tried at the chosen slopes, besides 0 (Gaz's phi3).
     combine : bool
         Also try, per joint, its best nonlinear law plus the ``position`` harmonics
         (one more fit; candidates ``"<law>+position"``).
@@ -99,6 +104,7 @@ class SelectionOptions:
     stribeck_grid: tuple[float, ...] = STRIBECK_GRID
     sigmoid_grid: tuple[float, ...] = SIGMOID_GRID
     refine: int = 3
+    sigmoid_shifts: tuple[float, ...] = SIGMOID_SHIFTS
     combine: bool = True
 
     def __post_init__(self):
@@ -256,6 +262,7 @@ class _Trial:
     shape: np.ndarray | None  # per joint, the shape value of this trial
     val: np.ndarray | None
     bic: np.ndarray
+    shift: np.ndarray | None = None  # per joint, the sigmoid shift c [rad/s]
 
 
 # ------------------------------------------------------------------ search
@@ -263,12 +270,16 @@ def _shape_field(model: str) -> str:
     return "stribeck_velocity" if model == "stribeck" else "sigmoid_slope"
 
 
-def _fit_trial(fit, robot, model, opts, shape: np.ndarray | None) -> _Trial:
+def _fit_trial(fit, robot, model, opts, shape: np.ndarray | None, shift=None) -> _Trial:
     """One fit; a joint whose law column these data do not excite (a Stribeck velocity
     below every velocity it reached) drops it and scores inf for this trial; a law that
     leaves other directions unexcited (too many harmonics for a joint's range) scores inf
     on every joint (the linear candidate must fit)."""
-    shapes = None if shape is None else FrictionShapes(**{_shape_field(model): tuple(shape)})
+    shapes = None
+    if shape is not None:
+        shapes = FrictionShapes(**{_shape_field(model): tuple(map(float, shape))})
+    if shift is not None:
+        shapes = replace(shapes or FrictionShapes(), sigmoid_shift=tuple(map(float, shift)))
     terms = candidate_terms(robot.terms, model, opts, shapes)
     dropped: set[int] = set()
     for _ in range(3):
@@ -281,7 +292,7 @@ def _fit_trial(fit, robot, model, opts, shape: np.ndarray | None) -> _Trial:
             if lost is None and model == "linear":
                 raise
             if lost is None:  # the law over-fits these data as a whole: not a candidate
-                return _Trial(shape, np.full(robot.nv, np.inf), np.full(robot.nv, np.inf))
+                return _Trial(shape, np.full(robot.nv, np.inf), np.full(robot.nv, np.inf), shift)
             keep = [list(terms.enabled) for _ in range(robot.nv)]
             for j, t in lost:
                 dropped.add(j)
@@ -293,7 +304,7 @@ def _fit_trial(fit, robot, model, opts, shape: np.ndarray | None) -> _Trial:
         bic[j] = np.inf
         if val is not None:
             val[j] = np.inf
-    return _Trial(shape, val, bic)
+    return _Trial(shape, val, bic, shift)
 
 
 def _unexcited_terms(robot: Robot, directions) -> list[tuple[int, str]] | None:
@@ -329,6 +340,12 @@ def _search(fit, robot: Robot, model: str, opts: SelectionOptions) -> tuple[_Tri
             trial = _fit_trial(fit, robot, model, opts, shape)
             winner = _winners([winner, trial])
             n += 1
+    if model == "sigmoid" and opts.sigmoid_shifts:  # Gaz's phi3, at the chosen slopes
+        winner.shift = np.zeros(nv)
+        for c in opts.sigmoid_shifts:
+            trial = _fit_trial(fit, robot, model, opts, winner.shape, np.full(nv, c))
+            winner = _winners([winner, trial])
+            n += 1
     return winner, n
 
 
@@ -340,7 +357,10 @@ def _winners(trials: list[_Trial]) -> _Trial:
     if pick[0].val is not None:
         val = np.array([t.val[j] for j, t in enumerate(pick)])  # type: ignore[index]
     bic = np.array([t.bic[j] for j, t in enumerate(pick)])
-    return _Trial(shape, val, bic)
+    shift = None
+    if any(t.shift is not None for t in pick):
+        shift = np.array([0.0 if t.shift is None else t.shift[j] for j, t in enumerate(pick)])
+    return _Trial(shape, val, bic, shift)
 
 
 def select_model(
@@ -411,6 +431,8 @@ def _candidate(model: str, trial: _Trial, j: int, name: str | None = None) -> Ca
     params = {}
     if trial.shape is not None:
         params = {"vs" if model == "stribeck" else "slope": float(trial.shape[j])}
+    if trial.shift is not None:
+        params["shift"] = float(trial.shift[j])
     val = None if trial.val is None else float(trial.val[j])
     return Candidate(name or model, params, val, float(trial.bic[j]))
 
@@ -467,6 +489,9 @@ def _shapes(trials: dict[str, _Trial]) -> FrictionShapes | None:
     return FrictionShapes(
         stribeck_velocity=None if vs is None else tuple(map(float, vs.shape)),  # type: ignore[arg-type]
         sigmoid_slope=None if slope is None else tuple(map(float, slope.shape)),  # type: ignore[arg-type]
+        sigmoid_shift=None
+        if slope is None or slope.shift is None
+        else tuple(map(float, slope.shift)),
     )
 
 
