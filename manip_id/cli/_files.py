@@ -222,8 +222,7 @@ def run(args: argparse.Namespace, outputs, t_start: float, robot=None) -> int:
             method=args.method,
             run=RunOptions(chunk=args.chunk, workers=args.workers),
             scans=scans,
-            **cmd._consistent_kwargs(args),
-        )
+        )  # plain least squares per candidate; --consistent applies to the chosen model
         timings["friction_selection"] = time.perf_counter() - t0
         print(selection.text())
     if args.method in ("rls", "gradient"):  # sample order, in memory
