@@ -129,6 +129,37 @@ def sigmoid_column(vel, shapes: FrictionShapes | None):
     return _sigmoid(a * (vel + c)) - _sigmoid(a * c)
 
 
+# the columns of the joint-term table (``parameters.JOINT_TERMS``): (angles, vel, acc, shapes)
+def viscous_positive(angles, vel, acc, shapes=None):
+    """``dq [dq > 0]``."""
+    return np.where(vel > 0, vel, 0.0)
+
+
+def viscous_negative(angles, vel, acc, shapes=None):
+    """``dq [dq < 0]``."""
+    return np.where(vel < 0, vel, 0.0)
+
+
+def coulomb_positive(angles, vel, acc, shapes=None):
+    """``[dq > 0]``."""
+    return (vel > 0).astype(float)
+
+
+def coulomb_negative(angles, vel, acc, shapes=None):
+    """``-[dq < 0]``."""
+    return -(vel < 0).astype(float)
+
+
+def stribeck_term(angles, vel, acc, shapes=None):
+    """:func:`stribeck_column` in the table's signature."""
+    return stribeck_column(vel, shapes)
+
+
+def sigmoid_term(angles, vel, acc, shapes=None):
+    """:func:`sigmoid_column` in the table's signature."""
+    return sigmoid_column(vel, shapes)
+
+
 def load_column(load, vel, *_):
     """``|tau_load| sign(dq)``, shape like ``vel`` (..., nv); ``load`` [N m or N]."""
     return np.abs(load) * np.sign(vel)

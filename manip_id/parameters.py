@@ -74,10 +74,14 @@ from .errors import InputError
 from .friction import (
     MAX_HARMONICS,
     FrictionShapes,
+    coulomb_negative,
+    coulomb_positive,
     harmonic_column,
     load_column,
-    sigmoid_column,
-    stribeck_column,
+    sigmoid_term,
+    stribeck_term,
+    viscous_negative,
+    viscous_positive,
 )
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -123,30 +127,6 @@ def _offset(angles, vel, acc, shapes=None):
 
 def _spring(angles, vel, acc, shapes=None):
     return angles
-
-
-def _viscous_positive(angles, vel, acc, shapes=None):
-    return np.where(vel > 0, vel, 0.0)
-
-
-def _viscous_negative(angles, vel, acc, shapes=None):
-    return np.where(vel < 0, vel, 0.0)
-
-
-def _coulomb_positive(angles, vel, acc, shapes=None):
-    return (vel > 0).astype(float)
-
-
-def _coulomb_negative(angles, vel, acc, shapes=None):
-    return -(vel < 0).astype(float)
-
-
-def _stribeck(angles, vel, acc, shapes=None):
-    return stribeck_column(vel, shapes)
-
-
-def _sigmoid(angles, vel, acc, shapes=None):
-    return sigmoid_column(vel, shapes)
 
 
 @dataclass(frozen=True)
@@ -215,15 +195,17 @@ JOINT_TERMS: tuple[JointTerm, ...] = (
     JointTerm("fo", "offset", "1", "N m", "N", False, _offset),
     JointTerm("k", "spring", "q_j", "N m/rad", "N/m", True, _spring),
     JointTerm(
-        "fvp", "asymmetric", "dq_j [dq_j > 0]", "N m s/rad", "N s/m", False, _viscous_positive
+        "fvp", "asymmetric", "dq_j [dq_j > 0]", "N m s/rad", "N s/m", False, viscous_positive
     ),
     JointTerm(
-        "fvn", "asymmetric", "dq_j [dq_j < 0]", "N m s/rad", "N s/m", False, _viscous_negative
+        "fvn", "asymmetric", "dq_j [dq_j < 0]", "N m s/rad", "N s/m", False, viscous_negative
     ),
-    JointTerm("fcp", "asymmetric", "[dq_j > 0]", "N m", "N", False, _coulomb_positive),
-    JointTerm("fcn", "asymmetric", "-[dq_j < 0]", "N m", "N", False, _coulomb_negative),
-    JointTerm("fs", "stribeck", "exp(-(dq_j/vs_j)^2) sign(dq_j)", "N m", "N", False, _stribeck),
-    JointTerm("fsg", "sigmoid", "S(a_j (dq_j + c_j)) - S(a_j c_j)", "N m", "N", False, _sigmoid),
+    JointTerm("fcp", "asymmetric", "[dq_j > 0]", "N m", "N", False, coulomb_positive),
+    JointTerm("fcn", "asymmetric", "-[dq_j < 0]", "N m", "N", False, coulomb_negative),
+    JointTerm("fs", "stribeck", "exp(-(dq_j/vs_j)^2) sign(dq_j)", "N m", "N", False, stribeck_term),
+    JointTerm(
+        "fsg", "sigmoid", "S(a_j (dq_j + c_j)) - S(a_j c_j)", "N m", "N", False, sigmoid_term
+    ),
     *(
         JointTerm(
             f"h{k}{'c' if cos else 's'}",
