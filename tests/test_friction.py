@@ -193,9 +193,10 @@ def test_linear_truth_is_not_fitted_worse(robot):
     linear = robot.with_terms(candidate_terms(robot.terms, "linear", SelectionOptions()))
     before = identify(linear, *train, validation=valid).relative_error.validation
     res, sel = select_model(_fit(robot, train, valid), robot, SelectionOptions(combine=False))
-    # the chosen model predicts the validation data at least as well (a law that
-    # contains the linear one may win by a hair on noise)
-    assert res.relative_error.validation <= before * 1.001
+    # the laws that contain the linear one win on noise by a hair only: within the 0.5 %
+    # tolerance, the simpler model is kept, and predicts as well as before
+    assert [j.chosen for j in sel.joints] == ["linear", "linear"]
+    assert res.relative_error.validation <= before * (1 + 1e-9)
     for j in sel.joints:
         lin = next(c for c in j.candidates if c.model == "linear")
         assert lin.validation_error <= min(c.validation_error for c in j.candidates) * 1.02

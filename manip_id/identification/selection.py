@@ -18,7 +18,8 @@ sums, streamed, forked or on Dask, whichever path ``fit`` takes), with one candi
 every joint at once: a joint's friction columns appear only in its own torque row, so
 each joint is scored on its own row by
 
-    validation error  ||tau_j - tau_hat_j|| / ||tau_j|| on the validation data, or
+    validation error  ||tau_j - tau_hat_j|| / ||tau_j|| on the validation data (the
+                      first candidate within 0.5 % of the least: simpler ones first), or
     BIC_j = n ln(sigma_j^2) + k_j ln(n)           (training sums: sigma_j^2 the joint's
                                                    residual variance, k_j its base
                                                    joint-term parameters, n samples)
@@ -93,6 +94,11 @@ class SelectionOptions:
         half the grid step, then a quarter, ...; two fits per round).
     sigmoid_shifts : tuple of float
         Sigmoid shifts c [rad/s] tried at the chosen slopes, besides 0 (Gaz's phi3).
+    tolerance : float
+        By validation error, the first candidate (simpler ones first) within
+        ``(1 + tolerance)`` of the least error is chosen: a law that contains another one
+        must predict better by more than this share to win (noise alone lets it win by a
+        hair).
     combine : bool
         Also try, per joint, its best nonlinear law plus the ``position`` harmonics
         (one more fit; candidates ``"<law>+position"``).
@@ -105,9 +111,12 @@ class SelectionOptions:
     sigmoid_grid: tuple[float, ...] = SIGMOID_GRID
     refine: int = 3
     sigmoid_shifts: tuple[float, ...] = SIGMOID_SHIFTS
+    tolerance: float = 0.005
     combine: bool = True
 
     def __post_init__(self):
+        if not (math.isfinite(self.tolerance) and self.tolerance >= 0):
+            raise InputError(f"tolerance must be >= 0 (relative), got {self.tolerance}")
         if int(self.refine) < 0:
             raise InputError(f"refine must be a number of rounds >= 0, got {self.refine}")
         bad = [c for c in self.candidates if c not in CANDIDATES]
@@ -405,8 +414,7 @@ def select_model(
         n_fits += _combine(fit, robot, opts, joints, shapes, use_val)
     per_joint = []
     for js in joints:
-        scores = [c.validation_error if use_val else c.bic for c in js.candidates]
-        js.chosen = js.candidates[int(np.nanargmin(np.array(scores, dtype=float)))].model
+        js.chosen = _choose(js.candidates, use_val, opts.tolerance)
         per_joint.append(_model_terms(robot.terms, js.chosen, opts, shapes))
     terms = combined_terms(robot.terms, per_joint, shapes)
     result = fit(robot.with_terms(terms))
@@ -425,6 +433,21 @@ def select_model(
     if shapes is not None:
         ctx["friction_shapes"] = shapes.to_dict()
     return replace(result, context=ctx), selection
+
+
+def _choose(candidates: list[Candidate], use_val: bool, tolerance: float) -> str:
+    """The chosen model: the least BIC, or the first candidate (the simpler ones come
+    first) whose validation error is within ``(1 + tolerance)`` of the least."""
+    if not use_val:
+        bic = np.array([c.bic for c in candidates], dtype=float)
+        return candidates[int(np.nanargmin(np.where(np.isfinite(bic), bic, np.inf)))].model
+    val = np.array(
+        [np.inf if c.validation_error is None else c.validation_error for c in candidates]
+    )
+    best = float(np.min(val))
+    return next(
+        c.model for c, v in zip(candidates, val, strict=True) if v <= best * (1 + tolerance)
+    )
 
 
 def _candidate(model: str, trial: _Trial, j: int, name: str | None = None) -> Candidate:
