@@ -39,6 +39,7 @@ from manip_id.estimators import (  # noqa: E402
     DREMEstimator,
     GradientEstimator,
 )
+from manip_id.estimators.drem import DEFAULT_GAMMA  # noqa: E402
 
 HOLD = 5.0  # [s]
 NAMES = ("k/m", "c/m", "b/m")
@@ -74,7 +75,12 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=".", help="folder for the two PNG figures (default .)")
     ap.add_argument("--horizon", type=float, default=100.0, help="simulated time [s]")
     ap.add_argument("--alpha", type=float, default=0.5, help="DREM extension bandwidth [1/s]")
-    ap.add_argument("--gamma", type=float, default=1e6, help="DREM per-parameter gain")
+    ap.add_argument(
+        "--gamma",
+        type=float,
+        default=DEFAULT_GAMMA,
+        help="DREM per-parameter rate of the normalized law [1/s]",
+    )
     ap.add_argument("--stack", type=int, default=6, help="concurrent-learning stack size")
     ap.add_argument("--json", metavar="OUT", help="write the figures as JSON")
     args = ap.parse_args(argv)

@@ -15,8 +15,10 @@ triangle inequalities. A body is counted consistent here when the smallest
 eigenvalue of its ``J`` exceeds ``tolerance * max(|eig J|)`` (default
 :data:`EIG_TOLERANCE`, so "positive definite beyond round-off").
 
-Joint terms: armature ``Ia``, viscous ``fv`` and Coulomb ``fc`` friction must be
-``>= 0`` (offset ``fo`` and spring ``k`` may have either sign).
+Joint terms: armature ``Ia``, viscous ``fv`` and Coulomb ``fc`` friction, their
+one-sided forms ``fvp fvn fcp fcn``, the Stribeck excess ``fs = f_static - fc`` and the
+sigmoid amplitude ``fsg`` must be ``>= 0`` (:mod:`manip_id.friction`; offset ``fo``,
+spring ``k`` and the position harmonics may have either sign).
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ from .errors import InputError, PhysicalConsistencyError
 #: Relative eigenvalue tolerance of the consistency check (``lambda_min > tol * lambda_max``).
 EIG_TOLERANCE = 1e-10
 #: Joint terms that must be non-negative.
-NONNEGATIVE_TERMS: tuple[str, ...] = ("Ia", "fv", "fc")
+NONNEGATIVE_TERMS: tuple[str, ...] = ("Ia", "fv", "fc", "fvp", "fvn", "fcp", "fcn", "fs", "fsg")
 
 
 def pseudo_inertia_basis() -> np.ndarray:

@@ -24,6 +24,16 @@ regressor column (only row ``j`` is non-zero), its units and its torque
     fc  Coulomb    sign(dq_j)      [N m | N]
     fo  offset     1               [N m | N]
     k   spring     q_j             [N m/rad | N/m]
+    fvp, fvn       dq_j [dq_j > 0], dq_j [dq_j < 0]        [N m s/rad | N s/m]
+    fcp, fcn       [dq_j > 0], -[dq_j < 0]                  [N m | N]
+    fs  Stribeck   exp(-(dq_j/vs_j)^2) sign(dq_j)           [N m | N]
+    fsg sigmoid    S(a_j (dq_j + c_j)) - S(a_j c_j)         [N m | N]
+    hks, hkc       sin(k q_j), cos(k q_j), k = 1..4         [N m | N]
+    fl  load       |tau_load_j| sign(dq_j)                  [1]
+
+(the friction laws, their shapes ``vs, a, c`` and how they combine:
+:mod:`manip_id.friction`). A layout may switch terms off for some DoFs
+(``mask``): their columns stay, identically zero, so the base parameters drop them.
 
 (revolute | prismatic units; ``q_j`` is the joint angle, ``atan2(sin, cos)``
 for a continuous joint stored as (cos, sin): see :class:`DofLayout`).
@@ -61,6 +71,18 @@ from .consistency import parameters_from_pseudo_inertia as parameters_from_pseud
 from .consistency import pseudo_inertia
 from .consistency import pseudo_inertia_basis as pseudo_inertia_basis  # re-exported
 from .errors import InputError
+from .friction import (
+    MAX_HARMONICS,
+    FrictionShapes,
+    coulomb_negative,
+    coulomb_positive,
+    harmonic_column,
+    load_column,
+    sigmoid_term,
+    stribeck_term,
+    viscous_negative,
+    viscous_positive,
+)
 
 if TYPE_CHECKING:  # pragma: no cover
     import pinocchio as pin
@@ -87,23 +109,23 @@ UNSET_LIMIT = 1e3
 
 
 # ------------------------------------------------------------------ joint terms
-def _armature(angles, vel, acc):
+def _armature(angles, vel, acc, shapes=None):
     return acc
 
 
-def _viscous(angles, vel, acc):
+def _viscous(angles, vel, acc, shapes=None):
     return vel
 
 
-def _coulomb(angles, vel, acc):
+def _coulomb(angles, vel, acc, shapes=None):
     return np.sign(vel)
 
 
-def _offset(angles, vel, acc):
+def _offset(angles, vel, acc, shapes=None):
     return np.ones_like(vel)
 
 
-def _spring(angles, vel, acc):
+def _spring(angles, vel, acc, shapes=None):
     return angles
 
 
@@ -131,20 +153,34 @@ class JointTerm:
     unit_revolute: str
     unit_prismatic: str
     needs_angles: bool
-    _column: Callable[[Any, Any, Any], Any]
+    _column: Callable[..., Any]
+    needs_load: bool = False
 
-    def column(self, angles, vel, acc) -> np.ndarray:
+    def column(
+        self, angles, vel, acc, shapes: FrictionShapes | None = None, load=None
+    ) -> np.ndarray:
         """Regressor entries of this term, shape like ``vel`` (..., nv).
 
-        ``angles``: joint angles (..., nv) [rad or m], used by ``k`` only (may be
-        None otherwise); ``vel``: velocity [rad/s or m/s]; ``acc``: acceleration
-        [rad/s^2 or m/s^2], used by ``Ia`` only.
+        ``angles``: joint angles (..., nv) [rad or m], used by ``k`` and the harmonics
+        only (may be None otherwise); ``vel``: velocity [rad/s or m/s]; ``acc``:
+        acceleration [rad/s^2 or m/s^2], used by ``Ia`` only; ``shapes``: the per-DoF
+        shapes of ``fs`` and ``fsg`` (None: their defaults, :mod:`manip_id.friction`);
+        ``load``: the nominal rigid-body torque (..., nv) [N m or N], used by ``fl`` only.
         """
-        return self._column(angles, vel, acc)
+        if self.needs_load:
+            if load is None:
+                raise InputError(
+                    f"the {self.name} term ({self.column_text}) needs the load torque "
+                    "(positions, velocities and accelerations of every joint)"
+                )
+            return load_column(load, vel)
+        return self._column(angles, vel, acc, shapes)
 
-    def torque(self, coefficient, angles, vel, acc) -> np.ndarray:
+    def torque(
+        self, coefficient, angles, vel, acc, shapes: FrictionShapes | None = None, load=None
+    ) -> np.ndarray:
         """``coefficient * column`` [N m or N], shape like ``vel``."""
-        return coefficient * self._column(angles, vel, acc)
+        return coefficient * self.column(angles, vel, acc, shapes, load)
 
     def unit(self, prismatic: bool) -> str:
         """Unit of this term's parameter for a prismatic or revolute DoF."""
@@ -158,6 +194,32 @@ JOINT_TERMS: tuple[JointTerm, ...] = (
     JointTerm("fc", "coulomb", "sign(dq_j)", "N m", "N", False, _coulomb),
     JointTerm("fo", "offset", "1", "N m", "N", False, _offset),
     JointTerm("k", "spring", "q_j", "N m/rad", "N/m", True, _spring),
+    JointTerm(
+        "fvp", "asymmetric", "dq_j [dq_j > 0]", "N m s/rad", "N s/m", False, viscous_positive
+    ),
+    JointTerm(
+        "fvn", "asymmetric", "dq_j [dq_j < 0]", "N m s/rad", "N s/m", False, viscous_negative
+    ),
+    JointTerm("fcp", "asymmetric", "[dq_j > 0]", "N m", "N", False, coulomb_positive),
+    JointTerm("fcn", "asymmetric", "-[dq_j < 0]", "N m", "N", False, coulomb_negative),
+    JointTerm("fs", "stribeck", "exp(-(dq_j/vs_j)^2) sign(dq_j)", "N m", "N", False, stribeck_term),
+    JointTerm(
+        "fsg", "sigmoid", "S(a_j (dq_j + c_j)) - S(a_j c_j)", "N m", "N", False, sigmoid_term
+    ),
+    *(
+        JointTerm(
+            f"h{k}{'c' if cos else 's'}",
+            "position",
+            f"{'cos' if cos else 'sin'}({k} q_j)",
+            "N m",
+            "N",
+            True,
+            harmonic_column(k, cos),
+        )
+        for k in range(1, MAX_HARMONICS + 1)
+        for cos in (False, True)
+    ),
+    JointTerm("fl", "load", "|tau_load_j| sign(dq_j)", "1", "1", False, load_column, True),
 )
 #: Joint-level term names, in the order their columns appear for each joint.
 JOINT_TERM_NAMES: tuple[str, ...] = tuple(t.name for t in JOINT_TERMS)
@@ -330,10 +392,23 @@ class ParameterLayout:
     dofs
         the :class:`DofLayout` of the model.
     terms
-        the enabled joint terms, in column order (a subsequence of ``Ia fv fc fo k``).
+        the enabled joint terms, in column order (a subsequence of
+        :data:`JOINT_TERM_NAMES`).
+    shapes
+        the per-DoF shapes of the nonlinear laws (None: their defaults).
+    mask
+        which terms each DoF carries, bool shape (nv, nt) (None: all); a masked-out
+        entry's column is identically zero.
     """
 
-    def __init__(self, body_names: Sequence[str], dofs: DofLayout, terms: Sequence[str]):
+    def __init__(
+        self,
+        body_names: Sequence[str],
+        dofs: DofLayout,
+        terms: Sequence[str],
+        shapes: FrictionShapes | None = None,
+        mask: ArrayLike | None = None,
+    ):
         self.body_names: tuple[str, ...] = tuple(body_names)
         self.dofs = dofs
         terms = tuple(terms)
@@ -343,6 +418,15 @@ class ParameterLayout:
             raise InputError(f"joint terms {terms} are not in column order {JOINT_TERM_NAMES}")
         self.terms: tuple[str, ...] = terms
         self.term_table: tuple[JointTerm, ...] = tuple(JOINT_TERM[t] for t in terms)
+        self.shapes = shapes
+        self.mask: np.ndarray | None = None
+        if mask is not None:
+            m = np.asarray(mask, dtype=bool)
+            if m.shape != (dofs.nv, len(terms)):
+                raise InputError(
+                    f"mask.shape={m.shape} but expected (nv, nt)={dofs.nv, len(terms)}"
+                )
+            self.mask = None if m.all() else m
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -470,9 +554,18 @@ class ParameterLayout:
         return tuple(self.owner(c).joint for c in range(self.n_parameters))
 
     # ------------------------------------------------------------ joint terms
-    def joint_values(self, angles, vel, acc) -> np.ndarray:
-        """Joint-term regressor entries, shape (..., nv, nt) (see :data:`JOINT_TERMS`)."""
-        return np.stack([t.column(angles, vel, acc) for t in self.term_table], axis=-1)
+    @cached_property
+    def needs_load(self) -> bool:
+        """Whether a term needs the load torque (the ``load`` law)."""
+        return any(t.needs_load for t in self.term_table)
+
+    def joint_values(self, angles, vel, acc, load=None) -> np.ndarray:
+        """Joint-term regressor entries, shape (..., nv, nt) (see :data:`JOINT_TERMS`),
+        with the layout's shapes, zero where the mask switches a term off; ``load`` the
+        nominal rigid-body torque (..., nv) [N m or N] when :attr:`needs_load`."""
+        shapes = self.shapes
+        vals = np.stack([t.column(angles, vel, acc, shapes, load) for t in self.term_table], -1)
+        return vals if self.mask is None else vals * self.mask
 
     # ------------------------------------------------------- physical consistency
     def pseudo_inertias(self, theta: ArrayLike) -> np.ndarray:

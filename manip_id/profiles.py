@@ -8,7 +8,7 @@ is optional::
     description = "Franka Emika Panda: the arm without its fingers"
 
     [model]
-    friction = ["viscous", "coulomb"]   # default friction model (some of viscous, coulomb, offset)
+    friction = ["viscous", "coulomb"]   # default friction model (manip_id.friction kinds)
     armature = false                    # model a rotor inertia per joint
     spring = false                      # model a linear spring per joint
 
@@ -41,6 +41,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import InputError, RobotError
+from .friction import FRICTION_KINDS
 
 #: Keys a profile may hold, per table ("" is the top level).
 _KEYS: dict[str, tuple[str, ...]] = {
@@ -50,7 +51,7 @@ _KEYS: dict[str, tuple[str, ...]] = {
     "excitation": ("harmonics", "period", "margin", "acceleration_limit"),
     "data": ("torque_scale", "columns"),
 }
-_FRICTION = ("viscous", "coulomb", "offset")
+_FRICTION = FRICTION_KINDS
 
 
 def robots_dir() -> Path:
@@ -179,7 +180,7 @@ def parse_profile(raw: Mapping[str, Any], *, name: str, source: str = "") -> Rob
     friction = model.get("friction")
     if friction is not None:
         friction = tuple(_strings(friction, "model.friction", where))
-        bad = [f for f in friction if f not in _FRICTION]
+        bad = [f for f in friction if f.partition(":")[0] not in _FRICTION]
         if bad:
             raise InputError(
                 f"profile {where}: model.friction holds {bad[0]!r}; expected some of "

@@ -100,6 +100,7 @@ class RegressorEvaluator:
         rows = np.arange(self.nv) * self.p
         self._flat = [(t, rows + self.layout.joint_columns(t.name)) for t in self.layout.term_table]
         self._needs_angles = any(t.needs_angles for t in self.layout.term_table)
+        self._load_data = robot.model.createData()  # the load law's rnea
         self._compiled: CompiledModel | None | bool = False  # False: not looked up yet
         self._seen = 0  # samples evaluated in blocks [-]
 
@@ -149,7 +150,25 @@ class RegressorEvaluator:
     def joint_values(self, q, vel, acc) -> np.ndarray:
         """Joint-term regressor entries, shape (..., nv, n_terms) (``parameters.JOINT_TERMS``)."""
         angles = self.joint_angles(q) if self._needs_angles else None
-        return self.layout.joint_values(angles, vel, acc)
+        load = self.load_torque(q, vel, acc) if self.layout.needs_load else None
+        return self.layout.joint_values(angles, vel, acc, load)
+
+    def load_torque(self, q, vel, acc) -> np.ndarray:
+        """The nominal rigid-body torque ``rnea(q, vel, acc)`` of the robot's model (its URDF
+        inertias), shape like ``vel`` (..., nv) [N m or N]: the load of the ``load`` law."""
+        m, d = self.model, self._load_data
+        if np.ndim(vel) == 1:
+            return np.array(pin.rnea(m, d, q, vel, acc))
+        return np.array([pin.rnea(m, d, a, b, c) for a, b, c in zip(q, vel, acc, strict=True)])
+
+    def refuse_load(self, what: str) -> None:
+        """Raise :class:`InputError` when the ``load`` law is modelled (``what`` cannot
+        evaluate it: it needs the measured acceleration)."""
+        if self.layout.needs_load:
+            raise InputError(
+                f"the load friction law (fl) needs the measured acceleration; {what} cannot "
+                "evaluate it: use the dynamic model (tau = Y(q, dq, ddq) theta)"
+            )
 
     def fill_joint_terms(self, Y: np.ndarray, q, vel, acc) -> None:
         """Write the joint-term columns of ``Y`` (nv, p) or (N, nv, p) in place.
@@ -161,9 +180,9 @@ class RegressorEvaluator:
             return
         if Y.ndim == 2:  # one sample: a few flat writes into the diagonal entries
             flat = Y.reshape(-1)
-            angles = self.joint_angles(q) if self._needs_angles else None
-            for term, idx in self._flat:
-                flat[idx] = term.column(angles, vel, acc)
+            vals = self.joint_values(q, vel, acc)  # (nv, nt): shapes, mask, load
+            for i, (_, idx) in enumerate(self._flat):
+                flat[idx] = vals[:, i]
             return
         vals = self.joint_values(q, vel, acc)
         Y[:, self._rows, self._cols] = vals.reshape(vals.shape[0], -1)
@@ -179,6 +198,7 @@ class RegressorEvaluator:
 
     def slotine_li(self, q, dq, v, w, out: np.ndarray | None = None) -> np.ndarray:
         """Y(q, dq, v, w), shape (nv, p), written into ``out`` when given."""
+        self.refuse_load("the Slotine-Li regressor")
         if out is None:
             out = np.zeros((self.nv, self.p))
         a = 0.5 * (dq + w)
@@ -277,6 +297,7 @@ class RegressorEvaluator:
 
     def iter_slotine_li(self, q, dq, v, w, chunk: int) -> Iterator[RegressorChunk]:
         """Chunks of the Slotine-Li regressor over a trajectory (arrays already checked)."""
+        self.refuse_load("the Slotine-Li regressor")
         n = q.shape[0]
         size = min(chunk, max(n, 1))
         buf = np.zeros((size, self.nv, self.p))
@@ -420,25 +441,28 @@ def iter_slotine_li_regressor(
     return robot.evaluator.iter_slotine_li(q, dq, v, w, int(chunk))
 
 
-def joint_torques(robot: Robot, theta, q, dq, ddq=None) -> np.ndarray:
+def joint_torques(robot: Robot, theta, q, dq, ddq=None, *, armature: bool = True) -> np.ndarray:
     """Torques of the joint-level terms alone, shape (nv,) or (N, nv) [N m or N].
 
-    ``Ia ddq + fv dq + fc sign(dq) + fo + k q`` for the enabled terms with the
-    values in ``theta`` (shape (p,)). With ``ddq=None`` the armature term is
-    left out (for forward dynamics, where armature belongs in the mass matrix:
-    see :meth:`Robot.with_parameters`).
+    ``Ia ddq + fv dq + fc sign(dq) + fo + k q + ...`` for the enabled terms with the
+    values in ``theta`` (shape (p,)). With ``ddq=None`` or ``armature=False`` the
+    armature term is left out (for inverse and forward dynamics by Pinocchio, where
+    armature belongs in the mass matrix: see :meth:`Robot.with_parameters`); the
+    ``load`` law needs ``ddq``.
     """
     theta = as_float_array(theta, "theta", ndim=1)
     if theta.shape[0] != robot.n_parameters:
         raise InputError(f"{theta.shape=} but robot.n_parameters={robot.n_parameters}")
+    ev = robot.evaluator
+    if ddq is None:
+        ev.refuse_load("joint_torques without ddq")
     acc = np.zeros_like(np.asarray(dq, dtype=float)) if ddq is None else ddq
     _, (q, dq, acc) = check_states(robot, q=q, dq=dq, ddq=acc)
-    ev = robot.evaluator
     if not ev.terms:
         return np.zeros_like(dq)
     vals = ev.joint_values(q, dq, acc)  # (..., nv, nt)
     coef = robot.layout.joint_block(theta)
-    if ddq is None and "Ia" in ev.terms:
+    if (ddq is None or not armature) and "Ia" in ev.terms:
         coef = coef.copy()
         coef[:, ev.terms.index("Ia")] = 0.0
     return np.einsum("...jt,jt->...j", vals, coef)

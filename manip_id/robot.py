@@ -111,6 +111,7 @@ class Robot:
         self.model = model
         self.data = model.createData()
         self.terms = terms
+        self._origin, self._reduction = origin, reduction  # for with_terms
         self.source = None if origin is None else origin.source
         self.package_dirs = [] if origin is None else list(origin.package_dirs)
         self._full_model = model if reduction is None else reduction.full_model
@@ -131,7 +132,9 @@ class Robot:
                         f"a spring term needs one-DoF joints, but {model.names[i]} is "
                         f"{jm.shortname()}"
                     )
-        self.layout = ParameterLayout(self.joint_names, self.dofs, terms.enabled)
+        self.layout = ParameterLayout(
+            self.joint_names, self.dofs, terms.enabled, terms.shapes, terms.mask(self.nv)
+        )
 
     # ----------------------------------------------------------------- sizes
     @property
@@ -227,8 +230,22 @@ class Robot:
                 np.asarray(self.settings.get("spring", 0.0), dtype=float), (self.nv,)
             ),
         }
-        joint = [[per_term[t][dof] for t in self.terms.enabled] for dof in range(self.nv)]
+        zero = np.zeros(self.nv)  # the other laws: no nominal value
+        joint = [[per_term.get(t, zero)[dof] for t in self.terms.enabled] for dof in range(self.nv)]
         return np.concatenate([np.concatenate(rigid), np.asarray(joint, dtype=float).ravel()])
+
+    def with_terms(self, terms: JointTerms) -> Robot:
+        """The same robot with other joint terms (a new :class:`Robot`; the model is shared)."""
+        if not isinstance(terms, JointTerms):
+            raise InputError(f"terms must be JointTerms, got {type(terms).__name__}")
+        return Robot(
+            self.name,
+            self.model,
+            terms,
+            origin=self._origin,
+            reduction=self._reduction,
+            profile=self.profile,
+        )
 
     def parameter_index(self, name: str) -> int:
         """Column index of a parameter name; the error lists close matches."""

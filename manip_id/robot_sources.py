@@ -21,10 +21,10 @@ import pinocchio as pin
 from ._checks import as_float_array
 from ._native import native_stderr_captured
 from .errors import InputError, RobotError, did_you_mean
+from .friction import FRICTION_KINDS as FRICTION_KINDS  # re-exported
+from .friction import FrictionShapes, FrictionSpec, friction_columns, parse_friction
 from .parameters import JOINT_TERM_NAMES
 from .profiles import RobotProfile, find_profile, load_profile, robots_dir
-
-FRICTION_KINDS: tuple[str, ...] = ("viscous", "coulomb", "offset")
 
 #: Fixed-base manipulators of example-robot-data listed by ``manip-id robots``.
 #: Any other fixed-base name of example-robot-data loads too.
@@ -64,19 +64,63 @@ FLOATING_JOINTS = (
 
 @dataclass(frozen=True)
 class JointTerms:
-    """Which joint-level terms the model carries (for every active joint)."""
+    """Which joint-level terms the model carries (for every active joint).
+
+    ``asymmetric``, ``stribeck``, ``sigmoid``, ``harmonics`` (the order of the
+    ``position`` law) and ``load`` are the friction laws of :mod:`manip_id.friction`; ``shapes``
+    their per-DoF shape parameters; ``per_dof`` (None: all) the terms each DoF keeps,
+    one tuple of term names per DoF (the others' columns are zero: a per-joint model).
+    """
 
     armature: bool = False
     viscous: bool = False
     coulomb: bool = False
     offset: bool = False
     spring: bool = False
+    asymmetric: bool = False
+    stribeck: bool = False
+    sigmoid: bool = False
+    harmonics: int = 0
+    load: bool = False
+    shapes: FrictionShapes | None = None
+    per_dof: tuple[tuple[str, ...], ...] | None = None
+
+    @property
+    def friction(self) -> FrictionSpec:
+        """The friction kinds as a :class:`~manip_id.friction.FrictionSpec`."""
+        flags = (
+            ("viscous", self.viscous),
+            ("coulomb", self.coulomb),
+            ("offset", self.offset),
+            ("asymmetric", self.asymmetric),
+            ("stribeck", self.stribeck),
+            ("sigmoid", self.sigmoid),
+            ("position", self.harmonics > 0),
+            ("load", self.load),
+        )
+        return FrictionSpec(frozenset(k for k, on in flags if on), int(self.harmonics))
 
     @property
     def enabled(self) -> tuple[str, ...]:
-        """Short names of the enabled terms, in column order (subset of ``Ia fv fc fo k``)."""
-        flags = (self.armature, self.viscous, self.coulomb, self.offset, self.spring)
-        return tuple(n for n, f in zip(JOINT_TERM_NAMES, flags, strict=True) if f)
+        """Short names of the enabled terms, in column order (subset of
+        :data:`~manip_id.parameters.JOINT_TERM_NAMES`)."""
+        names = friction_columns(self.friction)
+        if self.per_dof is not None:  # a per-joint model: the union of the joints' terms
+            names = set().union(*self.per_dof)
+        if self.armature:
+            names.add("Ia")
+        if self.spring:
+            names.add("k")
+        return tuple(n for n in JOINT_TERM_NAMES if n in names)
+
+    def mask(self, nv: int):
+        """The layout mask, bool shape (nv, nt), or None when every DoF keeps every term."""
+        if self.per_dof is None:
+            return None
+        if len(self.per_dof) != nv:
+            raise InputError(f"per_dof has {len(self.per_dof)} entries but nv={nv}")
+        enabled = self.enabled
+        return [[t in keep for t in enabled] for keep in self.per_dof]
 
 
 def available_robots() -> list[str]:
@@ -87,33 +131,22 @@ def available_robots() -> list[str]:
 def joint_terms(armature, friction, spring, defaults: JointTerms) -> JointTerms:
     """The joint-term flags of the arguments (None: the profile's ``defaults``)."""
     if friction is None:
-        kinds = {
-            k
-            for k, on in zip(
-                FRICTION_KINDS, (defaults.viscous, defaults.coulomb, defaults.offset), strict=True
-            )
-            if on
-        }
+        spec = defaults.friction
     else:
-        if isinstance(friction, str):
-            friction = [f for f in friction.replace(",", " ").split() if f]
-        if not isinstance(friction, list | tuple | set | frozenset):
-            raise InputError(
-                f"friction must be a list of kinds or a comma-separated string, got {friction!r}"
-            )
-        kinds = set()
-        for f in friction:
-            if f not in FRICTION_KINDS:
-                raise InputError(
-                    f"unknown friction kind {f!r}; expected some of {list(FRICTION_KINDS)}"
-                )
-            kinds.add(f)
+        spec = parse_friction(friction)
+    k = spec.kinds
     return JointTerms(
         armature=defaults.armature if armature is None else bool(armature),
-        viscous="viscous" in kinds,
-        coulomb="coulomb" in kinds,
-        offset="offset" in kinds,
+        viscous="viscous" in k,
+        coulomb="coulomb" in k,
+        offset="offset" in k,
         spring=defaults.spring if spring is None else bool(spring),
+        asymmetric="asymmetric" in k,
+        stribeck="stribeck" in k,
+        sigmoid="sigmoid" in k,
+        harmonics=spec.harmonics,
+        load="load" in k,
+        shapes=defaults.shapes if friction is None else None,
     )
 
 
@@ -186,13 +219,19 @@ def profile_terms(prof: RobotProfile | None) -> JointTerms:
     """The joint-term defaults of a profile (none without one)."""
     if prof is None:
         return JointTerms()
-    friction = prof.friction or ()
+    spec = parse_friction(list(prof.friction or ()))
+    k = spec.kinds
     return JointTerms(
         armature=bool(prof.armature),
-        viscous="viscous" in friction,
-        coulomb="coulomb" in friction,
-        offset="offset" in friction,
+        viscous="viscous" in k,
+        coulomb="coulomb" in k,
+        offset="offset" in k,
         spring=bool(prof.spring),
+        asymmetric="asymmetric" in k,
+        stribeck="stribeck" in k,
+        sigmoid="sigmoid" in k,
+        harmonics=spec.harmonics,
+        load="load" in k,
     )
 
 

@@ -143,7 +143,7 @@ def inverse_dynamics(robot: Robot, theta, q, dq, ddq) -> np.ndarray:
     for k in range(n):
         tau[k] = rnea(model, data, q[k], dq[k], ddq[k])
     if robot.terms.enabled:  # (joint_torques needs at least one joint term)
-        tau += joint_torques(robot, theta, q, dq)  # armature is already in rnea
+        tau += joint_torques(robot, theta, q, dq, ddq, armature=False)  # Ia is in rnea
     return tau
 
 
@@ -472,7 +472,7 @@ class _BatchInverseDynamics:
         pin.rneaInParallel(1, self.pool, q.T, dq.T, ddq.T, out)
         tau = out.T
         if self.robot.terms.enabled:  # (armature is in the model's rnea)
-            tau = tau + joint_torques(self.robot, self.theta, q, dq)
+            tau = tau + joint_torques(self.robot, self.theta, q, dq, ddq, armature=False)
         return tau
 
 

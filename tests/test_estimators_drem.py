@@ -34,14 +34,16 @@ def _time_below(history, threshold=0.01):
 
 @pytest.fixture(scope="module")
 def runs():
-    drem = DREMEstimator(THETA0, gamma=1e6, alpha=0.5, record_every=1)
+    drem = DREMEstimator(THETA0, gamma=1e6, alpha=0.5, normalized=False, record_every=1)
     grad = GradientEstimator(THETA0, [8.0, 8.0, 4.0], record_every=1)
-    _msd([drem, grad])
-    return drem, grad
+    default = DREMEstimator(THETA0, record_every=1)  # the normalized law, its default gain
+    _msd([drem, grad, default])
+    return drem, grad, default
 
 
-def test_every_parameter_error_is_non_increasing(runs):
-    drem, _ = runs
+@pytest.mark.parametrize("law", [0, 2], ids=["plain", "normalized-default"])
+def test_every_parameter_error_is_non_increasing(runs, law):
+    drem = runs[law]
     err = np.abs(drem.history.theta - THETA)  # (12501, 3)
     assert err.shape == (N_UPDATES + 1, 3)
     assert drem.t == pytest.approx(25.0)
@@ -51,7 +53,7 @@ def test_every_parameter_error_is_non_increasing(runs):
 
 
 def test_drem_converges_where_the_gradient_law_has_not(runs):
-    drem, grad = runs
+    drem, grad, _ = runs
     t_drem = _time_below(drem.history)
     assert t_drem is not None and t_drem < 10.0
     assert _time_below(grad.history) is None  # the lesson's point: not within 25 s
@@ -63,10 +65,12 @@ def test_drem_converges_where_the_gradient_law_has_not(runs):
 def test_mixing_is_determinant_and_adjugate():
     rng = np.random.default_rng(0)
     theta = np.array([1.0, -2.0, 0.5])
-    est = DREMEstimator(np.zeros(3), 1.0, alpha=2.0)
+    est = DREMEstimator(np.zeros(3), 1.0, alpha=2.0, normalized=False)
+    norm = DREMEstimator(np.zeros(3), 1.0, alpha=2.0)
     for _ in range(40):
         Y = rng.standard_normal((2, 3))
         est.step(Y, Y @ theta, 0.01)
+        norm.step(1e3 * Y, 1e3 * Y @ theta, 0.01)  # scaled data: the same Delta_n
     Phi = est.extended_regressor
     # independent: the filter written out as a sum of geometric weights
     a, g = np.exp(-2.0 * 0.01), (1 - np.exp(-2.0 * 0.01)) / 2.0
@@ -81,6 +85,29 @@ def test_mixing_is_determinant_and_adjugate():
     adj = np.linalg.det(ref) * np.linalg.inv(ref)
     np.testing.assert_allclose(Z, adj @ (ref @ theta), rtol=1e-9)
     np.testing.assert_allclose(Z, delta * theta, rtol=1e-9)  # Z_i = Delta theta_i
+    # normalized: Delta_n = det(Phi_e / s), s = tr(Phi_e) / p, whatever the data's scale
+    dn, Zn = norm.mixed()
+    s = np.trace(ref) / 3
+    assert dn == pytest.approx(np.linalg.det(ref / s), rel=1e-9)
+    assert 0 < dn <= 1
+    np.testing.assert_allclose(Zn, dn * theta, rtol=1e-9)
+
+
+def test_default_gain_converges_at_any_data_scale():
+    # the lesson's plant with the regression scaled by 1e-3 and 1e3: the plain law's
+    # Delta scales like 1e-18 / 1e18, the normalized one does not move
+    times = []
+    for scale in (1e-3, 1.0, 1e3):
+        est = DREMEstimator(THETA0, record_every=1)
+        y, dy = 0.4, -0.2
+        for k in range(N_UPDATES):
+            phi = np.array([-y, -dy, 1.2 * np.sin(1.1 * k * DT) + 0.7 * np.sin(2.3 * k * DT)])
+            ddy = float(phi @ THETA)
+            est.step(scale * phi, scale * ddy, DT)
+            y, dy = y + DT * dy, dy + DT * ddy
+        times.append(_time_below(est.history))
+    assert all(t is not None and t < 15.0 for t in times)
+    assert max(times) - min(times) < 1e-6  # the same law at every scale
 
 
 def test_no_excitation_no_update_and_bad_input():

@@ -211,7 +211,7 @@ def test_bad_input(panda, trajectory):
             ds.dq[:2000],
             None,
             ds.tau[:2000],
-            model=ModelOptions(name="energy", dt=0.002),
+            model=ModelOptions(name="energy", window_length=0.2, dt=0.002),
         )
     with pytest.raises(InputError, match=r"tau.shape=\(10, 7\) but expected \(20, robot.nv=7\)"):
         identify(
@@ -286,7 +286,7 @@ def test_cli_model_option(tmp_path, capsys):
     assert main([*args, "--model", "energy", "--window-length", "0.05", "--json", str(out)]) == 0
     report = json.loads(out.read_text())
     assert report["model"] == "energy" and report["outputs"] == ["energy"]
-    assert report["window_length"] == 0.05
+    assert report["window_length"] == pytest.approx(0.052)  # 0.05 s: 26 intervals (even)
     assert report["n_base"] == len(report["true_base_parameters"])
     assert report["parameter_error_in_std"] < 4.5  # 1 % torque noise, within its std
     out_text = capsys.readouterr().out  # the one rendering: the model's own outputs
@@ -295,3 +295,46 @@ def test_cli_model_option(tmp_path, capsys):
     assert "one process" in capsys.readouterr().err
     assert main([*args, "--model", "energy", "--window-length", "-1"]) == 2
     assert "--window-length must be a positive time" in capsys.readouterr().err
+
+
+def test_window_is_chosen_from_the_data():
+    from manip_id.models import DEFAULT_WINDOW, ROWS_PER_PARAMETER, choose_window
+
+    # 12437 samples at 1 kHz, 64 base parameters: the default 0.2 s gives 62 energy rows
+    w = choose_window(12437, 1e-3, 64)
+    assert w.chosen and w.samples % 2 == 0
+    assert w.rows >= ROWS_PER_PARAMETER * 64
+    assert (12436 // (w.samples + 2)) < ROWS_PER_PARAMETER * 64  # the longest such window
+    assert w.length == pytest.approx(w.samples * 1e-3)
+    # plenty of data: the default is kept
+    long = choose_window(200_000, 1e-3, 64)
+    assert long.length == pytest.approx(DEFAULT_WINDOW)
+    # momentum: nv rows per window
+    m = choose_window(12437, 1e-3, 64, rows_per_window=7, even=False)
+    assert m.length == pytest.approx(DEFAULT_WINDOW)
+    with pytest.raises(InputError, match="give more samples"):
+        choose_window(100, 1e-3, 64)
+
+
+def test_default_window_runs_where_the_default_gives_too_few_rows(panda, trajectory):
+    robot, theta = panda
+    ds = _data(panda, trajectory)
+    # 20.9 s at 500 Hz: 104 rows of the default 0.2 s window for 69 base parameters
+    res = identify(robot, ds.q, ds.dq, None, ds.tau, model=ModelOptions("energy", dt=1 / RATE))
+    window = res.context["window"]
+    assert window["chosen"] and window["rows"] >= 5 * len(res.names)
+    assert res.relative_error.train < 1e-3  # noise-free: the fit is exact up to Simpson
+
+
+def test_files_path_chooses_the_same_window(panda, trajectory, tmp_path):
+    from manip_id.fleet import identify_files
+
+    robot, _ = panda
+    ds = _data(panda, trajectory, noise=0.01)
+    path = tmp_path / "log.npz"
+    np.savez(path, t=ds.t, q=ds.q, dq=ds.dq, ddq=ds.ddq, tau=ds.tau)
+    own = identify(robot, ds.q, ds.dq, None, ds.tau, model=ModelOptions("energy", dt=1 / RATE))
+    assert own.context["window"]["chosen"]  # the default 0.2 s gives too few rows here
+    files = identify_files(robot, [str(path)], model=ModelOptions("energy"))
+    scale = np.abs(own.estimate).max()
+    assert np.abs(files.estimate - own.estimate).max() <= 1e-8 * scale

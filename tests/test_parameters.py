@@ -193,8 +193,11 @@ def test_term_table_names_match_the_robot_flags():
     from manip_id.robot import JointTerms
 
     assert tuple(t.name for t in JOINT_TERMS) == JOINT_TERM_NAMES
-    for t in JOINT_TERMS:
+    for t in JOINT_TERMS[:5]:  # the one-column terms: their flag alone
         assert JointTerms(**{t.flag: True}).enabled == (t.name,)
+    for t in JOINT_TERMS[5:]:  # the friction laws of manip_id.friction: their kind
+        flags = {"harmonics": 4} if t.flag == "position" else {t.flag: True}
+        assert t.name in JointTerms(**flags).enabled
 
 
 def test_consistency_checks_are_reexported():

@@ -18,7 +18,7 @@ from ..errors import InputError
 from ..identification import ModelOptions, RunOptions, identify
 from ..signals import DEFAULT_CUTOFF, preprocess
 from ..viz.report_document import ReportSamples, RunContext, result_document
-from ._common import column_map, explicit_workers, fleet_wanted, prepare
+from ._common import column_map, explicit_workers, fleet_wanted, note_window, prepare
 from ._runtime import consistent_kwargs, print_result, robot_from_args, write_outputs
 from ._simulated import simulate_record
 
@@ -130,7 +130,7 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     )
     report = result_document(robot, result, ctx)
     report["model"] = args.model
-    report["window_length"] = args.window_length
+    note_window(report, result, args.window_length)
     report["outputs"] = list(result.output_names)
     print_result(report)
     return write_outputs(args, outputs, robot, result, report, ReportSamples(train, valid, full))

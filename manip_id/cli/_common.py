@@ -35,8 +35,10 @@ def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--friction",
         default=None,
-        help="comma-separated friction terms per joint, some of viscous,coulomb,offset "
-        "[default: the robot profile's (robots/ROBOT.toml), else none]",
+        help="comma-separated friction laws per joint: viscous, coulomb, offset, asymmetric, "
+        "stribeck, sigmoid, position[:K], load (docs/friction.md); 'auto' (identify --data): "
+        "chosen per joint by validation error, else BIC [default: the robot profile's "
+        "(robots/ROBOT.toml), else none]",
     )
     parser.add_argument(
         "--armature",
@@ -421,6 +423,17 @@ FLEET_METHODS = ("ols", "wls")
 def exports_wanted(args: argparse.Namespace) -> bool:
     """Whether the run writes a URDF or an MJCF export."""
     return bool(getattr(args, "export_urdf", None) or getattr(args, "export_mjcf", None))
+
+
+def note_window(report: dict, result, window_length) -> None:
+    """Record and print the energy / momentum window a run used (``result.context["window"]``:
+    the given ``window_length`` [s], or the one chosen from the data)."""
+    window = result.context.get("window") or {}
+    report["window_length"] = window.get("length", window_length)  # the one used [s]
+    if window:
+        report["window"] = window
+        how = "chosen from the data: " + window["rule"] if window["chosen"] else "given"
+        print(f"window: {window['length']:.4g} s ({window['samples']} sampling intervals; {how})")
 
 
 def fleet_wanted(args: argparse.Namespace) -> bool:

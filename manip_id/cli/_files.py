@@ -30,6 +30,7 @@ from ..identification import (
     scan_file,
     split_file,
 )
+from ..identification.selection import select_model_files
 from ..viz.report_document import (
     ReportSamples,
     RunContext,
@@ -105,6 +106,38 @@ def _scan(robot, args: argparse.Namespace, specs, vspecs, options, timings: dict
     return SimpleNamespace(specs=specs, vspecs=vspecs, scans=scans, source=source, audit=audit)
 
 
+def _select_friction(robot, args, options, files: SimpleNamespace, timings: dict):
+    """``--friction auto``: the joint model chosen per joint (one fit per candidate and
+    shape, plain least squares; --consistent applies to the chosen model), printed;
+    ``(robot with the chosen model, selection)``, or ``(robot, None)``."""
+    if args.friction != "auto":
+        return robot, None
+    t0 = time.perf_counter()
+    robot, _, selection = select_model_files(
+        robot,
+        files.specs,
+        validation=files.vspecs,
+        options=options,
+        method=args.method,
+        run=RunOptions(chunk=args.chunk, workers=args.workers),
+        scans=files.scans,
+    )
+    timings["friction_selection"] = time.perf_counter() - t0
+    print(selection.text())
+    return robot, selection
+
+
+def _note_selection(report: dict, robot, selection) -> None:
+    """The selection's keys in the document (the same as select_model's result context)."""
+    report["friction_selection"] = selection.to_dict()
+    report["friction_criterion"] = selection.criterion
+    report["joint_terms_per_joint"] = dict(
+        zip(robot.dof_names, map(list, selection.terms.per_dof or ()), strict=True)
+    )
+    if selection.terms.shapes is not None:
+        report["friction_shapes"] = selection.terms.shapes.to_dict()
+
+
 def _identify_online(robot, args, options, files: SimpleNamespace, timings: dict):
     """rls / gradient: the files in memory, in sample order; (result, train, valid)."""
     t0 = time.perf_counter()
@@ -174,6 +207,7 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     robot = robot_from_args(args)
     options = preprocess_options(args, robot.nv, None if profile is None else profile.torque_scale)
     f = _scan(robot, args, specs, vspecs, options, timings)
+    robot, selection = _select_friction(robot, args, options, f, timings)
     train = valid = None
     if args.method in ("rls", "gradient"):  # sample order, in memory
         result, train, valid = _identify_online(robot, args, options, f, timings)
@@ -212,6 +246,8 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     report = result_document(robot, result, ctx)
     add_file_info(report, robot, f.specs, f.vspecs, f.scans, files, options, result)
     report["audit"] = f.audit.to_dict()
+    if selection is not None:
+        _note_selection(report, robot, selection)
     if args.report is not None and train is None:  # the report draws the samples
         train = collect(robot, f.specs, options, f.scans)
         valid = None if f.vspecs is None else collect(robot, f.vspecs, options, f.scans)

@@ -26,6 +26,7 @@ from ._common import (
     exports_wanted,
     file_specs,
     finish,
+    note_window,
     print_warnings,
     profile_from_args,
 )
@@ -119,7 +120,8 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
         report["per_file"] = [f.to_dict() for f in result.per_file or []]
     model = getattr(args, "model", "dynamic")
     if model != "dynamic":  # as the local energy / momentum path reports them
-        report.update(model=model, window_length=args.window_length)
+        report["model"] = model
+        note_window(report, result, args.window_length)
         report["outputs"] = list(result.output_names)
     print_result(report)
     if args.per_file:

@@ -54,6 +54,16 @@ def _check_args(args) -> None:
             raise InputError(f"--{name.replace('_', '-')} must be positive, got {value}")
     if explicit_workers(args) > 1 and args.method in ("rls", "gradient"):
         raise InputError(f"--workers applies to ols and wls; {args.method} runs in sample order")
+    if getattr(args, "friction", None) == "auto" and (
+        args.simulate
+        or args.model != "dynamic"
+        or args.method not in ("ols", "wls")
+        or fleet_wanted(args)
+    ):
+        raise InputError(
+            "--friction auto applies to --data files with --method ols or wls and the "
+            "dynamic model, without --scheduler or --per-file"
+        )
     _check_consistent_args(args)
     _check_fleet(args)
     _check_files(args)

@@ -32,7 +32,7 @@ def robot_from_args(args: argparse.Namespace) -> Robot:
         return load_robot(
             args.robot,
             armature=args.armature,
-            friction=args.friction,
+            friction=None if args.friction == "auto" else args.friction,
             spring=args.spring,
             active_joints=joints,
             package_dirs=args.package_dir,

@@ -58,6 +58,7 @@ class Plant:
             raise InputError(f"{theta.shape=} but robot.n_parameters={p}")
         check_finite(theta, "theta_true")
         require_physical(robot, theta)  # a message naming the body
+        robot.evaluator.refuse_load("the closed-loop plant (forward dynamics)")
         self.robot = robot
         self.theta = theta
         self.integrator = integrator
@@ -69,6 +70,8 @@ class Plant:
         self._lie = robot.nq != robot.nv
         # joint terms other than armature (which is in the model's mass matrix)
         coef = robot.layout.joint_block(theta)
+        if robot.layout.mask is not None:  # a per-joint model: the terms a joint lacks are 0
+            coef = coef * robot.layout.mask
         self._joint_terms = [
             (term, coef[:, i].copy())
             for i, term in enumerate(robot.layout.term_table)
@@ -89,7 +92,7 @@ class Plant:
         angles = self.robot.dofs.angles(q) if self._needs_angles else None
         out = np.zeros(self.robot.nv)
         for term, c in self._joint_terms:
-            out += term.torque(c, angles, dq, None)
+            out += term.torque(c, angles, dq, None, self.robot.layout.shapes)
         return out
 
     def acceleration(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray) -> np.ndarray:

@@ -38,9 +38,26 @@ increases. ``adj(Phi_e) = Delta Phi_e^-1`` comes from the eigendecomposition
 of the symmetric ``Phi_e`` (products of eigenvalues, no inverse of a singular
 matrix), so ``Delta = 0`` simply means no update.
 
-Scale: ``Delta`` is a product of p eigenvalues, so its size varies like the
-p-th power of the regressor's; ``gamma`` must be chosen for it (or the data
-scaled). DREM is meant for a handful of parameters.
+Normalized form (the default). ``Delta`` is a product of p eigenvalues, so its size
+varies like the p-th power of the regressor's and a gain in ``1/(s Delta^2)`` must be
+chosen for each plant. The normalized law divides the extension by its running scale
+``s = tr(Phi_e)/p`` (the mean eigenvalue) before mixing::
+
+    Phi_n = Phi_e / s,   z_n = z_e / s,   Delta_n = det(Phi_n),   Z_n = adj(Phi_n) z_n
+    =>  Z_n,i = Delta_n theta_i,    0 <= Delta_n <= 1   (AM-GM on the eigenvalues)
+
+and uses a normalized scalar gradient law::
+
+    d theta_hat_i/dt = -gamma_i Delta_n (Delta_n theta_hat_i - Z_n,i) / (mu + Delta_n^2)
+    =>  d theta_tilde_i/dt = -gamma_i Delta_n^2 / (mu + Delta_n^2) theta_tilde_i
+
+``Delta_n`` does not change when the regressor is scaled (it depends only on the
+shape of the excitation), so ``gamma`` [1/s] is a rate: each error decays at about
+``gamma`` once ``Delta_n^2 >> mu`` (``mu`` = :data:`DEFAULT_MU`, dimensionless).
+The rate factor is non-negative, so every ``|theta_tilde_i|`` is still non-increasing,
+in continuous and (exact step below) in discrete time. ``normalized=False`` gives the
+plain law above (``gamma`` in ``1/(s Delta^2)``). DREM is meant for a handful of
+parameters.
 """
 
 from __future__ import annotations
@@ -53,6 +70,12 @@ from .._checks import positive_vector
 from ..errors import InputError
 from .online import OnlineEstimator
 
+#: Default rate of the normalized law [1/s]: each parameter error decays like exp(-t).
+DEFAULT_GAMMA = 1.0
+#: Default ``mu`` of the normalized law (dimensionless; ``Delta_n`` below ``sqrt(mu)``
+#: counts as little excitation).
+DEFAULT_MU = 1e-6
+
 
 class DREMEstimator(OnlineEstimator):
     """DREM with Kreisselmeier's extension (module docstring), one scalar law per parameter.
@@ -60,38 +83,52 @@ class DREMEstimator(OnlineEstimator):
     Parameters
     ----------
     theta0 : array_like
-        initial estimate, shape (p,)
-    gamma : array_like
-        per-parameter gains gamma_i > 0, a scalar or shape (p,) [1/(s Delta^2)]
+        Initial estimate, shape (p,).
+    gamma : float or array_like
+        Per-parameter gains gamma_i > 0, a scalar or shape (p,): rates [1/s] of the
+        normalized law (default :data:`DEFAULT_GAMMA`), [1/(s Delta^2)] of the plain one.
     alpha : float
-        bandwidth of the extension filter [1/s], > 0 (memory about ``1/alpha`` s)
-    bounds : array_like
-        optional ``(lower, upper)`` box for the projection, shapes (p,)
+        Bandwidth of the extension filter [1/s], > 0 (memory about ``1/alpha`` s).
+    normalized : bool
+        The normalized law (module docstring, default) or the plain one.
+    mu : float
+        ``mu`` of the normalized law (dimensionless, > 0).
+    bounds : tuple or None
+        Optional ``(lower, upper)`` box for the projection, shapes (p,).
     record_every : int
-        keep every k-th estimate in :attr:`history` (0: none)
+        Keep every k-th estimate in :attr:`history` (0: none).
     t0 : float
-        initial time [s]
+        Initial time [s].
 
     ``step(Y, z, dt)`` takes ``Y`` (m, p) and ``z`` (m,), or ``phi`` (p,) and scalar
     ``z``; ``last_error`` is the prediction error ``Y theta_hat - z`` before the update.
+    :attr:`delta` is the last ``Delta`` (``Delta_n`` when normalized).
     """
 
     def __init__(
         self,
         theta0,
-        gamma=1.0,
+        gamma=DEFAULT_GAMMA,
         *,
         alpha: float = 1.0,
+        normalized: bool = True,
+        mu: float = DEFAULT_MU,
         bounds=None,
         record_every: int = 1,
         t0: float = 0.0,
     ):
         super().__init__(theta0, bounds=bounds, record_every=record_every, t0=t0)
-        self._gamma = positive_vector(gamma, "gamma", self.p, "1/s")
+        unit = "1/s" if normalized else "1/(s Delta^2)"
+        self._gamma = positive_vector(gamma, "gamma", self.p, unit)
         alpha = float(alpha)
         if not (math.isfinite(alpha) and alpha > 0):
             raise InputError(f"alpha must be a positive bandwidth [1/s], got {alpha}")
+        mu = float(mu)
+        if not (math.isfinite(mu) and mu > 0):
+            raise InputError(f"mu must be positive (dimensionless), got {mu}")
         self.alpha = alpha
+        self.normalized = bool(normalized)
+        self.mu = mu
         self._Phi = np.zeros((self.p, self.p))
         self._ze = np.zeros(self.p)
         self.delta = 0.0
@@ -107,13 +144,20 @@ class DREMEstimator(OnlineEstimator):
         return self._Phi.copy()
 
     def mixed(self) -> tuple[float, np.ndarray]:
-        """``(Delta, Z)``: the determinant of ``Phi_e`` and ``adj(Phi_e) z_e``, shape (p,)."""
-        w, V = np.linalg.eigh(self._Phi)
+        """``(Delta, Z)``: the determinant of ``Phi_e`` and ``adj(Phi_e) z_e``, shape (p,)
+        (``Delta_n`` and ``Z_n`` of ``Phi_e / s``, ``z_e / s`` when normalized)."""
+        Phi, ze = self._Phi, self._ze
+        if self.normalized:
+            scale = float(np.trace(Phi)) / self.p
+            if not scale > 0.0:
+                return 0.0, np.zeros(self.p)
+            Phi, ze = Phi / scale, ze / scale
+        w, V = np.linalg.eigh(Phi)
         w = np.maximum(w, 0.0)  # PSD up to round-off
         delta = float(np.prod(w))
         # adj = V diag(prod_{k != i} w_k) V^T
         cof = np.array([np.prod(np.delete(w, i)) for i in range(self.p)]) if self.p > 1 else [1.0]
-        Z = V @ (np.asarray(cof) * (V.T @ self._ze))
+        Z = V @ (np.asarray(cof) * (V.T @ ze))
         return delta, Z
 
     def step(self, Y, z, dt: float) -> np.ndarray:
@@ -138,7 +182,8 @@ class DREMEstimator(OnlineEstimator):
         delta, Z = self.mixed()
         self.delta = delta
         if delta > 0.0:
-            x = self._gamma * (delta * delta) * dt
+            d2 = delta * delta
+            x = self._gamma * (d2 / (self.mu + d2) if self.normalized else d2) * dt
             # theta_hat += (1 - e^-x)/Delta^2 * Delta (Z - Delta theta_hat)
             th += (-np.expm1(-x)) * (Z / delta - th)
         self._finish(e, dt)

@@ -19,7 +19,13 @@ from ..estimators import GradientEstimator, RLSEstimator
 from ..estimators.consistent.terms import missing_term_warnings
 from ..execution import AUTO, available_cores, open_backend, portable_robot, reduce_tree
 from ..identifiability import BaseParameters
-from ..models import accumulate_energy, accumulate_momentum
+from ..models import (
+    WindowChoice,
+    accumulate_energy,
+    accumulate_momentum,
+    choose_window,
+    window_samples,
+)
 from ..regressor import check_states
 from ..robot import Robot
 from .options import (
@@ -219,13 +225,14 @@ def _identify_acceleration_free(
     dt = 1.0 if model.dt is None else float(model.dt)
     nv_rows = 1 if model.name == "energy" else robot.nv
     rows_unc = replace(opts.uncertainty, block_length=1)  # rows span windows: start at one
+    window = model_window(model, q.shape[0], dt, base.n_base, robot.nv)
     acc = accumulate(
         robot,
         q,
         dq,
         tau,
         dt=dt,
-        window_length=model.window_length,
+        window_length=window.length,
         columns=base.independent,
         blocks=rows_unc.blocks(base.n_base, nv_rows),
     )
@@ -246,7 +253,8 @@ def _identify_acceleration_free(
         model=model.name,
         chunk=opts.run.chunk,
     )
-    return _solve(problem, method, opts)
+    result = _solve(problem, method, opts)
+    return replace(result, context={**result.context, "window": window.to_dict()})
 
 
 def _are_parts(items: list) -> bool:
@@ -368,6 +376,20 @@ def identify_chunks(
         chunk=run_o.chunk,
     )
     return _solve(problem, method, opts)
+
+
+def model_window(model: ModelOptions, n_samples: int, dt: float, n_base: int, nv: int):
+    """The energy / momentum window: the given ``model.window_length``, or one chosen from
+    the data (:func:`~manip_id.models.choose_window`), as a
+    :class:`~manip_id.models.WindowChoice`."""
+    energy = model.name == "energy"
+    if model.window_length is None:
+        return choose_window(
+            n_samples, dt, n_base, rows_per_window=1 if energy else nv, even=energy
+        )
+    w = window_samples(model.window_length, dt, even=energy)
+    rows = (max(n_samples - 1, 0) // w) * (1 if energy else nv)
+    return WindowChoice(w * dt, w, rows, False, "given")
 
 
 def identify_dataset(robot: Robot, dataset, *, ddq=None, validation=None, **kwargs):

@@ -51,6 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..consistency import NONNEGATIVE_TERMS
 from ..errors import DataError, InputError, format_direction
 from ..metrics import finite_list, finite_or_none
 
@@ -62,7 +63,7 @@ CONDITION_LIMIT = 100.0
 #: norm over the last 10 % of the data has not converged.
 CONVERGENCE_LIMIT = 0.01
 #: standard parameters that a physical body or drive has positive.
-MUST_BE_POSITIVE = ("m", "Ixx", "Iyy", "Izz", "Ia", "fv", "fc")
+MUST_BE_POSITIVE = ("m", "Ixx", "Iyy", "Izz", *NONNEGATIVE_TERMS)
 NON_PHYSICAL, POORLY, UNEXCITED = "non-physical", "poorly identified", "not excited by this data"
 #: a std above this [%], or a value that only a minimum-norm solution gives, is no number
 #: a user can act on: such a parameter is "not determined by these data".

@@ -34,7 +34,7 @@ from ..errors import DataError, InputError, ManipIdError
 from ..estimators import InformationAccumulator
 from ..execution import SPLIT_EVERY, Backend, open_backend, portable_robot, reduce_tree
 from ..identifiability import BaseParameters
-from ..models import accumulate_energy, accumulate_momentum, window_samples
+from ..models import accumulate_energy, accumulate_momentum, choose_window, window_samples
 from ..regressor import DEFAULT_CHUNK
 from ..robot import Robot
 from .file_sums import accumulate_file, accumulate_span
@@ -363,6 +363,19 @@ def plan_parts(backend: Backend, light: Robot, specs, options, model: ModelOptio
     return layout
 
 
+def _chosen_window(backend, light, specs, options, model: ModelOptions, n_base: int):
+    """``model`` with the window chosen from the files (:func:`~manip_id.models.choose_window`
+    on their samples together, at their mean sample time)."""
+    plans = backend.gather(backend.map(model_plan, [(light, s, options) for s in specs]))
+    n = sum(int(k) for k, _ in plans)
+    dt = sum(float(k) * float(d) for k, d in plans) / max(n, 1)
+    energy = model.name == "energy"
+    choice = choose_window(
+        n - len(plans) + 1, dt, n_base, rows_per_window=1 if energy else light.nv, even=energy
+    )
+    return replace(model, window_length=choice.length)
+
+
 def distributed_problem(
     robot: Robot,
     files,
@@ -398,6 +411,8 @@ def distributed_problem(
     every, chunk = int(partition.split_every), int(run.chunk)
     with open_backend(scheduler=run.scheduler) as backend:
         t0 = time.perf_counter()
+        if model.name != "dynamic" and model.window_length is None:
+            model = _chosen_window(backend, light, specs, mopts, model, base.n_base)
         layout = plan_parts(backend, light, specs, mopts, model, partition.block)
         if model.name == "dynamic":
             args = [[(light, pt, ind, chunk, options, uncertainty) for pt in lp] for lp in layout]

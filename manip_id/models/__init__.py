@@ -35,6 +35,8 @@ integrated exactly for a cubic interpolation of its inputs (``O(h^4)``);
 rows are taken every ``window_length`` seconds with ``lambda = 3 /
 window_length`` by default, so that the filtered noise of two rows is
 correlated by ``exp(-3) = 0.05`` only and the least-squares covariance holds.
+When no window is given it is chosen from the data (:mod:`~.window`: the default
+when it gives at least 5 rows per base parameter, else the longest window that does).
 """
 
 from .energy import (
@@ -46,16 +48,20 @@ from .energy import (
     window_samples,
 )
 from .momentum import accumulate_momentum, momentum_regressors, momentum_rows
+from .window import ROWS_PER_PARAMETER, WindowChoice, choose_window
 
 MODELS: tuple[str, ...] = ("dynamic", "energy", "momentum")
 
 __all__ = [
     "DEFAULT_WINDOW",
     "MODELS",
+    "ROWS_PER_PARAMETER",
     "EnergyBaseCheck",
+    "WindowChoice",
     "accumulate_energy",
     "accumulate_momentum",
     "check_energy_base",
+    "choose_window",
     "energy_rows",
     "momentum_regressors",
     "momentum_rows",
