@@ -182,6 +182,7 @@ def test_modes_and_auto_threshold(monkeypatch):
     robot = load_robot("double_pendulum")
     ev = robot.evaluator
     monkeypatch.setenv(cr.ENV, "auto")
+    monkeypatch.setattr(cr, "_seen", 0)  # a fresh process: no samples evaluated yet
     assert ev.kernel_for(10) is None  # a small job keeps Pinocchio
     assert ev.kernel_for(cr.AUTO_SAMPLES) is not None  # a large one takes the kernel
     monkeypatch.setenv(cr.ENV, "pinocchio")
