@@ -266,11 +266,15 @@ class PayloadResult:
     warnings: list[str] = field(default_factory=list)
     timings: dict = field(default_factory=dict)
     runs: dict = field(default_factory=dict)
+    #: how the covariance was estimated: ``{method, bandwidth, inflation, n_blocks, ...}``
+    #: (``hac``: autocorrelation-consistent from the runs' per-block sums)
+    uncertainty: dict | None = None
 
     def to_dict(self) -> dict:
         """JSON-ready: ``payload`` and the fit (lists, floats, None)."""
         return {
             "command": "payload",
+            "uncertainty": self.uncertainty,
             "robot": self.robot_name,
             "joints": list(self.dof_names),
             "method": self.method,

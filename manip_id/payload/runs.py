@@ -21,6 +21,7 @@ import numpy as np
 from .._checks import as_float_array, check_finite
 from ..errors import DataError, InputError, ManipIdError
 from ..estimators import InformationAccumulator
+from ..estimators.uncertainty import UncertaintyOptions
 from ..execution import SPLIT_EVERY, open_backend, portable_robot, reduce_tree
 from ..metrics import relative_error
 from ..regressor import DEFAULT_CHUNK, check_states
@@ -175,6 +176,7 @@ def run_sums(
     design: Design,
     chunk: int = DEFAULT_CHUNK,
     deadband: float | None = None,
+    stream: int = 0,
 ) -> RunSums:
     """One run's information sums: the body of the local loop and of a Dask task.
 
@@ -194,13 +196,18 @@ def run_sums(
         the rows of the problem, a picklable callable with ``n_cols``
     chunk
         samples per regressor chunk; deadband: see above
+    stream
+        the run's number in the problem: its per-block sums (for the autocorrelation-
+        consistent covariance, :mod:`manip_id.estimators.uncertainty`) are a record of
+        their own
 
     Raises
     ------
     InputError / DataError: naming the run (its file for a file), whatever went wrong.
     """
     ev = robot.evaluator
-    acc = InformationAccumulator(int(design.n_cols), robot.nv)  # type: ignore[attr-defined]
+    n_cols = int(design.n_cols)  # type: ignore[attr-defined]
+    acc = UncertaintyOptions().accumulator(n_cols, robot.nv, stream=int(stream))
     left_out = np.zeros(robot.nv, dtype=np.int64)
     try:
         for block in run.blocks():
@@ -241,12 +248,13 @@ def accumulate_runs(
     """
     worker_robot = robot if scheduler is None else portable_robot(robot)
     with open_backend(scheduler=scheduler) as backend:
-        roots = []
+        roots, stream = [], 0
         for runs, design in groups:
-            leaves = [
-                backend.submit(run_sums, worker_robot, run, design, int(chunk), deadband)
-                for run in runs
-            ]
+            leaves = []
+            for run in runs:
+                args = (worker_robot, run, design, int(chunk), deadband, stream)
+                leaves.append(backend.submit(run_sums, *args))
+                stream += 1
             roots.append(reduce_tree(backend, leaves, SPLIT_EVERY))
         return list(backend.gather(roots))
 

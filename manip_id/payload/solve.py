@@ -21,6 +21,7 @@ from .._checks import as_float_array
 from ..errors import DataError, InputError, RankDeficiencyError
 from ..estimators import InformationAccumulator, LeastSquaresSolution, solve_accumulator
 from ..estimators.consistent import ConsistentProblem, base_map, solve_sdp
+from ..estimators.uncertainty import solution_uncertainty
 from ..identifiability import BaseParameters, RankAnalysis, analyze, analyze_information
 from ..metrics import relative_error
 from ..robot import Robot
@@ -187,6 +188,7 @@ class _PayloadFit:
     cov_beta: np.ndarray
     solver: str
     phi_override: np.ndarray | None = None
+    uncertainty: dict | None = None  # the covariance's method, inflation, blocks
 
 
 def _payload_inputs(
@@ -280,7 +282,7 @@ def _payload_solve(prob: _PayloadProblem, sums: _PayloadSums, method: str, nv: i
     ls = solve_accumulator(acc, method=method, names=sums.names, rank_rtol=ra.tolerance)
     f = dof_factor(acc, ls.rank, sums.left_out)
     x = ls.estimate
-    cov = ls.covariance * f
+    cov, uncertainty = _honest_covariance(acc, ls, f)
     if prob.known is None:
         beta, psi = x[:r], x[r:]
         cov_psi = cov[r:, r:]
@@ -296,7 +298,28 @@ def _payload_solve(prob: _PayloadProblem, sums: _PayloadSums, method: str, nv: i
         G = np.linalg.solve(A_all[:k, :k], A_all[:k, k:])
         cov_psi = cov_psi + G @ prob.known.covariance @ G.T
         cov_beta = prob.known.covariance
-    return _PayloadFit(ls, ra, f, x, beta, psi, cov_psi, cov_beta, ls.solver)
+    return _PayloadFit(
+        ls, ra, f, x, beta, psi, cov_psi, cov_beta, ls.solver, uncertainty=uncertainty
+    )
+
+
+def _honest_covariance(acc: InformationAccumulator, ls: LeastSquaresSolution, f: float):
+    """``(covariance, summary)`` of the fit: the white-noise one (corrected by ``f`` for
+    the rows left out) scaled to the autocorrelation-consistent standard deviations of the
+    runs' per-block sums when they allow it (``auto``), never below it; ``summary`` as the
+    identification's ``uncertainty``."""
+    white = ls.covariance * f
+    if acc.blocks is None:  # a known base: its sums are derived (no blocks)
+        return white, {"method": "white", "reason": "the sums of a known base carry no blocks"}
+    unc = solution_uncertainty(acc, ls, white_covariance=white)
+    if unc.method != "hac":
+        return white, unc.to_dict()
+    # the white correlations scaled to the honest std, never below the white ones: the
+    # full block-score matrix of a few runs is too noisy for the payload's Wald test (as
+    # IdentificationResult.test_covariance for drift)
+    sw = np.sqrt(np.clip(np.diag(white), 0.0, None))
+    scale = np.maximum(np.divide(unc.std, sw, out=np.ones_like(sw), where=sw > 0), 1.0)
+    return white * np.outer(scale, scale), unc.to_dict()
 
 
 def _payload_shown(prob: _PayloadProblem, sums: _PayloadSums, fit: _PayloadFit) -> dict:
@@ -479,6 +502,7 @@ def _payload_result(
         warnings=messages,
         timings=timings,
         runs=sums.runs,
+        uncertainty=fit.uncertainty,
     )
 
 
