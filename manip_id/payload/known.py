@@ -8,7 +8,6 @@ the torque scale of ``manip-id identify --torque-scale-from``.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,6 +15,7 @@ import numpy as np
 
 from ..errors import DataError, InputError
 from ..identifiability import BaseParameters
+from ..identification.document import read_result_json
 from ..robot import Robot
 
 
@@ -49,14 +49,7 @@ def load_known_base(path) -> KnownBase:
     diagonal of the standard deviations).
     """
     path = Path(path)
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError as exc:
-        raise DataError(f"no such result file: {path}") from exc
-    except (OSError, ValueError) as exc:
-        raise DataError(f"cannot read {path} as the JSON of an identification: {exc}") from exc
-    if not isinstance(doc, dict):
-        raise DataError(f"{path} is not the JSON object of an identification")
+    doc = read_result_json(path, "result")
     rows, key = doc.get("base_parameters"), "value"
     if rows is None:
         rows, key = doc.get("parameters"), "estimate"
@@ -123,13 +116,8 @@ def load_torque_scale(path, robot: Robot | None = None) -> np.ndarray:
     gain must have been determined and be positive.
     """
     path = Path(path)
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError as exc:
-        raise DataError(f"no such drive-gain result: {path}") from exc
-    except (OSError, ValueError) as exc:
-        raise DataError(f"cannot read {path} as JSON: {exc}") from exc
-    rows = doc.get("drive_gains") if isinstance(doc, dict) else None
+    doc = read_result_json(path, "drive-gain result")
+    rows = doc.get("drive_gains")
     if not isinstance(rows, list) or not rows:
         raise DataError(
             f"{path} holds no 'drive_gains' (expected the JSON of manip-id drive-gains --json)"
