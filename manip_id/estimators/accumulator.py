@@ -26,7 +26,7 @@ from scipy.linalg.blas import dsyrk
 
 from .._checks import as_float_array
 from ..errors import InputError
-from .blocks import ScoreBlocks
+from .blocks import ScoreBlocks, add_joint_sums
 
 
 class InformationAccumulator:
@@ -138,14 +138,7 @@ class InformationAccumulator:
         """
         if self.blocks is not None:
             self.blocks.add_sums(A_joint, b_joint, zz_joint, n, supports)
-        for j in range(self.nv):
-            if supports is None:
-                self._A[j] += np.tril(A_joint[j])
-                self._b[j] += b_joint[j]
-            else:
-                sj = np.asarray(supports[j], dtype=np.intp)
-                self._A[j][np.ix_(sj, sj)] += np.tril(A_joint[j])
-                self._b[j][sj] += b_joint[j]
+        add_joint_sums(self._A, self._b, A_joint, b_joint, supports)
         self._zz += np.asarray(zz_joint, dtype=float)
         self.n += int(n)
         return self

@@ -45,6 +45,20 @@ MAX_BLOCKS = 128
 BLOCK_LENGTH = 32
 
 
+def add_joint_sums(A, b, A_joint, b_joint, supports=None) -> None:
+    """Add per-joint sums into ``A`` (lower triangles, (nv, p, p)) and ``b`` ((nv, p)) in
+    place: ``A_joint[j]``, ``b_joint[j]`` over all columns, or over the columns
+    ``supports[j]`` of joint ``j`` when given (the accumulator's and a block's rule)."""
+    for j in range(len(A)):
+        if supports is None:
+            A[j] += np.tril(A_joint[j])
+            b[j] += b_joint[j]
+        else:
+            sj = np.asarray(supports[j], dtype=np.intp)
+            A[j][np.ix_(sj, sj)] += np.tril(A_joint[j])
+            b[j][sj] += b_joint[j]
+
+
 class _Block:
     """The sums of one block: ``A`` (nv, p, p) with valid lower triangles, ``b`` (nv, p),
     ``zz`` (nv,), ``n`` samples."""
@@ -202,14 +216,7 @@ class ScoreBlocks:
         :meth:`InformationAccumulator.add_sums`): it cannot be cut, and counts in the
         block of its middle sample; the next sample follows it."""
         blk = self._block_at(self.position + int(n) // 2)
-        for j in range(self.nv):
-            if supports is None:
-                blk.A[j] += np.tril(A_joint[j])
-                blk.b[j] += b_joint[j]
-            else:
-                sj = np.asarray(supports[j], dtype=np.intp)
-                blk.A[j][np.ix_(sj, sj)] += np.tril(A_joint[j])
-                blk.b[j][sj] += b_joint[j]
+        add_joint_sums(blk.A, blk.b, A_joint, b_joint, supports)
         blk.zz += np.asarray(zz_joint, dtype=float)
         blk.n += int(n)
         self.position += int(n)
