@@ -100,7 +100,8 @@ class RegressorEvaluator:
         rows = np.arange(self.nv) * self.p
         self._flat = [(t, rows + self.layout.joint_columns(t.name)) for t in self.layout.term_table]
         self._needs_angles = any(t.needs_angles for t in self.layout.term_table)
-        self._load_data = robot.model.createData()  # the load law's rnea
+        self._load_model = robot.load_model  # the load law's rnea: the nominal inertias
+        self._load_data = self._load_model.createData()
         self._compiled: CompiledModel | None | bool = False  # False: not looked up yet
         self._seen = 0  # samples evaluated in blocks [-]
 
@@ -154,9 +155,10 @@ class RegressorEvaluator:
         return self.layout.joint_values(angles, vel, acc, load)
 
     def load_torque(self, q, vel, acc) -> np.ndarray:
-        """The nominal rigid-body torque ``rnea(q, vel, acc)`` of the robot's model (its URDF
-        inertias), shape like ``vel`` (..., nv) [N m or N]: the load of the ``load`` law."""
-        m, d = self.model, self._load_data
+        """The nominal rigid-body torque ``rnea(q, vel, acc)`` of :attr:`Robot.load_model`
+        (the URDF inertias, or those an identified robot's sidecar records), shape like
+        ``vel`` (..., nv) [N m or N]: the load of the ``load`` law."""
+        m, d = self._load_model, self._load_data
         if np.ndim(vel) == 1:
             return np.array(pin.rnea(m, d, q, vel, acc))
         return np.array([pin.rnea(m, d, a, b, c) for a, b, c in zip(q, vel, acc, strict=True)])

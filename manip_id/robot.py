@@ -60,7 +60,7 @@ from .robot_sources import (
     reference_configuration,
     resolve_profile,
 )
-from .sidecar import apply_identified, identified_options
+from .sidecar import apply_identified, identified_joint_model, identified_options
 from .sidecar import locked_configuration as sidecar_locked
 
 __all__ = [
@@ -230,7 +230,9 @@ class Robot:
                 np.asarray(self.settings.get("spring", 0.0), dtype=float), (self.nv,)
             ),
         }
-        zero = np.zeros(self.nv)  # the other laws: no nominal value
+        zero = np.zeros(self.nv)  # the other laws: no nominal value, unless identified
+        for t, v in self.settings.get("joint_term_values", {}).items():
+            per_term[t] = np.asarray(v, dtype=float)
         joint = [[per_term.get(t, zero)[dof] for t in self.terms.enabled] for dof in range(self.nv)]
         return np.concatenate([np.concatenate(rigid), np.asarray(joint, dtype=float).ravel()])
 
@@ -238,7 +240,7 @@ class Robot:
         """The same robot with other joint terms (a new :class:`Robot`; the model is shared)."""
         if not isinstance(terms, JointTerms):
             raise InputError(f"terms must be JointTerms, got {type(terms).__name__}")
-        return Robot(
+        out = Robot(
             self.name,
             self.model,
             terms,
@@ -246,6 +248,8 @@ class Robot:
             reduction=self._reduction,
             profile=self.profile,
         )
+        out.settings = dict(self.settings)  # an identified robot's offsets, load inertias
+        return out
 
     def parameter_index(self, name: str) -> int:
         """Column index of a parameter name; the error lists close matches."""
@@ -361,6 +365,20 @@ class Robot:
         return RegressorEvaluator(self)
 
     @cached_property
+    def load_model(self) -> pin.Model:
+        """The model whose ``rnea`` is the load of the ``load`` friction law: ``model``, or
+        for a robot loaded with ``identified=True`` a copy holding the inertias the law was
+        identified with (the sidecar's ``load_inertias``, shape (nb, 10)), since the
+        exported URDF carries the identified ones."""
+        blocks = self.settings.get("load_inertias")
+        if blocks is None:
+            return self.model
+        model = self.model.copy()
+        for i, block in enumerate(np.asarray(blocks, dtype=float), start=1):
+            model.inertias[i] = pin.Inertia.FromDynamicParameters(block)
+        return model
+
+    @cached_property
     def gravity_free_model(self) -> pin.Model:
         """The same model with zero gravity (for velocity-only terms)."""
         model = self.model.copy()
@@ -450,6 +468,7 @@ def load_robot(
     src = load_source(spec_str, [str(p) for p in package_dirs])
     model, name = src.model, src.name
     sidecar = None
+    explicit = {"armature": armature, "friction": friction, "spring": spring}
     if identified is not None and identified is not False:
         sidecar, armature, friction, spring, active_joints = identified_options(
             spec_str, identified, armature, friction, spring, active_joints
@@ -458,6 +477,9 @@ def load_robot(
             locked_configuration = sidecar_locked(sidecar)
     prof = resolve_profile(profile, name, src.by_path)
     terms = joint_terms(armature, friction, spring, profile_terms(prof))
+    model_fields = None if sidecar is None else identified_joint_model(sidecar, **explicit)
+    if model_fields is not None:  # the identified laws, shapes and per-joint models
+        terms = JointTerms(**model_fields)
 
     all_joints = [model.names[i] for i in range(1, model.njoints)]
     if active_joints is None and prof is not None:

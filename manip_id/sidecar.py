@@ -2,7 +2,10 @@
 
 :mod:`manip_id.export` writes ``OUT.identified.json`` next to an exported ``OUT.urdf``
 (``OUT.xml.identified.json`` next to an MJCF file): the identified parameters, the joint
-terms a URDF has no field for (armature ``Ia``, offset ``fo``, spring ``k``), the active
+terms a URDF has no field for (armature ``Ia``, offset ``fo``, spring ``k``), the
+coefficients of every friction law, the laws themselves (``joint_model``: which laws, the
+order of ``position``, the shapes ``vs, a, c`` and the per-joint models, version 3) and the
+inertias the ``load`` law's load torque was computed with (``load_inertias``), the active
 and locked joints. ``load_robot(OUT.urdf, identified=True)`` reads it with the functions
 here (:func:`identified_options`, :func:`locked_configuration`, :func:`apply_identified`).
 """
@@ -16,12 +19,25 @@ from typing import Any
 import numpy as np
 
 from .errors import InputError
+from .friction import FrictionShapes
 
 #: ``format`` field of the sidecar JSON.
 SIDECAR_FORMAT = "manip_id identified parameters"
-SIDECAR_VERSION = 2
+SIDECAR_VERSION = 3
 
 _TERM_FLAGS = {"Ia": "armature", "fv": "viscous", "fc": "coulomb", "fo": "offset", "k": "spring"}
+#: The on/off fields of :class:`~manip_id.robot.JointTerms` the sidecar's ``joint_model`` holds.
+MODEL_FLAGS: tuple[str, ...] = (
+    "armature",
+    "viscous",
+    "coulomb",
+    "offset",
+    "spring",
+    "asymmetric",
+    "stribeck",
+    "sigmoid",
+    "load",
+)
 
 
 def sidecar_path(path) -> Path:
@@ -71,6 +87,38 @@ def identified_options(spec: str, identified, armature, friction, spring, active
     return data, armature, friction, spring, active_joints
 
 
+def _toggle(per_dof, term: str, on: bool | None):
+    if per_dof is None or on is None:
+        return per_dof
+    return tuple(tuple(t for t in keep if t != term) + ((term,) if on else ()) for keep in per_dof)
+
+
+def identified_joint_model(sidecar: dict, *, armature=None, friction=None, spring=None):
+    """The fields of the :class:`~manip_id.robot.JointTerms` the sidecar's ``joint_model``
+    records (its laws, ``harmonics``, ``shapes``, ``per_dof``), or None when the caller
+    names the friction kinds (``friction`` not None: theirs win) or the sidecar has no
+    joint model (version 2). An explicit ``armature`` or ``spring`` flag overrides the
+    sidecar's, also in each joint's model."""
+    model = sidecar.get("joint_model")
+    if friction is not None or model is None:
+        return None
+    try:
+        fields: dict[str, Any] = {f: bool(model.get(f, False)) for f in MODEL_FLAGS}
+        fields["harmonics"] = int(model.get("harmonics", 0))
+        shapes = model.get("shapes")
+        fields["shapes"] = None if shapes is None else FrictionShapes.from_dict(shapes)
+        per_dof = model.get("per_dof")
+        per_dof = None if per_dof is None else tuple(tuple(map(str, k)) for k in per_dof)
+    except (AttributeError, TypeError, ValueError) as exc:
+        raise InputError(f"the sidecar's joint_model cannot be read: {model!r}") from exc
+    for flag, term, value in (("armature", "Ia", armature), ("spring", "k", spring)):
+        if value is not None:
+            fields[flag] = bool(value)
+            per_dof = _toggle(per_dof, term, bool(value))
+    fields["per_dof"] = per_dof
+    return fields
+
+
 def locked_configuration(sidecar: dict) -> dict[str, Any] | None:
     """The sidecar's locked joints as ``JointSelection(locked_configuration=...)`` of
     :func:`manip_id.robot.load_robot` takes them (None for a sidecar without them, version 1)."""
@@ -89,9 +137,26 @@ def locked_configuration(sidecar: dict) -> dict[str, Any] | None:
 
 
 def apply_identified(robot, sidecar: dict) -> None:
-    """Put the sidecar's armature into ``robot.model`` and its offset and spring into
-    ``robot.settings`` (so that ``robot.nominal_parameters`` holds them)."""
+    """Put the sidecar's armature into ``robot.model``, its offset, spring and the
+    coefficients of every other joint term into ``robot.settings`` (so that
+    ``robot.nominal_parameters`` holds them), and the ``load`` law's inertias
+    (``settings["load_inertias"]``, :attr:`~manip_id.robot.Robot.load_model`)."""
     joints = sidecar["joints"]
+    values = {
+        t: np.array([float(joints.get(d, {}).get(t, 0.0)) for d in robot.dof_names])
+        for t in robot.terms.enabled
+        if any(t in joints.get(d, {}) for d in robot.dof_names)
+    }
+    robot.settings["joint_term_values"] = values
+    blocks = sidecar.get("load_inertias")
+    if blocks is not None:
+        blocks = np.asarray(blocks, dtype=float)
+        if blocks.shape != (robot.n_bodies, 10):
+            raise InputError(
+                f"the sidecar's load_inertias have shape {blocks.shape}, expected "
+                f"(n_bodies, 10)={robot.n_bodies, 10}"
+            )
+        robot.settings["load_inertias"] = blocks
     arm = np.array(robot.model.armature, dtype=float)
     offset, spring = np.zeros(robot.nv), np.zeros(robot.nv)
     for k, dof in enumerate(robot.dof_names):

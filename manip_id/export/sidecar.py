@@ -5,7 +5,14 @@
 
 - ``parameters``: the identified standard parameter vector (name, value, unit);
 - ``joints``: per joint its identified terms (armature ``Ia``, viscous ``fv``, Coulomb
-  ``fc``, offset ``fo``, spring ``k``): armature and offset have no URDF field;
+  ``fc``, offset ``fo``, spring ``k``, and the coefficients of the other friction laws of
+  :mod:`manip_id.friction`: ``fvp, fvn, fcp, fcn, fs, fsg, hks, hkc, fl``): armature,
+  offset and the laws have no URDF field;
+- ``joint_model``: the laws (``JointTerms`` flags), the order of ``position``, the shapes
+  (Stribeck ``vs``, sigmoid slope ``a`` and shift ``c`` per DoF) and each joint's own
+  model (``per_dof``, after ``--friction auto``);
+- ``load_inertias`` (with the ``load`` law): the rigid-body parameters, shape (nb, 10),
+  whose ``rnea`` is the law's load torque (the URDF's nominal ones, not the exported);
 - ``active_joints``, ``locked_joints`` (name -> position), ``joint_terms``: how the robot
   was identified;
 - ``composites``: per body, the link holding the identified composite, the links it
@@ -27,6 +34,7 @@ import numpy as np
 
 from ..metrics import finite_or_none
 from ..sidecar import (  # noqa: F401  (re-exported: the reading half lives in the model layer)
+    MODEL_FLAGS,
     SIDECAR_FORMAT,
     SIDECAR_VERSION,
     apply_identified,
@@ -49,6 +57,17 @@ def locked_joints(robot) -> dict[str, Any]:
             coords = [float(v) for v in q[jm.idx_q : jm.idx_q + jm.nq]]
             out[name] = coords[0] if jm.nq == 1 else coords
     return out
+
+
+def joint_model_document(terms) -> dict:
+    """The sidecar's ``joint_model`` of a robot's :class:`~manip_id.robot.JointTerms`."""
+    shapes = terms.shapes
+    return {
+        **{f: bool(getattr(terms, f)) for f in MODEL_FLAGS},
+        "harmonics": int(terms.harmonics),
+        "shapes": None if shapes is None else shapes.to_dict(),
+        "per_dof": None if terms.per_dof is None else [list(k) for k in terms.per_dof],
+    }
 
 
 def sidecar_document(
@@ -75,6 +94,13 @@ def sidecar_document(
             for n, u in zip(names, robot.parameter_units, strict=True)
         ],
     }
+    doc["joint_model"] = joint_model_document(robot.terms)
+    if robot.terms.load:  # the load torque's inertias: the exported URDF has other ones
+        load = robot.load_model
+        doc["load_inertias"] = [
+            [float(v) for v in load.inertias[i].toDynamicParameters()]
+            for i in range(1, load.njoints)
+        ]
     if provenance:
         doc["provenance"] = dict(provenance)
     return doc
