@@ -136,12 +136,14 @@ class Candidate:
     parameters: dict
     validation_error: float | None
     bic: float
+    n_parameters: int | None = None  # the joint's identified coefficients plus its shapes
 
     def to_dict(self) -> dict:
-        """JSON-ready."""
+        """JSON-ready (``n_parameters``: the joint's base coefficients plus its shapes)."""
         return {
             "model": self.model,
             "parameters": self.parameters,
+            "n_parameters": self.n_parameters,
             "validation_error": finite_or_none(self.validation_error),
             "bic": finite_or_none(self.bic),
         }
@@ -244,16 +246,22 @@ def combined_terms(base: JointTerms, per_joint: list[JointTerms], shapes) -> Joi
 
 
 # ----------------------------------------------------------------- scoring
-def joint_scores(
-    robot: Robot, result: IdentificationResult
-) -> tuple[np.ndarray | None, np.ndarray]:
-    """Per joint ``(validation_error, bic)`` of one fit (module docstring), shapes (nv,)."""
-    n = max(int(result.n_samples), 1)
+def joint_coefficients(robot: Robot, result: IdentificationResult) -> np.ndarray:
+    """Per joint the base parameters of one fit that are its own joint terms, shape (nv,)."""
     k = np.zeros(robot.nv)
     for c in result.base.independent:
         owner = robot.layout.owner(int(c))
         if owner.kind == "joint":
             k[owner.index] += 1
+    return k
+
+
+def joint_scores(
+    robot: Robot, result: IdentificationResult
+) -> tuple[np.ndarray | None, np.ndarray]:
+    """Per joint ``(validation_error, bic)`` of one fit (module docstring), shapes (nv,)."""
+    n = max(int(result.n_samples), 1)
+    k = joint_coefficients(robot, result)
     var = np.maximum(np.asarray(result.noise_variance, dtype=float), 1e-300)
     bic = n * np.log(var) + k * math.log(n)
     v = result.relative_error.validation_per_joint
@@ -272,6 +280,7 @@ class _Trial:
     val: np.ndarray | None
     bic: np.ndarray
     shift: np.ndarray | None = None  # per joint, the sigmoid shift c [rad/s]
+    k: np.ndarray | None = None  # per joint, its base coefficients in this fit
 
 
 # ------------------------------------------------------------------ search
@@ -294,7 +303,8 @@ def _fit_trial(fit, robot, model, opts, shape: np.ndarray | None, shift=None) ->
     for _ in range(3):
         r = robot.with_terms(terms)
         try:
-            val, bic = joint_scores(r, fit(r))
+            res = fit(r)
+            val, bic = joint_scores(r, res)
             break
         except RankDeficiencyError as exc:
             lost = _unexcited_terms(r, exc.directions)
@@ -313,7 +323,7 @@ def _fit_trial(fit, robot, model, opts, shape: np.ndarray | None, shift=None) ->
         bic[j] = np.inf
         if val is not None:
             val[j] = np.inf
-    return _Trial(shape, val, bic, shift)
+    return _Trial(shape, val, bic, shift, joint_coefficients(r, res))
 
 
 def _unexcited_terms(robot: Robot, directions) -> list[tuple[int, str]] | None:
@@ -457,7 +467,8 @@ def _candidate(model: str, trial: _Trial, j: int, name: str | None = None) -> Ca
     if trial.shift is not None:
         params["shift"] = float(trial.shift[j])
     val = None if trial.val is None else float(trial.val[j])
-    return Candidate(name or model, params, val, float(trial.bic[j]))
+    k = None if trial.k is None else int(trial.k[j]) + len(params)
+    return Candidate(name or model, params, val, float(trial.bic[j]), k)
 
 
 def _model_terms(base: JointTerms, name: str, opts: SelectionOptions, shapes) -> JointTerms:
@@ -480,12 +491,15 @@ def _combine(fit, robot, opts, joints: list[JointSelection], shapes, use_val) ->
     per_joint = [_model_terms(robot.terms, c.model + "+position", opts, shapes) for c in names]
     r = robot.with_terms(combined_terms(robot.terms, per_joint, shapes))
     try:
-        val, bic = joint_scores(r, fit(r))
+        res = fit(r)
+        val, bic = joint_scores(r, res)
     except RankDeficiencyError:  # the combination over-fits these data: not a candidate
         return 1
+    k = joint_coefficients(r, res)
     for j, (js, c) in enumerate(zip(joints, names, strict=True)):
         v = None if val is None else float(val[j])
-        js.candidates.append(Candidate(c.model + "+position", c.parameters, v, float(bic[j])))
+        n = int(k[j]) + len(c.parameters)
+        js.candidates.append(Candidate(c.model + "+position", c.parameters, v, float(bic[j]), n))
     return 1
 
 

@@ -21,7 +21,12 @@ from .meshcat_scene import RobotScene, link_identifiability
 from .report import ReportContent, write_report
 from .report_answers import identify_answers
 from .report_document import ReportOptions, ReportSamples
-from .report_tables import report_parameter_rows, report_quality_rows, report_summary
+from .report_tables import (
+    report_parameter_rows,
+    report_quality_rows,
+    report_selection_rows,
+    report_summary,
+)
 
 
 def build_scene(robot, result, full, title: str, notes: list, assets: str = "inline"):
@@ -162,6 +167,20 @@ def _fit_figures(robot, result, report: dict, samples: ReportSamples, run_name: 
     }
 
 
+def report_sections(report: dict) -> dict | None:
+    """The report's sections after the parameters: the friction model chosen per joint
+    (``--friction auto``) and the data quality, those the document has."""
+    tables = {}
+    selection = report_selection_rows(report)
+    if selection:
+        by = report.get("friction_criterion") or "validation error or BIC"
+        tables[f"Friction model per joint (chosen by {by})"] = selection
+    quality = report_quality_rows(report)
+    if quality:
+        tables["Data quality"] = quality
+    return tables or None
+
+
 def write_identify_report(
     folder, robot, result, report: dict, samples: ReportSamples, *, options: ReportOptions
 ) -> Path:
@@ -192,7 +211,6 @@ def write_identify_report(
     notes: list[str] = []  # the warnings are answered under "What to do next?"
     title = f"manip-id identify: {run_name}"
     scene = build_scene(robot, result, full, title, notes, options.scene_assets)
-    quality = report_quality_rows(report)
     content = ReportContent(
         title=title,
         summary=report_summary(report, options.source),
@@ -201,7 +219,7 @@ def write_identify_report(
         scene=scene,
         json_result=report,
         notes=notes,
-        tables={"Data quality": quality} if quality else None,
+        tables=report_sections(report),
         questions=identify_answers(report, getattr(folder, "path", folder)),
     )
     return write_report(folder, content, force=options.force)
@@ -246,7 +264,6 @@ def write_fleet_report(
         for f in (result.per_file or [])
         if f.result is None
     ]
-    quality = report_quality_rows(report)
     content = ReportContent(
         title=f"manip-id identify: {run_name}",
         summary=summary,
@@ -254,7 +271,7 @@ def write_fleet_report(
         figures=figs,
         json_result=report,
         notes=notes,
-        tables={"Data quality": quality} if quality else None,
+        tables=report_sections(report),
         questions=identify_answers(report, getattr(folder, "path", folder)),
     )
     return write_report(folder, content, force=options.force)

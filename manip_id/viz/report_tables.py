@@ -159,3 +159,39 @@ def report_quality_rows(report: dict) -> list[dict]:
                 }
             )
     return rows
+
+
+_SHAPE_TEXT = {"vs": ("vs", "rad/s"), "slope": ("a", "s/rad"), "shift": ("c", "rad/s")}
+
+
+def _shape_text(parameters: dict) -> str:
+    """``"vs = 0.06 rad/s"``, ``"a = 30 s/rad, c = 0 rad/s"``, or ``-`` for a linear law."""
+    cells = []
+    for key, value in (parameters or {}).items():
+        name, unit = _SHAPE_TEXT.get(key, (key, ""))
+        cells.append(f"{name} = {number(value, 3)} {unit}".rstrip())
+    return ", ".join(cells) or "-"
+
+
+def report_selection_rows(report: dict) -> list[dict]:
+    """The ``--friction auto`` section: per joint each candidate model with its number of
+    parameters (the joint's identified coefficients plus its shapes), its shapes, its
+    validation error [%] and BIC; the chosen model of each joint marked. Empty without
+    ``friction_selection`` in the document."""
+    rows = []
+    for js in report.get("friction_selection") or []:
+        for c in js["candidates"]:
+            err, bic = c.get("validation_error"), c.get("bic")
+            chosen = c["model"] == js["chosen"]
+            rows.append(
+                {
+                    "joint": js["joint"],
+                    "model": c["model"],
+                    "chosen": "chosen" if chosen else "",
+                    "parameters": "n/a" if c.get("n_parameters") is None else c["n_parameters"],
+                    "shape": _shape_text(c.get("parameters")),
+                    "validation error [%]": "n/a" if err is None else number(100 * err, 4),
+                    "BIC": "n/a (not excited)" if bic is None else number(bic, 6),
+                }
+            )
+    return rows
