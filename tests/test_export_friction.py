@@ -116,3 +116,19 @@ def test_every_law_is_exported_and_evaluated_when_loaded_back(robot, tmp_path, l
     )
     assert np.abs(friction).max() > 0.1  # the law is there [N m]
     np.testing.assert_allclose(got - rigid, friction, rtol=0, atol=1e-9)
+
+
+def test_explicit_laws_win_over_the_sidecars(robot, tmp_path):
+    r, res = _identified(robot, "stribeck")
+    out = tmp_path / "stribeck.urdf"
+    export_urdf(r, res.standard.values, out)
+    plain = load_robot(out, identified=True, friction="viscous", armature=True)
+    assert plain.terms.enabled == ("Ia", "fv")
+    assert plain.terms.shapes is None and plain.terms.per_dof is None
+    side = json.loads(sidecar_path(out).read_text())
+    fv = [side["joints"][d]["fv"] for d in plain.dof_names]
+    np.testing.assert_allclose(plain.nominal_parameters[plain.layout.joint_columns("fv")], fv)
+    # an explicit armature flag joins the sidecar's laws, in every joint's model
+    with_ia = load_robot(out, identified=True, armature=True)
+    assert with_ia.terms.armature and with_ia.terms.stribeck
+    assert all("Ia" in keep for keep in with_ia.terms.per_dof or [with_ia.terms.enabled])
