@@ -1,9 +1,10 @@
 """numba kernels of :mod:`manip_id.compiled_regressor` (imported only when numba is installed).
 
-The math and conventions are in :mod:`manip_id.compiled_regressor`. Three kernels: the
+The math and conventions are in :mod:`manip_id.compiled_regressor`. Four kernels: the
 forward pass of one sample (placements, velocities, accelerations of every joint frame),
 the body regressor A(v, a) of one body, and the block loop that projects each body's
-A through its chain of ancestors. Compiled code is cached on disk (``cache=True``).
+A through its chain of ancestors; and the momentum loop of
+:mod:`manip_id.models.momentum`. Compiled code is cached on disk (``cache=True``).
 """
 
 from __future__ import annotations
@@ -195,6 +196,71 @@ def block(tree, q, dq, ddq, out):
                 j = parent[j]
 
 
+@numba.njit(cache=True)
+def momentum(tree, basis, q, dq, out_p, out_h):
+    """The rigid momentum regressors of every sample into ``out_p`` and ``out_h``.
+
+    ``out_p[k] += Y_p(q_k, dq_k)`` (``Y_p theta = M dq``) and ``out_h[k] -= dK/dq`` (``C^T
+    dq``), both (N, nv, >= 10 n), rigid columns; ``basis`` (10, 6, 6): the spatial inertia
+    of each dynamic parameter. Per body ``i`` and ancestor-or-self joint ``j``, with
+    ``h_ik = B_k v_i`` and ``v_j`` carried to frame ``i`` (:mod:`manip_id.models.momentum`)::
+
+        Y_p[j, 10 i + k] = S_j^T h_ik,     dK/dq_j = (v_j x S_j)^T h_ik
+    """
+    parent, kind, axis, _, _, _, idx_v, _ = tree
+    n = parent.shape[0]
+    R = np.empty((n, 3, 3))
+    P = np.empty((n, 3))
+    V = np.empty((n, 6))
+    A = np.empty((n, 6))
+    T = np.empty((n, n, 6))
+    work = (R, P, V, A, np.empty((6, 3)))
+    zero = np.zeros(dq.shape[1])
+    h = np.empty((10, 6))
+    u = np.empty(6)
+    c = np.empty(6)
+    for k in range(q.shape[0]):
+        _forward(tree, q[k], dq[k], zero, work)
+        _axes(parent, kind, axis, R, P, T)
+        for i in range(n):
+            for b in range(10):
+                for r in range(6):
+                    acc = 0.0
+                    for m in range(6):
+                        acc += basis[b, r, m] * V[i, m]
+                    h[b, r] = acc
+            for r in range(6):
+                u[r] = V[i, r]  # v_j in frame i, from j = i up to the root
+            j = i
+            while j >= 0:
+                s = T[i, j]
+                # motion cross (v, w) x (m, n) = (w x m + v x n, w x n): c = u x s
+                c[0] = u[4] * s[2] - u[5] * s[1] + u[1] * s[5] - u[2] * s[4]
+                c[1] = u[5] * s[0] - u[3] * s[2] + u[2] * s[3] - u[0] * s[5]
+                c[2] = u[3] * s[1] - u[4] * s[0] + u[0] * s[4] - u[1] * s[3]
+                c[3] = u[4] * s[5] - u[5] * s[4]
+                c[4] = u[5] * s[3] - u[3] * s[5]
+                c[5] = u[3] * s[4] - u[4] * s[3]
+                row = idx_v[j]
+                for b in range(10):
+                    yp = 0.0
+                    yh = 0.0
+                    for r in range(6):
+                        yp += s[r] * h[b, r]
+                        yh += c[r] * h[b, r]
+                    out_p[k, row, 10 * i + b] += yp
+                    out_h[k, row, 10 * i + b] -= yh
+                qd = dq[k, row]
+                for r in range(6):
+                    u[r] -= s[r] * qd
+                j = parent[j]
+
+
 def build():
     """The block kernel (compiled on first call, then loaded from numba's cache)."""
     return block
+
+
+def build_momentum():
+    """The momentum kernel (compiled on first call, then loaded from numba's cache)."""
+    return momentum

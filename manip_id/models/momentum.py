@@ -13,7 +13,11 @@ dynamic parameters): ``K_i = 1/2 v_i^T I_i v_i`` gives
 
 with ``J_i = d v_i/d dq`` and ``d v_i/dq`` from Pinocchio's kinematic derivatives
 (``getJointVelocityDerivatives``, LOCAL frame), and ``g`` from the torque
-regressor at rest.
+regressor at rest. The compiled kernel (:func:`manip_id.compiled_regressor.momentum_block`,
+used where the torque regressor's is) evaluates the same sums for a block of samples
+without them: ``d v_i/d q_j = iX_j (v_j x S_j)`` for ``j`` an ancestor-or-self of ``i``, so
+
+    (M dq)_j = sum_i S_j^T jX*_i I_i v_i,      dK/dq_j = sum_i (v_j x S_j)^T jX*_i I_i v_i
 
 Filter. ``F(s) = lambda/(s + lambda)`` is integrated exactly for inputs
 interpolated by the cubic through the last four samples (lower degrees at the
@@ -33,6 +37,7 @@ from functools import lru_cache
 import numpy as np
 import pinocchio as pin
 
+from ..compiled_regressor import momentum_block, rigid_block
 from ..errors import InputError
 from ..estimators import InformationAccumulator
 from ..estimators.blocks import ScoreBlocks
@@ -66,12 +71,28 @@ def momentum_regressors(robot: Robot, q, dq) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _regressors(robot: Robot, q: np.ndarray, dq: np.ndarray):
-    m = robot.model
-    d = m.createData()
-    n, nv, p, nb = q.shape[0], robot.nv, robot.n_parameters, robot.n_bodies
-    B = _inertia_basis()
+    n, nv, p, nr = q.shape[0], robot.nv, robot.n_parameters, robot.n_rigid
     Yp = np.zeros((n, nv, p))
     Yh = np.zeros((n, nv, p))
+    ev = robot.evaluator
+    desc = ev.kernel_for(n)
+    if desc is None:
+        _rigid_pinocchio(robot, q, dq, Yp, Yh)
+    else:  # g(q) = Y(q, 0, 0), then the compiled momentum loop
+        zero = np.zeros_like(dq)
+        rigid_block(desc, q, zero, zero, Yh[:, :, :nr])
+        momentum_block(desc, _inertia_basis(), q, np.ascontiguousarray(dq), Yp, Yh)
+    _add_joint_terms(robot, q, dq, Yp, Yh)
+    return Yp, Yh
+
+
+def _rigid_pinocchio(robot: Robot, q, dq, Yp: np.ndarray, Yh: np.ndarray) -> None:
+    """The rigid columns of ``Y_p`` and ``Y_h`` with Pinocchio's kinematic derivatives,
+    one call per sample (the reference path, and the fallback without the kernel)."""
+    m = robot.model
+    d = m.createData()
+    n, nv, nb = q.shape[0], robot.nv, robot.n_bodies
+    B = _inertia_basis()
     zero = np.zeros(nv)
     J = np.empty((nb, 6, nv))
     dV = np.empty((nb, 6, nv))
@@ -79,12 +100,19 @@ def _regressors(robot: Robot, q: np.ndarray, dq: np.ndarray):
     for k in range(n):
         pin.computeForwardKinematicsDerivatives(m, d, q[k], dq[k], zero)
         for i in range(1, nb + 1):
-            dV[i - 1], J[i - 1] = pin.getJointVelocityDerivatives(m, d, i, pin.LOCAL)
+            dv, jac = pin.getJointVelocityDerivatives(m, d, i, pin.LOCAL)
+            dV[i - 1], J[i - 1] = np.reshape(dv, (6, nv)), np.reshape(jac, (6, nv))  # nv = 1: (6,)
             V[i - 1] = d.v[i].vector
         H = np.einsum("kab,nb->nka", B, V)  # (nb, 10, 6): I(e_k) v_i
         Yp[k, :, : 10 * nb] = np.einsum("nai,nka->ink", J, H).reshape(nv, 10 * nb)
         dK = np.einsum("nai,nka->ink", dV, H).reshape(nv, 10 * nb)  # dK/dq
         Yh[k, :, : 10 * nb] = pin.computeJointTorqueRegressor(m, d, q[k], zero, zero) - dK
+
+
+def _add_joint_terms(robot: Robot, q, dq, Yp: np.ndarray, Yh: np.ndarray) -> None:
+    """The joint terms' columns: armature momentum in ``Y_p``; friction, offset and spring
+    in ``Y_h``."""
+    n, nv, p = q.shape[0], robot.nv, robot.n_parameters
     if robot.terms.enabled:
         ev = robot.evaluator
         zeros = np.zeros_like(dq)
@@ -96,7 +124,6 @@ def _regressors(robot: Robot, q: np.ndarray, dq: np.ndarray):
         Th = np.zeros((n, nv, p))
         ev.fill_joint_terms(Th, q, dq, zeros)
         Yh += Th  # friction, offset, spring (armature column: 0)
-    return Yp, Yh
 
 
 #: Degree of the interpolation of the filter inputs (cubic: O(dt^4) per step).
