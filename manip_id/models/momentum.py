@@ -45,6 +45,8 @@ from ..robot import Robot
 from .energy import check_model_states, window_samples
 
 _CHUNK = 1024
+#: rows at least this many samples apart: the filter is evaluated at the rows only
+_DECIMATE_STRIDE = 8
 
 
 @lru_cache(maxsize=1)
@@ -168,6 +170,7 @@ class _Filter:
         self.y = np.array(y0, dtype=float)  # last output
         self.past: list[np.ndarray] = []  # last inputs, newest first
         self.zi: np.ndarray | None = None
+        self._unrolled_weights: dict[int, np.ndarray] = {}
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         from scipy.signal import lfilter
@@ -191,6 +194,58 @@ class _Filter:
             _, b = self.weights[-1]
             out[k:], self.zi = lfilter(b, [1.0, -self.a], x[k:], axis=0, zi=self.zi)
         return out
+
+    def at(self, x: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """The outputs at the chunk's sorted local ``rows`` only, shape (len(rows), ...).
+
+        After the start-up, the recursion from the last output ``y_L`` to sample
+        ``t = L + s`` unrolls to ``y_t = a^s y_L + sum_{d=0}^{s+H-1} w_d(s) x_{t-d}`` with
+        ``w_d(s) = sum_i a^i c_{d-i}`` (``0 <= i < s``, ``0 <= d - i <= H``, ``H`` the
+        hold degree): one weighted sum per row and one to the chunk's end, whose state
+        (last output, last ``H`` inputs) carries on. Do not mix with ``__call__``.
+        """
+        c = x.shape[0]
+        out = np.empty((len(rows), *x.shape[1:]))
+        k0 = 0
+        if self.zi is None:  # the start-up samples, one at a time
+            k0 = min(c, HOLD_DEGREE - len(self.past))
+            head = self(x[:k0])
+            early = rows < k0
+            out[early] = head[rows[early]]
+        if k0 == c:
+            return out
+        H = HOLD_DEGREE
+        ext = np.concatenate([np.stack(self.past[::-1]), x[k0:]])  # ext[e]: sample k0 - H + e
+        flat = ext.reshape(ext.shape[0], -1)
+        last = k0 - 1
+        targets = [int(t) for t in rows if t >= k0]
+        if not targets or targets[-1] != c - 1:
+            targets.append(c - 1)
+        y = self.y.reshape(-1)
+        j = int(np.searchsorted(rows, k0))
+        for t in targets:
+            s = t - last
+            e0 = last + 1 - k0  # ext index of sample last + 1 - H
+            y = self.a**s * y + self._unrolled(s) @ flat[e0 : e0 + s + H]
+            if j < len(rows) and rows[j] == t:
+                out[j] = y.reshape(x.shape[1:])
+                j += 1
+            last = t
+        self.y = y.reshape(x.shape[1:]).copy()
+        self.past = [ext[ext.shape[0] - 1 - i].copy() for i in range(H)]  # newest first
+        return out
+
+    def _unrolled(self, s: int) -> np.ndarray:
+        """``w`` of ``s`` unrolled steps, oldest sample first, shape (s + H,) (:meth:`at`)."""
+        cache = self._unrolled_weights
+        if s not in cache:
+            _, c = self.weights[-1]
+            H = c.size - 1
+            w = np.zeros(s + H)  # w[d]: the weight of x_{t-d}
+            for i in range(s):
+                w[i : i + H + 1] += self.a**i * c
+            cache[s] = w[::-1].copy()
+        return cache[s]
 
     def _init_state(self) -> None:
         """Transposed direct-form state after the start-up: z_i = sum_{j>i} b_j x_{s+i-j}."""
@@ -242,24 +297,22 @@ def momentum_rows(
         raise InputError(
             f"{n} samples give no momentum row every {stride} samples: shorten window_length"
         )
-    filters: tuple[_Filter, _Filter, _Filter] | None = None
+    filters: tuple[_Filter, _Filter] | None = None
     for start in range(0, n, int(chunk)):
         stop = min(start + int(chunk), n)
         Yp, Yh = _regressors(robot, q[start:stop], dq[start:stop])
-        if filters is None:  # F[Y_p] starts at Y_p(0), the others at zero
-            zero = np.zeros_like(Yp[0])
-            filters = (
-                _Filter(lam, dt, Yp[0]),
-                _Filter(lam, dt, zero),
-                _Filter(lam, dt, zero[:, 0]),
-            )
-        fp, fh, ft = filters
-        Fp, Fh, Ft = fp(Yp), fh(Yh), ft(tau[start:stop])
+        Yh -= lam * Yp  # W = lam Y_p + F[Y_h - lam Y_p], its filter starting at -lam Y_p(0)
+        if filters is None:  # F[Y_p] starts at Y_p(0), F[Y_h] and F[tau] at zero
+            filters = (_Filter(lam, dt, -lam * Yp[0]), _Filter(lam, dt, np.zeros(robot.nv)))
         keep = np.arange(start, stop)
         keep = keep[(keep % stride == 0) & (keep > 0)] - start
+        fx, ft = filters
+        if stride < _DECIMATE_STRIDE:  # rows at (almost) every sample: filter them all
+            Fx, Ft = fx(Yh)[keep], ft(tau[start:stop])[keep]
+        else:  # only the rows' outputs, the states carried between them
+            Fx, Ft = fx.at(Yh, keep), ft.at(tau[start:stop], keep)
         if keep.size:
-            W = lam * (Yp[keep] - Fp[keep]) + Fh[keep]
-            yield W, Ft[keep]
+            yield lam * Yp[keep] + Fx, Ft
 
 
 def accumulate_momentum(
