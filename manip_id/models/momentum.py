@@ -112,20 +112,18 @@ def _rigid_pinocchio(robot: Robot, q, dq, Yp: np.ndarray, Yh: np.ndarray) -> Non
 
 
 def _add_joint_terms(robot: Robot, q, dq, Yp: np.ndarray, Yh: np.ndarray) -> None:
-    """The joint terms' columns: armature momentum in ``Y_p``; friction, offset and spring
-    in ``Y_h``."""
-    n, nv, p = q.shape[0], robot.nv, robot.n_parameters
-    if robot.terms.enabled:
-        ev = robot.evaluator
-        zeros = np.zeros_like(dq)
-        T0 = np.zeros((n, nv, p))
-        ev.fill_joint_terms(T0, q, zeros, zeros)
-        Ta = np.zeros((n, nv, p))
-        ev.fill_joint_terms(Ta, q, zeros, dq)
-        Yp += Ta - T0  # armature momentum Ia_j dq_j only
-        Th = np.zeros((n, nv, p))
-        ev.fill_joint_terms(Th, q, dq, zeros)
-        Yh += Th  # friction, offset, spring (armature column: 0)
+    """The joint terms' columns (zero in ``Yp`` and ``Yh`` before): armature momentum in
+    ``Y_p`` (``T(q, 0, dq) - T(q, 0, 0)``: ``Ia_j dq_j`` only); friction, offset and spring
+    in ``Y_h`` (``T(q, dq, 0)``; the armature column 0)."""
+    if not robot.terms.enabled:
+        return
+    ev, nr = robot.evaluator, robot.n_rigid
+    zeros = np.zeros_like(dq)
+    ev.fill_joint_terms(Yh, q, dq, zeros)
+    ev.fill_joint_terms(Yp, q, zeros, dq)
+    T0 = np.zeros(Yp.shape)  # calloc: the untouched pages cost nothing
+    ev.fill_joint_terms(T0, q, zeros, zeros)
+    Yp[:, :, nr:] -= T0[:, :, nr:]
 
 
 #: Degree of the interpolation of the filter inputs (cubic: O(dt^4) per step).
