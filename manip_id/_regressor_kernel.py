@@ -196,16 +196,37 @@ def block(tree, q, dq, ddq, out):
                 j = parent[j]
 
 
+@numba.njit(cache=True, inline="always")
+def _momentum_columns(s, v, y):
+    """y (10,) = s^T B_k v for the ten parameters k (``B_k`` Pinocchio's spatial inertia
+    of parameter k): ``m -> s_lin . v_lin``, ``mc -> v_lin x s_ang - v_ang x s_lin``,
+    ``I -> s_ang^T E_k v_ang`` (six symmetric entries)."""
+    l0, l1, l2, w0, w1, w2 = v[0], v[1], v[2], v[3], v[4], v[5]
+    a0, a1, a2, g0, g1, g2 = s[0], s[1], s[2], s[3], s[4], s[5]
+    y[0] = a0 * l0 + a1 * l1 + a2 * l2
+    y[1] = (l1 * g2 - l2 * g1) - (w1 * a2 - w2 * a1)
+    y[2] = (l2 * g0 - l0 * g2) - (w2 * a0 - w0 * a2)
+    y[3] = (l0 * g1 - l1 * g0) - (w0 * a1 - w1 * a0)
+    y[4] = g0 * w0
+    y[5] = g0 * w1 + g1 * w0
+    y[6] = g1 * w1
+    y[7] = g0 * w2 + g2 * w0
+    y[8] = g1 * w2 + g2 * w1
+    y[9] = g2 * w2
+
+
 @numba.njit(cache=True)
-def momentum(tree, basis, q, dq, out_p, out_h):
+def momentum(tree, q, dq, out_p, out_h):
     """The rigid momentum regressors of every sample into ``out_p`` and ``out_h``.
 
-    ``out_p[k] += Y_p(q_k, dq_k)`` (``Y_p theta = M dq``) and ``out_h[k] -= dK/dq`` (``C^T
-    dq``), both (N, nv, >= 10 n), rigid columns; ``basis`` (10, 6, 6): the spatial inertia
-    of each dynamic parameter. Per body ``i`` and ancestor-or-self joint ``j``, with
-    ``h_ik = B_k v_i`` and ``v_j`` carried to frame ``i`` (:mod:`manip_id.models.momentum`)::
+    ``out_p[k] = Y_p(q_k, dq_k)`` (``Y_p theta = M dq``) and ``out_h[k] = g(q_k) - dK/dq``
+    (``dK/dq = C^T dq``), both (N, nv, >= 10 n), rigid columns written (the others
+    untouched). Per body ``i`` and ancestor-or-self joint ``j``, with ``v_j`` carried to
+    frame ``i`` (:mod:`manip_id.models.momentum`)::
 
-        Y_p[j, 10 i + k] = S_j^T h_ik,     dK/dq_j = (v_j x S_j)^T h_ik
+        Y_p[j, 10 i + k] = S_j^T B_k v_i,     dK/dq_j = (v_j x S_j)^T B_k v_i
+
+    and ``g`` the torque regressor at rest (:func:`_project` of the gravity pass).
     """
     parent, kind, axis, _, _, _, idx_v, _ = tree
     n = parent.shape[0]
@@ -213,22 +234,28 @@ def momentum(tree, basis, q, dq, out_p, out_h):
     P = np.empty((n, 3))
     V = np.empty((n, 6))
     A = np.empty((n, 6))
+    G = np.empty((n, 6))
     T = np.empty((n, n, 6))
     work = (R, P, V, A, np.empty((6, 3)))
     zero = np.zeros(dq.shape[1])
-    h = np.empty((10, 6))
+    rest = np.zeros(6)
+    yp = np.empty(10)
+    yh = np.empty(10)
+    yg = np.empty(10)
     u = np.empty(6)
     c = np.empty(6)
     for k in range(q.shape[0]):
+        _forward(tree, q[k], zero, zero, work)  # at rest: A = the gravity pass
+        G[:, :] = A
         _forward(tree, q[k], dq[k], zero, work)
         _axes(parent, kind, axis, R, P, T)
+        Yp = out_p[k]
+        Yh = out_h[k]
+        for row in range(Yp.shape[0]):
+            for col in range(10 * n):
+                Yp[row, col] = 0.0
+                Yh[row, col] = 0.0
         for i in range(n):
-            for b in range(10):
-                for r in range(6):
-                    acc = 0.0
-                    for m in range(6):
-                        acc += basis[b, r, m] * V[i, m]
-                    h[b, r] = acc
             for r in range(6):
                 u[r] = V[i, r]  # v_j in frame i, from j = i up to the root
             j = i
@@ -241,15 +268,13 @@ def momentum(tree, basis, q, dq, out_p, out_h):
                 c[3] = u[4] * s[5] - u[5] * s[4]
                 c[4] = u[5] * s[3] - u[3] * s[5]
                 c[5] = u[3] * s[4] - u[4] * s[3]
+                _momentum_columns(s, V[i], yp)
+                _momentum_columns(c, V[i], yh)
+                _project(s, rest, G[i], yg)
                 row = idx_v[j]
                 for b in range(10):
-                    yp = 0.0
-                    yh = 0.0
-                    for r in range(6):
-                        yp += s[r] * h[b, r]
-                        yh += c[r] * h[b, r]
-                    out_p[k, row, 10 * i + b] += yp
-                    out_h[k, row, 10 * i + b] -= yh
+                    Yp[row, 10 * i + b] = yp[b]
+                    Yh[row, 10 * i + b] = yg[b] - yh[b]
                 qd = dq[k, row]
                 for r in range(6):
                     u[r] -= s[r] * qd

@@ -238,12 +238,11 @@ def rigid_block(desc: CompiledModel, q, dq, ddq, out: np.ndarray, gravity: bool 
     _kernel()(tree, q, dq, ddq, out)
 
 
-def momentum_block(desc: CompiledModel, basis: np.ndarray, q, dq, yp, yh) -> None:
-    """Add the rigid momentum regressor to ``yp`` and subtract ``dK/dq`` from ``yh``.
+def momentum_block(desc: CompiledModel, q, dq, yp: np.ndarray, yh: np.ndarray) -> None:
+    """Write the rigid momentum regressors ``Y_p`` into ``yp`` and ``g - dK/dq`` into ``yh``.
 
-    ``basis`` (10, 6, 6): the spatial inertia of each dynamic parameter; ``q`` (N, nq),
-    ``dq`` (N, nv) float64 C-contiguous; ``yp``, ``yh`` (N, nv, >= n_rigid), written in
-    their rigid columns (see :func:`manip_id.models.momentum.momentum_regressors`).
+    ``q`` (N, nq), ``dq`` (N, nv) float64 C-contiguous; ``yp``, ``yh`` (N, nv, >= n_rigid),
+    written in their rigid columns only (see :func:`manip_id.models.momentum_regressors`).
     """
     global _MOMENTUM
     if _MOMENTUM is None:
@@ -251,4 +250,4 @@ def momentum_block(desc: CompiledModel, basis: np.ndarray, q, dq, yp, yh) -> Non
 
         _MOMENTUM = build_momentum()
     tree = (desc.parent, desc.kind, desc.axis, desc.rot0, desc.pos0, desc.idx_q, desc.idx_v)
-    _MOMENTUM((*tree, desc.gravity), basis, q, dq, yp, yh)
+    _MOMENTUM((*tree, desc.gravity), q, dq, yp, yh)

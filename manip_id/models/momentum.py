@@ -37,7 +37,7 @@ from functools import lru_cache
 import numpy as np
 import pinocchio as pin
 
-from ..compiled_regressor import momentum_block, rigid_block
+from ..compiled_regressor import momentum_block
 from ..errors import InputError
 from ..estimators import InformationAccumulator
 from ..estimators.blocks import ScoreBlocks
@@ -73,17 +73,15 @@ def momentum_regressors(robot: Robot, q, dq) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _regressors(robot: Robot, q: np.ndarray, dq: np.ndarray):
-    n, nv, p, nr = q.shape[0], robot.nv, robot.n_parameters, robot.n_rigid
+    n, nv, p = q.shape[0], robot.nv, robot.n_parameters
     Yp = np.zeros((n, nv, p))
     Yh = np.zeros((n, nv, p))
     ev = robot.evaluator
     desc = ev.kernel_for(n)
     if desc is None:
         _rigid_pinocchio(robot, q, dq, Yp, Yh)
-    else:  # g(q) = Y(q, 0, 0), then the compiled momentum loop
-        zero = np.zeros_like(dq)
-        rigid_block(desc, q, zero, zero, Yh[:, :, :nr])
-        momentum_block(desc, _inertia_basis(), q, np.ascontiguousarray(dq), Yp, Yh)
+    else:  # the compiled loop over the block
+        momentum_block(desc, np.ascontiguousarray(q), np.ascontiguousarray(dq), Yp, Yh)
     _add_joint_terms(robot, q, dq, Yp, Yh)
     return Yp, Yh
 
