@@ -232,11 +232,9 @@ def test_momentum_regressors_equal_the_derivative_path(name, monkeypatch):
         _close(a, b)
     # and against crba / the Coriolis matrix: Y_p theta = M dq, Y_h theta = g - C^T dq + ...
     theta = robot.nominal_parameters
-    model = robot.with_parameters(
-        np.r_[theta[: robot.n_rigid], np.zeros(theta.size - robot.n_rigid)]
-    )
-    data = model.createData()
     rigid = np.r_[theta[: robot.n_rigid], np.zeros(theta.size - robot.n_rigid)]
+    model = robot.with_parameters(rigid)
+    data = model.createData()
     for k in range(3):
         M = pin.crba(model, data, q[k])
         M = np.triu(M) + np.triu(M, 1).T
