@@ -1,9 +1,10 @@
 """numba kernels of :mod:`manip_id.compiled_regressor` (imported only when numba is installed).
 
-The math and conventions are in :mod:`manip_id.compiled_regressor`. Three kernels: the
+The math and conventions are in :mod:`manip_id.compiled_regressor`. Four kernels: the
 forward pass of one sample (placements, velocities, accelerations of every joint frame),
 the body regressor A(v, a) of one body, and the block loop that projects each body's
-A through its chain of ancestors. Compiled code is cached on disk (``cache=True``).
+A through its chain of ancestors; and the momentum loop of
+:mod:`manip_id.models.momentum`. Compiled code is cached on disk (``cache=True``).
 """
 
 from __future__ import annotations
@@ -195,6 +196,96 @@ def block(tree, q, dq, ddq, out):
                 j = parent[j]
 
 
+@numba.njit(cache=True, inline="always")
+def _momentum_columns(s, v, y):
+    """y (10,) = s^T B_k v for the ten parameters k (``B_k`` Pinocchio's spatial inertia
+    of parameter k): ``m -> s_lin . v_lin``, ``mc -> v_lin x s_ang - v_ang x s_lin``,
+    ``I -> s_ang^T E_k v_ang`` (six symmetric entries)."""
+    l0, l1, l2, w0, w1, w2 = v[0], v[1], v[2], v[3], v[4], v[5]
+    a0, a1, a2, g0, g1, g2 = s[0], s[1], s[2], s[3], s[4], s[5]
+    y[0] = a0 * l0 + a1 * l1 + a2 * l2
+    y[1] = (l1 * g2 - l2 * g1) - (w1 * a2 - w2 * a1)
+    y[2] = (l2 * g0 - l0 * g2) - (w2 * a0 - w0 * a2)
+    y[3] = (l0 * g1 - l1 * g0) - (w0 * a1 - w1 * a0)
+    y[4] = g0 * w0
+    y[5] = g0 * w1 + g1 * w0
+    y[6] = g1 * w1
+    y[7] = g0 * w2 + g2 * w0
+    y[8] = g1 * w2 + g2 * w1
+    y[9] = g2 * w2
+
+
+@numba.njit(cache=True)
+def momentum(tree, q, dq, out_p, out_h):
+    """The rigid momentum regressors of every sample into ``out_p`` and ``out_h``.
+
+    ``out_p[k] = Y_p(q_k, dq_k)`` (``Y_p theta = M dq``) and ``out_h[k] = g(q_k) - dK/dq``
+    (``dK/dq = C^T dq``), both (N, nv, >= 10 n), rigid columns written (the others
+    untouched). Per body ``i`` and ancestor-or-self joint ``j``, with ``v_j`` carried to
+    frame ``i`` (:mod:`manip_id.models.momentum`)::
+
+        Y_p[j, 10 i + k] = S_j^T B_k v_i,     dK/dq_j = (v_j x S_j)^T B_k v_i
+
+    and ``g`` the torque regressor at rest (:func:`_project` of the gravity pass).
+    """
+    parent, kind, axis, _, _, _, idx_v, _ = tree
+    n = parent.shape[0]
+    R = np.empty((n, 3, 3))
+    P = np.empty((n, 3))
+    V = np.empty((n, 6))
+    A = np.empty((n, 6))
+    G = np.empty((n, 6))
+    T = np.empty((n, n, 6))
+    work = (R, P, V, A, np.empty((6, 3)))
+    zero = np.zeros(dq.shape[1])
+    rest = np.zeros(6)
+    yp = np.empty(10)
+    yh = np.empty(10)
+    yg = np.empty(10)
+    u = np.empty(6)
+    c = np.empty(6)
+    for k in range(q.shape[0]):
+        _forward(tree, q[k], zero, zero, work)  # at rest: A = the gravity pass
+        G[:, :] = A
+        _forward(tree, q[k], dq[k], zero, work)
+        _axes(parent, kind, axis, R, P, T)
+        Yp = out_p[k]
+        Yh = out_h[k]
+        for row in range(Yp.shape[0]):
+            for col in range(10 * n):
+                Yp[row, col] = 0.0
+                Yh[row, col] = 0.0
+        for i in range(n):
+            for r in range(6):
+                u[r] = V[i, r]  # v_j in frame i, from j = i up to the root
+            j = i
+            while j >= 0:
+                s = T[i, j]
+                # motion cross (v, w) x (m, n) = (w x m + v x n, w x n): c = u x s
+                c[0] = u[4] * s[2] - u[5] * s[1] + u[1] * s[5] - u[2] * s[4]
+                c[1] = u[5] * s[0] - u[3] * s[2] + u[2] * s[3] - u[0] * s[5]
+                c[2] = u[3] * s[1] - u[4] * s[0] + u[0] * s[4] - u[1] * s[3]
+                c[3] = u[4] * s[5] - u[5] * s[4]
+                c[4] = u[5] * s[3] - u[3] * s[5]
+                c[5] = u[3] * s[4] - u[4] * s[3]
+                _momentum_columns(s, V[i], yp)
+                _momentum_columns(c, V[i], yh)
+                _project(s, rest, G[i], yg)
+                row = idx_v[j]
+                for b in range(10):
+                    Yp[row, 10 * i + b] = yp[b]
+                    Yh[row, 10 * i + b] = yg[b] - yh[b]
+                qd = dq[k, row]
+                for r in range(6):
+                    u[r] -= s[r] * qd
+                j = parent[j]
+
+
 def build():
     """The block kernel (compiled on first call, then loaded from numba's cache)."""
     return block
+
+
+def build_momentum():
+    """The momentum kernel (compiled on first call, then loaded from numba's cache)."""
+    return momentum

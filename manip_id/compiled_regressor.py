@@ -133,6 +133,7 @@ def describe_model(model: pin.Model) -> CompiledModel | None:
 
 
 _KERNEL = None
+_MOMENTUM = None
 
 
 def _kernel():
@@ -235,3 +236,18 @@ def rigid_block(desc: CompiledModel, q, dq, ddq, out: np.ndarray, gravity: bool 
     g = desc.gravity if gravity else np.zeros(3)
     tree = (desc.parent, desc.kind, desc.axis, desc.rot0, desc.pos0, desc.idx_q, desc.idx_v, g)
     _kernel()(tree, q, dq, ddq, out)
+
+
+def momentum_block(desc: CompiledModel, q, dq, yp: np.ndarray, yh: np.ndarray) -> None:
+    """Write the rigid momentum regressors ``Y_p`` into ``yp`` and ``g - dK/dq`` into ``yh``.
+
+    ``q`` (N, nq), ``dq`` (N, nv) float64 C-contiguous; ``yp``, ``yh`` (N, nv, >= n_rigid),
+    written in their rigid columns only (see :func:`manip_id.models.momentum_regressors`).
+    """
+    global _MOMENTUM
+    if _MOMENTUM is None:
+        from ._regressor_kernel import build_momentum  # imports numba (optional, heavy)
+
+        _MOMENTUM = build_momentum()
+    tree = (desc.parent, desc.kind, desc.axis, desc.rot0, desc.pos0, desc.idx_q, desc.idx_v)
+    _MOMENTUM((*tree, desc.gravity), q, dq, yp, yh)

@@ -207,3 +207,50 @@ def test_identification_is_the_same_on_both_paths(monkeypatch, mode):
     monkeypatch.setenv(cr.ENV, mode)
     got = identify(robot, *sim)
     np.testing.assert_allclose(got.estimate, ref.estimate, rtol=1e-9, atol=1e-9)
+
+
+def _momentum_pair(spec, monkeypatch, **kw):
+    """``(compiled, reference)`` momentum regressors of one robot at random states: the
+    reference through Pinocchio's kinematic derivatives, one call per sample."""
+    from manip_id.models import momentum_regressors
+
+    robot = load_robot(spec, **kw)
+    q, dq, _ = robot.random_states(30, seed=5)
+    got = momentum_regressors(robot, q, dq)
+    monkeypatch.setenv(cr.ENV, "pinocchio")
+    ref = momentum_regressors(load_robot(spec, **kw), q, dq)
+    monkeypatch.setenv(cr.ENV, "compiled")
+    return robot, q, dq, got, ref
+
+
+@pytest.mark.parametrize("name", ["panda", "ur10", "tiago_no_hand", "baxter", "asr_twodof"])
+def test_momentum_regressors_equal_the_derivative_path(name, monkeypatch):
+    robot, q, dq, got, ref = _momentum_pair(
+        name, monkeypatch, friction=["viscous", "coulomb"], armature=True
+    )
+    for a, b in zip(got, ref, strict=True):
+        _close(a, b)
+    # and against crba / the Coriolis matrix: Y_p theta = M dq, Y_h theta = g - C^T dq + ...
+    theta = robot.nominal_parameters
+    rigid = np.r_[theta[: robot.n_rigid], np.zeros(theta.size - robot.n_rigid)]
+    model = robot.with_parameters(rigid)
+    data = model.createData()
+    for k in range(3):
+        M = pin.crba(model, data, q[k])
+        M = np.triu(M) + np.triu(M, 1).T
+        C = pin.computeCoriolisMatrix(model, data, q[k], dq[k])
+        g = pin.computeGeneralizedGravity(model, data, q[k])
+        np.testing.assert_allclose(got[0][k] @ rigid, M @ dq[k], rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(got[1][k] @ rigid, g - C.T @ dq[k], rtol=1e-10, atol=1e-9)
+
+
+@settings(max_examples=10, deadline=None)
+@given(seed=st.integers(0, 10_000), n=st.integers(1, 7))
+def test_momentum_regressors_of_random_trees(tmp_path_factory, seed, n):
+    path = tmp_path_factory.mktemp("urdf") / "random.urdf"
+    path.write_text(_random_urdf(seed, n))
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv(cr.ENV, "compiled")
+        *_, got, ref = _momentum_pair(path, mp)
+    for a, b in zip(got, ref, strict=True):
+        _close(a, b)

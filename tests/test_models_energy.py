@@ -178,6 +178,55 @@ def test_momentum_rows_start_exact(panda, trajectory):
     np.testing.assert_allclose(W[:5] @ theta, ft[:5], rtol=1e-5, atol=1e-6 * np.abs(ft).max())
 
 
+def _filtered_reference(x: np.ndarray, y0: np.ndarray, lam: float, dt: float) -> np.ndarray:
+    """The exact first-order filter sample by sample: degree min(k, 3) holds (the recursion
+    of the module docstring, written out directly)."""
+    from manip_id.models.momentum import filter_weights
+
+    y = np.empty_like(x)
+    y[0] = y0
+    for k in range(1, x.shape[0]):
+        a, c = filter_weights(lam, dt, min(k, 3))
+        y[k] = a * y[k - 1] + sum(c[j] * x[k - j] for j in range(c.size))
+    return y
+
+
+@pytest.mark.parametrize(
+    ("mode", "window", "chunk"),
+    [("pinocchio", 0.05, 300), ("compiled", 0.05, 257), ("compiled", 0.006, 100), (None, 0.05, 2)],
+)
+def test_momentum_rows_equal_the_filter_of_every_sample(
+    panda, trajectory, monkeypatch, mode, window, chunk
+):
+    """The rows (the filter evaluated at the rows only, or at every sample for short
+    strides; any chunking) equal W = lam (Y_p - F[Y_p]) + F[Y_h] with every sample
+    filtered one by one, on the regressors of Pinocchio's kinematic derivatives."""
+    if mode == "compiled":
+        pytest.importorskip("numba")
+    robot, _ = panda
+    ds = _data(panda, trajectory)
+    n, dt = 1500, 1 / RATE
+    q, dq, tau = ds.q[:n], ds.dq[:n], ds.tau[:n]
+    monkeypatch.setenv("MANIP_ID_REGRESSOR", "pinocchio")
+    Yp, Yh = momentum_regressors(load_robot("panda", friction=FRICTION, armature=True), q, dq)
+    stride = int(round(window / dt))
+    lam = 3.0 / (stride * dt)
+    Fp = _filtered_reference(Yp, Yp[0], lam, dt)
+    Fh = _filtered_reference(Yh, np.zeros_like(Yh[0]), lam, dt)
+    Ft = _filtered_reference(tau, np.zeros_like(tau[0]), lam, dt)
+    rows = np.arange(stride, n, stride)
+    W_ref = lam * (Yp[rows] - Fp[rows]) + Fh[rows]
+    if mode is not None:
+        monkeypatch.setenv("MANIP_ID_REGRESSOR", mode)
+    fresh = load_robot("panda", friction=FRICTION, armature=True)
+    parts = list(momentum_rows(fresh, q, dq, tau, dt=dt, window_length=window, chunk=chunk))
+    W = np.concatenate([w for w, _ in parts])
+    ft = np.concatenate([f for _, f in parts])
+    assert W.shape == W_ref.shape
+    np.testing.assert_allclose(W, W_ref, rtol=0, atol=1e-9 * np.abs(W_ref).max())
+    np.testing.assert_allclose(ft, Ft[rows], rtol=0, atol=1e-9 * np.abs(Ft).max())
+
+
 @pytest.mark.parametrize("name", available_robots())
 def test_energy_model_has_the_dynamic_base_parameters(name):
     robot = load_robot(name, friction=FRICTION, armature=True)

@@ -13,7 +13,11 @@ dynamic parameters): ``K_i = 1/2 v_i^T I_i v_i`` gives
 
 with ``J_i = d v_i/d dq`` and ``d v_i/dq`` from Pinocchio's kinematic derivatives
 (``getJointVelocityDerivatives``, LOCAL frame), and ``g`` from the torque
-regressor at rest.
+regressor at rest. The compiled kernel (:func:`manip_id.compiled_regressor.momentum_block`,
+used where the torque regressor's is) evaluates the same sums for a block of samples
+without them: ``d v_i/d q_j = iX_j (v_j x S_j)`` for ``j`` an ancestor-or-self of ``i``, so
+
+    (M dq)_j = sum_i S_j^T jX*_i I_i v_i,      dK/dq_j = sum_i (v_j x S_j)^T jX*_i I_i v_i
 
 Filter. ``F(s) = lambda/(s + lambda)`` is integrated exactly for inputs
 interpolated by the cubic through the last four samples (lower degrees at the
@@ -33,6 +37,7 @@ from functools import lru_cache
 import numpy as np
 import pinocchio as pin
 
+from ..compiled_regressor import momentum_block
 from ..errors import InputError
 from ..estimators import InformationAccumulator
 from ..estimators.blocks import ScoreBlocks
@@ -40,6 +45,8 @@ from ..robot import Robot
 from .energy import check_model_states, window_samples
 
 _CHUNK = 1024
+#: rows at least this many samples apart: the filter is evaluated at the rows only
+_DECIMATE_STRIDE = 8
 
 
 @lru_cache(maxsize=1)
@@ -66,12 +73,26 @@ def momentum_regressors(robot: Robot, q, dq) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _regressors(robot: Robot, q: np.ndarray, dq: np.ndarray):
-    m = robot.model
-    d = m.createData()
-    n, nv, p, nb = q.shape[0], robot.nv, robot.n_parameters, robot.n_bodies
-    B = _inertia_basis()
+    n, nv, p = q.shape[0], robot.nv, robot.n_parameters
     Yp = np.zeros((n, nv, p))
     Yh = np.zeros((n, nv, p))
+    ev = robot.evaluator
+    desc = ev.kernel_for(n)
+    if desc is None:
+        _rigid_pinocchio(robot, q, dq, Yp, Yh)
+    else:  # the compiled loop over the block
+        momentum_block(desc, np.ascontiguousarray(q), np.ascontiguousarray(dq), Yp, Yh)
+    _add_joint_terms(robot, q, dq, Yp, Yh)
+    return Yp, Yh
+
+
+def _rigid_pinocchio(robot: Robot, q, dq, Yp: np.ndarray, Yh: np.ndarray) -> None:
+    """The rigid columns of ``Y_p`` and ``Y_h`` with Pinocchio's kinematic derivatives,
+    one call per sample (the reference path, and the fallback without the kernel)."""
+    m = robot.model
+    d = m.createData()
+    n, nv, nb = q.shape[0], robot.nv, robot.n_bodies
+    B = _inertia_basis()
     zero = np.zeros(nv)
     J = np.empty((nb, 6, nv))
     dV = np.empty((nb, 6, nv))
@@ -79,24 +100,28 @@ def _regressors(robot: Robot, q: np.ndarray, dq: np.ndarray):
     for k in range(n):
         pin.computeForwardKinematicsDerivatives(m, d, q[k], dq[k], zero)
         for i in range(1, nb + 1):
-            dV[i - 1], J[i - 1] = pin.getJointVelocityDerivatives(m, d, i, pin.LOCAL)
+            dv, jac = pin.getJointVelocityDerivatives(m, d, i, pin.LOCAL)
+            dV[i - 1], J[i - 1] = np.reshape(dv, (6, nv)), np.reshape(jac, (6, nv))  # nv = 1: (6,)
             V[i - 1] = d.v[i].vector
         H = np.einsum("kab,nb->nka", B, V)  # (nb, 10, 6): I(e_k) v_i
         Yp[k, :, : 10 * nb] = np.einsum("nai,nka->ink", J, H).reshape(nv, 10 * nb)
         dK = np.einsum("nai,nka->ink", dV, H).reshape(nv, 10 * nb)  # dK/dq
         Yh[k, :, : 10 * nb] = pin.computeJointTorqueRegressor(m, d, q[k], zero, zero) - dK
-    if robot.terms.enabled:
-        ev = robot.evaluator
-        zeros = np.zeros_like(dq)
-        T0 = np.zeros((n, nv, p))
-        ev.fill_joint_terms(T0, q, zeros, zeros)
-        Ta = np.zeros((n, nv, p))
-        ev.fill_joint_terms(Ta, q, zeros, dq)
-        Yp += Ta - T0  # armature momentum Ia_j dq_j only
-        Th = np.zeros((n, nv, p))
-        ev.fill_joint_terms(Th, q, dq, zeros)
-        Yh += Th  # friction, offset, spring (armature column: 0)
-    return Yp, Yh
+
+
+def _add_joint_terms(robot: Robot, q, dq, Yp: np.ndarray, Yh: np.ndarray) -> None:
+    """The joint terms' columns (zero in ``Yp`` and ``Yh`` before): armature momentum in
+    ``Y_p`` (``T(q, 0, dq) - T(q, 0, 0)``: ``Ia_j dq_j`` only); friction, offset and spring
+    in ``Y_h`` (``T(q, dq, 0)``; the armature column 0)."""
+    if not robot.terms.enabled:
+        return
+    ev, nr = robot.evaluator, robot.n_rigid
+    zeros = np.zeros_like(dq)
+    ev.fill_joint_terms(Yh, q, dq, zeros)
+    ev.fill_joint_terms(Yp, q, zeros, dq)
+    T0 = np.zeros(Yp.shape)  # calloc: the untouched pages cost nothing
+    ev.fill_joint_terms(T0, q, zeros, zeros)
+    Yp[:, :, nr:] -= T0[:, :, nr:]
 
 
 #: Degree of the interpolation of the filter inputs (cubic: O(dt^4) per step).
@@ -141,6 +166,7 @@ class _Filter:
         self.y = np.array(y0, dtype=float)  # last output
         self.past: list[np.ndarray] = []  # last inputs, newest first
         self.zi: np.ndarray | None = None
+        self._unrolled_weights: dict[int, np.ndarray] = {}
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         from scipy.signal import lfilter
@@ -164,6 +190,58 @@ class _Filter:
             _, b = self.weights[-1]
             out[k:], self.zi = lfilter(b, [1.0, -self.a], x[k:], axis=0, zi=self.zi)
         return out
+
+    def at(self, x: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """The outputs at the chunk's sorted local ``rows`` only, shape (len(rows), ...).
+
+        After the start-up, the recursion from the last output ``y_L`` to sample
+        ``t = L + s`` unrolls to ``y_t = a^s y_L + sum_{d=0}^{s+H-1} w_d(s) x_{t-d}`` with
+        ``w_d(s) = sum_i a^i c_{d-i}`` (``0 <= i < s``, ``0 <= d - i <= H``, ``H`` the
+        hold degree): one weighted sum per row and one to the chunk's end, whose state
+        (last output, last ``H`` inputs) carries on. Do not mix with ``__call__``.
+        """
+        c = x.shape[0]
+        out = np.empty((len(rows), *x.shape[1:]))
+        k0 = 0
+        if self.zi is None:  # the start-up samples, one at a time
+            k0 = min(c, HOLD_DEGREE - len(self.past))
+            head = self(x[:k0])
+            early = rows < k0
+            out[early] = head[rows[early]]
+        if k0 == c:
+            return out
+        H = HOLD_DEGREE
+        ext = np.concatenate([np.stack(self.past[::-1]), x[k0:]])  # ext[e]: sample k0 - H + e
+        flat = ext.reshape(ext.shape[0], -1)
+        last = k0 - 1
+        targets = [int(t) for t in rows if t >= k0]
+        if not targets or targets[-1] != c - 1:
+            targets.append(c - 1)
+        y = self.y.reshape(-1)
+        j = int(np.searchsorted(rows, k0))
+        for t in targets:
+            s = t - last
+            e0 = last + 1 - k0  # ext index of sample last + 1 - H
+            y = self.a**s * y + self._unrolled(s) @ flat[e0 : e0 + s + H]
+            if j < len(rows) and rows[j] == t:
+                out[j] = y.reshape(x.shape[1:])
+                j += 1
+            last = t
+        self.y = y.reshape(x.shape[1:]).copy()
+        self.past = [ext[ext.shape[0] - 1 - i].copy() for i in range(H)]  # newest first
+        return out
+
+    def _unrolled(self, s: int) -> np.ndarray:
+        """``w`` of ``s`` unrolled steps, oldest sample first, shape (s + H,) (:meth:`at`)."""
+        cache = self._unrolled_weights
+        if s not in cache:
+            _, c = self.weights[-1]
+            H = c.size - 1
+            w = np.zeros(s + H)  # w[d]: the weight of x_{t-d}
+            for i in range(s):
+                w[i : i + H + 1] += self.a**i * c
+            cache[s] = w[::-1].copy()
+        return cache[s]
 
     def _init_state(self) -> None:
         """Transposed direct-form state after the start-up: z_i = sum_{j>i} b_j x_{s+i-j}."""
@@ -215,24 +293,22 @@ def momentum_rows(
         raise InputError(
             f"{n} samples give no momentum row every {stride} samples: shorten window_length"
         )
-    filters: tuple[_Filter, _Filter, _Filter] | None = None
+    filters: tuple[_Filter, _Filter] | None = None
     for start in range(0, n, int(chunk)):
         stop = min(start + int(chunk), n)
         Yp, Yh = _regressors(robot, q[start:stop], dq[start:stop])
-        if filters is None:  # F[Y_p] starts at Y_p(0), the others at zero
-            zero = np.zeros_like(Yp[0])
-            filters = (
-                _Filter(lam, dt, Yp[0]),
-                _Filter(lam, dt, zero),
-                _Filter(lam, dt, zero[:, 0]),
-            )
-        fp, fh, ft = filters
-        Fp, Fh, Ft = fp(Yp), fh(Yh), ft(tau[start:stop])
+        Yh -= lam * Yp  # W = lam Y_p + F[Y_h - lam Y_p], its filter starting at -lam Y_p(0)
+        if filters is None:  # F[Y_p] starts at Y_p(0), F[Y_h] and F[tau] at zero
+            filters = (_Filter(lam, dt, -lam * Yp[0]), _Filter(lam, dt, np.zeros(robot.nv)))
         keep = np.arange(start, stop)
         keep = keep[(keep % stride == 0) & (keep > 0)] - start
+        fx, ft = filters
+        if stride < _DECIMATE_STRIDE:  # rows at (almost) every sample: filter them all
+            Fx, Ft = fx(Yh)[keep], ft(tau[start:stop])[keep]
+        else:  # only the rows' outputs, the states carried between them
+            Fx, Ft = fx.at(Yh, keep), ft.at(tau[start:stop], keep)
         if keep.size:
-            W = lam * (Yp[keep] - Fp[keep]) + Fh[keep]
-            yield W, Ft[keep]
+            yield lam * Yp[keep] + Fx, Ft
 
 
 def accumulate_momentum(
