@@ -21,7 +21,7 @@ from .._checks import as_float_array
 from ..errors import DataError, InputError, RankDeficiencyError
 from ..estimators import InformationAccumulator, LeastSquaresSolution, solve_accumulator
 from ..estimators.consistent import ConsistentProblem, base_map, solve_sdp
-from ..estimators.uncertainty import solution_uncertainty
+from ..estimators.uncertainty import correlations_scaled, solution_uncertainty
 from ..identifiability import BaseParameters, RankAnalysis, analyze, analyze_information
 from ..metrics import relative_error
 from ..robot import Robot
@@ -317,9 +317,7 @@ def _honest_covariance(acc: InformationAccumulator, ls: LeastSquaresSolution, f:
     # the white correlations scaled to the honest std, never below the white ones: the
     # full block-score matrix of a few runs is too noisy for the payload's Wald test (as
     # IdentificationResult.test_covariance for drift)
-    sw = np.sqrt(np.clip(np.diag(white), 0.0, None))
-    scale = np.maximum(np.divide(unc.std, sw, out=np.ones_like(sw), where=sw > 0), 1.0)
-    return white * np.outer(scale, scale), unc.to_dict()
+    return correlations_scaled(white, unc.std), unc.to_dict()
 
 
 def _payload_shown(prob: _PayloadProblem, sums: _PayloadSums, fit: _PayloadFit) -> dict:
