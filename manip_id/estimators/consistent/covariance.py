@@ -23,22 +23,26 @@ parameters; with the white one, the white. Without a prior (``w = 0``) ``H^+`` l
 directions the data do not see at zero variance (they are fixed by the solver's choice,
 not by the data).
 
-When a linear constraint is active (a mass held at its range, a body on its bounding
-ellipsoid), the true sensitivity is the projection of ``G`` onto the constraints' tangent;
-the unconstrained ``G`` then over-states the spread of the parameters the constraint
-holds, so those bodies are listed (:func:`active_bodies`) and their std are upper bounds.
+When linear constraints are active (a body on its bounding ellipsoid ``tr(J Q_bar) = 0``,
+a mass at its range, the total mass at its bound; :func:`active_constraints`), the
+solution moves on their tangent as long as the active set does not change: with ``Z``
+a basis of the null space of the active rows ``a^T``, ``G = 2 Z (Z^T H Z)^+ Z^T P^T
+C^-1``. That holds for small changes of ``beta_ls`` only; a constraint that the noise
+makes and breaks from draw to draw (near-active) gives a spread between the two, so the
+bodies held are named (``constraints_active``). The pseudo-inertia margin is inside the
+log-det barrier, whose Hessian takes it into ``H``.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
 from ...consistency import pseudo_inertia, pseudo_inertia_basis
 from .problem import ConsistentProblem
 
-#: A body's constraint counts as active when its mass is within this relative distance of
-#: a mass bound, or its pseudo-inertia's least eigenvalue (less the margin) is below this
-#: fraction of its largest.
+#: A mass (total mass) bound counts as active within this relative distance.
 ACTIVE_TOL = 1e-4
 
 
@@ -61,38 +65,71 @@ def prior_hessian(problem: ConsistentProblem, theta: np.ndarray) -> np.ndarray:
 
 
 def sensitivity(problem: ConsistentProblem, theta: np.ndarray) -> np.ndarray:
-    """``G = d theta / d beta_ls = 2 H^+ P^T C^-1`` at the solution ``theta``, shape (p, r)."""
+    """``G = d theta / d beta_ls`` at the solution ``theta``, shape (p, r): ``2 H^+ P^T
+    C^-1``, on the tangent of the active linear constraints (module docstring)."""
     P, W = problem.P, problem.W
     Cinv = W.T @ W
     H = 2.0 * P.T @ Cinv @ P
     if problem.weight:
         H = H + problem.weight * prior_hessian(problem, theta)
-    d = np.sqrt(np.clip(np.diag(H), 0.0, None))
+    rows = active_constraints(problem, theta).rows
+    Z = np.eye(problem.p)
+    if rows.shape[0]:
+        _, sv, Vt = np.linalg.svd(rows)
+        rank = int(np.sum(sv > 1e-12 * sv[0]))
+        Z = Vt[rank:].T  # (p, p - rank): the constraints' tangent
+    Hz = Z.T @ H @ Z
+    d = np.sqrt(np.clip(np.diag(Hz), 0.0, None))
     d = np.where(d > 0, d, 1.0)
-    Hinv = np.linalg.pinv(H / np.outer(d, d), hermitian=True) / np.outer(d, d)
-    return 2.0 * Hinv @ P.T @ Cinv
+    Hinv = np.linalg.pinv(Hz / np.outer(d, d), hermitian=True) / np.outer(d, d)
+    return 2.0 * Z @ Hinv @ Z.T @ P.T @ Cinv
 
 
-def active_bodies(problem: ConsistentProblem, theta: np.ndarray) -> list[int]:
-    """Bodies whose constraints are active at ``theta``: the barrier margin, a bounding
-    ellipsoid (``tr(J Q_bar) <= 1e-3 m``), a mass range, the total mass (all bodies)."""
-    nb, b = problem.n_bodies, problem.bounds
-    J = pseudo_inertia(np.asarray(theta[: 10 * nb]).reshape(nb, 10))
-    masses = np.asarray(theta[: 10 * nb : 10], dtype=float)
-    if b is not None and b.total_mass is not None:
-        total = float(masses.sum())
-        if min(abs(total - t) for t in b.total_mass) <= ACTIVE_TOL * max(abs(total), 1e-12):
-            return list(range(nb))
-    out = []
+@dataclass(frozen=True)
+class ActiveConstraints:
+    """The linear constraints active at a consistent solution.
+
+    Attributes
+    ----------
+    rows : numpy.ndarray
+        Their gradients ``a`` (``a^T theta = c`` while active), shape (c, p).
+    bodies : list of int
+        The bodies they hold.
+    """
+
+    rows: np.ndarray
+    bodies: list[int]
+
+
+def active_constraints(problem: ConsistentProblem, theta: np.ndarray) -> ActiveConstraints:
+    """The active linear constraints at ``theta``: a bounding ellipsoid
+    (``tr(J Q_bar) <= 1e-3 m``), a mass range, the total mass (relative
+    :data:`ACTIVE_TOL`)."""
+    nb, b, p = problem.n_bodies, problem.bounds, problem.p
+    rows: list[np.ndarray] = []
+    bodies: set[int] = set()
+    if b is None:
+        return ActiveConstraints(np.zeros((0, p)), [])
+    theta = np.asarray(theta, dtype=float)
+    J = pseudo_inertia(theta[: 10 * nb].reshape(nb, 10))
+    masses = theta[: 10 * nb : 10]
+    E = pseudo_inertia_basis()
     for i in range(nb):
         m = float(masses[i])
-        ev = np.linalg.eigvalsh(J[i] - problem.margin[i] * np.eye(4))
-        active = ev[0] <= ACTIVE_TOL * max(abs(ev[-1]), 1e-300)
-        if b is not None and b.ellipsoids is not None:
-            active |= float(np.trace(J[i] @ b.ellipsoids[i])) <= 1e-3 * max(abs(m), 1e-12)
-        if b is not None and b.mass_range is not None:
-            lo, hi = b.mass_range[i]
-            active |= min(abs(m - lo), abs(m - hi)) <= ACTIVE_TOL * max(abs(m), 1e-12)
-        if active:
-            out.append(i)
-    return out
+        near = ACTIVE_TOL * max(abs(m), 1e-12)
+        if b.ellipsoids is not None and np.trace(J[i] @ b.ellipsoids[i]) <= 1e-3 * abs(m):
+            a = np.zeros(p)
+            a[10 * i : 10 * i + 10] = np.einsum("kab,ba->k", E, b.ellipsoids[i])
+            rows.append(a)
+            bodies.add(i)
+        if b.mass_range is not None and min(abs(m - x) for x in b.mass_range[i]) <= near:
+            rows.append(np.eye(p)[10 * i])
+            bodies.add(i)
+    if b.total_mass is not None:
+        total = float(masses.sum())
+        if min(abs(total - t) for t in b.total_mass) <= ACTIVE_TOL * max(abs(total), 1e-12):
+            a = np.zeros(p)
+            a[: 10 * nb : 10] = 1.0
+            rows.append(a)
+            bodies |= set(range(nb))
+    return ActiveConstraints(np.array(rows).reshape(-1, p), sorted(bodies))

@@ -20,7 +20,7 @@ from ...consistency import (
 )
 from ...metrics import finite_or_none
 from .bounds import BodyBounds, BoundsOptions, body_bounds
-from .covariance import active_bodies, sensitivity
+from .covariance import active_constraints, sensitivity
 from .problem import (
     DEFAULT_PRIOR_WEIGHT,
     SCALE_WEIGHT,
@@ -235,7 +235,7 @@ def consistent_estimate(
     return replace(
         est,
         sensitivity=sensitivity(final, sol.theta),
-        active=[names[i] for i in active_bodies(final, sol.theta)],
+        active=[names[i] for i in active_constraints(final, sol.theta).bodies],
     )
 
 
