@@ -23,7 +23,8 @@ parameters; with the white one, the white. Without a prior (``w = 0``) ``H^+`` l
 directions the data do not see at zero variance (they are fixed by the solver's choice,
 not by the data).
 
-When linear constraints are active (a body on its bounding ellipsoid ``tr(J Q_bar) = 0``,
+When linear constraints are active (a friction or armature term at 0, a body on its
+bounding ellipsoid ``tr(J Q_bar) = 0``,
 a mass at its range, the total mass at its bound; :func:`active_constraints`), the
 solution moves on their tangent as long as the active set does not change: with ``Z``
 a basis of the null space of the active rows ``a^T``, ``G = 2 Z (Z^T H Z)^+ Z^T P^T
@@ -95,22 +96,29 @@ class ActiveConstraints:
         Their gradients ``a`` (``a^T theta = c`` while active), shape (c, p).
     bodies : list of int
         The bodies they hold.
+    terms : list of int
+        Indices in ``theta`` of the joint terms held at 0 (``Ia, fv, fc >= 0``).
     """
 
     rows: np.ndarray
     bodies: list[int]
+    terms: list[int]
 
 
 def active_constraints(problem: ConsistentProblem, theta: np.ndarray) -> ActiveConstraints:
-    """The active linear constraints at ``theta``: a bounding ellipsoid
-    (``tr(J Q_bar) <= 1e-3 m``), a mass range, the total mass (relative
-    :data:`ACTIVE_TOL`)."""
+    """The active linear constraints at ``theta``: a nonnegative joint term at 0
+    (``<= 1e-6`` of its scale), a bounding ellipsoid (``tr(J Q_bar) <= 1e-3 m``), a mass
+    range, the total mass (relative :data:`ACTIVE_TOL`)."""
     nb, b, p = problem.n_bodies, problem.bounds, problem.p
-    rows: list[np.ndarray] = []
+    theta = np.asarray(theta, dtype=float)
+    scales = problem.term_scale[np.asarray(problem.nonnegative, dtype=np.intp) - 10 * nb]
+    terms = [
+        int(t) for t, s in zip(problem.nonnegative, scales, strict=True) if theta[t] <= 1e-6 * s
+    ]
+    rows: list[np.ndarray] = [np.eye(p)[t] for t in terms]
     bodies: set[int] = set()
     if b is None:
-        return ActiveConstraints(np.zeros((0, p)), [])
-    theta = np.asarray(theta, dtype=float)
+        return ActiveConstraints(np.array(rows).reshape(-1, p), [], terms)
     J = pseudo_inertia(theta[: 10 * nb].reshape(nb, 10))
     masses = theta[: 10 * nb : 10]
     E = pseudo_inertia_basis()
@@ -132,4 +140,4 @@ def active_constraints(problem: ConsistentProblem, theta: np.ndarray) -> ActiveC
             a[: 10 * nb : 10] = 1.0
             rows.append(a)
             bodies |= set(range(nb))
-    return ActiveConstraints(np.array(rows).reshape(-1, p), sorted(bodies))
+    return ActiveConstraints(np.array(rows).reshape(-1, p), sorted(bodies), terms)

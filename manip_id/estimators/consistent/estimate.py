@@ -76,7 +76,8 @@ class StandardEstimate:
         ``G = d theta / d beta_ls`` at the solution, shape (p, r)
         (:mod:`manip_id.estimators.consistent.covariance`); None for plain LS.
     active
-        names of the bodies whose constraints are active (their std are upper bounds).
+        the bodies and joint terms whose constraints are active at the solution (their
+        std hold on the constraints' tangent).
     std, std_white
         the honest and the white-noise std of ``values``, shape (p,), once
         :meth:`with_covariance` gave the base covariances (None before).
@@ -232,10 +233,11 @@ def consistent_estimate(
     final = replace(problem, weight=prior_weight * scale) if prior != "none" else problem
     est = _estimate(robot, problem, ls, feas, sol, scale, elapsed, prior_weight)
     names = [robot.parameter_names[10 * i].split(".")[0] for i in range(problem.n_bodies)]
+    held = active_constraints(final, sol.theta)
     return replace(
         est,
         sensitivity=sensitivity(final, sol.theta),
-        active=[names[i] for i in active_constraints(final, sol.theta).bodies],
+        active=[names[i] for i in held.bodies] + [robot.parameter_names[t] for t in held.terms],
     )
 
 
