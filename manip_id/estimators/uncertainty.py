@@ -346,15 +346,65 @@ def hac_covariance(
         raise InputError(
             f"an autocorrelation-consistent covariance needs >= 2 blocks of samples, got {B}"
         )
-    s = blocks.scores(estimate, weights)  # (B, p)
-    g = s @ Ainv  # block influences A^-1 s_k (Ainv symmetric)
+    return sandwich_covariance(
+        blocks.scores(estimate, weights), Ainv, blocks.information(weights), bandwidth=bandwidth
+    )
+
+
+def sandwich_covariance(
+    scores, bread, block_information, *, bandwidth: float | None = None
+) -> HacEstimate:
+    """``c H^-1 Omega_hat H^-1`` of any estimator defined by block estimating functions.
+
+    An estimate ``x_hat`` that zeroes ``sum_k s_k(x)`` (least squares: ``s_k = b_k -
+    A_k x``; a Gauss-Newton fit: the blocks' gradients) with ``H = -d sum_k s_k / dx``
+    has ``Cov = H^-1 Omega H^-1``, ``Omega`` the long-run covariance of the block scores
+    (module docstring: Bartlett weights, Andrews bandwidth on the influences
+    ``H^-1 s_k``, correction ``c`` from the block shares ``tr(H_k H^-1) / tr(I)``).
+
+    Parameters
+    ----------
+    scores : array_like
+        Block scores ``s_k`` at the estimate in sample order, shape (B, p).
+    bread : array_like
+        ``H^-1`` (a pseudo-inverse where ``H`` is singular), shape (p, p), symmetric.
+    block_information : array_like
+        Each block's ``H_k`` (``sum_k H_k = H``), shape (B, p, p).
+    bandwidth : float or None
+        ``S`` [blocks]; None: automatic (:func:`andrews_bandwidth`).
+    """
+    s = as_float_array(scores, "scores", ndim=2)
+    Hinv = as_float_array(bread, "bread", ndim=2)
+    Hk = as_float_array(block_information, "block_information", ndim=3)
+    B, p = s.shape
+    if Hinv.shape != (p, p) or Hk.shape != (B, p, p):
+        raise InputError(
+            f"scores.shape={s.shape}, bread.shape={Hinv.shape} and "
+            f"block_information.shape={Hk.shape} do not agree"
+        )
+    g = s @ Hinv  # block influences H^-1 s_k (H^-1 symmetric)
     S = andrews_bandwidth(g) if bandwidth is None else float(bandwidth)
     omega = long_run_covariance(s, S)
-    lev = np.einsum("kab,ab->k", blocks.information(weights), Ainv)  # tr(A_k A^-1)
+    lev = np.einsum("kab,ab->k", Hk, Hinv)  # tr(H_k H^-1)
     shares = lev / lev.sum() if lev.sum() > 0 else np.full(B, 1.0 / B)
     c = _correction(shares, S)
-    cov = c * (Ainv @ omega @ Ainv)
+    cov = c * (Hinv @ omega @ Hinv)
     return HacEstimate(covariance=0.5 * (cov + cov.T), bandwidth=S, correction=c, n_blocks=B)
+
+
+def correlations_scaled(white, std, *, floor: bool = True) -> np.ndarray:
+    """The white covariance's correlations with the standard deviations ``std``.
+
+    ``C_ab = W_ab f_a f_b``, ``f_a = std_a / sqrt(W_aa)`` (at least 1 with ``floor``):
+    the honest std on the diagonal, the white-noise correlations off it (the full
+    block-score matrix of a few runs is noisy off the diagonal). Shapes (p, p), (p,).
+    """
+    W = as_float_array(white, "white", ndim=2)
+    sw = np.sqrt(np.clip(np.diag(W), 0.0, None))
+    sd = as_float_array(std, "std", ndim=1)
+    f = np.divide(sd, sw, out=np.ones_like(sw), where=sw > 0)
+    f = np.maximum(f, 1.0) if floor else f
+    return W * np.outer(f, f)
 
 
 # ------------------------------------------------------------------ entry points

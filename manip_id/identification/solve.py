@@ -251,6 +251,7 @@ def _consistent(
             f"expected chi-square, so {told}; the prior was weighed against the fit in these "
             "inflated units"
         )
+    standard = standard.with_covariance(honest.covariance, honest.covariance_white)
     return standard, base.to_base(standard.values), solver, warnings_
 
 

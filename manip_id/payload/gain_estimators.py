@@ -16,6 +16,7 @@ import numpy as np
 
 from ..errors import DataError, InputError
 from ..estimators import InformationAccumulator
+from ..estimators.uncertainty import HacEstimate, sandwich_covariance
 
 
 def check_payload_present(
@@ -75,8 +76,12 @@ class _CurrentSums:
 
     @classmethod
     def from_accumulator(cls, acc: InformationAccumulator, nv: int) -> _CurrentSums:
-        A, b, zz = acc.A_joint, acc.b_joint, acc.zz_joint
-        m = acc.p - nv
+        return cls.from_sums(acc.A_joint, acc.b_joint, acc.zz_joint, nv)
+
+    @classmethod
+    def from_sums(cls, A, b, zz, nv: int) -> _CurrentSums:
+        """From per-joint sums ``A_j`` (nv, p, p), ``b_j`` (nv, p), ``zz_j`` (nv,)."""
+        m = A.shape[-1] - nv
         S = np.empty((nv, m + 1, m + 1))
         s = np.empty((nv, m + 1))
         ii = np.empty(nv)
@@ -216,17 +221,22 @@ def ml_gains(
     return np.r_[g, theta], cov, sigma2, what
 
 
-def _ml_covariance(cs: _CurrentSums, k, theta, w, free, active) -> np.ndarray:
-    """``(J^T W J)^+`` on the free parameters, mapped from ``k`` to ``g`` by ``-1/k^2``."""
-    p, nv = cs.p, cs.nv
-    H, _ = cs.normal(k, theta, w)
-    Hf = H[np.ix_(free, free)]
+def _scaled_pinv(Hf: np.ndarray) -> np.ndarray:
+    """``Hf^+`` computed on the Jacobi-scaled matrix."""
     dg = np.diag(Hf)
     d = np.where(dg > 0, np.sqrt(np.where(dg > 0, dg, 1.0)), 1.0)
+    return np.linalg.pinv(Hf / np.outer(d, d), hermitian=True) / np.outer(d, d)
+
+
+def _ml_covariance(cs: _CurrentSums, k, theta, w, free, active, meat=None) -> np.ndarray:
+    """``(J^T W J)^+`` on the free parameters (``H^+ meat(H^+) H^+`` with ``meat``, a
+    function of the bread giving the sandwiched covariance), mapped from ``k`` to ``g``
+    by ``dg/dk = -1/k^2``."""
+    p, nv = cs.p, cs.nv
+    H, _ = cs.normal(k, theta, w)
+    Hinv = _scaled_pinv(H[np.ix_(free, free)])
     cov_xi = np.zeros((p, p))
-    cov_xi[np.ix_(free, free)] = np.linalg.pinv(Hf / np.outer(d, d), hermitian=True) / np.outer(
-        d, d
-    )
+    cov_xi[np.ix_(free, free)] = Hinv if meat is None else meat(Hinv)
     Jt = np.eye(p)
     kk = np.where(active, k, 1.0)
     Jt[np.arange(nv), np.arange(nv)] = -1.0 / kk**2
@@ -246,3 +256,61 @@ def tls(acc: InformationAccumulator) -> np.ndarray:
     if v[-1] == 0:
         raise InputError("total least squares found no solution with the known payload scale")
     return -v[:-1] / v[-1]
+
+
+def ml_weights(acc: InformationAccumulator, nv: int, x: np.ndarray, n_rows, active) -> tuple:
+    """``(k, theta, w, free)`` of an ML estimate ``x = [g, theta]``: ``k = 1/g``, the final
+    weights ``w_j = 1 / sigma_j^2`` of :func:`ml_gains` and the parameters that moved."""
+    active = np.asarray(active, dtype=bool)
+    cs = _CurrentSums.from_accumulator(acc, nv)
+    k = np.where(active, 1.0 / np.where(active, x[:nv], 1.0), 0.0)
+    theta = x[nv:]
+    dof_j = np.maximum(np.asarray(n_rows, dtype=float) - cs.p / nv, 1.0)
+    floor = (1e-9) ** 2 * cs.ii / np.maximum(n_rows, 1)
+    var = np.maximum(cs.rss(k, theta) / dof_j, np.maximum(floor, 1e-300))
+    w = np.where(active, 1.0 / var, 0.0)
+    free = np.r_[np.flatnonzero(active), nv + np.arange(cs.m)]
+    return k, theta, w, free
+
+
+def ml_sandwich(
+    acc: InformationAccumulator,
+    nv: int,
+    x: np.ndarray,
+    n_rows,
+    active,
+    bandwidth: float | None = None,
+) -> tuple[np.ndarray, HacEstimate]:
+    """The autocorrelation-consistent covariance of an ML estimate ``x = [g, theta]``.
+
+    With ``xi = [k, theta]`` the ML estimate zeroes the gradient of
+    ``sum_j w_j ||e_j||^2 / 2``, a sum over the recorded blocks of samples ``k`` of
+    ``grad_k(xi)``, each from that block's per-joint sums
+    (:attr:`~manip_id.estimators.blocks.ScoreBlocks.A_joint` ...) as the whole is from the
+    accumulator. Gauss-Newton's ``H = sum_k H_k`` is the bread, the block gradients the
+    scores: ``Cov(xi) = c H^+ Omega_hat H^+``
+    (:func:`~manip_id.estimators.uncertainty.sandwich_covariance`; white noise gives
+    ``Omega = H`` and the white ``H^+``), then ``dg/dk = -1/k^2`` as :func:`ml_gains`.
+    Returns ``(covariance of [g, theta], HacEstimate)``; ``acc.blocks`` must be recorded.
+    """
+    blocks = acc.blocks
+    if blocks is None:
+        raise InputError("the ML sandwich needs the per-block sums (acc.blocks)")
+    active = np.asarray(active, dtype=bool)
+    k, theta, w, free = ml_weights(acc, nv, x, n_rows, active)
+    cs = _CurrentSums.from_accumulator(acc, nv)
+    Ab, bb, zb = blocks.A_joint, blocks.b_joint, blocks.zz_joint
+    Hk, gk = [], []
+    for a, b, z in zip(Ab, bb, zb, strict=True):
+        H, grad = _CurrentSums.from_sums(a, b, z, nv).normal(k, theta, w)
+        Hk.append(H[np.ix_(free, free)])
+        gk.append(grad[free])
+    out: list[HacEstimate] = []
+
+    def meat(Hinv: np.ndarray) -> np.ndarray:
+        est = sandwich_covariance(np.array(gk), Hinv, np.array(Hk), bandwidth=bandwidth)
+        out.append(est)
+        return est.covariance
+
+    cov = _ml_covariance(cs, k, theta, w, free, active, meat=meat)
+    return cov, out[0]

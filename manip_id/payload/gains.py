@@ -24,6 +24,7 @@ from ..identifiability import BaseParameters, RankAnalysis, analyze, analyze_inf
 from ..metrics import relative_error
 from ..robot import Robot
 from .gain_estimators import check_payload_present, ml_gains, tls
+from .gain_uncertainty import GainUncertainty, gain_uncertainty
 from .geometry import (
     PAYLOAD_NAMES,
     PayloadFrame,
@@ -264,6 +265,23 @@ def _gains_determined(
     return determined
 
 
+@dataclass(frozen=True)
+class _GainFit:
+    """The solved drive-gain system: estimate, covariance, what the data determine."""
+
+    ra: RankAnalysis
+    determined: np.ndarray  # per joint, whether the data fix its gain, (nv,)
+    x: np.ndarray  # [g, beta, psi_u]
+    uncertainty: GainUncertainty  # honest and white covariance of x
+    sigma2: float
+    solver: str
+
+    @property
+    def cov(self) -> np.ndarray:
+        """The honest covariance of ``x``."""
+        return self.uncertainty.covariance
+
+
 def _gains_solve(
     sums: _GainSums,
     ra: RankAnalysis,
@@ -272,9 +290,9 @@ def _gains_solve(
     p: int,
     determined: np.ndarray,
     messages: list[str],
-) -> tuple[np.ndarray, np.ndarray, float, str]:
-    """OLS/WLS with the known columns on the right, then TLS or ML from it:
-    ``(x, covariance, sigma2, solver)``."""
+) -> _GainFit:
+    """OLS/WLS with the known columns on the right, then TLS or ML from it, with the
+    honest covariance (:mod:`manip_id.payload.gain_uncertainty`)."""
     acc, left_out = sums.acc, sums.left_out
     ls = solve_accumulator(
         acc,
@@ -303,13 +321,15 @@ def _gains_solve(
                 "TLS: smallest right singular vector of the column-scaled [W, -y], scaled to "
                 "the known payload; covariance sigma^2 (W^T W)^-1 at the TLS estimate"
             )
+    n_rows = acc.n - left_out
     if method == "ml":  # damped steps leave the unexcited directions where OLS put them
-        x, cov, sigma2, what = ml_gains(acc, nv, x, acc.n - left_out, determined)
+        x, cov, sigma2, what = ml_gains(acc, nv, x, n_rows, determined)
         solver = f"{what}, started from OLS ({ls.solver})"
-    else:  # the ML gains from the same sums: a check of the errors in variables
-        x_ml = ml_gains(acc, nv, ls.estimate, acc.n - left_out, determined)[0]
-        _warn_ml_disagreement(sums, method, x, cov, x_ml, determined, messages)
-    return x, cov, sigma2, solver
+    unc = gain_uncertainty(acc, ls, f, method, x, cov, n_rows, determined)
+    if method != "ml":  # the ML gains from the same sums: a check of the errors in variables
+        x_ml = ml_gains(acc, nv, ls.estimate, n_rows, determined)[0]
+        _warn_ml_disagreement(sums, method, x, unc.covariance, x_ml, determined, messages)
+    return _GainFit(ra, determined, x, unc, float(sigma2), solver)
 
 
 def _warn_ml_disagreement(
@@ -396,18 +416,6 @@ def _gain_errors(sums: _GainSums, x: np.ndarray, nv: int, p: int) -> tuple[dict,
     return rel, rel_j
 
 
-@dataclass(frozen=True)
-class _GainFit:
-    """The solved drive-gain system: estimate, covariance, what the data determine."""
-
-    ra: RankAnalysis
-    determined: np.ndarray  # per joint, whether the data fix its gain, (nv,)
-    x: np.ndarray  # [g, beta, psi_u]
-    cov: np.ndarray
-    sigma2: float
-    solver: str
-
-
 def identify_drive_gains(
     robot: Robot,
     unloaded,
@@ -489,8 +497,7 @@ def _gain_fit(
     ra = analyze_information(acc.A, sums.names, n_rows=acc.n_rows)
     determined = _gains_determined(robot, acc, ra, p, messages)
     check_payload_present(acc, nv, determined, robot.dof_names)
-    x, cov, sigma2, solver = _gains_solve(sums, ra, method, nv, p, determined, messages)
-    return _GainFit(ra, determined, x, cov, float(sigma2), solver)
+    return _gains_solve(sums, ra, method, nv, p, determined, messages)
 
 
 def _gain_result(
@@ -505,6 +512,7 @@ def _gain_result(
     """The :class:`DriveGainResult` of a solved system: gains, payload, errors, warnings."""
     nv, r, p, x = prob.nv, prob.r, prob.p, fit.x
     gains, gains_std, std_all = _gains_uncertainty(robot, x, fit.cov, fit.determined, messages)
+    gains_std_white = np.where(fit.determined, fit.uncertainty.std_white[:nv], np.nan)
     est = _gain_payload(prob, x, fit.cov)
     rel, rel_j = _gain_errors(sums, x, nv, p)
     return DriveGainResult(
@@ -513,6 +521,8 @@ def _gain_result(
         dof_names=list(robot.dof_names),
         gains=gains,
         gains_std=gains_std,
+        gains_std_white=gains_std_white,
+        uncertainty=fit.uncertainty.summary,
         determined=fit.determined,
         payload=est,
         base_names=list(prob.base.base_names),

@@ -310,7 +310,12 @@ class DriveGainResult:
     ----------
     robot_name, method ("ols" or "tls"), dof_names
     gains, gains_std
-        shape (nv,) [N m / A] (NaN where not determined)
+        shape (nv,) [N m / A] (NaN where not determined); ``gains_std`` holds for
+        correlated residuals (:mod:`manip_id.payload.gain_uncertainty`)
+    gains_std_white
+        the white-noise standard deviations, shape (nv,) [N m / A]
+    uncertainty
+        how ``gains_std`` was estimated: ``{method, bandwidth, inflation, n_blocks, ...}``
     determined
         per joint, whether the data fix its gain
     payload
@@ -350,6 +355,8 @@ class DriveGainResult:
     warnings: list[str] = field(default_factory=list)
     timings: dict = field(default_factory=dict)
     runs: dict = field(default_factory=dict)
+    gains_std_white: np.ndarray | None = None
+    uncertainty: dict | None = None
 
     def gain_rows(self) -> list[dict]:
         """Per joint: ``joint``, ``gain``, ``std``, ``std_percent`` (``100 std / |gain|``)
@@ -359,10 +366,22 @@ class DriveGainResult:
             ok = bool(self.determined[j])
             g = finite_or_none(self.gains[j]) if ok else None
             s = finite_or_none(self.gains_std[j]) if ok else None
+            sw = None
+            if ok and self.gains_std_white is not None:
+                sw = finite_or_none(self.gains_std_white[j])
             pct = None
             if ok and g not in (None, 0.0) and s is not None:
                 pct = 100.0 * s / abs(g)
-            rows.append({"joint": name, "gain": g, "std": s, "std_percent": pct, "determined": ok})
+            rows.append(
+                {
+                    "joint": name,
+                    "gain": g,
+                    "std": s,
+                    "std_white": sw,
+                    "std_percent": pct,
+                    "determined": ok,
+                }
+            )
         return rows
 
     def to_dict(self) -> dict:
@@ -376,6 +395,7 @@ class DriveGainResult:
             "drive_gains": gains,
             "torque_scale": [g["gain"] for g in gains],
             "units": "N m / A (N / A for prismatic joints): torque = gain * current",
+            "uncertainty": self.uncertainty,
             **fit_dict(self),
         }
 

@@ -21,7 +21,13 @@ from .._checks import as_float_array
 from ..errors import DataError, InputError, RankDeficiencyError
 from ..estimators import InformationAccumulator, LeastSquaresSolution, solve_accumulator
 from ..estimators.consistent import ConsistentProblem, base_map, solve_sdp
-from ..estimators.uncertainty import solution_uncertainty
+from ..estimators.uncertainty import (
+    UncertaintyOptions,
+    correlations_scaled,
+    inflation,
+    sandwich_covariance,
+    solution_uncertainty,
+)
 from ..identifiability import BaseParameters, RankAnalysis, analyze, analyze_information
 from ..metrics import relative_error
 from ..robot import Robot
@@ -282,7 +288,11 @@ def _payload_solve(prob: _PayloadProblem, sums: _PayloadSums, method: str, nv: i
     ls = solve_accumulator(acc, method=method, names=sums.names, rank_rtol=ra.tolerance)
     f = dof_factor(acc, ls.rank, sums.left_out)
     x = ls.estimate
-    cov, uncertainty = _honest_covariance(acc, ls, f)
+    if prob.known is None:
+        cov, uncertainty = _honest_covariance(acc, ls, f)
+    else:
+        assert sums.full is not None
+        cov, uncertainty = _known_base_covariance(sums.full, ls, f, prob.known.estimate)
     if prob.known is None:
         beta, psi = x[:r], x[r:]
         cov_psi = cov[r:, r:]
@@ -317,9 +327,45 @@ def _honest_covariance(acc: InformationAccumulator, ls: LeastSquaresSolution, f:
     # the white correlations scaled to the honest std, never below the white ones: the
     # full block-score matrix of a few runs is too noisy for the payload's Wald test (as
     # IdentificationResult.test_covariance for drift)
+    return correlations_scaled(white, unc.std), unc.to_dict()
+
+
+def _known_base_covariance(
+    full: InformationAccumulator, ls: LeastSquaresSolution, f: float, known: np.ndarray
+):
+    """``(covariance, summary)`` of ``psi`` with a known base, from the blocks of the loaded
+    runs' full sums (columns ``[psi (k), beta (r)]``).
+
+    The derived problem ``z - X_b beta_known = X_p psi`` has the block scores
+    ``X_pk^T W (z_k - X_bk beta_known - X_pk psi)``: the first ``k`` entries of the full
+    blocks' scores at ``[psi, beta_known]``, and the bread ``A_pp^-1`` (weighted for WLS),
+    so :func:`~manip_id.estimators.uncertainty.sandwich_covariance` applies with no
+    derived blocks. Then as :func:`_honest_covariance`: the white correlations with the
+    honest std, never below white; the known base's own covariance is added by the caller.
+    """
+    white = ls.covariance * f
+    blocks = full.blocks
+    if blocks is None or blocks.n_blocks < UncertaintyOptions().min_blocks:
+        n = 0 if blocks is None else blocks.n_blocks
+        reason = f"the loaded runs' sums carry {n} blocks (fewer than the minimum)"
+        return white, {"method": "white", "reason": reason}
+    k = ls.estimate.size
+    theta = np.r_[ls.estimate, known]
+    Ak = blocks.information(ls.weights)[:, :k, :k]
+    Ainv = np.linalg.pinv(Ak.sum(axis=0), hermitian=True)
+    hac = sandwich_covariance(blocks.scores(theta, ls.weights)[:, :k], Ainv, Ak)
+    std = np.sqrt(np.clip(np.diag(hac.covariance), 0.0, None))
     sw = np.sqrt(np.clip(np.diag(white), 0.0, None))
-    scale = np.maximum(np.divide(unc.std, sw, out=np.ones_like(sw), where=sw > 0), 1.0)
-    return white * np.outer(scale, scale), unc.to_dict()
+    summary = {
+        "method": "hac",
+        "requested": "auto",
+        "bandwidth": float(f"{hac.bandwidth:.6g}"),
+        "inflation": inflation(std, sw),
+        "n_blocks": int(hac.n_blocks),
+        "block_samples": float(f"{blocks.counts.mean():.6g}"),
+        "reason": "",
+    }
+    return correlations_scaled(white, std), summary
 
 
 def _payload_shown(prob: _PayloadProblem, sums: _PayloadSums, fit: _PayloadFit) -> dict:

@@ -20,6 +20,7 @@ from ...consistency import (
 )
 from ...metrics import finite_or_none
 from .bounds import BodyBounds, BoundsOptions, body_bounds
+from .covariance import active_constraints, sensitivity
 from .problem import (
     DEFAULT_PRIOR_WEIGHT,
     SCALE_WEIGHT,
@@ -71,6 +72,15 @@ class StandardEstimate:
         ellipsoid (:func:`manip_id.consistency.check_plausibility`); None for plain LS.
     warnings
         what the user should know about these values (implausible bodies).
+    sensitivity
+        ``G = d theta / d beta_ls`` at the solution, shape (p, r)
+        (:mod:`manip_id.estimators.consistent.covariance`); None for plain LS.
+    active
+        the bodies and joint terms whose constraints are active at the solution (their
+        std hold on the constraints' tangent).
+    std, std_white
+        the honest and the white-noise std of ``values``, shape (p,), once
+        :meth:`with_covariance` gave the base covariances (None before).
     """
 
     names: list[str]
@@ -91,6 +101,22 @@ class StandardEstimate:
     bounds: BodyBounds | None = None
     plausibility: PlausibilityReport | None = None
     warnings: list[str] = field(default_factory=list)
+    sensitivity: np.ndarray | None = None
+    active: list[str] = field(default_factory=list)
+    std: np.ndarray | None = None
+    std_white: np.ndarray | None = None
+
+    def with_covariance(self, honest, white) -> StandardEstimate:
+        """The estimate with ``std`` and ``std_white`` from the base covariances ``honest``
+        and ``white`` of ``beta_ls`` (r, r): ``sqrt(diag(G C G^T))``."""
+        if self.sensitivity is None:
+            return self
+        G = self.sensitivity
+
+        def std(C):
+            return np.sqrt(np.clip(np.einsum("ia,ab,ib->i", G, np.asarray(C, float), G), 0, None))
+
+        return replace(self, std=std(honest), std_white=std(white))
 
     @property
     def physically_consistent(self) -> bool:
@@ -103,10 +129,12 @@ class StandardEstimate:
         return {
             "standard_parameters": [
                 {"name": n, "value": float(v), "unit": u, "nominal": float(x0)}
-                for n, v, u, x0 in zip(
-                    self.names, self.values, self.units, self.nominal, strict=True
+                | self._std_entries(k)
+                for k, (n, v, u, x0) in enumerate(
+                    zip(self.names, self.values, self.units, self.nominal, strict=True)
                 )
             ],
+            "constraints_active": list(self.active),
             "standard_parameters_kind": "consistent" if self.solver else "minimum norm",
             "physically_consistent": bool(self.consistency.consistent),
             "consistency": self.consistency.to_dict(),
@@ -125,6 +153,14 @@ class StandardEstimate:
                 "prior_shift_std": finite_or_none(self.prior_shift_std),
             },
             "plausibility": self._plausibility_dict(),
+        }
+
+    def _std_entries(self, k: int) -> dict:
+        if self.std is None or self.std_white is None:
+            return {}
+        return {
+            "std": finite_or_none(float(self.std[k])),
+            "std_white": finite_or_none(float(self.std_white[k])),
         }
 
     def _plausibility_dict(self) -> dict | None:
@@ -194,7 +230,15 @@ def consistent_estimate(
     if prior != "none":
         sol = solve_consistent(robot, replace(problem, weight=prior_weight * scale), solver=solver)
         elapsed += sol.time
-    return _estimate(robot, problem, ls, feas, sol, scale, elapsed, prior_weight)
+    final = replace(problem, weight=prior_weight * scale) if prior != "none" else problem
+    est = _estimate(robot, problem, ls, feas, sol, scale, elapsed, prior_weight)
+    names = [robot.parameter_names[10 * i].split(".")[0] for i in range(problem.n_bodies)]
+    held = active_constraints(final, sol.theta)
+    return replace(
+        est,
+        sensitivity=sensitivity(final, sol.theta),
+        active=[names[i] for i in held.bodies] + [robot.parameter_names[t] for t in held.terms],
+    )
 
 
 def _estimate(robot, problem, ls, feas, sol, scale: float, elapsed: float, weight: float):
