@@ -13,7 +13,7 @@ import html
 from collections.abc import Mapping
 from pathlib import Path
 
-from .report import ReportContent, html_table, write_report
+from .report import ReportContent, write_report
 from .report_tables import number
 
 
