@@ -3,7 +3,7 @@
 *Was anything detected?* (the detections per file, the first alarm's time [s] in the
 file's own clock), *How close did each joint come to its bound?* (per file and joint the
 largest residual ``max_t |r_j(t)|`` [N m] against the bound ``b_j`` [N m], as a margin
-``1 - max|r_j| / b_j``: negative where the bound was crossed), *How were the bounds set?*
+``max|r_j| / b_j``: above 1 where the bound was crossed), *How were the bounds set?*
 (per joint the bound, its noise and model parts, at the false-alarm rate asked), then one
 figure per file: the residuals (estimated external torques) with their bounds.
 """
@@ -58,23 +58,28 @@ def residual_figure(path, run, title: str) -> None:
 
 
 def margin_rows(runs) -> list[dict]:
-    """Per file and joint: the largest residual [N m], the bound [N m] and the margin
-    ``1 - max|r| / b`` [%] (negative: crossed), the share of samples in alarm [%]."""
+    """Per file and joint: the largest residual [N m], the bound [N m], their ratio
+    ``max|r| / b`` [-] (above 1: crossed), the share of samples in alarm [%]."""
     rows = []
     for run in runs:
         peak = np.abs(run.residual).max(axis=0)  # [N m]
         for j, name in enumerate(run.dof_names):
             b = float(run.bounds[j])
-            margin = 1.0 - peak[j] / b if np.isfinite(b) and b > 0 else None
+            ratio = peak[j] / b if np.isfinite(b) and b > 0 else None
             rows.append(
                 {
                     "file": run.file,
                     "joint": name,
                     "largest residual [N m]": number(peak[j], 3),
                     "bound [N m]": number(b, 3),
-                    "margin [%]": number(None if margin is None else 100 * margin, 3),
+                    "largest / bound [-]": number(ratio, 3),
+                    "bound": "not set"
+                    if ratio is None
+                    else "crossed"
+                    if ratio > 1
+                    else f"{number(100 * (1 - ratio), 2)} % to spare",
                     "samples in alarm [%]": number(100 * run.alarm_rate_per_joint[j], 3),
-                    "_class": "bad" if margin is not None and margin < 0 else "",
+                    "_class": "bad" if ratio is not None and ratio > 1 else "",
                 }
             )
     return rows

@@ -142,10 +142,16 @@ def _trust_answer(doc: Mapping) -> tuple[str, str]:
             f"residuals), {number(unc.get('inflation'), 3)} times the white-noise ones, from "
             f"{unc.get('n_blocks')} blocks"
         )
-    elif unc:
+    else:
         items.append(
             "standard deviations: white noise"
             + (f" ({_esc(unc['reason'])})" if unc.get("reason") else "")
+            + (
+                ""
+                if unc
+                else " (no autocorrelation-consistent estimate for this fit: correlated "
+                "residuals make them too small)"
+            )
         )
     cond = doc.get("condition_number")
     items.append(f"condition number of the regressor {number(cond)}")
@@ -318,7 +324,7 @@ def drive_gain_answers(doc: Mapping) -> list:
     n_ok = sum(bool(g["determined"]) for g in gains)
     verdict = (
         f'<p class="verdict">{n_ok} of {len(gains)} joint gains determined (torque = gain '
-        f"&times; current, {_esc(doc.get('units', 'N m / A'))}) by "
+        "&times; current [N m / A]) by "
         f"{_esc(str(doc.get('method', '')).upper())}: {_ml_agreement(doc)}.</p>"
     )
     return [
