@@ -70,9 +70,10 @@ def test_payload_report_frames_the_robot(tmp_path):
 
 @pytest.mark.xfail(
     strict=True,
-    reason="measured 0.52 of the height at 1170 x 600 px (ur5, simulated motion): the camera "
-    "backs off to keep the motion in view (camera.place_camera's min_fill is of the height "
-    "at an assumed aspect 1.2, the iframe's pane is wider)",
+    reason="measured 0.52 of the height (ur5, simulated motion): place_camera backs off to "
+    "keep the motion in view down to min_fill 0.68 of the larger of the height and width "
+    "shares; ur5's stretched start pose is wide, so the width binds (CameraPlacement.fill "
+    "0.516, width_fill 0.68)",
 )
 def test_identify_consistent_report_frames_the_robot(tmp_path):
     rep = tmp_path / "rep"
