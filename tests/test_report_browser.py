@@ -49,7 +49,6 @@ def framing(scene_html, tmp_path) -> dict:
 
 
 def _check(fig: dict) -> None:
-    print("framing", fig)
     assert fig["height"] >= 0.6, f"the robot spans {fig['height']:.2f} of the canvas height"
     assert fig["robot_left"] > fig["legend_right"], fig  # the legend never covers the robot
 
@@ -68,13 +67,6 @@ def test_payload_report_frames_the_robot(tmp_path):
     _check(framing(rep / "scene.html", tmp_path))
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="measured 0.52 of the height (ur5, simulated motion): place_camera backs off to "
-    "keep the motion in view down to min_fill 0.68 of the larger of the height and width "
-    "shares; ur5's stretched start pose is wide, so the width binds (CameraPlacement.fill "
-    "0.516, width_fill 0.68)",
-)
 def test_identify_consistent_report_frames_the_robot(tmp_path):
     rep = tmp_path / "rep"
     argv = ["identify", "ur5", "--simulate", "--duration", "4", "--consistent"]

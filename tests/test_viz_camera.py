@@ -31,5 +31,20 @@ def test_the_motion_never_pushes_the_start_pose_below_min_fill():
     assert place_camera(start, small, direction=(1.0, 0.0, 0.0)).fill == pytest.approx(0.8)
 
 
+def test_min_fill_holds_for_the_height_of_a_wide_start_pose():
+    # a start pose 4 times wider than tall: the height share, not the width's, keeps min_fill
+    # (the pinhole: 0.5 m tall at distance D spans 0.5 / (2 D tan(fov / 2)))
+    start = np.column_stack([np.zeros(11), np.linspace(-1, 1, 11), np.zeros(11)])
+    start = np.vstack([start, [[0.0, 0.0, 0.25], [0.0, 0.0, -0.25]]])
+    motion = np.vstack([start, [[0.0, 8.0, 0.0], [0.0, -8.0, 6.0]]])
+    cam = place_camera(start, motion, direction=(1.0, 0.0, 0.0), fill=0.8, min_fill=0.25)
+    assert cam.fill == pytest.approx(0.25, rel=1e-6)  # the width share is 0.83
+    d = np.linalg.norm(cam.position)
+    assert 0.5 / (2 * d * np.tan(np.radians(FOV) / 2)) == pytest.approx(0.25, rel=1e-6)
+    # taller than min_fill would push the start pose out of the view: it stays within 0.98
+    cam = place_camera(start, motion, direction=(1.0, 0.0, 0.0), fill=0.8, min_fill=0.6)
+    assert max(cam.fill, cam.width_fill) == pytest.approx(0.98, rel=1e-6)
+
+
 def test_points_behind_the_camera_have_no_extent():
     assert image_extent(_rod(1.0), (0.0, 0.0, 0.2)) == (np.inf, np.inf)

@@ -66,17 +66,25 @@ def image_extent(points, position, *, fov: float = FOV, aspect: float = ASPECT):
     return float(np.ptp(y)) / 2.0, float(np.ptp(x)) / 2.0
 
 
-def _distance(points, direction, share: float, *, fov: float, aspect: float) -> float:
+def _distance(
+    points, direction, share: float, *, fov: float, aspect: float, height_only: bool = False
+) -> float:
     """The distance along ``direction`` where ``points`` span ``share`` of the view in
-    height and at most ``share`` in width (bisection on a decreasing function)."""
+    height and at most ``share`` in width (``height_only``: in height, whatever the width;
+    bisection on a decreasing function)."""
+
+    def extent(dist: float) -> float:
+        h, w = image_extent(points, dist * direction, fov=fov, aspect=aspect)
+        return h if height_only else max(h, w)
+
     lo, hi = 1e-6, 1.0
-    while max(image_extent(points, hi * direction, fov=fov, aspect=aspect)) > share:
+    while extent(hi) > share:
         hi *= 2.0
         if hi > 1e9:
             raise InputError("the scene's points do not fit any camera distance")
     for _ in range(60):
         mid = 0.5 * (lo + hi)
-        if max(image_extent(points, mid * direction, fov=fov, aspect=aspect)) > share:
+        if extent(mid) > share:
             lo = mid
         else:
             hi = mid
@@ -99,7 +107,8 @@ def place_camera(
 
     The start pose spans ``fill`` of the view (height, or width when it is wider); the
     camera backs off to keep the whole motion within ``motion_fill`` of the view, but
-    never so far that the start pose spans less than ``min_fill``.
+    never so far that the start pose spans less than ``min_fill`` of the view height
+    (unless that would push the start pose itself out of ``motion_fill`` of the view).
     """
     d = np.asarray(direction, dtype=float)
     d = d / np.linalg.norm(d)
@@ -107,6 +116,7 @@ def place_camera(
     dist = _distance(start, d, fill, **kw)
     if motion is not None and len(motion):
         dist = max(dist, _distance(motion, d, motion_fill, **kw))
-        dist = min(dist, _distance(start, d, min_fill, **kw))
+        tall = _distance(start, d, min_fill, **kw, height_only=True)
+        dist = min(dist, max(tall, _distance(start, d, motion_fill, **kw)))
     h, w = image_extent(start, dist * d, **kw)
     return CameraPlacement(position=dist * d, fill=h, width_fill=w)
