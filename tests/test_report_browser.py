@@ -4,7 +4,8 @@ The scene of each report (identify --consistent, payload, adapt) is rendered at 
 it has in the report page (the iframe: about 1170 x 600 px), once as written and once with
 the robot hidden (the same camera, ellipsoids kept); the pixels that differ are the robot's.
 From them: the robot's bounding box spans >= 60 % of the canvas height, and the legend's
-box (the panel's own background colour, measured from the pixels) does not overlap it.
+box (the panel's own background colour, measured from the pixels) does not overlap it, and
+no edge of the canvas cuts it.
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ def framing(scene_html, tmp_path) -> dict:
     rows, cols = np.nonzero(robot)
     assert rows.size > 0.005 * robot.size, "the robot is not drawn"
     return {
+        "inside": bool(rows.min() > 0 and rows.max() < SIZE[1] - 1 and cols.max() < SIZE[0] - 1),
         "height": (rows.max() - rows.min() + 1) / SIZE[1],
         "robot_left": int(cols.min()),
         "legend_right": int(legend_cols.max()),
@@ -51,6 +53,7 @@ def framing(scene_html, tmp_path) -> dict:
 def _check(fig: dict) -> None:
     assert fig["height"] >= 0.6, f"the robot spans {fig['height']:.2f} of the canvas height"
     assert fig["robot_left"] > fig["legend_right"], fig  # the legend never covers the robot
+    assert fig["inside"], fig  # nothing of the robot cut by the canvas's edges
 
 
 def test_payload_report_frames_the_robot(tmp_path):

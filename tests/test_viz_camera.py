@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from manip_id.viz.camera import FOV, image_extent, place_camera
+from manip_id.viz.camera import FOV, image_coordinates, image_extent, place_camera
 
 
 def _rod(h: float) -> np.ndarray:
@@ -44,6 +44,19 @@ def test_min_fill_holds_for_the_height_of_a_wide_start_pose():
     # taller than min_fill would push the start pose out of the view: it stays within 0.98
     cam = place_camera(start, motion, direction=(1.0, 0.0, 0.0), fill=0.8, min_fill=0.6)
     assert max(cam.fill, cam.width_fill) == pytest.approx(0.98, rel=1e-6)
+
+
+def test_the_target_centres_a_pose_stretched_towards_the_camera():
+    # a rod along the viewing direction: its near end is drawn larger (perspective), so
+    # the box's centre is not the image's; the target puts the image in the middle
+    d = np.array([1.0, 0.7, 0.45]) / np.linalg.norm([1.0, 0.7, 0.45])
+    rod = np.outer(np.linspace(-0.5, 0.5, 21), [1.0, 0.0, 0.0])
+    pose = np.vstack([rod, [[0.5, 0.0, 0.3]]])  # [m]
+    cam = place_camera(pose, direction=d)
+    y, x = image_coordinates(pose - cam.target, cam.position)
+    assert abs(y.max() + y.min()) / 2 < 2e-3 and abs(x.max() + x.min()) / 2 < 2e-3
+    assert max(cam.fill, cam.width_fill) == pytest.approx(0.8, rel=1e-6)
+    assert np.linalg.norm(cam.target) > 0.01  # the box's centre alone is off-centre
 
 
 def test_points_behind_the_camera_have_no_extent():

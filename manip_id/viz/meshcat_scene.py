@@ -324,6 +324,7 @@ class RobotScene:
             qs = qs[np.linspace(0, len(qs) - 1, min(len(qs), 60)).astype(int)]
             motion = np.vstack([self._points(q) for q in qs] + [pad])
         self.camera = place_camera(start - center, None if motion is None else motion - center)
+        center = center + self.camera.target  # the image of the start pose centred
         # The viewer's orbit controls always aim at the world origin: shift the scene
         # (robot and world axes) so that the centre of the start pose sits there; the
         # viewer's grid would no longer be the floor, so it is hidden.
