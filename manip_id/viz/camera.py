@@ -13,6 +13,7 @@ distance ``|p|`` along a fixed direction, which :func:`place_camera` finds by bi
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -126,7 +127,7 @@ def place_camera(
     """
     d = np.asarray(direction, dtype=float)
     d = d / np.linalg.norm(d)
-    kw = dict(fov=fov, aspect=aspect)
+    kw: dict[str, Any] = dict(fov=fov, aspect=aspect)
     start = np.asarray(start, dtype=float)
     motion = None if motion is None or not len(motion) else np.asarray(motion, dtype=float)
     r = np.cross(-d, [0.0, 0.0, 1.0])
