@@ -159,7 +159,9 @@ def _trust_answer(doc: Mapping) -> tuple[str, str]:
     if test.get("p_value") is not None:
         items.append(
             f"the loaded runs show a payload: Wald statistic {number(test.get('statistic'))} "
-            f"for {test.get('dof')} parameters (p-value {number(test['p_value'], 3)})"
+            f"for {test.get('dof')} parameters (p-value "
+            + ("below 1e-6" if test["p_value"] < 1e-6 else number(test["p_value"], 3))
+            + ")"
         )
     rel = doc.get("relative_error") or {}
     errs = ", ".join(f"{k} runs {number(100 * v, 3)} %" for k, v in rel.items() if v is not None)
