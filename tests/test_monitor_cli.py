@@ -96,6 +96,13 @@ def test_monitor_json_from_results(robot, files, kind, tmp_path, capsys):
     assert "shoulder_lift_joint" in capsys.readouterr().out
     if kind == "plain":
         assert (report / "residuals_1.png").is_file() and (report / "index.html").is_file()
+        page = (report / "index.html").read_text()
+        assert page.index("Was anything detected?") < page.index("<h2>Summary</h2>")
+        assert "1 detection(s)</span> in 2 file(s)" in page
+        j, a, _, _ = HIT
+        first = doc["detections"][0]["start"]
+        assert f"the first alarm at {first:.4f} s" in page and first >= 100.0 + a
+        assert page.count('class="bad"') >= 1  # the hit joint crossed its bound
 
 
 def test_monitor_with_saved_thresholds(robot, files, tmp_path):

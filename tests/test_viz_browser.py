@@ -30,8 +30,9 @@ pytestmark = [
 ]
 
 
-def screenshot(html, png, tmp_path, hash_: str = "") -> np.ndarray:
-    """Render ``html`` in headless Chromium (software WebGL) and return the RGB image."""
+def screenshot(html, png, tmp_path, hash_: str = "", size=(WIDTH, HEIGHT)) -> np.ndarray:
+    """Render ``html`` in headless Chromium (software WebGL) in a window of ``size``
+    (width, height) [px] and return the RGB image."""
     cmd = [
         CHROMIUM,
         "--headless",
@@ -42,7 +43,7 @@ def screenshot(html, png, tmp_path, hash_: str = "") -> np.ndarray:
         "--no-first-run",
         "--hide-scrollbars",
         f"--user-data-dir={tmp_path / 'chromium-profile'}",
-        f"--window-size={WIDTH},{HEIGHT}",
+        f"--window-size={size[0]},{size[1]}",
         f"--screenshot={png}",
         "--virtual-time-budget=4000",
         html.resolve().as_uri() + hash_,
@@ -50,7 +51,7 @@ def screenshot(html, png, tmp_path, hash_: str = "") -> np.ndarray:
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
     assert proc.returncode == 0 and png.is_file(), proc.stderr[-2000:]
     img = imread(png)
-    assert img.shape[:2] == (HEIGHT, WIDTH)
+    assert img.shape[:2] == (size[1], size[0])
     return img[..., :3]
 
 

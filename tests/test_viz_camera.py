@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from manip_id.viz.camera import FOV, image_extent, place_camera
+from manip_id.viz.camera import FOV, image_coordinates, image_extent, place_camera
 
 
 def _rod(h: float) -> np.ndarray:
@@ -29,6 +29,34 @@ def test_the_motion_never_pushes_the_start_pose_below_min_fill():
     assert cam.fill == pytest.approx(0.65, rel=1e-6)
     small = np.vstack([start, [[0.0, 0.0, 0.6]]])  # a motion inside the view
     assert place_camera(start, small, direction=(1.0, 0.0, 0.0)).fill == pytest.approx(0.8)
+
+
+def test_min_fill_holds_for_the_height_of_a_wide_start_pose():
+    # a start pose 4 times wider than tall: the height share, not the width's, keeps min_fill
+    # (the pinhole: 0.5 m tall at distance D spans 0.5 / (2 D tan(fov / 2)))
+    start = np.column_stack([np.zeros(11), np.linspace(-1, 1, 11), np.zeros(11)])
+    start = np.vstack([start, [[0.0, 0.0, 0.25], [0.0, 0.0, -0.25]]])
+    motion = np.vstack([start, [[0.0, 8.0, 0.0], [0.0, -8.0, 6.0]]])
+    cam = place_camera(start, motion, direction=(1.0, 0.0, 0.0), fill=0.8, min_fill=0.25)
+    assert cam.fill == pytest.approx(0.25, rel=1e-6)  # the width share is 0.83
+    d = np.linalg.norm(cam.position)
+    assert 0.5 / (2 * d * np.tan(np.radians(FOV) / 2)) == pytest.approx(0.25, rel=1e-6)
+    # taller than min_fill would push the start pose out of the view: it stays within 0.98
+    cam = place_camera(start, motion, direction=(1.0, 0.0, 0.0), fill=0.8, min_fill=0.6)
+    assert max(cam.fill, cam.width_fill) == pytest.approx(0.98, rel=1e-6)
+
+
+def test_the_target_centres_a_pose_stretched_towards_the_camera():
+    # a rod along the viewing direction: its near end is drawn larger (perspective), so
+    # the box's centre is not the image's; the target puts the image in the middle
+    d = np.array([1.0, 0.7, 0.45]) / np.linalg.norm([1.0, 0.7, 0.45])
+    rod = np.outer(np.linspace(-0.5, 0.5, 21), [1.0, 0.0, 0.0])
+    pose = np.vstack([rod, [[0.5, 0.0, 0.3]]])  # [m]
+    cam = place_camera(pose, direction=d)
+    y, x = image_coordinates(pose - cam.target, cam.position)
+    assert abs(y.max() + y.min()) / 2 < 2e-3 and abs(x.max() + x.min()) / 2 < 2e-3
+    assert max(cam.fill, cam.width_fill) == pytest.approx(0.8, rel=1e-6)
+    assert np.linalg.norm(cam.target) > 0.01  # the box's centre alone is off-centre
 
 
 def test_points_behind_the_camera_have_no_extent():

@@ -9,6 +9,7 @@ from ..datasets import Window, parse_file_spec
 from ..datasets.stream import torque_scale_vector
 from ..errors import InputError
 from ..payload import load_torque_scale
+from ..viz.audit_report import write_audit_report
 from ._common import (
     column_map,
     input_paths,
@@ -64,7 +65,11 @@ def run(args: argparse.Namespace) -> int:
     print(audit.table())
     if args.json:
         outputs.write_json(args.json, {"audit": audit.to_dict()})
+    if args.report_claim is not None:
+        write_audit_report(args.report_claim, audit.to_dict(), force=args.force)
     outputs.publish()
     if args.json:
         print(f"wrote {args.json}")
+    if args.report_claim is not None:
+        print(f"wrote the report to {args.report}/index.html")
     return 0

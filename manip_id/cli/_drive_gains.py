@@ -10,14 +10,16 @@ import time
 
 from ..errors import InputError
 from ..payload import identify_drive_gains
+from ..viz.payload_report import write_drive_gain_report
 from ._common import parse_floats, print_warnings
 from ._payload import (
     check_run_args,
     input_paths,
     preprocess_settings,
-    publish_json,
+    publish_outputs,
     read_runs,
     reserve_json,
+    reserve_report,
 )
 from ._runtime import check_frame, robot_from_args
 
@@ -35,6 +37,7 @@ def run(args: argparse.Namespace) -> int:
     )
     if inertia is not None and com is None:
         raise InputError("--payload-inertia (about the centre of mass) needs --payload-com")
+    args.report_claim = reserve_report(args, input_paths(args))
     reserve_json(args, input_paths(args))
     robot = robot_from_args(args)
     check_frame(robot, args.frame)
@@ -59,5 +62,7 @@ def run(args: argparse.Namespace) -> int:
     doc["timings"]["command_total"] = round(time.perf_counter() - t_start, 6)
     print(result.table())
     print_warnings(doc)
-    publish_json(args, doc)
+    publish_outputs(
+        args, doc, lambda claim: write_drive_gain_report(claim, robot, doc, force=args.force)
+    )
     return 0

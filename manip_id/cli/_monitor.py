@@ -23,7 +23,7 @@ from ..monitor import (  # the package loads with the command, not with --help
     model_from_robot,
 )
 from ..robot import load_robot
-from ..viz.report import ReportContent, write_report
+from ..viz.monitor_report import write_monitor_report
 from ._common import (
     reserve_outputs,
 )
@@ -131,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json is not None:
         outputs.write_json(args.json, doc)
     if args.report is not None:
-        _write_report(robot, th, runs, doc, args)
+        write_monitor_report(args.report_claim, robot, th, runs, detections, doc, force=args.force)
     outputs.publish()
     if args.json is not None:
         print(f"wrote {args.json}")
@@ -174,85 +174,3 @@ def _summary(th, runs, detections) -> str:
             f"(peak {d.peak:.3g} N m on {d.peak_joint})"
         )
     return "\n".join(lines)
-
-
-def residual_figure(path, run, title: str) -> None:
-    """Residuals (estimated external torques) of one run with their bounds, one axis per joint."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg  # optional heavy library
-    from matplotlib.figure import Figure
-    from matplotlib.text import Text  # (matplotlib: optional heavy library)
-
-    nv = run.residual.shape[1]
-    fig = Figure(figsize=(10.0, 1.8 * nv + 1.0), dpi=100)
-    FigureCanvasAgg(fig)
-    stride = max(1, run.t.size // 4000)
-    for j in range(nv):
-        ax = fig.add_subplot(nv, 1, j + 1)
-        ax.plot(run.t[::stride], run.residual[::stride, j], lw=0.8, label="residual r")
-        b = run.bounds[j]
-        if np.isfinite(b):
-            ax.axhline(b, color="r", lw=0.8, ls="--", label="bound")
-            ax.axhline(-b, color="r", lw=0.8, ls="--")
-        flags = run.detected[:, j]
-        if flags.any():
-            ax.fill_between(
-                run.t, 0, 1, where=flags, color="orange", alpha=0.3,
-                transform=ax.get_xaxis_transform(), label="detected",
-            )  # fmt: skip
-        ax.set_ylabel(f"{run.dof_names[j]}\n[N m]", fontsize=7)
-        if j == 0:
-            ax.set_title(title, fontsize=9)
-            ax.legend(fontsize=7, loc="upper right")
-    fig.axes[-1].set_xlabel("t [s]")
-    for text in fig.findobj(Text):
-        text.set_parse_math(False)  # file names are shown literally
-    fig.tight_layout()
-    fig.savefig(path, format="png")
-
-
-def _write_report(robot, th, runs, doc, args):
-
-    figs = {
-        f"residuals_{i}": (
-            lambda path, run=run: residual_figure(
-                path, run, f"estimated external torque, {run.file}"
-            )
-        )
-        for i, run in enumerate(runs)
-    }
-    rows = [
-        {
-            "joint": j["name"],
-            "bound [N m]": f"{j['bound']:.4g}",
-            "noise part": f"{j['noise_bound']:.4g}",
-            "model part": f"{j['model_bound']:.4g}",
-            "method": j["method"],
-            "calibration rate": f"{j['rate']:.3g}",
-        }
-        for j in th.to_dict()["joints"]
-    ]
-    det_rows = [
-        {
-            "file": d["file"],
-            "start [s]": f"{d['start']:.4f}",
-            "stop [s]": f"{d['stop']:.4f}",
-            "joints": ", ".join(d["joints"]),
-            "peak [N m]": f"{d['peak']:.4g}",
-        }
-        for d in doc["detections"]
-    ]
-    content = ReportContent(
-        title=f"manip-id monitor {robot.name}",
-        summary={
-            "robot": robot.name,
-            "model": doc["model"],
-            "false-alarm rate": th.false_alarm,
-            "calibration samples": th.n_samples,
-            "detections": len(doc["detections"]),
-        },
-        parameter_table=rows,
-        figures=figs,
-        json_result=doc,
-        tables={"detections": det_rows} if det_rows else None,
-    )
-    return write_report(args.report_claim, content, force=args.force)

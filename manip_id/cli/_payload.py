@@ -19,6 +19,7 @@ from ..export import PayloadLink, check_output, payload_urdf_texts, sidecar_path
 from ..export.sidecar import identification_provenance
 from ..identification import PreprocessOptions, iter_processed, scan_file
 from ..payload import identify_payload, load_known_base
+from ..viz.payload_report import write_payload_report
 from ._common import (
     column_map,
     parse_floats,
@@ -159,6 +160,16 @@ def read_runs(args, robot, scale=None, scan: bool = True) -> tuple[list, list, d
     return runs["unloaded"], runs["loaded"], source
 
 
+def reserve_report(args, inputs: list[str]):
+    """Check and claim the --report folder before the work (None without one)."""
+    if getattr(args, "report", None) is None:
+        return None
+    if getattr(args, "outputs", None) is None:
+        args.outputs = OutputSet()
+    args.outputs.add_inputs(inputs)
+    return args.outputs.report(args.report, "--report", force=args.force)
+
+
 def reserve_json(args, inputs: list[str]):
     """Check the --json output before the work (the command's OutputSet when there is one)."""
     if not args.json:
@@ -174,17 +185,33 @@ def reserve_json(args, inputs: list[str]):
     return args.json
 
 
+def publish_outputs(args, doc: dict, report=None) -> None:
+    """Write the --json output and the report (``report(claim)`` builds it), then publish
+    every output of the command together and say where they are."""
+    publish_json(args, doc)
+    claim = getattr(args, "report_claim", None)
+    if report is not None and claim is not None:
+        report(claim)
+    outputs = getattr(args, "outputs", None)
+    if outputs is not None:
+        outputs.publish()
+    if args.json:
+        print(f"wrote {args.json}")
+    if getattr(args, "export_urdf", None):
+        print(f"wrote {args.export_urdf} and its sidecar")
+    if claim is not None:
+        print(f"wrote the report to {args.report}/index.html")
+
+
 def publish_json(args, doc: dict) -> None:
-    """Write the --json output (through the OutputSet when there is one)."""
+    """Stage the --json output (through the OutputSet when there is one)."""
     if not args.json:
         return
     outputs = getattr(args, "outputs", None)
     if outputs is not None:
         outputs.write_json(args.json, doc)
-        outputs.publish()
     else:
         write_json(args.json, doc)
-    print(f"wrote {args.json}")
 
 
 def input_paths(args) -> list[str]:
@@ -247,6 +274,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("give the --unloaded runs (or --known-base RESULT.json)")
 
     check_scheduler(args)
+    args.report_claim = reserve_report(args, input_paths(args))
     reserve_json(args, input_paths(args))
     _reserve_export(args, input_paths(args))
     known = load_known_base(args.known_base) if args.known_base is not None else None
@@ -289,12 +317,9 @@ def run(args: argparse.Namespace) -> int:
     print(result.table())
     print_warnings(doc)
     _stage_export(args, robot, result)
-    if args.json or not args.export_urdf:
-        publish_json(args, doc)
-    else:
-        args.outputs.publish()
-    if args.export_urdf:
-        print(f"wrote {args.export_urdf} and its sidecar")
+    publish_outputs(
+        args, doc, lambda claim: write_payload_report(claim, robot, doc, force=args.force)
+    )
     return 0
 
 

@@ -53,6 +53,14 @@ def register(sub) -> None:
         help="low-pass cut-off [Hz] for files without ddq [default that of identify]",
     )
     p.add_argument("--json", metavar="OUT", help="write the audit as JSON to OUT")
+    p.add_argument(
+        "--report",
+        metavar="DIR",
+        default=None,
+        help="write a report folder: the findings and what to fix first, then a table per "
+        "file and joint [default: none]",
+    )
+    p.add_argument("--force", action="store_true", help="replace a --report folder manip-id wrote")
     add_file_arguments(p)
     add_stream_arguments(p, trim=False)
     p.set_defaults(func=command("manip_id.cli._audit"))

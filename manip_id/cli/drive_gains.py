@@ -54,4 +54,9 @@ def register(sub) -> None:
         "joint; tls: total least squares. ols/wls/tls shrink the gain of a joint whose current "
         "is small against its noise",
     )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace a --report folder manip-id wrote [default: refuse]",
+    )
     p.set_defaults(func=command("manip_id.cli._drive_gains"))

@@ -93,6 +93,14 @@ def add_run_arguments(p: argparse.ArgumentParser, *, unloaded_required: bool) ->
     sig.add_argument("--decimate", type=int, default=1, help="keep every D-th sample [default 1]")
     add_execution_arguments(p, workers=False)
     p.add_argument("--json", metavar="OUT", help="write the result as JSON to OUT")
+    p.add_argument(
+        "--report",
+        metavar="DIR",
+        default=None,
+        help="write a report folder (index.html with the answers first, result.json"
+        + (", the robot with the payload's inertia ellipsoid" if p.prog.endswith("payload") else "")
+        + ") [default: none]",
+    )
     add_stream_arguments(p)
 
 
@@ -140,7 +148,8 @@ def register(sub) -> None:
     p.add_argument(
         "--force",
         action="store_true",
-        help="replace an existing --export-urdf file [default: refuse]",
+        help="replace an existing --export-urdf file or a --report folder manip-id wrote "
+        "[default: refuse]",
     )
     add_scheduler_argument(
         p,

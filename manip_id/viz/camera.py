@@ -12,7 +12,8 @@ distance ``|p|`` along a fixed direction, which :func:`place_camera` finds by bi
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -38,17 +39,33 @@ class CameraPlacement:
         Share of the view height the start pose spans [-].
     width_fill : float
         Share of the view width it spans [-].
+    target : numpy.ndarray
+        Where the camera looks, relative to the centre of the start pose's box [m],
+        shape (3,): perspective draws the near side larger, so the box's centre is not
+        the image's; the target puts the start pose's image in the middle of the view.
     """
 
     position: np.ndarray
     fill: float
     width_fill: float
+    target: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 def image_extent(points, position, *, fov: float = FOV, aspect: float = ASPECT):
     """``(height share, width share)`` of the view that ``points`` (shape (n, 3)) span,
     seen from ``position`` towards the origin; ``(inf, inf)`` when a point is behind
     the camera or on its plane."""
+    coords = image_coordinates(points, position, fov=fov, aspect=aspect)
+    if coords is None:
+        return np.inf, np.inf
+    y, x = coords
+    return float(np.ptp(y)) / 2.0, float(np.ptp(x)) / 2.0
+
+
+def image_coordinates(points, position, *, fov: float = FOV, aspect: float = ASPECT):
+    """Normalized image coordinates ``(y, x)`` (each shape (n,), in [-1, 1] on screen) of
+    ``points`` seen from ``position`` towards the origin; None when a point is behind the
+    camera or on its plane."""
     pts = np.asarray(points, dtype=float).reshape(-1, 3)
     p = np.asarray(position, dtype=float)
     f = -p / np.linalg.norm(p)
@@ -59,24 +76,30 @@ def image_extent(points, position, *, fov: float = FOV, aspect: float = ASPECT):
     rel = pts - p
     depth = rel @ f
     if np.any(depth <= 1e-9):
-        return np.inf, np.inf
+        return None
     t = np.tan(np.radians(fov) / 2)
-    y = (rel @ u) / (depth * t)
-    x = (rel @ r) / (depth * t * aspect)
-    return float(np.ptp(y)) / 2.0, float(np.ptp(x)) / 2.0
+    return (rel @ u) / (depth * t), (rel @ r) / (depth * t * aspect)
 
 
-def _distance(points, direction, share: float, *, fov: float, aspect: float) -> float:
+def _distance(
+    points, direction, share: float, *, fov: float, aspect: float, height_only: bool = False
+) -> float:
     """The distance along ``direction`` where ``points`` span ``share`` of the view in
-    height and at most ``share`` in width (bisection on a decreasing function)."""
+    height and at most ``share`` in width (``height_only``: in height, whatever the width;
+    bisection on a decreasing function)."""
+
+    def extent(dist: float) -> float:
+        h, w = image_extent(points, dist * direction, fov=fov, aspect=aspect)
+        return h if height_only else max(h, w)
+
     lo, hi = 1e-6, 1.0
-    while max(image_extent(points, hi * direction, fov=fov, aspect=aspect)) > share:
+    while extent(hi) > share:
         hi *= 2.0
         if hi > 1e9:
             raise InputError("the scene's points do not fit any camera distance")
     for _ in range(60):
         mid = 0.5 * (lo + hi)
-        if max(image_extent(points, mid * direction, fov=fov, aspect=aspect)) > share:
+        if extent(mid) > share:
             lo = mid
         else:
             hi = mid
@@ -99,14 +122,46 @@ def place_camera(
 
     The start pose spans ``fill`` of the view (height, or width when it is wider); the
     camera backs off to keep the whole motion within ``motion_fill`` of the view, but
-    never so far that the start pose spans less than ``min_fill``.
+    never so far that the start pose spans less than ``min_fill`` of the view height
+    (unless that would push the start pose itself out of ``motion_fill`` of the view).
     """
     d = np.asarray(direction, dtype=float)
     d = d / np.linalg.norm(d)
-    kw = dict(fov=fov, aspect=aspect)
-    dist = _distance(start, d, fill, **kw)
-    if motion is not None and len(motion):
-        dist = max(dist, _distance(motion, d, motion_fill, **kw))
-        dist = min(dist, _distance(start, d, min_fill, **kw))
-    h, w = image_extent(start, dist * d, **kw)
-    return CameraPlacement(position=dist * d, fill=h, width_fill=w)
+    kw: dict[str, Any] = dict(fov=fov, aspect=aspect)
+    start = np.asarray(start, dtype=float)
+    motion = None if motion is None or not len(motion) else np.asarray(motion, dtype=float)
+    r = np.cross(-d, [0.0, 0.0, 1.0])
+    r = r / np.linalg.norm(r) if np.linalg.norm(r) > 1e-12 else np.array([1.0, 0.0, 0.0])
+    u = np.cross(r, -d)
+    t = np.tan(np.radians(fov) / 2)
+
+    def distance(target: np.ndarray) -> float:
+        pts = start - target
+        dist = _distance(pts, d, fill, **kw)
+        if motion is not None:
+            dist = max(dist, _distance(motion - target, d, motion_fill, **kw))
+            tall = _distance(pts, d, min_fill, **kw, height_only=True)
+            dist = min(dist, max(tall, _distance(pts, d, motion_fill, **kw)))
+        return dist
+
+    def off_centre(target: np.ndarray, dist: float) -> tuple[float, float]:
+        coords = image_coordinates(start - target, dist * d, **kw)
+        if coords is None:
+            return np.inf, np.inf
+        y, x = coords
+        return 0.5 * (y.max() + y.min()), 0.5 * (x.max() + x.min())  # [-]
+
+    target = np.zeros(3)
+    dist = distance(target)
+    cy, cx = off_centre(target, dist)
+    for _ in range(12):  # damped steps towards the target that centres the image
+        if max(abs(cy), abs(cx)) < 1e-3:
+            break
+        trial = target + 0.5 * dist * t * (cy * u + cx * aspect * r)  # [m]
+        trial_dist = distance(trial)
+        ty, tx = off_centre(trial, trial_dist)
+        if max(abs(ty), abs(tx)) >= max(abs(cy), abs(cx)):
+            break  # no better: keep the last
+        target, dist, cy, cx = trial, trial_dist, ty, tx
+    h, w = image_extent(start - target, dist * d, **kw)
+    return CameraPlacement(position=dist * d, fill=h, width_fill=w, target=target)

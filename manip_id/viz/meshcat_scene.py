@@ -22,7 +22,7 @@ import base64
 import html as html_lib
 import json
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import meshcat.geometry as mg
@@ -324,6 +324,7 @@ class RobotScene:
             qs = qs[np.linspace(0, len(qs) - 1, min(len(qs), 60)).astype(int)]
             motion = np.vstack([self._points(q) for q in qs] + [pad])
         self.camera = place_camera(start - center, None if motion is None else motion - center)
+        center = center + self.camera.target  # the image of the start pose centred
         # The viewer's orbit controls always aim at the world origin: shift the scene
         # (robot and world axes) so that the centre of the start pose sits there; the
         # viewer's grid would no longer be the floor, so it is hidden.
@@ -390,6 +391,7 @@ class RobotScene:
         color=None,
         visible: bool | None = None,
         wireframe: bool | None = None,
+        bodies=None,
     ) -> list[str]:
         """Draw the equivalent inertia ellipsoid of each body of ``theta`` (shape (p,)).
 
@@ -400,12 +402,19 @@ class RobotScene:
         The page's legend has a check box per set that shows or hides it.
         color, wireframe: the set's style; default: the next of :data:`SET_STYLES` (the
         first set a dark wire frame, the others solid translucent blue, purple, teal).
+        bodies: names of the joints whose bodies are drawn (default: every body), e.g.
+        the one carrying a payload.
         """
         if not isinstance(label, str) or not label or "/" in label:
             raise InputError(f"label must be a non-empty name without '/', got {label!r}")
         if any(lb == label for lb, _, _ in self._sets):
             raise InputError(f"a parameter set labelled {label!r} is already drawn")
         ellipsoids = inertia_ellipsoids(self.robot, theta)
+        if bodies is not None:  # the others are kept (body order) but neither drawn nor noted
+            keep = set(bodies)
+            ellipsoids = [
+                e if e.joint in keep else replace(e, physical=False, note="") for e in ellipsoids
+            ]
         default, wire = SET_STYLES[len(self._sets) % len(SET_STYLES)]
         color = tuple(color) if color is not None else default
         wire = wire if wireframe is None else bool(wireframe)
@@ -434,11 +443,12 @@ class RobotScene:
                             else ": the data fix only grouped terms of this body's inertia"
                         )
                     )
-            else:
+            elif ell.note:
                 notes.append(f"{label}: {ell.note} (not drawn)")
         self._sets.append((label, ellipsoids, color))
         self.notes.extend(notes)
         drawn = sum(e.physical for e in ellipsoids)
+        n_bodies = len(ellipsoids) if bodies is None else len(set(bodies))
         widest = max(
             (2.0 * float(np.max(e.semi_axes)) for e in ellipsoids if e.physical), default=0.0
         )  # [m]
@@ -451,7 +461,7 @@ class RobotScene:
             if too_wide and visible is None
             else ""
         )
-        entry = _set_entry(label, color, wire, shown, f"{drawn} of {len(ellipsoids)} bodies")
+        entry = _set_entry(label, color, wire, shown, f"{drawn} of {n_bodies} bodies")
         self._legend.append(
             _Legend(f"inertia ellipsoids: {html_lib.escape(label)}", [entry + why], notes)
         )
