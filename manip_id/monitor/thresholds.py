@@ -29,7 +29,6 @@ new data the rate is what it is, see ``manip-id monitor``).
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -37,6 +36,7 @@ import numpy as np
 from scipy.special import ndtri
 
 from .._checks import as_real
+from .._io.reading import read_json
 from ..errors import DataError, InputError
 from ..regressor import iter_regressor
 from ..robot import Robot
@@ -155,12 +155,7 @@ def load_thresholds(path) -> Thresholds:
     """The thresholds saved by ``manip-id monitor --json`` (its ``thresholds``) or by
     ``json.dump(thresholds.to_dict())``; :class:`~manip_id.errors.DataError` otherwise."""
     p = Path(path)
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError as exc:
-        raise DataError(f"no such thresholds file: {p}") from exc
-    except (OSError, ValueError) as exc:
-        raise DataError(f"cannot read {p} as JSON: {exc}") from exc
+    doc = read_json(p, "thresholds file")
     if isinstance(doc, dict) and isinstance(doc.get("thresholds"), dict):
         doc = doc["thresholds"]
     if not isinstance(doc, dict):

@@ -1,0 +1,104 @@
+"""The structure of a URDF checked at load, before Pinocchio reads it.
+
+Pinocchio's URDF reader accepts some descriptions that are no robot and says nothing:
+a link that is the child of two joints loses one of them (the model then holds fewer
+joints than the file, and parameter names repeat), a joint axis ``0 0 0`` has no
+direction, inverted limits make every configuration infeasible, a negative mass makes
+the simulated torques those of no body. :func:`check_urdf_structure` refuses each with
+one line naming the joint or link:
+
+- every link is the child of at most one joint;
+- every joint axis is three finite numbers, not all zero;
+- every limit of a revolute or prismatic joint is finite where given, ``lower <= upper``,
+  and ``velocity`` and ``effort`` are >= 0;
+- every ``<mass value>`` is finite and >= 0, every inertia entry finite.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+
+from ._io.reading import read_text
+from .errors import RobotError
+
+
+def _numbers(text: str | None, count: int, where: str) -> list[float] | None:
+    if text is None:
+        return None
+    try:
+        values = [float(v) for v in text.split()]
+    except ValueError as exc:
+        raise RobotError(f"{where} must be {count} numbers, got {text!r}") from exc
+    if len(values) != count or not all(math.isfinite(v) for v in values):
+        raise RobotError(f"{where} must be {count} finite numbers, got {text!r}")
+    return values
+
+
+def _check_joint(joint: ET.Element, where: str, parents: dict[str, str]) -> None:
+    name = joint.get("name", "?")
+    child = joint.find("child")
+    link = child.get("link") if child is not None else None
+    if link is not None:
+        if link in parents:
+            raise RobotError(
+                f"{where}: link {link!r} is the child of two joints, {parents[link]!r} and "
+                f"{name!r} (each link has one parent joint)"
+            )
+        parents[link] = name
+    axis = joint.find("axis")
+    if axis is not None and joint.get("type") not in ("fixed", "floating", "planar"):
+        xyz = _numbers(axis.get("xyz"), 3, f"{where}: the axis of joint {name!r}")
+        if xyz is not None and not any(xyz):
+            raise RobotError(f"{where}: the axis of joint {name!r} is 0 0 0 (no direction)")
+    limit = joint.find("limit")
+    if limit is None or joint.get("type") not in ("revolute", "prismatic"):
+        return
+    bounds = {}
+    for key in ("lower", "upper", "velocity", "effort"):
+        value = _numbers(limit.get(key), 1, f"{where}: the {key} limit of joint {name!r}")
+        bounds[key] = None if value is None else value[0]
+    lo, hi = bounds["lower"], bounds["upper"]
+    if lo is not None and hi is not None and lo > hi:
+        raise RobotError(f"{where}: joint {name!r} has lower limit {lo:g} > upper limit {hi:g}")
+    for key in ("velocity", "effort"):
+        if bounds[key] is not None and bounds[key] < 0:
+            raise RobotError(f"{where}: joint {name!r} has a negative {key} limit {bounds[key]:g}")
+
+
+def _check_link(link: ET.Element, where: str) -> None:
+    inertial = link.find("inertial")
+    if inertial is None:
+        return
+    name = link.get("name", "?")
+    mass = inertial.find("mass")
+    if mass is not None:
+        m = _numbers(mass.get("value"), 1, f"{where}: the mass of link {name!r}")
+        if m is not None and m[0] < 0:
+            raise RobotError(f"{where}: link {name!r} has a negative mass {m[0]:g} [kg]")
+    inertia = inertial.find("inertia")
+    if inertia is not None:
+        for key in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"):
+            _numbers(inertia.get(key), 1, f"{where}: {key} of link {name!r}")
+
+
+def check_urdf_structure(path) -> None:
+    """Refuse a URDF file whose structure Pinocchio would read wrongly (module docstring).
+
+    Raises :class:`~manip_id.errors.RobotError` naming the file and the joint or link;
+    the file is read through :func:`manip_id._io.reading.read_text` (a regular file within
+    the URDF budget). XML syntax errors are left to Pinocchio's reader, which names them.
+    """
+    text = read_text(path, "URDF", "urdf", error=RobotError)
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError:
+        return  # the URDF reader reports the syntax error
+    if root.tag != "robot":
+        return
+    parents: dict[str, str] = {}
+    for joint in root.iter("joint"):
+        if joint.find("child") is not None:  # a transmission's <joint> has no child
+            _check_joint(joint, str(path), parents)
+    for link in root.iter("link"):
+        _check_link(link, str(path))
