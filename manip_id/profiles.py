@@ -148,7 +148,7 @@ def load_profile(spec: str | Path) -> RobotProfile:
     """
     s = str(spec)
     path = Path(s).expanduser() if s.endswith(".toml") or "/" in s else profile_path(s)
-    if not path.is_file():
+    if not path.exists():
         where = f"no file {path}" if path != profile_path(s) else f"no {path.name} in {path.parent}"
         raise RobotError(f"cannot read the robot profile {s!r}: {where}")
     raw = read_toml(path, "robot profile", error=RobotError)

@@ -3,15 +3,17 @@
 Pinocchio's URDF reader accepts some descriptions that are no robot and says nothing:
 a link that is the child of two joints loses one of them (the model then holds fewer
 joints than the file, and parameter names repeat), a joint axis ``0 0 0`` has no
-direction, inverted limits make every configuration infeasible, a negative mass makes
-the simulated torques those of no body. :func:`check_urdf_structure` refuses each with
-one line naming the joint or link:
+direction, inverted limits make every configuration infeasible. :func:`check_urdf_structure`
+refuses each with one line naming the joint or link:
 
 - every link is the child of at most one joint;
 - every joint axis is three finite numbers, not all zero;
 - every limit of a revolute or prismatic joint is finite where given, ``lower <= upper``,
-  and ``velocity`` and ``effort`` are >= 0;
-- every ``<mass value>`` is finite and >= 0, every inertia entry finite.
+  and ``velocity`` and ``effort`` are >= 0.
+
+Inertias are not structure: ``manip-id view`` needs none, and the commands that use them
+check them (a negative mass in a simulated URDF is refused by the simulation's check of
+the nominal parameters).
 """
 
 from __future__ import annotations
@@ -28,9 +30,11 @@ def _numbers(text: str | None, count: int, where: str) -> list[float] | None:
         return None
     try:
         values = [float(v) for v in text.split()]
-    except ValueError as exc:
-        raise RobotError(f"{where} must be {count} numbers, got {text!r}") from exc
-    if len(values) != count or not all(math.isfinite(v) for v in values):
+    except ValueError:
+        return None  # not a number: the URDF reader names it
+    if len(values) != count:
+        return None
+    if not all(math.isfinite(v) for v in values):
         raise RobotError(f"{where} must be {count} finite numbers, got {text!r}")
     return values
 
@@ -66,22 +70,6 @@ def _check_joint(joint: ET.Element, where: str, parents: dict[str, str]) -> None
             raise RobotError(f"{where}: joint {name!r} has a negative {key} limit {bounds[key]:g}")
 
 
-def _check_link(link: ET.Element, where: str) -> None:
-    inertial = link.find("inertial")
-    if inertial is None:
-        return
-    name = link.get("name", "?")
-    mass = inertial.find("mass")
-    if mass is not None:
-        m = _numbers(mass.get("value"), 1, f"{where}: the mass of link {name!r}")
-        if m is not None and m[0] < 0:
-            raise RobotError(f"{where}: link {name!r} has a negative mass {m[0]:g} [kg]")
-    inertia = inertial.find("inertia")
-    if inertia is not None:
-        for key in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"):
-            _numbers(inertia.get(key), 1, f"{where}: {key} of link {name!r}")
-
-
 def check_urdf_structure(path) -> None:
     """Refuse a URDF file whose structure Pinocchio would read wrongly (module docstring).
 
@@ -100,5 +88,3 @@ def check_urdf_structure(path) -> None:
     for joint in root.iter("joint"):
         if joint.find("child") is not None:  # a transmission's <joint> has no child
             _check_joint(joint, str(path), parents)
-    for link in root.iter("link"):
-        _check_link(link, str(path))

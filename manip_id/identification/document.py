@@ -397,6 +397,8 @@ def read_result_json(path, what: str = "result") -> dict:
     that holds no JSON object; ``what`` names the file in the messages.
     """
     path = Path(path)
+    if not path.exists():
+        raise DataError(f"no such {what} file: {path}")
     doc = read_json(path, f"{what} file")
     if not isinstance(doc, dict):
         raise DataError(f"{path}: a {what} is a JSON object, got {type(doc).__name__}")

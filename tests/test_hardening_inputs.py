@@ -1,0 +1,599 @@
+"""The hardening catalogue, third round (issue 29, rules 1, 2 and 5): every file read through
+one checked door, every JSON / TOML input validated before use, user numbers physical.
+
+Each CLI case runs ``manip-id`` in-process in the working folder of
+:func:`test_hardening.work` and asserts exit status 2, exactly one stderr line
+``manip-id...: error: ...`` matching the case, no traceback, every input byte-identical
+and nothing left behind. The properties feed random JSON / TOML structures to every
+reader and assert that only :class:`~manip_id.errors.ManipIdError` comes out.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+from test_hardening import arm_urdf, error_lines, snapshot, work  # noqa: F401 (work: fixture)
+
+from manip_id.cli import main
+
+SIDECAR = {
+    "format": "manip_id identified parameters",
+    "version": 2,
+    "joints": {"j1": {"Ia": 0.1, "fv": 0.2}, "j2": {}},
+    "active_joints": ["j1", "j2"],
+    "joint_terms": ["Ia", "fv"],
+}
+GAINS = {
+    "command": "drive-gains",
+    "robot": "msd",
+    "joints": ["cart"],
+    "drive_gains": [{"joint": "cart", "gain": 1.5, "std": 0.01, "determined": True}],
+}
+IDENTIFY = ["identify", "msd", "--data", "log.npz"]
+SCALE = [*IDENTIFY, "--torque-scale-from", "ts.json"]
+KNOWN = ["payload", "msd", "--known-base", "kb.json", "--loaded", "log.npz", "--frame", "cart"]
+MONITOR = ["monitor", "arm.urdf", "--identified", "--data", "log.npz", "--calibrate", "log.npz"]
+GAINS_CMD = ["drive-gains", "msd", "--unloaded", "log.npz", "--loaded", "valid.npz"]
+GAINS_CMD += ["--frame", "cart"]
+
+
+@pytest.fixture(scope="module")
+def result_doc(tmp_path_factory) -> dict:
+    """A real ``manip-id identify --json`` document of the msd (tampered by the cases)."""
+    from test_hardening import write_npz
+
+    folder = tmp_path_factory.mktemp("result")
+    write_npz(folder / "log.npz")
+    out = folder / "r.json"
+    assert main(["identify", "msd", "--data", str(folder / "log.npz"), "--json", str(out)]) == 0
+    return json.loads(out.read_text())
+
+
+def _clear(path: Path) -> Path:
+    """``path`` free for a case's own file (the default inputs are regular files)."""
+    if os.path.lexists(path):
+        path.unlink()
+    return path
+
+
+def _write(name: str, doc) -> Callable[[Path, dict], None]:
+    def setup(w: Path, result: dict) -> None:
+        _clear(w / name)
+        value = doc(result) if callable(doc) else doc
+        text = value if isinstance(value, str | bytes) else json.dumps(value)
+        if isinstance(text, bytes):
+            (w / name).write_bytes(text)
+        else:
+            (w / name).write_text(text)
+
+    return setup
+
+
+def _fifo(name: str) -> Callable[[Path, dict], None]:
+    return lambda w, result: os.mkfifo(_clear(w / name))
+
+
+def _folder(name: str) -> Callable[[Path, dict], None]:
+    return lambda w, result: _clear(w / name).mkdir()
+
+
+def _sparse(name: str, size: int) -> Callable[[Path, dict], None]:
+    def setup(w: Path, result: dict) -> None:
+        with open(_clear(w / name), "wb") as fh:
+            fh.truncate(size)
+
+    return setup
+
+
+def _link(name: str, target: str) -> Callable[[Path, dict], None]:
+    return lambda w, result: os.symlink(target, _clear(w / name))
+
+
+def _tampered(**changes):
+    """The real result with keys replaced."""
+    return lambda r: {**r, **changes}
+
+
+def _gains(**row):
+    return {**GAINS, "drive_gains": [{**GAINS["drive_gains"][0], **row}]}
+
+
+def _sidecar(**changes):
+    return {**SIDECAR, **changes}
+
+
+def _known(**changes):
+    def make(r):
+        doc = {**r, **changes}
+        return doc
+
+    return make
+
+
+def _urdf(old: str, new: str, name: str = "bad.urdf") -> Callable[[Path, dict], None]:
+    def setup(w: Path, result: dict) -> None:
+        text = arm_urdf(w / "base_arm.urdf").read_text()
+        (w / "base_arm.urdf").unlink()
+        assert old in text
+        (w / name).write_text(text.replace(old, new, 1))
+
+    return setup
+
+
+def _two_parents(w: Path, result: dict) -> None:
+    text = arm_urdf(w / "base_arm.urdf").read_text()
+    (w / "base_arm.urdf").unlink()
+    extra = (
+        '  <joint name="j3" type="revolute"><parent link="base"/><child link="l2"/>\n'
+        '    <axis xyz="1 0 0"/><limit lower="-1" upper="1" velocity="5" effort="5"/></joint>\n'
+    )
+    (w / "bad.urdf").write_text(text.replace("</robot>", extra + "</robot>"))
+
+
+def _both(*setups):
+    def setup(w: Path, result: dict) -> None:
+        for s in setups:
+            s(w, result)
+
+    return setup
+
+
+@dataclass
+class Case:
+    id: str
+    argv: list[str]
+    setup: Callable[[Path, dict], None] | None
+    match: str
+
+
+DEEP = "[" * 100_000 + "]" * 100_000
+NOT_UTF8 = b'{"robot": "\xff\xfe"}'
+
+# ------------------------------------------------------------------ rule 1: the door
+DOOR = [
+    Case("torque-scale-fifo", SCALE, _fifo("ts.json"), r"ts\.json is a FIFO"),
+    Case("torque-scale-folder", SCALE, _folder("ts.json"), r"is a directory"),
+    Case("torque-scale-dev-zero", [*IDENTIFY, "--torque-scale-from", "/dev/zero"], None, "device"),
+    Case("torque-scale-dev-null", [*IDENTIFY, "--torque-scale-from", "/dev/null"], None, "device"),
+    Case("torque-scale-link-to-device", SCALE, _link("ts.json", "/dev/zero"), "device"),
+    Case("torque-scale-over-budget", SCALE, _sparse("ts.json", 65 << 20), r"more than the \d+"),
+    Case("torque-scale-not-utf8", SCALE, _write("ts.json", NOT_UTF8), "not UTF-8"),
+    Case("torque-scale-syntax", SCALE, _write("ts.json", '{"drive_gains": ['), "as JSON"),
+    Case("torque-scale-deep", SCALE, _write("ts.json", DEEP), "nests deeper"),
+    Case("torque-scale-missing", SCALE, None, "no such drive-gain result file"),
+    Case("known-base-fifo", KNOWN, _fifo("kb.json"), "FIFO"),
+    Case("known-base-folder", KNOWN, _folder("kb.json"), "directory"),
+    Case("known-base-dev-zero", [*KNOWN[:3], "/dev/zero", *KNOWN[4:]], None, "device"),
+    Case(
+        "known-base-deep-object",
+        KNOWN,
+        _write("kb.json", '{"a":' * 5000 + "1" + "}" * 5000),
+        "nests deeper",
+    ),
+    Case("show-fifo", ["show", "r.json"], _fifo("r.json"), "FIFO"),
+    Case("show-dev-zero", ["show", "/dev/zero"], None, "device"),
+    Case(
+        "show-folder-result-fifo",
+        ["show", "rep"],
+        _both(_folder("rep"), _fifo("rep/result.json")),
+        "FIFO",
+    ),
+    Case("show-not-utf8", ["show", "r.json"], _write("r.json", NOT_UTF8), "not UTF-8"),
+    Case("show-deep", ["show", "r.json"], _write("r.json", DEEP), "nests deeper"),
+    Case(
+        "show-33-levels", ["show", "r.json"], _write("r.json", "[" * 33 + "]" * 33), "nests deeper"
+    ),
+    Case("show-over-budget", ["show", "r.json"], _sparse("r.json", 65 << 20), "more than"),
+    Case("urdf-fifo", ["rank", "fifo.urdf", "--samples", "20"], _fifo("fifo.urdf"), "FIFO"),
+    Case("urdf-folder", ["rank", "d.urdf", "--samples", "20"], _folder("d.urdf"), "directory"),
+    Case("urdf-dev-null", ["rank", "/dev/null", "--samples", "20"], None, "device"),
+    Case(
+        "urdf-not-utf8",
+        ["rank", "bad.urdf", "--samples", "20"],
+        _write("bad.urdf", b"<robot name='\xff'/>"),
+        "not UTF-8",
+    ),
+    Case("data-fifo", ["identify", "msd", "--data", "p.npz"], _fifo("p.npz"), "FIFO"),
+    Case("data-dev-zero", ["identify", "msd", "--data", "/dev/zero"], None, "device"),
+    Case(
+        "profile-fifo",
+        ["rank", "msd", "--profile", "p.toml", "--samples", "20"],
+        _fifo("p.toml"),
+        "FIFO",
+    ),
+    Case(
+        "profile-not-utf8",
+        ["rank", "msd", "--profile", "p.toml", "--samples", "20"],
+        _write("p.toml", b'description = "\xff"'),
+        "not UTF-8",
+    ),
+    Case(
+        "profile-syntax",
+        ["rank", "msd", "--profile", "p.toml", "--samples", "20"],
+        _write("p.toml", "[model\nfriction = "),
+        "as TOML",
+    ),
+    Case(
+        "profile-deep",
+        ["rank", "msd", "--profile", "p.toml", "--samples", "20"],
+        _write("p.toml", "x = " + "[" * 40 + "]" * 40),
+        "nests deeper",
+    ),
+    Case("sidecar-fifo", MONITOR, _fifo("arm.identified.json"), "FIFO"),
+    Case("sidecar-not-utf8", MONITOR, _write("arm.identified.json", NOT_UTF8), "not UTF-8"),
+    Case(
+        "thresholds-fifo",
+        [*MONITOR[:-2], "--thresholds", "t.json"],
+        _both(_write("arm.identified.json", SIDECAR), _fifo("t.json")),
+        "FIFO",
+    ),
+]
+
+# ------------------------------------------------------- rule 2: JSON validated before use
+SCHEMA = [
+    Case(
+        "known-base-covariance-strings",
+        KNOWN,
+        _write("kb.json", _known(covariance=[["a", "b", "c"]] * 3)),
+        "covariance",
+    ),
+    Case(
+        "known-base-covariance-object",
+        KNOWN,
+        _write("kb.json", _known(covariance={})),
+        "covariance must be a list",
+    ),
+    Case(
+        "known-base-covariance-shape",
+        KNOWN,
+        _write("kb.json", _known(covariance=[[1.0]])),
+        "3 x 3 matrix",
+    ),
+    Case(
+        "known-base-covariance-asymmetric",
+        KNOWN,
+        _write("kb.json", _known(covariance=[[1, 2, 0], [0, 1, 0], [0, 0, 1]])),
+        "not symmetric",
+    ),
+    Case(
+        "known-base-covariance-bool",
+        KNOWN,
+        _write("kb.json", _known(covariance=[[True, 0, 0], [0, 1, 0], [0, 0, 1]])),
+        "finite number",
+    ),
+    Case(
+        "known-base-value-string",
+        KNOWN,
+        _write(
+            "kb.json",
+            lambda r: {
+                **r,
+                "base_parameters": [
+                    {**r["base_parameters"][0], "value": "abc"},
+                    *r["base_parameters"][1:],
+                ],
+            },
+        ),
+        "value must be a finite number",
+    ),
+    Case(
+        "known-base-std-negative",
+        KNOWN,
+        _write(
+            "kb.json",
+            lambda r: {
+                **r,
+                "base_parameters": [
+                    {**r["base_parameters"][0], "std": -1.0},
+                    *r["base_parameters"][1:],
+                ],
+            },
+        ),
+        "std must be a number >= 0",
+    ),
+    Case(
+        "known-base-name-number",
+        KNOWN,
+        _write(
+            "kb.json",
+            lambda r: {
+                **r,
+                "base_parameters": [
+                    {**r["base_parameters"][0], "name": 7},
+                    *r["base_parameters"][1:],
+                ],
+            },
+        ),
+        "name must be a string",
+    ),
+    Case(
+        "known-base-row-not-object",
+        KNOWN,
+        _write("kb.json", _known(base_parameters=[1, 2, 3])),
+        "must be an object",
+    ),
+    Case(
+        "known-base-duplicate-names",
+        KNOWN,
+        _write(
+            "kb.json",
+            lambda r: {**r, "base_parameters": [r["base_parameters"][0]] * 3, "covariance": None},
+        ),
+        "appears twice",
+    ),
+    Case("known-base-top-level-list", KNOWN, _write("kb.json", [1, 2]), "JSON object"),
+    Case("torque-scale-gain-string", SCALE, _write("ts.json", _gains(gain="abc")), "finite number"),
+    Case("torque-scale-gain-list", SCALE, _write("ts.json", _gains(gain=[1, 2])), "finite number"),
+    Case("torque-scale-gain-true", SCALE, _write("ts.json", _gains(gain=True)), "finite number"),
+    Case("torque-scale-gain-zero", SCALE, _write("ts.json", _gains(gain=0)), "positive number"),
+    Case(
+        "torque-scale-gain-negative", SCALE, _write("ts.json", _gains(gain=-2.0)), "positive number"
+    ),
+    Case(
+        "torque-scale-gain-nan",
+        SCALE,
+        _write("ts.json", json.dumps(_gains()).replace("1.5", "NaN")),
+        "finite number",
+    ),
+    Case(
+        "torque-scale-not-determined",
+        SCALE,
+        _write("ts.json", _gains(determined=False)),
+        "not determined",
+    ),
+    Case(
+        "torque-scale-determined-string",
+        SCALE,
+        _write("ts.json", _gains(determined="yes")),
+        "true or false",
+    ),
+    Case(
+        "torque-scale-joint-number", SCALE, _write("ts.json", _gains(joint=3)), "must be a string"
+    ),
+    Case(
+        "torque-scale-unknown-joint",
+        SCALE,
+        _write("ts.json", _gains(joint="elbow")),
+        "unknown joint 'elbow'",
+    ),
+    Case(
+        "torque-scale-other-robot",
+        SCALE,
+        _write("ts.json", {**GAINS, "robot": "ur5"}),
+        "of robot 'ur5', not of 'msd'",
+    ),
+    Case(
+        "torque-scale-rows-object",
+        SCALE,
+        _write("ts.json", {**GAINS, "drive_gains": {}}),
+        "holds no 'drive_gains'",
+    ),
+    Case(
+        "torque-scale-row-null",
+        SCALE,
+        _write("ts.json", {**GAINS, "drive_gains": [None]}),
+        "must be an object",
+    ),
+    Case(
+        "torque-scale-joint-twice",
+        SCALE,
+        _write("ts.json", {**GAINS, "drive_gains": GAINS["drive_gains"] * 2}),
+        "appears twice",
+    ),
+    Case(
+        "show-warnings-not-strings",
+        ["show", "r.json"],
+        _write("r.json", _tampered(warnings=[1, None])),
+        "warnings",
+    ),
+    Case(
+        "show-warnings-object",
+        ["show", "r.json"],
+        _write("r.json", _tampered(warnings={})),
+        "warnings",
+    ),
+    Case(
+        "show-relative-error-string",
+        ["show", "r.json"],
+        _write("r.json", _tampered(relative_error="x")),
+        "relative_error",
+    ),
+    Case(
+        "show-base-parameters-string",
+        ["show", "r.json"],
+        _write("r.json", _tampered(base_parameters="x")),
+        "base_parameters",
+    ),
+    Case(
+        "show-n-base-string",
+        ["show", "r.json"],
+        _write("r.json", _tampered(n_base="abc")),
+        "n_base",
+    ),
+    Case("show-robot-number", ["show", "r.json"], _write("r.json", _tampered(robot=5)), "robot"),
+    Case(
+        "show-joints-object", ["show", "r.json"], _write("r.json", _tampered(joints={})), "joints"
+    ),
+    Case(
+        "sidecar-joints-string",
+        MONITOR,
+        _write("arm.identified.json", _sidecar(joints="x")),
+        "misses 'joints'",
+    ),
+    Case(
+        "sidecar-armature-nan",
+        MONITOR,
+        _write(
+            "arm.identified.json",
+            json.dumps(_sidecar(joints={"j1": {"Ia": 0.5}, "j2": {}})).replace("0.5", "NaN"),
+        ),
+        r"joints\.j1\.Ia must be a finite number",
+    ),
+    Case(
+        "sidecar-armature-negative",
+        MONITOR,
+        _write("arm.identified.json", _sidecar(joints={"j1": {"Ia": -0.1}, "j2": {}})),
+        r"joints\.j1\.Ia must be a number >= 0",
+    ),
+    Case(
+        "sidecar-armature-string",
+        MONITOR,
+        _write("arm.identified.json", _sidecar(joints={"j1": {"Ia": "big"}, "j2": {}})),
+        "finite number",
+    ),
+    Case(
+        "sidecar-friction-bool",
+        MONITOR,
+        _write("arm.identified.json", _sidecar(joints={"j1": {"fv": True}, "j2": {}})),
+        "finite number",
+    ),
+    Case(
+        "sidecar-terms-object",
+        MONITOR,
+        _write("arm.identified.json", _sidecar(joints={"j1": [1, 2], "j2": {}})),
+        "must be an object",
+    ),
+    Case(
+        "sidecar-active-numbers",
+        MONITOR,
+        _write("arm.identified.json", _sidecar(active_joints=[1, 2])),
+        "must be a string",
+    ),
+    Case(
+        "sidecar-unknown-joint",
+        MONITOR,
+        _write("arm.identified.json", _sidecar(joints={"j1": {}, "j9": {"Ia": 0.1}})),
+        "j9",
+    ),
+    Case(
+        "sidecar-locked-string",
+        MONITOR,
+        _write("arm.identified.json", _sidecar(locked_joints={"j2": "up"})),
+        "finite number",
+    ),
+    Case(
+        "sidecar-not-object",
+        MONITOR,
+        _write("arm.identified.json", [SIDECAR]),
+        "not a manip_id sidecar",
+    ),
+]
+
+# ----------------------------------------------------------- rule 5: physical user numbers
+PHYSICAL = [
+    Case(
+        "urdf-two-parents",
+        ["rank", "bad.urdf", "--samples", "20"],
+        _two_parents,
+        "link 'l2' is the child of two joints",
+    ),
+    Case(
+        "urdf-zero-axis",
+        ["rank", "bad.urdf", "--samples", "20"],
+        _urdf('<axis xyz="0 1 0"/>', '<axis xyz="0 0 0"/>'),
+        "axis of joint 'j2' is 0 0 0",
+    ),
+    Case(
+        "urdf-axis-nan",
+        ["rank", "bad.urdf", "--samples", "20"],
+        _urdf('<axis xyz="0 1 0"/>', '<axis xyz="0 nan 0"/>'),
+        "finite numbers",
+    ),
+    Case(
+        "urdf-inverted-limits",
+        ["rank", "bad.urdf", "--samples", "20"],
+        _urdf('lower="-3" upper="3"', 'lower="3" upper="-3"'),
+        "lower limit 3 > upper limit -3",
+    ),
+    Case(
+        "urdf-negative-velocity-limit",
+        ["rank", "bad.urdf", "--samples", "20"],
+        _urdf('velocity="5"', 'velocity="-5"'),
+        "negative velocity limit",
+    ),
+    Case(
+        "urdf-limit-not-number",
+        ["rank", "bad.urdf", "--samples", "20"],
+        _urdf('upper="3"', 'upper="three"'),
+        "bad.urdf",
+    ),
+    Case(
+        "urdf-negative-mass-simulate",
+        ["identify", "bad.urdf", "--simulate"],
+        _urdf('<mass value="1.0"/>', '<mass value="-1.0"/>'),
+        r"j2: mass m > 0",
+    ),
+    Case(
+        "urdf-inertia-inf",
+        ["rank", "bad.urdf", "--samples", "20"],
+        _urdf('ixx="0.01"', 'ixx="inf"'),
+        "ixx is not a valid double",
+    ),
+    Case(
+        "drive-gains-mass-1e30",
+        [*GAINS_CMD, "--payload-mass", "1e30"],
+        None,
+        "payload mass must be <=",
+    ),
+    Case(
+        "drive-gains-com-far",
+        [*GAINS_CMD, "--payload-mass", "1", "--payload-com", "100,0,0"],
+        None,
+        "centre of mass must lie within",
+    ),
+    Case(
+        "drive-gains-inertia-not-physical",
+        [
+            *GAINS_CMD,
+            "--payload-mass",
+            "1",
+            "--payload-com",
+            "0,0,0",
+            "--payload-inertia",
+            "1,0,0.01,0,0,0.01",
+        ],
+        None,
+        "not physical",
+    ),
+    Case(
+        "drive-gains-inertia-negative",
+        [
+            *GAINS_CMD,
+            "--payload-mass",
+            "1",
+            "--payload-com",
+            "0,0,0",
+            "--payload-inertia=-1,0,1,0,0,1",
+        ],
+        None,
+        "not physical",
+    ),
+]
+
+CASES = DOOR + SCHEMA + PHYSICAL
+
+
+@pytest.mark.parametrize("case", [pytest.param(c, id=c.id) for c in CASES])
+def test_input_case(case: Case, work: Path, result_doc: dict, capfd):  # noqa: F811
+    for name, doc in (("r.json", result_doc), ("kb.json", result_doc)):
+        (work / name).write_text(json.dumps(doc))
+    (work / "arm.identified.json").write_text(json.dumps(SIDECAR))
+    if case.setup is not None:
+        case.setup(work, result_doc)
+    capfd.readouterr()
+    before = snapshot(work)
+    status = main(list(case.argv))
+    _, err = capfd.readouterr()
+    lines = error_lines(err)
+    assert "Traceback" not in err, err
+    assert status == 2, (status, err)
+    assert len(lines) == 1, lines
+    assert re.match(r"manip-id( \w+)?: error: ", lines[0]), lines[0]
+    assert re.search(case.match, lines[0]), lines[0]
+    assert snapshot(work) == before  # inputs byte-identical, nothing left behind
