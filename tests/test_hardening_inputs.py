@@ -17,10 +17,14 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from test_hardening import arm_urdf, error_lines, snapshot, work  # noqa: F401 (work: fixture)
 
 from manip_id.cli import main
+from manip_id.errors import ManipIdError
 
 SIDECAR = {
     "format": "manip_id identified parameters",
@@ -597,3 +601,152 @@ def test_input_case(case: Case, work: Path, result_doc: dict, capfd):  # noqa: F
     assert re.match(r"manip-id( \w+)?: error: ", lines[0]), lines[0]
     assert re.search(case.match, lines[0]), lines[0]
     assert snapshot(work) == before  # inputs byte-identical, nothing left behind
+
+
+# ------------------------------------------- properties: random structures to every reader
+_SCALARS = (
+    st.none()
+    | st.booleans()
+    | st.integers(-(10**20), 10**20)
+    | st.floats(allow_nan=True, allow_infinity=True)
+    | st.text(max_size=8)
+)
+_JSON = st.recursive(
+    _SCALARS,
+    lambda inner: (
+        st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6), inner, max_size=4)
+    ),
+    max_leaves=20,
+)
+
+
+def _mutated(valid: dict) -> st.SearchStrategy:
+    """``valid`` with one key (at the top or one level down) replaced by a random value."""
+
+    def mutate(args):
+        key, sub, value = args
+        doc = json.loads(json.dumps(valid))
+        keys = list(doc)
+        k = keys[key % len(keys)]
+        if isinstance(doc[k], list) and doc[k] and isinstance(doc[k][0], dict) and sub:
+            row = doc[k][0]
+            row[list(row)[sub % len(row)]] = value
+        elif isinstance(doc[k], dict) and doc[k] and sub:
+            doc[k][list(doc[k])[sub % len(doc[k])]] = value
+        else:
+            doc[k] = value
+        return doc
+
+    return st.tuples(st.integers(0, 99), st.integers(0, 9), _JSON).map(mutate)
+
+
+def _only_ours(read: Callable[[Path], object], path: Path, doc) -> None:
+    path.write_text(json.dumps(doc) if not isinstance(doc, str) else doc)
+    try:
+        read(path)
+    except ManipIdError:
+        pass
+
+
+_PROPERTY = settings(
+    max_examples=60,
+    deadline=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
+
+
+@pytest.fixture(scope="module")
+def robots():
+    from manip_id import load_robot
+
+    return {"msd": load_robot("msd")}
+
+
+@_PROPERTY
+@given(doc=_JSON | st.deferred(lambda: _mutated(GAINS)))
+def test_torque_scale_reader_raises_only_ours(doc, tmp_path, robots):
+    from manip_id.payload import load_torque_scale
+
+    _only_ours(lambda p: load_torque_scale(p, robots["msd"]), tmp_path / "ts.json", doc)
+
+
+@_PROPERTY
+@given(data=st.data())
+def test_result_readers_raise_only_ours(data, tmp_path, result_doc):
+    from manip_id.identification import load_result
+    from manip_id.payload import load_known_base
+
+    doc = data.draw(_JSON | _mutated(result_doc))
+    for read in (load_result, load_known_base):
+        _only_ours(read, tmp_path / "r.json", doc)
+
+
+@_PROPERTY
+@given(doc=_JSON | st.deferred(lambda: _mutated(SIDECAR)))
+def test_sidecar_reader_raises_only_ours(doc, tmp_path):
+    from manip_id import load_robot
+
+    urdf = tmp_path / "arm.urdf"
+    if not urdf.exists():
+        arm_urdf(urdf)
+    _only_ours(lambda p: load_robot(urdf, identified=p), tmp_path / "arm.identified.json", doc)
+
+
+@_PROPERTY
+@given(doc=_JSON)
+def test_thresholds_reader_raises_only_ours(doc, tmp_path):
+    from manip_id.monitor import load_thresholds
+
+    _only_ours(load_thresholds, tmp_path / "t.json", doc)
+
+
+def _toml_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int | float):
+        return repr(value) if np.isfinite(value) else ("nan" if value != value else "inf")
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, list):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    return "{" + ", ".join(f"{json.dumps(k)} = {_toml_value(v)}" for k, v in value.items()) + "}"
+
+
+_TOML_SCALARS = st.booleans() | st.integers(-(10**15), 10**15) | st.floats() | st.text(max_size=6)
+_TOML = st.recursive(
+    _TOML_SCALARS,
+    lambda inner: (
+        st.lists(inner, max_size=3) | st.dictionaries(st.text(max_size=5), inner, max_size=3)
+    ),
+    max_leaves=12,
+)
+_TABLES = st.sampled_from(["model", "joints", "excitation", "data", "other"])
+_KEYS = st.sampled_from(
+    [
+        "friction",
+        "armature",
+        "spring",
+        "active",
+        "locked",
+        "harmonics",
+        "period",
+        "margin",
+        "acceleration_limit",
+        "columns",
+        "torque_scale",
+        "time_unit",
+        "x",
+    ]
+)
+
+
+@_PROPERTY
+@given(tables=st.dictionaries(_TABLES, st.dictionaries(_KEYS, _TOML, max_size=3), max_size=4))
+def test_profile_reader_raises_only_ours(tables, tmp_path):
+    from manip_id.profiles import load_profile
+
+    text = "\n".join(
+        f"[{name}]\n" + "\n".join(f"{k} = {_toml_value(v)}" for k, v in body.items())
+        for name, body in tables.items()
+    )
+    _only_ours(load_profile, tmp_path / "p.toml", text)
