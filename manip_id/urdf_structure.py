@@ -58,7 +58,7 @@ def _check_joint(joint: ET.Element, where: str, parents: dict[str, str]) -> None
     limit = joint.find("limit")
     if limit is None or joint.get("type") not in ("revolute", "prismatic"):
         return
-    bounds = {}
+    bounds: dict[str, float | None] = {}
     for key in ("lower", "upper", "velocity", "effort"):
         value = _numbers(limit.get(key), 1, f"{where}: the {key} limit of joint {name!r}")
         bounds[key] = None if value is None else value[0]
@@ -66,8 +66,9 @@ def _check_joint(joint: ET.Element, where: str, parents: dict[str, str]) -> None
     if lo is not None and hi is not None and lo > hi:
         raise RobotError(f"{where}: joint {name!r} has lower limit {lo:g} > upper limit {hi:g}")
     for key in ("velocity", "effort"):
-        if bounds[key] is not None and bounds[key] < 0:
-            raise RobotError(f"{where}: joint {name!r} has a negative {key} limit {bounds[key]:g}")
+        bound = bounds[key]
+        if bound is not None and bound < 0:
+            raise RobotError(f"{where}: joint {name!r} has a negative {key} limit {bound:g}")
 
 
 def check_urdf_structure(path) -> None:

@@ -9,6 +9,7 @@ came instead (a JSON ``true`` is no number, ``"abc"`` is no gain, ``{}`` is no m
 
 from __future__ import annotations
 
+import builtins
 import math
 from collections.abc import Iterable
 from typing import Any
@@ -28,11 +29,11 @@ class Fields:
 
     Parameters
     ----------
-    where : str
+    where : str or os.PathLike
         The file, or what the document is, as the messages name it.
     """
 
-    def __init__(self, where: str):
+    def __init__(self, where: object):
         self.where = str(where)
 
     def fail(self, field: str, expected: str, got: Any) -> DataError:
@@ -57,7 +58,7 @@ class Fields:
             raise self.fail(field, "a string", value)
         return value
 
-    def texts(self, value: Any, field: str) -> list[str]:
+    def texts(self, value: Any, field: str) -> builtins.list[str]:
         """A list of strings."""
         items = self.list(value, field)
         for k, item in enumerate(items):
