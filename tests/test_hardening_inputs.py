@@ -580,7 +580,116 @@ PHYSICAL = [
     ),
 ]
 
-CASES = DOOR + SCHEMA + PHYSICAL
+
+def _corrupted_bag(w: Path, result: dict) -> None:
+    """A rosbag2 folder of 5 JointState messages, the third cut short (CDR that ends early)."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    kind = "sensor_msgs/msg/JointState"
+    state, header = store.types[kind], store.types["std_msgs/msg/Header"]
+    stamp = store.types["builtin_interfaces/msg/Time"]
+    with Writer(w / "cbag", version=8, storage_plugin=StoragePlugin.MCAP) as out:
+        conn = out.add_connection("/joint_states", kind, typestore=store)
+        for k in range(5):
+            msg = state(
+                header=header(stamp=stamp(sec=k + 1, nanosec=0), frame_id=""),
+                name=["cart"],
+                position=np.array([0.1 * k]),
+                velocity=np.array([0.0]),
+                effort=np.array([1.0]),
+            )
+            raw = bytes(store.serialize_cdr(msg, kind))
+            out.write(conn, 10**9 * (k + 1), raw[:30] if k == 2 else raw)
+
+
+THRESHOLDS = {
+    "false_alarm": 0.001,
+    "n_samples": 400,
+    "rate": 0.0,
+    "files": ["log.npz"],
+    "joints": [
+        {
+            "name": "cart",
+            "bound": 0.02,
+            "noise_bound": 0.02,
+            "model_bound": 0.0,
+            "gain": 25.0,
+            "filter_gain": 25.0,
+            "method": "exponential tail",
+            "rate": 0.0,
+        }
+    ],
+}
+WATCH = ["monitor", "msd", "--model", "r.json", "--data", "log.npz", "--thresholds", "t.json"]
+
+
+def _thresholds(**row):
+    return {**THRESHOLDS, "joints": [{**THRESHOLDS["joints"][0], **row}]}
+
+
+MORE = [
+    Case(
+        "thresholds-joint-number",
+        WATCH,
+        _write("t.json", {**THRESHOLDS, "joints": [1]}),
+        r"joints\[0\] must be an object",
+    ),
+    Case(
+        "thresholds-bound-string",
+        WATCH,
+        _write("t.json", _thresholds(bound="x")),
+        r"joints\[0\]\.bound must be a finite number",
+    ),
+    Case(
+        "thresholds-bound-negative",
+        WATCH,
+        _write("t.json", _thresholds(bound=-1)),
+        r"bound must be a number >= 0",
+    ),
+    Case(
+        "thresholds-false-alarm-2",
+        WATCH,
+        _write("t.json", {**THRESHOLDS, "false_alarm": 2}),
+        r"false_alarm must be a number <= 1",
+    ),
+    Case(
+        "thresholds-n-samples-float",
+        WATCH,
+        _write("t.json", {**THRESHOLDS, "n_samples": 1.5}),
+        "n_samples must be an integer",
+    ),
+    Case(
+        "data-csv-not-utf8",
+        ["identify", "msd", "--data", "bad.csv"],
+        _write("bad.csv", b"t,q_cart\n\xff\xfe,1\n"),
+        "bad.csv",
+    ),
+    Case(
+        "data-npz-garbage",
+        ["identify", "msd", "--data", "bad.npz"],
+        _write("bad.npz", b"PK\x03\x04" + bytes(range(256))),
+        "bad.npz",
+    ),
+    Case(
+        "data-mcap-garbage",
+        ["identify", "msd", "--data", "b.mcap"],
+        _write("b.mcap", bytes(range(256)) * 4),
+        "as a ROS 2 bag",
+    ),
+]
+
+MORE.append(
+    Case(
+        "bag-corrupted-cdr",
+        ["identify", "msd", "--data", "cbag"],
+        _corrupted_bag,
+        "message of '/joint_states' is not valid CDR",
+    )
+)
+
+CASES = DOOR + SCHEMA + PHYSICAL + MORE
 
 
 @pytest.mark.parametrize("case", [pytest.param(c, id=c.id) for c in CASES])
@@ -693,7 +802,7 @@ def test_sidecar_reader_raises_only_ours(doc, tmp_path):
 
 
 @_PROPERTY
-@given(doc=_JSON)
+@given(doc=_JSON | st.deferred(lambda: _mutated(THRESHOLDS)))
 def test_thresholds_reader_raises_only_ours(doc, tmp_path):
     from manip_id.monitor import load_thresholds
 

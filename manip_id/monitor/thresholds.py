@@ -36,6 +36,7 @@ import numpy as np
 from scipy.special import ndtri
 
 from .._checks import as_real
+from .._io.fields import Fields
 from .._io.reading import read_json
 from ..errors import DataError, InputError
 from ..regressor import iter_regressor
@@ -151,6 +152,24 @@ class Thresholds:
             ) from exc
 
 
+def _check_fields(f: Fields, doc: dict) -> None:
+    """The types and ranges of a thresholds document, before :meth:`Thresholds.from_dict`."""
+    for k, row in enumerate(f.list(doc.get("joints"), "joints", nonempty=True)):
+        row = f.object(row, f"joints[{k}]")
+        f.text(row.get("name"), f"joints[{k}].name")
+        f.text(row.get("method"), f"joints[{k}].method")
+        for key in ("bound", "noise_bound", "model_bound", "gain", "rate"):
+            f.number(row.get(key), f"joints[{k}].{key}", minimum=0.0)
+        f.optional_number(row.get("filter_gain"), f"joints[{k}].filter_gain", minimum=0.0)
+    f.number(doc.get("false_alarm"), "false_alarm", positive=True, maximum=1.0)
+    f.number(doc.get("rate"), "rate", minimum=0.0)
+    n = doc.get("n_samples")
+    if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+        raise f.fail("n_samples", "an integer >= 0", n)
+    if doc.get("files") is not None:
+        f.list(doc["files"], "files")
+
+
 def load_thresholds(path) -> Thresholds:
     """The thresholds saved by ``manip-id monitor --json`` (its ``thresholds``) or by
     ``json.dump(thresholds.to_dict())``; :class:`~manip_id.errors.DataError` otherwise."""
@@ -160,6 +179,7 @@ def load_thresholds(path) -> Thresholds:
         doc = doc["thresholds"]
     if not isinstance(doc, dict):
         raise DataError(f"{p}: not monitor thresholds (a JSON object is expected)")
+    _check_fields(Fields(f"{p}: not monitor thresholds"), doc)
     try:
         return Thresholds.from_dict(doc)
     except DataError as exc:
