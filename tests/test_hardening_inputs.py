@@ -859,3 +859,74 @@ def test_profile_reader_raises_only_ours(tables, tmp_path):
         for name, body in tables.items()
     )
     _only_ours(load_profile, tmp_path / "p.toml", text)
+
+
+# --------------------------------------------------------------- API cases of rule 5
+@pytest.mark.parametrize(
+    "locked",
+    [{"j2": float("nan")}, {"j2": "up"}, {"j2": [0.1, 0.2]}, [0.0, float("inf")]],
+    ids=["nan", "string", "two-values", "vector-inf"],
+)
+def test_locked_positions_are_finite(locked, tmp_path):
+    from manip_id import load_robot
+    from manip_id.errors import InputError
+    from manip_id.robot import JointSelection
+
+    urdf = arm_urdf(tmp_path / "arm.urdf")
+    with pytest.raises(InputError, match="locked"):
+        load_robot(urdf, active_joints=JointSelection(["j1"], locked_configuration=locked))
+
+
+@pytest.mark.parametrize(
+    ("mass", "com", "inertia", "match"),
+    [
+        (1e30, None, None, "mass must be <="),
+        (float("nan"), None, None, "mass must be > 0"),
+        (1.0, [0, 0, 11], None, "within 10 m"),
+        (1.0, [0, 0, 0], [1, 0, 0.01, 0, 0, 0.01], "not physical"),  # triangle inequality
+        (1.0, [0, 0, 0], [0.01, 0.02, 0.01, 0, 0, 0.01], "not physical"),  # Ixy too large
+    ],
+)
+def test_known_payload_is_physical(mass, com, inertia, match):
+    from manip_id.errors import InputError
+    from manip_id.payload import check_known_payload
+
+    with pytest.raises(InputError, match=match):
+        check_known_payload(mass, com, inertia)
+
+
+def test_a_physical_payload_passes():
+    """A solid box 0.1 x 0.2 x 0.3 m of 2 kg: I = m (b^2 + c^2) / 12 ... [kg m^2]."""
+    from manip_id.payload import check_known_payload
+
+    a, b, c, m = 0.1, 0.2, 0.3, 2.0
+    inertia = [
+        m * (b * b + c * c) / 12,
+        0,
+        m * (a * a + c * c) / 12,
+        0,
+        0,
+        m * (a * a + b * b) / 12,
+    ]
+    mass, com, got = check_known_payload(m, [0.0, 0.0, 0.05], inertia)
+    assert mass == m and np.allclose(got, inertia) and np.allclose(com, [0, 0, 0.05])
+
+
+def test_the_door_refuses_a_path_swapped_after_the_stat(tmp_path, monkeypatch):
+    """A regular file at ``stat`` that is a FIFO at ``open``: refused by ``fstat``, no block."""
+    from manip_id._io import reading
+    from manip_id.errors import DataError
+
+    fifo = tmp_path / "swapped.json"
+    os.mkfifo(fifo)
+    real_stat = os.stat
+
+    def fake_stat(path, *args, **kwargs):
+        st_ = real_stat(path, *args, **kwargs)
+        if Path(path) == fifo:  # looks like a small regular file to the first check
+            return os.stat_result((0o100644, *tuple(st_)[1:6], 10, *tuple(st_)[7:10]))
+        return st_
+
+    monkeypatch.setattr(reading.os, "stat", fake_stat)
+    with pytest.raises(DataError, match="FIFO"):
+        reading.read_json(fifo, "result file")
