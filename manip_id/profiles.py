@@ -34,12 +34,12 @@ A URDF loaded by path takes no profile unless one is named (``profile=`` or
 from __future__ import annotations
 
 import math
-import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ._io.reading import read_toml
 from .errors import InputError, RobotError
 from .friction import FRICTION_KINDS
 
@@ -148,17 +148,10 @@ def load_profile(spec: str | Path) -> RobotProfile:
     """
     s = str(spec)
     path = Path(s).expanduser() if s.endswith(".toml") or "/" in s else profile_path(s)
-    if not path.is_file():
+    if not path.exists():
         where = f"no file {path}" if path != profile_path(s) else f"no {path.name} in {path.parent}"
         raise RobotError(f"cannot read the robot profile {s!r}: {where}")
-    if sys.version_info >= (3, 11):  # the TOML reader, imported when a profile is read
-        import tomllib
-    else:  # pragma: no cover - Python 3.10 (the tomli backport is a dependency there)
-        import tomli as tomllib
-    try:
-        raw = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise RobotError(f"cannot read the robot profile {path}: {exc}") from exc
+    raw = read_toml(path, "robot profile", error=RobotError)
     return parse_profile(raw, name=path.stem, source=str(path))
 
 

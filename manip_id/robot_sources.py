@@ -8,7 +8,6 @@ configuration, and the profile (:mod:`manip_id.profiles`).
 
 from __future__ import annotations
 
-import json
 import os
 import warnings
 from collections.abc import Mapping
@@ -19,12 +18,14 @@ import numpy as np
 import pinocchio as pin
 
 from ._checks import as_float_array
+from ._io.reading import check_readable, read_json
 from ._native import native_stderr_captured
 from .errors import InputError, RobotError, did_you_mean
 from .friction import FRICTION_KINDS as FRICTION_KINDS  # re-exported
 from .friction import FrictionShapes, FrictionSpec, friction_columns, parse_friction
 from .parameters import JOINT_TERM_NAMES
 from .profiles import RobotProfile, find_profile, load_profile, robots_dir
+from .urdf_structure import check_urdf_structure
 
 #: Fixed-base manipulators of example-robot-data listed by ``manip-id robots``.
 #: Any other fixed-base name of example-robot-data loads too.
@@ -152,8 +153,8 @@ def joint_terms(armature, friction, spring, defaults: JointTerms) -> JointTerms:
 
 def load_urdf(path: Path) -> pin.Model:
     """A Pinocchio model from a URDF file, its parse errors as :class:`RobotError`."""
-    if not path.is_file():
-        raise RobotError(f"cannot read URDF {path}: no such file")
+    check_readable(path, "URDF", "urdf", error=RobotError)
+    check_urdf_structure(path)
     try:
         with native_stderr_captured("urdfdom", error=RobotError), warnings.catch_warnings():
             warnings.simplefilter("ignore")  # urdfdom's errors: refused, not a massless body
@@ -203,7 +204,7 @@ def load_source(spec: str, pkg: list[str]) -> RobotSource:
         path = base / f"{spec}.urdf"
         model = load_urdf(path)
         settings_file = base / f"{spec}.json"
-        settings = json.loads(settings_file.read_text()) if settings_file.is_file() else {}
+        settings = read_json(settings_file, "robot settings") if settings_file.is_file() else {}
         return RobotSource(model, spec, str(path), pkg or [str(path.parent)], settings, {}, False)
     if spec.endswith(".urdf") or Path(spec).suffix == ".urdf" or "/" in spec:
         path = Path(spec).expanduser()
@@ -279,13 +280,21 @@ def reference_configuration(model: pin.Model, locked, all_joints) -> np.ndarray:
                     f"unknown joint {joint!r} in locked_configuration; valid joints: {all_joints}"
                 )
             jm = model.joints[model.getJointId(joint)]
-            q[jm.idx_q : jm.idx_q + jm.nq] = value
+            coords = as_float_array(value, f"the locked position of {joint!r}", ndim=None)
+            if coords.size != jm.nq or not np.isfinite(coords).all():
+                raise InputError(
+                    f"the locked position of {joint!r} must be {jm.nq} finite number(s) "
+                    f"[rad or m], got {value!r}"
+                )
+            q[jm.idx_q : jm.idx_q + jm.nq] = coords.ravel()
         return q
     arr = as_float_array(locked, "locked_configuration", ndim=1)
     if arr.shape != (model.nq,):
         raise InputError(
             f"locked_configuration.shape={arr.shape} but the full model has nq={model.nq}"
         )
+    if not np.isfinite(arr).all():
+        raise InputError(f"locked_configuration must be finite [rad or m], got {arr.tolist()}")
     return arr.copy()
 
 

@@ -12,13 +12,14 @@ here (:func:`identified_options`, :func:`locked_configuration`, :func:`apply_ide
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .errors import InputError
+from ._io.fields import Fields
+from ._io.reading import read_json
+from .errors import DataError, InputError
 from .friction import FrictionShapes
 
 #: ``format`` field of the sidecar JSON.
@@ -50,19 +51,39 @@ def sidecar_path(path) -> Path:
     return p.with_name(p.name + ".identified.json")
 
 
+#: Joint terms that are >= 0 in any physical drive (armature, viscous and Coulomb friction).
+_NONNEGATIVE = ("Ia", "fv", "fc", "fvp", "fvn", "fcp", "fcn", "fs", "fsg")
+
+
 def read_sidecar(path) -> dict:
-    """Read and check a sidecar JSON written by an export."""
+    """Read and check a sidecar JSON written by an export.
+
+    Every field used is checked before use: ``joints`` an object of per-joint objects of
+    finite numbers (armature and friction >= 0), ``active_joints`` and ``joint_terms``
+    lists of strings, ``locked_joints`` an object of finite positions. A tampered sidecar
+    is refused with one :class:`~manip_id.errors.InputError` line naming the field.
+    """
     p = Path(path)
-    try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError as exc:
-        raise InputError(f"no identified-parameter sidecar at {p}") from exc
-    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read the identified-parameter sidecar {p}: {exc}") from exc
+    data = read_json(p, "identified-parameter sidecar", error=InputError)
     if not isinstance(data, dict) or data.get("format") != SIDECAR_FORMAT:
         raise InputError(f"{p} is not a manip_id sidecar (expected format {SIDECAR_FORMAT!r})")
     if not isinstance(data.get("joints"), dict) or not isinstance(data.get("active_joints"), list):
         raise InputError(f"{p}: the sidecar misses 'joints' or 'active_joints'")
+    f = Fields(p)
+    try:
+        f.texts(data["active_joints"], "active_joints")
+        f.texts(data.get("joint_terms", []), "joint_terms")
+        for joint, terms in data["joints"].items():
+            for term, value in f.object(terms, f"joints.{joint}").items():
+                low = 0.0 if term in _NONNEGATIVE else None
+                f.number(value, f"joints.{joint}.{term}", minimum=low)
+        locked = data.get("locked_joints")
+        if locked is not None:
+            for joint, value in f.object(locked, "locked_joints").items():
+                for k, v in enumerate(value if isinstance(value, list) else [value]):
+                    f.number(v, f"locked_joints.{joint}[{k}]")
+    except DataError as exc:
+        raise InputError(str(exc)) from exc
     return data
 
 
@@ -142,6 +163,12 @@ def apply_identified(robot, sidecar: dict) -> None:
     ``robot.nominal_parameters`` holds them), and the ``load`` law's inertias
     (``settings["load_inertias"]``, :attr:`~manip_id.robot.Robot.load_model`)."""
     joints = sidecar["joints"]
+    unknown = [j for j in joints if j not in robot.dof_names]
+    if unknown:
+        raise InputError(
+            f"the identified-parameter sidecar names joints {unknown[:4]} that robot "
+            f"{robot.name!r} does not move (its joints: {list(robot.dof_names)})"
+        )
     values = {
         t: np.array([float(joints.get(d, {}).get(t, 0.0)) for d in robot.dof_names])
         for t in robot.terms.enabled

@@ -1,6 +1,6 @@
 """File output shared by the package: checked before the work, published together at the end.
 
-Three modules, used by every command and by the API writers:
+The modules, used by every command and by the API writers:
 
 - :mod:`.files`: checks before the work (:func:`check_output_file`,
   :func:`check_output_dir`), staged files and atomic writers (:class:`StagedFile`,
@@ -9,6 +9,10 @@ Three modules, used by every command and by the API writers:
 - :mod:`.report_folder`: report folders claimed atomically before the work, built in a
   temporary sibling and swapped into place, replaced only when manip_id wrote them
   (:func:`claim_report`, :class:`ReportFolder`, :func:`check_report_target`).
+- :mod:`.reading`: the one door for every file read (regular files only, a size budget
+  per kind, decoding errors as one line; :func:`~.reading.read_json`,
+  :func:`~.reading.read_toml`, :func:`~.reading.check_readable`), and :mod:`.fields`,
+  the typed fields of the JSON and TOML inputs.
 - :mod:`.outputs`: the outputs of one command, checked at once and published together
   (:class:`OutputSet`).
 """

@@ -43,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     robot = robot_from_args(args)
     given: object = None
     if args.torque_scale_from is not None:
-        given = load_torque_scale(args.torque_scale_from)
+        given = load_torque_scale(args.torque_scale_from, robot)
     elif args.torque_scale is not None:
         given = parse_floats(args.torque_scale, "--torque-scale")
     elif profile is not None and profile.torque_scale is not None:

@@ -9,7 +9,7 @@ import math
 import time
 
 from ..errors import InputError
-from ..payload import identify_drive_gains
+from ..payload import check_known_payload, identify_drive_gains
 from ..viz.payload_report import write_drive_gain_report
 from ._common import parse_floats, print_warnings
 from ._payload import (
@@ -37,6 +37,7 @@ def run(args: argparse.Namespace) -> int:
     )
     if inertia is not None and com is None:
         raise InputError("--payload-inertia (about the centre of mass) needs --payload-com")
+    check_known_payload(args.payload_mass, com, inertia)  # physical, before any file is read
     args.report_claim = reserve_report(args, input_paths(args))
     reserve_json(args, input_paths(args))
     robot = robot_from_args(args)

@@ -20,7 +20,7 @@ from ..export import check_output, sidecar_path
 from ..payload import load_torque_scale
 from . import _acceleration_free, _files, _fleet, _simulated
 from ._common import FLEET_METHODS, explicit_workers, fleet_wanted, parse_floats, reserve_outputs
-from ._runtime import check_scheduler
+from ._runtime import check_scheduler, robot_from_args
 
 
 # -------------------------------------------------------------------- checks
@@ -111,7 +111,8 @@ def _check_files(args: argparse.Namespace) -> None:
     if getattr(args, "torque_scale_from", None) is not None:  # manip-id drive-gains --json
         if args.simulate or args.torque_scale is not None:
             raise InputError("--torque-scale-from applies to --data files, without --torque-scale")
-        gains = load_torque_scale(args.torque_scale_from)
+        # checked against the robot: its name and its joints, in order
+        gains = load_torque_scale(args.torque_scale_from, robot_from_args(args))
         args.torque_scale = ",".join(repr(float(g)) for g in gains)
     if args.simulate:
         for name in ("window", "torque_scale", "velocity_deadband", "topic", "delay", "time_unit"):

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from .._checks import memory_budget
 from .._io import atomic_write
+from .._io.reading import check_data_path
 from ..errors import DataError
 from .core import Dataset
 from .csv import load_csv, write_csv
@@ -64,10 +65,7 @@ def load_dataset(
     if not isinstance(path, str | os.PathLike) or not str(path):
         raise DataError(f"a data path must be a non-empty str or os.PathLike, got {path!r}")
     path = Path(path).expanduser()
-    if not path.exists():
-        raise DataError(f"no such data file or folder: {path}")
-    if not (path.is_file() or path.is_dir()):  # a FIFO or a device would block or never end
-        raise DataError(f"{path} is neither a regular file nor a folder")
+    check_data_path(path)
     fmt = infer_format(path) if format is None else str(format).lower()
     if fmt not in FORMATS:
         raise DataError(f"unknown data format {format!r}; expected one of {', '.join(FORMATS)}")

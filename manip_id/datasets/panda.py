@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._io.reading import check_readable
 from ..errors import DataError
 from .core import Dataset
 
@@ -45,8 +46,9 @@ def load_panda_gaz2019(folder: str | Path) -> Dataset:
     arrays = {}
     for name, fname in PANDA_FILES.items():
         f = folder / fname
-        if not f.is_file():
+        if not f.exists():
             raise DataError(f"the Panda log folder {folder} lacks {fname}")
+        check_readable(f, "Panda log file", "data")
         try:
             values = np.loadtxt(f, ndmin=1)
         except ValueError as exc:

@@ -44,7 +44,13 @@ def parse_joint_state(raw):
     end of the 4-byte encapsulation header): int32 sec, uint32 nanosec, string
     frame_id, sequence<string> name, then three sequence<float64>.
     """
-    buf = memoryview(raw)
+    try:
+        return _parse_joint_state(memoryview(raw))
+    except struct.error:  # a sequence length past the end: rosbags decides (and refuses)
+        return None
+
+
+def _parse_joint_state(buf: memoryview):
     size = len(buf)
     if size < 16 or buf[0] != 0 or buf[1] != 1:
         return None
@@ -86,7 +92,7 @@ def decode_names(key: bytes) -> list[str]:
     while o < len(key):
         o = (o + 3) & ~3
         (n,) = struct.unpack_from("<I", key, o)
-        out.append(key[o + 4 : o + 4 + n - 1].decode())
+        out.append(key[o + 4 : o + 4 + n - 1].decode("utf-8", errors="replace"))
         o += 4 + n
     return out
 
@@ -188,7 +194,13 @@ class BagSource:
     def _decode(self, raw, msgtype):
         if BagSource._store is None:
             BagSource._store = _typestore()
-        return BagSource._store.deserialize_cdr(raw, msgtype)
+        try:
+            return BagSource._store.deserialize_cdr(raw, msgtype)
+        except Exception as exc:  # rosbags' errors, struct.error, UnicodeDecodeError, ...
+            raise DataError(
+                f"{self.path}: a {msgtype} message of {self.topic!r} is not valid CDR "
+                f"({type(exc).__name__}: {exc})"
+            ) from exc
 
     def chunks(self, chunk: int, start: int = 0, stop: int | None = None) -> Iterator[np.ndarray]:
         """Packed rows of messages ``start:stop``, ``chunk`` messages at a time."""

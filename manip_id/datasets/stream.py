@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from .._checks import MEASURED_LIMITS
+from .._io.reading import check_data_path
 from ..errors import DataError, InputError
 from .adjust import TIME_UNITS, AdjustedSource, delay_vector
 from .core import Dataset, check_time, check_values
@@ -102,10 +103,7 @@ def open_source(spec: FileSpec, joint_names=None):
     """
     spec = spec if isinstance(spec, FileSpec) else FileSpec(Path(spec))
     path = spec.path
-    if not path.exists():
-        raise DataError(f"no such data file or folder: {path}")
-    if not (path.is_file() or path.is_dir()):  # a FIFO or a device would block or never end
-        raise DataError(f"{path} is neither a regular file nor a folder")
+    check_data_path(path)
     fmt = infer_format(path) if spec.format is None else str(spec.format).lower()
     if fmt not in FORMATS:
         raise DataError(

@@ -34,6 +34,7 @@ import pinocchio as pin
 
 from .._checks import as_float_array, check_finite
 from .._io import atomic_write_text, check_output_file, json_text
+from .._io.reading import read_text
 from ..consistency import EIG_TOLERANCE, pseudo_inertia, require_consistent
 from ..errors import ExportWarning, InputError, RobotError
 from .links import Composite, LinkTree, link_inertia, link_tree, split_composites
@@ -121,12 +122,14 @@ def set_inertial(link: ET.Element, m: float, c, I_c) -> None:
 def read_urdf(robot, source=None) -> tuple[Path, ET.Element]:
     """The robot's URDF (``source`` or ``robot.source``) and its root, parsed with comments."""
     src = Path(source if source is not None else (robot.source or ""))
-    if not src.is_file():
+    if not src.exists():
         raise RobotError(f"robot {robot.name!r} has no URDF file to copy (source {src})")
+    text = read_text(src, "URDF", "urdf", error=RobotError)
     try:
         parser = ET.XMLParser(target=ET.TreeBuilder(insert_comments=True))
-        root = ET.parse(src, parser=parser).getroot()
-    except (ET.ParseError, OSError) as exc:
+        parser.feed(text)
+        root = parser.close()
+    except ET.ParseError as exc:
         raise RobotError(f"cannot read URDF {src}: {exc}") from exc
     if root is None or root.tag != "robot":
         raise RobotError(f"{src} is not a URDF (no <robot> root element)")

@@ -45,12 +45,12 @@ one, ``tau_hat = Y_b theta_b_nominal`` with ``theta_b_nominal = base.to_base(nom
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
 import numpy as np
 
+from .._io.reading import read_json
 from ..consistency import NONNEGATIVE_TERMS
 from ..errors import DataError, InputError, format_direction
 from ..metrics import finite_list, finite_or_none
@@ -397,12 +397,9 @@ def read_result_json(path, what: str = "result") -> dict:
     that holds no JSON object; ``what`` names the file in the messages.
     """
     path = Path(path)
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError as exc:
-        raise DataError(f"no such {what} file: {path}") from exc
-    except (OSError, ValueError) as exc:
-        raise DataError(f"cannot read {path} as JSON: {exc}") from exc
+    if not path.exists():
+        raise DataError(f"no such {what} file: {path}")
+    doc = read_json(path, f"{what} file")
     if not isinstance(doc, dict):
         raise DataError(f"{path}: a {what} is a JSON object, got {type(doc).__name__}")
     return doc

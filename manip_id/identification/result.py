@@ -21,6 +21,7 @@ from ..identifiability import BaseParameters, RankAnalysis
 from ..regressor import DEFAULT_CHUNK, check_states, iter_regressor
 from ..robot import Robot
 from .document import OWN_KEYS, read_result_json, result_text, result_to_dict
+from .result_schema import check_result_document
 
 
 def _array(x, dtype=float):
@@ -269,6 +270,7 @@ def result_from_dict(doc: dict) -> IdentificationResult:
     results, the caller's keys) is kept in ``context`` and written back by ``to_dict``."""
     if not isinstance(doc, dict):
         raise DataError(f"an identification result is a JSON object, got {type(doc).__name__}")
+    check_result_document(doc)
     missing = [
         k
         for k in (
@@ -343,7 +345,7 @@ def result_from_dict(doc: dict) -> IdentificationResult:
             uncertainty=doc.get("uncertainty"),
             covariance_white=_matrix(doc.get("covariance_white"), len(rows)),
         )
-    except (KeyError, TypeError, ValueError, IndexError) as exc:
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
         raise DataError(f"a malformed identification result: {type(exc).__name__}: {exc}") from exc
 
 

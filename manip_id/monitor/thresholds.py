@@ -29,7 +29,6 @@ new data the rate is what it is, see ``manip-id monitor``).
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -37,6 +36,8 @@ import numpy as np
 from scipy.special import ndtri
 
 from .._checks import as_real
+from .._io.fields import Fields
+from .._io.reading import read_json
 from ..errors import DataError, InputError
 from ..regressor import iter_regressor
 from ..robot import Robot
@@ -151,20 +152,34 @@ class Thresholds:
             ) from exc
 
 
+def _check_fields(f: Fields, doc: dict) -> None:
+    """The types and ranges of a thresholds document, before :meth:`Thresholds.from_dict`."""
+    for k, row in enumerate(f.list(doc.get("joints"), "joints", nonempty=True)):
+        row = f.object(row, f"joints[{k}]")
+        f.text(row.get("name"), f"joints[{k}].name")
+        f.text(row.get("method"), f"joints[{k}].method")
+        for key in ("bound", "noise_bound", "model_bound", "gain", "rate"):
+            f.number(row.get(key), f"joints[{k}].{key}", minimum=0.0)
+        f.optional_number(row.get("filter_gain"), f"joints[{k}].filter_gain", minimum=0.0)
+    f.number(doc.get("false_alarm"), "false_alarm", positive=True, maximum=1.0)
+    f.number(doc.get("rate"), "rate", minimum=0.0)
+    n = doc.get("n_samples")
+    if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+        raise f.fail("n_samples", "an integer >= 0", n)
+    if doc.get("files") is not None:
+        f.list(doc["files"], "files")
+
+
 def load_thresholds(path) -> Thresholds:
     """The thresholds saved by ``manip-id monitor --json`` (its ``thresholds``) or by
     ``json.dump(thresholds.to_dict())``; :class:`~manip_id.errors.DataError` otherwise."""
     p = Path(path)
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError as exc:
-        raise DataError(f"no such thresholds file: {p}") from exc
-    except (OSError, ValueError) as exc:
-        raise DataError(f"cannot read {p} as JSON: {exc}") from exc
+    doc = read_json(p, "thresholds file")
     if isinstance(doc, dict) and isinstance(doc.get("thresholds"), dict):
         doc = doc["thresholds"]
     if not isinstance(doc, dict):
         raise DataError(f"{p}: not monitor thresholds (a JSON object is expected)")
+    _check_fields(Fields(f"{p}: not monitor thresholds"), doc)
     try:
         return Thresholds.from_dict(doc)
     except DataError as exc:

@@ -93,7 +93,7 @@ Modules: :mod:`~manip_id.payload.geometry` (frames, the payload regressor, quant
 """
 
 from ..errors import PayloadWarning
-from .gains import identify_drive_gains
+from .gains import check_known_payload, identify_drive_gains
 from .geometry import (
     INERTIA_COMPONENTS,
     PAYLOAD_NAMES,
@@ -135,6 +135,7 @@ __all__ = [
     "frame_names",
     "identify_drive_gains",
     "identify_payload",
+    "check_known_payload",
     "load_known_base",
     "load_torque_scale",
     "payload_frame",

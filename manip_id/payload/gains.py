@@ -30,6 +30,7 @@ from .geometry import (
     PayloadFrame,
     payload_frame,
     payload_identifiability,
+    pseudo_inertia_eigenvalues,
     standard_from_quantities,
 )
 from .options import GAIN_METHODS, DriveGainOptions, resolve_options
@@ -126,7 +127,34 @@ class _GainSums:
     runs: dict = field(default_factory=dict)  # per kind, the runs' summaries (RunSums.runs)
 
 
-def _known_payload(payload_mass, payload_com, payload_inertia):
+#: Largest known payload mass accepted [kg] (a manipulator's payload, not a building).
+MAX_PAYLOAD_MASS = 1e4
+#: Largest distance of a known payload's centre of mass from its frame [m].
+MAX_PAYLOAD_REACH = 10.0
+
+
+def _check_physical_payload(mass: float, com, inertia) -> None:
+    """Magnitudes in range, and the pseudo-inertia ``J(phi)`` of a known inertia positive
+    semidefinite (an inertia about the CoM whose eigenvalues obey the triangle inequality)."""
+    if mass > MAX_PAYLOAD_MASS:
+        raise InputError(f"the payload mass must be <= {MAX_PAYLOAD_MASS:g} [kg], got {mass:g}")
+    if com is not None and float(np.linalg.norm(com)) > MAX_PAYLOAD_REACH:
+        raise InputError(
+            f"the payload centre of mass must lie within {MAX_PAYLOAD_REACH:g} m of the frame, "
+            f"got {com.tolist()}"
+        )
+    if inertia is None:
+        return
+    eig = pseudo_inertia_eigenvalues(standard_from_quantities(mass, com, inertia))
+    if eig[0] < -1e-9 * max(1.0, float(np.abs(eig).max())):
+        raise InputError(
+            "the payload inertia (Ixx, Ixy, Iyy, Ixz, Iyz, Izz) about its centre of mass is not "
+            f"physical: its pseudo-inertia has the eigenvalue {eig[0]:.3g} < 0, got "
+            f"{inertia.tolist()} [kg m^2]"
+        )
+
+
+def check_known_payload(payload_mass, payload_com, payload_inertia):
     """The payload's known mass [kg], centre of mass [m] and inertia [kg m^2], checked."""
     try:
         mass = float(payload_mass)
@@ -151,6 +179,7 @@ def _known_payload(payload_mass, payload_com, payload_inertia):
                 "payload_inertia must be 6 finite numbers (Ixx, Ixy, Iyy, Ixz, Iyz, Izz) "
                 f"[kg m^2], got {inertia.tolist()}"
             )
+    _check_physical_payload(mass, com, inertia)
     return mass, com, inertia
 
 
@@ -164,7 +193,7 @@ def _gain_inputs(
     timings: dict[str, float],
 ) -> _GainProblem:
     """Read and check the inputs of :func:`identify_drive_gains`, with the structure;
-    ``payload`` is ``(mass, com, inertia)`` as :func:`_known_payload` returns it."""
+    ``payload`` is ``(mass, com, inertia)`` as :func:`check_known_payload` returns it."""
     if opts.method not in GAIN_METHODS:
         raise InputError(f"method must be one of {list(GAIN_METHODS)}, got {opts.method!r}")
     mass, com, inertia = payload
@@ -467,7 +496,7 @@ def identify_drive_gains(
     opts = resolve_options(DriveGainOptions, options, settings)
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
-    payload = _known_payload(payload_mass, payload_com, payload_inertia)
+    payload = check_known_payload(payload_mass, payload_com, payload_inertia)
     prob = _gain_inputs(robot, unloaded, loaded, frame, payload, opts, timings)
     t0 = time.perf_counter()
     sums = _gain_accumulate(robot, prob, opts.chunk, opts.scheduler)

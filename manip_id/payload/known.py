@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._io.fields import Fields
 from ..errors import DataError, InputError
 from ..identifiability import BaseParameters
 from ..identification.document import read_result_json
@@ -46,10 +47,14 @@ def load_known_base(path) -> KnownBase:
 
     Reads ``base_parameters`` (``name``, ``value``, ``std``) or ``parameters``
     (``name``, ``estimate``, ``std``), and ``covariance`` when present (else the
-    diagonal of the standard deviations).
+    diagonal of the standard deviations). Every field is checked before use
+    (:class:`~manip_id._io.fields.Fields`): names are strings, values finite numbers,
+    standard deviations finite and >= 0 (or null), the covariance an r x r matrix of
+    finite numbers, symmetric with a non-negative diagonal.
     """
     path = Path(path)
     doc = read_result_json(path, "result")
+    f = Fields(path)
     rows, key = doc.get("base_parameters"), "value"
     if rows is None:
         rows, key = doc.get("parameters"), "estimate"
@@ -58,26 +63,28 @@ def load_known_base(path) -> KnownBase:
             f"{path} holds no base parameters (expected 'base_parameters' from manip-id "
             "identify --json)"
         )
-    try:
-        names = [str(r["name"]) for r in rows]
-        values = np.array([float(r[key]) for r in rows])
-        std = np.array([float(r["std"]) if r.get("std") is not None else np.nan for r in rows])
-    except (KeyError, TypeError, ValueError) as exc:
-        raise DataError(f"{path}: a base parameter lacks name, {key} or std ({exc})") from exc
-    if not np.isfinite(values).all():
-        raise DataError(f"{path}: a base parameter value is missing or not finite")
+    names, values, std = [], [], []
+    for k, row in enumerate(rows):
+        row = f.object(row, f"base parameter {k}")
+        names.append(f.text(row.get("name"), f"base parameter {k} name"))
+        values.append(f.number(row.get(key), f"base parameter {names[-1]} {key}"))
+        s = f.optional_number(row.get("std"), f"base parameter {names[-1]} std", minimum=0.0)
+        std.append(np.nan if s is None else s)
+    if len(set(names)) != len(names):
+        raise DataError(f"{path}: a base parameter name appears twice")
     cov = doc.get("covariance")
     if cov is not None:
-        cov = np.asarray(cov, dtype=float)
-        if cov.shape != (len(names),) * 2 or not np.isfinite(cov).all():
-            cov = None
-    if cov is None:
-        cov = np.diag(np.nan_to_num(std, nan=0.0) ** 2)
+        cov = f.matrix(cov, "covariance", (len(names), len(names)))
+        if not np.allclose(cov, cov.T, rtol=1e-9, atol=0.0) or np.any(np.diag(cov) < 0):
+            raise DataError(f"{path}: the covariance is not symmetric with a diagonal >= 0")
+    else:
+        cov = np.diag(np.nan_to_num(np.array(std), nan=0.0) ** 2)
+    robot = doc.get("robot", "")
     return KnownBase(
         names=names,
-        estimate=values,
+        estimate=np.array(values),
         covariance=cov,
-        robot_name=str(doc.get("robot", "")),
+        robot_name=f.text(robot, "robot") if robot is not None else "",
         source=str(path),
     )
 
@@ -112,31 +119,42 @@ def check_known_base(robot: Robot, base: BaseParameters, known) -> KnownBase:
 def load_torque_scale(path, robot: Robot | None = None) -> np.ndarray:
     """The drive gains of a ``manip-id drive-gains --json`` result, in joint order, (nv,).
 
-    With ``robot``, the result's joints must be ``robot.dof_names`` (same order). Every
-    gain must have been determined and be positive.
+    Every row is checked before use: ``joint`` a string (each once), ``gain`` a finite
+    positive number (not a bool, not a string), ``determined`` (when present) true. With
+    ``robot``, the result must be of that robot (by name) and its joints
+    ``robot.dof_names`` (same order): gains of another robot are refused even when its
+    joints happen to share the names.
     """
     path = Path(path)
     doc = read_result_json(path, "drive-gain result")
+    f = Fields(path)
     rows = doc.get("drive_gains")
     if not isinstance(rows, list) or not rows:
         raise DataError(
             f"{path} holds no 'drive_gains' (expected the JSON of manip-id drive-gains --json)"
         )
-    try:
-        joints = [str(r["joint"]) for r in rows]
-        gains = [r["gain"] for r in rows]
-    except (KeyError, TypeError) as exc:
-        raise DataError(f"{path}: each drive gain needs 'joint' and 'gain' ({exc})") from exc
-    bad = [j for j, g in zip(joints, gains, strict=True) if g is None]
-    if bad:
-        raise DataError(f"{path}: the drive gain of {', '.join(bad)} was not determined")
-    g = np.asarray(gains, dtype=float)
-    if not np.isfinite(g).all() or np.any(g <= 0):
-        j = int(np.argmin(np.where(np.isfinite(g), g, -np.inf)))
-        raise DataError(f"{path}: the drive gain of {joints[j]} is {gains[j]}, not positive")
-    if robot is not None and joints != list(robot.dof_names):
-        raise DataError(
-            f"{path} holds gains for the joints {joints} but robot {robot.name!r} has "
-            f"{list(robot.dof_names)}"
-        )
-    return g
+    joints, gains = [], []
+    for k, row in enumerate(rows):
+        row = f.object(row, f"drive gain {k}")
+        joint = f.text(row.get("joint"), f"drive gain {k} joint")
+        if "determined" in row and not f.boolean(row["determined"], f"{joint} determined"):
+            raise DataError(f"{path}: the drive gain of {joint} was not determined")
+        if row.get("gain") is None:
+            raise DataError(f"{path}: the drive gain of {joint} was not determined")
+        gains.append(f.number(row["gain"], f"the drive gain of {joint}", positive=True))
+        joints.append(joint)
+    if len(set(joints)) != len(joints):
+        raise DataError(f"{path}: a joint appears twice among the drive gains")
+    if robot is not None:
+        owner = doc.get("robot")
+        if owner is not None and f.text(owner, "robot") != robot.name:
+            raise DataError(
+                f"{path} holds the drive gains of robot {owner!r}, not of {robot.name!r}"
+            )
+        f.known_names(joints, robot.dof_names, "joint")
+        if joints != list(robot.dof_names):
+            raise DataError(
+                f"{path} holds gains for the joints {joints} but robot {robot.name!r} has "
+                f"{list(robot.dof_names)}"
+            )
+    return np.array(gains)
