@@ -24,6 +24,9 @@ FLOAT = 8
 #: The largest buffer [bytes] of a dense regressor chunk (samples x nv x p): beyond it the
 #: model is too large for the dense per-sample regressor (a chain of some 300 joints).
 REGRESSOR_BUFFER_LIMIT = 512 * 2**20
+#: The most time steps of one closed-loop run (duration x rate x substeps): at some
+#: 10 us a step, about 20 minutes.
+MAX_STEPS = 10**8
 #: The most Fourier harmonics per joint of an excitation trajectory.
 MAX_HARMONICS = 1000
 
@@ -77,6 +80,7 @@ def check_count(value: float, limit: float, what: str, unit: str = "") -> None:
 __all__ = [
     "FLOAT",
     "MAX_HARMONICS",
+    "MAX_STEPS",
     "MEMORY_SHARE",
     "REGRESSOR_BUFFER_LIMIT",
     "check_count",
