@@ -24,6 +24,8 @@ FLOAT = 8
 #: The largest buffer [bytes] of a dense regressor chunk (samples x nv x p): beyond it the
 #: model is too large for the dense per-sample regressor (a chain of some 300 joints).
 REGRESSOR_BUFFER_LIMIT = 512 * 2**20
+#: Allocations below this [bytes] are not checked against the memory available.
+SMALL = 64 * 2**20
 #: The most time steps of one closed-loop run (duration x rate x substeps): at some
 #: 10 us a step, about 20 minutes.
 MAX_STEPS = 10**8
@@ -68,7 +70,8 @@ def check_regressor_buffer(chunk: int, nv: int, p: int) -> None:
             f"{chunk} samples, above the limit of {gib(REGRESSOR_BUFFER_LIMIT)}: the model "
             "is too large for manip-id (split the chain or lock joints)"
         )
-    check_memory(need, f"the regressor of {nv} joints and {p} parameters needs")
+    if need > SMALL:  # (asking the system costs more than a small buffer)
+        check_memory(need, f"the regressor of {nv} joints and {p} parameters needs")
 
 
 def check_count(value: float, limit: float, what: str, unit: str = "") -> None:
