@@ -7,11 +7,17 @@ redirects fd 2 to a temporary file around such a call: when the block succeeds, 
 captured lines become one :class:`LibraryOutputWarning` (the command line prints it
 as ``manip-id: warning: urdfdom: ...``); when it raises, they are dropped, since our
 error message says what went wrong.
+
+Python libraries' log lines (Dask's ``distributed``, whose workers log every failed
+task with its traceback) are silenced by :func:`library_logs_quiet`, in this process and
+in the worker processes it starts: the failure reaches the client as the task's
+exception, and the command line prints it as its one error line.
 """
 
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import re
 import sys
@@ -75,3 +81,33 @@ def native_stderr_captured(source: str = "", error: Callable[[str], Exception] |
         if error is not None and errors:
             raise error(prefix + "; ".join(errors))
         warnings.warn(prefix + "; ".join(lines), LibraryOutputWarning, stacklevel=3)
+
+
+#: The loggers of the Dask libraries and of the event loop under them.
+QUIET_LOGGERS = ("distributed", "dask", "tornado", "bokeh", "asyncio")
+#: The variable distributed's logging configuration reads when it is imported (also in
+#: the worker processes, which inherit the environment).
+DASK_LOG_VARIABLE = "DASK_LOGGING__DISTRIBUTED"
+
+
+@contextlib.contextmanager
+def library_logs_quiet():
+    """Silence the :data:`QUIET_LOGGERS` in the block (see the module docstring).
+
+    The environment and the loggers' levels are given back afterwards.
+    """
+    saved_env = os.environ.get(DASK_LOG_VARIABLE)
+    os.environ[DASK_LOG_VARIABLE] = "critical"
+    loggers = [logging.getLogger(name) for name in QUIET_LOGGERS]
+    levels = [logger.level for logger in loggers]
+    for logger in loggers:
+        logger.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        for logger, level in zip(loggers, levels, strict=True):
+            logger.setLevel(level)
+        if saved_env is None:
+            os.environ.pop(DASK_LOG_VARIABLE, None)
+        else:
+            os.environ[DASK_LOG_VARIABLE] = saved_env

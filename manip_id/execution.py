@@ -33,6 +33,7 @@ more than the samples save below that size.
 
 from __future__ import annotations
 
+import math
 import multiprocessing as mp
 import os
 import signal
@@ -54,6 +55,9 @@ AUTO = "auto"
 FORK_MIN_SAMPLES = 50_000
 #: Parts added together by one reduction task.
 SPLIT_EVERY = 8
+#: The default wait [s] for a scheduler (address or file) to answer, and the variable
+#: that overrides it.
+CONNECT_TIMEOUT, TIMEOUT_VARIABLE = 5.0, "MANIP_ID_DASK_TIMEOUT"
 #: Worker processes of ``scheduler="local"``.
 DEFAULT_LOCAL_WORKERS = 2
 #: Environment of the LocalCluster's workers: one BLAS thread (the tasks' matrices are
@@ -254,8 +258,17 @@ def parse_scheduler(spec: str) -> tuple[str, Any]:
     if "://" in spec:
         proto, _, rest = spec.partition("://")
         host, sep, port = rest.rpartition(":")
-        if proto not in ("tcp", "tls", "inproc", "ucx") or not sep or not port.isdigit():
+        host = host[1:-1] if host.startswith("[") and host.endswith("]") else host  # IPv6
+        if (
+            proto not in ("tcp", "tls")
+            or not sep
+            or not host
+            or any(c in host for c in "/@?# ")
+            or not port.isdigit()
+        ):
             raise InputError(f"scheduler address must look like tcp://HOST:PORT, got {spec!r}")
+        if not 1 <= int(port) <= 65535:
+            raise InputError(f"scheduler port must be in 1..65535, got {port} in {spec!r}")
         return "address", spec
     path = Path(spec).expanduser()
     if path.suffix.lower() == ".json":
@@ -286,12 +299,44 @@ def connect(spec: str):
             except BaseException:
                 cluster.close()
                 raise
+        timeout = connect_timeout()
         if kind == "address":
-            timeout = os.environ.get("MANIP_ID_DASK_TIMEOUT", "30s")
             return dist.Client(value, timeout=timeout), None
-        return dist.Client(scheduler_file=value, timeout="30s"), None
+        return dist.Client(scheduler_file=value, timeout=timeout), None
     except (OSError, TimeoutError) as exc:
-        raise InputError(f"cannot reach the Dask scheduler {spec!r}: {exc}") from exc
+        raise InputError(
+            f"cannot reach the Dask scheduler {spec!r} within {connect_timeout()} s "
+            f"(is it running? {TIMEOUT_VARIABLE} sets the wait): {_one_line(exc)}"
+        ) from exc
+
+
+def connect_timeout() -> float:
+    """The wait [s] for a scheduler to answer: ``$MANIP_ID_DASK_TIMEOUT``, else 5 s."""
+    text = os.environ.get(TIMEOUT_VARIABLE, "").strip().removesuffix("s")
+    if not text:
+        return CONNECT_TIMEOUT
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0 < value <= 3600:
+        raise InputError(f"{TIMEOUT_VARIABLE} must be a wait in (0, 3600] s, got {text!r}")
+    return value
+
+
+def cap_local_workers(spec: str) -> tuple[str, int | None]:
+    """``spec`` with ``local:N`` capped at :func:`available_cores`, and the N it had (else None)."""
+    kind, value = parse_scheduler(spec)
+    cores = available_cores()
+    if kind == "local" and value > cores:
+        return f"local:{cores}", value
+    return spec, None
+
+
+def _one_line(exc: BaseException) -> str:
+    """The first line of an exception's message (Dask's carry tracebacks of their own)."""
+    text = str(exc).strip().splitlines()
+    return text[0] if text else type(exc).__name__
 
 
 class DaskBackend(Backend):
@@ -385,6 +430,8 @@ __all__ = [
     "connect",
     "open_backend",
     "parse_scheduler",
+    "cap_local_workers",
+    "connect_timeout",
     "portable_robot",
     "reduce_tree",
     "resolve_workers",

@@ -17,6 +17,7 @@ import pinocchio as pin
 from ._checks import as_float_array, as_real, check_finite, random_generator
 from .consistency import PhysicalConsistencyError, check_consistency
 from .errors import InputError
+from .resources import check_count
 from .robot import Robot
 
 #: Joint terms that must stay non-negative (offset may take either sign).
@@ -72,6 +73,11 @@ def _perturb_body(block: np.ndarray, rel: float, rng: np.random.Generator) -> np
     return pin.Inertia(mass_p, com_p, 0.5 * (Ic_p + Ic_p.T)).toDynamicParameters()
 
 
+#: The largest relative perturbation [-]: factors exp(rel e) of e ~ N(0, 1) stay finite
+#: (and below about 1e10) for rel up to 5.
+MAX_REL = 5.0
+
+
 def perturb_parameters(robot: Robot, rel: float, seed: int = 0, theta=None) -> np.ndarray:
     """Parameters perturbed by a relative amount ``rel`` while staying physically valid.
 
@@ -99,6 +105,7 @@ def perturb_parameters(robot: Robot, rel: float, seed: int = 0, theta=None) -> n
         zero term stays zero.
     """
     rel = as_real(rel, "rel", minimum=0.0)
+    check_count(rel, MAX_REL, "the relative perturbation")  # exp(rel e) overflows beyond
     theta = (
         robot.nominal_parameters.copy() if theta is None else parameter_vector(robot, theta).copy()
     )

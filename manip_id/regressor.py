@@ -50,6 +50,7 @@ from .compiled_regressor import (
     rigid_block,
 )
 from .errors import InputError
+from .resources import check_regressor_buffer
 
 if TYPE_CHECKING:
     from .robot import Robot
@@ -426,6 +427,7 @@ def iter_regressor(
     batched, (q, dq, ddq) = check_states(robot, q=q, dq=dq, ddq=ddq)
     if not batched:
         raise InputError(f"iter_regressor takes N samples (2-D arrays), got q.shape={q.shape}")
+    check_regressor_buffer(min(int(chunk), max(q.shape[0], 1)), robot.nv, robot.n_parameters)
     return robot.evaluator.iter_regressor(q, dq, ddq, int(chunk))
 
 

@@ -41,11 +41,12 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from ._checks import as_real, memory_budget
+from ._checks import as_real
 from .datasets import Dataset
-from .errors import InputError, ResourceError
+from .errors import InputError
 from .perturbation import parameter_vector, perturb_parameters, require_physical
 from .regressor import joint_torques
+from .resources import check_memory
 from .robot import Robot
 from .trajectories import FourierTrajectory, trajectory_to_configuration
 
@@ -145,10 +146,6 @@ def inverse_dynamics(robot: Robot, theta, q, dq, ddq) -> np.ndarray:
     if robot.terms.enabled:  # (joint_torques needs at least one joint term)
         tau += joint_torques(robot, theta, q, dq, ddq, armature=False)  # Ia is in rnea
     return tau
-
-
-#: Share of the available memory a simulation may take.
-MEMORY_SHARE = 0.5
 
 
 def simulation_bytes(robot: Robot, n_samples: int) -> int:
@@ -477,13 +474,8 @@ class _BatchInverseDynamics:
 
 
 def _check_memory(need: int, what: str) -> None:
-    """Raise :class:`~manip_id.errors.ResourceError` if ``need`` bytes would not fit."""
-    available = memory_budget(1.0)  # [bytes] available now
-    if need > MEMORY_SHARE * available:
-        raise ResourceError(
-            f"{what} about {need / 2**30:.3g} GiB, more than {MEMORY_SHARE:.0%} of the "
-            f"{available / 2**30:.3g} GiB available; shorten the duration or lower the rate"
-        )
+    """:func:`~manip_id.resources.check_memory` with the simulation's hint."""
+    check_memory(need, what, "shorten the duration or lower the rate")
 
 
 __all__ = [

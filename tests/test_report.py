@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 from html.parser import HTMLParser
 
@@ -72,7 +73,10 @@ def test_report_folder_contents(tmp_path):
         "scene.html",
     ]
     manifest = json.loads((out / ".manip-id-report.json").read_text())
-    assert manifest["files"] == names[1:]
+    assert sorted(manifest["files"]) == names[1:]
+    for name, entry in manifest["files"].items():  # size and SHA-256, checked by --force
+        data = (out / name).read_bytes()
+        assert entry == {"size": len(data), "sha256": hashlib.sha256(data).hexdigest()}
     assert json.loads((out / "result.json").read_text()) == {"answer": 42, "array": [0, 1, 2]}
     assert (out / "copied.png").read_bytes() == existing.read_bytes()
     assert (out / "scene.html").read_text() == "<html><body>scene</body></html>"

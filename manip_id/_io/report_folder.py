@@ -9,10 +9,15 @@ Rules (issue 14):
 - **Never half-written**: the report is built in a temporary sibling folder
   (``.<name>.tmp-*``, registered for removal on signals, :meth:`ReportFolder.build`) and
   renamed into place at the end.
-- **Only our own folders are replaced**: every report folder holds a manifest,
-  ``.manip-id-report.json``, listing the files manip_id wrote. An existing non-empty
-  folder is replaced only with ``force=True``, and only when it has a manifest and holds
-  nothing the manifest does not list; anything else is refused, never deleted.
+- **Only our own folders are replaced, unchanged** (issue 29): every report folder holds
+  a manifest, ``.manip-id-report.json``, listing each file manip_id wrote with its size
+  [bytes] and SHA-256. An existing non-empty folder is replaced only with ``force=True``,
+  and only when every entry it holds is a regular file the manifest lists, of the listed
+  size and hash; the first foreign, edited or non-file entry is named in the refusal and
+  nothing is deleted. A manifest of an older manip-id (names without hashes) cannot prove
+  the files unchanged: such a folder is refused, the message says to delete it by hand.
+- **A report path that is a symbolic link is refused** (never followed, never replaced):
+  nothing is created, neither beside it nor in its target.
 
 What a report holds is rendered by :mod:`manip_id.viz.report`; this module only
 claims, stages and publishes the folder.
@@ -20,9 +25,12 @@ claims, stages and publishes the folder.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+import re
 import shutil
+import stat
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -44,18 +52,92 @@ PACKAGE = __name__.split(".")[0]
 MANIFEST, CLAIM = ".manip-id-report.json", ".manip-id-claim"
 
 
-def _manifest_files(path: Path) -> set[str] | None:
-    """The files a report folder's manifest lists, or None without a (readable) manifest."""
+def file_digest(path: Path) -> str:
+    """The SHA-256 of a file's bytes (hex), read in blocks of 1 MiB."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(2**20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _manifest_entries(path: Path) -> dict[str, tuple[int, str]]:
+    """The files a report folder's manifest lists: name -> (size [bytes], sha256).
+
+    Raises :class:`~manip_id.errors.OutputError` without a readable manifest of ours, or
+    with an old one that lists names without hashes.
+    """
+    manifest = path / MANIFEST
     try:
-        data = json.loads((path / MANIFEST).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
+        if not stat.S_ISREG(manifest.lstat().st_mode) or manifest.lstat().st_size > 2**20:
+            raise ValueError("not a small regular file")
+        data = json.loads(manifest.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise OutputError(
+            f"report folder {path} was not written by manip-id (no readable {MANIFEST}); "
+            "--force only replaces folders manip-id wrote: remove it yourself or choose another"
+        ) from exc
+    files = data.get("files") if isinstance(data, dict) else None
     if not isinstance(data, dict) or data.get("written_by") != PACKAGE:
-        return None
-    files = data.get("files")
-    if not isinstance(files, list) or not all(isinstance(f, str) for f in files):
-        return None
-    return set(files)
+        raise OutputError(
+            f"report folder {path} was not written by manip-id ({MANIFEST} is not ours); "
+            "--force only replaces folders manip-id wrote: remove it yourself or choose another"
+        )
+    if isinstance(files, list):
+        raise OutputError(
+            f"report folder {path} was written by an older manip-id whose manifest has no "
+            "checksums, so --force cannot tell your edits from ours: delete the folder "
+            "yourself or choose another"
+        )
+    entries: dict[str, tuple[int, str]] = {}
+    for name, item in (files or {}).items() if isinstance(files, dict) else ():
+        size = item.get("size") if isinstance(item, dict) else None
+        digest = item.get("sha256") if isinstance(item, dict) else None
+        if (
+            isinstance(size, int)
+            and not isinstance(size, bool)
+            and isinstance(digest, str)
+            and re.fullmatch(r"[0-9a-f]{64}", digest)
+        ):
+            entries[name] = (size, digest)
+    if not isinstance(files, dict) or len(entries) != len(files):
+        raise OutputError(f"report folder {path}: {MANIFEST} is malformed; remove it yourself")
+    return entries
+
+
+def _check_own_entries(path: Path, names: list[str]) -> None:
+    """Raise unless every entry ``names`` of ``path`` is a listed, unchanged regular file."""
+    listed = _manifest_entries(path)
+    for name in names:
+        if name in (MANIFEST, CLAIM):
+            continue
+        entry = path / name
+        try:
+            info = entry.lstat()
+        except OSError as exc:
+            raise OutputError(f"cannot read {entry}: {exc.strerror}") from exc
+        if name not in listed:
+            reason = "is a file manip-id did not write"
+        elif not stat.S_ISREG(info.st_mode):
+            reason = "is not a regular file (manip-id writes only files)"
+        elif info.st_size != listed[name][0] or file_digest(entry) != listed[name][1]:
+            reason = "was changed since manip-id wrote it"
+        else:
+            continue
+        raise OutputError(
+            f"report folder {path}: {name} {reason}; --force will not delete it "
+            "(move it away or choose another folder)"
+        )
+
+
+def _refuse_symlink(directory, what: str) -> None:
+    """Raise if the path of the report folder is itself a symbolic link."""
+    p = Path(os.fsdecode(directory)) if isinstance(directory, (str, bytes, os.PathLike)) else None
+    if p is not None and p.is_symlink():
+        raise OutputError(
+            f"{what} {p} is a symbolic link; give the real folder ({os.path.realpath(p)}) "
+            "or another path"
+        )
 
 
 def check_report_target(directory, force: bool = False, *, inputs=(), what="report folder") -> Path:
@@ -73,6 +155,7 @@ def check_report_target(directory, force: bool = False, *, inputs=(), what="repo
         if "not a folder" in str(exc):
             raise OutputError(f"report folder {directory} exists and is not a folder") from exc
         raise
+    _refuse_symlink(directory, what)
     if not path.is_dir():
         return path
     try:
@@ -85,18 +168,7 @@ def check_report_target(directory, force: bool = False, *, inputs=(), what="repo
         return path
     if not force:
         raise ReportExistsError(path)
-    listed = _manifest_files(path)
-    if listed is None:
-        raise OutputError(
-            f"report folder {path} was not written by manip-id (no {MANIFEST}); "
-            "--force only replaces folders manip-id wrote: remove it yourself or choose another"
-        )
-    extra = [e for e in entries if e not in listed and e != MANIFEST]
-    if extra:
-        raise OutputError(
-            f"report folder {path} holds files manip-id did not write ({', '.join(extra[:5])}"
-            f"{', ...' if len(extra) > 5 else ''}); --force will not delete them"
-        )
+    _check_own_entries(path, entries)
     return path
 
 
@@ -150,7 +222,10 @@ class ReportFolder:
         try:
             os.chmod(tmp, 0o755)
             fill(tmp)
-            files = sorted(p.name for p in tmp.iterdir())
+            files = {
+                p.name: {"size": p.stat().st_size, "sha256": file_digest(p)}
+                for p in sorted(tmp.iterdir())
+            }
             atomic_write_text(tmp / MANIFEST, json_text({"written_by": PACKAGE, "files": files}))
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
@@ -238,17 +313,12 @@ def claim_report(
 
 def check_report_target_claimed(path: Path, force: bool) -> None:
     """:func:`check_report_target`'s content rules on a folder that holds our claim."""
-    entries = [p.name for p in path.iterdir() if p.name != CLAIM]
+    entries = sorted(p.name for p in path.iterdir() if p.name != CLAIM)
     if not entries:
         return
     if not force:
         raise ReportExistsError(path)
-    listed = _manifest_files(path)
-    if listed is None or any(e not in listed and e != MANIFEST for e in entries):
-        raise OutputError(
-            f"report folder {path} was not written by manip-id or holds other files; "
-            "--force only replaces folders manip-id wrote"
-        )
+    _check_own_entries(path, entries)
 
 
 def _swap(new: Path, target: Path) -> None:

@@ -27,6 +27,7 @@ command started are stopped. Warnings (NumPy, SciPy, ours) are printed once each
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import os
 import pkgutil
@@ -48,7 +49,10 @@ for _name, _value in BLAS_THREADS.items():
 import psutil  # noqa: E402 (after the BLAS threads are set)
 
 from .._io import OutputSet, remove_temporaries  # noqa: E402
-from .._native import native_stderr_captured  # noqa: F401, E402 (re-exported, as earlier)
+from .._native import (  # noqa: E402 (native_stderr_captured: re-exported, as earlier)
+    library_logs_quiet,
+    native_stderr_captured,  # noqa: F401
+)
 from ..errors import ManipIdError, did_you_mean  # noqa: E402
 from ._common import warn  # noqa: F401, E402 (the commands' warnings, as earlier releases)
 
@@ -210,7 +214,8 @@ def main(argv: list[str] | None = None) -> int:
     outputs = OutputSet()
     status = 0
     interrupted = False
-    with warnings.catch_warnings():
+    quiet = contextlib.nullcontext() if debug else library_logs_quiet()  # Dask's log lines
+    with quiet, warnings.catch_warnings():
         warnings.simplefilter("default")
         warnings.filterwarnings("ignore", category=DeprecationWarning)
         warnings.filterwarnings("ignore", category=PendingDeprecationWarning)

@@ -14,14 +14,14 @@ from .._native import native_stderr_captured
 from ..audit import AuditOptions, audit_files
 from ..datasets.stream import torque_scale_vector
 from ..errors import InputError, did_you_mean
-from ..execution import parse_scheduler
+from ..execution import available_cores, cap_local_workers
 from ..export import export_texts, mjcf_text, sidecar_path
 from ..export.sidecar import identification_provenance
 from ..identification import ConsistentOptions, PreprocessOptions, result_text
 from ..robot import Robot, load_robot
 from ..viz.identify_report import write_identify_report
 from ..viz.report_document import ReportOptions
-from ._common import exports_wanted, finish, parse_floats, print_warnings, profile_option
+from ._common import exports_wanted, finish, parse_floats, print_warnings, profile_option, warn
 
 
 def robot_from_args(args: argparse.Namespace) -> Robot:
@@ -58,7 +58,11 @@ def check_frame(robot, frame: str) -> None:
 def check_scheduler(args: argparse.Namespace) -> None:
     """Refuse a malformed ``--scheduler`` before any work (nothing of Dask imported)."""
     if getattr(args, "scheduler", None) is not None:
-        parse_scheduler(args.scheduler)
+        args.scheduler, asked = cap_local_workers(args.scheduler)
+        if asked is not None:  # as --workers is (check_seed_and_workers)
+            warn(
+                f"--scheduler local:{asked} capped at the {available_cores()} cores of this machine"
+            )
 
 
 def preprocess_options(args: argparse.Namespace, nv: int, profile_scale=None):

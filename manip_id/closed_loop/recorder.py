@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from ..adaptive import SlotineLiController
+from ..resources import FLOAT, MAX_STEPS, check_count, check_memory
 from ..robot import Robot
 
 
@@ -46,6 +47,13 @@ class Recorder:
         damping: np.ndarray,
     ) -> None:
         nq, nv, p = robot.nq, robot.nv, robot.n_parameters
+        check_count(n_steps, MAX_STEPS, "the closed-loop run's time steps (duration x rate)")
+        n_kept = n_steps // max(int(record_every), 1) + 2  # the samples recorded
+        check_memory(  # t, q, q_d, dq, tau, s, theta_hat, eps and the indices
+            FLOAT * n_kept * (3 + 2 * nq + 3 * nv + p),
+            f"a record of {n_kept:.3g} samples of {nv} joints and {p} parameters needs",
+            "shorten the duration or lower the rate",
+        )
         idx = np.arange(0, n_steps, record_every)
         if idx[-1] != n_steps - 1:
             idx = np.append(idx, n_steps - 1)

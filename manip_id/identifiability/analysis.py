@@ -16,6 +16,7 @@ import numpy as np
 from .._checks import as_float_array, as_int, as_real
 from ..errors import InputError
 from ..regressor import iter_regressor
+from ..resources import FLOAT, check_memory, check_regressor_buffer
 from ..robot import Robot
 from .accumulator import RFactorAccumulator
 from .notes import robot_notes, zero_columns
@@ -79,6 +80,12 @@ def structural_analysis(
             f"need at least {math.ceil(p / nv)} samples"
         )
     tol = _check_tolerance(tolerance)
+    check_regressor_buffer(min(_CHUNK, n_samples), nv, p)  # before the states are drawn
+    check_memory(  # q, dq, ddq and their draws (about twice)
+        2 * FLOAT * n_samples * (robot.nq + 2 * nv),
+        f"{n_samples:.3g} random states of {nv} joints need",
+        "ask for fewer --samples",
+    )
     q, dq, ddq = robot.random_states(n_samples, seed)
     acc = RFactorAccumulator(p, robot.parameter_names)
     for chunk in iter_regressor(robot, q, dq, ddq, chunk=_CHUNK):

@@ -18,6 +18,7 @@ from .._checks import as_int, as_real, random_generator
 from ..errors import InfeasibleTrajectoryError, InputError, NumericalError
 from ..identifiability import analyze
 from ..regressor import iter_regressor
+from ..resources import MAX_HARMONICS, check_count
 from ..robot import Robot
 from .fourier import DEFAULT_WF, FourierTrajectory, trajectory_to_configuration
 from .limits import (
@@ -48,6 +49,7 @@ def _check_design_args(harmonics: int, wf: float) -> tuple[int, float]:
     harmonics = as_int(harmonics, "harmonics")
     if harmonics < 1:
         raise InputError(f"harmonics must be a positive integer, got {harmonics}")
+    check_count(harmonics, MAX_HARMONICS, "the number of Fourier harmonics per joint")
     wf = as_real(wf, "wf", unit="rad/s")
     if not (np.isfinite(wf) and wf > 0):
         raise InputError(f"wf must be a positive pulsation [rad/s], got {wf}")
