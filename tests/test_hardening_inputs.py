@@ -19,9 +19,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _catalogue import arm_urdf, error_lines, snapshot, write_npz
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from test_hardening import arm_urdf, error_lines, snapshot, work  # noqa: F401 (work: fixture)
+from test_hardening import work  # noqa: F401 (work: fixture)
 
 from manip_id.cli import main
 from manip_id.errors import ManipIdError
@@ -50,7 +51,6 @@ GAINS_CMD += ["--frame", "cart"]
 @pytest.fixture(scope="module")
 def result_doc(tmp_path_factory) -> dict:
     """A real ``manip-id identify --json`` document of the msd (tampered by the cases)."""
-    from test_hardening import write_npz
 
     folder = tmp_path_factory.mktemp("result")
     write_npz(folder / "log.npz")
