@@ -41,6 +41,7 @@ from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from ._io.reading import read_json
 from .errors import InputError
 from .robot import Robot
 from .robot_sources import RobotSource
@@ -248,7 +249,10 @@ def _distributed():
 
 def parse_scheduler(spec: str) -> tuple[str, Any]:
     """``"local[:N]"`` -> ("local", N); ``"tcp://HOST:PORT"`` -> ("address", spec);
-    an existing ``.json`` file -> ("file", path). Raises :class:`InputError` otherwise."""
+    an existing ``.json`` scheduler file -> the ("address", ADDRESS) it names (read through
+    the checked door, its address parsed as strictly as a given one).
+
+    Raises :class:`InputError` otherwise."""
     spec = str(spec).strip()
     if spec == "local" or spec.startswith("local:"):
         n_text = spec.partition(":")[2] or str(DEFAULT_LOCAL_WORKERS)
@@ -272,9 +276,17 @@ def parse_scheduler(spec: str) -> tuple[str, Any]:
         return "address", spec
     path = Path(spec).expanduser()
     if path.suffix.lower() == ".json":
-        if not path.is_file():
+        if not path.exists():
             raise InputError(f"no such scheduler file: {path}")
-        return "file", str(path)
+        doc = read_json(path, "scheduler file", InputError)
+        address = doc.get("address") if isinstance(doc, dict) else None
+        if not isinstance(address, str) or not address.startswith(("tcp://", "tls://")):
+            raise InputError(
+                f'scheduler file {path} must be a JSON object with an "address" such as '
+                f"tcp://HOST:PORT (as dask-scheduler --scheduler-file writes it), got "
+                f"{type(doc).__name__ if not isinstance(doc, dict) else repr(address)[:60]}"
+            )
+        return parse_scheduler(address)
     raise InputError(
         f"scheduler must be local[:N], tcp://HOST:PORT or a scheduler JSON file, got {spec!r}"
     )
@@ -300,9 +312,7 @@ def connect(spec: str):
                 cluster.close()
                 raise
         timeout = connect_timeout()
-        if kind == "address":
-            return dist.Client(value, timeout=timeout), None
-        return dist.Client(scheduler_file=value, timeout=timeout), None
+        return dist.Client(value, timeout=timeout), None
     except (OSError, TimeoutError) as exc:
         raise InputError(
             f"cannot reach the Dask scheduler {spec!r} within {connect_timeout()} s "

@@ -392,6 +392,19 @@ class Robot:
         )
 
 
+def frame_id(model: pin.Model, name: str) -> int:
+    """The id of the frame ``name`` of ``model``.
+
+    Where frames of several types share the name (a link named as its joint, as the
+    one-DoF models are), the link's (BODY) frame is meant, then the joint's; Pinocchio's
+    ``getFrameId`` without a type refuses such a name.
+    """
+    for kind in (pin.BODY, pin.JOINT, pin.FIXED_JOINT, pin.OP_FRAME, pin.SENSOR):
+        if model.existFrame(name, kind):
+            return int(model.getFrameId(name, kind))
+    return int(model.getFrameId(name))
+
+
 # --------------------------------------------------------------------- loading
 @dataclass(frozen=True)
 class JointSelection:

@@ -366,3 +366,12 @@ def test_velocity_deadband_counts_rows(ur5, ur5_base):
     want = (np.abs(u[1]) < eps).sum(axis=0) + (np.abs(ld[1]) < eps).sum(axis=0)
     assert np.array_equal(res.rows_left_out, want)
     assert np.allclose(res.payload.values, truth(payload), atol=1e-6)
+
+
+def test_payload_frame_named_as_its_joint():
+    """The msd's link and joint are both named ``cart``: Pinocchio's untyped
+    ``getFrameId`` refuses the name, the payload frame is the link's (BODY) frame."""
+    msd = get_robot("msd")
+    pf = payload_frame(msd, "cart")
+    assert msd.model.frames[pf.frame_id].type == pin.BODY
+    assert (pf.joint_name, pf.body) == ("cart", 0)

@@ -26,7 +26,6 @@ claims, stages and publishes the folder.
 from __future__ import annotations
 
 import hashlib
-import json
 import os
 import re
 import shutil
@@ -45,6 +44,7 @@ from .files import (
     register_temporary,
     unregister_temporary,
 )
+from .reading import read_json
 
 #: The package that writes the manifests (``written_by``).
 PACKAGE = __name__.split(".")[0]
@@ -71,8 +71,8 @@ def _manifest_entries(path: Path) -> dict[str, tuple[int, str]]:
     try:
         if not stat.S_ISREG(manifest.lstat().st_mode) or manifest.lstat().st_size > 2**20:
             raise ValueError("not a small regular file")
-        data = json.loads(manifest.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
+        data = read_json(manifest, f"report manifest {MANIFEST}", OutputError)
+    except (OSError, ValueError, OutputError) as exc:
         raise OutputError(
             f"report folder {path} was not written by manip-id (no readable {MANIFEST}); "
             "--force only replaces folders manip-id wrote: remove it yourself or choose another"

@@ -36,6 +36,7 @@ from .._checks import as_float_array, check_finite
 from .._io import atomic_write_text, json_text
 from ..consistency import EIG_TOLERANCE, PhysicalConsistencyError, Violation, pseudo_inertia
 from ..errors import InputError, RobotError
+from ..robot import frame_id
 from .meshes import rewrite_meshes
 from .sidecar import sidecar_document
 from .urdf import ExportResult, body_check, check_output, read_urdf, set_inertial
@@ -62,7 +63,7 @@ def _attachment(full: pin.Model, frame: str) -> tuple[str, pin.SE3]:
         raise InputError(f"no frame {frame!r} in the robot; its links: {', '.join(links)}")
     if full.existFrame(frame, pin.BODY):
         return frame, pin.SE3.Identity()
-    fid = full.getFrameId(frame)
+    fid = frame_id(full, frame)
     f = full.frames[fid]
     link = next(
         (g for g in full.frames if g.type == pin.BODY and g.parentFrame == fid),

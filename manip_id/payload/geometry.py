@@ -22,7 +22,7 @@ from ..consistency import pseudo_inertia
 from ..errors import InputError
 from ..identifiability import RankAnalysis, analyze
 from ..regressor import DEFAULT_CHUNK, check_states
-from ..robot import INERTIAL_NAMES, Robot
+from ..robot import INERTIAL_NAMES, Robot, frame_id
 
 #: The payload's standard parameter names, in Pinocchio's order, expressed in its frame.
 PAYLOAD_NAMES: tuple[str, ...] = tuple(f"payload.{n}" for n in INERTIAL_NAMES)
@@ -141,7 +141,7 @@ def payload_frame(robot: Robot, frame: str) -> PayloadFrame:
             f"robot {robot.name!r} has no frame {frame!r}; frames on moving joints: "
             + ", ".join(valid)
         )
-    fid = int(model.getFrameId(frame))
+    fid = frame_id(model, frame)
     f = model.frames[fid]
     jid = int(f.parentJoint)
     if jid == 0:
