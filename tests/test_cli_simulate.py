@@ -83,13 +83,22 @@ def test_payload_runs_carry_the_payload_and_the_payload_command_finds_its_mass(t
     np.testing.assert_allclose(got["com"], truth["com"], atol=0.01)  # [m]
 
 
-def test_drive_gains_write_currents(tmp_path, capsys):
+def test_drive_gains_write_currents_and_the_drive_gains_command_finds_the_gains(tmp_path, capsys):
     out = tmp_path / "sim"
-    _simulate(capsys, "ur5", "--out", out, "--files", 1, "--duration", 2, "--noise", 0,
-              "--drive-gains", "1,2,3,4,5,6")  # fmt: skip
+    _simulate(capsys, "ur5", "--out", out, "--files", 1, "--duration", 10, "--noise", 0.005,
+              "--payload", 1.3, "--drive-gains", "8,8,8,3,3,3")  # fmt: skip
+    gains = np.array([8.0, 8, 8, 3, 3, 3])  # [N m/A]
     d = load_dataset(out / "run_0.npz")
-    gains = np.arange(1.0, 7.0)  # [N m/A]
-    np.testing.assert_allclose(d.tau * gains, _rnea(load_robot("ur5").model, d), atol=1e-9)
+    clean = _rnea(load_robot("ur5").model, d)
+    noise = (d.tau * gains - clean).std(axis=0) / np.sqrt((clean**2).mean(axis=0))
+    np.testing.assert_allclose(noise, 0.005, rtol=0.15)
+    status = main(["drive-gains", "ur5", "--unloaded", str(out / "run_0.npz"),
+                   "--loaded", str(out / "payload_1.3kg_0.npz"), "--frame", "wrist_3_joint",
+                   "--payload-mass", "1.3", "--json", str(tmp_path / "g.json")])  # fmt: skip
+    assert status == 0, capsys.readouterr().err
+    got = json.loads((tmp_path / "g.json").read_text())["drive_gains"]
+    assert [g["joint"] for g in got] == load_robot("ur5").joint_names
+    np.testing.assert_allclose([g["gain"] for g in got], gains, rtol=0.01)
 
 
 @pytest.mark.parametrize(
