@@ -34,8 +34,11 @@ system-deps:
 test: $(STAMP) system-deps
 	$(PY) -m pytest -q
 
+# train on one simulated excitation, validate on another (demo-data/run_0.npz, seed 1)
 demo: $(STAMP)
-	$(VENV)/bin/manip-id identify panda --simulate --split 0.7 --report demo-report --force
+	$(VENV)/bin/manip-id simulate panda --out demo-data --files 1 --seed 1 --force
+	$(VENV)/bin/manip-id identify panda --simulate --validate demo-data/run_0.npz --consistent \
+		--export-urdf demo-panda.urdf --report demo-report --force
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check manip_id tests experiments

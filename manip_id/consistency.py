@@ -162,7 +162,9 @@ def _body_violations(name: str, pi: np.ndarray, lam: np.ndarray, tol: float) -> 
         )
     ]
     m = float(pi[0])
-    if m <= 0:
+    # a mass at the round-off level of J (minimum-norm parameters leave 1e-17 kg where the
+    # data fix no mass) is no mass: c = (m c) / m would be a meaningless 1e17 m
+    if m <= tol * max(float(np.abs(lam).max()), 1e-300):
         out.append(Violation(name, "mass m > 0 [kg]", m))
         return out
     c = pi[1:4] / m

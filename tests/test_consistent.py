@@ -352,3 +352,18 @@ def test_solver_failure_is_a_manip_id_error_with_the_status():
         solve_consistent(robot, pr, solver="sdp", max_iter=1)
     assert isinstance(info.value, ManipIdError)
     assert info.value.solver == "sdp" and info.value.status
+
+
+def test_a_round_off_mass_is_reported_as_no_mass_not_as_a_huge_inertia():
+    # minimum-norm standard parameters leave ~1e-17 kg where the data fix no mass; the
+    # CoM (m c) / m of such a body is 1e17 m, its inertia about the CoM -1e17 kg m^2
+    robot = get_robot("panda", friction=FRICTION)
+    bad = _truth(robot)
+    k = 10 * robot.joint_names.index("panda_joint2")
+    bad[k] = 1e-17  # [kg]
+    bad[k + 2] = -1.2  # [kg m]
+    rep = check_consistency(robot, bad)
+    found = [v for v in rep.violations if v.name == "panda_joint2"]
+    assert [v.condition for v in found][1:] == ["mass m > 0 [kg]"]
+    assert found[1].value == 1e-17
+    assert all(abs(v.value) < 10 for v in rep.violations)

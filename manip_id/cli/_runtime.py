@@ -17,7 +17,7 @@ from ..errors import InputError, did_you_mean
 from ..execution import available_cores, cap_local_workers
 from ..export import export_texts, mjcf_text, sidecar_path
 from ..export.sidecar import identification_provenance
-from ..identification import ConsistentOptions, PreprocessOptions, result_text
+from ..identification import ConsistentOptions, PreprocessOptions, result_text, verdict_text
 from ..robot import Robot, load_robot
 from ..viz.identify_report import write_identify_report
 from ..viz.report_document import ReportOptions
@@ -204,4 +204,6 @@ def write_outputs(args: argparse.Namespace, outputs, robot, result, report: dict
         )
     if exports_wanted(args):
         stage_export(robot, result, args, outputs)
-    return finish(args, outputs, path)
+    status = finish(args, outputs, path)
+    print(verdict_text(report))  # the last line: the run in one sentence
+    return status

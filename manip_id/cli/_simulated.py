@@ -40,19 +40,24 @@ from ._runtime import (
 )
 
 
+def excitation(robot, seed: int, *, optimize: bool = False):
+    """The excitation of the simulating commands: a random (or condition-optimized) Fourier
+    trajectory of ``seed``, designed by the robot's profile (robots/NAME.toml
+    ``[excitation]``), else with 5 harmonics."""
+    design = {"harmonics": 5, **(robot.profile.excitation.design_kwargs() if robot.profile else {})}
+    if optimize:
+        return optimize_excitation(robot, seed=seed, **design).trajectory
+    return random_trajectory(robot, seed=seed, **design)
+
+
 def simulation_stream(robot, args: argparse.Namespace):
     """The simulated record of the ``--simulate`` options, as a block-wise stream, and
     the simulation's settings (duration, rate, noise, seed, period)."""
     opts = {
         k: (SIM_DEFAULTS[k] if getattr(args, k) is None else getattr(args, k)) for k in SIM_DEFAULTS
     }
-    # the robot's profile (robots/NAME.toml [excitation]) sets the design, else 5 harmonics
-    design = {"harmonics": 5, **(robot.profile.excitation.design_kwargs() if robot.profile else {})}
     seed = int(opts["seed"])  # --seed is parsed as an int, its default is 0
-    if args.optimize:
-        traj = optimize_excitation(robot, seed=seed, **design).trajectory
-    else:
-        traj = random_trajectory(robot, seed=seed, **design)
+    traj = excitation(robot, seed, optimize=args.optimize)
     opts["period"] = float(traj.period)  # [s] the excitation repeats after it
     stream = SimulationStream(
         robot,

@@ -37,6 +37,7 @@ from .document import (
     result_warnings,
     structural_directions,
     summary_rows,
+    verdict_text,
 )
 from .file_sums import FileAccumulation, accumulate_file, accumulate_files, merge_accumulations
 from .files import identify_datasets
@@ -96,6 +97,7 @@ __all__ = [
     "read_result_json",
     "result_from_dict",
     "result_text",
+    "verdict_text",
     "result_to_dict",
     "result_warnings",
     "row_supports",

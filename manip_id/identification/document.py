@@ -543,6 +543,23 @@ def result_text(doc: dict, max_rows: int | None = None) -> str:
     return "\n".join(lines)
 
 
+def verdict_text(doc: dict) -> str:
+    """The one-line verdict of a result document: the relative torque error of the
+    identified and the nominal model on validation (else training) data, whether the
+    standard parameters are physical, and how many warnings were given."""
+    e = doc["relative_error"]
+    key = "validation" if e.get("validation") is not None else "train"
+    part, mine, nominal = key.replace("train", "training"), e[key], e.get(f"nominal_{key}")
+    text = f"verdict: the identified model predicts the {part} torques to {100 * mine:.3f} %"
+    if nominal is not None:
+        text += f" (nominal model {100 * nominal:.3f} %)"
+    consistent = doc.get("physically_consistent")
+    if consistent is not None:
+        text += ", physically consistent" if consistent else ", NOT physically consistent"
+    n = len(doc.get("warnings") or [])
+    return text + (f", {n} warning(s) above" if n else ", no warnings")
+
+
 def _white_covariance(result) -> dict:
     """``{"covariance_white": rows}`` when the result carries the white-noise covariance."""
     cov = getattr(result, "covariance_white", None)
@@ -566,4 +583,5 @@ __all__ = [
     "structural_directions",
     "summary_rows",
     "uncertainty_text",
+    "verdict_text",
 ]

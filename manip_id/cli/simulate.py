@@ -1,0 +1,88 @@
+"""``manip-id simulate``: simulated logs, with the truth behind them, to try every command on.
+
+Each file is one excitation (a random Fourier trajectory within the joint limits, its own
+seed) simulated with the robot's nominal parameters and torque noise relative to each
+joint's RMS torque; ``--payload`` adds runs carrying a point mass on the last body, and
+``--drive-gains`` writes motor currents instead of torques. The folder also holds
+``README.txt`` and ``truth.json``: the robot, the parameters, the payload and the noise
+used, so that identified values can be compared with them.
+"""
+
+from __future__ import annotations
+
+from ._common import SIM_DEFAULTS, add_robot_arguments, command
+
+FORMATS = ("npz", "csv", "mcap")
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "simulate",
+        help="write simulated logs (and their truth) to try the other commands on",
+        description="Simulate ROBOT along --files excitation trajectories (each its own seed) "
+        "and write one log per trajectory into the new folder --out, with README.txt and "
+        "truth.json stating the parameters, payload and noise used. The logs read as --data "
+        "of identify, --unloaded/--loaded of payload and drive-gains, and --data of monitor "
+        "and audit.",
+    )
+    add_robot_arguments(p)
+    p.add_argument("--out", required=True, metavar="DIR", help="the folder to write (new)")
+    p.add_argument(
+        "--files",
+        type=int,
+        default=2,
+        metavar="N",
+        help="number of logs (unloaded runs), each another trajectory [default 2]",
+    )
+    p.add_argument(
+        "--duration",
+        type=float,
+        default=SIM_DEFAULTS["duration"],
+        metavar="S",
+        help=f"length of each log [s] [default {SIM_DEFAULTS['duration']:g}]",
+    )
+    p.add_argument(
+        "--rate",
+        type=float,
+        default=SIM_DEFAULTS["rate"],
+        metavar="HZ",
+        help=f"sampling rate [Hz] [default {SIM_DEFAULTS['rate']:g}]",
+    )
+    p.add_argument(
+        "--noise",
+        type=float,
+        default=SIM_DEFAULTS["noise"],
+        metavar="REL",
+        help="torque noise std, relative to each joint's RMS torque (0: exact) "
+        f"[default {SIM_DEFAULTS['noise']:g}]",
+    )
+    p.add_argument(
+        "--payload",
+        default=None,
+        metavar="MASS[,MASS...]",
+        help="also write --files loaded runs per mass [kg]: a point mass 0.1 m along the last "
+        "joint's axis, on the last body [default: none]",
+    )
+    p.add_argument(
+        "--drive-gains",
+        default=None,
+        metavar="G[,G...]",
+        help="write motor currents tau / G [A] in the torque columns, one gain [N m/A] per "
+        "joint or one for all (input of drive-gains) [default: torques]",
+    )
+    p.add_argument(
+        "--format", choices=FORMATS, default="npz", help="file format of the logs [default npz]"
+    )
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=SIM_DEFAULTS["seed"],
+        help="seed of the first trajectory and its noise; file k uses SEED + k "
+        f"[default {SIM_DEFAULTS['seed']}]",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an --out folder that manip-id wrote [default: refuse]",
+    )
+    p.set_defaults(func=command("manip_id.cli._simulate"))
