@@ -42,13 +42,19 @@ def stream_lags(robot, proc, eps: float, max_lag: int, gains: np.ndarray):
     g = max(1, max_lag // COARSE)
     coarse = np.arange(-(max_lag // g), max_lag // g + 1) * g  # holds lag 0
     masks = (half, ~half)
-    grams = [gram(Y[m]) for m in masks]
-    parts = [lag_sums(Y[m], tau, k[m], coarse, gm) for m, gm in zip(masks, grams, strict=True)]
+    halves = [Y[m] for m in masks]
+    del Y
+    grams = [gram(Ym) for Ym in halves]
+    parts = [
+        lag_sums(Ym, tau, k[m], coarse, gm) for Ym, m, gm in zip(halves, masks, grams, strict=True)
+    ]
     curve = _both(parts, None, None)  # the held-out SSE of all joints
     zero = float(curve[coarse.size // 2])
     best = int(coarse[int(np.argmin(curve))])
     fine = np.arange(max(best - g, -max_lag), min(best + g, max_lag) + 1)
-    fine_parts = [lag_sums(Y[m], tau, k[m], fine, gm) for m, gm in zip(masks, grams, strict=True)]
+    fine_parts = [
+        lag_sums(Ym, tau, k[m], fine, gm) for Ym, m, gm in zip(halves, masks, grams, strict=True)
+    ]
     fine_curve = _both(fine_parts, None, None)
     v = vertex(fine_curve)
     common = None if v is None else float(fine[0] + v)
@@ -69,16 +75,19 @@ def _columns(robot, proc, k: np.ndarray, eps: float) -> np.ndarray:
     """The regressor rows ``k`` with per-joint friction and offset columns, each column
     scaled to unit norm (zero columns dropped), shape (N', nv, c)."""
     nv = robot.nv
-    Y = regressor(robot, proc.q[k], proc.dq[k], proc.ddq[k])  # (N', nv, p)
-    F = np.zeros((k.size, nv, 3 * nv))
+    R = regressor(robot, proc.q[k], proc.dq[k], proc.ddq[k])  # (N', nv, p)
+    p = R.shape[2]
+    Y = np.zeros((k.size, nv, p + 3 * nv))  # filled in place: one copy at a time
+    Y[:, :, :p] = R
+    del R
     for j in range(nv):
         dq = proc.dq[k, j]
-        F[:, j, 3 * j : 3 * j + 3] = np.column_stack(
+        Y[:, j, p + 3 * j : p + 3 * j + 3] = np.column_stack(
             [dq, np.where(np.abs(dq) >= eps, np.sign(dq), 0.0), np.ones(k.size)]
         )
-    Y = np.concatenate([Y, F], axis=2)
     norm = np.sqrt(np.einsum("njc,njc->c", Y, Y))
-    return np.ascontiguousarray(Y[:, :, norm > 0] / norm[norm > 0])
+    keep = norm > 0
+    return np.ascontiguousarray(Y[:, :, keep] / norm[keep])
 
 
 def _both(parts, j: int | None, at: np.ndarray | None) -> np.ndarray:
