@@ -36,14 +36,15 @@ def stream_lags(robot, proc, eps: float, max_lag: int, gains: np.ndarray):
         return None, 0.0, [None] * nv
     k = np.arange(max_lag, n - max_lag)
     k = k[:: max(1, k.size // LAG_ROWS)]
-    Y = _columns(robot, proc, k, eps)
     half = (np.arange(k.size) // LAG_BLOCK) % 2 == 0
+    n0 = int(half.sum())
+    # the rows of the first half, then the second: each half a contiguous view
+    Y = _columns(robot, proc, np.concatenate([k[half], k[~half]]), eps)
     tau = proc.tau / gains  # currents and flipped signs undone: one model fits all joints
     g = max(1, max_lag // COARSE)
     coarse = np.arange(-(max_lag // g), max_lag // g + 1) * g  # holds lag 0
     masks = (half, ~half)
-    halves = [Y[m] for m in masks]
-    del Y
+    halves = [Y[:n0], Y[n0:]]
     grams = [gram(Ym) for Ym in halves]
     parts = [
         lag_sums(Ym, tau, k[m], coarse, gm) for Ym, m, gm in zip(halves, masks, grams, strict=True)
@@ -69,17 +70,25 @@ def stream_lags(robot, proc, eps: float, max_lag: int, gains: np.ndarray):
 
 #: Lags on each side of zero in the coarse sweep of the delay search.
 COARSE = 20
+#: Rows per call of the regressor in the delay search's columns.
+COLUMN_BLOCK = 2000
 
 
 def _columns(robot, proc, k: np.ndarray, eps: float) -> np.ndarray:
     """The regressor rows ``k`` with per-joint friction and offset columns, each column
-    scaled to unit norm (zero columns dropped), shape (N', nv, c)."""
+    scaled to unit norm (zero columns dropped), shape (N', nv, c). The regressor is
+    evaluated in blocks of :data:`COLUMN_BLOCK` rows written into one array."""
     nv = robot.nv
-    R = regressor(robot, proc.q[k], proc.dq[k], proc.ddq[k])  # (N', nv, p)
-    p = R.shape[2]
-    Y = np.zeros((k.size, nv, p + 3 * nv))  # filled in place: one copy at a time
-    Y[:, :, :p] = R
-    del R
+    Y = None
+    for s in range(0, k.size, COLUMN_BLOCK):
+        b = k[s : s + COLUMN_BLOCK]
+        R = regressor(robot, proc.q[b], proc.dq[b], proc.ddq[b])  # (rows, nv, p)
+        if Y is None:
+            Y = np.zeros((k.size, nv, R.shape[2] + 3 * nv))
+        Y[s : s + b.size, :, : R.shape[2]] = R
+    if Y is None:
+        return np.zeros((0, nv, 0))
+    p = Y.shape[2] - 3 * nv
     for j in range(nv):
         dq = proc.dq[k, j]
         Y[:, j, p + 3 * j : p + 3 * j + 3] = np.column_stack(
@@ -87,7 +96,10 @@ def _columns(robot, proc, k: np.ndarray, eps: float) -> np.ndarray:
         )
     norm = np.sqrt(np.einsum("njc,njc->c", Y, Y))
     keep = norm > 0
-    return np.ascontiguousarray(Y[:, :, keep] / norm[keep])
+    out = np.compress(keep, Y, axis=2)  # the one copy (C-contiguous)
+    del Y
+    out /= norm[keep]
+    return out
 
 
 def _both(parts, j: int | None, at: np.ndarray | None) -> np.ndarray:
