@@ -77,29 +77,35 @@ COLUMN_BLOCK = 2000
 def _columns(robot, proc, k: np.ndarray, eps: float) -> np.ndarray:
     """The regressor rows ``k`` with per-joint friction and offset columns, each column
     scaled to unit norm (zero columns dropped), shape (N', nv, c). The regressor is
-    evaluated in blocks of :data:`COLUMN_BLOCK` rows written into one array."""
+    evaluated in blocks of :data:`COLUMN_BLOCK` rows twice, for the column norms and
+    then into the one array returned (the rows' full regressor is never held twice)."""
     nv = robot.nv
-    Y = None
-    for s in range(0, k.size, COLUMN_BLOCK):
-        b = k[s : s + COLUMN_BLOCK]
-        R = regressor(robot, proc.q[b], proc.dq[b], proc.ddq[b])  # (rows, nv, p)
-        if Y is None:
-            Y = np.zeros((k.size, nv, R.shape[2] + 3 * nv))
-        Y[s : s + b.size, :, : R.shape[2]] = R
-    if Y is None:
-        return np.zeros((0, nv, 0))
-    p = Y.shape[2] - 3 * nv
+    F = np.zeros((k.size, nv, 3 * nv))
     for j in range(nv):
         dq = proc.dq[k, j]
-        Y[:, j, p + 3 * j : p + 3 * j + 3] = np.column_stack(
+        F[:, j, 3 * j : 3 * j + 3] = np.column_stack(
             [dq, np.where(np.abs(dq) >= eps, np.sign(dq), 0.0), np.ones(k.size)]
         )
-    norm = np.sqrt(np.einsum("njc,njc->c", Y, Y))
+    blocks = [k[s : s + COLUMN_BLOCK] for s in range(0, k.size, COLUMN_BLOCK)]
+    sq = sum(np.einsum("njc,njc->c", R, R) for R in _blocks(robot, proc, blocks))
+    norm = np.sqrt(np.concatenate([sq, np.einsum("njc,njc->c", F, F)]))
     keep = norm > 0
-    out = np.compress(keep, Y, axis=2)  # the one copy (C-contiguous)
-    del Y
+    p = norm.size - 3 * nv
+    cols = np.flatnonzero(keep[:p])
+    out = np.empty((k.size, nv, int(keep.sum())))
+    s = 0
+    for R in _blocks(robot, proc, blocks):
+        out[s : s + R.shape[0], :, : cols.size] = R[:, :, cols]
+        s += R.shape[0]
+    out[:, :, cols.size :] = F[:, :, keep[p:]]
     out /= norm[keep]
     return out
+
+
+def _blocks(robot, proc, blocks):
+    """The regressor of each block of rows, shape (rows, nv, p) each."""
+    for b in blocks:
+        yield regressor(robot, proc.q[b], proc.dq[b], proc.ddq[b])
 
 
 def _both(parts, j: int | None, at: np.ndarray | None) -> np.ndarray:

@@ -96,16 +96,18 @@ def read_pass(rows, layout, joint_names, eps: float) -> AuditRows:
             while held and held[0][0] + next(iter(held[0][1].values())).shape[0] <= bound:
                 held.pop(0)
     t = np.concatenate(ts) if ts else np.empty(0)
-    q = np.concatenate(qs) if qs else np.empty((0, layout.nq))
     start = (n - FIT_ROWS) // 2 if n > FIT_ROWS else 0
     stop = min(n, start + FIT_ROWS)
-    fields = {}
+    fields, parts = {}, []
     for m in ("dq", "tau", "ddq"):
         parts = [v[m][max(0, start - s) : max(0, stop - s)] for s, v in held if m in v]
         if parts:
             fields[m] = np.concatenate(parts, axis=0)
+    del held, parts  # before the positions are joined: the peak is about two copies of q
     if "dq" not in fields:
         fields = {m: np.empty((0, layout.nv)) for m in ("dq", "tau")}
+    q = np.concatenate(qs) if qs else np.empty((0, layout.nq))
+    del qs
     central = Dataset(
         t=t[start:stop],
         q=q[start:stop],
