@@ -36,19 +36,26 @@ def stream_lags(robot, proc, eps: float, max_lag: int, gains: np.ndarray):
         return None, 0.0, [None] * nv
     k = np.arange(max_lag, n - max_lag)
     k = k[:: max(1, k.size // LAG_ROWS)]
-    Y = _columns(robot, proc, k, eps)
     half = (np.arange(k.size) // LAG_BLOCK) % 2 == 0
+    n0 = int(half.sum())
+    # the rows of the first half, then the second: each half a contiguous view
+    Y = _columns(robot, proc, np.concatenate([k[half], k[~half]]), eps)
     tau = proc.tau / gains  # currents and flipped signs undone: one model fits all joints
     g = max(1, max_lag // COARSE)
     coarse = np.arange(-(max_lag // g), max_lag // g + 1) * g  # holds lag 0
     masks = (half, ~half)
-    grams = [gram(Y[m]) for m in masks]
-    parts = [lag_sums(Y[m], tau, k[m], coarse, gm) for m, gm in zip(masks, grams, strict=True)]
+    halves = [Y[:n0], Y[n0:]]
+    grams = [gram(Ym) for Ym in halves]
+    parts = [
+        lag_sums(Ym, tau, k[m], coarse, gm) for Ym, m, gm in zip(halves, masks, grams, strict=True)
+    ]
     curve = _both(parts, None, None)  # the held-out SSE of all joints
     zero = float(curve[coarse.size // 2])
     best = int(coarse[int(np.argmin(curve))])
     fine = np.arange(max(best - g, -max_lag), min(best + g, max_lag) + 1)
-    fine_parts = [lag_sums(Y[m], tau, k[m], fine, gm) for m, gm in zip(masks, grams, strict=True)]
+    fine_parts = [
+        lag_sums(Ym, tau, k[m], fine, gm) for Ym, m, gm in zip(halves, masks, grams, strict=True)
+    ]
     fine_curve = _both(fine_parts, None, None)
     v = vertex(fine_curve)
     common = None if v is None else float(fine[0] + v)
@@ -63,22 +70,42 @@ def stream_lags(robot, proc, eps: float, max_lag: int, gains: np.ndarray):
 
 #: Lags on each side of zero in the coarse sweep of the delay search.
 COARSE = 20
+#: Rows per call of the regressor in the delay search's columns.
+COLUMN_BLOCK = 2000
 
 
 def _columns(robot, proc, k: np.ndarray, eps: float) -> np.ndarray:
     """The regressor rows ``k`` with per-joint friction and offset columns, each column
-    scaled to unit norm (zero columns dropped), shape (N', nv, c)."""
+    scaled to unit norm (zero columns dropped), shape (N', nv, c). The regressor is
+    evaluated in blocks of :data:`COLUMN_BLOCK` rows twice, for the column norms and
+    then into the one array returned (the rows' full regressor is never held twice)."""
     nv = robot.nv
-    Y = regressor(robot, proc.q[k], proc.dq[k], proc.ddq[k])  # (N', nv, p)
     F = np.zeros((k.size, nv, 3 * nv))
     for j in range(nv):
         dq = proc.dq[k, j]
         F[:, j, 3 * j : 3 * j + 3] = np.column_stack(
             [dq, np.where(np.abs(dq) >= eps, np.sign(dq), 0.0), np.ones(k.size)]
         )
-    Y = np.concatenate([Y, F], axis=2)
-    norm = np.sqrt(np.einsum("njc,njc->c", Y, Y))
-    return np.ascontiguousarray(Y[:, :, norm > 0] / norm[norm > 0])
+    blocks = [k[s : s + COLUMN_BLOCK] for s in range(0, k.size, COLUMN_BLOCK)]
+    sq = sum(np.einsum("njc,njc->c", R, R) for R in _blocks(robot, proc, blocks))
+    norm = np.sqrt(np.concatenate([sq, np.einsum("njc,njc->c", F, F)]))
+    keep = norm > 0
+    p = norm.size - 3 * nv
+    cols = np.flatnonzero(keep[:p])
+    out = np.empty((k.size, nv, int(keep.sum())))
+    s = 0
+    for R in _blocks(robot, proc, blocks):
+        out[s : s + R.shape[0], :, : cols.size] = R[:, :, cols]
+        s += R.shape[0]
+    out[:, :, cols.size :] = F[:, :, keep[p:]]
+    out /= norm[keep]
+    return out
+
+
+def _blocks(robot, proc, blocks):
+    """The regressor of each block of rows, shape (rows, nv, p) each."""
+    for b in blocks:
+        yield regressor(robot, proc.q[b], proc.dq[b], proc.ddq[b])
 
 
 def _both(parts, j: int | None, at: np.ndarray | None) -> np.ndarray:

@@ -2,37 +2,30 @@
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 
 from ..datasets import FileSpec, RowCounts, Window, iter_rows, open_source, parse_file_spec
 from ..datasets.adjust import check_rate
 from ..datasets.quality import STANDSTILL, encoder_resolution, static_span
-from ..datasets.stream import collect, torque_scale_vector
+from ..datasets.stream import torque_scale_vector
 from ..errors import DataError, InputError
 from ..robot import Robot
 from ..signals import DEFAULT_CUTOFF, preprocess
 from .delay import stream_lags
 from .findings import position_findings, torque_findings
 from .fits import fit_joint, nominal_torque
+from .reading import AuditRows, read_pass
 from .report import Audit, AuditOptions, FileAudit, JointAudit
 
 #: Rest at a file's start or end longer than this [s] is reported (``--trim-standstill``).
 EDGE_REST = 1.0
 #: A joint at rest on more than this share of the rows is reported.
 REST_SHARE = 0.5
-#: Rows of the torque fits (scale, offset, delay): a longer moving file is fitted on its
-#: central rows. These are constants of the setup along a log, and the fits' cost
-#: (filtering, ``rnea`` per row, robust fits, the delay search) grows with the rows: on
-#: 10^6 rows of a simulated ur10 log (experiments/bench_identify.py --user) all rows took
-#: 10 s and 0.6 GB, 2e5 rows 2.6 s, 5e4 rows 0.8 s, with the same findings (none), the
-#: scales within 3e-4 of each other and the delays within one sample.
-FIT_ROWS = 50_000
 
 
-def _read(robot: Robot, spec: FileSpec, options: AuditOptions):
-    """``(dataset, counts, rate)`` of the rows a fit sees; refuses an implausible rate."""
+def _read(robot: Robot, spec: FileSpec, options: AuditOptions, eps: float):
+    """``(rows, counts, rate)`` of the rows a fit sees (:class:`AuditRows`); refuses an
+    implausible rate."""
     try:
         src = open_source(spec, joint_names=list(robot.dof_names))
     except DataError as exc:
@@ -61,14 +54,12 @@ def _read(robot: Robot, spec: FileSpec, options: AuditOptions):
         counts=counts,
     )
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # degrees: a finding of the audit
-            ds = collect(rows, lay, src.joint_names)
+        ds = read_pass(rows, lay, src.joint_names, eps)
     except DataError as exc:
         msg = str(exc)
         raise DataError(msg if str(spec.path) in msg else f"{spec.label}: {msg}") from exc
     step = float(np.median(np.diff(ds.t)))
-    return ds, counts, check_rate(step, spec.label, spec.time_unit), src
+    return ds, counts, check_rate(step, spec.label, spec.time_unit)
 
 
 def audit_file(robot: Robot, spec, options: AuditOptions | None = None) -> FileAudit:
@@ -87,10 +78,10 @@ def audit_file(robot: Robot, spec, options: AuditOptions | None = None) -> FileA
     """
     spec = parse_file_spec(spec)
     options = options or AuditOptions()
-    ds, counts, rate, src = _read(robot, spec, options)
     eps = STANDSTILL if options.standstill is None else float(options.standstill)
+    ds, counts, rate = _read(robot, spec, options, eps)
     joints = list(robot.dof_names)
-    still = np.abs(ds.dq) < eps  # (N, nv)
+    still = ds.still  # (nv,) shares of the rows at rest
     res = encoder_resolution(ds.q)
     static = bool(np.all(ds.q.max(axis=0) - ds.q.min(axis=0) <= static_span(res)))
     findings: list[str] = []
@@ -108,7 +99,7 @@ def audit_file(robot: Robot, spec, options: AuditOptions | None = None) -> FileA
         audits = _static_fits(robot, ds, still)
         rest, kept = (0.0, 0.0), None
     else:
-        audits, gain = _motion_fits(robot, ds, still, eps, options, findings)
+        audits, gain = _motion_fits(robot, ds.central, still, eps, options, findings)
         rest, kept = _edges(ds, still, spec, counts)
         if max(rest) > EDGE_REST:
             findings.append(
@@ -118,9 +109,8 @@ def audit_file(robot: Robot, spec, options: AuditOptions | None = None) -> FileA
             suggestions["trim_standstill"] = True
         else:
             kept = None
-        share = still.mean(axis=0)
-        for j in np.flatnonzero(share > REST_SHARE):
-            findings.append(f"joint {joints[j]} at rest on {100 * share[j]:.0f} % of the rows")
+        for j in np.flatnonzero(still > REST_SHARE):
+            findings.append(f"joint {joints[j]} at rest on {100 * still[j]:.0f} % of the rows")
     findings += torque_findings(audits, 1.0 / rate, gain, suggestions, options.currents)
     return FileAudit(
         spec=spec,
@@ -151,12 +141,11 @@ def audit_files(robot: Robot, files, options: AuditOptions | None = None, *, win
 
 
 # ---------------------------------------------------------------- motion
-def _edges(ds, still: np.ndarray, spec: FileSpec, counts: RowCounts):
+def _edges(ds: AuditRows, still: np.ndarray, spec: FileSpec, counts: RowCounts):
     """``((rest_start, rest_end) [s], kept window)`` from the rows where some joint moves."""
-    moving = np.flatnonzero(~still.all(axis=1))
-    if not moving.size:
+    if ds.moving is None:
         return (ds.duration, ds.duration), None
-    a, b = int(moving[0]), int(moving[-1])
+    a, b = ds.moving
     rest = (float(ds.t[a] - ds.t[0]), float(ds.t[-1] - ds.t[b]))
     w = spec.window
     if w is not None and w.unit == "index":
@@ -175,11 +164,8 @@ def _edges(ds, still: np.ndarray, spec: FileSpec, counts: RowCounts):
 def _motion_fits(robot, ds, still, eps: float, options: AuditOptions, findings: list[str]):
     """``(joints, delay_gain)`` of a moving file: per joint :class:`JointAudit`, and the
     share of the held-out error the file's delay removes (None: not searched). The fits
-    use the central :data:`FIT_ROWS` rows of a longer file (the standstill shares
-    ``still`` all rows)."""
-    if ds.n_samples > FIT_ROWS:
-        start = (ds.n_samples - FIT_ROWS) // 2
-        ds = ds.slice(start, start + FIT_ROWS)
+    use ``ds``, the central :data:`FIT_ROWS` rows of a longer file (the standstill
+    shares ``still`` all rows)."""
     proc = ds
     if ds.ddq is None:
         cutoff = DEFAULT_CUTOFF if options.cutoff is None else options.cutoff
@@ -215,16 +201,12 @@ def _motion_fits(robot, ds, still, eps: float, options: AuditOptions, findings: 
 
 def _joint(robot, j: int, still: np.ndarray, **fields) -> JointAudit:
     base = {"scale": None, "delay": None, "offset": None, "explained": None, "own_delay": None}
-    return JointAudit(
-        robot.dof_names[j], standstill=float(still[:, j].mean()), **{**base, **fields}
-    )
+    return JointAudit(robot.dof_names[j], standstill=float(still[j]), **{**base, **fields})
 
 
-def _static_fits(robot, ds, still) -> list[JointAudit]:
+def _static_fits(robot, ds: AuditRows, still) -> list[JointAudit]:
     """The joints of a static file: the gravity torque alone cannot tell a scale from an
     offset, so the scale is left undetermined and the offset is the mean of ``tau - g(q)``."""
-    nom = nominal_torque(robot, ds.q, np.zeros_like(ds.dq), np.zeros_like(ds.dq))
-    return [
-        _joint(robot, j, still, offset=float(np.mean(ds.tau[:, j] - nom[:, j])))
-        for j in range(ds.nv)
-    ]
+    zero = np.zeros((ds.n_samples, robot.nv))
+    g = nominal_torque(robot, ds.q, zero, zero).mean(axis=0)
+    return [_joint(robot, j, still, offset=float(ds.tau_mean[j] - g[j])) for j in range(robot.nv)]
