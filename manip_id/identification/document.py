@@ -557,7 +557,9 @@ def verdict_text(doc: dict) -> str:
     if consistent is not None:
         text += ", physically consistent" if consistent else ", NOT physically consistent"
     n = len(doc.get("warnings") or [])
-    return text + (f", {n} warning(s) above" if n else ", no warnings")
+    return text + (
+        f", {n} warning(s) on the result (above)" if n else ", no warnings on the result"
+    )
 
 
 def _white_covariance(result) -> dict:
