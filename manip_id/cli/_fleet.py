@@ -19,13 +19,13 @@ from types import SimpleNamespace
 from ..fleet import identify_files
 from ..identification import ModelOptions, PartitionOptions, RunOptions
 from ..signals import DEFAULT_CUTOFF
-from ..viz.identify_report import write_fleet_report
 from ..viz.report_document import RunContext, add_file_info, result_document
 from ._common import (
     data_column_map,
     exports_wanted,
     file_specs,
     finish,
+    identify_report,
     note_window,
     print_warnings,
     profile_from_args,
@@ -133,7 +133,7 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     path = None
     if args.report is not None:
         options = report_options(args, f"{len(specs)} files")
-        path = write_fleet_report(
+        path = identify_report("write_fleet_report")(
             args.report_claim, robot, result, report, options=options, per_file=args.per_file
         )
     if exports_wanted(args):

@@ -19,9 +19,16 @@ from ..export import export_texts, mjcf_text, sidecar_path
 from ..export.sidecar import identification_provenance
 from ..identification import ConsistentOptions, PreprocessOptions, result_text, verdict_text
 from ..robot import Robot, load_robot
-from ..viz.identify_report import write_identify_report
 from ..viz.report_document import ReportOptions
-from ._common import exports_wanted, finish, parse_floats, print_warnings, profile_option, warn
+from ._common import (
+    exports_wanted,
+    finish,
+    identify_report,
+    parse_floats,
+    print_warnings,
+    profile_option,
+    warn,
+)
 
 
 def robot_from_args(args: argparse.Namespace) -> Robot:
@@ -199,7 +206,7 @@ def write_outputs(args: argparse.Namespace, outputs, robot, result, report: dict
         outputs.write_json(args.json, report)
     path = None
     if args.report is not None:
-        path = write_identify_report(
+        path = identify_report("write_identify_report")(
             args.report_claim, robot, result, report, samples, options=report_options(args)
         )
     if exports_wanted(args):
