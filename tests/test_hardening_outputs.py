@@ -322,3 +322,24 @@ def test_symlinked_report_leaves_nothing_in_its_target(work, capfd):
     assert sorted(p.name for p in (work / "target").iterdir()) == before
     assert os.readlink(work / "rep") == "target"
     assert not [p for p in os.listdir(work) if ".old-" in p or ".tmp" in p]
+
+
+def test_resource_tracker_note_silenced(monkeypatch, capfd):
+    """multiprocessing's "resource_tracker: process died unexpectedly" (seen when a local
+    cluster's tracker was stopped with it) is not one of ours: no line without --debug,
+    while a warning of the package itself is still printed."""
+    import warnings
+
+    import manip_id.cli._robots as robots_run
+
+    def noisy(args):
+        warnings.warn("resource_tracker: process died unexpectedly, relaunching.", stacklevel=1)
+        warnings.warn("a warning of the package", stacklevel=1)
+        return 0
+
+    monkeypatch.setattr(robots_run, "run", noisy)
+    capfd.readouterr()
+    assert main(["robots"]) == 0
+    assert error_lines(capfd.readouterr().err) == ["manip-id: warning: a warning of the package"]
+    assert main(["robots", "--debug"]) == 0
+    assert any("resource_tracker" in line for line in error_lines(capfd.readouterr().err))

@@ -220,6 +220,9 @@ def main(argv: list[str] | None = None) -> int:
         warnings.filterwarnings("ignore", category=DeprecationWarning)
         warnings.filterwarnings("ignore", category=PendingDeprecationWarning)
         warnings.filterwarnings("ignore", category=ResourceWarning)  # libraries' leaks
+        if not debug:  # multiprocessing's note when a worker cluster's resource tracker
+            # was stopped with it: the library's bookkeeping, nothing the user acts on
+            warnings.filterwarnings("ignore", message="resource_tracker: process died")
         warnings.showwarning = _WarningPrinter()
         try:
             parser = build_parser()
