@@ -72,3 +72,17 @@ def test_scene_rejects_trajectories_that_do_not_fit():
         RobotScene(robot).animate(t, q)
     with pytest.raises(InputError):
         RobotScene(robot).animate(t[::-1], np.zeros((5, 6)))
+
+
+def test_grouped_terms_note_only_for_a_set_estimated_from_data():
+    """The Panda's nominal link 1 is a rod 1.68 m long (its URDF's inertia): drawn as a
+    given set ("true") the note says so; only a set estimated from data adds that the
+    data fix only grouped terms."""
+    panda = get_robot("panda")
+    scene = RobotScene(panda)
+    given = scene.add_inertia(panda.nominal_parameters, label="true")
+    estimate = scene.add_inertia(panda.nominal_parameters, label="estimate", estimated=True)
+    rods = [n for n in given if "panda_joint1's ellipsoid is a rod" in n]
+    assert len(rods) == 1 and "grouped terms" not in rods[0]
+    assert not any("grouped terms" in n for n in given)
+    assert any("panda_joint1" in n and "rod" in n and "grouped terms" in n for n in estimate)

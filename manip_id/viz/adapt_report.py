@@ -67,7 +67,7 @@ def write_adapt_report(
     except InfeasibleTrajectoryError as exc:
         notes.append(f"scene not animated: {exc}")
     scene.add_inertia(a.theta_true, label="true")
-    scene.add_inertia(a.theta_hat[-1], label="final_estimate")
+    scene.add_inertia(a.theta_hat[-1], label="final_estimate", estimated=True)
     notes += list(scene.notes)
     rows = [
         {"parameter": n, "unit": u, "true": t, "initial": s0, "final": s1}

@@ -42,7 +42,12 @@ def build_scene(robot, result, full, title: str, notes: list, assets: str = "inl
         scene.add_inertia(robot.nominal_parameters, label="nominal")
         if result.standard is not None and result.standard.solver:  # --consistent
             # the estimate the user asked for: shown at first (the nominal set may be hidden)
-            scene.add_inertia(result.standard.values, label="identified (consistent)", visible=True)
+            scene.add_inertia(
+                result.standard.values,
+                label="identified (consistent)",
+                visible=True,
+                estimated=True,
+            )
         ind = result.base.independent
         flags = np.zeros(robot.n_parameters, dtype=bool)
         flags[ind] = True

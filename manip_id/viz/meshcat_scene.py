@@ -392,6 +392,7 @@ class RobotScene:
         visible: bool | None = None,
         wireframe: bool | None = None,
         bodies=None,
+        estimated: bool = False,
     ) -> list[str]:
         """Draw the equivalent inertia ellipsoid of each body of ``theta`` (shape (p,)).
 
@@ -404,6 +405,9 @@ class RobotScene:
         first set a dark wire frame, the others solid translucent blue, purple, teal).
         bodies: names of the joints whose bodies are drawn (default: every body), e.g.
         the one carrying a payload.
+        estimated: the set was estimated from data (not a given model such as the nominal
+        or the true one): a degenerate ellipsoid is then explained by the data fixing
+        only grouped terms of the body's inertia.
         """
         if not isinstance(label, str) or not label or "/" in label:
             raise InputError(f"label must be a non-empty name without '/', got {label!r}")
@@ -438,9 +442,9 @@ class RobotScene:
                         f"{label}: {ell.joint}'s ellipsoid is {shape} "
                         f"({2 * float(np.max(radii)):.2f} m across)"
                         + (
-                            ""
-                            if label == "nominal"
-                            else ": the data fix only grouped terms of this body's inertia"
+                            ": the data fix only grouped terms of this body's inertia"
+                            if estimated
+                            else ""
                         )
                     )
             elif ell.note:

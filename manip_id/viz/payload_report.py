@@ -200,7 +200,9 @@ def payload_scene(robot, doc: Mapping, title: str, notes: list):
         theta = np.zeros(robot.n_parameters)
         theta[pf.columns] = pf.transform @ phi  # the payload about its joint's origin
         scene = RobotScene(robot, title=title)
-        scene.add_inertia(theta, label="payload", bodies=[pf.joint_name], visible=True)
+        scene.add_inertia(
+            theta, label="payload", bodies=[pf.joint_name], visible=True, estimated=True
+        )
     except (TypeError, ValueError, KeyError) as exc:  # a value the data do not fix
         notes.append(f"3-D scene not drawn: the payload is not fully determined ({exc})")
         return None
