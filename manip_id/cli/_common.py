@@ -461,6 +461,19 @@ def prepare(ds, args: argparse.Namespace, what: str):
         raise InputError(f"{what}: {exc}") from exc
 
 
+def check_preprocess_args(args: argparse.Namespace) -> None:
+    """The checks of the preprocessing and streaming options (``--cutoff``, ``--trim``,
+    ``--decimate``, ``--chunk``) that need no data."""
+    if args.cutoff is not None and not (math.isfinite(args.cutoff) and args.cutoff > 0):
+        raise InputError(f"--cutoff must be a positive frequency [Hz], got {args.cutoff}")
+    if args.trim is not None and not (math.isfinite(args.trim) and args.trim >= 0):
+        raise InputError(f"--trim must be >= 0 seconds, got {args.trim}")
+    if args.decimate < 1:
+        raise InputError(f"--decimate must be >= 1, got {args.decimate}")
+    if args.chunk < 1:
+        raise InputError(f"--chunk must be >= 1, got {args.chunk}")
+
+
 def identify_report(name: str):
     """The function ``name`` (``write_identify_report``, ``write_fleet_report``) of
     :mod:`manip_id.viz.identify_report`, imported only when a report is written: that

@@ -19,7 +19,14 @@ from ..estimators.consistent.bounds import bound_options
 from ..export import check_output, sidecar_path
 from ..payload import load_torque_scale
 from . import _acceleration_free, _files, _fleet, _simulated
-from ._common import FLEET_METHODS, explicit_workers, fleet_wanted, parse_floats, reserve_outputs
+from ._common import (
+    FLEET_METHODS,
+    check_preprocess_args,
+    explicit_workers,
+    fleet_wanted,
+    parse_floats,
+    reserve_outputs,
+)
 from ._runtime import check_scheduler, robot_from_args
 
 
@@ -40,14 +47,7 @@ def _check_args(args) -> None:
         raise InputError("--column applies to CSV data files (--data, --validate) only")
     if args.split is not None and not 0.0 < args.split < 1.0:
         raise InputError(f"--split must be a fraction in (0, 1), got {args.split}")
-    if args.cutoff is not None and not (math.isfinite(args.cutoff) and args.cutoff > 0):
-        raise InputError(f"--cutoff must be a positive frequency [Hz], got {args.cutoff}")
-    if args.trim is not None and not (math.isfinite(args.trim) and args.trim >= 0):
-        raise InputError(f"--trim must be >= 0 seconds, got {args.trim}")
-    if args.decimate < 1:
-        raise InputError(f"--decimate must be >= 1, got {args.decimate}")
-    if args.chunk < 1:
-        raise InputError(f"--chunk must be >= 1, got {args.chunk}")
+    check_preprocess_args(args)
     for name in ("poorly_identified", "condition_limit"):
         value = getattr(args, name, None)
         if value is not None and not (math.isfinite(value) and value > 0):

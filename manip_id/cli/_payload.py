@@ -21,6 +21,7 @@ from ..identification import PreprocessOptions, iter_processed, scan_file
 from ..payload import identify_payload, load_known_base
 from ..viz.payload_report import write_payload_report
 from ._common import (
+    check_preprocess_args,
     column_map,
     parse_floats,
     print_warnings,
@@ -33,16 +34,9 @@ from ._runtime import before_fit, check_frame, check_scheduler, robot_from_args
 # ------------------------------------------------------------------ reading
 def check_run_args(args) -> None:
     """Option checks that need no data."""
-    if args.cutoff is not None and not (math.isfinite(args.cutoff) and args.cutoff > 0):
-        raise InputError(f"--cutoff must be a positive frequency [Hz], got {args.cutoff}")
-    if args.trim is not None and not (math.isfinite(args.trim) and args.trim >= 0):
-        raise InputError(f"--trim must be >= 0 seconds, got {args.trim}")
-    if args.decimate < 1:
-        raise InputError(f"--decimate must be >= 1, got {args.decimate}")
+    check_preprocess_args(args)
     if args.order < 1:
         raise InputError(f"--order must be >= 1, got {args.order}")
-    if args.chunk < 1:
-        raise InputError(f"--chunk must be >= 1, got {args.chunk}")
     d = args.velocity_deadband
     if d is not None and not (math.isfinite(d) and d >= 0):
         raise InputError(f"--velocity-deadband must be >= 0 [rad/s], got {d}")
