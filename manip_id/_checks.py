@@ -99,6 +99,7 @@ MEASURED_LIMITS: dict[str, tuple[str, float]] = {
     "dq": ("rad/s or m/s", 1e4),
     "ddq": ("rad/s^2 or m/s^2", 1e7),
     "tau": ("N m or N", 1e6),
+    "temp": ("degC or K", 1e4),
 }
 #: Below this, every value of a field is "all tiny": squares underflow double precision.
 TINY = 1e-150

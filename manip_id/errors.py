@@ -71,6 +71,34 @@ class DataError(ManipIdError):
     """A dataset file is missing, malformed or inconsistent with the robot."""
 
 
+class MissingTemperatureError(DataError):
+    """The ``temperature`` friction law was asked for, but the data carry no temperature.
+
+    Attributes
+    ----------
+    source : str
+        The file (or ``"the arrays"``) without a temperature.
+    format : str
+        Its format (``"csv"``, ``"npz"``, ``"rosbag"``, ...).
+    fields : tuple of str
+        The fields it does hold (``t``, ``q``, ``dq``, ``tau``, ...).
+    """
+
+    def __init__(self, source: str, format: str, fields: Sequence[str]):
+        self.source, self.format, self.fields = str(source), str(format), tuple(fields)
+        how = {
+            "csv": "map its column(s) with --column temp=COLUMN (one per joint, or one for "
+            "every joint; columns=... in the API)",
+            "npz": "save a temp array of shape (N, nv), or (N,) for every joint",
+            "rosbag": "a ROS 2 JointState bag carries no temperature: convert it to NPZ or "
+            "CSV with a temp field",
+        }.get(self.format, "give temp=... (shape (N, nv) or (N, 1))")
+        super().__init__(
+            f"the temperature friction law needs the measured temperature, but {self.source} "
+            f"({self.format}) has no temp field (it holds {', '.join(self.fields)}): {how}"
+        )
+
+
 class InfeasibleTrajectoryError(ManipIdError):
     """A trajectory leaves the joint limits.
 

@@ -13,6 +13,8 @@ enters the regressor as columns of joint ``j``'s row (``dq = dq_j``, ``q = q_j``
     sigmoid       fsg (S(a (dq + c)) - S(a c)),  S(x) = 1/(1 + e^-x)  fsg [N m]
     position      sum_k hks sin(k q) + hkc cos(k q),  k = 1..K      hks, hkc [N m]
     load          fl |tau_load| sign(dq)                             fl [1]
+    temperature   fvt (T - T0) dq + fct (T - T0) sign(dq)            fvt [N m s/(rad K)]
+                                                                     fct [N m/K]
 
 (prismatic joints: N, N s/m). ``asymmetric`` replaces ``viscous`` and ``coulomb``; with
 ``offset`` its Coulomb pair is ``coulomb`` + ``offset`` (torque ``fc + fo`` for dq > 0
@@ -27,8 +29,17 @@ inertias), a known signal, so the law stays linear in ``fl``. It needs the measu
 acceleration: the dynamic model only (not the Slotine-Li regressor, the energy and
 momentum models or the closed-loop plant, which refuse it).
 
+``temperature`` makes the viscous and Coulomb coefficients linear in the joint's measured
+temperature ``T`` (degC or K: only differences enter): ``fv(T) = fv + fvt (T - T0)`` and
+``fc(T) = fc + fct (T - T0)``, so it adds the columns ``(T - T0) dq`` and ``(T - T0)
+sign(dq)`` to ``viscous`` and ``coulomb``. ``T`` is a measured signal (a ``temp`` field of
+the data: one column per DoF, or one broadcast to every DoF); the reference ``T0`` is a
+shape, fixed before the solve: by default the training data's mean temperature per DoF,
+from the sums of :class:`TemperatureStats` (so every path that adds sums agrees).
+
 Shapes (:class:`FrictionShapes`): the Stribeck velocity ``vs`` [rad/s], the sigmoid
-slope ``a`` [s/rad] and shift ``c`` [rad/s], per DoF. They are fixed when the linear
+slope ``a`` [s/rad] and shift ``c`` [rad/s], the reference temperature ``T0`` [degC or
+K], per DoF. They are fixed when the linear
 solve runs; :mod:`manip_id.identification.selection` chooses them by variable
 projection (a grid, each point solved from its accumulated sums, then refined).
 """
@@ -52,6 +63,7 @@ FRICTION_KINDS: tuple[str, ...] = (
     "sigmoid",
     "position",
     "load",
+    "temperature",
 )
 #: Highest harmonic order of the ``position`` law.
 MAX_HARMONICS = 4
@@ -75,19 +87,25 @@ class FrictionShapes:
         ``a`` [s/rad or s/m] per DoF (None: :data:`DEFAULT_SIGMOID_SLOPE`).
     sigmoid_shift : tuple of float or None
         ``c`` [rad/s or m/s] per DoF (None: :data:`DEFAULT_SIGMOID_SHIFT`).
+    temperature_reference : tuple of float or None
+        ``T0`` [degC or K] per DoF of the ``temperature`` law (None: 0, the raw
+        temperature; the identification sets the training data's mean).
     """
 
     stribeck_velocity: tuple[float, ...] | None = None
     sigmoid_slope: tuple[float, ...] | None = None
     sigmoid_shift: tuple[float, ...] | None = None
+    temperature_reference: tuple[float, ...] | None = None
 
     def __post_init__(self):
         for name in ("stribeck_velocity", "sigmoid_slope"):
             v = getattr(self, name)
             if v is not None and not all(np.isfinite(x) and x > 0 for x in v):
                 raise InputError(f"{name} must be positive and finite per DoF, got {v}")
-        if self.sigmoid_shift is not None and not all(np.isfinite(self.sigmoid_shift)):
-            raise InputError(f"sigmoid_shift must be finite per DoF, got {self.sigmoid_shift}")
+        for name in ("sigmoid_shift", "temperature_reference"):
+            v = getattr(self, name)
+            if v is not None and not all(np.isfinite(v)):
+                raise InputError(f"{name} must be finite per DoF, got {v}")
 
     def values(self, name: str, default: float) -> np.ndarray | float:
         """The per-DoF values of field ``name`` (an array), or ``default`` when unset."""
@@ -98,7 +116,7 @@ class FrictionShapes:
         """JSON-ready fields (None for unset)."""
         return {
             k: None if getattr(self, k) is None else list(map(float, getattr(self, k)))
-            for k in ("stribeck_velocity", "sigmoid_slope", "sigmoid_shift")
+            for k in SHAPE_FIELDS
         }
 
     @classmethod
@@ -109,6 +127,13 @@ class FrictionShapes:
 
 
 NO_SHAPES = FrictionShapes()
+#: The fields of :class:`FrictionShapes`.
+SHAPE_FIELDS = (
+    "stribeck_velocity",
+    "sigmoid_slope",
+    "sigmoid_shift",
+    "temperature_reference",
+)
 
 
 def _sigmoid(x):
@@ -163,6 +188,69 @@ def sigmoid_term(angles, vel, acc, shapes=None):
 def load_column(load, vel, *_):
     """``|tau_load| sign(dq)``, shape like ``vel`` (..., nv); ``load`` [N m or N]."""
     return np.abs(load) * np.sign(vel)
+
+
+def temperature_difference(temp, vel, shapes: FrictionShapes | None) -> np.ndarray:
+    """``T - T0``, shape like ``vel`` (..., nv): ``temp`` (..., nv) or (..., 1) [degC or K]
+    broadcast to every DoF, ``T0`` the shapes' ``temperature_reference`` (None: 0)."""
+    t0 = (shapes or NO_SHAPES).values("temperature_reference", 0.0)
+    return np.broadcast_to(np.asarray(temp, dtype=float), np.shape(vel)) - t0
+
+
+def viscous_temperature(temp, vel, shapes=None):
+    """``(T - T0) dq``, shape like ``vel`` (..., nv)."""
+    return temperature_difference(temp, vel, shapes) * vel
+
+
+def coulomb_temperature(temp, vel, shapes=None):
+    """``(T - T0) sign(dq)``, shape like ``vel`` (..., nv)."""
+    return temperature_difference(temp, vel, shapes) * np.sign(vel)
+
+
+@dataclass(frozen=True)
+class TemperatureStats:
+    """Sums of a temperature signal per column: count, sum, min, max (they merge by ``+``).
+
+    Attributes
+    ----------
+    n : int
+        Samples summed.
+    total, low, high : numpy.ndarray
+        Per column sum, minimum and maximum [degC or K], shape (k,) (k = 1 or nv).
+    """
+
+    n: int
+    total: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+
+    @classmethod
+    def of(cls, temp) -> TemperatureStats:
+        """The sums of ``temp`` (N, k) [degC or K]."""
+        t = np.asarray(temp, dtype=float).reshape(np.shape(temp)[0], -1)
+        return cls(t.shape[0], t.sum(axis=0), t.min(axis=0), t.max(axis=0))
+
+    def __add__(self, other: TemperatureStats) -> TemperatureStats:
+        if self.total.shape != other.total.shape:
+            raise InputError(
+                f"temperature columns differ between data sets: {self.total.size} and "
+                f"{other.total.size}"
+            )
+        return TemperatureStats(
+            self.n + other.n,
+            self.total + other.total,
+            np.minimum(self.low, other.low),
+            np.maximum(self.high, other.high),
+        )
+
+    def per_dof(self, nv: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(mean, min, max)`` per DoF [degC or K], each (nv,) (one column broadcast)."""
+        if self.n < 1:
+            raise InputError("no temperature samples to take the reference T0 from")
+        return tuple(  # type: ignore[return-value]
+            np.broadcast_to(v, (nv,)).astype(float)
+            for v in (self.total / self.n, self.low, self.high)
+        )
 
 
 def _harmonic(angles, vel, acc, shapes=None, *, order: int, cosine: bool):
@@ -236,6 +324,8 @@ def friction_columns(spec: FrictionSpec) -> set[str]:
         out.add("fsg")
     if "load" in k:
         out.add("fl")
+    if "temperature" in k:
+        out |= {"fvt", "fct"}
     for order in range(1, spec.harmonics + 1):
         out |= {f"h{order}s", f"h{order}c"}
     return out

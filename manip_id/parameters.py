@@ -30,6 +30,7 @@ regressor column (only row ``j`` is non-zero), its units and its torque
     fsg sigmoid    S(a_j (dq_j + c_j)) - S(a_j c_j)         [N m | N]
     hks, hkc       sin(k q_j), cos(k q_j), k = 1..4         [N m | N]
     fl  load       |tau_load_j| sign(dq_j)                  [1]
+    fvt, fct       (T_j - T0_j) dq_j, (T_j - T0_j) sign(dq_j)  [N m s/(rad K) | N m/K]
 
 (the friction laws, their shapes ``vs, a, c`` and how they combine:
 :mod:`manip_id.friction`). A layout may switch terms off for some DoFs
@@ -76,30 +77,21 @@ from .friction import (
     FrictionShapes,
     coulomb_negative,
     coulomb_positive,
+    coulomb_temperature,
     harmonic_column,
     load_column,
     sigmoid_term,
     stribeck_term,
     viscous_negative,
     viscous_positive,
+    viscous_temperature,
 )
 
 if TYPE_CHECKING:  # pragma: no cover
     import pinocchio as pin
 
 #: Inertial parameter names of one body, in Pinocchio's order.
-INERTIAL_NAMES: tuple[str, ...] = (
-    "m",
-    "mcx",
-    "mcy",
-    "mcz",
-    "Ixx",
-    "Ixy",
-    "Iyy",
-    "Ixz",
-    "Iyz",
-    "Izz",
-)
+INERTIAL_NAMES: tuple[str, ...] = tuple("m mcx mcy mcz Ixx Ixy Iyy Ixz Iyz Izz".split())
 #: Units of the inertial parameters of one body, aligned with :data:`INERTIAL_NAMES`.
 INERTIAL_UNITS: tuple[str, ...] = ("kg", "kg m", "kg m", "kg m", *("kg m^2",) * 6)
 #: Number of standard inertial parameters of one body.
@@ -129,6 +121,12 @@ def _spring(angles, vel, acc, shapes=None):
     return angles
 
 
+_NEEDS = {
+    "load": "the load torque (positions, velocities and accelerations of every joint)",
+    "temp": "the measured temperature (a temp field of the data)",
+}
+
+
 @dataclass(frozen=True)
 class JointTerm:
     """One joint-level term: its regressor column, its units and its torque.
@@ -145,6 +143,9 @@ class JointTerm:
         unit of the parameter for a revolute / prismatic DoF.
     needs_angles
         whether the column uses the joint angle ``q_j``.
+    needs
+        the signal the column multiplies: ``"load"`` (the nominal rigid-body torque) or
+        ``"temp"`` (the measured temperature); None: neither.
     """
 
     name: str
@@ -154,33 +155,33 @@ class JointTerm:
     unit_prismatic: str
     needs_angles: bool
     _column: Callable[..., Any]
-    needs_load: bool = False
+    needs: str | None = None
 
     def column(
-        self, angles, vel, acc, shapes: FrictionShapes | None = None, load=None
+        self, angles, vel, acc, shapes: FrictionShapes | None = None, load=None, temp=None
     ) -> np.ndarray:
         """Regressor entries of this term, shape like ``vel`` (..., nv).
 
         ``angles``: joint angles (..., nv) [rad or m], used by ``k`` and the harmonics
         only (may be None otherwise); ``vel``: velocity [rad/s or m/s]; ``acc``:
         acceleration [rad/s^2 or m/s^2], used by ``Ia`` only; ``shapes``: the per-DoF
-        shapes of ``fs`` and ``fsg`` (None: their defaults, :mod:`manip_id.friction`);
-        ``load``: the nominal rigid-body torque (..., nv) [N m or N], used by ``fl`` only.
+        shapes of ``fs``, ``fsg``, ``fvt`` and ``fct`` (None: their defaults,
+        :mod:`manip_id.friction`); ``load``: the nominal rigid-body torque (..., nv) [N m or
+        N], used by ``fl`` only; ``temp``: the measured temperature (..., nv) or (..., 1)
+        [degC or K], used by ``fvt`` and ``fct`` only.
         """
-        if self.needs_load:
-            if load is None:
+        if self.needs is not None:
+            signal = load if self.needs == "load" else temp
+            if signal is None:
                 raise InputError(
-                    f"the {self.name} term ({self.column_text}) needs the load torque "
-                    "(positions, velocities and accelerations of every joint)"
+                    f"the {self.name} term ({self.column_text}) needs {_NEEDS[self.needs]}"
                 )
-            return load_column(load, vel)
+            return self._column(signal, vel, shapes)
         return self._column(angles, vel, acc, shapes)
 
-    def torque(
-        self, coefficient, angles, vel, acc, shapes: FrictionShapes | None = None, load=None
-    ) -> np.ndarray:
+    def torque(self, coefficient, angles, vel, acc, shapes=None, load=None, temp=None):
         """``coefficient * column`` [N m or N], shape like ``vel``."""
-        return coefficient * self.column(angles, vel, acc, shapes, load)
+        return coefficient * self.column(angles, vel, acc, shapes, load, temp)
 
     def unit(self, prismatic: bool) -> str:
         """Unit of this term's parameter for a prismatic or revolute DoF."""
@@ -219,7 +220,14 @@ JOINT_TERMS: tuple[JointTerm, ...] = (
         for k in range(1, MAX_HARMONICS + 1)
         for cos in (False, True)
     ),
-    JointTerm("fl", "load", "|tau_load_j| sign(dq_j)", "1", "1", False, load_column, True),
+    JointTerm("fl", "load", "|tau_load_j| sign(dq_j)", "1", "1", False, load_column, "load"),
+    *(
+        JointTerm(n, "temperature", text, ur, up, False, f, "temp")
+        for n, text, ur, up, f in (
+            ("fvt", "(T_j - T0_j) dq_j", "N m s/(rad K)", "N s/(m K)", viscous_temperature),
+            ("fct", "(T_j - T0_j) sign(dq_j)", "N m/K", "N/K", coulomb_temperature),
+        )
+    ),
 )
 #: Joint-level term names, in the order their columns appear for each joint.
 JOINT_TERM_NAMES: tuple[str, ...] = tuple(t.name for t in JOINT_TERMS)
@@ -557,14 +565,22 @@ class ParameterLayout:
     @cached_property
     def needs_load(self) -> bool:
         """Whether a term needs the load torque (the ``load`` law)."""
-        return any(t.needs_load for t in self.term_table)
+        return any(t.needs == "load" for t in self.term_table)
 
-    def joint_values(self, angles, vel, acc, load=None) -> np.ndarray:
+    @cached_property
+    def needs_temperature(self) -> bool:
+        """Whether a term needs the measured temperature (the ``temperature`` law)."""
+        return any(t.needs == "temp" for t in self.term_table)
+
+    def joint_values(self, angles, vel, acc, load=None, temp=None) -> np.ndarray:
         """Joint-term regressor entries, shape (..., nv, nt) (see :data:`JOINT_TERMS`),
         with the layout's shapes, zero where the mask switches a term off; ``load`` the
-        nominal rigid-body torque (..., nv) [N m or N] when :attr:`needs_load`."""
+        nominal rigid-body torque (..., nv) [N m or N] when :attr:`needs_load`, ``temp``
+        the temperature (..., nv) or (..., 1) when :attr:`needs_temperature`."""
         shapes = self.shapes
-        vals = np.stack([t.column(angles, vel, acc, shapes, load) for t in self.term_table], -1)
+        vals = np.stack(
+            [t.column(angles, vel, acc, shapes, load, temp) for t in self.term_table], -1
+        )
         return vals if self.mask is None else vals * self.mask
 
     # ------------------------------------------------------- physical consistency

@@ -7,10 +7,12 @@ Inverse dynamics is linear in the parameters of :class:`~manip_id.robot.Robot`::
 The rigid-body columns come from ``pinocchio.computeJointTorqueRegressor``; the
 joint-term columns (only row ``j`` is non-zero for the terms of joint ``j``) are
 
-    Ia: ddq_j    fv: dq_j    fc: sign(dq_j)    fo: 1    k: q_j
+    Ia: ddq_j    fv: dq_j    fc: sign(dq_j)    fo: 1    k: q_j    ... (parameters.JOINT_TERMS)
 
 (``q_j`` is the joint angle; for a continuous joint stored as (cos, sin) it is
-``atan2(sin, cos)``).
+``atan2(sin, cos)``). The ``temperature`` law's columns also take the measured
+temperature ``temp``, shape (nv,) / (N, nv), or one column (1,) / (N, 1) broadcast to every
+joint, or a scalar [degC or K]: the keyword ``temp`` of the functions below.
 
 Slotine-Li form. ``Y(q, dq, v, w) theta = M(q) v + C(q, dq) w + g(q)`` with the
 Christoffel-consistent C. Its velocity part is the symmetric bilinear form
@@ -149,11 +151,12 @@ class RegressorEvaluator:
         """Joint coordinate per velocity DoF, shape (..., nv) [rad or m]."""
         return self._dofs.angles(q)
 
-    def joint_values(self, q, vel, acc) -> np.ndarray:
-        """Joint-term regressor entries, shape (..., nv, n_terms) (``parameters.JOINT_TERMS``)."""
+    def joint_values(self, q, vel, acc, temp=None) -> np.ndarray:
+        """Joint-term regressor entries, shape (..., nv, n_terms) (``parameters.JOINT_TERMS``);
+        ``temp`` the temperature, shape like ``vel`` (the ``temperature`` law)."""
         angles = self.joint_angles(q) if self._needs_angles else None
         load = self.load_torque(q, vel, acc) if self.layout.needs_load else None
-        return self.layout.joint_values(angles, vel, acc, load)
+        return self.layout.joint_values(angles, vel, acc, load, temp)
 
     def load_torque(self, q, vel, acc) -> np.ndarray:
         """The nominal rigid-body torque ``rnea(q, vel, acc)`` of :attr:`Robot.load_model`
@@ -173,7 +176,7 @@ class RegressorEvaluator:
                 "evaluate it: use the dynamic model (tau = Y(q, dq, ddq) theta)"
             )
 
-    def fill_joint_terms(self, Y: np.ndarray, q, vel, acc) -> None:
+    def fill_joint_terms(self, Y: np.ndarray, q, vel, acc, temp=None) -> None:
         """Write the joint-term columns of ``Y`` (nv, p) or (N, nv, p) in place.
 
         ``vel`` is the velocity the friction terms see and ``acc`` the acceleration
@@ -183,20 +186,20 @@ class RegressorEvaluator:
             return
         if Y.ndim == 2:  # one sample: a few flat writes into the diagonal entries
             flat = Y.reshape(-1)
-            vals = self.joint_values(q, vel, acc)  # (nv, nt): shapes, mask, load
+            vals = self.joint_values(q, vel, acc, temp)  # (nv, nt): shapes, mask, load
             for i, (_, idx) in enumerate(self._flat):
                 flat[idx] = vals[:, i]
             return
-        vals = self.joint_values(q, vel, acc)
+        vals = self.joint_values(q, vel, acc, temp)
         Y[:, self._rows, self._cols] = vals.reshape(vals.shape[0], -1)
 
     # ----------------------------------------------------------- one sample
-    def regressor(self, q, dq, ddq, out: np.ndarray | None = None) -> np.ndarray:
+    def regressor(self, q, dq, ddq, out: np.ndarray | None = None, temp=None) -> np.ndarray:
         """Y(q, dq, ddq), shape (nv, p), written into ``out`` when given."""
         if out is None:
             out = np.zeros((self.nv, self.p))
         out[:, : self.n_rigid] = pin.computeJointTorqueRegressor(self.model, self.data, q, dq, ddq)
-        self.fill_joint_terms(out, q, dq, ddq)
+        self.fill_joint_terms(out, q, dq, ddq, temp)
         return out
 
     def slotine_li(self, q, dq, v, w, out: np.ndarray | None = None) -> np.ndarray:
@@ -216,8 +219,8 @@ class RegressorEvaluator:
         return out
 
     # -------------------------------------------------------------- batches
-    def iter_regressor(self, q, dq, ddq, chunk: int) -> Iterator[RegressorChunk]:
-        """Chunks of Y over a trajectory (arrays already checked)."""
+    def iter_regressor(self, q, dq, ddq, chunk: int, temp=None) -> Iterator[RegressorChunk]:
+        """Chunks of Y over a trajectory (arrays already checked; ``temp`` like ``dq``)."""
         n = q.shape[0]
         buf = np.zeros((min(chunk, max(n, 1)), self.nv, self.p))
         rigid = buf[:, :, : self.n_rigid]
@@ -226,11 +229,12 @@ class RegressorEvaluator:
             s = slice(start, stop)
             self.rigid_block(q[s], dq[s], ddq[s], rigid[: stop - start])
             Y = buf[: stop - start]
-            self.fill_joint_terms(Y, q[start:stop], dq[start:stop], ddq[start:stop])
+            tk = None if temp is None else temp[s]
+            self.fill_joint_terms(Y, q[start:stop], dq[start:stop], ddq[start:stop], tk)
             yield RegressorChunk(start, stop, Y)
 
     def iter_row_supports(
-        self, q, dq, ddq, columns: np.ndarray, supports: list[np.ndarray], chunk: int
+        self, q, dq, ddq, columns: np.ndarray, supports: list[np.ndarray], chunk: int, temp=None
     ) -> Iterator[tuple[int, int, list[np.ndarray]]]:
         """Per joint, only the selected columns that can be non-zero in its row.
 
@@ -240,7 +244,8 @@ class RegressorEvaluator:
         torque never involves the bodies before it, nor other joints' terms).
         Yields ``(start, stop, blocks)`` with ``blocks[j]`` of shape
         (stop - start, len(supports[j])), C-contiguous: ``blocks[j][k] =
-        Y(q_k, dq_k, ddq_k)[j, columns[supports[j]]]``. Buffers are reused.
+        Y(q_k, dq_k, ddq_k)[j, columns[supports[j]]]``. Buffers are reused. ``temp``: the
+        temperature, shape like ``dq`` (the ``temperature`` law).
         """
         n, nv, nr = q.shape[0], self.nv, self.n_rigid
         columns = np.asarray(columns, dtype=np.intp)
@@ -267,7 +272,7 @@ class RegressorEvaluator:
             else:
                 self._stacked_rigid(qs, dqs, ddqs, flat)
             if joint_cols.size:
-                vals = self.joint_values(qs, dqs, ddqs)
+                vals = self.joint_values(qs, dqs, ddqs, None if temp is None else temp[s])
                 for i, (j, t) in enumerate(zip(jc_dof, jc_term, strict=True)):
                     wide[:size_k, j, nr + i] = vals[:, j, t]
             blocks = []
@@ -352,8 +357,26 @@ def check_states(robot: Robot, **arrays) -> tuple[bool, list[np.ndarray]]:
     return batched, out
 
 
+def check_temperature(robot: Robot, temp, dq: np.ndarray) -> np.ndarray | None:
+    """The temperature ``temp`` [degC or K] broadcast to the shape of ``dq`` (checked
+    ``dq``: (nv,) or (N, nv)), or None when not given: a scalar, one column ((1,) or
+    (N, 1)) for every joint, or one per joint; finite."""
+    if temp is None:
+        return None
+    t = as_float_array(temp, "temp", ndim=(0, 1, 2))
+    if t.ndim and (
+        t.ndim != dq.ndim or t.shape[:-1] != dq.shape[:-1] or t.shape[-1] not in (1, robot.nv)
+    ):
+        raise InputError(
+            f"temp.shape={t.shape} but dq.shape={dq.shape}: give one temperature column per "
+            f"joint ({robot.nv}) or one column for every joint, one row per sample"
+        )
+    check_finite(np.atleast_1d(t), "temp")
+    return np.ascontiguousarray(np.broadcast_to(t, dq.shape))
+
+
 # ---------------------------------------------------------------- public API
-def regressor(robot: Robot, q, dq, ddq) -> np.ndarray:
+def regressor(robot: Robot, q, dq, ddq, *, temp=None) -> np.ndarray:
     """The joint torque regressor Y(q, dq, ddq) with the robot's joint terms.
 
     Parameters
@@ -364,6 +387,8 @@ def regressor(robot: Robot, q, dq, ddq) -> np.ndarray:
         joint velocities [rad/s or m/s], shape (nv,) or (N, nv)
     ddq
         joint accelerations [rad/s^2 or m/s^2], shape (nv,) or (N, nv)
+    temp
+        the measured temperature [degC or K] of the ``temperature`` law (module docstring)
 
     Returns
     -------
@@ -373,11 +398,12 @@ def regressor(robot: Robot, q, dq, ddq) -> np.ndarray:
     ``Y.reshape(-1, p)`` is the sample-major stacked regressor.
     """
     batched, (q, dq, ddq) = check_states(robot, q=q, dq=dq, ddq=ddq)
+    temp = check_temperature(robot, temp, dq)
     ev = robot.evaluator
     if not batched:
-        return ev.regressor(q, dq, ddq)
+        return ev.regressor(q, dq, ddq, temp=temp)
     out = np.empty((q.shape[0], robot.nv, robot.n_parameters))
-    for c in ev.iter_regressor(q, dq, ddq, DEFAULT_CHUNK):
+    for c in ev.iter_regressor(q, dq, ddq, DEFAULT_CHUNK, temp):
         out[c.start : c.stop] = c.Y
     return out
 
@@ -415,9 +441,9 @@ def slotine_li_regressor(robot: Robot, q, dq, v, w) -> np.ndarray:
 
 
 def iter_regressor(
-    robot: Robot, q, dq, ddq, chunk: int = DEFAULT_CHUNK
+    robot: Robot, q, dq, ddq, chunk: int = DEFAULT_CHUNK, *, temp=None
 ) -> Iterator[RegressorChunk]:
-    """Y(q, dq, ddq) over N samples, ``chunk`` samples at a time.
+    """Y(q, dq, ddq) over N samples, ``chunk`` samples at a time (``temp``: see the top).
 
     Memory is O(chunk * nv * p) whatever N. Each yielded
     :class:`RegressorChunk` is a view of one reused buffer.
@@ -427,8 +453,9 @@ def iter_regressor(
     batched, (q, dq, ddq) = check_states(robot, q=q, dq=dq, ddq=ddq)
     if not batched:
         raise InputError(f"iter_regressor takes N samples (2-D arrays), got q.shape={q.shape}")
+    temp = check_temperature(robot, temp, dq)
     check_regressor_buffer(min(int(chunk), max(q.shape[0], 1)), robot.nv, robot.n_parameters)
-    return robot.evaluator.iter_regressor(q, dq, ddq, int(chunk))
+    return robot.evaluator.iter_regressor(q, dq, ddq, int(chunk), temp)
 
 
 def iter_slotine_li_regressor(
@@ -445,14 +472,16 @@ def iter_slotine_li_regressor(
     return robot.evaluator.iter_slotine_li(q, dq, v, w, int(chunk))
 
 
-def joint_torques(robot: Robot, theta, q, dq, ddq=None, *, armature: bool = True) -> np.ndarray:
+def joint_torques(
+    robot: Robot, theta, q, dq, ddq=None, *, armature: bool = True, temp=None
+) -> np.ndarray:
     """Torques of the joint-level terms alone, shape (nv,) or (N, nv) [N m or N].
 
     ``Ia ddq + fv dq + fc sign(dq) + fo + k q + ...`` for the enabled terms with the
     values in ``theta`` (shape (p,)). With ``ddq=None`` or ``armature=False`` the
     armature term is left out (for inverse and forward dynamics by Pinocchio, where
     armature belongs in the mass matrix: see :meth:`Robot.with_parameters`); the
-    ``load`` law needs ``ddq``.
+    ``load`` law needs ``ddq``, the ``temperature`` law ``temp`` (module docstring).
     """
     theta = as_float_array(theta, "theta", ndim=1)
     if theta.shape[0] != robot.n_parameters:
@@ -462,9 +491,10 @@ def joint_torques(robot: Robot, theta, q, dq, ddq=None, *, armature: bool = True
         ev.refuse_load("joint_torques without ddq")
     acc = np.zeros_like(np.asarray(dq, dtype=float)) if ddq is None else ddq
     _, (q, dq, acc) = check_states(robot, q=q, dq=dq, ddq=acc)
+    temp = check_temperature(robot, temp, dq)
     if not ev.terms:
         return np.zeros_like(dq)
-    vals = ev.joint_values(q, dq, acc)  # (..., nv, nt)
+    vals = ev.joint_values(q, dq, acc, temp)  # (..., nv, nt)
     coef = robot.layout.joint_block(theta)
     if (ddq is None or not armature) and "Ia" in ev.terms:
         coef = coef.copy()

@@ -33,6 +33,7 @@ import pinocchio as pin
 from ._checks import as_float_array, random_generator
 from ._native import native_stderr_captured
 from .errors import InputError, RobotError
+from .friction import NO_SHAPES
 from .parameters import (
     INERTIAL_NAMES,
     JOINT_TERM_NAMES,
@@ -320,6 +321,14 @@ class Robot:
         dq = rng.uniform(-vmax, vmax, size=(n, self.nv))
         ddq = rng.uniform(-acceleration, acceleration, size=(n, self.nv))
         return q, dq, ddq
+
+    def random_temperatures(self, n: int, seed: int = 0) -> np.ndarray | None:
+        """``n`` random temperatures per DoF, ``T0 + U(-1, 1)`` [degC or K], shape (n, nv),
+        when the model has the ``temperature`` law (for rank analyses); else None."""
+        if not self.layout.needs_temperature:
+            return None
+        t0 = (self.layout.shapes or NO_SHAPES).values("temperature_reference", 0.0)
+        return t0 + random_generator(seed + 1).uniform(-1.0, 1.0, size=(n, self.nv))
 
     def neutral(self) -> np.ndarray:
         """A valid configuration in the middle of the limits, shape (nq,)."""

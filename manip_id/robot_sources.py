@@ -68,9 +68,10 @@ class JointTerms:
     """Which joint-level terms the model carries (for every active joint).
 
     ``asymmetric``, ``stribeck``, ``sigmoid``, ``harmonics`` (the order of the
-    ``position`` law) and ``load`` are the friction laws of :mod:`manip_id.friction`; ``shapes``
-    their per-DoF shape parameters; ``per_dof`` (None: all) the terms each DoF keeps,
-    one tuple of term names per DoF (the others' columns are zero: a per-joint model).
+    ``position`` law), ``load`` and ``temperature`` are the friction laws of
+    :mod:`manip_id.friction`; ``shapes`` their per-DoF shape parameters; ``per_dof``
+    (None: all) the terms each DoF keeps, one tuple of term names per DoF (the others'
+    columns are zero: a per-joint model).
     """
 
     armature: bool = False
@@ -83,6 +84,7 @@ class JointTerms:
     sigmoid: bool = False
     harmonics: int = 0
     load: bool = False
+    temperature: bool = False
     shapes: FrictionShapes | None = None
     per_dof: tuple[tuple[str, ...], ...] | None = None
 
@@ -98,6 +100,7 @@ class JointTerms:
             ("sigmoid", self.sigmoid),
             ("position", self.harmonics > 0),
             ("load", self.load),
+            ("temperature", self.temperature),
         )
         return FrictionSpec(frozenset(k for k, on in flags if on), int(self.harmonics))
 
@@ -147,6 +150,7 @@ def joint_terms(armature, friction, spring, defaults: JointTerms) -> JointTerms:
         sigmoid="sigmoid" in k,
         harmonics=spec.harmonics,
         load="load" in k,
+        temperature="temperature" in k,
         shapes=defaults.shapes if friction is None else None,
     )
 
@@ -233,6 +237,7 @@ def profile_terms(prof: RobotProfile | None) -> JointTerms:
         sigmoid="sigmoid" in k,
         harmonics=spec.harmonics,
         load="load" in k,
+        temperature="temperature" in k,
     )
 
 

@@ -4,7 +4,7 @@
 (``OUT.xml.identified.json`` next to an MJCF file): the identified parameters, the joint
 terms a URDF has no field for (armature ``Ia``, offset ``fo``, spring ``k``), the
 coefficients of every friction law, the laws themselves (``joint_model``: which laws, the
-order of ``position``, the shapes ``vs, a, c`` and the per-joint models, version 3) and the
+order of ``position``, the shapes ``vs, a, c, T0`` and the per-joint models, version 3) and the
 inertias the ``load`` law's load torque was computed with (``load_inertias``), the active
 and locked joints. ``load_robot(OUT.urdf, identified=True)`` reads it with the functions
 here (:func:`identified_options`, :func:`locked_configuration`, :func:`apply_identified`).
@@ -38,6 +38,7 @@ MODEL_FLAGS: tuple[str, ...] = (
     "stribeck",
     "sigmoid",
     "load",
+    "temperature",
 )
 
 

@@ -31,6 +31,7 @@ from ..identification import (
     split_file,
 )
 from ..identification.selection import select_model_files
+from ..identification.temperature import check_scans_temperature, reference_from_scans
 from ..viz.report_document import (
     ReportSamples,
     RunContext,
@@ -207,6 +208,8 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     robot = robot_from_args(args)
     options = preprocess_options(args, robot.nv, None if profile is None else profile.torque_scale)
     f = _scan(robot, args, specs, vspecs, options, timings)
+    check_scans_temperature(robot, [f.scans[s] for s in f.vspecs or []])
+    robot = reference_from_scans(robot, [f.scans[s] for s in f.specs])  # the law's T0
     robot, selection = _select_friction(robot, args, options, f, timings)
     train = valid = None
     if args.method in ("rls", "gradient"):  # sample order, in memory

@@ -7,6 +7,7 @@ A dataset is a time series of joint states and torques::
     dq   velocities [rad/s or m/s], shape (N, nv)
     tau  joint torques [N m or N], shape (N, nv)
     ddq  accelerations [rad/s^2 or m/s^2], shape (N, nv), optional
+    temp temperatures [degC or K], shape (N, nv) or (N, 1) (one for every joint), optional
     joint_names  one name per velocity coordinate, optional
 
 Validation on construction: at least 2 samples, one row per time stamp,
@@ -107,6 +108,12 @@ def check_shapes(shapes: dict[str, tuple[int, ...]], prefix: str = "") -> None:
     for name in ("tau", "ddq"):
         if name in shapes and shapes[name][1] != nv:
             raise DataError(f"{prefix}dq.shape={shapes['dq']} but {name}.shape={shapes[name]}")
+    temp = shapes.get("temp")
+    if temp is not None and (len(temp) > 2 or (len(temp) == 2 and temp[1] not in (1, nv))):
+        raise DataError(
+            f"{prefix}dq.shape={shapes['dq']} but temp.shape={temp}: give one temperature "
+            "column per joint or one column for every joint"
+        )
 
 
 @dataclass(frozen=True)
@@ -120,11 +127,14 @@ class Dataset:
     ddq: np.ndarray | None = None
     joint_names: tuple[str, ...] | None = None
     meta: dict = field(default_factory=dict, compare=False)
+    temp: np.ndarray | None = None
 
     def __post_init__(self):
         arrays = {"t": (self.t, 1), "q": (self.q, 2), "dq": (self.dq, 2), "tau": (self.tau, 2)}
         if self.ddq is not None:
             arrays["ddq"] = (self.ddq, 2)
+        if self.temp is not None:  # one column: (N,) taken as (N, 1)
+            arrays["temp"] = (np.reshape(self.temp, (len(self.temp), -1)), 2)
         clean = {}
         for name, (value, ndim) in arrays.items():
             arr = np.asarray(value) if not isinstance(value, np.ndarray) else value
@@ -151,7 +161,7 @@ class Dataset:
             if len(names) != nv:
                 raise DataError(f"{len(names)} joint_names for nv={nv} velocity columns")
         for name, arr in clean.items():
-            check_values(name, arr, arr.ndim, names if name != "q" else None)
+            check_values(name, arr, arr.ndim, names if arr.shape[-1] == nv else None)
         check_time(clean["t"])
         if np.abs(clean["q"]).max() > DEGREES_THRESHOLD:
             warnings.warn(
@@ -188,6 +198,7 @@ class Dataset:
             dq=self.dq[start:stop],
             tau=self.tau[start:stop],
             ddq=None if self.ddq is None else self.ddq[start:stop],
+            temp=None if self.temp is None else self.temp[start:stop],
         )
 
     def split(self, fraction: float) -> tuple[Dataset, Dataset]:

@@ -2,10 +2,11 @@
 
 Default layout (comma-separated, one sample per row)::
 
-    t,q_<joint>...,dq_<joint>...,tau_<joint>...[,ddq_<joint>...]
+    t,q_<joint>...,dq_<joint>...,tau_<joint>...[,ddq_<joint>...][,temp_<joint>...]
 
 Columns are found by prefix (``t`` or ``time``; ``q_``, ``dq_``, ``tau_``,
-``ddq_``) in header order, so any column order works; joint names come from
+``ddq_``, ``temp_``: the temperature [degC or K], one column per joint or one for every
+joint) in header order, so any column order works; joint names come from
 the ``dq_`` columns. Other layouts load with a column map (field -> header
 names, a glob such as ``"pos*"``, or 0-based indices). Without dq columns, dq is
 the central-difference derivative of q (``numpy.gradient``, second order, also
@@ -40,7 +41,8 @@ class CsvColumns:
 
     @property
     def layout(self) -> Layout:
-        return Layout(len(self.index["q"]), len(self.index["tau"]), "ddq" in self.index)
+        n_temp = len(self.index.get("temp", ()))
+        return Layout(len(self.index["q"]), len(self.index["tau"]), "ddq" in self.index, n_temp)
 
 
 def _head(path: Path) -> tuple[str | None, list[str] | None]:
@@ -147,6 +149,11 @@ def resolve_columns(path: Path, columns: Mapping | None, width: int | None = Non
             raise DataError(
                 f"{path}: {len(idx[name])} {name} columns but {len(idx['tau'])} tau columns"
             )
+    if "temp" in idx and len(idx["temp"]) not in (1, len(idx["tau"])):
+        raise DataError(
+            f"{path}: {len(idx['temp'])} temp columns but {len(idx['tau'])} tau columns: give "
+            "one temperature column per joint or one for every joint"
+        )
     return CsvColumns(
         delimiter, header, idx, tuple(str(n) for n in names) if names else None, derive
     )
@@ -328,6 +335,7 @@ def load_csv(path: Path, columns: Mapping | None = None) -> Dataset:
             ddq=f.get("ddq"),
             joint_names=src.joint_names,
             meta={"source": str(path)},
+            temp=f.get("temp"),
         )
     except DataError as exc:
         raise DataError(f"{path}: {exc}") from exc
@@ -344,6 +352,9 @@ def csv_header(layout: Layout, joint_names) -> list[str]:
     head += [f"tau_{n}" for n in names]
     if layout.has_ddq:
         head += [f"ddq_{n}" for n in names]
+    head += [f"temp_{n}" for n in (names if layout.n_temp == layout.nv else ["all"])][
+        : layout.n_temp
+    ]
     return head
 
 

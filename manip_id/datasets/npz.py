@@ -7,6 +7,8 @@ Layout (what :func:`~manip_id.datasets.save_dataset` writes)::
     dq           float (N, nv)   velocities [rad/s or m/s]
     tau          float (N, nv)   torques [N m or N]
     ddq          float (N, nv)   accelerations, optional
+    temp         float (N, nv)   temperatures [degC or K], optional; (N,) or (N, 1): one
+                                 for every joint (the ``temperature`` friction law)
     joint_names  str   (nv,)     optional
 
 Streaming. An NPZ is a zip of ``.npy`` members. :func:`inspect_npz` reads only
@@ -87,7 +89,7 @@ def inspect_npz(path: Path, max_bytes: int | None = None) -> tuple[dict[str, Npy
     """Headers of the members of the NPZ dataset ``path``, checked, and its column layout.
 
     Checks: a zip of ``.npy`` members; t, q, dq, tau present and nothing but
-    t, q, dq, tau, ddq, joint_names; real numeric data (complex, object and
+    t, q, dq, tau, ddq, temp, joint_names; real numeric data (complex, object and
     string arrays refused; strings only for joint_names); t of shape (N,), the
     others (N, width) with one row per stamp, dq, tau, ddq of equal width;
     declared sizes equal to the zip's; with ``max_bytes``, the numeric data as
@@ -104,21 +106,22 @@ def inspect_npz(path: Path, max_bytes: int | None = None) -> tuple[dict[str, Npy
             if not info.filename.endswith(".npy"):
                 raise DataError(
                     f"{path} holds unexpected member {info.filename!r}; "
-                    "expected .npy arrays t, q, dq, tau, ddq, joint_names"
+                    "expected .npy arrays t, q, dq, tau, ddq, temp, joint_names"
                 )
             m = _member_header(zf, info, path)
             members[m.name] = m
     missing = [k for k in REQUIRED if k not in members]
     if missing:
         raise DataError(
-            f"{path} lacks array(s) {', '.join(missing)}; an NPZ dataset holds t, q, dq, "
-            f"tau and optionally ddq, joint_names (found {', '.join(sorted(members)) or 'none'})"
+            f"{path} lacks array(s) {', '.join(missing)}; an NPZ dataset holds t, q, dq, tau "
+            "and optionally ddq, temp, joint_names "
+            f"(found {', '.join(sorted(members)) or 'none'})"
         )
     unknown = sorted(set(members) - {*FIELDS, "joint_names"})
     if unknown:
         raise DataError(
             f"{path} holds unexpected array(s) {', '.join(unknown)}; "
-            "expected t, q, dq, tau, ddq, joint_names"
+            "expected t, q, dq, tau, ddq, temp, joint_names"
         )
     for name, m in members.items():
         kind = m.dtype.kind
@@ -133,13 +136,15 @@ def inspect_npz(path: Path, max_bytes: int | None = None) -> tuple[dict[str, Npy
         if kind not in "fiu":
             raise DataError(f"{path}: {name} must be numeric, got dtype {m.dtype}")
         want = 1 if name == "t" else 2
-        if len(m.shape) != want:
+        if len(m.shape) != want and not (name == "temp" and len(m.shape) == 1):
             raise DataError(
                 f"{path}: {name} must have {want} dimension(s), got {name}.shape={m.shape}"
             )
     check_shapes({name: members[name].shape for name in FIELDS if name in members}, f"{path}: ")
     n, nv = members["t"].shape[0], members["dq"].shape[1]
-    layout = Layout(nq=members["q"].shape[1], nv=nv, has_ddq="ddq" in members)
+    temp = members["temp"].shape if "temp" in members else None
+    n_temp = 0 if temp is None else (temp[1] if len(temp) == 2 else 1)
+    layout = Layout(nq=members["q"].shape[1], nv=nv, has_ddq="ddq" in members, n_temp=n_temp)
     if "joint_names" in members and members["joint_names"].shape != (nv,):
         raise DataError(
             f"{path}: {members['joint_names'].shape[0] if members['joint_names'].shape else 1} "

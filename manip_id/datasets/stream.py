@@ -81,7 +81,8 @@ class MemorySource:
         self.dataset = dataset
         self.path = Path(path)
         self.format = format
-        self.layout = Layout(dataset.q.shape[1], dataset.nv, dataset.ddq is not None)
+        n_temp = 0 if dataset.temp is None else dataset.temp.shape[1]
+        self.layout = Layout(dataset.q.shape[1], dataset.nv, dataset.ddq is not None, n_temp)
         self.joint_names = dataset.joint_names
         self.n_rows = dataset.n_samples
 
@@ -91,7 +92,12 @@ class MemorySource:
         for s in range(start, stop, chunk):
             e = min(s + chunk, stop)
             yield self.layout.pack(
-                d.t[s:e], d.q[s:e], d.dq[s:e], d.tau[s:e], None if d.ddq is None else d.ddq[s:e]
+                d.t[s:e],
+                d.q[s:e],
+                d.dq[s:e],
+                d.tau[s:e],
+                None if d.ddq is None else d.ddq[s:e],
+                None if d.temp is None else d.temp[s:e],
             )
 
 
@@ -368,4 +374,5 @@ def collect(rows: Iterator[np.ndarray], layout: Layout, joint_names, meta=None) 
         ddq=f.get("ddq"),
         joint_names=joint_names,
         meta=dict(meta or {}),
+        temp=f.get("temp"),
     )

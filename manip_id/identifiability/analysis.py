@@ -88,7 +88,8 @@ def structural_analysis(
     )
     q, dq, ddq = robot.random_states(n_samples, seed)
     acc = RFactorAccumulator(p, robot.parameter_names)
-    for chunk in iter_regressor(robot, q, dq, ddq, chunk=_CHUNK):
+    temp = robot.random_temperatures(n_samples, seed)  # the temperature law's, or None
+    for chunk in iter_regressor(robot, q, dq, ddq, chunk=_CHUNK, temp=temp):
         acc.add(chunk.Y)
     tol = tol if tol is not None else default_tolerance(acc.n_rows, p)
     zero = zero_columns(acc.R, tol)

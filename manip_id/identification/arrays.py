@@ -26,7 +26,7 @@ from ..models import (
     choose_window,
     window_samples,
 )
-from ..regressor import check_states
+from ..regressor import check_states, check_temperature
 from ..robot import Robot
 from .options import (
     ONLINE,
@@ -46,6 +46,7 @@ from .problem import (
     accumulate_blocks,
     accumulate_forked,
     accumulate_online,
+    array_part,
     check_equations,
     check_samples,
     check_tau,
@@ -55,6 +56,7 @@ from .problem import (
 from .result import IdentificationResult
 from .solve import solve
 from .tasks import PartSums, blocks_sums
+from .temperature import reference_from_arrays
 
 
 def online_estimator(method: str, r: int, options: OnlineOptions, n: int):
@@ -94,6 +96,7 @@ def identify(
     rank: RankOptions | dict | None = None,
     run: RunOptions | dict | None = None,
     uncertainty: UncertaintyOptions | str | dict | None = None,
+    temp=None,
 ) -> IdentificationResult:
     """Identify the base parameters of ``robot`` from N samples, streamed.
 
@@ -110,7 +113,8 @@ def identify(
         from the OLS residuals), "rls" (one pass of recursive least squares),
         "gradient" (one pass of the normalized gradient law); see :data:`METHODS`.
     validation : tuple or None
-        ``(q, dq, ddq, tau)`` for the validation error.
+        ``(q, dq, ddq, tau)`` for the validation error (``(q, dq, ddq, tau, temp)`` with
+        the temperature law).
     base : BaseParameters or None
         Base parametrization; default the structural one of ``analyze(robot)``.
     consistent : ConsistentOptions, bool or None
@@ -130,6 +134,11 @@ def identify(
         from per-block sums of the accumulation, when the data give at least 16
         blocks; else white), "white" (``sigma^2 (Y^T Y)^-1``) or "hac"; see
         :mod:`manip_id.estimators.uncertainty`. ``std_white`` keeps the white one.
+    temp : array_like or None
+        The measured temperature [degC or K] of the ``temperature`` friction law, shape
+        (N, nv) or (N, 1) (one for every joint). When the robot's reference ``T0`` is
+        unset it becomes the mean of ``temp`` per joint
+        (:mod:`~manip_id.identification.temperature`), in ``context["friction_shapes"]``.
 
     Returns
     -------
@@ -143,6 +152,8 @@ def identify(
     if opts.model.name != "dynamic":
         return _identify_acceleration_free(robot, (q, dq, tau), method, validation, base, opts)
     q, dq, ddq, tau = check_samples(robot, q, dq, ddq, tau)
+    robot = reference_from_arrays(robot, temp)  # the temperature law's T0 (else robot)
+    temp = check_temperature(robot, temp, dq) if robot.layout.needs_temperature else None
     n = q.shape[0]
     blocks = validation_blocks(robot, validation)
     timings["checks"] = time.perf_counter() - t_start
@@ -155,12 +166,13 @@ def identify(
     if method in ONLINE:
         est, what = online_estimator(method, r, online_options, n)
         acc, times = accumulate_online(
-            robot, q, dq, ddq, tau, ind, est, dt, run=run_o, uncertainty=opts.uncertainty
-        )
+            robot, q, dq, ddq, tau, ind, est, dt, run=run_o, uncertainty=opts.uncertainty,
+            temp=temp,
+        )  # fmt: skip
         online_run = OnlineRun(est, what)
     else:
         acc, times = accumulate_arrays(
-            robot, q, dq, ddq, tau, ind, run=run_o, uncertainty=opts.uncertainty
+            robot, q, dq, ddq, tau, ind, run=run_o, uncertainty=opts.uncertainty, temp=temp
         )
     timings.update(times)
     problem = Problem(
@@ -176,9 +188,12 @@ def identify(
     )
     result = _solve(problem, method, opts)
     # an implausible consistent fit: would a joint term the model lacks lower the error?
+    train = next(array_part(q, dq, ddq, tau, 0, n, temp))
     result.warnings.extend(
-        missing_term_warnings(robot, result.standard, [(q, dq, ddq, tau)], blocks, ind, run_o.chunk)
+        missing_term_warnings(robot, result.standard, [train], blocks, ind, run_o.chunk)
     )
+    if temp is not None:  # the reference T0 the coefficients fvt, fct refer to
+        result.context["friction_shapes"] = robot.layout.shapes.to_dict()
     return result
 
 
@@ -400,7 +415,8 @@ def identify_dataset(robot: Robot, dataset, *, ddq=None, validation=None, **kwar
     if validation is not None and hasattr(validation, "tau"):
         if validation.ddq is None:
             raise InputError("the validation dataset has no accelerations (ddq)")
-        validation = (validation.q, validation.dq, validation.ddq, validation.tau)
+        v = validation
+        validation = (v.q, v.dq, v.ddq, v.tau) + (() if v.temp is None else (v.temp,))
     model = ModelOptions.from_value(kwargs.pop("model", None))
     if model.name != "dynamic":
         if model.dt is None:
@@ -431,6 +447,7 @@ def identify_dataset(robot: Robot, dataset, *, ddq=None, validation=None, **kwar
         dataset.tau,
         validation=validation,
         model=model,
+        temp=dataset.temp,
         **kwargs,
     )
 

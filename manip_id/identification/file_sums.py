@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from ..compiled_regressor import planned_samples
-from ..datasets import FileSpec, parse_file_spec
+from ..datasets import FileSpec, Layout, parse_file_spec
 from ..datasets.stream import torque_scale_vector
 from ..errors import DataError, InputError
 from ..estimators import InformationAccumulator
@@ -82,7 +82,7 @@ class FileAccumulation(FileRecord):
 
 
 def file_stream(robot: Robot, spec: FileSpec, options: PreprocessOptions, scan: FileScan):
-    """``(settings, blocks)``: the file's packed rows ``t | q | dq | tau | ddq`` as the fit
+    """``(settings, blocks)``: the file's packed rows ``t | q | dq | tau | ddq [| temp]`` as the fit
     sees them, each block paired with the same rows' raw torques (nv columns) when the
     preprocessing filters the torques (a second, unfiltered preprocessing of the same
     rows: the states are the same), else with None."""
@@ -103,9 +103,10 @@ def file_stream(robot: Robot, spec: FileSpec, options: PreprocessOptions, scan: 
 
 
 def _span_states(pairs, robot: Robot, span, deadband, counts: dict, progress=None):
-    """The states ``(q, dq, ddq, tau[, tau_raw])`` of rows ``[lo, hi)`` of a file stream;
-    counts the samples and the rows the deadband leaves out."""
+    """The states ``(q, dq, ddq, tau[, tau_raw[, temp]])`` of rows ``[lo, hi)`` of a file
+    stream; counts the samples and the rows the deadband leaves out."""
     nq, nv = robot.nq, robot.nv
+    lay = None
     lo, hi = span
     seen = 0
     for rows, raw in pairs:
@@ -115,13 +116,14 @@ def _span_states(pairs, robot: Robot, span, deadband, counts: dict, progress=Non
         a, b = max(lo - g0, 0), rows.shape[0] if hi is None else min(hi - g0, rows.shape[0])
         if a >= b:
             continue
-        rows = rows[a:b]
-        q, dq = rows[:, 1 : 1 + nq], rows[:, 1 + nq : 1 + nq + nv]
-        tau, ddq = rows[:, 1 + nq + nv : 1 + nq + 2 * nv], rows[:, 1 + nq + 2 * nv :]
+        lay = lay or Layout.processed(nq, nv, rows.shape[1])
+        f = lay.unpack(rows[a:b])
+        dq = f["dq"]
         if deadband is not None:
             counts["excluded"] += (np.abs(dq) < deadband).sum(axis=0)
-        counts["n"] += rows.shape[0]
-        yield (q, dq, ddq, tau) if raw is None else (q, dq, ddq, tau, raw[a:b])
+        counts["n"] += b - a
+        states = (f["q"], dq, f["ddq"], f["tau"], None if raw is None else raw[a:b])
+        yield states + (f["temp"],) if "temp" in f else states
         if progress is not None:
             progress(counts["n"])
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
+from ..datasets import Layout
 from ..estimators.consistent.terms import missing_term_warnings
 from ..identifiability import BaseParameters
 from ..robot import Robot
@@ -25,10 +26,11 @@ from .options import (
     check_least_squares,
 )
 from .problem import Problem, check_equations, resolve_base
-from .reading import iter_processed
+from .reading import iter_processed, scan_file
 from .result import IdentificationResult
 from .solve import solve
-from .tasks import distributed_problem
+from .tasks import distributed_problem, file_specs
+from .temperature import check_scans_temperature, reference_from_scans
 
 
 def identify_datasets(
@@ -92,6 +94,7 @@ def identify_datasets(
     minimum_norm = RankOptions.from_value(rank).minimum_norm
     options = options or PreprocessOptions()
     uopts = UncertaintyOptions.from_value(uncertainty)
+    robot, scans, made = _temperature_reference(robot, files, validation, options, window, scans)
     base = resolve_base(robot, base, timings)
     kw: dict[str, Any] = dict(consistent=copts, minimum_norm=minimum_norm, uncertainty=uopts)
     if run_o.scheduler is not None:
@@ -100,6 +103,8 @@ def identify_datasets(
             uncertainty=uopts,
         ).problem  # fmt: skip
         problem.t_start = t_start
+        for scan in made:  # the temperature reference's scans: the tasks scan their own
+            scan.discard()
         return solve(problem, method, **kw)
     ind = base.independent
     t0 = time.perf_counter()
@@ -146,15 +151,33 @@ def identify_datasets(
     return result
 
 
+def _temperature_reference(robot: Robot, files, validation, options, window, scans):
+    """``(robot, scans, made)``: with the temperature law, every file scanned (``made``:
+    the scans made here), checked for a temp field, and ``T0`` from the training scans
+    (:mod:`~manip_id.identification.temperature`); else the arguments as they came."""
+    scans = dict(scans or {})
+    if not robot.layout.needs_temperature:
+        return robot, scans, []
+    specs = file_specs(files, "paths", window)
+    vspecs = [] if validation is None else file_specs(validation, "validation", window)
+    made = []
+    for s in specs + vspecs:
+        if s not in scans:
+            scans[s] = scan_file(robot, s, options)
+            made.append(scans[s])
+    check_scans_temperature(robot, [scans[s] for s in vspecs])
+    return reference_from_scans(robot, [scans[s] for s in specs]), scans, made
+
+
 def _file_blocks(robot: Robot, files, options, scans):
-    """The files' blocks ``(q, dq, ddq, tau)`` as the fit sees them, read again (one pass)."""
-    nq, nv = robot.nq, robot.nv
+    """The files' blocks ``(q, dq, ddq, tau[, None, temp])`` as the fit sees them, read
+    again (one pass)."""
     for spec in files:
         _, blocks = iter_processed(robot, spec, options, (scans or {}).get(spec))
-        for b in blocks:  # packed t | q | dq | tau | ddq
-            q, dq = b[:, 1 : 1 + nq], b[:, 1 + nq : 1 + nq + nv]
-            tau, ddq = b[:, 1 + nq + nv : 1 + nq + 2 * nv], b[:, 1 + nq + 2 * nv :]
-            yield q, dq, ddq, tau
+        for b in blocks:  # packed t | q | dq | tau | ddq [| temp]
+            f = Layout.processed(robot.nq, robot.nv, b.shape[1]).unpack(b)
+            states = (f["q"], f["dq"], f["ddq"], f["tau"])
+            yield states + (None, f["temp"]) if "temp" in f else states
 
 
 def _validation_sums(robot: Robot, validation, options, ind, window, run: RunOptions, scans):

@@ -31,7 +31,7 @@ from ..estimators import InformationAccumulator
 from ..estimators.blocks import ScoreBlocks
 from ..execution import ForkBackend
 from ..identifiability import BaseParameters, analyze
-from ..regressor import DEFAULT_CHUNK, check_states, iter_regressor
+from ..regressor import DEFAULT_CHUNK, check_states, check_temperature, iter_regressor
 from ..robot import Robot
 from .options import RunOptions, UncertaintyOptions
 
@@ -243,14 +243,25 @@ def check_equations(n_rows: int, r: int, what: str = "samples") -> None:
 
 
 def validation_blocks(robot: Robot, validation) -> list | None:
-    """``validation = (q, dq, ddq, tau)`` checked as one validation block, or None."""
+    """``validation = (q, dq, ddq, tau[, temp])`` checked as one validation block
+    ``(q, dq, ddq, tau[, None, temp])``, or None."""
     if validation is None:
         return None
     try:
-        vq, vdq, vddq, vtau = validation
+        vq, vdq, vddq, vtau, *rest = validation
+        if len(rest) > 1:
+            raise ValueError
     except (TypeError, ValueError) as exc:
-        raise InputError("validation must be a tuple (q, dq, ddq, tau)") from exc
-    return [check_samples(robot, vq, vdq, vddq, vtau, prefix="validation ")]
+        raise InputError("validation must be a tuple (q, dq, ddq, tau[, temp])") from exc
+    block = check_samples(robot, vq, vdq, vddq, vtau, prefix="validation ")
+    if not rest or rest[0] is None:
+        return [block]
+    return [(*block, None, check_temperature(robot, rest[0], block[1]))]
+
+
+def block_temperature(block) -> np.ndarray | None:
+    """The temperature of a block ``(q, dq, ddq, tau[, tau_raw[, temp]])``, or None."""
+    return block[5] if len(block) > 5 else None
 
 
 # ------------------------------------------------------------ accumulation
@@ -264,8 +275,14 @@ def row_supports(robot: Robot, columns, n_states: int = 16, seed: int = 12345) -
     Returns a list of ``nv`` sorted index arrays.
     """
     q, dq, ddq = robot.random_states(n_states, seed=seed)
+    temp = robot.random_temperatures(n_states, seed)
     ev = robot.evaluator
-    Y = np.stack([ev.regressor(q[k], dq[k], ddq[k]) for k in range(n_states)])
+    Y = np.stack(
+        [
+            ev.regressor(q[k], dq[k], ddq[k], temp=None if temp is None else temp[k])
+            for k in range(n_states)
+        ]
+    )
     nonzero = np.abs(Y[:, :, np.asarray(columns, dtype=np.intp)]).max(axis=0) > 0  # (nv, r)
     return [np.flatnonzero(row) for row in nonzero]
 
@@ -353,7 +370,9 @@ def accumulate_rows(
     total: int = 0,
     record: ScoreBlocks | None = None,
 ) -> RowSums:
-    """Accumulate the base-column information of blocks ``(q, dq, ddq, tau[, tau_raw])``.
+    """Accumulate the base-column information of blocks ``(q, dq, ddq, tau[, tau_raw[,
+    temp]])`` (``tau_raw`` may be None; ``temp`` the temperature of the ``temperature`` law,
+    (N, nv) or (N, 1), :func:`~manip_id.regressor.check_temperature`).
 
     Row ``j`` of the regressor is accumulated on its non-zero columns only
     (:func:`row_supports`): in a serial chain that about halves the work of the
@@ -373,15 +392,17 @@ def accumulate_rows(
     t_reg = t_acc = 0.0
     done, with_raw = 0, None
     for block in blocks:
-        if not isinstance(block, (tuple, list)) or len(block) not in (4, 5):
+        if not isinstance(block, (tuple, list)) or len(block) not in (4, 5, 6):
             raise InputError("each data block must be a tuple (q, dq, ddq, tau)")
-        with_raw = len(block) == 5 if with_raw is None else with_raw
+        has_raw = len(block) > 4 and block[4] is not None
+        with_raw = has_raw if with_raw is None else with_raw
         prefix = f"block at sample {done}: "
         q, dq, ddq, tau = block[0], block[1], block[2], block[3]
         bq, bdq, bddq, btau = check_samples(robot, q, dq, ddq, tau, prefix=prefix)
         braw = check_tau(robot, block[4], bq.shape[0], "tau_raw") if with_raw else None
+        btemp = check_temperature(robot, block[5], bdq) if len(block) > 5 else None
         t0 = time.perf_counter()
-        for start, stop, rows in ev.iter_row_supports(bq, bdq, bddq, ind, supports, chunk):
+        for start, stop, rows in ev.iter_row_supports(bq, bdq, bddq, ind, supports, chunk, btemp):
             t1 = time.perf_counter()
             t_reg += t1 - t0
             tau = btau[start:stop]
@@ -475,9 +496,14 @@ def accumulate_forked(
     return acc, times
 
 
-def array_part(q, dq, ddq, tau, start: int, stop: int):
-    """The one block of samples ``start:stop`` (the arrays reach forked workers by fork)."""
-    yield q[start:stop], dq[start:stop], ddq[start:stop], tau[start:stop]
+def array_part(q, dq, ddq, tau, start: int, stop: int, temp=None):
+    """The one block of samples ``start:stop`` (the arrays reach forked workers by fork);
+    ``temp`` the temperature (N, nv) of the temperature law, or None."""
+    s = slice(start, stop)
+    if temp is None:
+        yield q[s], dq[s], ddq[s], tau[s]
+    else:
+        yield q[s], dq[s], ddq[s], tau[s], None, temp[s]
 
 
 def accumulate_arrays(
@@ -490,25 +516,27 @@ def accumulate_arrays(
     *,
     run: RunOptions,
     uncertainty: UncertaintyOptions | None = None,
+    temp=None,
 ):
     """The samples' information: in this process, or in ``run.workers_for(n)`` contiguous
     parts in forked processes merged by addition (equal to the serial sums to round-off,
-    the per-block sums of ``uncertainty`` too)."""
+    the per-block sums of ``uncertainty`` too); ``temp`` the checked temperature (N, nv)."""
     n = q.shape[0]
     unc = UncertaintyOptions.from_value(uncertainty)
     with planned_samples(n):
-        return _accumulate_arrays(robot, (q, dq, ddq, tau), ind, run, run.workers_for(n), unc)
+        arrays = (q, dq, ddq, tau, temp)
+        return _accumulate_arrays(robot, arrays, ind, run, run.workers_for(n), unc)
 
 
 def _accumulate_arrays(robot: Robot, arrays, ind, run: RunOptions, workers: int, unc):
-    q, dq, ddq, tau = arrays
+    q, dq, ddq, tau, temp = arrays
     n, chunk, progress = q.shape[0], run.chunk, run.progress
     r, nv = len(ind), robot.nv
     if workers > 1 and n >= 2 * workers:
         t0 = time.perf_counter()
         cuts = np.linspace(0, n, workers + 1).astype(int)
         parts = [
-            (array_part, (q, dq, ddq, tau, int(a), int(b)))
+            (array_part, (q, dq, ddq, tau, int(a), int(b), temp))
             for a, b in zip(cuts[:-1], cuts[1:], strict=True)
         ]
         records = [unc.blocks(r, nv, offset=int(a)) for a in cuts[:-1]]
@@ -516,9 +544,8 @@ def _accumulate_arrays(robot: Robot, arrays, ind, run: RunOptions, workers: int,
         times["accumulate_wall"] = time.perf_counter() - t0
         return acc, times
     record = unc.blocks(r, nv)
-    return accumulate_blocks(
-        robot, [(q, dq, ddq, tau)], ind, chunk, progress=progress, total=n, record=record
-    )
+    block = next(array_part(q, dq, ddq, tau, 0, n, temp))
+    return accumulate_blocks(robot, [block], ind, chunk, progress=progress, total=n, record=record)
 
 
 def accumulate_online(
@@ -533,16 +560,17 @@ def accumulate_online(
     *,
     run: RunOptions,
     uncertainty: UncertaintyOptions | None = None,
+    temp=None,
 ):
     """One pass of the online law ``est`` over the samples in order (Euler step ``dt``
     [s]), with the information accumulated in the same pass (for the covariance and the
     errors, with the per-block sums of ``uncertainty``); ``run.chunk``,
-    ``run.progress(done, total)``."""
+    ``run.progress(done, total)``; ``temp`` the temperature (N, nv) or None."""
     n, nv, chunk, progress = q.shape[0], robot.nv, run.chunk, run.progress
     acc = UncertaintyOptions.from_value(uncertainty).accumulator(len(ind), nv)
     t_reg = t_acc = t_onl = 0.0
     t0 = time.perf_counter()
-    for c in iter_regressor(robot, q, dq, ddq, chunk=chunk):
+    for c in iter_regressor(robot, q, dq, ddq, chunk=chunk, temp=temp):
         t1 = time.perf_counter()
         t_reg += t1 - t0
         Yb = np.ascontiguousarray(c.Y[:, :, ind])
@@ -571,6 +599,7 @@ __all__ = [
     "accumulate_online",
     "accumulate_rows",
     "array_part",
+    "block_temperature",
     "check_equations",
     "check_samples",
     "check_tau",

@@ -42,6 +42,7 @@ from ..datasets.core import check_position_range
 from ..datasets.quality import DataQuality, QualityAccumulator
 from ..datasets.stream import torque_scale_vector
 from ..errors import DataError, InputError
+from ..friction import TemperatureStats
 from ..robot import Robot
 from ..signals import (
     DEFAULT_CUTOFF,
@@ -70,6 +71,12 @@ class FileScan:
     dt_max: float
     counts: RowCounts
     spill: str | None = None
+    temperature: TemperatureStats | None = None
+
+    @property
+    def temperature_columns(self) -> int:
+        """Temperature columns of the file (0: none)."""
+        return self.layout.n_temp
 
     def discard(self) -> None:
         """Remove the spill file (the scanned rows of a slow format), if any."""
@@ -145,6 +152,8 @@ def scan_file(robot: Robot, spec, options: PreprocessOptions | None = None) -> F
         standstill_eps=options.velocity_deadband,
     )
     counts = RowCounts()
+    temp = src.layout.slices.get("temp")
+    temperature: TemperatureStats | None = None
     spill = fh = None
     if src.format in SPILL_FORMATS or getattr(src, "compressed", False):
         fd, spill = tempfile.mkstemp(prefix="manip_id_rows_", suffix=".f64")
@@ -153,6 +162,9 @@ def scan_file(robot: Robot, spec, options: PreprocessOptions | None = None) -> F
     try:
         for rows in read_rows(src, spec, options, counts):
             qa.add(rows)
+            if temp is not None and rows.shape[0]:  # the sums of the reference T0
+                part = TemperatureStats.of(rows[:, temp])
+                temperature = part if temperature is None else temperature + part
             if fh is not None:
                 fh.write(np.ascontiguousarray(rows, dtype="<f8").tobytes())
     except BaseException as exc:
@@ -189,6 +201,7 @@ def scan_file(robot: Robot, spec, options: PreprocessOptions | None = None) -> F
         dt_max=quality.dt_max,
         counts=counts,
         spill=spill,
+        temperature=temperature,
     )
 
 
@@ -205,7 +218,8 @@ def _spilled_rows(path: str, width: int, chunk: int) -> Iterator[np.ndarray]:
 def iter_processed(
     robot: Robot, spec, options: PreprocessOptions | None = None, scan: FileScan | None = None
 ) -> tuple[PreprocessSettings | None, Iterator[np.ndarray]]:
-    """The rows of one file as the fit sees them: packed ``t | q | dq | tau | ddq`` blocks.
+    """The rows of one file as the fit sees them: packed ``t | q | dq | tau | ddq [| temp]``
+    blocks (:meth:`~manip_id.datasets.Layout.processed`).
 
     Returns ``(settings, blocks)``; ``settings`` is None when the file's own
     ddq is used as is. ``scan`` (from :func:`scan_file`) is made when not given.
@@ -233,8 +247,9 @@ def iter_processed(
         )
         stats = StreamStats(scan.n, scan.t_first, scan.t_last, scan.dt_min, scan.dt_max)
         settings, blocks = preprocess_blocks(
-            rows, lay.nq, lay.nv, stats, options=signal_options, block=options.block
-        )
+            rows, lay.nq, lay.nv, stats, options=signal_options, block=options.block,
+            n_temp=lay.n_temp,
+        )  # fmt: skip
     except (InputError, DataError) as exc:
         raise type(exc)(f"{spec.label}: {exc}") from exc
     return settings, blocks

@@ -27,7 +27,7 @@ from ..identifiability import RankAnalysis, analyze_information
 from ..metrics import finite_or_none, relative_error
 from ..robot import Robot
 from .options import LEAST_SQUARES, ConsistentOptions, UncertaintyOptions, check_method
-from .problem import FileSums, Problem, check_samples
+from .problem import FileSums, Problem, block_temperature, check_samples
 from .result import IdentificationResult, RelativeError
 
 
@@ -178,14 +178,14 @@ def raw_errors(problem: Problem, estimate, nominal) -> RelativeError | None:
 
 def stream_validation(robot: Robot, blocks, ind, estimate, nominal, chunk: int) -> RelativeError:
     """Validation errors of ``estimate`` and ``nominal`` by one pass over ``blocks``
-    ``(q, dq, ddq, tau)`` (exact, no round-off floor). Validation fields only."""
+    ``(q, dq, ddq, tau[, None, temp])`` (exact, no round-off floor). Validation fields only."""
     ev = robot.evaluator
     thetas = [estimate, nominal]
     sse = [np.zeros(robot.nv) for _ in thetas]
     zz = np.zeros(robot.nv)
-    for bq, bdq, bddq, btau in blocks:
-        vq, vdq, vddq, vtau = check_samples(robot, bq, bdq, bddq, btau, prefix="validation ")
-        for c in ev.iter_regressor(vq, vdq, vddq, chunk):
+    for block in blocks:
+        vq, vdq, vddq, vtau = check_samples(robot, *block[:4], prefix="validation ")
+        for c in ev.iter_regressor(vq, vdq, vddq, chunk, block_temperature(block)):
             Yb = c.Y[:, :, ind]
             for k, theta in enumerate(thetas):
                 err = Yb @ theta - vtau[c.start : c.stop]  # [N m]

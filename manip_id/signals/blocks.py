@@ -175,13 +175,14 @@ def preprocess_blocks(
     *,
     options: SignalOptions | None = None,
     block: int = DEFAULT_BLOCK,
+    n_temp: int = 0,
 ):
     """:func:`preprocess` on a stream of packed rows, block by block; equal to it to round-off.
 
     Parameters
     ----------
     chunks : iterable of numpy.ndarray
-        Packed rows ``t | q (nq) | dq (nv) | tau (nv) [| ddq]``
+        Packed rows ``t | q (nq) | dq (nv) | tau (nv) [| ddq] [| temp (n_temp)]``
         (:class:`manip_id.datasets.Layout`); a ddq column block is ignored.
     nq, nv : int
         Sizes of the q and dq column blocks.
@@ -194,12 +195,15 @@ def preprocess_blocks(
         :func:`preprocess`; default ``SignalOptions()``.
     block : int
         Rows per block (memory is O((block + 2 margin) * width)).
+    n_temp : int
+        Temperature columns, the last ``n_temp`` of each row (0: none): resampled and
+        low-pass filtered as q, carried after ddq.
 
     Returns
     -------
     tuple
         ``(settings, blocks)``: the :class:`PreprocessSettings` (known before any row
-        is read) and an iterator of packed rows ``t | q | dq | tau | ddq`` after
+        is read) and an iterator of packed rows ``t | q | dq | tau | ddq [| temp]`` after
         filtering, differentiation, trimming and decimation. Each block is computed on
         rows with :func:`overlap_margin` rows of margin on both sides (the identity of
         :mod:`manip_id.signals`), so the concatenated output equals ``preprocess`` of
@@ -207,22 +211,30 @@ def preprocess_blocks(
     """
     options = SignalOptions() if options is None else options
     filt, settings = stats.plan(options)
-    width_in = 1 + nq + 2 * nv
+    width_in, n_temp = 1 + nq + 2 * nv, int(n_temp)
+
+    def fields(c: np.ndarray) -> np.ndarray:  # t | q | dq | tau [| temp]
+        return (
+            np.hstack([c[:, :width_in], c[:, c.shape[1] - n_temp :]]) if n_temp else c[:, :width_in]
+        )
+
     if settings.resampled:
         n_uniform = uniform_grid(stats.t_first, stats.t_last, settings.rate).shape[0]
-        stream = (c[:, :width_in] for c in chunks)
+        stream = (fields(c) for c in chunks)
         windows = iter_overlapping(stream, block, SPLINE_MARGIN)
-        cols = slice(1, width_in)
+        cols = slice(1, width_in + n_temp)
         uniform_rows = resample_windows(
             windows, cols, stats.t_first, settings.rate, n_uniform, "cubic"
         )
     else:
         n_uniform = stats.n
-        uniform_rows = (c[:, :width_in] for c in chunks)
+        uniform_rows = (fields(c) for c in chunks)
     n_trim = settings.trim
     if n_trim < 0 or 2 * n_trim > n_uniform - 2:
         raise DataError(f"trimming {n_trim} + {n_trim} samples leaves fewer than 2 of {n_uniform}")
-    cut = _Cut(nq, nv, n_trim, n_uniform - n_trim, int(options.decimate), overlap_margin(filt))
+    cut = _Cut(
+        nq, nv, n_trim, n_uniform - n_trim, int(options.decimate), overlap_margin(filt), n_temp
+    )
     return settings, cut.blocks(uniform_rows, filt, options, block)
 
 
@@ -236,6 +248,7 @@ class _Cut:
     stop: int  # one past the last kept row
     step: int  # decimation
     margin: int  # rows of margin on each side of a block (:func:`overlap_margin`)
+    n_temp: int = 0  # temperature columns after tau (filtered as q, carried after ddq)
 
     def blocks(self, uniform_rows, filt: Lowpass, options: SignalOptions, block: int):
         """Filtered, differentiated, trimmed and decimated rows ``t | q | dq | tau | ddq``."""
@@ -262,4 +275,7 @@ class _Cut:
             first = lo_keep + (-(lo_keep - self.start)) % D  # first kept global index >= lo_keep
             idx = np.arange(first, hi_keep, D) - w.lo
             if idx.size:
-                yield np.column_stack([t[idx], q[idx], dq[idx], tau[idx], ddq[idx]])
+                out = [t[idx], q[idx], dq[idx], tau[idx], ddq[idx]]
+                if self.n_temp:  # slow: the same zero-phase filter as q
+                    out.append(filt(rows[:, stau.stop : stau.stop + self.n_temp])[idx])
+                yield np.column_stack(out)

@@ -120,10 +120,10 @@ def preprocess(
     Steps: (1) when the time stamps are not uniform (or ``rate`` is given),
     cubic-spline resampling on the grid ``t[0] + k / rate``
     (default rate: the mean one); (2) zero-phase
-    Butterworth low-pass (``cutoff`` [Hz], ``order``) of q, dq and, with
-    ``filter_torque``, tau; (3) ``ddq`` by central differences of the filtered
-    dq; (4) removal of the filter's edge transients, ``trim`` seconds at each
-    end; (5) keeping every ``decimate``-th sample.
+    Butterworth low-pass (``cutoff`` [Hz], ``order``) of q, dq, the temperature
+    (when measured) and, with ``filter_torque``, tau; (3) ``ddq`` by central
+    differences of the filtered dq; (4) removal of the filter's edge transients,
+    ``trim`` seconds at each end; (5) keeping every ``decimate``-th sample.
 
     Parameters
     ----------
@@ -177,9 +177,10 @@ def preprocess(
         dq = filt(data.dq)
     ddq = derivative(data.t, dq)
     tau = filt(data.tau) if filter_torque else data.tau
+    temp = None if data.temp is None else filt(data.temp)  # like q: slow, zero phase
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the degrees check already ran on the input
-        out = replace(data, q=q, dq=dq, ddq=ddq, tau=tau)
+        out = replace(data, q=q, dq=dq, ddq=ddq, tau=tau, temp=temp)
     out = trim_samples(out, n_trim)
     out = downsample(out, decimate)
     return replace(out, meta={**dataset.meta, "preprocess": settings})

@@ -113,7 +113,7 @@ def resample_dataset(dataset: Dataset, rate: float | None = None, kind: str = "c
     t_new = uniform_grid(dataset.t[0], dataset.t[-1], rate)
     fields: dict = {
         name: resample(dataset.t, getattr(dataset, name), t_new, kind)
-        for name in ("q", "dq", "tau", "ddq")
+        for name in ("q", "dq", "tau", "ddq", "temp")
         if getattr(dataset, name) is not None
     }
     return replace(dataset, t=t_new, **fields, meta={**dataset.meta, "rate": rate})
@@ -134,6 +134,7 @@ def downsample(dataset: Dataset, factor: int) -> Dataset:
         dq=dataset.dq[s],
         tau=dataset.tau[s],
         ddq=None if dataset.ddq is None else dataset.ddq[s],
+        temp=None if dataset.temp is None else dataset.temp[s],
     )
 
 

@@ -123,11 +123,13 @@ def candidate_rows(terms, q, dq, ddq) -> np.ndarray:
 
 def accumulate_candidates(robot, blocks, ind, terms, chunk: int) -> InformationAccumulator:
     """One accumulator over ``[Y_b, C]`` (``Y_b`` the regressor columns ``ind``, ``C`` the
-    candidate terms' columns) of blocks ``(q, dq, ddq, tau)`` (one pass)."""
+    candidate terms' columns) of blocks ``(q, dq, ddq, tau[, None, temp])`` (one pass)."""
     ind = np.asarray(ind, dtype=np.intp)
     acc = InformationAccumulator(ind.size + len(terms) * robot.nv, robot.nv)
-    for q, dq, ddq, tau in blocks:
-        for c in robot.evaluator.iter_regressor(q, dq, ddq, int(chunk)):
+    for block in blocks:
+        q, dq, ddq, tau = block[:4]
+        temp = block[5] if len(block) > 5 else None  # (the temperature law's)
+        for c in robot.evaluator.iter_regressor(q, dq, ddq, int(chunk), temp):
             s = slice(c.start, c.stop)
             C = candidate_rows(terms, None if q is None else q[s], dq[s], ddq[s])
             acc.add(np.concatenate([c.Y[:, :, ind], C], axis=2), tau[s], check=False)

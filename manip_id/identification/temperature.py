@@ -1,0 +1,97 @@
+"""The data side of the ``temperature`` friction law: its reference T0 and its range.
+
+The law (:mod:`manip_id.friction`) adds the columns ``(T_j - T0_j) dq_j`` and ``(T_j - T0_j)
+sign(dq_j)``; ``T0`` is a shape, fixed before any sum is accumulated, so that sums of parts
+(files, forked processes, Dask tasks) add up to the sums of the whole. It is the mean
+temperature per DoF of the training data *as read* (the rows the fit reads, before the
+preprocessing's trim and filter), from :class:`~manip_id.friction.TemperatureStats` summed
+over the files' scans (or over the arrays of an in-memory fit)::
+
+    T0_j = sum_k T_kj / N            T_min,j = min_k T_kj     T_max,j = max_k T_kj
+
+A reference given beforehand (``FrictionShapes(temperature_reference=...)``) is kept.
+Centring keeps ``fv`` and ``fc`` the coefficients at the data's mean temperature (well
+conditioned: the raw ``T dq`` column is nearly collinear with ``dq`` when T is in K).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from ..errors import MissingTemperatureError
+from ..friction import NO_SHAPES, TemperatureStats
+from ..robot import Robot
+
+
+def needs_reference(robot: Robot) -> bool:
+    """Whether ``robot`` models the temperature law without a reference ``T0`` yet."""
+    shapes = robot.layout.shapes or NO_SHAPES
+    return robot.layout.needs_temperature and shapes.temperature_reference is None
+
+
+def check_scans_temperature(robot: Robot, scans) -> None:
+    """Raise :class:`~manip_id.errors.MissingTemperatureError` when ``robot`` models the
+    temperature law and one of ``scans`` (:class:`~.reading.FileScan`) has no temp field."""
+    if not robot.layout.needs_temperature:
+        return
+    for scan in scans:
+        if scan.temperature is None:
+            raise MissingTemperatureError(scan.spec.label, scan.format, scan.layout.fields)
+
+
+def scans_temperature(scans) -> TemperatureStats | None:
+    """The temperature sums of ``scans`` added (None: no scan has a temperature)."""
+    total = None
+    for scan in scans:
+        if scan.temperature is not None:
+            total = scan.temperature if total is None else total + scan.temperature
+    return total
+
+
+def with_temperature_reference(robot: Robot, stats: TemperatureStats | None) -> Robot:
+    """``robot`` with ``T0`` the mean of ``stats`` per DoF (module docstring) when it models
+    the temperature law without one; else ``robot`` itself."""
+    if not needs_reference(robot) or stats is None:
+        return robot
+    mean, _, _ = stats.per_dof(robot.nv)
+    shapes = replace(
+        robot.layout.shapes or NO_SHAPES, temperature_reference=tuple(map(float, mean))
+    )
+    return robot.with_terms(replace(robot.terms, shapes=shapes))
+
+
+def reference_from_scans(robot: Robot, scans) -> Robot:
+    """The training ``scans`` checked for a temp field, and ``T0`` from their sums."""
+    scans = list(scans)
+    check_scans_temperature(robot, scans)
+    return with_temperature_reference(robot, scans_temperature(scans))
+
+
+def reference_from_arrays(robot: Robot, temp) -> Robot:
+    """``T0`` from the in-memory temperatures ``temp`` (N, nv) or (N, 1) of a fit; refuses
+    a missing ``temp`` when the robot models the law."""
+    if not robot.layout.needs_temperature:
+        return robot
+    if temp is None:
+        raise MissingTemperatureError("the arrays", "arrays", ("q", "dq", "ddq", "tau"))
+    return with_temperature_reference(robot, TemperatureStats.of(np.atleast_1d(temp)))
+
+
+def temperature_range(robot: Robot, stats: TemperatureStats) -> np.ndarray:
+    """Per DoF ``(T_min - T0, T_max - T0)`` of the training data [K], shape (nv, 2)."""
+    _, low, high = stats.per_dof(robot.nv)
+    t0 = (robot.layout.shapes or NO_SHAPES).values("temperature_reference", 0.0)
+    return np.stack([low - t0, high - t0], axis=1)
+
+
+__all__ = [
+    "check_scans_temperature",
+    "needs_reference",
+    "reference_from_arrays",
+    "reference_from_scans",
+    "scans_temperature",
+    "temperature_range",
+    "with_temperature_reference",
+]
