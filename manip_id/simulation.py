@@ -3,7 +3,7 @@
 Along a :class:`~manip_id.trajectories.FourierTrajectory` sampled at ``rate``
 [Hz] (``t_k = k / rate``, ``k = 0 .. floor(duration * rate)``) the torques are::
 
-    tau(t) = rnea(model(theta), q, dq, ddq) + joint_torques(theta, q, dq)
+    tau(t) = rnea(model(theta), q, dq, ddq) + joint_torques(theta, q, dq[, ddq, temp])
 
 ``model(theta)`` is :meth:`Robot.with_parameters` (rigid bodies, and the
 armature, which ``pinocchio.rnea`` includes); friction, offset and spring come
@@ -24,6 +24,12 @@ joint's position is added to the angle before it is stored as (cos, sin).
 The dataset's ``ddq`` is the exact (analytic) acceleration. The torque, the
 position and the velocity noise, and the parameter perturbation, draw from
 independent streams of one seed, so switching one on does not change the others.
+
+Temperature. A robot with the ``temperature`` friction law needs the joints' temperature
+``T(t)``: :func:`inverse_dynamics` takes it as ``temp`` (a constant, one value per joint,
+or one row per sample); :func:`simulate` and :class:`SimulationStream` take a
+:class:`ThermalOptions` (a linear drift ``T_j(t) = start + (end - start) t / t_end +
+offset_j`` [degC or K], noise-free), whose temperature the dataset carries as ``temp``.
 Each stream is drawn per block of :data:`NOISE_BLOCK` samples from its own
 generator, so a record is produced block by block (:class:`SimulationStream`,
 memory ``8 N nv`` bytes plus one block) with the same samples as :func:`simulate`.
@@ -68,6 +74,33 @@ class MeasurementNoise:
     tau: float = 0.0
     q: float = 0.0
     dq: float = 0.0
+
+
+@dataclass(frozen=True)
+class ThermalOptions:
+    """The simulated joints' temperature (module docstring): a linear drift.
+
+    Attributes
+    ----------
+    start, end : float
+        Temperature at the first and at the last sample [degC or K] (end None: constant).
+    offsets : tuple of float or None
+        Per-joint offsets added to every joint's drift [K] (None: none).
+    """
+
+    start: float = 25.0
+    end: float | None = None
+    offsets: tuple[float, ...] | None = None
+
+    def temperature(self, t, t_end: float, nv: int) -> np.ndarray:
+        """``T(t)`` [degC or K], shape (len(t), nv), for stamps ``t`` [s] of a record that
+        ends at ``t_end`` [s]."""
+        end = self.start if self.end is None else float(self.end)
+        drift = self.start + (end - self.start) * np.asarray(t, dtype=float) / max(t_end, 1e-300)
+        off = np.zeros(nv) if self.offsets is None else np.asarray(self.offsets, dtype=float)
+        if off.shape != (nv,):
+            raise InputError(f"ThermalOptions.offsets has {off.size} values for nv={nv} joints")
+        return drift[:, None] + off
 
 
 @dataclass(frozen=True)
@@ -118,7 +151,7 @@ def _nonnegative(value: float, name: str) -> float:
     return as_real(value, name, minimum=0.0)
 
 
-def inverse_dynamics(robot: Robot, theta, q, dq, ddq) -> np.ndarray:
+def inverse_dynamics(robot: Robot, theta, q, dq, ddq, temp=None) -> np.ndarray:
     """Joint torques of the full model with parameters ``theta``, without the regressor.
 
     ``pinocchio.rnea`` on ``robot.with_parameters(theta)`` (whose armature is
@@ -129,6 +162,9 @@ def inverse_dynamics(robot: Robot, theta, q, dq, ddq) -> np.ndarray:
     ----------
     theta : array_like
         shape (p,); q: (N, nq) [rad or m]; dq, ddq: (N, nv).
+    temp : array_like or None
+        the joints' temperature [degC or K] of the ``temperature`` law: a scalar, (1,),
+        (nv,), (N, 1) or (N, nv) (:func:`~manip_id.regressor.check_temperature`).
 
     Returns
     -------
@@ -144,8 +180,15 @@ def inverse_dynamics(robot: Robot, theta, q, dq, ddq) -> np.ndarray:
     for k in range(n):
         tau[k] = rnea(model, data, q[k], dq[k], ddq[k])
     if robot.terms.enabled:  # (joint_torques needs at least one joint term)
-        tau += joint_torques(robot, theta, q, dq, ddq, armature=False)  # Ia is in rnea
+        temp = None if temp is None else _per_sample(temp, n)
+        tau += joint_torques(robot, theta, q, dq, ddq, armature=False, temp=temp)  # Ia: rnea
     return tau
+
+
+def _per_sample(temp, n: int) -> np.ndarray:
+    """A constant or per-joint temperature repeated for ``n`` samples, shape (n, k)."""
+    t = np.asarray(temp, dtype=float)
+    return np.broadcast_to(t.reshape(1, -1), (n, t.size)) if t.ndim < 2 else t
 
 
 def simulation_bytes(robot: Robot, n_samples: int) -> int:
@@ -173,6 +216,7 @@ def simulate(
     perturb: float = 0.0,
     noise: MeasurementNoise | None = None,
     seed: int = 0,
+    thermal: ThermalOptions | None = None,
 ) -> SimulatedData:
     """Simulated measurements along a trajectory.
 
@@ -195,6 +239,9 @@ def simulate(
         velocity noise [rad/s or m/s] (:class:`MeasurementNoise`); default none.
     seed : int
         seed of every random draw (module docstring).
+    thermal : ThermalOptions, optional
+        the joints' temperature, carried by the dataset as ``temp`` (needed by the
+        ``temperature`` friction law; module docstring); default none.
 
     Returns
     -------
@@ -210,6 +257,7 @@ def simulate(
         perturb=perturb,
         noise=noise,
         seed=seed,
+        thermal=thermal,
     )
     check_simulation_memory(robot, stream.n_samples)
     return stream.simulated_data()
@@ -254,7 +302,7 @@ class SimulationStream:
         number of samples ``N = floor(duration rate) + 1``.
     rate : float
         sampling rate [Hz]; sample ``k`` is at ``t_k = k / rate`` [s].
-    noise_tau, noise_q, noise_dq, perturb, seed
+    noise_tau, noise_q, noise_dq, perturb, seed, thermal
         as given (validated).
     """
 
@@ -269,6 +317,7 @@ class SimulationStream:
         perturb: float = 0.0,
         noise: MeasurementNoise | None = None,
         seed: int = 0,
+        thermal: ThermalOptions | None = None,
     ):
         if not isinstance(trajectory, FourierTrajectory):
             raise InputError(f"expected a FourierTrajectory, got {type(trajectory).__name__}")
@@ -297,6 +346,7 @@ class SimulationStream:
         self.noise_q = _nonnegative(noise.q, "noise.q")  # [rad or m]
         self.noise_dq = _nonnegative(noise.dq, "noise.dq")  # [rad/s or m/s]
         self.seed = int(seed)
+        self.thermal = thermal
         base = robot.nominal_parameters if theta is None else parameter_vector(robot, theta)
         require_physical(robot, base)
         g_theta = _streams(self.seed)[0]
@@ -317,6 +367,15 @@ class SimulationStream:
         angles, dq, ddq = self.trajectory.sample(t)
         return t, angles, trajectory_to_configuration(self.robot, angles), dq, ddq
 
+    def temperature(self, start: int = 0, stop: int | None = None) -> np.ndarray | None:
+        """The joints' temperature of samples ``[start, stop)`` [degC or K], (n, nv), or
+        None without :class:`ThermalOptions`."""
+        if self.thermal is None:
+            return None
+        start, stop = self._range(start, stop)
+        t_end = (self.n_samples - 1) / self.rate  # [s]
+        return self.thermal.temperature(np.arange(start, stop) / self.rate, t_end, self.robot.nv)
+
     @property
     def tau_true(self) -> np.ndarray:
         """Noise-free torques of the whole record [N m or N], shape (N, nv) (computed once)."""
@@ -329,7 +388,7 @@ class SimulationStream:
             for lo in range(0, self.n_samples, NOISE_BLOCK):
                 hi = min(lo + NOISE_BLOCK, self.n_samples)
                 _, _, q, dq, ddq = self._noise_free(lo, hi)
-                tau[lo:hi] = batch(q, dq, ddq)
+                tau[lo:hi] = batch(q, dq, ddq, self.temperature(lo, hi))
             self._tau_true = tau
         return self._tau_true
 
@@ -388,10 +447,14 @@ class SimulationStream:
             yield t, q, dq, ddq, tau
 
     def blocks(self, start: int = 0, stop: int | None = None):
-        """``(q, dq, ddq, tau)`` blocks of ``[start, stop)``, as
+        """``(q, dq, ddq, tau)`` blocks of ``[start, stop)`` (``(q, dq, ddq, tau, None,
+        temp)`` with :class:`ThermalOptions`), as
         :func:`manip_id.identification.identify_chunks` takes them."""
+        at = self._range(start, stop)[0]
         for _, q, dq, ddq, tau in self.measurements(start, stop):
-            yield q, dq, ddq, tau
+            temp = self.temperature(at, at + q.shape[0])
+            at += q.shape[0]
+            yield (q, dq, ddq, tau) if temp is None else (q, dq, ddq, tau, None, temp)
 
     def parts(self, n_parts: int, start: int = 0, stop: int | None = None) -> list:
         """``[(self.blocks, (lo, hi)), ...]``: ``[start, stop)`` cut into ``n_parts`` contiguous
@@ -429,7 +492,14 @@ class SimulationStream:
             ddq[at : at + k], tau[at : at + k] = bddq, btau
             at += k
         return Dataset(
-            t=t, q=q, dq=dq, tau=tau, ddq=ddq, joint_names=tuple(robot.dof_names), meta=self.meta()
+            t=t,
+            q=q,
+            dq=dq,
+            tau=tau,
+            ddq=ddq,
+            joint_names=tuple(robot.dof_names),
+            meta=self.meta(),
+            temp=self.temperature(start, stop),
         )
 
     def simulated_data(self) -> SimulatedData:
@@ -462,14 +532,14 @@ class _BatchInverseDynamics:
         if hasattr(pin, "rneaInParallel") and hasattr(pin, "ModelPool"):
             self.pool = pin.ModelPool(robot.with_parameters(theta), 1)
 
-    def __call__(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray) -> np.ndarray:
+    def __call__(self, q: np.ndarray, dq: np.ndarray, ddq: np.ndarray, temp=None) -> np.ndarray:
         if self.pool is None:
-            return inverse_dynamics(self.robot, self.theta, q, dq, ddq)
+            return inverse_dynamics(self.robot, self.theta, q, dq, ddq, temp)
         out = np.empty((self.robot.nv, q.shape[0]), order="F")  # [N m or N], sample per column
         pin.rneaInParallel(1, self.pool, q.T, dq.T, ddq.T, out)
         tau = out.T
         if self.robot.terms.enabled:  # (armature is in the model's rnea)
-            tau = tau + joint_torques(self.robot, self.theta, q, dq, ddq, armature=False)
+            tau = tau + joint_torques(self.robot, self.theta, q, dq, ddq, armature=False, temp=temp)
         return tau
 
 
@@ -483,6 +553,7 @@ __all__ = [
     "MeasurementNoise",
     "SimulatedData",
     "SimulationStream",
+    "ThermalOptions",
     "inverse_dynamics",
     "simulate",
 ]

@@ -26,7 +26,7 @@ from ..models import (
     choose_window,
     window_samples,
 )
-from ..regressor import check_states, check_temperature
+from ..regressor import check_states, check_temperature, iter_regressor
 from ..robot import Robot
 from .options import (
     ONLINE,
@@ -45,7 +45,6 @@ from .problem import (
     accumulate_arrays,
     accumulate_blocks,
     accumulate_forked,
-    accumulate_online,
     array_part,
     check_equations,
     check_samples,
@@ -56,7 +55,7 @@ from .problem import (
 from .result import IdentificationResult
 from .solve import solve
 from .tasks import PartSums, blocks_sums
-from .temperature import reference_from_arrays
+from .temperature import note_reference, reference_from_arrays
 
 
 def online_estimator(method: str, r: int, options: OnlineOptions, n: int):
@@ -96,7 +95,6 @@ def identify(
     rank: RankOptions | dict | None = None,
     run: RunOptions | dict | None = None,
     uncertainty: UncertaintyOptions | str | dict | None = None,
-    temp=None,
 ) -> IdentificationResult:
     """Identify the base parameters of ``robot`` from N samples, streamed.
 
@@ -134,21 +132,28 @@ def identify(
         from per-block sums of the accumulation, when the data give at least 16
         blocks; else white), "white" (``sigma^2 (Y^T Y)^-1``) or "hac"; see
         :mod:`manip_id.estimators.uncertainty`. ``std_white`` keeps the white one.
-    temp : array_like or None
-        The measured temperature [degC or K] of the ``temperature`` friction law, shape
-        (N, nv) or (N, 1) (one for every joint). When the robot's reference ``T0`` is
-        unset it becomes the mean of ``temp`` per joint
-        (:mod:`~manip_id.identification.temperature`), in ``context["friction_shapes"]``.
 
     Returns
     -------
     IdentificationResult
+        The robot's ``temperature`` friction law needs the measured temperature: give a
+        :class:`~manip_id.datasets.Dataset` with ``temp`` to :func:`identify_dataset`.
     """
+    opts = _Opts(consistent, model, rank, run, uncertainty, online)
+    return _identify(robot, (q, dq, ddq, tau, None), method, validation, base, opts)
+
+
+def _identify(robot: Robot, samples: tuple, method: str, validation, base, opts: _Opts):
+    """The body of :func:`identify` on ``samples = (q, dq, ddq, tau, temp)`` (``temp``
+    the measured temperature of the ``temperature`` law, (N, nv) or (N, 1), or None: when
+    the robot's reference ``T0`` is unset it becomes the mean of ``temp`` per joint,
+    :mod:`~manip_id.identification.temperature`, recorded in
+    ``context["friction_shapes"]``)."""
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
     check_method(method)
-    opts = _Opts(consistent, model, rank, run, uncertainty)
-    online_options = OnlineOptions.from_value(online)
+    q, dq, ddq, tau, temp = samples
+    online_options = opts.online
     if opts.model.name != "dynamic":
         return _identify_acceleration_free(robot, (q, dq, tau), method, validation, base, opts)
     q, dq, ddq, tau = check_samples(robot, q, dq, ddq, tau)
@@ -165,10 +170,10 @@ def identify(
     online_run = None
     if method in ONLINE:
         est, what = online_estimator(method, r, online_options, n)
+        states = (q, dq, ddq, tau, temp)
         acc, times = accumulate_online(
-            robot, q, dq, ddq, tau, ind, est, dt, run=run_o, uncertainty=opts.uncertainty,
-            temp=temp,
-        )  # fmt: skip
+            robot, states, ind, est, dt, run=run_o, uncertainty=opts.uncertainty
+        )
         online_run = OnlineRun(est, what)
     else:
         acc, times = accumulate_arrays(
@@ -192,15 +197,53 @@ def identify(
     result.warnings.extend(
         missing_term_warnings(robot, result.standard, [train], blocks, ind, run_o.chunk)
     )
-    if temp is not None:  # the reference T0 the coefficients fvt, fct refer to
-        result.context["friction_shapes"] = robot.layout.shapes.to_dict()
-    return result
+    return note_reference(result, robot)  # the T0 the coefficients fvt, fct refer to
+
+
+def accumulate_online(
+    robot: Robot,
+    states: tuple,
+    ind,
+    est,
+    dt: float,
+    *,
+    run: RunOptions,
+    uncertainty: UncertaintyOptions | None = None,
+):
+    """One pass of the online law ``est`` over the samples ``states = (q, dq, ddq, tau,
+    temp)`` in order (Euler step ``dt`` [s]; ``temp`` the temperature (N, nv) or None),
+    with the information accumulated in the same pass (for the covariance and the errors,
+    with the per-block sums of ``uncertainty``); ``run.chunk``, ``run.progress(done,
+    total)``."""
+    q, dq, ddq, tau, temp = states
+    n, nv, chunk, progress = q.shape[0], robot.nv, run.chunk, run.progress
+    acc = UncertaintyOptions.from_value(uncertainty).accumulator(len(ind), nv)
+    t_reg = t_acc = t_onl = 0.0
+    t0 = time.perf_counter()
+    for c in iter_regressor(robot, q, dq, ddq, chunk=chunk, temp=temp):
+        t1 = time.perf_counter()
+        t_reg += t1 - t0
+        Yb = np.ascontiguousarray(c.Y[:, :, ind])
+        acc.add(Yb, tau[c.start : c.stop], check=False)
+        t2 = time.perf_counter()
+        t_acc += t2 - t1
+        step = est.step
+        for i in range(c.stop - c.start):
+            step(Yb[i], tau[c.start + i], dt)
+        t_onl += time.perf_counter() - t2
+        if progress is not None:
+            progress(c.stop, n)
+        t0 = time.perf_counter()
+    return acc, {"regressor": t_reg, "accumulate": t_acc, "online": t_onl}
 
 
 class _Opts:
     """The option objects of one call, each from its value (None: the defaults)."""
 
-    def __init__(self, consistent, model, rank, run, uncertainty=None):
+    def __init__(
+        self, consistent=None, model=None, rank=None, run=None, uncertainty=None, online=None
+    ):
+        self.online = OnlineOptions.from_value(online)
         self.consistent = ConsistentOptions.from_value(consistent)
         self.model = ModelOptions.from_value(model)
         self.rank = RankOptions.from_value(rank)
@@ -409,7 +452,9 @@ def model_window(model: ModelOptions, n_samples: int, dt: float, n_base: int, nv
 
 def identify_dataset(robot: Robot, dataset, *, ddq=None, validation=None, **kwargs):
     """:func:`identify` on a :class:`~manip_id.datasets.Dataset` (``ddq`` from the dataset
-    unless given); ``validation`` may be another Dataset. Other keywords as :func:`identify`.
+    unless given; its ``temp``, the measured temperature of the ``temperature`` friction
+    law, with ``T0`` its mean when the robot has none); ``validation`` may be another
+    Dataset. Other keywords as :func:`identify`.
     With the energy or momentum model no ddq is needed and the model's ``dt`` defaults to
     the dataset's mean sample time."""
     if validation is not None and hasattr(validation, "tau"):
@@ -439,17 +484,9 @@ def identify_dataset(robot: Robot, dataset, *, ddq=None, validation=None, **kwar
             "the dataset has no accelerations (ddq): estimate them first "
             "(manip_id.signals) or pass ddq="
         )
-    return identify(
-        robot,
-        dataset.q,
-        dataset.dq,
-        acc_arr,
-        dataset.tau,
-        validation=validation,
-        model=model,
-        temp=dataset.temp,
-        **kwargs,
-    )
+    method, base = kwargs.pop("method", "ols"), kwargs.pop("base", None)
+    samples = (dataset.q, dataset.dq, acc_arr, dataset.tau, dataset.temp)
+    return _identify(robot, samples, method, validation, base, _Opts(model=model, **kwargs))
 
 
 __all__ = [

@@ -30,7 +30,7 @@ from .reading import iter_processed, scan_file
 from .result import IdentificationResult
 from .solve import solve
 from .tasks import distributed_problem, file_specs
-from .temperature import check_scans_temperature, reference_from_scans
+from .temperature import check_scans_temperature, note_reference, reference_from_scans
 
 
 def identify_datasets(
@@ -105,7 +105,7 @@ def identify_datasets(
         problem.t_start = t_start
         for scan in made:  # the temperature reference's scans: the tasks scan their own
             scan.discard()
-        return solve(problem, method, **kw)
+        return note_reference(solve(problem, method, **kw), robot)
     ind = base.independent
     t0 = time.perf_counter()
     train = accumulate_files(
@@ -148,7 +148,7 @@ def identify_datasets(
                 run_o.chunk,
             )
         )
-    return result
+    return note_reference(result, robot)
 
 
 def _temperature_reference(robot: Robot, files, validation, options, window, scans):

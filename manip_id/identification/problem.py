@@ -31,7 +31,7 @@ from ..estimators import InformationAccumulator
 from ..estimators.blocks import ScoreBlocks
 from ..execution import ForkBackend
 from ..identifiability import BaseParameters, analyze
-from ..regressor import DEFAULT_CHUNK, check_states, check_temperature, iter_regressor
+from ..regressor import DEFAULT_CHUNK, check_states, check_temperature
 from ..robot import Robot
 from .options import RunOptions, UncertaintyOptions
 
@@ -548,45 +548,6 @@ def _accumulate_arrays(robot: Robot, arrays, ind, run: RunOptions, workers: int,
     return accumulate_blocks(robot, [block], ind, chunk, progress=progress, total=n, record=record)
 
 
-def accumulate_online(
-    robot: Robot,
-    q,
-    dq,
-    ddq,
-    tau,
-    ind,
-    est,
-    dt: float,
-    *,
-    run: RunOptions,
-    uncertainty: UncertaintyOptions | None = None,
-    temp=None,
-):
-    """One pass of the online law ``est`` over the samples in order (Euler step ``dt``
-    [s]), with the information accumulated in the same pass (for the covariance and the
-    errors, with the per-block sums of ``uncertainty``); ``run.chunk``,
-    ``run.progress(done, total)``; ``temp`` the temperature (N, nv) or None."""
-    n, nv, chunk, progress = q.shape[0], robot.nv, run.chunk, run.progress
-    acc = UncertaintyOptions.from_value(uncertainty).accumulator(len(ind), nv)
-    t_reg = t_acc = t_onl = 0.0
-    t0 = time.perf_counter()
-    for c in iter_regressor(robot, q, dq, ddq, chunk=chunk, temp=temp):
-        t1 = time.perf_counter()
-        t_reg += t1 - t0
-        Yb = np.ascontiguousarray(c.Y[:, :, ind])
-        acc.add(Yb, tau[c.start : c.stop], check=False)
-        t2 = time.perf_counter()
-        t_acc += t2 - t1
-        step = est.step
-        for i in range(c.stop - c.start):
-            step(Yb[i], tau[c.start + i], dt)
-        t_onl += time.perf_counter() - t2
-        if progress is not None:
-            progress(c.stop, n)
-        t0 = time.perf_counter()
-    return acc, {"regressor": t_reg, "accumulate": t_acc, "online": t_onl}
-
-
 __all__ = [
     "FileRecord",
     "FileSums",
@@ -596,7 +557,6 @@ __all__ = [
     "accumulate_arrays",
     "accumulate_blocks",
     "accumulate_forked",
-    "accumulate_online",
     "accumulate_rows",
     "array_part",
     "block_temperature",

@@ -79,6 +79,14 @@ def reference_from_arrays(robot: Robot, temp) -> Robot:
     return with_temperature_reference(robot, TemperatureStats.of(np.atleast_1d(temp)))
 
 
+def note_reference(result, robot: Robot):
+    """``result`` with ``context["friction_shapes"]`` the shapes of ``robot`` (its ``T0``)
+    when it models the temperature law (the reference its ``fvt``, ``fct`` refer to)."""
+    if robot.layout.needs_temperature:
+        result.context["friction_shapes"] = (robot.layout.shapes or NO_SHAPES).to_dict()
+    return result
+
+
 def temperature_range(robot: Robot, stats: TemperatureStats) -> np.ndarray:
     """Per DoF ``(T_min - T0, T_max - T0)`` of the training data [K], shape (nv, 2)."""
     _, low, high = stats.per_dof(robot.nv)
@@ -89,6 +97,7 @@ def temperature_range(robot: Robot, stats: TemperatureStats) -> np.ndarray:
 __all__ = [
     "check_scans_temperature",
     "needs_reference",
+    "note_reference",
     "reference_from_arrays",
     "reference_from_scans",
     "scans_temperature",
