@@ -293,3 +293,22 @@ def test_sidecar_round_trip(robot, files, tmp_path):
         dt = temp[:, 0] - t0[j]
         law = (c["fv"] + c["fvt"] * dt) * dq[:, j] + (c["fc"] + c["fct"] * dt) * np.sign(dq[:, j])
         np.testing.assert_allclose(got[:, j] - rigid[:, j], law, atol=1e-9)
+
+
+# ---------------------------------------------------------------- selection
+def test_auto_adds_the_temperature_candidate_only_with_a_temperature(robot, files, tmp_path):
+    folder, _ = files
+    argv = ["identify", "double_pendulum", "--friction", "auto", "--split", "0.7", "--quiet"]
+    hot, plain = tmp_path / "hot.json", tmp_path / "plain.json"
+    assert main([*argv, "--data", str(folder / "run.npz"), "--json", str(hot)]) == 0
+    assert main([*argv, "--data", str(folder / "plain.npz"), "--json", str(plain)]) == 0
+    rh, rp = json.loads(hot.read_text()), json.loads(plain.read_text())
+    for j in rh["friction_selection"]:
+        models = [c["model"] for c in j["candidates"]]
+        assert "temperature" in models
+        assert j["chosen"].startswith("temperature")  # the truth's law, by validation error
+    assert len(rh["friction_shapes"]["temperature_reference"]) == 2
+    for j in rp["friction_selection"]:  # no temperature: the candidates of before
+        assert not any(c["model"].startswith("temperature") for c in j["candidates"])
+    assert rp["friction_shapes"]["temperature_reference"] is None
+    assert rh["relative_error"]["validation"] < 0.5 * rp["relative_error"]["validation"]

@@ -11,6 +11,8 @@ Candidates (:data:`CANDIDATES`; every one with the offset ``fo`` when
     sigmoid      fv dq + fsg (S(a (dq + c)) - S(a c))                a, c per joint
     position     fv dq + fc sign(dq) + sum_k hks sin(k q) + hkc cos(k q)
     load         fv dq + fc sign(dq) + fl |tau_load| sign(dq)      (nominal tau_load)
+    temperature  (fv + fvt (T - T0)) dq + (fc + fct (T - T0)) sign(dq)
+                 only when the data carry a temperature (:func:`select_model_files`)
     X+position   a joint's best of asymmetric / stribeck / sigmoid, plus the harmonics
 
 Each fit is the usual one (``fit(robot) -> IdentificationResult``: the same accumulated
@@ -48,6 +50,8 @@ from ..metrics import finite_or_none
 from ..robot import JointTerms, Robot
 from .files import identify_datasets
 from .result import IdentificationResult
+from .tasks import file_specs
+from .temperature import scans_temperature, with_temperature_reference
 
 #: The candidate models, in the order they are tried.
 CANDIDATES: tuple[str, ...] = (
@@ -57,7 +61,11 @@ CANDIDATES: tuple[str, ...] = (
     "sigmoid",
     "position",
     "load",
+    "temperature",
 )
+#: The candidates tried by default: all but ``temperature``, which needs a measured
+#: temperature (:func:`select_model_files` adds it when every file has one).
+DEFAULT_CANDIDATES: tuple[str, ...] = tuple(c for c in CANDIDATES if c != "temperature")
 _KINDS = {
     "linear": ("viscous", "coulomb"),
     "asymmetric": ("asymmetric",),
@@ -65,6 +73,7 @@ _KINDS = {
     "sigmoid": ("viscous", "sigmoid"),
     "position": ("viscous", "coulomb", "position"),
     "load": ("viscous", "coulomb", "load"),
+    "temperature": ("viscous", "coulomb", "temperature"),
 }
 #: Default grids: Stribeck velocities vs [rad/s], sigmoid slopes a [s/rad].
 STRIBECK_GRID = (0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5)
@@ -80,7 +89,7 @@ class SelectionOptions:
     Attributes
     ----------
     candidates : tuple of str
-        Models to try, some of :data:`CANDIDATES`.
+        Models to try, some of :data:`CANDIDATES` (default :data:`DEFAULT_CANDIDATES`).
     offset : bool
         Every candidate carries the offset ``fo``.
     harmonics : int
@@ -104,7 +113,7 @@ class SelectionOptions:
         (one more fit; candidates ``"<law>+position"``).
     """
 
-    candidates: tuple[str, ...] = CANDIDATES
+    candidates: tuple[str, ...] = DEFAULT_CANDIDATES
     offset: bool = True
     harmonics: int = 2
     stribeck_grid: tuple[float, ...] = STRIBECK_GRID
@@ -212,8 +221,10 @@ class FrictionSelection:
 def candidate_terms(
     base: JointTerms, model: str, opts: SelectionOptions, shapes: FrictionShapes | None = None
 ) -> JointTerms:
-    """The joint terms of one candidate on every joint (``base``'s armature and spring)."""
+    """The joint terms of one candidate on every joint (``base``'s armature and spring, and
+    its temperature reference ``T0``)."""
     kinds = set(_KINDS[model]) | ({"offset"} if opts.offset else set())
+    shapes = _with_reference(shapes, base)
     return JointTerms(
         armature=base.armature,
         spring=base.spring,
@@ -225,21 +236,31 @@ def candidate_terms(
         sigmoid="sigmoid" in kinds,
         harmonics=opts.harmonics if "position" in kinds else 0,
         load="load" in kinds,
+        temperature="temperature" in kinds,
         shapes=shapes,
     )
+
+
+def _with_reference(shapes: FrictionShapes | None, base: JointTerms) -> FrictionShapes | None:
+    """``shapes`` with the temperature reference ``T0`` of ``base``'s shapes, if any."""
+    t0 = None if base.shapes is None else base.shapes.temperature_reference
+    return shapes if t0 is None else replace(shapes or FrictionShapes(), temperature_reference=t0)
 
 
 def combined_terms(base: JointTerms, per_joint: list[JointTerms], shapes) -> JointTerms:
     """One :class:`JointTerms` holding each joint's own model (``per_dof``)."""
     flags = {
         k: any(getattr(t, k) for t in per_joint)
-        for k in ("viscous", "coulomb", "offset", "asymmetric", "stribeck", "sigmoid", "load")
-    }
+        for k in (
+            "viscous", "coulomb", "offset", "asymmetric", "stribeck", "sigmoid", "load",
+            "temperature",
+        )
+    }  # fmt: skip
     return JointTerms(
         armature=base.armature,
         spring=base.spring,
         harmonics=max(t.harmonics for t in per_joint),
-        shapes=shapes,
+        shapes=_with_reference(shapes, base),
         per_dof=tuple(t.enabled for t in per_joint),
         **flags,
     )
@@ -440,8 +461,8 @@ def select_model(
             for name, keep in zip(robot.dof_names, terms.per_dof or (), strict=True)
         },
     }
-    if shapes is not None:
-        ctx["friction_shapes"] = shapes.to_dict()
+    if terms.shapes is not None:
+        ctx["friction_shapes"] = terms.shapes.to_dict()
     return replace(result, context=ctx), selection
 
 
@@ -508,14 +529,34 @@ def select_model_files(
 ) -> tuple[Robot, IdentificationResult, FrictionSelection]:
     """:func:`select_model` on log files: each fit is
     :func:`~manip_id.identification.identify_datasets` ``(robot, files, **kwargs)``
-    (give ``validation=`` files for the validation error). Returns the robot with the
-    chosen per-joint model, its result and the selection."""
+    (give ``validation=`` files for the validation error). The ``temperature`` candidate
+    joins the default ones when every file (training and validation) carries a temperature
+    (``kwargs["scans"]`` holds their scans; the reference ``T0`` from the training ones);
+    otherwise the candidates are the defaults. Returns the robot with the chosen per-joint
+    model, its result and the selection."""
 
     def fit(r: Robot) -> IdentificationResult:
         return identify_datasets(r, files, **kwargs)
 
+    if selection is None:
+        robot, selection = _temperature_candidate(robot, files, kwargs)
     result, chosen = select_model(fit, robot, selection)
     return robot.with_terms(chosen.terms), result, chosen
+
+
+def _temperature_candidate(robot: Robot, files, kwargs: dict):
+    """``(robot with T0, options with the temperature candidate)`` when every file's scan
+    in ``kwargs["scans"]`` has a temperature, else ``(robot, None)``."""
+    scans = kwargs.get("scans") or {}
+    specs = file_specs(files, "paths", kwargs.get("window"))
+    valid = kwargs.get("validation")
+    vspecs = [] if valid is None else file_specs(valid, "validation", kwargs.get("window"))
+    found = [scans.get(s) for s in specs + vspecs]
+    if not found or any(s is None or s.temperature is None for s in found):
+        return robot, None
+    stats = scans_temperature(found[: len(specs)])
+    robot = with_temperature_reference(robot, stats, modelled=False)
+    return robot, SelectionOptions(candidates=CANDIDATES)
 
 
 def _shapes(trials: dict[str, _Trial]) -> FrictionShapes | None:
@@ -534,6 +575,7 @@ def _shapes(trials: dict[str, _Trial]) -> FrictionShapes | None:
 
 __all__ = [
     "CANDIDATES",
+    "DEFAULT_CANDIDATES",
     "Candidate",
     "FrictionSelection",
     "JointSelection",

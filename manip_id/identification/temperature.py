@@ -50,10 +50,16 @@ def scans_temperature(scans) -> TemperatureStats | None:
     return total
 
 
-def with_temperature_reference(robot: Robot, stats: TemperatureStats | None) -> Robot:
-    """``robot`` with ``T0`` the mean of ``stats`` per DoF (module docstring) when it models
-    the temperature law without one; else ``robot`` itself."""
-    if not needs_reference(robot) or stats is None:
+def with_temperature_reference(
+    robot: Robot, stats: TemperatureStats | None, *, modelled: bool = True
+) -> Robot:
+    """``robot`` with ``T0`` the mean of ``stats`` per DoF (module docstring) when it has
+    none and models the temperature law (``modelled=False``: whatever its laws, for the
+    candidates of a model selection); else ``robot`` itself."""
+    shapes = robot.layout.shapes or NO_SHAPES
+    if stats is None or shapes.temperature_reference is not None:
+        return robot
+    if modelled and not robot.layout.needs_temperature:
         return robot
     mean, _, _ = stats.per_dof(robot.nv)
     shapes = replace(
