@@ -75,6 +75,17 @@ DEFAULT_SIGMOID_SLOPE = 50.0
 DEFAULT_SIGMOID_SHIFT = 0.0
 
 
+#: The fields of :class:`FrictionShapes`.
+SHAPE_FIELDS = (
+    "stribeck_velocity",
+    "sigmoid_slope",
+    "sigmoid_shift",
+    "temperature_reference",
+    "temperature_low",
+    "temperature_high",
+)
+
+
 @dataclass(frozen=True)
 class FrictionShapes:
     """Shape parameters of the nonlinear laws, one value per DoF (tuples of length nv).
@@ -90,19 +101,24 @@ class FrictionShapes:
     temperature_reference : tuple of float or None
         ``T0`` [degC or K] per DoF of the ``temperature`` law (None: 0, the raw
         temperature; the identification sets the training data's mean).
+    temperature_low, temperature_high : tuple of float or None
+        The training data's temperature range per DoF [degC or K], where the law was
+        fitted (the physically consistent estimate keeps ``fv(T)``, ``fc(T)`` >= 0 there).
     """
 
     stribeck_velocity: tuple[float, ...] | None = None
     sigmoid_slope: tuple[float, ...] | None = None
     sigmoid_shift: tuple[float, ...] | None = None
     temperature_reference: tuple[float, ...] | None = None
+    temperature_low: tuple[float, ...] | None = None
+    temperature_high: tuple[float, ...] | None = None
 
     def __post_init__(self):
         for name in ("stribeck_velocity", "sigmoid_slope"):
             v = getattr(self, name)
             if v is not None and not all(np.isfinite(x) and x > 0 for x in v):
                 raise InputError(f"{name} must be positive and finite per DoF, got {v}")
-        for name in ("sigmoid_shift", "temperature_reference"):
+        for name in SHAPE_FIELDS[2:]:
             v = getattr(self, name)
             if v is not None and not all(np.isfinite(v)):
                 raise InputError(f"{name} must be finite per DoF, got {v}")
@@ -127,13 +143,6 @@ class FrictionShapes:
 
 
 NO_SHAPES = FrictionShapes()
-#: The fields of :class:`FrictionShapes`.
-SHAPE_FIELDS = (
-    "stribeck_velocity",
-    "sigmoid_slope",
-    "sigmoid_shift",
-    "temperature_reference",
-)
 
 
 def _sigmoid(x):

@@ -10,6 +10,7 @@ training rows' mean temperature, so the truth at T0 is ``fv0 + fv1 (T0 - Tref)``
 from __future__ import annotations
 
 import json
+import sys
 
 import numpy as np
 import pinocchio as pin
@@ -312,3 +313,32 @@ def test_auto_adds_the_temperature_candidate_only_with_a_temperature(robot, file
         assert not any(c["model"].startswith("temperature") for c in j["candidates"])
     assert rp["friction_shapes"]["temperature_reference"] is None
     assert rh["relative_error"]["validation"] < 0.5 * rp["relative_error"]["validation"]
+
+
+# --------------------------------------------------------------- consistent
+@pytest.mark.parametrize("solver", ["sdp", "logchol"])
+def test_consistent_friction_stays_physical_over_the_temperature_range(robot, monkeypatch, solver):
+    # a truth whose viscous friction would turn negative above 40 degC: least squares
+    # follows it, the consistent estimate keeps fv(T) >= 0 at the range's ends
+    monkeypatch.setattr(sys.modules[__name__], "FV0", np.array([0.02, 0.2]))
+    rec = _record(robot, seed=5, duration=20.0)
+    r = load_robot("double_pendulum", friction=LAW)
+    ls = identify_dataset(r, _dataset(robot, rec))
+    res = identify_dataset(r, _dataset(robot, rec), consistent={"solver": solver})
+    shapes = res.context["friction_shapes"]
+    t0, lo, hi = (np.array(shapes[k]) for k in ("temperature_reference", "temperature_low",
+                                                 "temperature_high"))  # fmt: skip
+    np.testing.assert_allclose(lo, rec[5].min(axis=0))
+    np.testing.assert_allclose(hi, rec[5].max(axis=0))
+    names, theta = r.parameter_names, res.standard.values  # the standard parameters
+
+    def law(th, base, slope, end):
+        return np.array([th[names.index(f"{d}.{base}")] + th[names.index(f"{d}.{slope}")]
+                         * (end[j] - t0[j]) for j, d in enumerate(r.dof_names)])  # fmt: skip
+
+    fv_ls = _coef(ls, r, "fv") + _coef(ls, r, "fvt") * (hi - t0)
+    assert fv_ls[0] < -0.02  # least squares: negative viscous friction when hot
+    for base, slope in (("fv", "fvt"), ("fc", "fct")):
+        for end in (lo, hi):
+            assert np.all(law(theta, base, slope, end) >= -1e-7)
+    assert abs(law(theta, "fv", "fvt", hi)[0]) < 1e-6  # the constraint binds

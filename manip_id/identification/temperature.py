@@ -4,12 +4,16 @@ The law (:mod:`manip_id.friction`) adds the columns ``(T_j - T0_j) dq_j`` and ``
 sign(dq_j)``; ``T0`` is a shape, fixed before any sum is accumulated, so that sums of parts
 (files, forked processes, Dask tasks) add up to the sums of the whole. It is the mean
 temperature per DoF of the training data *as read* (the rows the fit reads, before the
-preprocessing's trim and filter), from :class:`~manip_id.friction.TemperatureStats` summed
-over the files' scans (or over the arrays of an in-memory fit)::
+preprocessing's trim and filter), with the range ``[T_min, T_max]`` it spans, from
+:class:`~manip_id.friction.TemperatureStats` summed over the files' scans (or over the
+arrays of an in-memory fit)::
 
     T0_j = sum_k T_kj / N            T_min,j = min_k T_kj     T_max,j = max_k T_kj
 
-A reference given beforehand (``FrictionShapes(temperature_reference=...)``) is kept.
+A reference given beforehand (``FrictionShapes(temperature_reference=...)``) is kept. The
+range is kept as the shapes' ``temperature_low``, ``temperature_high``: the physically
+consistent estimate keeps ``fv + fvt (T - T0) >= 0`` and ``fc + fct (T - T0) >= 0`` at
+both ends (:func:`~manip_id.estimators.consistent.problem.temperature_rows`).
 Centring keeps ``fv`` and ``fc`` the coefficients at the data's mean temperature (well
 conditioned: the raw ``T dq`` column is nearly collinear with ``dq`` when T is in K).
 """
@@ -61,10 +65,8 @@ def with_temperature_reference(
         return robot
     if modelled and not robot.layout.needs_temperature:
         return robot
-    mean, _, _ = stats.per_dof(robot.nv)
-    shapes = replace(
-        robot.layout.shapes or NO_SHAPES, temperature_reference=tuple(map(float, mean))
-    )
+    mean, low, high = (tuple(map(float, v)) for v in stats.per_dof(robot.nv))
+    shapes = replace(shapes, temperature_reference=mean, temperature_low=low, temperature_high=high)
     return robot.with_terms(replace(robot.terms, shapes=shapes))
 
 

@@ -95,6 +95,9 @@ class ConsistentProblem:
     bounds
         the plausibility bounds (:class:`~manip_id.estimators.consistent.bounds.BodyBounds`:
         bounding ellipsoids, mass ranges, total mass), linear in theta; None for none.
+    linear
+        rows ``G`` (m, p) of the linear constraints ``G theta >= 0`` of the temperature
+        law (:func:`temperature_rows`); None for none.
     """
 
     P: np.ndarray
@@ -111,6 +114,18 @@ class ConsistentProblem:
     dependent: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
     names: list[str] = field(default_factory=list)
     bounds: BodyBounds | None = None
+    linear: np.ndarray | None = None
+
+    def linear_violations(self, theta: np.ndarray, tol: float = 1e-9) -> list[str]:
+        """The rows of :attr:`linear` that ``theta`` breaks by more than ``tol`` times
+        the largest coefficient of the row's terms, as text."""
+        if self.linear is None:
+            return []
+        g = self.linear @ theta
+        scale = np.abs(self.linear) @ np.abs(theta) + 1e-300
+        return [
+            f"{TEMPERATURE_ROW_TEXT} row {k}: {g[k]:.3g}" for k in np.flatnonzero(g < -tol * scale)
+        ]
 
     @property
     def p(self) -> int:
@@ -258,6 +273,7 @@ def build_problem(
         independent=np.asarray(base.independent, dtype=np.intp),
         dependent=np.asarray(base.dependent, dtype=np.intp),
         names=list(robot.parameter_names),
+        linear=temperature_rows(robot),
     )
 
 
@@ -290,6 +306,41 @@ def nonnegative_terms(robot) -> np.ndarray:
     return np.array(
         [nb10 + k for k, t in enumerate(terms) if t in NONNEGATIVE_TERMS], dtype=np.intp
     )
+
+
+#: What a row of :func:`temperature_rows` keeps non-negative.
+TEMPERATURE_ROW_TEXT = "fv(T) or fc(T) >= 0 at the training temperature range's ends"
+
+
+def temperature_rows(robot) -> np.ndarray | None:
+    """Rows ``G`` (m, p) with ``G theta >= 0`` the temperature law's physical friction over
+    the training range: per DoF ``j`` that carries ``fvt`` (``fct``), at ``T`` the ends
+    ``temperature_low_j``, ``temperature_high_j`` of the shapes::
+
+        fv_j + fvt_j (T - T0_j) >= 0        fc_j + fct_j (T - T0_j) >= 0
+
+    (``fv_j`` absent: its coefficient 0). None when the robot has no such term or its
+    shapes no range."""
+    layout, shapes = robot.layout, robot.layout.shapes
+    if not layout.needs_temperature or shapes is None or shapes.temperature_low is None:
+        return None
+    t0 = shapes.values("temperature_reference", 0.0) * np.ones(robot.nv)
+    ends = (np.asarray(shapes.temperature_low), np.asarray(shapes.temperature_high))
+    mask = np.ones((robot.nv, len(layout.terms)), bool) if layout.mask is None else layout.mask
+    rows = []
+    for base_term, slope in (("fv", "fvt"), ("fc", "fct")):
+        if slope not in layout.terms:
+            continue
+        cols_s = layout.joint_columns(slope)
+        cols_b = layout.joint_columns(base_term) if base_term in layout.terms else None
+        for j in np.flatnonzero(mask[:, layout.terms.index(slope)]):
+            for end in ends:
+                g = np.zeros(robot.n_parameters)
+                g[cols_s[j]] = end[j] - t0[j]
+                if cols_b is not None and mask[j, layout.terms.index(base_term)]:
+                    g[cols_b[j]] = 1.0
+                rows.append(g)
+    return np.array(rows) if rows else None
 
 
 def _whitened_fit(A, b, variance, zz, n_rows) -> tuple[np.ndarray, np.ndarray]:

@@ -86,6 +86,8 @@ def _constraints(cp, pr: ConsistentProblem, theta):
         cons.append(theta[pr.nonnegative] >= 0)
     if pr.bounds is not None:
         cons += bound_constraints(pr.bounds, theta)
+    if pr.linear is not None:  # the temperature law's friction >= 0 over its range
+        cons.append(pr.linear @ theta >= 0)
     return cons, Js
 
 

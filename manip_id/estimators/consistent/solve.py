@@ -28,7 +28,8 @@ def solve_consistent(
     afterwards; when it breaks one, the problem is solved again by the SDP and the
     status says so (``"logchol broke the bounds (...); solved by the SDP: ..."``);
     without cvxpy the log-Cholesky result stays, with the status ``"bounds not held:
-    ..."`` and the plausibility check of the estimate names the bodies.
+    ..."`` and the plausibility check of the estimate names the bodies. The temperature
+    law's linear constraints (``problem.linear``) are held the same way.
     """
     if solver not in SOLVERS:
         raise InputError(f"solver must be one of {list(SOLVERS)}, got {solver!r}")
@@ -38,6 +39,7 @@ def solve_consistent(
     else:
         theta, status, iters = solve_logchol(problem, **options)
         broken = [] if problem.bounds is None else problem.bounds.violations(theta)
+        broken += problem.linear_violations(theta)
         if broken:
             theta, status, iters = _bounded_by_sdp(problem, theta, status, iters, broken)
     elapsed = time.perf_counter() - t0
