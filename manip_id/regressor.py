@@ -176,6 +176,15 @@ class RegressorEvaluator:
                 "evaluate it: use the dynamic model (tau = Y(q, dq, ddq) theta)"
             )
 
+    def refuse_temperature(self, what: str) -> None:
+        """Raise :class:`InputError` when the ``temperature`` law is modelled (``what``
+        carries no temperature)."""
+        if self.layout.needs_temperature:
+            raise InputError(
+                f"the temperature friction law (fvt, fct) needs the measured temperature; "
+                f"{what} carries none: use the dynamic model (tau = Y(q, dq, ddq) theta)"
+            )
+
     def fill_joint_terms(self, Y: np.ndarray, q, vel, acc, temp=None) -> None:
         """Write the joint-term columns of ``Y`` (nv, p) or (N, nv, p) in place.
 
@@ -205,6 +214,7 @@ class RegressorEvaluator:
     def slotine_li(self, q, dq, v, w, out: np.ndarray | None = None) -> np.ndarray:
         """Y(q, dq, v, w), shape (nv, p), written into ``out`` when given."""
         self.refuse_load("the Slotine-Li regressor")
+        self.refuse_temperature("the Slotine-Li regressor")
         if out is None:
             out = np.zeros((self.nv, self.p))
         a = 0.5 * (dq + w)
@@ -306,6 +316,7 @@ class RegressorEvaluator:
     def iter_slotine_li(self, q, dq, v, w, chunk: int) -> Iterator[RegressorChunk]:
         """Chunks of the Slotine-Li regressor over a trajectory (arrays already checked)."""
         self.refuse_load("the Slotine-Li regressor")
+        self.refuse_temperature("the Slotine-Li regressor")
         n = q.shape[0]
         size = min(chunk, max(n, 1))
         buf = np.zeros((size, self.nv, self.p))

@@ -342,3 +342,19 @@ def test_consistent_friction_stays_physical_over_the_temperature_range(robot, mo
         for end in (lo, hi):
             assert np.all(law(theta, base, slope, end) >= -1e-7)
     assert abs(law(theta, "fv", "fvt", hi)[0]) < 1e-6  # the constraint binds
+
+
+def test_the_law_is_refused_where_there_is_no_temperature(robot):
+    from manip_id.closed_loop import Plant
+    from manip_id.models import accumulate_energy
+    from manip_id.regressor import slotine_li_regressor
+
+    r = load_robot("double_pendulum", friction=LAW)
+    _, q, dq, ddq, tau, _ = _record(robot, duration=2.0)
+    for call in (
+        lambda: accumulate_energy(r, q, dq, tau, dt=1 / RATE),
+        lambda: slotine_li_regressor(r, q[0], dq[0], ddq[0], dq[0]),
+        lambda: Plant(r, r.nominal_parameters, rate=100.0),
+    ):
+        with pytest.raises(InputError, match="temperature friction law"):
+            call()

@@ -59,6 +59,7 @@ class Plant:
         check_finite(theta, "theta_true")
         require_physical(robot, theta)  # a message naming the body
         robot.evaluator.refuse_load("the closed-loop plant (forward dynamics)")
+        robot.evaluator.refuse_temperature("the closed-loop plant (forward dynamics)")
         self.robot = robot
         self.theta = theta
         self.integrator = integrator

@@ -62,6 +62,7 @@ def _simpson_weights(w: int, dt: float) -> np.ndarray:
 def check_model_states(robot: Robot, q, dq, tau):
     """``(q, dq, tau)`` of N samples checked for the acceleration-free models."""
     robot.evaluator.refuse_load("the energy and momentum models")
+    robot.evaluator.refuse_temperature("the energy and momentum models")
     batched, (q, dq) = check_states(robot, q=q, dq=dq)
     if not batched:
         raise InputError(f"the energy model takes N samples (2-D arrays), got q.shape={q.shape}")
