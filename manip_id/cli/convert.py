@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 
 from .._io import OutputSet
-from ..datasets import RowCounts, iter_rows, open_source, parse_file_spec
+from ..datasets import Layout, RowCounts, iter_rows, open_source, parse_file_spec
 from ..datasets.io import output_format, write_rows_to
 from ..datasets.stream import torque_scale_vector
 from ..errors import DataError
@@ -74,7 +74,8 @@ def run(args: argparse.Namespace) -> int:
         scale = torque_scale_vector(
             parse_floats(args.torque_scale, "--torque-scale"), src.layout.nv, "--torque-scale"
         )
-    layout = src.layout if fmt != "mcap" else src.layout.with_ddq(False)
+    # a JointState bag carries neither ddq nor a temperature: the rows' first columns
+    layout = src.layout if fmt != "mcap" else Layout(src.layout.nq, src.layout.nv)
 
     passes: list[RowCounts] = []
 
@@ -98,6 +99,9 @@ def run(args: argparse.Namespace) -> int:
     outputs.publish()
     counts = passes[0]
     dropped = f", {counts.n_dropped} bad rows dropped" if counts.n_dropped else ""
-    note = " (ddq not carried by JointState)" if fmt == "mcap" and src.layout.has_ddq else ""
+    dropped_fields = [f for f in ("ddq", "temp") if f in src.layout.slices]
+    note = ""
+    if fmt == "mcap" and dropped_fields:
+        note = f" ({', '.join(dropped_fields)} not carried by JointState)"
     print(f"wrote {out}: {counts.n_read} samples from {spec.label} as {fmt}{dropped}{note}")
     return 0

@@ -184,7 +184,8 @@ def stream_validation(robot: Robot, blocks, ind, estimate, nominal, chunk: int) 
     sse = [np.zeros(robot.nv) for _ in thetas]
     zz = np.zeros(robot.nv)
     for block in blocks:
-        vq, vdq, vddq, vtau = check_samples(robot, *block[:4], prefix="validation ")
+        bq, bdq, bddq, btau = block[:4]
+        vq, vdq, vddq, vtau = check_samples(robot, bq, bdq, bddq, btau, prefix="validation ")
         for c in ev.iter_regressor(vq, vdq, vddq, chunk, block_temperature(block)):
             Yb = c.Y[:, :, ind]
             for k, theta in enumerate(thetas):
