@@ -358,3 +358,21 @@ def test_the_law_is_refused_where_there_is_no_temperature(robot):
     ):
         with pytest.raises(InputError, match="temperature friction law"):
             call()
+
+
+def test_cli_online_method_and_report_carry_the_temperature(robot, files, tmp_path):
+    folder, _ = files
+    argv = ["identify", "double_pendulum", "--friction", LAW, "--quiet", "--split", "0.7"]
+    out = tmp_path / "rls.json"
+    data = ["--data", str(folder / "run.npz")]
+    assert main([*argv, *data, "--method", "rls", "--json", str(out)]) == 0
+    values = {p["name"]: p["value"] for p in json.loads(out.read_text())["base_parameters"]}
+    for j, dof in enumerate(robot.dof_names):
+        assert values[f"{dof}.fvt"] == pytest.approx(FV1[j], abs=1e-3)
+        assert values[f"{dof}.fct"] == pytest.approx(FC1[j], abs=1e-3)
+    report = tmp_path / "report"  # its figures predict the torques: with the temperature
+    assert main([*argv, *data, "--report", str(report)]) == 0
+    assert (report / "index.html").is_file() and (report / "residuals.png").is_file()
+    assert json.loads((report / "result.json").read_text())["relative_error"]["validation"] < (
+        3 * NOISE
+    )

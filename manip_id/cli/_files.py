@@ -20,11 +20,11 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ..datasets import load_dataset
+from ..datasets import Layout, load_dataset
 from ..errors import InputError
 from ..identification import (
     RunOptions,
-    identify,
+    identify_dataset,
     identify_datasets,
     iter_processed,
     scan_file,
@@ -69,15 +69,9 @@ def collect(robot, specs, options, scans) -> SimpleNamespace:
             rows[:, 0] += shift
         parts.append(rows)
     rows = np.vstack(parts)
-    return SimpleNamespace(
-        t=rows[:, 0],
-        q=rows[:, 1 : 1 + nq],
-        dq=rows[:, 1 + nq : 1 + nq + nv],
-        tau=rows[:, 1 + nq + nv : 1 + nq + 2 * nv],
-        ddq=rows[:, 1 + nq + 2 * nv : 1 + nq + 3 * nv],
-        n_samples=rows.shape[0],
-        settings=settings,
-    )
+    f = Layout.processed(nq, nv, rows.shape[1]).unpack(rows)
+    f.setdefault("temp", None)
+    return SimpleNamespace(**f, n_samples=rows.shape[0], settings=settings)
 
 
 def _scan(robot, args: argparse.Namespace, specs, vspecs, options, timings: dict):
@@ -145,14 +139,11 @@ def _identify_online(robot, args, options, files: SimpleNamespace, timings: dict
     train = collect(robot, files.specs, options, files.scans)
     valid = None if files.vspecs is None else collect(robot, files.vspecs, options, files.scans)
     timings["preprocess"] = time.perf_counter() - t0
-    result = identify(
+    result = identify_dataset(  # (the processed rows as a dataset: with temp, if any)
         robot,
-        train.q,
-        train.dq,
-        train.ddq,
-        train.tau,
+        train,
         method=args.method,
-        validation=None if valid is None else (valid.q, valid.dq, valid.ddq, valid.tau),
+        validation=valid,
         run=RunOptions(chunk=args.chunk, progress=progress(args, train.n_samples)),
         uncertainty=args.uncertainty,
     )

@@ -195,10 +195,13 @@ class IdentificationResult:
             return self.context.get("physically_consistent")
         return self.standard.physically_consistent
 
-    def predict(self, robot: Robot, q, dq, ddq, *, chunk: int = DEFAULT_CHUNK) -> np.ndarray:
+    def predict(
+        self, robot: Robot, q, dq, ddq, *, chunk: int = DEFAULT_CHUNK, temp=None
+    ) -> np.ndarray:
         """Predicted torques ``Y_b(q, dq, ddq) theta_b``, shape (N, nv) [N m or N].
 
-        ``q`` (N, nq), ``dq`` and ``ddq`` (N, nv); streamed chunk by chunk.
+        ``q`` (N, nq), ``dq`` and ``ddq`` (N, nv); streamed chunk by chunk; ``temp`` the
+        temperature [degC or K] of the ``temperature`` law, (N, nv) or (N, 1).
         """
         if robot.n_parameters != len(self.base.names):
             raise InputError(
@@ -210,7 +213,9 @@ class IdentificationResult:
             q, dq, ddq = q[None], dq[None], ddq[None]
         out = np.empty((q.shape[0], robot.nv))
         ind = self.base.independent
-        for c in iter_regressor(robot, q, dq, ddq, chunk=chunk):
+        if temp is not None and not batched:
+            temp = np.asarray(temp, dtype=float)[None]
+        for c in iter_regressor(robot, q, dq, ddq, chunk=chunk, temp=temp):
             out[c.start : c.stop] = c.Y[:, :, ind] @ self.estimate
         return out if batched else out[0]
 

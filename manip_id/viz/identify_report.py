@@ -93,18 +93,23 @@ def history_figure(robot, result, train, report: dict):
     )
 
 
+def _temp(samples):
+    """The samples' temperature (the ``temperature`` law's), or None."""
+    return getattr(samples, "temp", None)
+
+
 def _joined(robot, result, samples: ReportSamples, chunk: int) -> dict:
     """Training and validation one after the other: t, tau, the identified and nominal
     predictions, where validation starts, and the validation residual's arguments."""
     nominal = replace(result, estimate=result.nominal)
     train, valid = samples.train, samples.valid
-    pred = result.predict(robot, train.q, train.dq, train.ddq, chunk=chunk)
-    npred = nominal.predict(robot, train.q, train.dq, train.ddq, chunk=chunk)
+    pred = result.predict(robot, train.q, train.dq, train.ddq, chunk=chunk, temp=_temp(train))
+    npred = nominal.predict(robot, train.q, train.dq, train.ddq, chunk=chunk, temp=_temp(train))
     out: dict = dict(t=train.t, tau=train.tau, pred=pred, npred=npred, start=None, res_kw={})
     if valid is None:
         return out
-    vpred = result.predict(robot, valid.q, valid.dq, valid.ddq, chunk=chunk)
-    vnom = nominal.predict(robot, valid.q, valid.dq, valid.ddq, chunk=chunk)
+    vpred = result.predict(robot, valid.q, valid.dq, valid.ddq, chunk=chunk, temp=_temp(valid))
+    vnom = nominal.predict(robot, valid.q, valid.dq, valid.ddq, chunk=chunk, temp=_temp(valid))
     t, tv = train.t, valid.t
     if tv[0] <= t[-1]:  # separate validation files: drawn after the training record
         step = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
@@ -155,7 +160,8 @@ def _fit_figures(robot, result, report: dict, samples: ReportSamples, run_name: 
         "residuals": lambda path: figures.residuals(
             path,
             train.t,
-            train.tau - result.predict(robot, train.q, train.dq, train.ddq, chunk=chunk),
+            train.tau
+            - result.predict(robot, train.q, train.dq, train.ddq, chunk=chunk, temp=_temp(train)),
             joint_names=joints,
             units=units,
             title=f"residuals tau - Y_b theta_b: {run_name}",

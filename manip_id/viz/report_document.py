@@ -197,7 +197,8 @@ def add_raw_reference(report: dict, robot, result, parts, chunk: int) -> None:
             [np.interp(proc.t, t_raw, np.asarray(tau_raw)[:, j]) for j in range(robot.nv)]
         )
         for key, model in (("", result), ("nominal_", nominal)):
-            pred = model.predict(robot, proc.q, proc.dq, proc.ddq, chunk=chunk)
+            temp = getattr(proc, "temp", None)  # the temperature law's
+            pred = model.predict(robot, proc.q, proc.dq, proc.ddq, chunk=chunk, temp=temp)
             out[f"{key}{name}"] = _finite(np.linalg.norm(raw - pred) / np.linalg.norm(raw))
     if not out:
         return
