@@ -70,8 +70,8 @@ def collect(robot, specs, options, scans) -> SimpleNamespace:
         parts.append(rows)
     rows = np.vstack(parts)
     f = Layout.processed(nq, nv, rows.shape[1]).unpack(rows)
-    f.setdefault("temp", None)
-    return SimpleNamespace(**f, n_samples=rows.shape[0], settings=settings)
+    fields: dict = {"temp": None, **f}  # temp: the temperature law's, when measured
+    return SimpleNamespace(**fields, n_samples=rows.shape[0], settings=settings)
 
 
 def _scan(robot, args: argparse.Namespace, specs, vspecs, options, timings: dict):
