@@ -74,6 +74,7 @@ from .identification import (
 from .identification.options import options_from
 from .identification.problem import resolve_base
 from .identification.tasks import FilePart, PartSums, file_length, part_sums
+from .identification.temperature import note_reference, reference_from_files
 from .robot import Robot
 
 #: Methods that accumulate (the online laws need the samples in order).
@@ -240,6 +241,10 @@ def identify_files(
     minimum_norm = RankOptions.from_value(rank).minimum_norm
     mopts = ModelOptions.from_value(model)
     part = options_from(PartitionOptions, partition, "partition")
+    pre = preprocess_options(options)
+    robot, _, made = reference_from_files(robot, paths, validation, pre, window)  # its T0
+    for scan in made:  # (the tasks scan their files themselves)
+        scan.discard()
     base = resolve_base(robot, base, timings)
     uopts = UncertaintyOptions.from_value(uncertainty)
     sums = distributed_problem(
@@ -247,7 +252,7 @@ def identify_files(
         paths,
         validation,
         base,
-        preprocess_options(options),
+        pre,
         window=window,
         timings=timings,
         run=RunOptions.from_value(run),
@@ -259,6 +264,7 @@ def identify_files(
     result = solve(
         sums.problem, method, consistent=copts, minimum_norm=minimum_norm, uncertainty=uopts
     )
+    note_reference(result, robot)  # the temperature law's T0, if any
     if sums.per_file is None:
         return result
     records = sums.problem.files["train"] if sums.problem.files else []

@@ -21,6 +21,7 @@ from manip_id.cli import main
 from manip_id.datasets import Dataset, load_dataset, save_dataset
 from manip_id.errors import InputError, MissingTemperatureError
 from manip_id.export import export_urdf
+from manip_id.fleet import identify_files
 from manip_id.friction import FrictionShapes, TemperatureStats
 from manip_id.identification import RunOptions, identify, identify_dataset, identify_datasets
 from manip_id.regressor import joint_torques, regressor
@@ -198,6 +199,7 @@ def test_streamed_forked_dask_and_in_memory_agree(robot, files):
         ("dask", RunOptions(scheduler="local:2")),
     ):
         out[name] = identify_datasets(r, [train], validation=[valid], run=run)
+    out["fleet"] = identify_files(r, [train], validation=[valid], run=RunOptions(chunk=700))
     ds = load_dataset(folder / "run.npz")
     k = int(np.searchsorted(ds.t, ds.t[0] + 20.0))  # the window [0, 20) s
     out["memory"] = identify_dataset(r, ds.slice(0, k), validation=ds.slice(k, ds.n_samples))

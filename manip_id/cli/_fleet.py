@@ -18,6 +18,7 @@ from types import SimpleNamespace
 
 from ..fleet import identify_files
 from ..identification import ModelOptions, PartitionOptions, RunOptions
+from ..identification.temperature import reference_from_files
 from ..signals import DEFAULT_CUTOFF
 from ..viz.report_document import RunContext, add_file_info, result_document
 from ._common import (
@@ -68,6 +69,9 @@ def _identify(args: argparse.Namespace):
     model = getattr(args, "model", "dynamic")
     if model != "dynamic" and options.cutoff is None:  # as the local path: q, dq filtered
         options = replace(options, cutoff=DEFAULT_CUTOFF)
+    robot, _, made = reference_from_files(robot, specs, vspecs, options)  # the law's T0
+    for scan in made:
+        scan.discard()
     result = identify_files(
         robot,
         specs,

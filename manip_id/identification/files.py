@@ -26,11 +26,11 @@ from .options import (
     check_least_squares,
 )
 from .problem import Problem, check_equations, resolve_base
-from .reading import iter_processed, scan_file
+from .reading import iter_processed
 from .result import IdentificationResult
 from .solve import solve
-from .tasks import distributed_problem, file_specs
-from .temperature import check_scans_temperature, note_reference, reference_from_scans
+from .tasks import distributed_problem
+from .temperature import note_reference, reference_from_files
 
 
 def identify_datasets(
@@ -94,7 +94,7 @@ def identify_datasets(
     minimum_norm = RankOptions.from_value(rank).minimum_norm
     options = options or PreprocessOptions()
     uopts = UncertaintyOptions.from_value(uncertainty)
-    robot, scans, made = _temperature_reference(robot, files, validation, options, window, scans)
+    robot, scans, made = reference_from_files(robot, files, validation, options, window, scans)
     base = resolve_base(robot, base, timings)
     kw: dict[str, Any] = dict(consistent=copts, minimum_norm=minimum_norm, uncertainty=uopts)
     if run_o.scheduler is not None:
@@ -149,24 +149,6 @@ def identify_datasets(
             )
         )
     return note_reference(result, robot)
-
-
-def _temperature_reference(robot: Robot, files, validation, options, window, scans):
-    """``(robot, scans, made)``: with the temperature law, every file scanned (``made``:
-    the scans made here), checked for a temp field, and ``T0`` from the training scans
-    (:mod:`~manip_id.identification.temperature`); else the arguments as they came."""
-    scans = dict(scans or {})
-    if not robot.layout.needs_temperature:
-        return robot, scans, []
-    specs = file_specs(files, "paths", window)
-    vspecs = [] if validation is None else file_specs(validation, "validation", window)
-    made = []
-    for s in specs + vspecs:
-        if s not in scans:
-            scans[s] = scan_file(robot, s, options)
-            made.append(scans[s])
-    check_scans_temperature(robot, [scans[s] for s in vspecs])
-    return reference_from_scans(robot, [scans[s] for s in specs]), scans, made
 
 
 def _file_blocks(robot: Robot, files, options, scans):

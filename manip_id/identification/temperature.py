@@ -27,6 +27,8 @@ import numpy as np
 from ..errors import MissingTemperatureError
 from ..friction import NO_SHAPES, TemperatureStats
 from ..robot import Robot
+from .reading import scan_file
+from .tasks import file_specs
 
 
 def needs_reference(robot: Robot) -> bool:
@@ -77,6 +79,25 @@ def reference_from_scans(robot: Robot, scans) -> Robot:
     return with_temperature_reference(robot, scans_temperature(scans))
 
 
+def reference_from_files(robot: Robot, files, validation, options, window=None, scans=None):
+    """``(robot, scans, made)``: with the temperature law, every file (specs or texts;
+    ``window`` for those without one) scanned unless in ``scans`` (``made``: the scans
+    made here, to discard), checked for a temp field, and ``T0`` from the training scans;
+    else the arguments as they came."""
+    scans = dict(scans or {})
+    if not robot.layout.needs_temperature:
+        return robot, scans, []
+    specs = file_specs(files, "paths", window)
+    vspecs = [] if validation is None else file_specs(validation, "validation", window)
+    made = []
+    for s in specs + vspecs:
+        if s not in scans:
+            scans[s] = scan_file(robot, s, options)
+            made.append(scans[s])
+    check_scans_temperature(robot, [scans[s] for s in vspecs])
+    return reference_from_scans(robot, [scans[s] for s in specs]), scans, made
+
+
 def reference_from_arrays(robot: Robot, temp) -> Robot:
     """``T0`` from the in-memory temperatures ``temp`` (N, nv) or (N, 1) of a fit; refuses
     a missing ``temp`` when the robot models the law."""
@@ -107,6 +128,7 @@ __all__ = [
     "needs_reference",
     "note_reference",
     "reference_from_arrays",
+    "reference_from_files",
     "reference_from_scans",
     "scans_temperature",
     "temperature_range",
