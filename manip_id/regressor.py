@@ -181,8 +181,8 @@ class RegressorEvaluator:
         carries no temperature)."""
         if self.layout.needs_temperature:
             raise InputError(
-                f"the temperature friction law (fvt, fct) needs the measured temperature; "
-                f"{what} carries none: use the dynamic model (tau = Y(q, dq, ddq) theta)"
+                "the temperature friction law (fvt, fct) needs the measured temperature, "
+                f"which {what} cannot take: use the dynamic model (tau = Y(q, dq, ddq) theta)"
             )
 
     def fill_joint_terms(self, Y: np.ndarray, q, vel, acc, temp=None) -> None:

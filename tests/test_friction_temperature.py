@@ -378,3 +378,18 @@ def test_cli_online_method_and_report_carry_the_temperature(robot, files, tmp_pa
     assert json.loads((report / "result.json").read_text())["relative_error"]["validation"] < (
         3 * NOISE
     )
+
+
+def test_cli_bag_and_simulate_refuse_the_law_in_one_line(files, tmp_path, capsys):
+    folder, _ = files
+    bag = tmp_path / "run.mcap"
+    assert main(["convert", str(folder / "run.npz"), str(bag)]) == 0
+    assert "temp not carried by JointState" in capsys.readouterr().out
+    for argv in (["--data", str(bag)], ["--simulate"]):
+        assert main(["identify", "double_pendulum", "--friction", LAW, *argv]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("manip-id: error:")
+        assert "temperature" in err[0]
+    # the bag's own message: a JointState carries no temperature
+    assert main(["identify", "double_pendulum", "--friction", LAW, "--data", str(bag)]) == 2
+    assert "JointState bag carries no temperature" in capsys.readouterr().err

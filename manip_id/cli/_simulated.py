@@ -161,6 +161,12 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
         validation = load_dataset(args.validate[0], columns=column_map(args.column))
     timings["load"] = time.perf_counter() - t0
     robot = robot_from_args(args)
+    if robot.layout.needs_temperature:
+        raise InputError(
+            "--simulate simulates no temperature, which the temperature friction law needs: "
+            "identify logs with a temp field (--data), or simulate with "
+            "manip_id.simulation.simulate(..., thermal=ThermalOptions(...))"
+        )
     if _streams(args):  # simulated least squares: block by block, bounded memory
         return _run_stream(robot, args, outputs, timings, t_start)
     t0 = time.perf_counter()
