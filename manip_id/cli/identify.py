@@ -48,7 +48,7 @@ def register(sub) -> None:
         nargs="+",
         action="extend",
         help="one or more measurement files (--data a b, or --data a --data b; each read in "
-        "chunks and preprocessed on its own): .npz (t, q, dq, tau[, ddq, joint_names]), .csv "
+        "chunks and preprocessed on its own): .npz (t, q, dq, tau[, ddq, temp, joint_names]), .csv "
         "(t,q_<joint>...,dq_<joint>...,tau_<joint>...), a ROS 2 bag (rosbag2 folder or "
         ".mcap) or a Panda log folder; FILE@START:STOP [s] or FILE@#A:#B [rows] for a window",
     )
@@ -57,7 +57,8 @@ def register(sub) -> None:
         action="append",
         default=[],
         metavar="FIELD=COLUMNS",
-        help="CSV column map for other layouts (repeatable): FIELD is t, q, dq, ddq, tau or "
+        help="CSV column map for other layouts (repeatable): FIELD is t, q, dq, ddq, tau, temp "
+        "(the temperature of --friction temperature: one column per joint or one for all) or "
         "joint_names; COLUMNS a header name, a glob such as 'pos*', or a comma-separated list of "
         "names or 0-based indices, e.g. --column t=stamp --column q='pos*'",
     )
