@@ -31,7 +31,11 @@ from ..identification import (
     split_file,
 )
 from ..identification.selection import select_model_files
-from ..identification.temperature import check_scans_temperature, reference_from_scans
+from ..identification.temperature import (
+    check_scans_temperature,
+    reference_from_scans,
+    reference_text,
+)
 from ..viz.report_document import (
     ReportSamples,
     RunContext,
@@ -201,6 +205,8 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     f = _scan(robot, args, specs, vspecs, options, timings)
     check_scans_temperature(robot, [f.scans[s] for s in f.vspecs or []])
     robot = reference_from_scans(robot, [f.scans[s] for s in f.specs])  # the law's T0
+    if (text := reference_text(robot)) is not None:
+        print(text)
     robot, selection = _select_friction(robot, args, options, f, timings)
     train = valid = None
     if args.method in ("rls", "gradient"):  # sample order, in memory

@@ -71,12 +71,7 @@ class FileScan:
     dt_max: float
     counts: RowCounts
     spill: str | None = None
-    temperature: TemperatureStats | None = None
-
-    @property
-    def temperature_columns(self) -> int:
-        """Temperature columns of the file (0: none)."""
-        return self.layout.n_temp
+    temperature: TemperatureStats | None = None  # the temp field's sums (None: no field)
 
     def discard(self) -> None:
         """Remove the spill file (the scanned rows of a slow format), if any."""

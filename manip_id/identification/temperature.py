@@ -31,12 +31,6 @@ from .reading import scan_file
 from .tasks import file_specs
 
 
-def needs_reference(robot: Robot) -> bool:
-    """Whether ``robot`` models the temperature law without a reference ``T0`` yet."""
-    shapes = robot.layout.shapes or NO_SHAPES
-    return robot.layout.needs_temperature and shapes.temperature_reference is None
-
-
 def check_scans_temperature(robot: Robot, scans) -> None:
     """Raise :class:`~manip_id.errors.MissingTemperatureError` when ``robot`` models the
     temperature law and one of ``scans`` (:class:`~.reading.FileScan`) has no temp field."""
@@ -116,21 +110,27 @@ def note_reference(result, robot: Robot):
     return result
 
 
-def temperature_range(robot: Robot, stats: TemperatureStats) -> np.ndarray:
-    """Per DoF ``(T_min - T0, T_max - T0)`` of the training data [K], shape (nv, 2)."""
-    _, low, high = stats.per_dof(robot.nv)
-    t0 = (robot.layout.shapes or NO_SHAPES).values("temperature_reference", 0.0)
-    return np.stack([low - t0, high - t0], axis=1)
+def reference_text(robot: Robot) -> str | None:
+    """One line naming the temperature law's ``T0`` and range per DoF, or None."""
+    shapes = robot.layout.shapes or NO_SHAPES
+    if not robot.layout.needs_temperature or shapes.temperature_reference is None:
+        return None
+    cells = []
+    for j, dof in enumerate(robot.dof_names):
+        cell = f"{dof} {shapes.temperature_reference[j]:.4g}"
+        if shapes.temperature_low is not None and shapes.temperature_high is not None:
+            cell += f" ({shapes.temperature_low[j]:.4g} to {shapes.temperature_high[j]:.4g})"
+        cells.append(cell)
+    return "temperature law: T0 (training mean, range) per joint: " + ", ".join(cells)
 
 
 __all__ = [
     "check_scans_temperature",
-    "needs_reference",
     "note_reference",
     "reference_from_arrays",
     "reference_from_files",
     "reference_from_scans",
+    "reference_text",
     "scans_temperature",
-    "temperature_range",
     "with_temperature_reference",
 ]
