@@ -393,3 +393,24 @@ def test_cli_bag_and_simulate_refuse_the_law_in_one_line(files, tmp_path, capsys
     # the bag's own message: a JointState carries no temperature
     assert main(["identify", "double_pendulum", "--friction", LAW, "--data", str(bag)]) == 2
     assert "JointState bag carries no temperature" in capsys.readouterr().err
+
+
+def test_csv_temperature_columns_by_header_and_by_map(tmp_path):
+    from manip_id.errors import DataError
+
+    t = np.arange(5) / 10.0
+    head = "t,q_a,q_b,dq_a,dq_b,tau_a,tau_b"
+    rows = np.column_stack([t, np.zeros((5, 6))])
+    per_joint = tmp_path / "per_joint.csv"
+    per_joint.write_text(head + ",temp_a,temp_b\n" + "\n".join(
+        ",".join(map(str, [*r, 30.0 + k, 31.0 + k])) for k, r in enumerate(rows)))  # fmt: skip
+    ds = load_dataset(per_joint)
+    np.testing.assert_allclose(ds.temp, np.column_stack([30 + np.arange(5), 31 + np.arange(5)]))
+    three = tmp_path / "three.csv"  # temp_ columns that are not one per joint: not ours
+    three.write_text(head + ",temp_x,temp_y,temp_z\n" + "\n".join(
+        ",".join(map(str, [*r, 1.0, 2.0, 3.0])) for r in rows))  # fmt: skip
+    assert load_dataset(three).temp is None
+    with pytest.raises(DataError, match="3 temp columns but 2 tau columns"):
+        load_dataset(three, columns={"temp": "temp_*"})
+    one = load_dataset(three, columns={"temp": "temp_y"})
+    np.testing.assert_allclose(one.temp, np.full((5, 1), 2.0))

@@ -149,6 +149,8 @@ def resolve_columns(path: Path, columns: Mapping | None, width: int | None = Non
             raise DataError(
                 f"{path}: {len(idx[name])} {name} columns but {len(idx['tau'])} tau columns"
             )
+    if "temp" in idx and "temp" not in columns and len(idx["temp"]) not in (1, len(idx["tau"])):
+        del idx["temp"]  # found by the temp_ prefix alone, not a temperature per joint: not ours
     if "temp" in idx and len(idx["temp"]) not in (1, len(idx["tau"])):
         raise DataError(
             f"{path}: {len(idx['temp'])} temp columns but {len(idx['tau'])} tau columns: give "
