@@ -265,7 +265,10 @@ def row_supports(robot: Robot, columns, n_states: int = 16, seed: int = 12345) -
     """
     q, dq, ddq = robot.random_states(n_states, seed=seed)
     ev = robot.evaluator
-    Y = np.stack([ev.regressor(q[k], dq[k], ddq[k]) for k in range(n_states)])
+    if robot.evaluator.needs_history:  # a path state: the random states as one path
+        Y = np.concatenate([c.Y.copy() for c in ev.iter_regressor(q, dq, ddq, n_states)])
+    else:
+        Y = np.stack([ev.regressor(q[k], dq[k], ddq[k]) for k in range(n_states)])
     nonzero = np.abs(Y[:, :, np.asarray(columns, dtype=np.intp)]).max(axis=0) > 0  # (nv, r)
     return [np.flatnonzero(row) for row in nonzero]
 
@@ -372,7 +375,7 @@ def accumulate_rows(
     fit, still, raw = _Sums(supports, nv), _Sums(supports, nv), _Sums(supports, nv)
     t_reg = t_acc = 0.0
     done, with_raw = 0, None
-    for block in blocks:
+    for block in ev.sequential(blocks):  # one trajectory: the hysteresis state carries
         if not isinstance(block, (tuple, list)) or len(block) not in (4, 5):
             raise InputError("each data block must be a tuple (q, dq, ddq, tau)")
         with_raw = len(block) == 5 if with_raw is None else with_raw
@@ -475,8 +478,12 @@ def accumulate_forked(
     return acc, times
 
 
-def array_part(q, dq, ddq, tau, start: int, stop: int):
-    """The one block of samples ``start:stop`` (the arrays reach forked workers by fork)."""
+def array_part(q, dq, ddq, tau, start: int, stop: int, robot: Robot | None = None):
+    """The one block of samples ``start:stop`` (the arrays reach forked workers by fork);
+    with ``robot``, its hysteresis state is first run over the samples before ``start``
+    (:meth:`~manip_id.regressor.RegressorEvaluator.advance`), as the serial pass has it."""
+    if robot is not None:
+        robot.evaluator.advance(q[:start])
     yield q[start:stop], dq[start:stop], ddq[start:stop], tau[start:stop]
 
 
@@ -508,7 +515,7 @@ def _accumulate_arrays(robot: Robot, arrays, ind, run: RunOptions, workers: int,
         t0 = time.perf_counter()
         cuts = np.linspace(0, n, workers + 1).astype(int)
         parts = [
-            (array_part, (q, dq, ddq, tau, int(a), int(b)))
+            (array_part, (q, dq, ddq, tau, int(a), int(b), robot))
             for a, b in zip(cuts[:-1], cuts[1:], strict=True)
         ]
         records = [unc.blocks(r, nv, offset=int(a)) for a in cuts[:-1]]
