@@ -183,7 +183,7 @@ def stream_validation(robot: Robot, blocks, ind, estimate, nominal, chunk: int) 
     thetas = [estimate, nominal]
     sse = [np.zeros(robot.nv) for _ in thetas]
     zz = np.zeros(robot.nv)
-    for bq, bdq, bddq, btau in blocks:
+    for bq, bdq, bddq, btau in ev.sequential(blocks):  # one path (the hysteresis state)
         vq, vdq, vddq, vtau = check_samples(robot, bq, bdq, bddq, btau, prefix="validation ")
         for c in ev.iter_regressor(vq, vdq, vddq, chunk):
             Yb = c.Y[:, :, ind]
