@@ -32,7 +32,7 @@ from manip_id.identification import (
 from manip_id.identification.selection import SelectionOptions, select_model
 from manip_id.regressor import iter_regressor, joint_torques, regressor
 from manip_id.robot import JointTerms
-from manip_id.simulation import inverse_dynamics
+from manip_id.simulation import NOISE_BLOCK, inverse_dynamics, simulate
 from manip_id.trajectories import random_trajectory
 
 RATE = 200.0  # [Hz]
@@ -269,3 +269,21 @@ def test_sidecar_round_trip_and_the_simulator(robot, data, tmp_path):
     )
     assert min(c[j]["fh"] for j in range(2)) > 0.1
     np.testing.assert_allclose(got - rigid, friction, rtol=0, atol=1e-9)
+
+
+def test_simulated_torques_carry_the_state_across_noise_blocks(robot):
+    r = _hysteresis_robot(robot)
+    theta = r.nominal_parameters.copy()
+    theta[r.layout.joint_columns("fh")] = FH
+    traj = random_trajectory(robot, harmonics=4, wf=0.3, seed=9)
+    n = NOISE_BLOCK + 500  # two noise blocks: the torques are computed block by block
+    sim = simulate(r, traj, duration=n / 1000.0, rate=1000.0, theta=theta)
+    ds = sim.dataset
+    assert ds.q.shape[0] > NOISE_BLOCK + 100
+    whole = inverse_dynamics(r, theta, ds.q, ds.dq, ds.ddq)  # one call: one path
+    np.testing.assert_allclose(sim.tau_true, whole, rtol=0, atol=1e-9)
+    # the second block restarted at s = 0 would differ there
+    restart = inverse_dynamics(
+        r, theta, ds.q[NOISE_BLOCK:], ds.dq[NOISE_BLOCK:], ds.ddq[NOISE_BLOCK:]
+    )
+    assert np.abs(restart - whole[NOISE_BLOCK:]).max() > 0.1
