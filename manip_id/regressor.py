@@ -193,6 +193,15 @@ class RegressorEvaluator:
         if self.needs_history and self._depth and len(q):
             self._history(self.joint_angles(np.asarray(q, dtype=float)))
 
+    def refuse_history(self, what: str) -> None:
+        """Raise :class:`InputError` when the ``hysteresis`` law is modelled (``what``
+        has no measured path to run its state over)."""
+        if self.needs_history:
+            raise InputError(
+                f"the hysteresis friction law (fh) is a state of the measured joint path; "
+                f"{what} cannot evaluate it: use the dynamic model (tau = Y(q, dq, ddq) theta)"
+            )
+
     def _history(self, angles) -> np.ndarray:
         """The Dahl state of the samples' angles (N, nv), carried within a sequence."""
         if np.ndim(angles) < 2:
@@ -218,11 +227,7 @@ class RegressorEvaluator:
         """Raise :class:`InputError` when the ``load`` law is modelled (``what`` cannot
         evaluate it: it needs the measured acceleration), or the ``hysteresis`` law (a
         state of the measured path, which ``what`` does not have)."""
-        if self.needs_history:
-            raise InputError(
-                f"the hysteresis friction law (fh) is a state of the measured joint path; "
-                f"{what} cannot evaluate it: use the dynamic model (tau = Y(q, dq, ddq) theta)"
-            )
+        self.refuse_history(what)
         if self.layout.needs_load:
             raise InputError(
                 f"the load friction law (fl) needs the measured acceleration; {what} cannot "
@@ -277,14 +282,13 @@ class RegressorEvaluator:
         n = q.shape[0]
         buf = np.zeros((min(chunk, max(n, 1)), self.nv, self.p))
         rigid = buf[:, :, : self.n_rigid]
-        with self.sequence():  # the chunks are one trajectory (the hysteresis state)
-            for start in range(0, n, chunk):
-                stop = min(start + chunk, n)
-                s = slice(start, stop)
-                self.rigid_block(q[s], dq[s], ddq[s], rigid[: stop - start])
-                Y = buf[: stop - start]
-                self.fill_joint_terms(Y, q[start:stop], dq[start:stop], ddq[start:stop])
-                yield RegressorChunk(start, stop, Y)
+        for start in self.sequential(range(0, n, chunk)):  # one path (hysteresis)
+            stop = min(start + chunk, n)
+            s = slice(start, stop)
+            self.rigid_block(q[s], dq[s], ddq[s], rigid[: stop - start])
+            Y = buf[: stop - start]
+            self.fill_joint_terms(Y, q[start:stop], dq[start:stop], ddq[start:stop])
+            yield RegressorChunk(start, stop, Y)
 
     def iter_row_supports(
         self, q, dq, ddq, columns: np.ndarray, supports: list[np.ndarray], chunk: int
@@ -313,27 +317,26 @@ class RegressorEvaluator:
         wide = np.zeros((size, nv, nr + joint_cols.size))
         flat = wide.reshape(size * nv, nr + joint_cols.size)
         outs = [np.empty((size, sel.size)) for sel in selections]
-        with self.sequence():  # the chunks are one trajectory (the hysteresis state)
-            for start in range(0, n, chunk):
-                stop = min(start + chunk, n)
-                s = slice(start, stop)
-                size_k = stop - start
-                qs, dqs, ddqs = q[s], dq[s], ddq[s]
-                desc = self.kernel_for(size_k)
-                if desc is not None:
-                    rigid_block(desc, qs, dqs, ddqs, wide[:size_k, :, :nr])
-                else:
-                    self._stacked_rigid(qs, dqs, ddqs, flat)
-                if joint_cols.size:
-                    vals = self.joint_values(qs, dqs, ddqs)
-                    for i, (j, t) in enumerate(zip(jc_dof, jc_term, strict=True)):
-                        wide[:size_k, j, nr + i] = vals[:, j, t]
-                blocks = []
-                for j in range(nv):
-                    out = outs[j][:size_k]
-                    np.take(wide[:size_k, j], selections[j], axis=1, out=out, mode="clip")
-                    blocks.append(out)
-                yield start, stop, blocks
+        for start in self.sequential(range(0, n, chunk)):  # one path (hysteresis)
+            stop = min(start + chunk, n)
+            s = slice(start, stop)
+            size_k = stop - start
+            qs, dqs, ddqs = q[s], dq[s], ddq[s]
+            desc = self.kernel_for(size_k)
+            if desc is not None:
+                rigid_block(desc, qs, dqs, ddqs, wide[:size_k, :, :nr])
+            else:
+                self._stacked_rigid(qs, dqs, ddqs, flat)
+            if joint_cols.size:
+                vals = self.joint_values(qs, dqs, ddqs)
+                for i, (j, t) in enumerate(zip(jc_dof, jc_term, strict=True)):
+                    wide[:size_k, j, nr + i] = vals[:, j, t]
+            blocks = []
+            for j in range(nv):
+                out = outs[j][:size_k]
+                np.take(wide[:size_k, j], selections[j], axis=1, out=out, mode="clip")
+                blocks.append(out)
+            yield start, stop, blocks
 
     def _stacked_rigid(self, qs, dqs, ddqs, flat: np.ndarray) -> None:
         """Y_rigid by Pinocchio per sample into the rows of ``flat`` (size * nv, >= nr).
