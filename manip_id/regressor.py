@@ -150,18 +150,6 @@ class RegressorEvaluator:
         for k in range(q.shape[0]):
             out[k] = f(m, d, q[k], dq[k], ddq[k])
 
-    # ------------------------------------------------------------ joint terms
-    def joint_angles(self, q: np.ndarray) -> np.ndarray:
-        """Joint coordinate per velocity DoF, shape (..., nv) [rad or m]."""
-        return self._dofs.angles(q)
-
-    def joint_values(self, q, vel, acc) -> np.ndarray:
-        """Joint-term regressor entries, shape (..., nv, n_terms) (``parameters.JOINT_TERMS``)."""
-        angles = self.joint_angles(q) if self._needs_angles else None
-        load = self.load_torque(q, vel, acc) if self.layout.needs_load else None
-        history = self._history(angles) if self.needs_history else None
-        return self.layout.joint_values(angles, vel, acc, load, history)
-
     # ------------------------------------------------- hysteresis: a path state
     @contextmanager
     def sequence(self):
@@ -213,6 +201,18 @@ class RegressorEvaluator:
         if self._depth:
             self._carry = trace.carry
         return trace.state
+
+    # ------------------------------------------------------------ joint terms
+    def joint_angles(self, q: np.ndarray) -> np.ndarray:
+        """Joint coordinate per velocity DoF, shape (..., nv) [rad or m]."""
+        return self._dofs.angles(q)
+
+    def joint_values(self, q, vel, acc) -> np.ndarray:
+        """Joint-term regressor entries, shape (..., nv, n_terms) (``parameters.JOINT_TERMS``)."""
+        angles = self.joint_angles(q) if self._needs_angles else None
+        load = self.load_torque(q, vel, acc) if self.layout.needs_load else None
+        history = self._history(angles) if self.needs_history else None
+        return self.layout.joint_values(angles, vel, acc, load, history)
 
     def load_torque(self, q, vel, acc) -> np.ndarray:
         """The nominal rigid-body torque ``rnea(q, vel, acc)`` of :attr:`Robot.load_model`

@@ -371,11 +371,12 @@ def accumulate_rows(
     """
     ev, nv, r = robot.evaluator, robot.nv, len(ind)
     supports = row_supports(robot, ind)
+    blocks = ev.sequential(blocks)  # one trajectory: the hysteresis state carries
     fc = _coulomb_positions(robot, np.asarray(ind), supports)
     fit, still, raw = _Sums(supports, nv), _Sums(supports, nv), _Sums(supports, nv)
     t_reg = t_acc = 0.0
     done, with_raw = 0, None
-    for block in ev.sequential(blocks):  # one trajectory: the hysteresis state carries
+    for block in blocks:
         if not isinstance(block, (tuple, list)) or len(block) not in (4, 5):
             raise InputError("each data block must be a tuple (q, dq, ddq, tau)")
         with_raw = len(block) == 5 if with_raw is None else with_raw
@@ -478,13 +479,17 @@ def accumulate_forked(
     return acc, times
 
 
-def array_part(q, dq, ddq, tau, start: int, stop: int, robot: Robot | None = None):
-    """The one block of samples ``start:stop`` (the arrays reach forked workers by fork);
-    with ``robot``, its hysteresis state is first run over the samples before ``start``
-    (:meth:`~manip_id.regressor.RegressorEvaluator.advance`), as the serial pass has it."""
-    if robot is not None:
-        robot.evaluator.advance(q[:start])
+def array_part(q, dq, ddq, tau, start: int, stop: int):
+    """The one block of samples ``start:stop`` (the arrays reach forked workers by fork)."""
     yield q[start:stop], dq[start:stop], ddq[start:stop], tau[start:stop]
+
+
+def path_part(robot: Robot, q, dq, ddq, tau, start: int, stop: int):
+    """:func:`array_part`, the robot's hysteresis state first run over the samples before
+    ``start`` (:meth:`~manip_id.regressor.RegressorEvaluator.advance`): the part's path
+    starts where the serial pass has it."""
+    robot.evaluator.advance(q[:start])
+    yield from array_part(q, dq, ddq, tau, start, stop)
 
 
 def accumulate_arrays(
@@ -515,7 +520,7 @@ def _accumulate_arrays(robot: Robot, arrays, ind, run: RunOptions, workers: int,
         t0 = time.perf_counter()
         cuts = np.linspace(0, n, workers + 1).astype(int)
         parts = [
-            (array_part, (q, dq, ddq, tau, int(a), int(b), robot))
+            (path_part, (robot, q, dq, ddq, tau, int(a), int(b)))
             for a, b in zip(cuts[:-1], cuts[1:], strict=True)
         ]
         records = [unc.blocks(r, nv, offset=int(a)) for a in cuts[:-1]]

@@ -180,10 +180,11 @@ def stream_validation(robot: Robot, blocks, ind, estimate, nominal, chunk: int) 
     """Validation errors of ``estimate`` and ``nominal`` by one pass over ``blocks``
     ``(q, dq, ddq, tau)`` (exact, no round-off floor). Validation fields only."""
     ev = robot.evaluator
+    blocks = ev.sequential(blocks)  # one path: the hysteresis state carries
     thetas = [estimate, nominal]
     sse = [np.zeros(robot.nv) for _ in thetas]
     zz = np.zeros(robot.nv)
-    for bq, bdq, bddq, btau in ev.sequential(blocks):  # one path (the hysteresis state)
+    for bq, bdq, bddq, btau in blocks:
         vq, vdq, vddq, vtau = check_samples(robot, bq, bdq, bddq, btau, prefix="validation ")
         for c in ev.iter_regressor(vq, vdq, vddq, chunk):
             Yb = c.Y[:, :, ind]
