@@ -39,7 +39,7 @@ so ``fh s`` follows the friction's square wave at reversals with a rounded edge 
 ``xc`` instead of the jump of ``sign(dq)``. The state depends on the path since the
 start of the trajectory (:func:`hysteresis_state`, carried across blocks by
 :class:`HysteresisCarry`), so the law needs the samples in order: one sample alone
-(online laws, the simulator) cannot evaluate it.
+(the one-sample regressor, forward simulation) cannot evaluate it.
 
 Shapes (:class:`FrictionShapes`): the Stribeck velocity ``vs`` [rad/s], the sigmoid
 slope ``a`` [s/rad] and shift ``c`` [rad/s], the hysteresis length ``xc`` [rad], per
