@@ -13,6 +13,7 @@ enters the regressor as columns of joint ``j``'s row (``dq = dq_j``, ``q = q_j``
     sigmoid       fsg (S(a (dq + c)) - S(a c)),  S(x) = 1/(1 + e^-x)  fsg [N m]
     position      sum_k hks sin(k q) + hkc cos(k q),  k = 1..K      hks, hkc [N m]
     load          fl |tau_load| sign(dq)                             fl [1]
+    hysteresis    fh s,  ds/dq = (1 - s sign(dq)) / xc  (Dahl)        fh [N m]
 
 (prismatic joints: N, N s/m). ``asymmetric`` replaces ``viscous`` and ``coulomb``; with
 ``offset`` its Coulomb pair is ``coulomb`` + ``offset`` (torque ``fc + fo`` for dq > 0
@@ -27,10 +28,24 @@ inertias), a known signal, so the law stays linear in ``fl``. It needs the measu
 acceleration: the dynamic model only (not the Slotine-Li regressor, the energy and
 momentum models or the closed-loop plant, which refuse it).
 
+``hysteresis`` is the pre-sliding (Dahl) friction: a state ``s`` in [-1, 1] driven by
+the joint's displacement, not its velocity. Between reversals it approaches
+``sign(dq)`` exponentially with the distance travelled, over ``xc`` [rad or m]; over a
+sample step of displacement ``d = q_k - q_(k-1)`` exactly::
+
+    s_k = sign(d) + (s_(k-1) - sign(d)) exp(-|d| / xc),     s = 0 before the first sample
+
+so ``fh s`` follows the friction's square wave at reversals with a rounded edge of a few
+``xc`` instead of the jump of ``sign(dq)``. The state depends on the path since the
+start of the trajectory (:func:`hysteresis_state`, carried across blocks by
+:class:`HysteresisCarry`), so the law needs the samples in order: one sample alone
+(the one-sample regressor, forward simulation) cannot evaluate it.
+
 Shapes (:class:`FrictionShapes`): the Stribeck velocity ``vs`` [rad/s], the sigmoid
-slope ``a`` [s/rad] and shift ``c`` [rad/s], per DoF. They are fixed when the linear
-solve runs; :mod:`manip_id.identification.selection` chooses them by variable
-projection (a grid, each point solved from its accumulated sums, then refined).
+slope ``a`` [s/rad] and shift ``c`` [rad/s], the hysteresis length ``xc`` [rad], per
+DoF. They are fixed when the linear solve runs;
+:mod:`manip_id.identification.selection` chooses them by variable projection (a grid,
+each point solved from its accumulated sums, then refined).
 """
 
 from __future__ import annotations
@@ -52,6 +67,7 @@ FRICTION_KINDS: tuple[str, ...] = (
     "sigmoid",
     "position",
     "load",
+    "hysteresis",
 )
 #: Highest harmonic order of the ``position`` law.
 MAX_HARMONICS = 4
@@ -61,6 +77,8 @@ DEFAULT_HARMONICS = 2
 DEFAULT_STRIBECK_VELOCITY = 0.05
 DEFAULT_SIGMOID_SLOPE = 50.0
 DEFAULT_SIGMOID_SHIFT = 0.0
+#: Default hysteresis (Dahl) length xc [rad or m].
+DEFAULT_HYSTERESIS_LENGTH = 0.005
 
 
 @dataclass(frozen=True)
@@ -75,14 +93,17 @@ class FrictionShapes:
         ``a`` [s/rad or s/m] per DoF (None: :data:`DEFAULT_SIGMOID_SLOPE`).
     sigmoid_shift : tuple of float or None
         ``c`` [rad/s or m/s] per DoF (None: :data:`DEFAULT_SIGMOID_SHIFT`).
+    hysteresis_length : tuple of float or None
+        ``xc`` [rad or m] per DoF (None: :data:`DEFAULT_HYSTERESIS_LENGTH`).
     """
 
     stribeck_velocity: tuple[float, ...] | None = None
     sigmoid_slope: tuple[float, ...] | None = None
     sigmoid_shift: tuple[float, ...] | None = None
+    hysteresis_length: tuple[float, ...] | None = None
 
     def __post_init__(self):
-        for name in ("stribeck_velocity", "sigmoid_slope"):
+        for name in ("stribeck_velocity", "sigmoid_slope", "hysteresis_length"):
             v = getattr(self, name)
             if v is not None and not all(np.isfinite(x) and x > 0 for x in v):
                 raise InputError(f"{name} must be positive and finite per DoF, got {v}")
@@ -98,7 +119,7 @@ class FrictionShapes:
         """JSON-ready fields (None for unset)."""
         return {
             k: None if getattr(self, k) is None else list(map(float, getattr(self, k)))
-            for k in ("stribeck_velocity", "sigmoid_slope", "sigmoid_shift")
+            for k in ("stribeck_velocity", "sigmoid_slope", "sigmoid_shift", "hysteresis_length")
         }
 
     @classmethod
@@ -163,6 +184,65 @@ def sigmoid_term(angles, vel, acc, shapes=None):
 def load_column(load, vel, *_):
     """``|tau_load| sign(dq)``, shape like ``vel`` (..., nv); ``load`` [N m or N]."""
     return np.abs(load) * np.sign(vel)
+
+
+# ------------------------------------------------------- hysteresis (Dahl) law
+@dataclass(frozen=True)
+class HysteresisCarry:
+    """The hysteresis state at the end of a block: where the next block starts from.
+
+    Attributes
+    ----------
+    angle : ndarray
+        The last joint angle per DoF, shape (nv,) [rad or m].
+    state : ndarray
+        The Dahl state ``s`` there, shape (nv,) [-].
+    """
+
+    angle: np.ndarray
+    state: np.ndarray
+
+
+@dataclass(frozen=True)
+class HysteresisTrace:
+    """:func:`hysteresis_state` of one block: the state per sample and the carry."""
+
+    state: np.ndarray  # (N, nv) [-]
+    carry: HysteresisCarry
+
+
+def hysteresis_state(angles, shapes: FrictionShapes | None, start=None) -> HysteresisTrace:
+    """The Dahl state ``s`` of every sample of a block of joint angles (module docstring).
+
+    Parameters
+    ----------
+    angles : ndarray
+        Joint angles in sample order, shape (N, nv) [rad or m].
+    shapes : FrictionShapes or None
+        ``hysteresis_length`` per DoF (None: :data:`DEFAULT_HYSTERESIS_LENGTH`).
+    start : HysteresisCarry or None
+        The state at the end of the previous block of the same trajectory (None: the
+        block starts the trajectory, ``s = 0`` and no step before its first sample).
+
+    Returns
+    -------
+    HysteresisTrace
+        ``state`` (N, nv) and the carry after the last sample.
+    """
+    q = np.asarray(angles, dtype=float)
+    xc = (shapes or NO_SHAPES).values("hysteresis_length", DEFAULT_HYSTERESIS_LENGTH)
+    if start is None:
+        prev, s = q[:1], np.zeros(q.shape[1])
+    else:
+        prev, s = start.angle[None, :], np.array(start.state, dtype=float)
+    step = np.diff(q, axis=0, prepend=prev if q.shape[0] else q[:0])
+    sigma, decay = np.sign(step), np.exp(-np.abs(step) / xc)
+    out = np.empty_like(q)
+    for k in range(q.shape[0]):  # s_k = sigma + (s_(k-1) - sigma) exp(-|d|/xc)
+        s = sigma[k] + (s - sigma[k]) * decay[k]
+        out[k] = s
+    last = q[-1].copy() if q.shape[0] else prev[0].copy()
+    return HysteresisTrace(out, HysteresisCarry(last, s.copy()))
 
 
 def _harmonic(angles, vel, acc, shapes=None, *, order: int, cosine: bool):
@@ -236,6 +316,8 @@ def friction_columns(spec: FrictionSpec) -> set[str]:
         out.add("fsg")
     if "load" in k:
         out.add("fl")
+    if "hysteresis" in k:
+        out.add("fh")
     for order in range(1, spec.harmonics + 1):
         out |= {f"h{order}s", f"h{order}c"}
     return out

@@ -30,6 +30,7 @@ regressor column (only row ``j`` is non-zero), its units and its torque
     fsg sigmoid    S(a_j (dq_j + c_j)) - S(a_j c_j)         [N m | N]
     hks, hkc       sin(k q_j), cos(k q_j), k = 1..4         [N m | N]
     fl  load       |tau_load_j| sign(dq_j)                  [1]
+    fh  hysteresis s_j, the Dahl state of q_j's path         [N m | N]
 
 (the friction laws, their shapes ``vs, a, c`` and how they combine:
 :mod:`manip_id.friction`). A layout may switch terms off for some DoFs
@@ -155,9 +156,10 @@ class JointTerm:
     needs_angles: bool
     _column: Callable[..., Any]
     needs_load: bool = False
+    needs_history: bool = False  # the column is a state of the path (the hysteresis law)
 
     def column(
-        self, angles, vel, acc, shapes: FrictionShapes | None = None, load=None
+        self, angles, vel, acc, shapes: FrictionShapes | None = None, load=None, history=None
     ) -> np.ndarray:
         """Regressor entries of this term, shape like ``vel`` (..., nv).
 
@@ -165,8 +167,17 @@ class JointTerm:
         only (may be None otherwise); ``vel``: velocity [rad/s or m/s]; ``acc``:
         acceleration [rad/s^2 or m/s^2], used by ``Ia`` only; ``shapes``: the per-DoF
         shapes of ``fs`` and ``fsg`` (None: their defaults, :mod:`manip_id.friction`);
-        ``load``: the nominal rigid-body torque (..., nv) [N m or N], used by ``fl`` only.
+        ``load``: the nominal rigid-body torque (..., nv) [N m or N], used by ``fl`` only;
+        ``history``: the Dahl state (..., nv) of the samples' path
+        (:func:`~manip_id.friction.hysteresis_state`), the column of ``fh``.
         """
+        if self.needs_history:
+            if history is None:
+                raise InputError(
+                    f"the {self.name} term ({self.column_text}) needs the samples in order "
+                    "(a state of the joint's path): one sample alone cannot evaluate it"
+                )
+            return np.asarray(history, dtype=float)
         if self.needs_load:
             if load is None:
                 raise InputError(
@@ -220,6 +231,7 @@ JOINT_TERMS: tuple[JointTerm, ...] = (
         for cos in (False, True)
     ),
     JointTerm("fl", "load", "|tau_load_j| sign(dq_j)", "1", "1", False, load_column, True),
+    JointTerm("fh", "hysteresis", "s_j (Dahl state)", "N m", "N", True, _offset, False, True),
 )
 #: Joint-level term names, in the order their columns appear for each joint.
 JOINT_TERM_NAMES: tuple[str, ...] = tuple(t.name for t in JOINT_TERMS)
@@ -559,12 +571,15 @@ class ParameterLayout:
         """Whether a term needs the load torque (the ``load`` law)."""
         return any(t.needs_load for t in self.term_table)
 
-    def joint_values(self, angles, vel, acc, load=None) -> np.ndarray:
+    def joint_values(self, angles, vel, acc, load=None, history=None) -> np.ndarray:
         """Joint-term regressor entries, shape (..., nv, nt) (see :data:`JOINT_TERMS`),
         with the layout's shapes, zero where the mask switches a term off; ``load`` the
-        nominal rigid-body torque (..., nv) [N m or N] when :attr:`needs_load`."""
+        nominal rigid-body torque (..., nv) [N m or N] when :attr:`needs_load`;
+        ``history`` the Dahl state (..., nv) of the ``hysteresis`` law."""
         shapes = self.shapes
-        vals = np.stack([t.column(angles, vel, acc, shapes, load) for t in self.term_table], -1)
+        vals = np.stack(
+            [t.column(angles, vel, acc, shapes, load, history) for t in self.term_table], -1
+        )
         return vals if self.mask is None else vals * self.mask
 
     # ------------------------------------------------------- physical consistency

@@ -68,9 +68,10 @@ class JointTerms:
     """Which joint-level terms the model carries (for every active joint).
 
     ``asymmetric``, ``stribeck``, ``sigmoid``, ``harmonics`` (the order of the
-    ``position`` law) and ``load`` are the friction laws of :mod:`manip_id.friction`; ``shapes``
-    their per-DoF shape parameters; ``per_dof`` (None: all) the terms each DoF keeps,
-    one tuple of term names per DoF (the others' columns are zero: a per-joint model).
+    ``position`` law), ``load`` and ``hysteresis`` are the friction laws of
+    :mod:`manip_id.friction`; ``shapes`` their per-DoF shape parameters; ``per_dof``
+    (None: all) the terms each DoF keeps, one tuple of term names per DoF (the others'
+    columns are zero: a per-joint model).
     """
 
     armature: bool = False
@@ -85,6 +86,7 @@ class JointTerms:
     load: bool = False
     shapes: FrictionShapes | None = None
     per_dof: tuple[tuple[str, ...], ...] | None = None
+    hysteresis: bool = False  # the Dahl law (fh), a state of the joint's path
 
     @property
     def friction(self) -> FrictionSpec:
@@ -98,6 +100,7 @@ class JointTerms:
             ("sigmoid", self.sigmoid),
             ("position", self.harmonics > 0),
             ("load", self.load),
+            ("hysteresis", self.hysteresis),
         )
         return FrictionSpec(frozenset(k for k, on in flags if on), int(self.harmonics))
 
@@ -147,6 +150,7 @@ def joint_terms(armature, friction, spring, defaults: JointTerms) -> JointTerms:
         sigmoid="sigmoid" in k,
         harmonics=spec.harmonics,
         load="load" in k,
+        hysteresis="hysteresis" in k,
         shapes=defaults.shapes if friction is None else None,
     )
 
@@ -233,6 +237,7 @@ def profile_terms(prof: RobotProfile | None) -> JointTerms:
         sigmoid="sigmoid" in k,
         harmonics=spec.harmonics,
         load="load" in k,
+        hysteresis="hysteresis" in k,
     )
 
 

@@ -38,6 +38,7 @@ MODEL_FLAGS: tuple[str, ...] = (
     "stribeck",
     "sigmoid",
     "load",
+    "hysteresis",
 )
 
 
@@ -52,7 +53,7 @@ def sidecar_path(path) -> Path:
 
 
 #: Joint terms that are >= 0 in any physical drive (armature, viscous and Coulomb friction).
-_NONNEGATIVE = ("Ia", "fv", "fc", "fvp", "fvn", "fcp", "fcn", "fs", "fsg")
+_NONNEGATIVE = ("Ia", "fv", "fc", "fvp", "fvn", "fcp", "fcn", "fs", "fsg", "fh")
 
 
 def read_sidecar(path) -> dict:

@@ -36,7 +36,8 @@ def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
         "--friction",
         default=None,
         help="comma-separated friction laws per joint: viscous, coulomb, offset, asymmetric, "
-        "stribeck, sigmoid, position[:K], load (docs/friction.md); 'auto' (identify --data): "
+        "stribeck, sigmoid, position[:K], load, hysteresis (docs/friction.md); 'auto' "
+        "(identify --data): "
         "chosen per joint by validation error, else BIC [default: the robot profile's "
         "(robots/ROBOT.toml), else none]",
     )

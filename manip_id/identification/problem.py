@@ -265,7 +265,10 @@ def row_supports(robot: Robot, columns, n_states: int = 16, seed: int = 12345) -
     """
     q, dq, ddq = robot.random_states(n_states, seed=seed)
     ev = robot.evaluator
-    Y = np.stack([ev.regressor(q[k], dq[k], ddq[k]) for k in range(n_states)])
+    if robot.evaluator.needs_history:  # a path state: the random states as one path
+        Y = np.concatenate([c.Y.copy() for c in ev.iter_regressor(q, dq, ddq, n_states)])
+    else:
+        Y = np.stack([ev.regressor(q[k], dq[k], ddq[k]) for k in range(n_states)])
     nonzero = np.abs(Y[:, :, np.asarray(columns, dtype=np.intp)]).max(axis=0) > 0  # (nv, r)
     return [np.flatnonzero(row) for row in nonzero]
 
@@ -368,6 +371,7 @@ def accumulate_rows(
     """
     ev, nv, r = robot.evaluator, robot.nv, len(ind)
     supports = row_supports(robot, ind)
+    blocks = ev.sequential(blocks)  # one trajectory: the hysteresis state carries
     fc = _coulomb_positions(robot, np.asarray(ind), supports)
     fit, still, raw = _Sums(supports, nv), _Sums(supports, nv), _Sums(supports, nv)
     t_reg = t_acc = 0.0
@@ -480,6 +484,14 @@ def array_part(q, dq, ddq, tau, start: int, stop: int):
     yield q[start:stop], dq[start:stop], ddq[start:stop], tau[start:stop]
 
 
+def path_part(robot: Robot, q, dq, ddq, tau, start: int, stop: int):
+    """:func:`array_part`, the robot's hysteresis state first run over the samples before
+    ``start`` (:meth:`~manip_id.regressor.RegressorEvaluator.advance`): the part's path
+    starts where the serial pass has it."""
+    robot.evaluator.advance(q[:start])
+    yield from array_part(q, dq, ddq, tau, start, stop)
+
+
 def accumulate_arrays(
     robot: Robot,
     q,
@@ -508,7 +520,7 @@ def _accumulate_arrays(robot: Robot, arrays, ind, run: RunOptions, workers: int,
         t0 = time.perf_counter()
         cuts = np.linspace(0, n, workers + 1).astype(int)
         parts = [
-            (array_part, (q, dq, ddq, tau, int(a), int(b)))
+            (path_part, (robot, q, dq, ddq, tau, int(a), int(b)))
             for a, b in zip(cuts[:-1], cuts[1:], strict=True)
         ]
         records = [unc.blocks(r, nv, offset=int(a)) for a in cuts[:-1]]

@@ -11,6 +11,7 @@ Candidates (:data:`CANDIDATES`; every one with the offset ``fo`` when
     sigmoid      fv dq + fsg (S(a (dq + c)) - S(a c))                a, c per joint
     position     fv dq + fc sign(dq) + sum_k hks sin(k q) + hkc cos(k q)
     load         fv dq + fc sign(dq) + fl |tau_load| sign(dq)      (nominal tau_load)
+    hysteresis   fv dq + fc sign(dq) + fh s, s the Dahl state        xc per joint
     X+position   a joint's best of asymmetric / stribeck / sigmoid, plus the harmonics
 
 Each fit is the usual one (``fit(robot) -> IdentificationResult``: the same accumulated
@@ -24,8 +25,8 @@ each joint is scored on its own row by
                                                    residual variance, k_j its base
                                                    joint-term parameters, n samples)
 
-when no validation data are given. The shapes (Stribeck ``vs``, sigmoid slope ``a``)
-are chosen by variable projection: the linear coefficients are solved for every value
+when no validation data are given. The shapes (Stribeck ``vs``, sigmoid slope ``a``, hysteresis
+length ``xc``) are chosen by variable projection: the linear coefficients are solved for every value
 of a grid (one fit per value), each joint keeps its best value, then the best is refined
 by a bisection in log(shape) (two fits per round, each joint its own value); the
 sigmoid's shift ``c`` is then chosen among :data:`SIGMOID_SHIFTS` and 0. The
@@ -57,6 +58,7 @@ CANDIDATES: tuple[str, ...] = (
     "sigmoid",
     "position",
     "load",
+    "hysteresis",
 )
 _KINDS = {
     "linear": ("viscous", "coulomb"),
@@ -65,12 +67,21 @@ _KINDS = {
     "sigmoid": ("viscous", "sigmoid"),
     "position": ("viscous", "coulomb", "position"),
     "load": ("viscous", "coulomb", "load"),
+    "hysteresis": ("viscous", "coulomb", "hysteresis"),
 }
 #: Default grids: Stribeck velocities vs [rad/s], sigmoid slopes a [s/rad].
 STRIBECK_GRID = (0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5)
 SIGMOID_GRID = (5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0)
 #: Sigmoid shifts c [rad/s] tried at the chosen slopes (besides 0).
 SIGMOID_SHIFTS = (-0.04, -0.02, -0.01, 0.01, 0.02, 0.04)
+#: Default grid of hysteresis (Dahl) lengths xc [rad].
+HYSTERESIS_GRID = (0.0005, 0.001, 0.002, 0.005, 0.01, 0.02, 0.05)
+#: The searched laws: their shape field of :class:`FrictionShapes` and its name in the table.
+_SHAPE_FIELDS = {
+    "stribeck": ("stribeck_velocity", "vs"),
+    "sigmoid": ("sigmoid_slope", "slope"),
+    "hysteresis": ("hysteresis_length", "xc"),
+}
 
 
 @dataclass(frozen=True)
@@ -102,6 +113,8 @@ class SelectionOptions:
     combine : bool
         Also try, per joint, its best nonlinear law plus the ``position`` harmonics
         (one more fit; candidates ``"<law>+position"``).
+    hysteresis_grid : tuple of float
+        Hysteresis (Dahl) lengths xc to try [rad], ascending.
     """
 
     candidates: tuple[str, ...] = CANDIDATES
@@ -113,6 +126,7 @@ class SelectionOptions:
     sigmoid_shifts: tuple[float, ...] = SIGMOID_SHIFTS
     tolerance: float = 0.005
     combine: bool = True
+    hysteresis_grid: tuple[float, ...] = HYSTERESIS_GRID
 
     def __post_init__(self):
         if not (math.isfinite(self.tolerance) and self.tolerance >= 0):
@@ -122,7 +136,7 @@ class SelectionOptions:
         bad = [c for c in self.candidates if c not in CANDIDATES]
         if bad or not self.candidates:
             raise InputError(f"candidates must be some of {list(CANDIDATES)}, got {bad or '[]'}")
-        for name in ("stribeck_grid", "sigmoid_grid"):
+        for name in ("stribeck_grid", "sigmoid_grid", "hysteresis_grid"):
             g = getattr(self, name)
             if not g or any(not (math.isfinite(x) and x > 0) for x in g) or list(g) != sorted(g):
                 raise InputError(f"{name} must be positive values in ascending order, got {g}")
@@ -225,6 +239,7 @@ def candidate_terms(
         sigmoid="sigmoid" in kinds,
         harmonics=opts.harmonics if "position" in kinds else 0,
         load="load" in kinds,
+        hysteresis="hysteresis" in kinds,
         shapes=shapes,
     )
 
@@ -233,7 +248,16 @@ def combined_terms(base: JointTerms, per_joint: list[JointTerms], shapes) -> Joi
     """One :class:`JointTerms` holding each joint's own model (``per_dof``)."""
     flags = {
         k: any(getattr(t, k) for t in per_joint)
-        for k in ("viscous", "coulomb", "offset", "asymmetric", "stribeck", "sigmoid", "load")
+        for k in (
+            "viscous",
+            "coulomb",
+            "offset",
+            "asymmetric",
+            "stribeck",
+            "sigmoid",
+            "load",
+            "hysteresis",
+        )
     }
     return JointTerms(
         armature=base.armature,
@@ -285,7 +309,7 @@ class _Trial:
 
 # ------------------------------------------------------------------ search
 def _shape_field(model: str) -> str:
-    return "stribeck_velocity" if model == "stribeck" else "sigmoid_slope"
+    return _SHAPE_FIELDS[model][0]
 
 
 def _fit_trial(fit, robot, model, opts, shape: np.ndarray | None, shift=None) -> _Trial:
@@ -331,7 +355,15 @@ def _unexcited_terms(robot: Robot, directions) -> list[tuple[int, str]] | None:
     out = []
     for d in directions:
         dof, _, term = str(d).rpartition(".")
-        if dof not in robot.dof_names or term not in ("fs", "fsg", "fvp", "fvn", "fcp", "fcn"):
+        if dof not in robot.dof_names or term not in (
+            "fs",
+            "fsg",
+            "fvp",
+            "fvn",
+            "fcp",
+            "fcn",
+            "fh",
+        ):
             return None
         out.append((robot.dof_names.index(dof), term))
     return out or None
@@ -347,7 +379,11 @@ def _search(fit, robot: Robot, model: str, opts: SelectionOptions) -> tuple[_Tri
     """The per-joint best shape of a nonlinear law: the grid, then ``opts.refine`` rounds
     of a bisection in log(shape) around each joint's best (two fits per round)."""
     nv = robot.nv
-    grid = opts.stribeck_grid if model == "stribeck" else opts.sigmoid_grid
+    grid = {
+        "stribeck": opts.stribeck_grid,
+        "sigmoid": opts.sigmoid_grid,
+        "hysteresis": opts.hysteresis_grid,
+    }[model]
     trials = [_fit_trial(fit, robot, model, opts, np.full(nv, g)) for g in grid]
     winner = _winners(trials)
     n = len(trials)
@@ -409,7 +445,7 @@ def select_model(
     trials: dict[str, _Trial] = {}
     n_fits = 0
     for model in opts.candidates:
-        if model in ("stribeck", "sigmoid"):
+        if model in _SHAPE_FIELDS:
             trials[model], n = _search(fit, robot, model, opts)
         else:
             trials[model], n = _fit_trial(fit, robot, model, opts, None), 1
@@ -463,7 +499,7 @@ def _choose(candidates: list[Candidate], use_val: bool, tolerance: float) -> str
 def _candidate(model: str, trial: _Trial, j: int, name: str | None = None) -> Candidate:
     params = {}
     if trial.shape is not None:
-        params = {"vs" if model == "stribeck" else "slope": float(trial.shape[j])}
+        params = {_SHAPE_FIELDS[model][1]: float(trial.shape[j])}
     if trial.shift is not None:
         params["shift"] = float(trial.shift[j])
     val = None if trial.val is None else float(trial.val[j])
@@ -520,10 +556,11 @@ def select_model_files(
 
 def _shapes(trials: dict[str, _Trial]) -> FrictionShapes | None:
     """The per-joint best shapes of the nonlinear laws tried (None: neither was)."""
-    vs, slope = trials.get("stribeck"), trials.get("sigmoid")
-    if vs is None and slope is None:
+    vs, slope, xc = trials.get("stribeck"), trials.get("sigmoid"), trials.get("hysteresis")
+    if vs is None and slope is None and xc is None:
         return None
     return FrictionShapes(
+        hysteresis_length=None if xc is None else tuple(map(float, xc.shape)),  # type: ignore[arg-type]
         stribeck_velocity=None if vs is None else tuple(map(float, vs.shape)),  # type: ignore[arg-type]
         sigmoid_slope=None if slope is None else tuple(map(float, slope.shape)),  # type: ignore[arg-type]
         sigmoid_shift=None
