@@ -33,7 +33,18 @@ from .errors import InputError, PhysicalConsistencyError
 #: Relative eigenvalue tolerance of the consistency check (``lambda_min > tol * lambda_max``).
 EIG_TOLERANCE = 1e-10
 #: Joint terms that must be non-negative.
-NONNEGATIVE_TERMS: tuple[str, ...] = ("Ia", "fv", "fc", "fvp", "fvn", "fcp", "fcn", "fs", "fsg")
+NONNEGATIVE_TERMS: tuple[str, ...] = (
+    "Ia",
+    "fv",
+    "fc",
+    "fvp",
+    "fvn",
+    "fcp",
+    "fcn",
+    "fs",
+    "fsg",
+    "fh",
+)
 
 
 def pseudo_inertia_basis() -> np.ndarray:

@@ -15,6 +15,7 @@ enters the regressor as columns of joint ``j``'s row (``dq = dq_j``, ``q = q_j``
     load          fl |tau_load| sign(dq)                             fl [1]
     temperature   fvt (T - T0) dq + fct (T - T0) sign(dq)            fvt [N m s/(rad K)]
                                                                      fct [N m/K]
+    hysteresis    fh s,  ds/dq = (1 - s sign(dq)) / xc  (Dahl)        fh [N m]
 
 (prismatic joints: N, N s/m). ``asymmetric`` replaces ``viscous`` and ``coulomb``; with
 ``offset`` its Coulomb pair is ``coulomb`` + ``offset`` (torque ``fc + fo`` for dq > 0
@@ -37,11 +38,24 @@ the data: one column per DoF, or one broadcast to every DoF); the reference ``T0
 shape, fixed before the solve: by default the training data's mean temperature per DoF,
 from the sums of :class:`TemperatureStats` (so every path that adds sums agrees).
 
+``hysteresis`` is the pre-sliding (Dahl) friction: a state ``s`` in [-1, 1] driven by
+the joint's displacement, not its velocity. Between reversals it approaches
+``sign(dq)`` exponentially with the distance travelled, over ``xc`` [rad or m]; over a
+sample step of displacement ``d = q_k - q_(k-1)`` exactly::
+
+    s_k = sign(d) + (s_(k-1) - sign(d)) exp(-|d| / xc),     s = 0 before the first sample
+
+so ``fh s`` follows the friction's square wave at reversals with a rounded edge of a few
+``xc`` instead of the jump of ``sign(dq)``. The state depends on the path since the
+start of the trajectory (:func:`hysteresis_state`, carried across blocks by
+:class:`HysteresisCarry`), so the law needs the samples in order: one sample alone
+(the one-sample regressor, forward simulation) cannot evaluate it.
+
 Shapes (:class:`FrictionShapes`): the Stribeck velocity ``vs`` [rad/s], the sigmoid
 slope ``a`` [s/rad] and shift ``c`` [rad/s], the reference temperature ``T0`` [degC or
-K], per DoF. They are fixed when the linear
-solve runs; :mod:`manip_id.identification.selection` chooses them by variable
-projection (a grid, each point solved from its accumulated sums, then refined).
+K], the hysteresis length ``xc`` [rad], per DoF. They are fixed when the linear solve
+runs; :mod:`manip_id.identification.selection` chooses them by variable projection (a
+grid, each point solved from its accumulated sums, then refined).
 """
 
 from __future__ import annotations
@@ -64,6 +78,7 @@ FRICTION_KINDS: tuple[str, ...] = (
     "position",
     "load",
     "temperature",
+    "hysteresis",
 )
 #: Highest harmonic order of the ``position`` law.
 MAX_HARMONICS = 4
@@ -73,6 +88,8 @@ DEFAULT_HARMONICS = 2
 DEFAULT_STRIBECK_VELOCITY = 0.05
 DEFAULT_SIGMOID_SLOPE = 50.0
 DEFAULT_SIGMOID_SHIFT = 0.0
+#: Default hysteresis (Dahl) length xc [rad or m].
+DEFAULT_HYSTERESIS_LENGTH = 0.005
 
 
 #: The fields of :class:`FrictionShapes`.
@@ -83,6 +100,7 @@ SHAPE_FIELDS = (
     "temperature_reference",
     "temperature_low",
     "temperature_high",
+    "hysteresis_length",
 )
 
 
@@ -104,6 +122,8 @@ class FrictionShapes:
     temperature_low, temperature_high : tuple of float or None
         The training data's temperature range per DoF [degC or K], where the law was
         fitted (the physically consistent estimate keeps ``fv(T)``, ``fc(T)`` >= 0 there).
+    hysteresis_length : tuple of float or None
+        ``xc`` [rad or m] per DoF (None: :data:`DEFAULT_HYSTERESIS_LENGTH`).
     """
 
     stribeck_velocity: tuple[float, ...] | None = None
@@ -112,9 +132,10 @@ class FrictionShapes:
     temperature_reference: tuple[float, ...] | None = None
     temperature_low: tuple[float, ...] | None = None
     temperature_high: tuple[float, ...] | None = None
+    hysteresis_length: tuple[float, ...] | None = None
 
     def __post_init__(self):
-        for name in ("stribeck_velocity", "sigmoid_slope"):
+        for name in ("stribeck_velocity", "sigmoid_slope", "hysteresis_length"):
             v = getattr(self, name)
             if v is not None and not all(np.isfinite(x) and x > 0 for x in v):
                 raise InputError(f"{name} must be positive and finite per DoF, got {v}")
@@ -262,6 +283,70 @@ class TemperatureStats:
         )
 
 
+# ------------------------------------------------------- hysteresis (Dahl) law
+@dataclass(frozen=True)
+class HysteresisCarry:
+    """The hysteresis state at the end of a block: where the next block starts from.
+
+    Attributes
+    ----------
+    angle : ndarray
+        The last joint angle per DoF, shape (nv,) [rad or m].
+    state : ndarray
+        The Dahl state ``s`` there, shape (nv,) [-].
+    """
+
+    angle: np.ndarray
+    state: np.ndarray
+
+
+@dataclass(frozen=True)
+class HysteresisTrace:
+    """:func:`hysteresis_state` of one block: the state per sample and the carry."""
+
+    state: np.ndarray  # (N, nv) [-]
+    carry: HysteresisCarry
+
+
+def hysteresis_state(angles, shapes: FrictionShapes | None, start=None) -> HysteresisTrace:
+    """The Dahl state ``s`` of every sample of a block of joint angles (module docstring).
+
+    Parameters
+    ----------
+    angles : ndarray
+        Joint angles in sample order, shape (N, nv) [rad or m].
+    shapes : FrictionShapes or None
+        ``hysteresis_length`` per DoF (None: :data:`DEFAULT_HYSTERESIS_LENGTH`).
+    start : HysteresisCarry or None
+        The state at the end of the previous block of the same trajectory (None: the
+        block starts the trajectory, ``s = 0`` and no step before its first sample).
+
+    Returns
+    -------
+    HysteresisTrace
+        ``state`` (N, nv) and the carry after the last sample.
+    """
+    q = np.asarray(angles, dtype=float)
+    xc = (shapes or NO_SHAPES).values("hysteresis_length", DEFAULT_HYSTERESIS_LENGTH)
+    if start is None:
+        prev, s = q[:1], np.zeros(q.shape[1])
+    else:
+        prev, s = start.angle[None, :], np.array(start.state, dtype=float)
+    step = np.diff(q, axis=0, prepend=prev if q.shape[0] else q[:0])
+    sigma, decay = np.sign(step), np.exp(-np.abs(step) / xc)
+    out = np.empty_like(q)
+    for k in range(q.shape[0]):  # s_k = sigma + (s_(k-1) - sigma) exp(-|d|/xc)
+        s = sigma[k] + (s - sigma[k]) * decay[k]
+        out[k] = s
+    last = q[-1].copy() if q.shape[0] else prev[0].copy()
+    return HysteresisTrace(out, HysteresisCarry(last, s.copy()))
+
+
+def hysteresis_column(state, vel, shapes=None):
+    """The ``fh`` column: the Dahl state ``s`` (..., nv) of :func:`hysteresis_state` as is."""
+    return np.asarray(state, dtype=float)
+
+
 def _harmonic(angles, vel, acc, shapes=None, *, order: int, cosine: bool):
     return np.cos(order * angles) if cosine else np.sin(order * angles)
 
@@ -335,6 +420,8 @@ def friction_columns(spec: FrictionSpec) -> set[str]:
         out.add("fl")
     if "temperature" in k:
         out |= {"fvt", "fct"}
+    if "hysteresis" in k:
+        out.add("fh")
     for order in range(1, spec.harmonics + 1):
         out |= {f"h{order}s", f"h{order}c"}
     return out

@@ -31,6 +31,7 @@ regressor column (only row ``j`` is non-zero), its units and its torque
     hks, hkc       sin(k q_j), cos(k q_j), k = 1..4         [N m | N]
     fl  load       |tau_load_j| sign(dq_j)                  [1]
     fvt, fct       (T_j - T0_j) dq_j, (T_j - T0_j) sign(dq_j)  [N m s/(rad K) | N m/K]
+    fh  hysteresis s_j, the Dahl state of q_j's path         [N m | N]
 
 (the friction laws, their shapes ``vs, a, c`` and how they combine:
 :mod:`manip_id.friction`). A layout may switch terms off for some DoFs
@@ -79,6 +80,7 @@ from .friction import (
     coulomb_positive,
     coulomb_temperature,
     harmonic_column,
+    hysteresis_column,
     load_column,
     sigmoid_term,
     stribeck_term,
@@ -124,6 +126,7 @@ def _spring(angles, vel, acc, shapes=None):
 _NEEDS = {
     "load": "the load torque (positions, velocities and accelerations of every joint)",
     "temp": "the measured temperature (a temp field of the data)",
+    "history": "the samples in order (a state of the joint's path), not one sample alone",
 }
 
 
@@ -144,8 +147,8 @@ class JointTerm:
     needs_angles
         whether the column uses the joint angle ``q_j``.
     needs
-        the signal the column multiplies: ``"load"`` (the nominal rigid-body torque) or
-        ``"temp"`` (the measured temperature); None: neither.
+        the signal the column is built from: ``"load"`` (nominal rigid-body torque), ``"temp"``
+        (measured temperature) or ``"history"`` (the path's Dahl state); None: none.
     """
 
     name: str
@@ -157,21 +160,18 @@ class JointTerm:
     _column: Callable[..., Any]
     needs: str | None = None
 
-    def column(
-        self, angles, vel, acc, shapes: FrictionShapes | None = None, load=None, temp=None
-    ) -> np.ndarray:
+    def column(self, angles, vel, acc, shapes=None, load=None, temp=None, history=None):
         """Regressor entries of this term, shape like ``vel`` (..., nv).
 
-        ``angles``: joint angles (..., nv) [rad or m], used by ``k`` and the harmonics
-        only (may be None otherwise); ``vel``: velocity [rad/s or m/s]; ``acc``:
-        acceleration [rad/s^2 or m/s^2], used by ``Ia`` only; ``shapes``: the per-DoF
-        shapes of ``fs``, ``fsg``, ``fvt`` and ``fct`` (None: their defaults,
-        :mod:`manip_id.friction`); ``load``: the nominal rigid-body torque (..., nv) [N m or
-        N], used by ``fl`` only; ``temp``: the measured temperature (..., nv) or (..., 1)
-        [degC or K], used by ``fvt`` and ``fct`` only.
+        ``angles`` (..., nv) [rad or m] (``k``, the harmonics; may be None otherwise), ``vel``
+        [rad/s or m/s], ``acc`` [rad/s^2 or m/s^2] (``Ia``); ``shapes`` the per-DoF shapes
+        (None: defaults, :mod:`manip_id.friction`); the signals of :attr:`needs`: ``load`` the
+        nominal rigid-body torque (..., nv) [N m or N] (``fl``), ``temp`` the temperature
+        (..., nv) or (..., 1) [degC or K] (``fvt``, ``fct``), ``history`` the Dahl state
+        (..., nv) of the samples' path (:func:`~manip_id.friction.hysteresis_state`, ``fh``).
         """
         if self.needs is not None:
-            signal = load if self.needs == "load" else temp
+            signal = {"load": load, "temp": temp, "history": history}[self.needs]
             if signal is None:
                 raise InputError(
                     f"the {self.name} term ({self.column_text}) needs {_NEEDS[self.needs]}"
@@ -180,7 +180,7 @@ class JointTerm:
         return self._column(angles, vel, acc, shapes)
 
     def torque(self, coefficient, angles, vel, acc, shapes=None, load=None, temp=None):
-        """``coefficient * column`` [N m or N], shape like ``vel``."""
+        """``coefficient * column`` [N m or N], shape like ``vel`` (not for ``fh``)."""
         return coefficient * self.column(angles, vel, acc, shapes, load, temp)
 
     def unit(self, prismatic: bool) -> str:
@@ -227,6 +227,9 @@ JOINT_TERMS: tuple[JointTerm, ...] = (
             ("fvt", "(T_j - T0_j) dq_j", "N m s/(rad K)", "N s/(m K)", viscous_temperature),
             ("fct", "(T_j - T0_j) sign(dq_j)", "N m/K", "N/K", coulomb_temperature),
         )
+    ),
+    JointTerm(
+        "fh", "hysteresis", "s_j (Dahl state)", "N m", "N", True, hysteresis_column, "history"
     ),
 )
 #: Joint-level term names, in the order their columns appear for each joint.
@@ -572,15 +575,12 @@ class ParameterLayout:
         """Whether a term needs the measured temperature (the ``temperature`` law)."""
         return any(t.needs == "temp" for t in self.term_table)
 
-    def joint_values(self, angles, vel, acc, load=None, temp=None) -> np.ndarray:
+    def joint_values(self, angles, vel, acc, load=None, temp=None, history=None) -> np.ndarray:
         """Joint-term regressor entries, shape (..., nv, nt) (see :data:`JOINT_TERMS`),
-        with the layout's shapes, zero where the mask switches a term off; ``load`` the
-        nominal rigid-body torque (..., nv) [N m or N] when :attr:`needs_load`, ``temp``
-        the temperature (..., nv) or (..., 1) when :attr:`needs_temperature`."""
-        shapes = self.shapes
-        vals = np.stack(
-            [t.column(angles, vel, acc, shapes, load, temp) for t in self.term_table], -1
-        )
+        with the layout's shapes, zero where the mask switches a term off; the signals
+        ``load``, ``temp``, ``history`` as in :meth:`JointTerm.column` (None if unused)."""
+        shapes, sig = self.shapes, (load, temp, history)
+        vals = np.stack([t.column(angles, vel, acc, shapes, *sig) for t in self.term_table], -1)
         return vals if self.mask is None else vals * self.mask
 
     # ------------------------------------------------------- physical consistency

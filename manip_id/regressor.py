@@ -35,6 +35,7 @@ chunk into one preallocated buffer.
 from __future__ import annotations
 
 from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -52,6 +53,7 @@ from .compiled_regressor import (
     rigid_block,
 )
 from .errors import InputError
+from .friction import HysteresisCarry, hysteresis_state
 from .resources import check_regressor_buffer
 
 if TYPE_CHECKING:
@@ -107,6 +109,10 @@ class RegressorEvaluator:
         self._load_data = self._load_model.createData()
         self._compiled: CompiledModel | None | bool = False  # False: not looked up yet
         self._seen = 0  # samples evaluated in blocks [-]
+        self._carry: HysteresisCarry | None = None  # the hysteresis state between blocks
+        self._depth = 0  # open trajectories (:meth:`sequence`)
+        #: Whether a term is a state of the samples' path (the ``hysteresis`` law).
+        self.needs_history = any(t.needs == "history" for t in self.layout.term_table)
 
     # ------------------------------------------------------------ rigid blocks
     @property
@@ -146,6 +152,58 @@ class RegressorEvaluator:
         for k in range(q.shape[0]):
             out[k] = f(m, d, q[k], dq[k], ddq[k])
 
+    # ------------------------------------------------- hysteresis: a path state
+    @contextmanager
+    def sequence(self):
+        """One trajectory over several calls: the hysteresis state (the ``fh`` column,
+        :func:`~manip_id.friction.hysteresis_state`) carries from each block to the next.
+
+        Entering starts a trajectory (state 0 before its first sample); a nested entry
+        joins the open one. Outside, each call's samples are a trajectory of their own.
+        """
+        if self._depth == 0:
+            self._carry = None
+        self._depth += 1
+        try:
+            yield self
+        finally:
+            self._depth -= 1
+            if self._depth == 0:
+                self._carry = None
+
+    def sequential(self, blocks) -> Iterator:
+        """``blocks`` as they come, within one :meth:`sequence` (a stream of blocks)."""
+        with self.sequence():
+            yield from blocks
+
+    def advance(self, q) -> None:
+        """Run the open trajectory's hysteresis state over samples ``q`` (N, nq) that are
+        not evaluated (the rows before a span of a file): the next block starts where
+        the whole stream would. A no-op without the law or an open :meth:`sequence`."""
+        if self.needs_history and self._depth and len(q):
+            self._history(self.joint_angles(np.asarray(q, dtype=float)))
+
+    def refuse_history(self, what: str) -> None:
+        """Raise :class:`InputError` when the ``hysteresis`` law is modelled (``what``
+        has no measured path to run its state over)."""
+        if self.needs_history:
+            raise InputError(
+                f"the hysteresis friction law (fh) is a state of the measured joint path; "
+                f"{what} cannot evaluate it: use the dynamic model (tau = Y(q, dq, ddq) theta)"
+            )
+
+    def _history(self, angles) -> np.ndarray:
+        """The Dahl state of the samples' angles (N, nv), carried within a sequence."""
+        if np.ndim(angles) < 2:
+            raise InputError(
+                "the hysteresis friction law (fh) is a state of the joint's path: it needs "
+                "the samples in order (2-D arrays), not one sample"
+            )
+        trace = hysteresis_state(angles, self.layout.shapes, self._carry if self._depth else None)
+        if self._depth:
+            self._carry = trace.carry
+        return trace.state
+
     # ------------------------------------------------------------ joint terms
     def joint_angles(self, q: np.ndarray) -> np.ndarray:
         """Joint coordinate per velocity DoF, shape (..., nv) [rad or m]."""
@@ -156,7 +214,8 @@ class RegressorEvaluator:
         ``temp`` the temperature, shape like ``vel`` (the ``temperature`` law)."""
         angles = self.joint_angles(q) if self._needs_angles else None
         load = self.load_torque(q, vel, acc) if self.layout.needs_load else None
-        return self.layout.joint_values(angles, vel, acc, load, temp)
+        history = self._history(angles) if self.needs_history else None
+        return self.layout.joint_values(angles, vel, acc, load, temp, history)
 
     def load_torque(self, q, vel, acc) -> np.ndarray:
         """The nominal rigid-body torque ``rnea(q, vel, acc)`` of :attr:`Robot.load_model`
@@ -169,7 +228,9 @@ class RegressorEvaluator:
 
     def refuse_load(self, what: str) -> None:
         """Raise :class:`InputError` when the ``load`` law is modelled (``what`` cannot
-        evaluate it: it needs the measured acceleration)."""
+        evaluate it: it needs the measured acceleration), or the ``hysteresis`` law (a
+        state of the measured path, which ``what`` does not have)."""
+        self.refuse_history(what)
         if self.layout.needs_load:
             raise InputError(
                 f"the load friction law (fl) needs the measured acceleration; {what} cannot "
@@ -234,7 +295,7 @@ class RegressorEvaluator:
         n = q.shape[0]
         buf = np.zeros((min(chunk, max(n, 1)), self.nv, self.p))
         rigid = buf[:, :, : self.n_rigid]
-        for start in range(0, n, chunk):
+        for start in self.sequential(range(0, n, chunk)):  # one path (hysteresis)
             stop = min(start + chunk, n)
             s = slice(start, stop)
             self.rigid_block(q[s], dq[s], ddq[s], rigid[: stop - start])
@@ -271,7 +332,7 @@ class RegressorEvaluator:
         wide = np.zeros((size, nv, nr + joint_cols.size))
         flat = wide.reshape(size * nv, nr + joint_cols.size)
         outs = [np.empty((size, sel.size)) for sel in selections]
-        for start in range(0, n, chunk):
+        for start in self.sequential(range(0, n, chunk)):  # one path (hysteresis)
             stop = min(start + chunk, n)
             s = slice(start, stop)
             size_k = stop - start

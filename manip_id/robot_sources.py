@@ -68,7 +68,7 @@ class JointTerms:
     """Which joint-level terms the model carries (for every active joint).
 
     ``asymmetric``, ``stribeck``, ``sigmoid``, ``harmonics`` (the order of the
-    ``position`` law), ``load`` and ``temperature`` are the friction laws of
+    ``position`` law), ``load``, ``temperature`` and ``hysteresis`` are the friction laws of
     :mod:`manip_id.friction`; ``shapes`` their per-DoF shape parameters; ``per_dof``
     (None: all) the terms each DoF keeps, one tuple of term names per DoF (the others'
     columns are zero: a per-joint model).
@@ -87,6 +87,7 @@ class JointTerms:
     temperature: bool = False
     shapes: FrictionShapes | None = None
     per_dof: tuple[tuple[str, ...], ...] | None = None
+    hysteresis: bool = False  # the Dahl law (fh), a state of the joint's path
 
     @property
     def friction(self) -> FrictionSpec:
@@ -101,6 +102,7 @@ class JointTerms:
             ("position", self.harmonics > 0),
             ("load", self.load),
             ("temperature", self.temperature),
+            ("hysteresis", self.hysteresis),
         )
         return FrictionSpec(frozenset(k for k, on in flags if on), int(self.harmonics))
 
@@ -151,6 +153,7 @@ def joint_terms(armature, friction, spring, defaults: JointTerms) -> JointTerms:
         harmonics=spec.harmonics,
         load="load" in k,
         temperature="temperature" in k,
+        hysteresis="hysteresis" in k,
         shapes=defaults.shapes if friction is None else None,
     )
 
@@ -238,6 +241,7 @@ def profile_terms(prof: RobotProfile | None) -> JointTerms:
         harmonics=spec.harmonics,
         load="load" in k,
         temperature="temperature" in k,
+        hysteresis="hysteresis" in k,
     )
 
 

@@ -39,6 +39,7 @@ MODEL_FLAGS: tuple[str, ...] = (
     "sigmoid",
     "load",
     "temperature",
+    "hysteresis",
 )
 
 
@@ -53,7 +54,7 @@ def sidecar_path(path) -> Path:
 
 
 #: Joint terms that are >= 0 in any physical drive (armature, viscous and Coulomb friction).
-_NONNEGATIVE = ("Ia", "fv", "fc", "fvp", "fvn", "fcp", "fcn", "fs", "fsg")
+_NONNEGATIVE = ("Ia", "fv", "fc", "fvp", "fvn", "fcp", "fcn", "fs", "fsg", "fh")
 
 
 def read_sidecar(path) -> dict:

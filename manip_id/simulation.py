@@ -385,7 +385,8 @@ class SimulationStream:
             )
             tau = np.empty((self.n_samples, self.robot.nv))  # [N m or N]
             batch = _BatchInverseDynamics(self.robot, self.theta_true)
-            for lo in range(0, self.n_samples, NOISE_BLOCK):
+            blocks = self.robot.evaluator.sequential(range(0, self.n_samples, NOISE_BLOCK))
+            for lo in blocks:  # one path: the hysteresis state carries from block to block
                 hi = min(lo + NOISE_BLOCK, self.n_samples)
                 _, _, q, dq, ddq = self._noise_free(lo, hi)
                 tau[lo:hi] = batch(q, dq, ddq, self.temperature(lo, hi))

@@ -31,6 +31,7 @@ from manip_id.estimators.consistent import (
 )
 from manip_id.identifiability import analyze
 from manip_id.identification import ConsistentOptions
+from manip_id.identification.document import result_text, result_to_dict
 
 FRICTION = "viscous,coulomb"
 
@@ -367,3 +368,18 @@ def test_a_round_off_mass_is_reported_as_no_mass_not_as_a_huge_inertia():
     assert [v.condition for v in found][1:] == ["mass m > 0 [kg]"]
     assert found[1].value == 1e-17
     assert all(abs(v.value) < 10 for v in rep.violations)
+
+
+def test_text_gives_each_link_mass_with_its_consistent_std():
+    """The text's link-mass line carries each mass's std: sqrt of the diagonal of the
+    consistent standard parameters' covariance (the JSON's ``std`` of ``<link>.m``)."""
+    robot = get_robot("panda", friction=FRICTION)
+    q, dq, ddq, tau = _data(robot, _light_wrist(robot), 400, 0.3, seed=7)
+    cons = identify(robot, q, dq, ddq, tau, consistent=True)
+    doc = result_to_dict(cons)
+    line = next(x for x in result_text(doc).splitlines() if x.startswith("link masses"))
+    assert line.startswith("link masses [kg] +- std (x nominal): ")
+    std = cons.standard.std[: robot.n_rigid : 10]  # [kg], the mass rows
+    masses = cons.standard.values[: robot.n_rigid : 10]
+    for name, m, s in zip(robot.joint_names, masses, std, strict=True):
+        assert f"{name} {m:.3g} +- {s:.2g} (" in line, (name, line)

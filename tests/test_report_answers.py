@@ -12,7 +12,7 @@ import pytest
 from conftest import get_robot
 
 from manip_id.cli import main
-from manip_id.viz.report_answers import body_rows, identify_answers, next_steps
+from manip_id.viz.report_answers import body_rows, identify_answers, next_steps, trust
 from manip_id.viz.report_tables import number, report_parameter_rows, report_quality_rows
 
 
@@ -118,3 +118,23 @@ def test_plain_least_squares_says_it_did_not_check(tmp_path):
     assert "Not checked" in answers["Is it physical?"]
     assert "--consistent" in answers["Is it physical?"]
     assert "training data" in answers["How good is the model?"]
+
+
+@pytest.mark.parametrize("method", ["hac", "white"])
+def test_trust_gives_one_std_figure_for_correlated_residuals(method):
+    """A chi-square 272 times its expectation: with autocorrelation-consistent std the
+    answer names their inflation (what the tables show), not also sqrt(272) = 16."""
+    doc = {
+        "base_parameters": [],
+        "condition_number": 96.0,
+        "consistent_solver": {"fit_scale": 272.0},
+        "uncertainty": {"method": method, "inflation": 14.8 if method == "hac" else None},
+    }
+    head, body = trust(doc)
+    assert head == "Can I trust the numbers?"
+    assert "272 times its expected chi-square" in body
+    if method == "hac":
+        assert "14.8 times the white-noise ones" in body and "16 times" not in body
+        assert body.count("standard deviations") == 1
+    else:
+        assert "about 16 times too small" in body

@@ -3,7 +3,8 @@
 The scene of each report (identify --consistent, payload, adapt) is rendered at the size
 it has in the report page (the iframe: about 1170 x 600 px), once as written and once with
 the robot hidden (the same camera, ellipsoids kept); the pixels that differ are the robot's.
-From them: the robot's bounding box spans >= 60 % of the canvas height, and the legend's
+From them: the robot's bounding box spans >= 60 % of the canvas height (or, for a robot
+wider than tall, of the canvas width beside the legend), and the legend's
 box (the panel's own background colour, measured from the pixels) does not overlap it, and
 no edge of the canvas cuts it.
 """
@@ -45,13 +46,15 @@ def framing(scene_html, tmp_path) -> dict:
     return {
         "inside": bool(rows.min() > 0 and rows.max() < SIZE[1] - 1 and cols.max() < SIZE[0] - 1),
         "height": (rows.max() - rows.min() + 1) / SIZE[1],
+        "width": (cols.max() - cols.min() + 1) / (SIZE[0] - 1 - legend_cols.max()),
         "robot_left": int(cols.min()),
         "legend_right": int(legend_cols.max()),
     }
 
 
 def _check(fig: dict) -> None:
-    assert fig["height"] >= 0.6, f"the robot spans {fig['height']:.2f} of the canvas height"
+    # a tall robot fills the height; a wide one, seen from its side, the width beside the legend
+    assert max(fig["height"], fig["width"]) >= 0.6, f"the robot spans {fig} of the canvas"
     assert fig["robot_left"] > fig["legend_right"], fig  # the legend never covers the robot
     assert fig["inside"], fig  # nothing of the robot cut by the canvas's edges
 

@@ -5,7 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from manip_id.viz.camera import FOV, image_coordinates, image_extent, place_camera
+from manip_id.viz.camera import (
+    DIRECTION,
+    FOV,
+    image_coordinates,
+    image_extent,
+    place_camera,
+    view_direction,
+)
 
 
 def _rod(h: float) -> np.ndarray:
@@ -61,3 +68,33 @@ def test_the_target_centres_a_pose_stretched_towards_the_camera():
 
 def test_points_behind_the_camera_have_no_extent():
     assert image_extent(_rod(1.0), (0.0, 0.0, 0.2)) == (np.inf, np.inf)
+
+
+def _box_area(points, d) -> float:
+    """Orthographic bounding-box area [m^2] of ``points`` seen along ``d`` (z up)."""
+    d = np.asarray(d, dtype=float) / np.linalg.norm(d)
+    r = np.cross(-d, [0.0, 0.0, 1.0])
+    r /= np.linalg.norm(r)
+    u = np.cross(r, -d)
+    return float(np.ptp(points @ r) * np.ptp(points @ u))
+
+
+def test_view_direction_shows_an_arm_along_the_line_of_sight_from_its_side():
+    d0 = np.asarray(DIRECTION) / np.linalg.norm(DIRECTION)
+    along = np.array([d0[0], d0[1], 0.0]) / np.hypot(d0[0], d0[1])
+    arm = np.outer(np.linspace(-0.5, 0.5, 21), along) + [0.0, 0.0, 0.05]  # a 1 m rod [m]
+    arm = np.vstack([arm, arm - [0.0, 0.0, 0.1]])
+    d = view_direction(arm)
+    assert np.isclose(np.linalg.norm(d), 1.0) and np.isclose(d[2], d0[2])  # same elevation
+    assert abs(np.dot(d[:2], along[:2])) / np.hypot(*d[:2]) < 0.7  # over 45 deg from end-on
+    assert _box_area(arm, d) > 3.0 * _box_area(arm, d0)
+
+
+def test_view_direction_keeps_the_default_for_a_robot_alike_from_every_side():
+    rng = np.random.default_rng(0)
+    x = rng.standard_normal((400, 3))
+    ball = x / np.linalg.norm(x, axis=1, keepdims=True)  # a unit sphere's points [m]
+    ball[:, 2] *= 2.0  # tall
+    d = view_direction(ball)
+    d0 = np.asarray(DIRECTION) / np.linalg.norm(DIRECTION)
+    assert np.degrees(np.arccos(np.clip(np.dot(d, d0), -1, 1))) < 16.0  # the nearest azimuth

@@ -37,7 +37,7 @@ def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="comma-separated friction laws per joint: viscous, coulomb, offset, asymmetric, "
         "stribeck, sigmoid, position[:K], load, temperature (needs a temp field: --column "
-        "temp=...) (docs/friction.md); 'auto' (identify --data): "
+        "temp=...), hysteresis (docs/friction.md); 'auto' (identify --data): "
         "chosen per joint by validation error, else BIC [default: the robot profile's "
         "(robots/ROBOT.toml), else none]",
     )

@@ -511,16 +511,28 @@ def _standard_lines(doc: dict) -> list[str]:
         )
     plaus = doc.get("plausibility")
     if plaus:  # the consistent estimate's masses against the nominal ones
+        std = _mass_std(doc)
         lines.append(
-            "link masses [kg] (x nominal): "
+            f"link masses [kg]{' +- std' if std else ''} (x nominal): "
             + ", ".join(
                 f"{b['name']} {b['mass']:.3g}"
+                + ("" if std.get(b["name"]) is None else f" +- {std[b['name']]:.2g}")
                 + ("" if b.get("mass_ratio") is None else f" ({b['mass_ratio']:.2g}x)")
                 for b in plaus["bodies"]
             )
             + f"; total {plaus['total_mass']:.3g} (nominal {plaus['nominal_total_mass']:.3g})"
         )
     return lines
+
+
+def _mass_std(doc: dict) -> dict[str, float]:
+    """Link name -> the std of its mass [kg] among the standard parameters (those with one)."""
+    out = {}
+    for r in doc.get("standard_parameters") or []:
+        link, _, field = r["name"].rpartition(".")
+        if field == "m" and r.get("std") is not None:
+            out[link] = float(r["std"])
+    return out
 
 
 def result_text(doc: dict, max_rows: int | None = None) -> str:

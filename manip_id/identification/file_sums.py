@@ -109,11 +109,14 @@ def _span_states(pairs, robot: Robot, span, deadband, counts: dict, progress=Non
     lay = None
     lo, hi = span
     seen = 0
+    history = robot.evaluator.needs_history
     for rows, raw in pairs:
         g0, seen = seen, seen + rows.shape[0]
         if hi is not None and g0 >= hi:
             break
         a, b = max(lo - g0, 0), rows.shape[0] if hi is None else min(hi - g0, rows.shape[0])
+        if history:  # the rows before the span: the hysteresis state runs over them
+            robot.evaluator.advance(rows[: min(a, rows.shape[0]), 1 : 1 + nq])
         if a >= b:
             continue
         lay = lay or Layout.processed(nq, nv, rows.shape[1])

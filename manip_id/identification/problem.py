@@ -277,12 +277,16 @@ def row_supports(robot: Robot, columns, n_states: int = 16, seed: int = 12345) -
     q, dq, ddq = robot.random_states(n_states, seed=seed)
     temp = robot.random_temperatures(n_states, seed)
     ev = robot.evaluator
-    Y = np.stack(
-        [
-            ev.regressor(q[k], dq[k], ddq[k], temp=None if temp is None else temp[k])
-            for k in range(n_states)
-        ]
-    )
+    if ev.needs_history:  # a path state: the random states as one path
+        chunks = ev.iter_regressor(q, dq, ddq, n_states, temp=temp)
+        Y = np.concatenate([c.Y.copy() for c in chunks])
+    else:
+        Y = np.stack(
+            [
+                ev.regressor(q[k], dq[k], ddq[k], temp=None if temp is None else temp[k])
+                for k in range(n_states)
+            ]
+        )
     nonzero = np.abs(Y[:, :, np.asarray(columns, dtype=np.intp)]).max(axis=0) > 0  # (nv, r)
     return [np.flatnonzero(row) for row in nonzero]
 
@@ -387,6 +391,7 @@ def accumulate_rows(
     """
     ev, nv, r = robot.evaluator, robot.nv, len(ind)
     supports = row_supports(robot, ind)
+    blocks = ev.sequential(blocks)  # one trajectory: the hysteresis state carries
     fc = _coulomb_positions(robot, np.asarray(ind), supports)
     fit, still, raw = _Sums(supports, nv), _Sums(supports, nv), _Sums(supports, nv)
     t_reg = t_acc = 0.0
@@ -506,6 +511,14 @@ def array_part(q, dq, ddq, tau, start: int, stop: int, temp=None):
         yield q[s], dq[s], ddq[s], tau[s], None, temp[s]
 
 
+def path_part(robot: Robot, q, dq, ddq, tau, start: int, stop: int, temp=None):
+    """:func:`array_part`, the robot's hysteresis state first run over the samples before
+    ``start`` (:meth:`~manip_id.regressor.RegressorEvaluator.advance`): the part's path
+    starts where the serial pass has it."""
+    robot.evaluator.advance(q[:start])
+    yield from array_part(q, dq, ddq, tau, start, stop, temp)
+
+
 def accumulate_arrays(
     robot: Robot,
     q,
@@ -536,7 +549,7 @@ def _accumulate_arrays(robot: Robot, arrays, ind, run: RunOptions, workers: int,
         t0 = time.perf_counter()
         cuts = np.linspace(0, n, workers + 1).astype(int)
         parts = [
-            (array_part, (q, dq, ddq, tau, int(a), int(b), temp))
+            (path_part, (robot, q, dq, ddq, tau, int(a), int(b), temp))
             for a, b in zip(cuts[:-1], cuts[1:], strict=True)
         ]
         records = [unc.blocks(r, nv, offset=int(a)) for a in cuts[:-1]]

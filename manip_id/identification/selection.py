@@ -13,6 +13,7 @@ Candidates (:data:`CANDIDATES`; every one with the offset ``fo`` when
     load         fv dq + fc sign(dq) + fl |tau_load| sign(dq)      (nominal tau_load)
     temperature  (fv + fvt (T - T0)) dq + (fc + fct (T - T0)) sign(dq)
                  only when the data carry a temperature (:func:`select_model_files`)
+    hysteresis   fv dq + fc sign(dq) + fh s, s the Dahl state        xc per joint
     X+position   a joint's best of asymmetric / stribeck / sigmoid, plus the harmonics
 
 Each fit is the usual one (``fit(robot) -> IdentificationResult``: the same accumulated
@@ -26,8 +27,8 @@ each joint is scored on its own row by
                                                    residual variance, k_j its base
                                                    joint-term parameters, n samples)
 
-when no validation data are given. The shapes (Stribeck ``vs``, sigmoid slope ``a``)
-are chosen by variable projection: the linear coefficients are solved for every value
+when no validation data are given. The shapes (Stribeck ``vs``, sigmoid slope ``a``, hysteresis
+length ``xc``) are chosen by variable projection: the linear coefficients are solved for every value
 of a grid (one fit per value), each joint keeps its best value, then the best is refined
 by a bisection in log(shape) (two fits per round, each joint its own value); the
 sigmoid's shift ``c`` is then chosen among :data:`SIGMOID_SHIFTS` and 0. The
@@ -50,8 +51,7 @@ from ..metrics import finite_or_none
 from ..robot import JointTerms, Robot
 from .files import identify_datasets
 from .result import IdentificationResult
-from .tasks import file_specs
-from .temperature import scans_temperature, with_temperature_reference
+from .temperature import candidate_reference
 
 #: The candidate models, in the order they are tried.
 CANDIDATES: tuple[str, ...] = (
@@ -62,6 +62,7 @@ CANDIDATES: tuple[str, ...] = (
     "position",
     "load",
     "temperature",
+    "hysteresis",
 )
 #: The candidates tried by default: all but ``temperature``, which needs a measured
 #: temperature (:func:`select_model_files` adds it when every file has one).
@@ -74,12 +75,21 @@ _KINDS = {
     "position": ("viscous", "coulomb", "position"),
     "load": ("viscous", "coulomb", "load"),
     "temperature": ("viscous", "coulomb", "temperature"),
+    "hysteresis": ("viscous", "coulomb", "hysteresis"),
 }
 #: Default grids: Stribeck velocities vs [rad/s], sigmoid slopes a [s/rad].
 STRIBECK_GRID = (0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5)
 SIGMOID_GRID = (5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0)
 #: Sigmoid shifts c [rad/s] tried at the chosen slopes (besides 0).
 SIGMOID_SHIFTS = (-0.04, -0.02, -0.01, 0.01, 0.02, 0.04)
+#: Default grid of hysteresis (Dahl) lengths xc [rad].
+HYSTERESIS_GRID = (0.0005, 0.001, 0.002, 0.005, 0.01, 0.02, 0.05)
+#: The searched laws: their shape field of :class:`FrictionShapes` and its name in the table.
+_SHAPE_FIELDS = {
+    "stribeck": ("stribeck_velocity", "vs"),
+    "sigmoid": ("sigmoid_slope", "slope"),
+    "hysteresis": ("hysteresis_length", "xc"),
+}
 
 
 @dataclass(frozen=True)
@@ -111,6 +121,8 @@ class SelectionOptions:
     combine : bool
         Also try, per joint, its best nonlinear law plus the ``position`` harmonics
         (one more fit; candidates ``"<law>+position"``).
+    hysteresis_grid : tuple of float
+        Hysteresis (Dahl) lengths xc to try [rad], ascending.
     """
 
     candidates: tuple[str, ...] = DEFAULT_CANDIDATES
@@ -122,6 +134,7 @@ class SelectionOptions:
     sigmoid_shifts: tuple[float, ...] = SIGMOID_SHIFTS
     tolerance: float = 0.005
     combine: bool = True
+    hysteresis_grid: tuple[float, ...] = HYSTERESIS_GRID
 
     def __post_init__(self):
         if not (math.isfinite(self.tolerance) and self.tolerance >= 0):
@@ -131,7 +144,7 @@ class SelectionOptions:
         bad = [c for c in self.candidates if c not in CANDIDATES]
         if bad or not self.candidates:
             raise InputError(f"candidates must be some of {list(CANDIDATES)}, got {bad or '[]'}")
-        for name in ("stribeck_grid", "sigmoid_grid"):
+        for name in ("stribeck_grid", "sigmoid_grid", "hysteresis_grid"):
             g = getattr(self, name)
             if not g or any(not (math.isfinite(x) and x > 0) for x in g) or list(g) != sorted(g):
                 raise InputError(f"{name} must be positive values in ascending order, got {g}")
@@ -237,6 +250,7 @@ def candidate_terms(
         harmonics=opts.harmonics if "position" in kinds else 0,
         load="load" in kinds,
         temperature="temperature" in kinds,
+        hysteresis="hysteresis" in kinds,
         shapes=shapes,
     )
 
@@ -253,7 +267,7 @@ def combined_terms(base: JointTerms, per_joint: list[JointTerms], shapes) -> Joi
         k: any(getattr(t, k) for t in per_joint)
         for k in (
             "viscous", "coulomb", "offset", "asymmetric", "stribeck", "sigmoid", "load",
-            "temperature",
+            "temperature", "hysteresis",
         )
     }  # fmt: skip
     return JointTerms(
@@ -306,7 +320,7 @@ class _Trial:
 
 # ------------------------------------------------------------------ search
 def _shape_field(model: str) -> str:
-    return "stribeck_velocity" if model == "stribeck" else "sigmoid_slope"
+    return _SHAPE_FIELDS[model][0]
 
 
 def _fit_trial(fit, robot, model, opts, shape: np.ndarray | None, shift=None) -> _Trial:
@@ -352,7 +366,8 @@ def _unexcited_terms(robot: Robot, directions) -> list[tuple[int, str]] | None:
     out = []
     for d in directions:
         dof, _, term = str(d).rpartition(".")
-        if dof not in robot.dof_names or term not in ("fs", "fsg", "fvp", "fvn", "fcp", "fcn"):
+        lone = term in ("fs", "fsg", "fvp", "fvn", "fcp", "fcn", "fh")  # a law's own columns
+        if dof not in robot.dof_names or not lone:
             return None
         out.append((robot.dof_names.index(dof), term))
     return out or None
@@ -368,7 +383,11 @@ def _search(fit, robot: Robot, model: str, opts: SelectionOptions) -> tuple[_Tri
     """The per-joint best shape of a nonlinear law: the grid, then ``opts.refine`` rounds
     of a bisection in log(shape) around each joint's best (two fits per round)."""
     nv = robot.nv
-    grid = opts.stribeck_grid if model == "stribeck" else opts.sigmoid_grid
+    grid = {
+        "stribeck": opts.stribeck_grid,
+        "sigmoid": opts.sigmoid_grid,
+        "hysteresis": opts.hysteresis_grid,
+    }[model]
     trials = [_fit_trial(fit, robot, model, opts, np.full(nv, g)) for g in grid]
     winner = _winners(trials)
     n = len(trials)
@@ -430,7 +449,7 @@ def select_model(
     trials: dict[str, _Trial] = {}
     n_fits = 0
     for model in opts.candidates:
-        if model in ("stribeck", "sigmoid"):
+        if model in _SHAPE_FIELDS:
             trials[model], n = _search(fit, robot, model, opts)
         else:
             trials[model], n = _fit_trial(fit, robot, model, opts, None), 1
@@ -484,7 +503,7 @@ def _choose(candidates: list[Candidate], use_val: bool, tolerance: float) -> str
 def _candidate(model: str, trial: _Trial, j: int, name: str | None = None) -> Candidate:
     params = {}
     if trial.shape is not None:
-        params = {"vs" if model == "stribeck" else "slope": float(trial.shape[j])}
+        params = {_SHAPE_FIELDS[model][1]: float(trial.shape[j])}
     if trial.shift is not None:
         params["shift"] = float(trial.shift[j])
     val = None if trial.val is None else float(trial.val[j])
@@ -538,33 +557,20 @@ def select_model_files(
     def fit(r: Robot) -> IdentificationResult:
         return identify_datasets(r, files, **kwargs)
 
-    if selection is None:
-        robot, selection = _temperature_candidate(robot, files, kwargs)
+    with_t0 = None if selection is not None else candidate_reference(robot, files, kwargs)
+    if with_t0 is not None:  # every file has a temperature: the temperature law joins
+        robot, selection = with_t0, SelectionOptions(candidates=CANDIDATES)
     result, chosen = select_model(fit, robot, selection)
     return robot.with_terms(chosen.terms), result, chosen
 
 
-def _temperature_candidate(robot: Robot, files, kwargs: dict):
-    """``(robot with T0, options with the temperature candidate)`` when every file's scan
-    in ``kwargs["scans"]`` has a temperature, else ``(robot, None)``."""
-    scans = kwargs.get("scans") or {}
-    specs = file_specs(files, "paths", kwargs.get("window"))
-    valid = kwargs.get("validation")
-    vspecs = [] if valid is None else file_specs(valid, "validation", kwargs.get("window"))
-    found = [scans.get(s) for s in specs + vspecs]
-    if not found or any(s is None or s.temperature is None for s in found):
-        return robot, None
-    stats = scans_temperature(found[: len(specs)])
-    robot = with_temperature_reference(robot, stats, modelled=False)
-    return robot, SelectionOptions(candidates=CANDIDATES)
-
-
 def _shapes(trials: dict[str, _Trial]) -> FrictionShapes | None:
     """The per-joint best shapes of the nonlinear laws tried (None: neither was)."""
-    vs, slope = trials.get("stribeck"), trials.get("sigmoid")
-    if vs is None and slope is None:
+    vs, slope, xc = trials.get("stribeck"), trials.get("sigmoid"), trials.get("hysteresis")
+    if vs is None and slope is None and xc is None:
         return None
     return FrictionShapes(
+        hysteresis_length=None if xc is None else tuple(map(float, xc.shape)),  # type: ignore[arg-type]
         stribeck_velocity=None if vs is None else tuple(map(float, vs.shape)),  # type: ignore[arg-type]
         sigmoid_slope=None if slope is None else tuple(map(float, slope.shape)),  # type: ignore[arg-type]
         sigmoid_shift=None

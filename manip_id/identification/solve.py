@@ -180,6 +180,7 @@ def stream_validation(robot: Robot, blocks, ind, estimate, nominal, chunk: int) 
     """Validation errors of ``estimate`` and ``nominal`` by one pass over ``blocks``
     ``(q, dq, ddq, tau[, None, temp])`` (exact, no round-off floor). Validation fields only."""
     ev = robot.evaluator
+    blocks = ev.sequential(blocks)  # one path: the hysteresis state carries
     thetas = [estimate, nominal]
     sse = [np.zeros(robot.nv) for _ in thetas]
     zz = np.zeros(robot.nv)

@@ -106,6 +106,39 @@ def _distance(
     return hi
 
 
+#: Azimuths [deg] :func:`view_direction` tries, at the elevation of :data:`DIRECTION`.
+AZIMUTHS = tuple(range(0, 360, 15))
+#: Preference for the default azimuth in :func:`view_direction`: a direction's score is
+#: its projected area times ``1 + DEFAULT_PREFERENCE cos(azimuth - default azimuth)``.
+DEFAULT_PREFERENCE = 0.15
+
+
+def view_direction(points, default=DIRECTION) -> np.ndarray:
+    """A viewing direction (unit, from the target towards the camera) that shows ``points``
+    (shape (n, 3) [m]) broadside: at the elevation of ``default``, the azimuth of
+    :data:`AZIMUTHS` whose orthographic image has the largest bounding box (width times
+    height), the default one preferred by :data:`DEFAULT_PREFERENCE` (so a robot that looks
+    alike from every side keeps it). An arm stretched along the default line of sight is
+    seen from its side instead of end-on."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 3)
+    d0 = np.asarray(default, dtype=float)
+    d0 = d0 / np.linalg.norm(d0)
+    elevation = np.arcsin(np.clip(d0[2], -1.0, 1.0))
+    az0 = np.arctan2(d0[1], d0[0])
+    best, best_score = d0, -np.inf
+    for az in np.radians(AZIMUTHS):
+        d = np.array([np.cos(az), np.sin(az), 0.0]) * np.cos(elevation)
+        d[2] = np.sin(elevation)
+        r = np.cross(-d, [0.0, 0.0, 1.0])
+        r = r / np.linalg.norm(r)
+        u = np.cross(r, -d)
+        area = float(np.ptp(pts @ r) * np.ptp(pts @ u))  # [m^2]
+        score = area * (1.0 + DEFAULT_PREFERENCE * np.cos(az - az0))
+        if score > best_score + 1e-12:
+            best, best_score = d, score
+    return best
+
+
 def place_camera(
     start,
     motion=None,

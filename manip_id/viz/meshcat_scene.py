@@ -35,7 +35,7 @@ from pinocchio.visualize.meshcat_visualizer import applyScalingOnHomegeneousTran
 from .._io import atomic_write_text
 from ..errors import InputError, ManipIdError
 from ..robot import Robot
-from .camera import place_camera
+from .camera import place_camera, view_direction
 from .inertia_ellipsoid import (
     EquivalentEllipsoid,
     degenerate_shape,
@@ -323,7 +323,11 @@ class RobotScene:
             qs = np.atleast_2d(qs)
             qs = qs[np.linspace(0, len(qs) - 1, min(len(qs), 60)).astype(int)]
             motion = np.vstack([self._points(q) for q in qs] + [pad])
-        self.camera = place_camera(start - center, None if motion is None else motion - center)
+        self.camera = place_camera(
+            start - center,
+            None if motion is None else motion - center,
+            direction=view_direction(start - center),
+        )
         center = center + self.camera.target  # the image of the start pose centred
         # The viewer's orbit controls always aim at the world origin: shift the scene
         # (robot and world axes) so that the centre of the start pose sits there; the

@@ -157,20 +157,29 @@ def trust(doc: Mapping) -> tuple[str, str]:
         "the parameter table)",
     ]
     fit_scale = (doc.get("consistent_solver") or {}).get("fit_scale")
-    if fit_scale is not None and fit_scale > 4.0:  # chi-square over its expectation
+    unc = doc.get("uncertainty")
+    method = unc.get("method", "white") if isinstance(unc, Mapping) else None
+    inflation = unc.get("inflation") if isinstance(unc, Mapping) else None
+    honest = method == "hac" and inflation is not None
+    not_white = fit_scale is not None and fit_scale > 4.0  # chi-square over its expectation
+    if not_white:
+        told = (  # one figure for the std a reader acts on: the one the tables show
+            f"the standard deviations shown are the autocorrelation-consistent ones "
+            f"({number(inflation, 3)} times the white-noise ones)"
+            if honest
+            else f"white-noise standard deviations are about {number(np.sqrt(fit_scale), 2)} "
+            "times too small"
+        )
         items.append(
             f'<span class="no">the residuals are not white</span>: the physical fit is '
-            f"{number(fit_scale, 3)} times its expected chi-square, so white-noise standard "
-            f"deviations are about {number(np.sqrt(fit_scale), 2)} times too small"
+            f"{number(fit_scale, 3)} times its expected chi-square, so {told}"
         )
-    unc = doc.get("uncertainty")
-    if isinstance(unc, Mapping):
-        inflation = unc.get("inflation")
+    if method is not None and not (not_white and honest):  # else the item above says it
         items.append(
-            f"standard deviations: {_esc(unc.get('method', 'white'))}"
+            f"standard deviations: {_esc(method)}"
             + ("" if inflation is None else f", {number(inflation, 3)} times the white-noise ones")
         )
-    else:
+    elif method is None:
         items.append(
             "standard deviations: white-noise least squares (they hold for uncorrelated "
             "residuals only)"
