@@ -43,6 +43,9 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _measure import byte_compile  # noqa: E402
+
 DEFAULT_DATA = Path("/tmp/manip_id_bench/ur10_1000000/user.npz")
 ROBOT, FRICTION = "ur10", "viscous,coulomb"
 
@@ -161,6 +164,7 @@ def main() -> None:
     args = parser.parse_args()
     if not args.simulate and not args.data.exists():
         raise SystemExit(f"{args.data} is missing: run experiments/bench_identify.py --user first")
+    print(byte_compile())  # the package's .pyc, as an installed one has them
     what = f"--simulate {args.simulate} samples" if args.simulate else str(args.data)
     print(f"manip-id identify {ROBOT} --friction {FRICTION} on {what}, median of {args.repeat}")
     results = {}
