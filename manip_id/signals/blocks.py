@@ -257,6 +257,6 @@ class _Cut:
             tau = y[:, ftau] if options.filter_torque else rows[:, stau]
             ddq = derivative(t, dq)
             first = lo_keep + (-(lo_keep - self.start)) % D  # first kept global index >= lo_keep
-            idx = np.arange(first, hi_keep, D) - w.lo
-            if idx.size:
+            idx = slice(first - w.lo, hi_keep - w.lo, D)  # views: one copy, by the stack
+            if hi_keep > first:
                 yield np.column_stack([t[idx], q[idx], dq[idx], tau[idx], ddq[idx]])
