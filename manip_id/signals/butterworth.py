@@ -29,7 +29,7 @@ import math
 
 import numpy as np
 
-from ..compiled_regressor import numba_available
+from ..compiled_regressor import note_numba_warm, numba_available
 
 
 def butterworth_poles(order: int, cutoff: float, rate: float) -> tuple[np.ndarray, float]:
@@ -119,6 +119,7 @@ def impulse_response(sos: np.ndarray, n: int) -> np.ndarray:
         from ._filter_kernel import run_sections  # numba kernels (optional heavy library)
 
         run_sections(sos, np.zeros((sos.shape[0], 2, 1)), x, False)
+        note_numba_warm()
         return x[:, 0]
     import scipy.signal as _signal  # heavy (0.4 s): the fallback without numba
 
@@ -140,4 +141,5 @@ def zero_phase(sos: np.ndarray, x: np.ndarray, axis: int = 0) -> np.ndarray:
     flat = np.ascontiguousarray(moved.reshape(moved.shape[0], -1))
     out = np.empty_like(flat)
     filtfilt(sos, sosfilt_zi(sos), flat, pad_length(sos), out)
+    note_numba_warm()
     return np.moveaxis(out.reshape(moved.shape), 0, axis)
