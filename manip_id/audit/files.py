@@ -11,6 +11,7 @@ from ..datasets.stream import torque_scale_vector
 from ..errors import DataError, InputError
 from ..robot import Robot
 from ..signals import DEFAULT_CUTOFF, preprocess
+from ..signals.butterworth import load_kernels
 from .delay import stream_lags
 from .findings import position_findings, torque_findings
 from .fits import fit_joint, nominal_torque
@@ -43,6 +44,8 @@ def _read(robot: Robot, spec: FileSpec, options: AuditOptions, eps: float):
         steps = np.diff(t)
         if steps.size and np.median(steps) > 0:
             check_rate(float(np.median(steps)), spec.label, spec.time_unit)
+    if not lay.has_ddq:  # the central rows will be filtered: load the filter first
+        load_kernels()  # (its memory taken before the read's transients, not on top)
     counts = RowCounts()
     scale = torque_scale_vector(options.torque_scale, lay.nv, "--torque-scale")
     rows = iter_rows(
