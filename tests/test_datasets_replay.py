@@ -136,19 +136,28 @@ def _identify(path, tmp_path, *extra):
     return doc, np.array([p["value"] for p in doc["base_parameters"]])
 
 
+@pytest.mark.parametrize("compiled", [False, True])
 @pytest.mark.parametrize("extra", [(), ("--trim-standstill",), ("--split", "0.7")])
-def test_identify_parses_a_csv_once_and_equals_its_npz(logs, tmp_path, monkeypatch, extra):
+def test_identify_parses_a_csv_once_and_equals_its_npz(
+    logs, tmp_path, monkeypatch, extra, compiled
+):
     npz, csv, n = logs
-    lines = []
-    parse = csv_module._parse
+    if compiled:  # the compiled reader whatever the file's size (numba installed)
+        pytest.importorskip("numba")
+        monkeypatch.setattr(csv_module, "COMPILED_BYTES", 0)
+    else:
+        monkeypatch.setattr(csv_module, "_compiled_parser", lambda path: None)
+    rows = []
+    tables = csv_module.CsvSource._tables
 
-    def counted(text_lines, *args):
-        lines.append(len(text_lines))
-        return parse(text_lines, *args)
+    def counted(self, chunk):
+        for first, table in tables(self, chunk):
+            rows.append(table.shape[0])
+            yield first, table
 
-    monkeypatch.setattr(csv_module, "_parse", counted)
+    monkeypatch.setattr(csv_module.CsvSource, "_tables", counted)
     doc_csv, est_csv = _identify(csv, tmp_path, *extra)
-    assert sum(lines) == n  # every data line parsed once, by the audit's pass
+    assert sum(rows) == n  # every data line parsed once, by the audit's pass
     doc_npz, est_npz = _identify(npz, tmp_path, *extra)
     assert doc_csv["n_samples"] == doc_npz["n_samples"]
     assert doc_csv["files"][0]["window"] == doc_npz["files"][0]["window"]

@@ -16,7 +16,9 @@ chunks, which gives the same values as on the whole file.
 from __future__ import annotations
 
 import fnmatch
+import io
 import itertools
+import sys
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -152,6 +154,34 @@ def resolve_columns(path: Path, columns: Mapping | None, width: int | None = Non
     )
 
 
+#: CSV files of at least this many bytes are parsed by the compiled reader
+#: (:mod:`._csv_kernel`) when numba is installed: below it, importing numba and loading
+#: the compiled code (~0.5 s a process) costs more than it saves (~2 us a row of 19
+#: numbers). Once numba is imported, every comma-separated file is.
+COMPILED_BYTES = 32 << 20
+
+
+def _compiled_parser(path: Path):
+    """The compiled reader of comma-separated lines (``bytes, width -> table or None``)
+    for ``path``, or None (numba missing, a small file, lone carriage returns)."""
+    if "numba" not in sys.modules and path.stat().st_size < COMPILED_BYTES:
+        return None
+    with open(path, "rb") as fh:  # universal newlines: a lone CR also ends a line
+        head = fh.read(1 << 16)
+    if head.count(b"\r") != head.count(b"\r\n"):
+        return None
+    try:
+        from ._csv_kernel import parse_lines  # imports numba (optional, heavy)
+    except ImportError:
+        return None
+    return parse_lines
+
+
+def _decoded(raw: list[bytes]) -> list[str]:
+    """Lines read as bytes, as text mode reads them (default encoding, universal newlines)."""
+    return list(io.TextIOWrapper(io.BytesIO(b"".join(raw))))
+
+
 def _parse(
     lines: list[str], delimiter, path: Path, first_line: int, width: int | None
 ) -> tuple[np.ndarray, dict[int, str]]:
@@ -214,34 +244,45 @@ class CsvSource:
         c = self.columns
         skip = 0 if c.header is None else 1
         width = None
-        with open(self.path) as fh:
+        fast = _compiled_parser(self.path) if c.delimiter == "," else None
+        with open(self.path, "rb" if fast is not None else "r") as fh:
             for _ in range(skip):
                 fh.readline()
             line_no = skip
             row = 0
             while True:
-                lines = [ln for ln in itertools.islice(fh, chunk) if ln.strip()]
-                if not lines:
-                    return
-                table, bad = _parse(lines, c.delimiter, self.path, line_no, width)
+                raw = list(itertools.islice(fh, chunk))
+                table = None if fast is None or not raw else fast(b"".join(raw), width)
+                bad: dict[int, str] = {}
+                if table is not None:
+                    lines = raw
+                else:  # numpy's reader (the text of the same lines)
+                    lines = [ln for ln in (_decoded(raw) if fast else raw) if ln.strip()]
+                    if not lines:
+                        return
+                    table, bad = _parse(lines, c.delimiter, self.path, line_no, width)
                 self.malformed.update({row + k: msg for k, msg in bad.items()})
                 row += len(lines)
                 line_no += len(lines)
                 if width is None:
                     width = table.shape[1]
-                    if c.header is not None and width != len(c.header):
-                        raise DataError(
-                            f"{self.path}: the header has {len(c.header)} columns but rows "
-                            f"have {width}"
-                        )
-                    for name, cols in c.index.items():
-                        outside = [i for i in cols if not -width <= i < width]
-                        if outside:
-                            raise DataError(
-                                f"column map: {name!r} refers to column {outside[0]} but "
-                                f"{self.path} has {width} columns"
-                            )
+                    self._check_width(width)
                 yield line_no - len(lines), table
+
+    def _check_width(self, width: int) -> None:
+        """The first rows' field count against the header and the column map."""
+        c = self.columns
+        if c.header is not None and width != len(c.header):
+            raise DataError(
+                f"{self.path}: the header has {len(c.header)} columns but rows have {width}"
+            )
+        for name, cols in c.index.items():
+            outside = [i for i in cols if not -width <= i < width]
+            if outside:
+                raise DataError(
+                    f"column map: {name!r} refers to column {outside[0]} but "
+                    f"{self.path} has {width} columns"
+                )
 
     def _pack(self, table: np.ndarray) -> np.ndarray:
         lay, idx = self.layout, self.columns.index
