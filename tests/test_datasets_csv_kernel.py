@@ -4,6 +4,7 @@ correctly rounded reference numpy's reader uses), and CsvSource with it against 
 from __future__ import annotations
 
 import math
+import multiprocessing
 from fractions import Fraction
 
 import numpy as np
@@ -13,6 +14,7 @@ pytest.importorskip("numba")
 
 import manip_id.datasets.csv as csv_module  # noqa: E402
 from manip_id.datasets._csv_kernel import parse_lines  # noqa: E402
+from manip_id.errors import DataError  # noqa: E402
 
 
 def _bits(x) -> np.ndarray:
@@ -141,13 +143,21 @@ def _write(path, text: str):
     return path
 
 
-def _chunks(path, monkeypatch, compiled: bool, columns=None):
-    if compiled:
-        monkeypatch.setattr(csv_module, "COMPILED_BYTES", 0)
-    else:
-        monkeypatch.setattr(csv_module, "_compiled_parser", lambda path: None)
-    src = csv_module.CsvSource(path, columns)
-    return list(src.chunks(4)), dict(src.malformed)
+def _force(monkeypatch, reader: str) -> None:
+    """Files read by ``reader`` ("numpy", "compiled" here, "forked" in a child) where the
+    compiled reader applies (whatever their size)."""
+    choose = csv_module._reader_of
+    monkeypatch.setattr(csv_module, "COMPILED_BYTES", 0)
+    monkeypatch.setattr(
+        csv_module, "_reader_of", lambda p, d: "numpy" if choose(p, d) == "numpy" else reader
+    )
+
+
+def _chunks(path, monkeypatch, reader: str, columns=None):
+    with monkeypatch.context() as m:
+        _force(m, reader)
+        src = csv_module.CsvSource(path, columns)
+        return list(src.chunks(4)), dict(src.malformed)
 
 
 HEAD = "t,q_a,q_b,dq_a,dq_b,tau_a,tau_b\n"
@@ -168,37 +178,48 @@ ROWS = [f"{0.01 * k!r},{0.1 * k},-{k}e-3,0.5,{k},-1.25,{7 * k}" for k in range(1
         ("blanks", HEAD + "\n".join(" " + r.replace(",", " , ") for r in ROWS) + "\n"),
     ],
 )
-def test_compiled_source_equals_numpy(tmp_path, monkeypatch, name, text):
+@pytest.mark.parametrize("reader", ["compiled", "forked"])
+def test_compiled_source_equals_numpy(tmp_path, monkeypatch, name, text, reader):
     path = _write(tmp_path / "f.csv", text)
-    with monkeypatch.context() as m:
-        want, want_bad = _chunks(path, m, compiled=False)
-    with monkeypatch.context() as m:
-        got, got_bad = _chunks(path, m, compiled=True)
+    want, want_bad = _chunks(path, monkeypatch, "numpy")
+    got, got_bad = _chunks(path, monkeypatch, reader)
     assert got_bad == want_bad
     assert len(got) == len(want) > 1
     for a, b in zip(got, want, strict=True):
         assert np.array_equal(_bits(a), _bits(b))
 
 
-def test_compiled_source_without_header_and_derived_dq(tmp_path, monkeypatch):
+@pytest.mark.parametrize("reader", ["compiled", "forked"])
+def test_compiled_source_without_header_and_derived_dq(tmp_path, monkeypatch, reader):
     body = "\n".join(",".join(r.split(",")[i] for i in (0, 1, 2, 5, 6)) for r in ROWS) + "\n"
     path = _write(tmp_path / "g.csv", body)
     cols = {"t": 0, "q": [1, 2], "tau": [3, 4]}
-    with monkeypatch.context() as m:
-        want, _ = _chunks(path, m, compiled=False, columns=cols)
-    with monkeypatch.context() as m:
-        got, _ = _chunks(path, m, compiled=True, columns=cols)
+    want, _ = _chunks(path, monkeypatch, "numpy", columns=cols)
+    got, _ = _chunks(path, monkeypatch, reader, columns=cols)
     assert len(got) == len(want) > 1
     for a, b in zip(got, want, strict=True):
         assert np.array_equal(_bits(a), _bits(b))
 
 
-def test_the_power_table_is_the_floor_of_its_definition():
-    """T(q) = floor(5^q 2^s) in [2^127, 2^128) (the error bound [P, P + w) needs the floor)."""
-    from manip_id.datasets import _csv_kernel as k
+@pytest.mark.parametrize("reader", ["compiled", "forked"])
+def test_a_header_that_does_not_fit_is_refused_alike(tmp_path, monkeypatch, reader):
+    path = _write(tmp_path / "h.csv", HEAD.replace("\n", ",x\n") + "\n".join(ROWS) + "\n")
+    messages = []
+    for r in ("numpy", reader):
+        with pytest.raises(DataError) as err:
+            _chunks(path, monkeypatch, r)
+        messages.append(str(err.value))
+    assert messages[0] == messages[1] and "the header has 8 columns but rows have 7" in messages[0]
 
-    for i, q in enumerate(range(k.Q_MIN, k.Q_MAX + 1)):
-        t = (int(k.HI[i]) << 64) | int(k.LO[i])
-        true = Fraction(5) ** q * Fraction(2) ** int(k.SHIFT[i])
-        assert 2**127 <= t <= true < t + 1
-        assert bool(k.EXACT[i]) == (true == t)
+
+def test_a_forked_read_stopped_early_ends_its_child(tmp_path, monkeypatch):
+    """A child a pass stopped early (its pipe full: it waits) is ended with the pass."""
+    path = _write(tmp_path / "f.csv", HEAD + "\n".join(ROWS * 2000) + "\n")
+    with monkeypatch.context() as m:
+        _force(m, "forked")
+        blocks = csv_module.CsvSource(path).chunks(4)
+        first = next(blocks)
+        assert multiprocessing.active_children()
+        blocks.close()
+    assert not multiprocessing.active_children()
+    assert np.array_equal(first, _chunks(path, monkeypatch, "numpy")[0][0])

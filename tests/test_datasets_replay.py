@@ -146,12 +146,12 @@ def test_identify_parses_a_csv_once_and_equals_its_npz(
         pytest.importorskip("numba")
         monkeypatch.setattr(csv_module, "COMPILED_BYTES", 0)
     else:
-        monkeypatch.setattr(csv_module, "_compiled_parser", lambda path: None)
+        monkeypatch.setattr(csv_module, "_reader_of", lambda path, delimiter: "numpy")
     rows = []
     tables = csv_module.CsvSource._tables
 
-    def counted(self, chunk):
-        for first, table in tables(self, chunk):
+    def counted(self, chunk, reader=None):
+        for first, table in tables(self, chunk, reader):
             rows.append(table.shape[0])
             yield first, table
 
