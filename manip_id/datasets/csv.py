@@ -20,7 +20,9 @@ import importlib.util
 import io
 import itertools
 import multiprocessing
+import signal
 import sys
+import threading
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -178,7 +180,10 @@ def _reader_of(path: Path, delimiter: str | None) -> str:
         head = fh.read(1 << 16)
     if head.count(b"\r") != head.count(b"\r\n"):
         return "numpy"
-    return "forked" if CAN_FORK and not loaded else "compiled"
+    # a fork only from a plain single-threaded process (a pool's daemonic worker may not
+    # have children; a fork copies no other thread, whatever locks they hold)
+    alone = threading.active_count() == 1 and not multiprocessing.current_process().daemon
+    return "forked" if CAN_FORK and alone and not loaded else "compiled"
 
 
 def _compiled_parser():
@@ -195,6 +200,8 @@ def _child(conn, source: CsvSource, chunk: int) -> None:
     """In a forked child: ``source``'s tables (compiled reader) sent through ``conn``:
     ``(first line, shape, new malformed lines)`` then the table's bytes; None at the end,
     ``"error"`` when the reading failed (the parent reads again, to raise it)."""
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # ended by the parent (terminate)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C
     try:
         known = 0
         for first, table in source._tables(chunk, "compiled"):
@@ -314,7 +321,13 @@ class CsvSource:
         ctx = multiprocessing.get_context("fork")
         recv, send = ctx.Pipe(duplex=False)
         proc = ctx.Process(target=_child, args=(send, self, chunk), daemon=True)
-        proc.start()
+        try:
+            proc.start()
+        except OSError:  # no process to be had: the compiled reader here
+            recv.close()
+            send.close()
+            yield from self._tables(chunk, "compiled")
+            return
         send.close()
         n = 0
         try:
