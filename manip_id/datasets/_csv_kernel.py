@@ -35,7 +35,6 @@ _MASK32 = _U(0xFFFFFFFF)
 _S32 = _U(32)
 _S63 = _U(63)
 _TOP = _U(1 << 63)
-_LIMIT = _U(10**18)  # w below this takes one more digit (at most 19)
 _MANT_END = _U(1 << 53)
 _POW10 = np.array([10.0**k for k in range(23)])  # exact doubles
 #: m 2^e with 2^52 <= m < 2^53 is a normal double for e in [E_MIN, E_MAX]
@@ -148,20 +147,27 @@ def _parse(buf, out):
         neg = pos < n and buf[pos] == 45
         if pos < n and (buf[pos] == 45 or buf[pos] == 43):
             pos += 1
-        w, q, seen, point = _ZERO, 0, False, False
-        while pos < n:
-            b = buf[pos]
-            if 48 <= b <= 57:
-                if w >= _LIMIT:  # a 20th significant digit
-                    return -1
-                w = w * _TEN + _U(b - 48)
-                q -= 1 if point else 0
-                seen = True
-            elif b == 46 and not point:
-                point = True
-            else:
-                break
+        w, q, f0 = _ZERO, 0, pos
+        while pos < n and buf[pos] == 48:  # leading zeros
             pos += 1
+        s0 = pos
+        while pos < n and 48 <= buf[pos] <= 57:
+            w = w * _TEN + _U(buf[pos] - 48)
+            pos += 1
+        digits, seen = pos - s0, pos > f0
+        if pos < n and buf[pos] == 46:  # the fraction
+            pos += 1
+            f0 = pos
+            if digits == 0:  # no significant digit yet: the fraction's leading zeros
+                while pos < n and buf[pos] == 48:
+                    pos += 1
+            s0 = pos
+            while pos < n and 48 <= buf[pos] <= 57:
+                w = w * _TEN + _U(buf[pos] - 48)
+                pos += 1
+            digits, q, seen = digits + pos - s0, f0 - pos, seen or pos > f0
+        if digits > 19:  # w overflowed: numpy decides
+            return -1
         if pos < n and (buf[pos] == 101 or buf[pos] == 69):  # the exponent
             pos += 1
             sign = -1 if pos < n and buf[pos] == 45 else 1
