@@ -13,6 +13,7 @@ from conftest import get_robot
 import manip_id.datasets.csv as csv_module
 from manip_id.cli import main
 from manip_id.datasets import FileSpec, RowCache, RowCounts, Window, iter_rows, open_source
+from manip_id.datasets.stream import READ_CHUNK
 from manip_id.errors import DataError
 
 ROBOT = "ur5"
@@ -128,18 +129,21 @@ def logs(robot, tmp_path_factory):
     return npz, _write_csv(folder / "log.csv", robot, t, q, dq, tau), t.size
 
 
-def _identify(path, tmp_path, *extra):
+def _identify(path, tmp_path, *extra, window=""):
     out = tmp_path / f"{path.suffix[1:]}.json"
-    args = ["identify", ROBOT, "--friction", "viscous,coulomb", "--data", str(path)]
+    args = ["identify", ROBOT, "--friction", "viscous,coulomb", "--data", f"{path}{window}"]
     assert main([*args, *extra, "--json", str(out)]) == 0
     doc = json.loads(out.read_text())
     return doc, np.array([p["value"] for p in doc["base_parameters"]])
 
 
 @pytest.mark.parametrize("compiled", [False, True])
-@pytest.mark.parametrize("extra", [(), ("--trim-standstill",), ("--split", "0.7")])
+@pytest.mark.parametrize(
+    ("extra", "window"),
+    [((), ""), (("--trim-standstill",), ""), (("--split", "0.7"), ""), ((), "@#100:#3000")],
+)
 def test_identify_parses_a_csv_once_and_equals_its_npz(
-    logs, tmp_path, monkeypatch, extra, compiled
+    logs, tmp_path, monkeypatch, extra, window, compiled
 ):
     npz, csv, n = logs
     if compiled:  # the compiled reader whatever the file's size (numba installed)
@@ -156,9 +160,11 @@ def test_identify_parses_a_csv_once_and_equals_its_npz(
             yield first, table
 
     monkeypatch.setattr(csv_module.CsvSource, "_tables", counted)
-    doc_csv, est_csv = _identify(csv, tmp_path, *extra)
-    assert sum(rows) == n  # every data line parsed once, by the audit's pass
-    doc_npz, est_npz = _identify(npz, tmp_path, *extra)
+    doc_csv, est_csv = _identify(csv, tmp_path, *extra, window=window)
+    # every data line parsed once, by the audit's pass (a row window: the tables of
+    # READ_CHUNK lines up to its end)
+    assert sum(rows) == (n if not window else min(n, -(-3000 // READ_CHUNK) * READ_CHUNK))
+    doc_npz, est_npz = _identify(npz, tmp_path, *extra, window=window)
     assert doc_csv["n_samples"] == doc_npz["n_samples"]
     assert doc_csv["files"][0]["window"] == doc_npz["files"][0]["window"]
     if extra == ("--trim-standstill",):

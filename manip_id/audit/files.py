@@ -49,7 +49,11 @@ def _read(robot: Robot, spec: FileSpec, options: AuditOptions, eps: float, cache
         )
     # the first rows' rate before the value checks: stamps in ns would be refused as
     # implausible seconds (with a cache: the first block of the pass below, recorded once)
-    head = (options.read_chunk, 0, None) if cache is not None else (RATE_ROWS, 0, RATE_ROWS)
+    head: tuple = (RATE_ROWS, 0, RATE_ROWS)
+    if cache is not None:
+        w = spec.window
+        span = (0, None) if w is None or w.unit != "index" else (w.start or 0, w.stop)
+        head = (options.read_chunk, *span)
     first = next(iter(src.chunks(*head)), None)
     if first is not None:
         t = first[:RATE_ROWS, 0][np.isfinite(first[:RATE_ROWS, 0])]
