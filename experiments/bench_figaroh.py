@@ -36,7 +36,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from _measure import machine, manip_id_command, run  # noqa: E402
+from _measure import byte_compile, machine, manip_id_command, run  # noqa: E402
 
 RATE = 200.0  # [Hz]
 TARGET_TIME, TARGET_MEMORY = 15.0, 12.0
@@ -91,6 +91,7 @@ def main(argv: list[str] | None = None) -> int:
 
     fig_exe, fig_version = figaroh_python()
     print(f"machine: {machine()}")
+    print(byte_compile())
     print(f"work: ur10, viscous + Coulomb friction, {n:,} simulated samples at {RATE:g} Hz")
     with tempfile.TemporaryDirectory(prefix="bench_figaroh_") as tmp:
         tmp_path = Path(tmp)

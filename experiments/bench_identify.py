@@ -49,6 +49,9 @@ import numpy as np
 
 from manip_id.identification import RunOptions
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _measure import byte_compile  # noqa: E402
+
 ROBOT = "ur10"
 FRICTION = ("viscous", "coulomb")
 RATE = 1000.0
@@ -462,6 +465,7 @@ def main() -> None:
     if args.case:
         run_case(args)
         return
+    print(byte_compile())  # the package's .pyc, as an installed one has them
     if args.user:
         user_main(
             Path(args.cache),

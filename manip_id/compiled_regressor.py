@@ -50,7 +50,7 @@ ENV = "MANIP_ID_REGRESSOR"
 MODES = ("auto", "compiled", "pinocchio")
 #: in ``auto`` mode the kernel is used once an evaluator has seen this many samples: below
 #: it, importing numba and loading the compiled code (~0.5 s a process) costs more than the
-#: ~2 us a sample it saves
+#: ~2 us a sample it saves (unless numba is loaded already: :func:`numba_warm`)
 AUTO_SAMPLES = 200_000
 
 
@@ -171,10 +171,27 @@ def set_mode(value: str) -> None:
     os.environ[ENV] = value
 
 
+#: whether a numba kernel has run in this process (e.g. the low-pass of the log
+#: preprocessing): numba's code generation is then loaded, and the regressor kernel costs
+#: about 10 ms more to load, which about 3000 samples repay
+_warm = False
 #: samples announced by :func:`planned_samples` for the current run (0: none)
 _planned = 0
 #: samples evaluated in blocks by this process, every evaluator together
 _seen = 0
+
+
+def note_numba_warm() -> None:
+    """Record that a numba kernel has run in this process (see :func:`numba_warm`)."""
+    global _warm
+    _warm = True
+
+
+def numba_warm() -> bool:
+    """Whether a numba kernel has run in this process: then ``auto`` takes the compiled
+    kernel for any block, its one-off cost (importing numba, loading its code generation)
+    being paid already."""
+    return _warm
 
 
 def planned() -> int:
@@ -236,6 +253,7 @@ def rigid_block(desc: CompiledModel, q, dq, ddq, out: np.ndarray, gravity: bool 
     g = desc.gravity if gravity else np.zeros(3)
     tree = (desc.parent, desc.kind, desc.axis, desc.rot0, desc.pos0, desc.idx_q, desc.idx_v, g)
     _kernel()(tree, q, dq, ddq, out)
+    note_numba_warm()
 
 
 def momentum_block(desc: CompiledModel, q, dq, yp: np.ndarray, yh: np.ndarray) -> None:

@@ -49,6 +49,7 @@ from .compiled_regressor import (
     compile_model,
     count_samples,
     mode,
+    numba_warm,
     planned,
     rigid_block,
 )
@@ -128,11 +129,13 @@ class RegressorEvaluator:
         Mode ``compiled``: whenever the model is covered; ``auto``: once this process
         has seen :data:`~manip_id.compiled_regressor.AUTO_SAMPLES` samples, or from the
         start of a run announced that large (:func:`~manip_id.compiled_regressor.
-        planned_samples`); ``pinocchio``: never (see :mod:`manip_id.compiled_regressor`).
+        planned_samples`), or once a numba kernel has run in this process (the filter of
+        the log preprocessing: :func:`~manip_id.compiled_regressor.numba_warm`);
+        ``pinocchio``: never (see :mod:`manip_id.compiled_regressor`).
         """
         self._seen += n
         current = mode()
-        large = max(count_samples(n), planned()) >= AUTO_SAMPLES
+        large = max(count_samples(n), planned()) >= AUTO_SAMPLES or numba_warm()
         if current == "pinocchio" or (current == "auto" and not large):
             return None
         return self.compiled

@@ -183,8 +183,12 @@ def test_modes_and_auto_threshold(monkeypatch):
     ev = robot.evaluator
     monkeypatch.setenv(cr.ENV, "auto")
     monkeypatch.setattr(cr, "_seen", 0)  # a fresh process: no samples evaluated yet
+    monkeypatch.setattr(cr, "_warm", False)  # ... and no numba kernel run
     assert ev.kernel_for(10) is None  # a small job keeps Pinocchio
     assert ev.kernel_for(cr.AUTO_SAMPLES) is not None  # a large one takes the kernel
+    monkeypatch.setattr(cr, "_seen", 0)
+    cr.note_numba_warm()  # numba loaded by another kernel (the filter): no one-off cost left
+    assert ev.kernel_for(10) is not None
     monkeypatch.setenv(cr.ENV, "pinocchio")
     assert ev.kernel_for(10**9) is None
     monkeypatch.setenv(cr.ENV, "fast")

@@ -6,13 +6,22 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..datasets import FileSpec, RowCounts, Window, iter_rows, open_source, parse_file_spec
+from ..datasets import (
+    FileSpec,
+    RowCache,
+    RowCounts,
+    Window,
+    iter_rows,
+    open_source,
+    parse_file_spec,
+)
 from ..datasets.adjust import check_rate
 from ..datasets.quality import STANDSTILL, encoder_resolution, static_span
 from ..datasets.stream import torque_scale_vector
 from ..errors import DataError, InputError
 from ..robot import Robot
 from ..signals import DEFAULT_CUTOFF, preprocess
+from ..signals.butterworth import load_kernels
 from .delay import stream_lags
 from .findings import position_findings, torque_findings
 from .fits import fit_joint, nominal_torque
@@ -23,13 +32,15 @@ from .report import Audit, AuditOptions, FileAudit, JointAudit
 EDGE_REST = 1.0
 #: A joint at rest on more than this share of the rows is reported.
 REST_SHARE = 0.5
+#: The first rows whose stamps are checked for a plausible rate before the rows are read.
+RATE_ROWS = 4096
 
 
-def _read(robot: Robot, spec: FileSpec, options: AuditOptions, eps: float):
+def _read(robot: Robot, spec: FileSpec, options: AuditOptions, eps: float, cache):
     """``(rows, counts, rate)`` of the rows a fit sees (:class:`AuditRows`); refuses an
     implausible rate."""
     try:
-        src = open_source(spec, joint_names=list(robot.dof_names))
+        src = open_source(spec, joint_names=list(robot.dof_names), cache=cache)
     except DataError as exc:
         msg = str(exc)
         raise DataError(msg if str(spec.path) in msg else f"{spec.label}: {msg}") from exc
@@ -39,12 +50,21 @@ def _read(robot: Robot, spec: FileSpec, options: AuditOptions, eps: float):
             f"{spec.label}: the data have {lay.nv} joints ({lay.nq} positions) but robot "
             f"{robot.name!r} has nq={robot.nq}, nv={robot.nv}"
         )
-    first = next(iter(src.chunks(4096, 0, 4096)), None)  # before the value checks:
-    if first is not None:  # stamps in ns would be refused as implausible seconds
-        t = first[:, 0][np.isfinite(first[:, 0])]
+    # the first rows' rate before the value checks: stamps in ns would be refused as
+    # implausible seconds (with a cache: the first block of the pass below, recorded once)
+    head: tuple = (RATE_ROWS, 0, RATE_ROWS)
+    if cache is not None:
+        w = spec.window
+        span = (0, None) if w is None or w.unit != "index" else (w.start or 0, w.stop)
+        head = (options.read_chunk, *span)
+    first = next(iter(src.chunks(*head)), None)
+    if first is not None:
+        t = first[:RATE_ROWS, 0][np.isfinite(first[:RATE_ROWS, 0])]
         steps = np.diff(t)
         if steps.size and np.median(steps) > 0:
             check_rate(float(np.median(steps)), spec.label, spec.time_unit)
+    if not lay.has_ddq:  # the central rows will be filtered: load the filter first
+        load_kernels()  # (its memory taken before the read's transients, not on top)
     counts = RowCounts()
     scale = torque_scale_vector(options.torque_scale, lay.nv, "--torque-scale")
     rows = iter_rows(
@@ -64,7 +84,9 @@ def _read(robot: Robot, spec: FileSpec, options: AuditOptions, eps: float):
     return ds, counts, check_rate(step, spec.label, spec.time_unit)
 
 
-def audit_file(robot: Robot, spec, options: AuditOptions | None = None) -> FileAudit:
+def audit_file(
+    robot: Robot, spec, options: AuditOptions | None = None, *, cache: RowCache | None = None
+) -> FileAudit:
     """The audit of one file (see the module docstring).
 
     Parameters
@@ -72,6 +94,8 @@ def audit_file(robot: Robot, spec, options: AuditOptions | None = None) -> FileA
     robot: the robot whose nominal model is the reference.
     spec: a :class:`~manip_id.datasets.FileSpec` or its text ``PATH[@WINDOW]``.
     options: :class:`AuditOptions`.
+    cache: a :class:`~manip_id.datasets.RowCache` that keeps the parsed rows of a slow
+        format (CSV, ROS bags) for the run's later passes (the scan before the fit).
 
     Raises
     ------
@@ -83,7 +107,7 @@ def audit_file(robot: Robot, spec, options: AuditOptions | None = None) -> FileA
     if robot.terms.temperature:  # a slow drift of the friction the audit's fits do without
         robot = robot.with_terms(replace(robot.terms, temperature=False))
     eps = STANDSTILL if options.standstill is None else float(options.standstill)
-    ds, counts, rate = _read(robot, spec, options, eps)
+    ds, counts, rate = _read(robot, spec, options, eps, cache)
     joints = list(robot.dof_names)
     still = ds.still  # (nv,) shares of the rows at rest
     res = encoder_resolution(ds.q)
@@ -131,17 +155,25 @@ def audit_file(robot: Robot, spec, options: AuditOptions | None = None) -> FileA
     )
 
 
-def audit_files(robot: Robot, files, options: AuditOptions | None = None, *, window=None) -> Audit:
+def audit_files(
+    robot: Robot,
+    files,
+    options: AuditOptions | None = None,
+    *,
+    window=None,
+    cache: RowCache | None = None,
+) -> Audit:
     """:func:`audit_file` for every file of ``files`` (specs or their texts), in order.
 
-    ``window`` (text or :class:`~manip_id.datasets.Window`) applies to each file that has none.
+    ``window`` (text or :class:`~manip_id.datasets.Window`) applies to each file that has
+    none; ``cache``: see :func:`audit_file`.
     """
     if isinstance(files, (str, FileSpec)) or not hasattr(files, "__iter__"):
         files = [files]
     specs = [parse_file_spec(f, window=window) for f in files]
     if not specs:
         raise InputError("no data files given")
-    return Audit(robot.name, [audit_file(robot, s, options) for s in specs])
+    return Audit(robot.name, [audit_file(robot, s, options, cache=cache) for s in specs])
 
 
 # ---------------------------------------------------------------- motion

@@ -20,7 +20,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ..datasets import Layout, load_dataset
+from ..datasets import Layout, RowCache, load_dataset
 from ..errors import InputError
 from ..identification import (
     RunOptions,
@@ -80,21 +80,26 @@ def collect(robot, specs, options, scans) -> SimpleNamespace:
 
 def _scan(robot, args: argparse.Namespace, specs, vspecs, options, timings: dict):
     """The pre-fit audit (printed), then each training and validation file scanned
-    (``--split``: the one file cut first)."""
-    t0 = time.perf_counter()
-    audited, audit = before_fit(robot, specs + (vspecs or []), options, args)
-    specs, vspecs = audited[: len(specs)], (None if vspecs is None else audited[len(specs) :])
-    timings["audit"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    scans = {s: scan_file(robot, s, options) for s in specs + (vspecs or [])}
-    source: dict = {"data": [s.label for s in specs]}
-    if vspecs is None and args.split is not None:
-        train_spec, valid_spec = split_file(robot, specs[0], args.split, options, scans[specs[0]])
-        for old in scans.values():
-            old.discard()
-        specs, vspecs = [train_spec], [valid_spec]
-        scans = {s: scan_file(robot, s, options) for s in specs + vspecs}
-        source["split"] = args.split
+    (``--split``: the one file cut first). A slow format (CSV, ROS bags) is parsed once:
+    the audit's pass records its rows, which the scans read back."""
+    with RowCache() as cache:
+        t0 = time.perf_counter()
+        audited, audit = before_fit(robot, specs + (vspecs or []), options, args, cache=cache)
+        specs = audited[: len(specs)]
+        vspecs = None if vspecs is None else audited[len(specs) :]
+        timings["audit"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        scans = {s: scan_file(robot, s, options, cache=cache) for s in specs + (vspecs or [])}
+        source: dict = {"data": [s.label for s in specs]}
+        if vspecs is None and args.split is not None:
+            train_spec, valid_spec = split_file(
+                robot, specs[0], args.split, options, scans[specs[0]], cache=cache
+            )
+            for old in scans.values():
+                old.discard()
+            specs, vspecs = [train_spec], [valid_spec]
+            scans = {s: scan_file(robot, s, options, cache=cache) for s in specs + vspecs}
+            source["split"] = args.split
     if vspecs is not None:
         source["validate"] = [s.label for s in vspecs]
     timings["scan"] = time.perf_counter() - t0

@@ -126,16 +126,17 @@ def stage_export(robot, result, args: argparse.Namespace, outputs) -> None:
         outputs.write_json(sidecar_path(args.export_mjcf), mj.sidecar)
 
 
-def before_fit(robot, specs, options, args, *, currents: bool = False):
+def before_fit(robot, specs, options, args, *, currents: bool = False, cache=None):
     """The pre-fit audit of ``specs``: printed, and the specs to fit.
 
     ``options``: the run's :class:`~manip_id.identification.PreprocessOptions` (torque
     scale, bad rows, deadband, cut-off). ``currents``: the torque columns are expected
     to hold currents (``drive-gains``): no torque-scale finding. With
     ``--trim-standstill`` the specs come back with the windows the audit keeps.
-    Returns ``(specs, audit)``.
+    ``cache``: a :class:`~manip_id.datasets.RowCache` keeping the parsed rows of slow
+    formats for the scan that follows. Returns ``(specs, audit)``.
     """
-    audit = audit_files(robot, specs, _audit_options(options, currents))
+    audit = audit_files(robot, specs, _audit_options(options, currents), cache=cache)
     print(audit.table())
     if getattr(args, "trim_standstill", False):
         specs = audit.trimmed()

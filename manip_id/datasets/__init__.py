@@ -9,13 +9,15 @@ a :class:`FileSpec` (path, optional window, the unit of its stamps and the
 delay of its torque stream, :mod:`~.spec`, :mod:`~.adjust`) opened with
 :func:`open_source` and read with :func:`iter_rows` as packed row blocks
 (:mod:`~.layout`, :mod:`~.stream`), with a data-quality summary per file
-(:mod:`~.quality`).
+(:mod:`~.quality`); a slow format's rows parsed once for a run's several passes
+(:class:`RowCache`, :mod:`~.replay`).
 """
 
 from .core import Dataset, check_robot, check_values
 from .io import MEMORY_BUDGET, load_dataset, save_dataset, write_rows
 from .layout import FIELDS, Layout
 from .panda import PANDA_JOINTS, load_panda_gaz2019
+from .replay import RowCache
 from .spec import FileSpec, Window, parse_file_spec
 from .stream import FORMATS, MemorySource, RowCounts, iter_rows, open_source
 
@@ -28,6 +30,7 @@ __all__ = [
     "FileSpec",
     "Layout",
     "MemorySource",
+    "RowCache",
     "RowCounts",
     "Window",
     "check_robot",

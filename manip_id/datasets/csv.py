@@ -17,7 +17,13 @@ chunks, which gives the same values as on the whole file.
 from __future__ import annotations
 
 import fnmatch
+import importlib.util
+import io
 import itertools
+import multiprocessing
+import signal
+import sys
+import threading
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -161,6 +167,69 @@ def resolve_columns(path: Path, columns: Mapping | None, width: int | None = Non
     )
 
 
+#: CSV files of at least this many bytes are parsed by the compiled reader
+#: (:mod:`._csv_kernel`) when numba is installed: below it, importing numba and loading
+#: the compiled code (~0.5 s, ~120 MB) costs more than it saves (~2 us a row of 19
+#: numbers). Once numba is imported, every comma-separated file is.
+COMPILED_BYTES = 32 << 20
+#: Whether a child process may be forked to run the compiled reader (Linux).
+CAN_FORK = sys.platform.startswith("linux")
+
+
+def _reader_of(path: Path, delimiter: str | None) -> str:
+    """How the lines of ``path`` are parsed: ``"compiled"`` (here), ``"forked"`` (the
+    compiled reader in a forked child while this process takes the rows: numba is not
+    imported here, its memory stays out of this process), or ``"numpy"``."""
+    loaded = "numba" in sys.modules
+    if delimiter != "," or (not loaded and path.stat().st_size < COMPILED_BYTES):
+        return "numpy"
+    if not loaded and importlib.util.find_spec("numba") is None:
+        return "numpy"
+    with open(path, "rb") as fh:  # universal newlines: a lone CR also ends a line
+        head = fh.read(1 << 16)
+    if head.count(b"\r") != head.count(b"\r\n"):
+        return "numpy"
+    # a fork only from a plain single-threaded process (a pool's daemonic worker may not
+    # have children; a fork copies no other thread, whatever locks they hold)
+    alone = threading.active_count() == 1 and not multiprocessing.current_process().daemon
+    return "forked" if CAN_FORK and alone and not loaded else "compiled"
+
+
+def _compiled_parser():
+    """The compiled reader of comma-separated lines (``bytes, width -> table or None``),
+    or None (numba cannot be imported)."""
+    try:
+        from ._csv_kernel import parse_lines  # imports numba (optional, heavy)
+    except ImportError:
+        return None
+    return parse_lines
+
+
+def _child(conn, source: CsvSource, chunk: int) -> None:
+    """In a forked child: ``source``'s tables (compiled reader) sent through ``conn``:
+    ``(first line, shape, new malformed lines)`` then the table's bytes; None at the end,
+    ``"error"`` when the reading failed (the parent reads again, to raise it)."""
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # ended by the parent (terminate)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C
+    try:
+        known = 0
+        for first, table in source._tables(chunk, "compiled"):
+            bad = dict(itertools.islice(source.malformed.items(), known, None))
+            known = len(source.malformed)
+            conn.send((first, table.shape, bad))
+            conn.send_bytes(np.ascontiguousarray(table, dtype=np.float64).tobytes())
+        conn.send(None)
+    except BaseException:
+        conn.send("error")
+    finally:
+        conn.close()
+
+
+def _decoded(raw: list[bytes]) -> list[str]:
+    """Lines read as bytes, as text mode reads them (default encoding, universal newlines)."""
+    return list(io.TextIOWrapper(io.BytesIO(b"".join(raw))))
+
+
 def _parse(
     lines: list[str], delimiter, path: Path, first_line: int, width: int | None
 ) -> tuple[np.ndarray, dict[int, str]]:
@@ -219,38 +288,87 @@ class CsvSource:
         #: data row (0-based) -> why it could not be read; such rows are NaN
         self.malformed: dict[int, str] = {}
 
-    def _tables(self, chunk: int) -> Iterator[tuple[int, np.ndarray]]:
+    def _tables(self, chunk: int, reader: str | None = None) -> Iterator[tuple[int, np.ndarray]]:
+        """``(first line, table)`` of each ``chunk`` lines; ``reader``: see
+        :func:`_reader_of` (None: chosen for the file)."""
         c = self.columns
+        reader = _reader_of(self.path, c.delimiter) if reader is None else reader
+        if reader == "forked":
+            yield from self._forked_tables(chunk)
+            return
+        fast = _compiled_parser() if reader == "compiled" else None
         skip = 0 if c.header is None else 1
         width = None
-        with open(self.path) as fh:
+        with open(self.path, "rb" if fast is not None else "r") as fh:
             for _ in range(skip):
                 fh.readline()
             line_no = skip
             row = 0
             while True:
-                lines = [ln for ln in itertools.islice(fh, chunk) if ln.strip()]
-                if not lines:
-                    return
-                table, bad = _parse(lines, c.delimiter, self.path, line_no, width)
+                raw = list(itertools.islice(fh, chunk))
+                table = None if fast is None or not raw else fast(b"".join(raw), width)
+                bad: dict[int, str] = {}
+                if table is not None:
+                    lines = raw
+                else:  # numpy's reader (the text of the same lines)
+                    lines = [ln for ln in (_decoded(raw) if fast else raw) if ln.strip()]
+                    if not lines:
+                        return
+                    table, bad = _parse(lines, c.delimiter, self.path, line_no, width)
                 self.malformed.update({row + k: msg for k, msg in bad.items()})
                 row += len(lines)
                 line_no += len(lines)
                 if width is None:
                     width = table.shape[1]
-                    if c.header is not None and width != len(c.header):
-                        raise DataError(
-                            f"{self.path}: the header has {len(c.header)} columns but rows "
-                            f"have {width}"
-                        )
-                    for name, cols in c.index.items():
-                        outside = [i for i in cols if not -width <= i < width]
-                        if outside:
-                            raise DataError(
-                                f"column map: {name!r} refers to column {outside[0]} but "
-                                f"{self.path} has {width} columns"
-                            )
+                    self._check_width(width)
                 yield line_no - len(lines), table
+
+    def _forked_tables(self, chunk: int) -> Iterator[tuple[int, np.ndarray]]:
+        """The tables parsed by a forked child (:func:`_child`), taken as they come; when
+        it fails, this process reads the file again after the tables received (its error
+        is raised here)."""
+        ctx = multiprocessing.get_context("fork")
+        recv, send = ctx.Pipe(duplex=False)
+        proc = ctx.Process(target=_child, args=(send, self, chunk), daemon=True)
+        try:
+            proc.start()
+        except OSError:  # no process to be had: the compiled reader here
+            recv.close()
+            send.close()
+            yield from self._tables(chunk, "compiled")
+            return
+        send.close()
+        n = 0
+        try:
+            while (msg := recv.recv()) not in (None, "error"):
+                first, shape, bad = msg
+                table = np.frombuffer(recv.recv_bytes(), dtype=np.float64).reshape(shape)
+                self.malformed.update(bad)
+                n += 1
+                yield first, table
+        except EOFError:  # the child died
+            msg = "error"
+        finally:
+            recv.close()
+            proc.terminate()
+            proc.join()
+        if msg == "error":
+            yield from itertools.islice(self._tables(chunk, "numpy"), n, None)
+
+    def _check_width(self, width: int) -> None:
+        """The first rows' field count against the header and the column map."""
+        c = self.columns
+        if c.header is not None and width != len(c.header):
+            raise DataError(
+                f"{self.path}: the header has {len(c.header)} columns but rows have {width}"
+            )
+        for name, cols in c.index.items():
+            outside = [i for i in cols if not -width <= i < width]
+            if outside:
+                raise DataError(
+                    f"column map: {name!r} refers to column {outside[0]} but "
+                    f"{self.path} has {width} columns"
+                )
 
     def _pack(self, table: np.ndarray) -> np.ndarray:
         lay, idx = self.layout, self.columns.index

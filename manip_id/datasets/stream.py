@@ -39,6 +39,7 @@ from .csv import CsvSource
 from .layout import Layout
 from .npz import NpzSource
 from .panda import PANDA_FILES, is_panda_log, load_panda_gaz2019
+from .replay import RowCache
 from .rosbag import BagSource, is_bag
 from .spec import FileSpec, Window
 
@@ -101,11 +102,13 @@ class MemorySource:
             )
 
 
-def open_source(spec: FileSpec, joint_names=None):
+def open_source(spec: FileSpec, joint_names=None, cache: RowCache | None = None):
     """A streamed source for ``spec`` (see the module docstring).
 
     ``joint_names``: the robot's joints in order; a ROS bag's messages are
-    matched to them by name (other formats keep the file's columns).
+    matched to them by name (other formats keep the file's columns). ``cache``: a
+    :class:`~.replay.RowCache` that keeps the rows of a slow format (CSV, ROS bags)
+    parsed once for the later passes of the same run.
     """
     spec = spec if isinstance(spec, FileSpec) else FileSpec(Path(spec))
     path = spec.path
@@ -120,10 +123,22 @@ def open_source(spec: FileSpec, joint_names=None):
     if spec.topic is not None and fmt != "rosbag":
         raise DataError(f"a topic applies to ROS bags only, not to {path} (format {fmt!r})")
     src = _raw_source(spec, fmt, joint_names)
+    if cache is not None:
+        src = cache.wrap(_source_key(spec, fmt, joint_names), src)
     if spec.time_unit is None and spec.delay is None:
         return src
     delay = delay_vector(spec.delay, src.layout.nv, f"the delay of {spec.label}")
     return AdjustedSource(src, TIME_UNITS[spec.time_unit or "s"], delay)
+
+
+def _source_key(spec: FileSpec, fmt: str, joint_names) -> tuple:
+    """What a raw source reads: the file (its size and modification time), the format and
+    the options that change its rows (column map, topic, the joints a bag is matched to)."""
+    path = spec.path.resolve()
+    st = path.stat()
+    columns = None if spec.columns is None else repr(sorted(dict(spec.columns).items(), key=str))
+    names = None if fmt != "rosbag" or joint_names is None else tuple(joint_names)
+    return (str(path), st.st_size, st.st_mtime_ns, fmt, columns, spec.topic, names)
 
 
 def _raw_source(spec: FileSpec, fmt: str, joint_names):

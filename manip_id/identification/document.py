@@ -527,12 +527,9 @@ def _standard_lines(doc: dict) -> list[str]:
 
 def _mass_std(doc: dict) -> dict[str, float]:
     """Link name -> the std of its mass [kg] among the standard parameters (those with one)."""
-    out = {}
-    for r in doc.get("standard_parameters") or []:
-        link, _, field = r["name"].rpartition(".")
-        if field == "m" and r.get("std") is not None:
-            out[link] = float(r["std"])
-    return out
+    rows = doc.get("standard_parameters") or []
+    masses = [r for r in rows if r["name"].endswith(".m") and r.get("std") is not None]
+    return {r["name"][:-2]: float(r["std"]) for r in masses}
 
 
 def result_text(doc: dict, max_rows: int | None = None) -> str:

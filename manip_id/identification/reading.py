@@ -32,6 +32,7 @@ from .._io import register_temporary, unregister_temporary
 from ..datasets import (
     FileSpec,
     Layout,
+    RowCache,
     RowCounts,
     Window,
     iter_rows,
@@ -107,10 +108,13 @@ def _check_layout(robot: Robot, src, spec: FileSpec) -> tuple[str, ...]:
     return tuple(robot.dof_names)
 
 
-def open_checked(robot: Robot, spec: FileSpec):
-    """The file's row source, checked against ``robot`` (joints, their order); its joints."""
+def open_checked(robot: Robot, spec: FileSpec, cache: RowCache | None = None):
+    """The file's row source, checked against ``robot`` (joints, their order); its joints.
+
+    ``cache``: a :class:`~manip_id.datasets.RowCache` whose recordings serve (and keep)
+    the parsed rows of a slow format."""
     try:
-        src = open_source(spec, joint_names=list(robot.dof_names))
+        src = open_source(spec, joint_names=list(robot.dof_names), cache=cache)
     except DataError as exc:
         msg = str(exc)
         raise DataError(msg if str(spec.path) in msg else f"{spec.label}: {msg}") from exc
@@ -132,11 +136,21 @@ def read_rows(
     )
 
 
-def scan_file(robot: Robot, spec, options: PreprocessOptions | None = None) -> FileScan:
-    """The first pass over one file: its rows checked, its quality summary (see module)."""
+def scan_file(
+    robot: Robot,
+    spec,
+    options: PreprocessOptions | None = None,
+    *,
+    cache: RowCache | None = None,
+) -> FileScan:
+    """The first pass over one file: its rows checked, its quality summary (see module).
+
+    ``cache``: a :class:`~manip_id.datasets.RowCache` holding the rows of a slow format
+    already parsed by an earlier pass of the run (the pre-fit audit): they are read
+    back instead of parsed again."""
     spec = parse_file_spec(spec)
     options = options or PreprocessOptions()
-    src, joints = open_checked(robot, spec)
+    src, joints = open_checked(robot, spec, cache)
     qa = QualityAccumulator(
         src.layout,
         joints,
@@ -263,19 +277,26 @@ def processed_count(
 
 
 def split_file(
-    robot: Robot, spec, fraction: float, options: PreprocessOptions | None = None, scan=None
+    robot: Robot,
+    spec,
+    fraction: float,
+    options: PreprocessOptions | None = None,
+    scan=None,
+    *,
+    cache: RowCache | None = None,
 ) -> tuple[FileSpec, FileSpec]:
     """Two windows of one file: its first ``fraction`` of samples, then the rest.
 
     As :meth:`~manip_id.datasets.Dataset.split` on the rows a fit sees: ``k =
     round(fraction N)`` (at least 2 on each side). The windows are in seconds
     (or rows, for a file cut by rows), so each part is preprocessed on its own.
+    ``cache``: see :func:`scan_file`.
     """
     spec = parse_file_spec(spec)
     options = options or PreprocessOptions()
     if not 0.0 < float(fraction) < 1.0:
         raise InputError(f"split fraction must be in (0, 1), got {fraction}")
-    scan = scan_file(robot, spec, options) if scan is None else scan
+    scan = scan_file(robot, spec, options, cache=cache) if scan is None else scan
     n = scan.n
     if n < 4:
         raise DataError(f"{spec.label}: {n} samples cannot be split in two parts of 2")
@@ -292,7 +313,7 @@ def split_file(
             spec.with_window(Window(a, a + k, "index")),
             spec.with_window(Window(a + k, w.stop, "index")),
         )
-    src, _ = open_checked(robot, spec)
+    src, _ = open_checked(robot, spec, cache)
     seen, t_k = 0, None
     for rows in read_rows(src, spec, options, RowCounts()):
         if seen + rows.shape[0] > k:

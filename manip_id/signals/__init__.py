@@ -8,7 +8,8 @@ The path from a raw log to data fit for identification (:func:`preprocess`)::
         --trim edge transients--> --decimate by D--> Dataset with ddq
 
 Zero-phase low-pass. A Butterworth filter of order ``n`` and cut-off ``f_c``
-[Hz], run forward and backward (``scipy.signal.sosfiltfilt``), has no phase
+[Hz], run forward and backward (``scipy.signal.sosfiltfilt``'s conventions,
+:mod:`~manip_id.signals.butterworth`), has no phase
 lag and the squared magnitude of the one-way filter::
 
     |H_ff(f)| = |H(f)|^2 = 1 / (1 + (tan(pi f / f_s) / tan(pi f_c / f_s))^(2 n))
@@ -54,6 +55,7 @@ cuts a stream of rows into such windows and :func:`preprocess_blocks` runs the
 whole of :func:`preprocess` on them, in memory O(block + margin) whatever N.
 
 Modules: :mod:`~manip_id.signals.filters` (the low-pass, parallel filtering),
+:mod:`~manip_id.signals.butterworth` (its design in closed form and its zero-phase run),
 :mod:`~manip_id.signals.sampling` (grids, resampling, differences, decimation, trimming),
 :mod:`~manip_id.signals.preprocess` (the in-memory path) and
 :mod:`~manip_id.signals.blocks` (the same path in overlapping blocks).

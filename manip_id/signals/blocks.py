@@ -30,10 +30,7 @@ def overlap_margin(filt: Lowpass, tol: float = 1e-16) -> int:
     ``filt``, times 1.25 for the polynomial factors of clustered poles, plus
     the padding of ``sosfiltfilt`` and a few rows for the central differences.
     """
-    import scipy.signal as _signal  # heavy (0.4 s): only when a filter runs
-
-    _, poles, _ = _signal.sos2zpk(filt.sos)
-    r = float(np.max(np.abs(poles)))
+    r = float(np.max(np.abs(filt.poles)))
     decay = math.ceil(math.log(tol) / math.log(r)) if 0 < r < 1 else 0
     return int(1.25 * decay) + 3 * (2 * filt.sos.shape[0] + 1) + 8
 
@@ -273,8 +270,8 @@ class _Cut:
             tau = y[:, ftau] if options.filter_torque else rows[:, stau]
             ddq = derivative(t, dq)
             first = lo_keep + (-(lo_keep - self.start)) % D  # first kept global index >= lo_keep
-            idx = np.arange(first, hi_keep, D) - w.lo
-            if idx.size:
+            idx = slice(first - w.lo, hi_keep - w.lo, D)  # views: one copy, by the stack
+            if hi_keep > first:
                 out = [t[idx], q[idx], dq[idx], tau[idx], ddq[idx]]
                 if self.n_temp:  # slow: the same zero-phase filter as q
                     out.append(filt(rows[:, stau.stop : stau.stop + self.n_temp])[idx])

@@ -13,6 +13,7 @@ from functools import cached_property
 import numpy as np
 
 from ..errors import InputError
+from .butterworth import butterworth_poles, butterworth_sos, impulse_response, zero_phase
 
 #: Default cut-off [Hz] of :func:`preprocess` (chosen on the real Panda log, see its docstring).
 DEFAULT_CUTOFF = 3.0
@@ -57,10 +58,14 @@ class Lowpass:
 
     @cached_property
     def sos(self) -> np.ndarray:
-        """Second-order sections of the one-way filter, shape (ceil(n/2), 6)."""
-        import scipy.signal as _signal  # heavy (0.4 s): only when a filter runs
+        """Second-order sections of the one-way filter, shape (ceil(n/2), 6)
+        (:func:`~manip_id.signals.butterworth.butterworth_sos`)."""
+        return butterworth_sos(self.order, self.cutoff, self.rate)
 
-        return _signal.butter(self.order, self.cutoff, btype="low", fs=self.rate, output="sos")
+    @cached_property
+    def poles(self) -> np.ndarray:
+        """The one-way filter's poles, shape (n,) complex, all inside the unit circle."""
+        return butterworth_poles(self.order, self.cutoff, self.rate)[0]
 
     def gain(self, frequency) -> np.ndarray:
         """Forward-backward magnitude ``|H(f)|^2`` at ``frequency`` [Hz] (see module docstring)."""
@@ -77,11 +82,7 @@ class Lowpass:
         signal was padded.
         """
         n = int(20 * self.rate / self.cutoff) + 64
-        impulse = np.zeros(n)
-        impulse[0] = 1.0
-        import scipy.signal as _signal  # heavy (0.4 s): only when a filter runs
-
-        h = np.abs(_signal.sosfilt(self.sos, impulse))
+        h = np.abs(impulse_response(self.sos, n))
         above = np.nonzero(h > tol * h.max())[0]
         return int(above[-1]) + 1
 
@@ -93,9 +94,7 @@ class Lowpass:
                 f"{x.shape[axis]} samples are too few to filter with order {self.order}: "
                 f"need more than {3 * (2 * self.sos.shape[0] + 1)}"
             )
-        import scipy.signal as _signal  # heavy (0.4 s): only when a filter runs
-
-        return _signal.sosfiltfilt(self.sos, x, axis=axis)
+        return zero_phase(self.sos, x, axis=axis)
 
 
 def lowpass(x, cutoff: float, rate: float, order: int = DEFAULT_ORDER, axis: int = 0) -> np.ndarray:
