@@ -162,7 +162,7 @@ def trust(doc: Mapping) -> tuple[str, str]:
     inflation = unc.get("inflation") if isinstance(unc, Mapping) else None
     honest = method == "hac" and inflation is not None
     not_white = fit_scale is not None and fit_scale > 4.0  # chi-square over its expectation
-    if not_white:
+    if fit_scale is not None and not_white:
         told = (  # one figure for the std a reader acts on: the one the tables show
             f"the standard deviations shown are the autocorrelation-consistent ones "
             f"({number(inflation, 3)} times the white-noise ones)"
