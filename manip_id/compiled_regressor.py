@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from ._numba import note_numba_warm, numba_available
 from .errors import InputError
 
 # joint kinds of the compiled kernel
@@ -146,15 +147,6 @@ def _kernel():
     return _KERNEL
 
 
-def numba_available() -> bool:
-    """Whether numba can be imported (the compiled kernel's only requirement)."""
-    try:
-        import numba  # noqa: F401  (optional heavy dependency: only probed here)
-    except ImportError:
-        return False
-    return True
-
-
 def mode() -> str:
     """The regressor mode of this process (``MANIP_ID_REGRESSOR``), one of :data:`MODES`."""
     value = os.environ.get(ENV, "auto").strip().lower() or "auto"
@@ -171,27 +163,10 @@ def set_mode(value: str) -> None:
     os.environ[ENV] = value
 
 
-#: whether a numba kernel has run in this process (e.g. the low-pass of the log
-#: preprocessing): numba's code generation is then loaded, and the regressor kernel costs
-#: about 10 ms more to load, which about 3000 samples repay
-_warm = False
 #: samples announced by :func:`planned_samples` for the current run (0: none)
 _planned = 0
 #: samples evaluated in blocks by this process, every evaluator together
 _seen = 0
-
-
-def note_numba_warm() -> None:
-    """Record that a numba kernel has run in this process (see :func:`numba_warm`)."""
-    global _warm
-    _warm = True
-
-
-def numba_warm() -> bool:
-    """Whether a numba kernel has run in this process: then ``auto`` takes the compiled
-    kernel for any block, its one-off cost (importing numba, loading its code generation)
-    being paid already."""
-    return _warm
 
 
 def planned() -> int:

@@ -43,13 +43,13 @@ import numpy as np
 import pinocchio as pin
 
 from ._checks import as_float_array, check_finite
+from ._numba import numba_warm
 from .compiled_regressor import (
     AUTO_SAMPLES,
     CompiledModel,
     compile_model,
     count_samples,
     mode,
-    numba_warm,
     planned,
     rigid_block,
 )
@@ -130,7 +130,7 @@ class RegressorEvaluator:
         has seen :data:`~manip_id.compiled_regressor.AUTO_SAMPLES` samples, or from the
         start of a run announced that large (:func:`~manip_id.compiled_regressor.
         planned_samples`), or once a numba kernel has run in this process (the filter of
-        the log preprocessing: :func:`~manip_id.compiled_regressor.numba_warm`);
+        the log preprocessing: :func:`~manip_id._numba.numba_warm`);
         ``pinocchio``: never (see :mod:`manip_id.compiled_regressor`).
         """
         self._seen += n

@@ -13,6 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from manip_id import _numba
 from manip_id import compiled_regressor as cr
 from manip_id.errors import InputError
 from manip_id.identification import identify
@@ -183,11 +184,11 @@ def test_modes_and_auto_threshold(monkeypatch):
     ev = robot.evaluator
     monkeypatch.setenv(cr.ENV, "auto")
     monkeypatch.setattr(cr, "_seen", 0)  # a fresh process: no samples evaluated yet
-    monkeypatch.setattr(cr, "_warm", False)  # ... and no numba kernel run
+    monkeypatch.setattr(_numba, "_warm", False)  # ... and no numba kernel run
     assert ev.kernel_for(10) is None  # a small job keeps Pinocchio
     assert ev.kernel_for(cr.AUTO_SAMPLES) is not None  # a large one takes the kernel
     monkeypatch.setattr(cr, "_seen", 0)
-    cr.note_numba_warm()  # numba loaded by another kernel (the filter): no one-off cost left
+    _numba.note_numba_warm()  # numba loaded by another kernel (the filter): no one-off cost left
     assert ev.kernel_for(10) is not None
     monkeypatch.setenv(cr.ENV, "pinocchio")
     assert ev.kernel_for(10**9) is None

@@ -17,9 +17,10 @@ import pytest
 
 import manip_id.execution as execution
 from manip_id import load_robot
+from manip_id._numba import numba_available
 from manip_id.cli import main
 from manip_id.cli._common import REGRESSOR_ENV, REGRESSOR_MODES
-from manip_id.compiled_regressor import ENV, MODES, numba_available
+from manip_id.compiled_regressor import ENV, MODES
 from manip_id.datasets import Dataset, save_dataset
 from manip_id.errors import InputError
 from manip_id.identification import RunOptions, identify

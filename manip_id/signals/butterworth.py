@@ -29,7 +29,7 @@ import math
 
 import numpy as np
 
-from ..compiled_regressor import note_numba_warm, numba_available
+from .._numba import note_numba_warm, numba_available
 
 
 def butterworth_poles(order: int, cutoff: float, rate: float) -> tuple[np.ndarray, float]:
