@@ -71,6 +71,7 @@ from .blocks import (
     iter_overlapping,
     overlap_margin,
     preprocess_blocks,
+    read_start,
 )
 from .filters import DEFAULT_CUTOFF, DEFAULT_ORDER, Lowpass, filter_regressor, lowpass
 from .preprocess import PreprocessSettings, SignalOptions, preprocess
@@ -106,6 +107,7 @@ __all__ = [
     "overlap_margin",
     "preprocess",
     "preprocess_blocks",
+    "read_start",
     "resample",
     "resample_dataset",
     "sampling_rate",
