@@ -45,7 +45,20 @@ def data(robot):
 
 
 def _file(tmp_path, robot, d, fmt: str, ddq: bool):
+    """``fmt``: npz, csv, "z.npz" (compressed: spilled by the scan) or "nan.npz" (a row
+    of NaN, dropped with ``drop_bad_rows``: the rows are read from the first and skipped)."""
     names = tuple(robot.dof_names)
+    if fmt in ("z.npz", "nan.npz"):
+        fields = {"t": d.t, "q": d.q.copy(), "dq": d.dq, "tau": d.tau}
+        if ddq:
+            fields["ddq"] = d.ddq
+        fields["q"][400, 1] = np.nan
+        path = tmp_path / f"log.{fmt}"
+        save = np.savez_compressed if fmt == "z.npz" else np.savez
+        if fmt == "z.npz":
+            fields["q"][400, 1] = d.q[400, 1]
+        save(path, joint_names=np.array(names), **fields)
+        return path
     ds = Dataset(d.t, d.q, d.dq, d.tau, ddq=d.ddq if ddq else None, joint_names=names)
     return save_dataset(ds, tmp_path / f"log.{fmt}")
 
@@ -128,6 +141,9 @@ CASES = [
     ("csv", False, {}, None),
     ("csv", True, {"cutoff": 12.0, "trim": 0.2}, "1.0:5.0"),
     ("csv", False, {"cutoff": 10.0, "decimate": 3}, "#50:"),
+    ("z.npz", False, {"cutoff": 10.0}, "#20:1450"),
+    ("nan.npz", False, {"drop_bad_rows": True}, None),
+    ("nan.npz", True, {"drop_bad_rows": True, "cutoff": 15.0}, "#10:"),
 ]
 
 
@@ -137,6 +153,8 @@ def test_span_rows_and_sums_equal_the_serial_pass(tmp_path, robot, data, fmt, dd
     spec = str(path) if window is None else f"{path}@{window}"
     options = PreprocessOptions(block=BLOCK, read_chunk=200, **opts)
     scan = scan_file(robot, spec, options)
+    assert (scan.spill is not None) == (fmt in ("csv", "z.npz"))  # read back by a seek
+    assert scan.counts.n_dropped == (fmt == "nan.npz")  # read from the first row, skipped
     try:
         _, whole = _rows(robot, scan.spec, options, scan)
         n = whole.shape[0]
