@@ -9,7 +9,9 @@ import pytest
 from conftest import get_robot
 from test_payload import make_payload, make_runs, truth
 
+import manip_id.datasets.csv as csv_module
 from manip_id.cli import main
+from manip_id.datasets import load_dataset, save_dataset
 
 GAINS = np.array([0.45, 0.8, 1.1, 1.4, 1.7, 2.3])  # [N m / A]
 
@@ -428,3 +430,29 @@ def test_files_without_accelerations_are_preprocessed(tmp_path, capsys):
     assert len(doc["data_quality"]["loaded"]) == 1
     assert p["mass"] == pytest.approx(payload.mass, rel=0.01)
     assert p["com"] == pytest.approx(payload.lever.tolist(), abs=0.005)
+
+
+def test_payload_parses_a_csv_once_and_equals_its_npz(files, tmp_path, monkeypatch, capsys):
+    """The pre-fit audit records the CSV rows it parses; the scans read them back."""
+    csvs = {k: str(save_dataset(load_dataset(files[k]), tmp_path / f"{k}.csv")) for k in "ul"}
+    monkeypatch.setattr(csv_module, "_reader_of", lambda path, delimiter: "numpy")
+    rows: list[int] = []
+    tables = csv_module.CsvSource._tables
+
+    def counted(self, chunk, reader=None):
+        for first, table in tables(self, chunk, reader):
+            rows.append(table.shape[0])
+            yield first, table
+
+    monkeypatch.setattr(csv_module.CsvSource, "_tables", counted)
+    docs = {}
+    for fmt, paths in (("csv", csvs), ("npz", files)):
+        out = tmp_path / f"{fmt}.json"
+        argv = ["payload", "ur5", "--unloaded", paths["u"], "--loaded", paths["l"]]
+        status, cap = _run([*argv, "--frame", "tool0", "--json", str(out)], capsys)
+        assert status == 0, cap.err
+        docs[fmt] = json.loads(out.read_text())["payload"]
+        if fmt == "csv":
+            assert sum(rows) == 1000  # the 500 rows of each file parsed once
+    for key in ("mass", "com", "inertia"):
+        np.testing.assert_allclose(docs["csv"][key], docs["npz"][key], rtol=1e-12, atol=1e-15)

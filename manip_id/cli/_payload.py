@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from .._io import OutputSet
-from ..datasets import parse_file_spec
+from ..datasets import RowCache, parse_file_spec
 from ..errors import DataError, InputError
 from ..execution import portable_robot
 from ..export import PayloadLink, check_output, payload_urdf_texts, sidecar_path
@@ -72,10 +72,10 @@ class StreamedRun:
     preprocessing come back through :meth:`summary`.
     """
 
-    def __init__(self, robot, spec, options, scan: bool = True):
+    def __init__(self, robot, spec, options, scan: bool = True, cache: RowCache | None = None):
         self.robot, self.spec, self.options = robot, spec, options
-        # bad files fail here, named
-        self.scan = scan_file(robot, spec, options) if scan else None
+        # bad files fail here, named; ``cache``: the rows the pre-fit audit parsed
+        self.scan = scan_file(robot, spec, options, cache=cache) if scan else None
         self.settings: Any = None  # PreprocessSettings once streamed (None: ddq as is)
 
     @property
@@ -130,20 +130,26 @@ def read_runs(args, robot, scale=None, scan: bool = True) -> tuple[list, list, d
     audit = None
     if not scan and getattr(args, "trim_standstill", False):
         raise InputError("--trim-standstill needs the pre-fit audit, which --scheduler skips")
-    if scan:  # the pre-fit audit, printed and saved as "audit" (not where tasks read the files)
-        audited, audit = before_fit(
-            robot, specs_u + specs_l, options, args, currents=args.command == "drive-gains"
-        )
-        specs_u, specs_l = audited[: len(specs_u)], audited[len(specs_u) :]
     runs: dict[str, list] = {"unloaded": [], "loaded": []}
     quality: dict[str, list] = {"unloaded": [], "loaded": []}
-    for what, specs in (("unloaded", specs_u), ("loaded", specs_l)):
-        for spec in specs:
-            run = StreamedRun(robot, spec, options, scan=scan)
-            if run.scan is not None:
-                print(f"{what} " + run.scan.quality.text())
-                quality[what].append(run.scan.quality.to_dict())
-            runs[what].append(run)
+    with RowCache() as cache:  # a slow format parsed once: the audit records, the scans replay
+        if scan:  # the pre-fit audit, printed and saved as "audit" (not where tasks read files)
+            audited, audit = before_fit(
+                robot,
+                specs_u + specs_l,
+                options,
+                args,
+                currents=args.command == "drive-gains",
+                cache=cache,
+            )
+            specs_u, specs_l = audited[: len(specs_u)], audited[len(specs_u) :]
+        for what, specs in (("unloaded", specs_u), ("loaded", specs_l)):
+            for spec in specs:
+                run = StreamedRun(robot, spec, options, scan=scan, cache=cache)
+                if run.scan is not None:
+                    print(f"{what} " + run.scan.quality.text())
+                    quality[what].append(run.scan.quality.to_dict())
+                runs[what].append(run)
     source = {
         "unloaded": [s.label for s in specs_u],
         "loaded": [s.label for s in specs_l],

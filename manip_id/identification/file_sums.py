@@ -81,15 +81,18 @@ class FileAccumulation(FileRecord):
         )
 
 
-def file_stream(robot: Robot, spec: FileSpec, options: PreprocessOptions, scan: FileScan):
-    """``(settings, blocks)``: the file's packed rows ``t | q | dq | tau | ddq [| temp]`` as the fit
-    sees them, each block paired with the same rows' raw torques (nv columns) when the
-    preprocessing filters the torques (a second, unfiltered preprocessing of the same
-    rows: the states are the same), else with None."""
-    settings, blocks = iter_processed(robot, spec, options, scan)
+def file_stream(
+    robot: Robot, spec: FileSpec, options: PreprocessOptions, scan: FileScan, start: int = 0
+):
+    """``(settings, blocks)``: the file's packed rows ``t | q | dq | tau | ddq [| temp]`` as
+    the fit sees them (from processed row ``start`` on), each block paired with the same
+    rows' raw torques (nv columns) when the preprocessing filters the torques (a second,
+    unfiltered preprocessing of the same rows: the states are the same), else with None."""
+    settings, blocks = iter_processed(robot, spec, options, scan, start=start)
     if settings is None or not options.filter_torque:
         return settings, ((b, None) for b in blocks)
-    _, raw = iter_processed(robot, spec, replace(options, filter_torque=False), scan)
+    raw_options = replace(options, filter_torque=False)
+    _, raw = iter_processed(robot, spec, raw_options, scan, start=start)
     nq, nv = robot.nq, robot.nv
     tau = slice(1 + nq + nv, 1 + nq + 2 * nv)
 
@@ -102,13 +105,14 @@ def file_stream(robot: Robot, spec: FileSpec, options: PreprocessOptions, scan: 
     return settings, pairs()
 
 
-def _span_states(pairs, robot: Robot, span, deadband, counts: dict, progress=None):
+def _span_states(pairs, robot: Robot, span, deadband, counts: dict, progress=None, first=0):
     """The states ``(q, dq, ddq, tau[, tau_raw[, temp]])`` of rows ``[lo, hi)`` of a file
-    stream; counts the samples and the rows the deadband leaves out."""
+    stream whose first row is row ``first``; counts the samples and the rows the deadband
+    leaves out."""
     nq, nv = robot.nq, robot.nv
     lay = None
     lo, hi = span
-    seen = 0
+    seen = int(first)
     history = robot.evaluator.needs_history
     for rows, raw in pairs:
         g0, seen = seen, seen + rows.shape[0]
@@ -142,16 +146,20 @@ def accumulate_span(
     span: tuple[int, int | None] = (0, None),
     uncertainty: UncertaintyOptions | None = None,
 ) -> FileAccumulation:
-    """The sums of rows ``[lo, hi)`` of one scanned file's preprocessed stream (the file is
-    preprocessed whole, so spans add up to the file); ``run.progress(samples_done)``. The
+    """The sums of rows ``[lo, hi)`` of one scanned file's preprocessed stream (each row as
+    the whole file's preprocessing makes it, so spans add up to the file);
+    ``run.progress(samples_done)``. The file is read and filtered from one filter margin
+    before ``lo`` (:func:`~manip_id.identification.reading.iter_processed` ``start``), from
+    its first row when a history-dependent friction law must run over the rows before. The
     fit's sums carry the per-block sums ``uncertainty`` needs (record 0 from offset ``lo``;
     :meth:`~manip_id.estimators.blocks.ScoreBlocks.set_stream` numbers the file)."""
     t0 = time.perf_counter()
-    settings, pairs = file_stream(robot, spec, options, scan)
+    first = 0 if robot.evaluator.needs_history else int(span[0])
+    settings, pairs = file_stream(robot, spec, options, scan, first)
     eps = options.velocity_deadband
     deadband = None if eps is None else np.full(robot.nv, float(eps))
     counts: dict[str, Any] = {"n": 0, "excluded": np.zeros(robot.nv, dtype=np.int64)}
-    states = _span_states(pairs, robot, span, deadband, counts, run.progress)
+    states = _span_states(pairs, robot, span, deadband, counts, run.progress, first)
     try:
         record = UncertaintyOptions.from_value(uncertainty).blocks(
             len(ind), robot.nv, offset=int(span[0])

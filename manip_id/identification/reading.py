@@ -51,6 +51,7 @@ from ..signals import (
     SignalOptions,
     StreamStats,
     preprocess_blocks,
+    read_start,
     uniform_grid,
 )
 from .options import PreprocessOptions
@@ -214,9 +215,10 @@ def scan_file(
     )
 
 
-def _spilled_rows(path: str, width: int, chunk: int) -> Iterator[np.ndarray]:
-    """Packed rows read back from a spill file, ``chunk`` at a time (plain reads)."""
+def _spilled_rows(path: str, width: int, chunk: int, start: int = 0) -> Iterator[np.ndarray]:
+    """Packed rows ``start:`` read back from a spill file, ``chunk`` at a time (plain reads)."""
     with open(path, "rb") as fh:
+        fh.seek(int(start) * width * 8)
         while True:
             block = np.fromfile(fh, dtype="<f8", count=chunk * width)
             if not block.size:
@@ -224,26 +226,58 @@ def _spilled_rows(path: str, width: int, chunk: int) -> Iterator[np.ndarray]:
             yield block.reshape(-1, width)
 
 
+def _checked_rows(src, scan: FileScan, options: PreprocessOptions, start: int):
+    """The scanned rows ``start:`` of a file (row 0: the first row the scan kept): from the
+    spill by a seek; from the source at raw row ``window start + start`` when no row was
+    dropped and the window (if any) is in rows; else read from the first row and skipped."""
+    spec, lay = scan.spec, src.layout
+    if scan.spill is not None and Path(scan.spill).is_file():
+        return _spilled_rows(scan.spill, lay.width, options.read_chunk, start)
+    w = spec.window
+    if start and not scan.counts.n_dropped and (w is None or w.unit == "index"):
+        w0 = 0 if w is None else int(w.start or 0)
+        spec = spec.with_window(Window(w0 + start, None if w is None else w.stop, "index"))
+        start = 0
+    # the scan checked these rows' values: only window, drops, order and scale again
+    rows = read_rows(src, spec, options, RowCounts(), checked=True)
+    return rows if not start else _skip_rows(rows, start)
+
+
+def _skip_rows(blocks, n: int) -> Iterator[np.ndarray]:
+    """``blocks`` (row arrays) without their first ``n`` rows."""
+    for b in blocks:
+        if n >= b.shape[0]:
+            n -= b.shape[0]
+            continue
+        yield b[n:] if n else b
+        n = 0
+
+
 def iter_processed(
-    robot: Robot, spec, options: PreprocessOptions | None = None, scan: FileScan | None = None
+    robot: Robot,
+    spec,
+    options: PreprocessOptions | None = None,
+    scan: FileScan | None = None,
+    *,
+    start: int = 0,
 ) -> tuple[PreprocessSettings | None, Iterator[np.ndarray]]:
     """The rows of one file as the fit sees them: packed ``t | q | dq | tau | ddq [| temp]``
     blocks (:meth:`~manip_id.datasets.Layout.processed`).
 
     Returns ``(settings, blocks)``; ``settings`` is None when the file's own
     ddq is used as is. ``scan`` (from :func:`scan_file`) is made when not given.
+    ``start``: the blocks hold the processed rows from row ``start`` on, bit for bit
+    those of the whole pass; the file is read from one filter margin before them
+    (:func:`~manip_id.signals.blocks.read_start`; from its first row when resampled).
     """
     spec = parse_file_spec(spec)
     options = options or PreprocessOptions()
     scan = scan_file(robot, spec, options) if scan is None else scan
     src, _ = open_checked(robot, spec)
     lay = src.layout
-    if scan.spill is not None and Path(scan.spill).is_file():
-        rows = _spilled_rows(scan.spill, lay.width, options.read_chunk)
-    else:  # the scan checked these rows' values: only window, drops, order and scale again
-        rows = read_rows(src, spec, options, RowCounts(), checked=True)
+    start = max(int(start), 0)
     if not options.preprocesses(lay.has_ddq):
-        return None, rows
+        return None, _checked_rows(src, scan, options, start)
     try:
         signal_options = SignalOptions(
             cutoff=DEFAULT_CUTOFF if options.cutoff is None else options.cutoff,
@@ -255,10 +289,19 @@ def iter_processed(
             filter_torque=options.filter_torque,
         )
         stats = StreamStats(scan.n, scan.t_first, scan.t_last, scan.dt_min, scan.dt_max)
+        first = read_start(stats, signal_options, options.block, start)
+        rows = _checked_rows(src, scan, options, first)
         settings, blocks = preprocess_blocks(
-            rows, lay.nq, lay.nv, stats, options=signal_options, block=options.block,
+            rows,
+            lay.nq,
+            lay.nv,
+            stats,
+            options=signal_options,
+            block=options.block,
             n_temp=lay.n_temp,
-        )  # fmt: skip
+            start=start,
+            first_row=first,
+        )
     except (InputError, DataError) as exc:
         raise type(exc)(f"{spec.label}: {exc}") from exc
     return settings, blocks

@@ -52,7 +52,11 @@ at its centre to round-off; central differences and the not-a-knot cubic
 spline of :func:`resample` (whose dependence on a knot ``d`` samples away decays
 like ``(2 - sqrt 3)^d``) are blocked the same way. :func:`iter_overlapping`
 cuts a stream of rows into such windows and :func:`preprocess_blocks` runs the
-whole of :func:`preprocess` on them, in memory O(block + margin) whatever N.
+whole of :func:`preprocess` on them, in memory O(block + margin) whatever N. The
+windows are fixed by the block grid alone, so a stream read from
+:func:`read_start` (the block holding a wanted row, less ``M``) gives the very
+windows of the whole stream from there on: its rows are the whole pass's, bit for
+bit (a worker's part of a file; not for a resampled stream, read from its start).
 
 Modules: :mod:`~manip_id.signals.filters` (the low-pass, parallel filtering),
 :mod:`~manip_id.signals.butterworth` (its design in closed form and its zero-phase run),
@@ -71,6 +75,7 @@ from .blocks import (
     iter_overlapping,
     overlap_margin,
     preprocess_blocks,
+    read_start,
 )
 from .filters import DEFAULT_CUTOFF, DEFAULT_ORDER, Lowpass, filter_regressor, lowpass
 from .preprocess import PreprocessSettings, SignalOptions, preprocess
@@ -106,6 +111,7 @@ __all__ = [
     "overlap_margin",
     "preprocess",
     "preprocess_blocks",
+    "read_start",
     "resample",
     "resample_dataset",
     "sampling_rate",

@@ -55,20 +55,30 @@ class OverlapWindow:
         return slice(self.a - self.lo, self.b - self.lo)
 
 
-def iter_overlapping(chunks, block: int, margin: int):
+def iter_overlapping(chunks, block: int, margin: int, *, start: int = 0, first: int | None = None):
     """Cut a stream of row chunks (2-D arrays) into blocks with ``margin`` rows each side.
 
     Yields :class:`OverlapWindow` for consecutive blocks ``[a, b)`` covering
     every row once; each window holds rows ``[max(a - margin, 0), min(b +
     margin, N))``. The length N need not be known: the stream is read ahead
     by ``block + margin`` rows at most, so memory is O(block + 2 margin).
+    ``start``: a multiple of ``block``, the first block's row; ``first`` (``<= start``,
+    default ``max(start - margin, 0)``): the series row of the stream's first row. With the
+    default the windows are those of the whole series from that block on (the same rows at
+    the same places); a later ``first`` cuts the first windows short at it.
     """
     block, margin = max(int(block), 1), max(int(margin), 0)
+    first = max(int(start) - margin, 0) if first is None else int(first)
+    if start % block or not 0 <= first <= start:
+        raise ValueError(
+            f"start must be a multiple of the block ({block}) and first in [0, start], "
+            f"got start={start}, first={first}"
+        )
     it = iter(chunks)
     parts: list[np.ndarray] = []
-    buf_lo = buf_hi = 0
+    buf_lo = buf_hi = first
     exhausted = False
-    a = 0
+    a = int(start)
     while True:
         while not exhausted and buf_hi < a + block + margin:
             nxt = next(it, None)
@@ -85,13 +95,13 @@ def iter_overlapping(chunks, block: int, margin: int):
             return
         buf = np.concatenate(parts) if len(parts) > 1 else parts[0]
         parts = [buf]
-        lo = max(a - margin, 0)
+        lo = max(a - margin, first)
         at_end = exhausted and b == buf_hi
         yield OverlapWindow(buf[lo - buf_lo : hi - buf_lo], lo, a, b, at_end)
         if at_end:
             return
         a = b
-        keep = max(a - margin, 0)
+        keep = max(a - margin, first)
         if keep > buf_lo:
             parts = [buf[keep - buf_lo :]]
             buf_lo = keep
@@ -173,6 +183,8 @@ def preprocess_blocks(
     options: SignalOptions | None = None,
     block: int = DEFAULT_BLOCK,
     n_temp: int = 0,
+    start: int = 0,
+    first_row: int | None = None,
 ):
     """:func:`preprocess` on a stream of packed rows, block by block; equal to it to round-off.
 
@@ -195,6 +207,13 @@ def preprocess_blocks(
     n_temp : int
         Temperature columns, the last ``n_temp`` of each row (0: none): resampled and
         low-pass filtered as q, carried after ddq.
+    start : int
+        The first output row wanted; ``chunks`` then begin at input row
+        :func:`read_start` ``(stats, options, block, start)``, and the rows yielded are
+        the whole stream's from row ``start`` on, bit for bit.
+    first_row : int or None
+        The input row of the chunks' first row (default :func:`read_start`; a later one
+        gives the first rows without their full filter margin).
 
     Returns
     -------
@@ -229,10 +248,38 @@ def preprocess_blocks(
     n_trim = settings.trim
     if n_trim < 0 or 2 * n_trim > n_uniform - 2:
         raise DataError(f"trimming {n_trim} + {n_trim} samples leaves fewer than 2 of {n_uniform}")
-    cut = _Cut(
-        nq, nv, n_trim, n_uniform - n_trim, int(options.decimate), overlap_margin(filt), n_temp
-    )
-    return settings, cut.blocks(uniform_rows, filt, options, block)
+    D, margin = int(options.decimate), overlap_margin(filt)
+    cut = _Cut(nq, nv, n_trim + int(start) * D, n_uniform - n_trim, D, margin, n_temp)
+    a0 = _first_block(stats, options, block, start)
+    first = max(a0 - margin, 0) if first_row is None else int(first_row)
+    if settings.resampled and first:
+        raise DataError(f"a resampled stream is read from its first row, not row {first}")
+    return settings, cut.blocks(uniform_rows, filt, options, block, (a0, first))
+
+
+def read_start(stats: StreamStats, options: SignalOptions, block: int, start: int) -> int:
+    """The first input row :func:`preprocess_blocks` needs for its output from row ``start``.
+
+    Output row ``s`` is uniform row ``u = trim + s D`` (``D`` the decimation), computed in
+    the block ``a = block floor(u / block)`` on rows ``[a - m, a + block + m)`` (``m``:
+    :func:`overlap_margin`, the filter's transient and padding plus the difference
+    stencil). Reading from ``max(a - m, 0)`` gives the same windows as the whole stream,
+    hence the same rows bit for bit. A resampled stream (non-uniform stamps or a rate)
+    starts at 0: its spline windows are laid on the input rows, which do not map to grid
+    rows without reading them.
+    """
+    filt, _ = stats.plan(options)
+    return max(_first_block(stats, options, block, start) - overlap_margin(filt), 0)
+
+
+def _first_block(stats: StreamStats, options: SignalOptions, block: int, start: int) -> int:
+    """The uniform row of the block holding output row ``start`` (0 when resampled)."""
+    _, settings = stats.plan(options)
+    if start <= 0 or settings.resampled:
+        return 0
+    block = max(int(block), 1)
+    u = settings.trim + int(start) * int(options.decimate)
+    return (u // block) * block
 
 
 @dataclass(frozen=True)
@@ -241,14 +288,15 @@ class _Cut:
 
     nq: int
     nv: int
-    start: int  # first kept row of the uniform stream (the trim)
+    start: int  # first kept row of the uniform stream (the trim, or the first row wanted)
     stop: int  # one past the last kept row
     step: int  # decimation
     margin: int  # rows of margin on each side of a block (:func:`overlap_margin`)
     n_temp: int = 0  # temperature columns after tau (filtered as q, carried after ddq)
 
-    def blocks(self, uniform_rows, filt: Lowpass, options: SignalOptions, block: int):
-        """Filtered, differentiated, trimmed and decimated rows ``t | q | dq | tau | ddq``."""
+    def blocks(self, uniform_rows, filt: Lowpass, options: SignalOptions, block: int, at):
+        """Filtered, differentiated, trimmed and decimated rows ``t | q | dq | tau | ddq``
+        (``at = (a0, first)``: ``uniform_rows`` from row ``first``, the first block at ``a0``)."""
         nq, nv, D = self.nq, self.nv, self.step
         sq, sdq = slice(1, 1 + nq), slice(1 + nq, 1 + nq + nv)
         stau = slice(1 + nq + nv, 1 + nq + 2 * nv)
@@ -257,7 +305,8 @@ class _Cut:
         # tau (when filtered); a column filtered but unused costs less than a second call
         hi_f = stau.stop if options.filter_torque else (sq.stop if differentiate else sdq.stop)
         fq, fdq, ftau = (slice(s.start - sq.start, s.stop - sq.start) for s in (sq, sdq, stau))
-        for w in iter_overlapping(uniform_rows, block, self.margin):
+        a0, first_row = at
+        for w in iter_overlapping(uniform_rows, block, self.margin, start=a0, first=first_row):
             lo_keep, hi_keep = max(w.a, self.start), min(w.b, self.stop)
             if hi_keep <= lo_keep:
                 continue
