@@ -19,8 +19,9 @@ round (the machine is shared: compare cases of one round only):
    files on the workers).
 
 Before the clock, every case loads the compiled kernel (in this process and on every
-worker) and makes one small call on the first rows of the files: imports and first-call
-costs, which a long-lived process or cluster pays once.
+worker) and makes one call on the first rows of every file, 2 10^5 samples in all (the
+``auto`` threshold: the kernel's first call too): imports and first-call costs, which a
+long-lived process or cluster pays once. The whole command (``--cli``) pays them all.
 3. with ``--cli``, also the whole command ``manip-id payload ... --scheduler local:N``
    (cluster start-up, reading and the solve inside the clock).
 
@@ -113,6 +114,7 @@ def _warm() -> None:
 def run_case(unloaded: list[str], loaded: list[str], workers: int) -> dict:
     """One case in this process: 0 workers = local (no Dask)."""
     from manip_id import load_robot
+    from manip_id.compiled_regressor import AUTO_SAMPLES
     from manip_id.execution import connect, portable_robot
     from manip_id.payload import identify_payload
 
@@ -131,8 +133,10 @@ def run_case(unloaded: list[str], loaded: list[str], workers: int) -> dict:
         _warm()
         if client is not None:
             client.run(_warm)
-        k = max(workers, 1)
-        small = [f"{p}@#0:2000" for p in unloaded[:k]], [f"{p}@#0:2000" for p in loaded[:k]]
+        # the first rows of every file, announced as large as the kernel's threshold: the
+        # kernel's first call on every worker too
+        rows = -(-AUTO_SAMPLES // (len(unloaded) + len(loaded)))
+        small = [f"{p}@#0:{rows}" for p in unloaded], [f"{p}@#0:{rows}" for p in loaded]
         identify_payload(
             robot, _runs(light, small[0], dist), _runs(light, small[1], dist), FRAME,
             scheduler=client,

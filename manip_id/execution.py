@@ -73,6 +73,17 @@ WORKER_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
 #: starts: a nanny hands its own configuration to its worker, over any ``DASK_*`` variable
 #: of :data:`WORKER_ENV` (which therefore left the profiler on).
 WORKER_CONFIG = {"distributed.worker.profile.enabled": False}
+#: glibc's allocator settings of the LocalCluster's workers, read when a process starts
+#: (so set in this process's environment while the workers are spawned). Dask sets
+#: ``MALLOC_TRIM_THRESHOLD_=65536``, which also fixes glibc's mmap threshold at 128 KiB:
+#: every regressor chunk (a few MB) was then a fresh mapping, about 2 10^5 page faults
+#: and 0.13 s of system time per task of 10^5 ur5 samples, about 1 s per worker in a new
+#: cluster (``experiments/bench_payload_dask.py``). Blocks below 64 MiB come from the
+#: heap, and up to 128 MiB of free heap is kept for the next chunk.
+WORKER_MALLOC = {
+    "MALLOC_MMAP_THRESHOLD_": str(64 * 2**20),
+    "MALLOC_TRIM_THRESHOLD_": str(128 * 2**20),
+}
 
 
 def available_cores() -> int:
@@ -368,15 +379,24 @@ def _local_cluster(dist, n: int):
     """A LocalCluster of ``n`` single-threaded worker processes on 127.0.0.1."""
     import dask  # optional heavy dependency (installed with distributed)
 
-    with dask.config.set(WORKER_CONFIG):  # read by the nannies as they are made
-        return dist.LocalCluster(
-            n_workers=n,
-            threads_per_worker=1,
-            processes=True,
-            host="127.0.0.1",
-            scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
-            env=WORKER_ENV,
-        )
+    saved = {k: os.environ.get(k) for k in WORKER_MALLOC}
+    os.environ.update(WORKER_MALLOC)  # inherited by the spawned workers (and over Dask's)
+    try:
+        with dask.config.set(WORKER_CONFIG):  # read by the nannies as they are made
+            return dist.LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                host="127.0.0.1",
+                scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
+                env=WORKER_ENV,
+            )
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
 
 
 def connect_timeout() -> float:
@@ -510,6 +530,7 @@ __all__ = [
     "SPLIT_EVERY",
     "WORKER_CONFIG",
     "WORKER_ENV",
+    "WORKER_MALLOC",
     "Backend",
     "DaskBackend",
     "ForkBackend",

@@ -7,6 +7,8 @@ configuration, their BLAS environment, the size a task sees announced.
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -26,18 +28,25 @@ def _worker_settings() -> dict:
     return {
         "profile": dask.config.get("distributed.worker.profile.enabled"),
         "blas": os.environ.get("OPENBLAS_NUM_THREADS"),
+        "malloc": {k: os.environ.get(k) for k in execution.WORKER_MALLOC},
     }
 
 
 def test_connect_caps_local_workers_at_the_cores(monkeypatch):
     monkeypatch.setattr(execution, "available_cores", lambda: 1)
+    monkeypatch.delenv("MALLOC_MMAP_THRESHOLD_", raising=False)
+    monkeypatch.setenv("MALLOC_TRIM_THRESHOLD_", "12345")
     with pytest.warns(ManipIdWarning, match=r"local:3 capped at the 1 cores"):
         client, cluster = connect("local:3")
     try:
         settings = client.run(_worker_settings)
         assert len(settings) == 1  # one worker, not three
-        # the workers run without the statistical profiler, on one BLAS thread
-        assert list(settings.values()) == [{"profile": False, "blas": "1"}]
+        # the workers run without the statistical profiler, on one BLAS thread, with the
+        # allocator's settings; this process's environment is left as it was
+        want = {"profile": False, "blas": "1", "malloc": execution.WORKER_MALLOC}
+        assert list(settings.values()) == [want]
+        assert "MALLOC_MMAP_THRESHOLD_" not in os.environ
+        assert os.environ["MALLOC_TRIM_THRESHOLD_"] == "12345"
     finally:
         client.close()
         cluster.close()
