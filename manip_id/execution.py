@@ -68,11 +68,11 @@ DEFAULT_LOCAL_WORKERS = 2
 #: Environment of the LocalCluster's workers: one BLAS thread (the tasks' matrices are
 #: small; two threads per worker on two cores only take turns).
 WORKER_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
-#: Dask configuration of the LocalCluster's workers: no statistical profiler (it samples
-#: the task thread's Python stack every 10 ms). Given as configuration when the cluster
-#: starts: a nanny hands its own configuration to its worker, over any ``DASK_*`` variable
-#: of :data:`WORKER_ENV` (which therefore left the profiler on).
-WORKER_CONFIG = {"distributed.worker.profile.enabled": False}
+#: The LocalCluster's workers' periodic callbacks stopped once they run
+#: (:func:`quiet_worker`): the statistical profiler, which samples the task thread's
+#: Python stack every 10 ms. (A ``DASK_*`` variable in :data:`WORKER_ENV` cannot: a nanny
+#: hands its own configuration to its worker, over the environment.)
+STOPPED_CALLBACKS = ("profile", "profile-cycle")
 #: glibc's allocator settings of the LocalCluster's workers, read when a process starts
 #: (so set in this process's environment while the workers are spawned). Dask sets
 #: ``MALLOC_TRIM_THRESHOLD_=65536``, which also fixes glibc's mmap threshold at 128 KiB:
@@ -362,7 +362,9 @@ def connect(spec: str):
         if kind == "local":
             cluster = _local_cluster(dist, value)
             try:
-                return dist.Client(cluster), cluster
+                client = dist.Client(cluster)
+                client.run(quiet_worker)
+                return client, cluster
             except BaseException:
                 cluster.close()
                 raise
@@ -375,22 +377,30 @@ def connect(spec: str):
         ) from exc
 
 
+def quiet_worker(dask_worker) -> list[str]:
+    """Stop a worker's :data:`STOPPED_CALLBACKS` (run on it by ``Client.run``); their names."""
+    stopped = []
+    for name in STOPPED_CALLBACKS:
+        callback = dask_worker.periodic_callbacks.pop(name, None)
+        if callback is not None:
+            callback.stop()
+            stopped.append(name)
+    return stopped
+
+
 def _local_cluster(dist, n: int):
     """A LocalCluster of ``n`` single-threaded worker processes on 127.0.0.1."""
-    import dask  # optional heavy dependency (installed with distributed)
-
     saved = {k: os.environ.get(k) for k in WORKER_MALLOC}
     os.environ.update(WORKER_MALLOC)  # inherited by the spawned workers (and over Dask's)
     try:
-        with dask.config.set(WORKER_CONFIG):  # read by the nannies as they are made
-            return dist.LocalCluster(
-                n_workers=n,
-                threads_per_worker=1,
-                processes=True,
-                host="127.0.0.1",
-                scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
-                env=WORKER_ENV,
-            )
+        return dist.LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
+            env=WORKER_ENV,
+        )
     finally:
         for k, v in saved.items():
             if v is None:
@@ -528,7 +538,7 @@ __all__ = [
     "FORK_MIN_SAMPLES",
     "HEADER_FORMATS",
     "SPLIT_EVERY",
-    "WORKER_CONFIG",
+    "STOPPED_CALLBACKS",
     "WORKER_ENV",
     "WORKER_MALLOC",
     "Backend",
@@ -542,6 +552,7 @@ __all__ = [
     "open_backend",
     "parse_scheduler",
     "planned_task",
+    "quiet_worker",
     "cap_local_workers",
     "connect_timeout",
     "header_samples",

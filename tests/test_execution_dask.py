@@ -20,13 +20,11 @@ from manip_id.execution import DaskBackend, add_values, connect, header_samples,
 pytest.importorskip("distributed")
 
 
-def _worker_settings() -> dict:
+def _worker_settings(dask_worker) -> dict:
     import os
 
-    import dask
-
     return {
-        "profile": dask.config.get("distributed.worker.profile.enabled"),
+        "profile": "profile" in dask_worker.periodic_callbacks,
         "blas": os.environ.get("OPENBLAS_NUM_THREADS"),
         "malloc": {k: os.environ.get(k) for k in execution.WORKER_MALLOC},
     }
@@ -47,6 +45,21 @@ def test_connect_caps_local_workers_at_the_cores(monkeypatch):
         assert list(settings.values()) == [want]
         assert "MALLOC_MMAP_THRESHOLD_" not in os.environ
         assert os.environ["MALLOC_TRIM_THRESHOLD_"] == "12345"
+    finally:
+        client.close()
+        cluster.close()
+
+
+def test_connect_under_the_users_dask_configuration():
+    """A cluster started inside the user's own ``dask.config.set`` works and keeps it."""
+    import dask
+
+    with dask.config.set({"distributed.scheduler.work-stealing": False}):
+        client, cluster = connect("local:1")
+    try:
+        assert client.submit(sum, [1, 2]).result() == 3
+        assert client.run(_worker_settings)  # the worker answers
+        assert dask.config.get("distributed.scheduler.work-stealing") is True
     finally:
         client.close()
         cluster.close()
