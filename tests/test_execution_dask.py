@@ -50,19 +50,22 @@ def test_connect_caps_local_workers_at_the_cores(monkeypatch):
         cluster.close()
 
 
-def test_connect_under_the_users_dask_configuration():
-    """A cluster started inside the user's own ``dask.config.set`` works and keeps it."""
+def test_connect_leaves_the_dask_configuration_as_it_was():
+    """The profiler is stopped on the workers themselves: the global configuration of
+    this process is the same after a local cluster as before it."""
+    import copy
+
     import dask
 
-    with dask.config.set({"distributed.scheduler.work-stealing": False}):
-        client, cluster = connect("local:1")
+    before = copy.deepcopy(dask.config.config)
+    client, cluster = connect("local:1")
     try:
         assert client.submit(sum, [1, 2]).result() == 3
-        assert client.run(_worker_settings)  # the worker answers
-        assert dask.config.get("distributed.scheduler.work-stealing") is True
+        assert [s["profile"] for s in client.run(_worker_settings).values()] == [False]
     finally:
         client.close()
         cluster.close()
+    assert dask.config.config == before
 
 
 def test_connect_within_the_cores_does_not_warn(monkeypatch, recwarn):
