@@ -1,7 +1,7 @@
 """Fleet identification on Dask: throughput and scaling with 1 and 2 workers.
 
     python experiments/bench_fleet.py [--files 100] [--samples 100000] [--workers 1 2]
-                                      [--block B] [--cache DIR] [--json OUT]
+                                      [--repeat R] [--block B] [--cache DIR] [--json OUT]
 
 Robot: ur10 with viscous and Coulomb friction (48 base parameters). Data:
 ``--files`` NPZ logs of ``--samples`` samples each (random states within the
@@ -13,11 +13,14 @@ scaled down to fit a shared 2-core machine (16 files of 2 10^4 samples).
 Each case runs in its own process:
 
 1. serial: :func:`manip_id.fleet.identify_files` without a scheduler (no Dask);
-2. dask N: a ``LocalCluster`` of N single-threaded worker processes on
-   127.0.0.1, started before the clock runs (its start-up is printed apart).
+2. dask N: ``manip_id.execution.connect("local:N")`` (N single-threaded worker
+   processes on 127.0.0.1), started before the clock runs (its start-up is printed apart).
 
-Before the clock, every case runs one file once per worker (imports and
-first-call costs, which a long-lived cluster pays once).
+Before the clock, every case loads the compiled kernel (in this process and on every
+worker) and runs two files per worker (imports and first-call costs, which a
+long-lived cluster pays once). ``--repeat R`` runs R rounds, the cases interleaved in
+each (the machine is shared); the figures are medians over the rounds, every ratio
+taken within a round.
 
 Printed per case: wall time of ``identify_files`` [s], throughput [samples/s],
 the ratio to the serial run, the scaling efficiency
@@ -34,6 +37,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import statistics
 import subprocess
 import sys
 import time
@@ -71,31 +75,27 @@ def make_files(cache: Path, n_files: int, n: int) -> list[str]:
 
 
 def _warm_worker() -> None:
-    """Import what a task needs (run on every worker before the clock)."""
+    """Import what a task needs and load the compiled kernel (before the clock)."""
     import manip_id.fleet  # noqa: F401
     import manip_id.identification  # noqa: F401
+    from manip_id import compiled_regressor as cr
+
+    with cr.planned_samples(cr.AUTO_SAMPLES):  # loads the kernel unless mode pinocchio
+        pass
 
 
 def run_case(paths: list[str], workers: int, block: int | None) -> dict:
     """One case in this process: 0 workers = serial (no Dask)."""
     from manip_id import load_robot
-    from manip_id.fleet import WORKER_ENV, identify_files
+    from manip_id.execution import connect
+    from manip_id.fleet import identify_files
 
     robot = load_robot(ROBOT, friction=FRICTION)
     out: dict = {"workers": workers}
     client = cluster = None
     if workers > 0:
-        from distributed import Client, LocalCluster
-
         t0 = time.perf_counter()
-        cluster = LocalCluster(
-            n_workers=workers,
-            threads_per_worker=1,
-            host="127.0.0.1",
-            scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
-            env=WORKER_ENV,
-        )
-        client = Client(cluster)
+        client, cluster = connect(f"local:{workers}")
         out["startup_s"] = time.perf_counter() - t0
     try:
         # the structural analysis is the same in every case: out of the clock
@@ -104,6 +104,7 @@ def run_case(paths: list[str], workers: int, block: int | None) -> dict:
         base = analyze(robot).base
         # warm-up on one file: imports and first-call costs on every worker, out of the clock
         t0 = time.perf_counter()
+        _warm_worker()
         if client is not None:
             client.run(_warm_worker)
         identify_files(
@@ -129,12 +130,57 @@ def run_case(paths: list[str], workers: int, block: int | None) -> dict:
     return out
 
 
+def _print_table(args, rounds: list[list[dict]]) -> None:
+    """Medians over the rounds (ratios within each round), checked against serial."""
+    med = statistics.median
+    cases = [r["workers"] for r in rounds[0]]
+    one = cases.index(1) if 1 in cases else None
+    total = rounds[0][0]["n_samples"]
+    load = os.getloadavg()
+    print(
+        f"{ROBOT}, {args.files} files x {args.samples} samples = {total} samples, "
+        f"task = {'a file' if args.block is None else f'{args.block} samples'}, "
+        f"{len(rounds)} round(s); load average {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} "
+        f"on {os.cpu_count()} cores"
+    )
+    print(
+        "| case | start-up s | wall s (median, range) | samples/s | vs serial | efficiency "
+        "| task s (sum) | busy | max rel diff |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|")
+    for c, w in enumerate(cases):
+        rs = [r[c] for r in rounds]
+        walls = [r["wall_s"] for r in rs]
+        diff = max(
+            float(np.abs(np.asarray(r[c]["estimate"]) - np.asarray(r[0]["estimate"])).max())
+            / float(np.abs(np.asarray(r[0]["estimate"])).max())
+            for r in rounds
+        )
+        eff = ""
+        if w > 0 and one is not None:
+            eff = f"{med(r[one]['wall_s'] / (w * r[c]['wall_s']) for r in rounds):.2f}"
+        name = "serial (no Dask)" if w == 0 else f"Dask, {w} worker{'s' * (w > 1)}"
+        start = f"{med(r['startup_s'] for r in rs):.2f}" if "startup_s" in rs[0] else ""
+        busy = [
+            r["task_seconds"].get("scan", 0.0) + r["task_seconds"].get("accumulate_total", 0.0)
+            for r in rs
+        ]  # summed over tasks
+        vs = med(r[0]["wall_s"] / r[c]["wall_s"] for r in rounds)
+        print(
+            f"| {name} | {start} | {med(walls):.2f} ({min(walls):.2f}-{max(walls):.2f}) | "
+            f"{total / med(walls):,.0f} | {vs:.2f} | {eff} | {med(busy):.2f} | "
+            f"{med(b / (max(w, 1) * r['wall_s']) for b, r in zip(busy, rs, strict=True)):.2f} "
+            f"| {diff:.1e} |"
+        )
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--files", type=int, default=16)
     ap.add_argument("--samples", type=int, default=20000, help="samples per file")
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--block", type=int, default=None, help="samples per task (default a file)")
+    ap.add_argument("--repeat", type=int, default=1, help="rounds, the cases interleaved")
     ap.add_argument("--cache", type=Path, default=Path("/tmp/manip_id_bench_fleet"))
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("--case", type=int, default=None, help=argparse.SUPPRESS)
@@ -145,47 +191,24 @@ def main() -> int:
         print(json.dumps(run_case(paths, args.case, args.block)))
         return 0
 
-    rows = []
-    for workers in [0, *args.workers]:
-        cmd = [sys.executable, __file__, "--files", str(args.files), "--samples",
-               str(args.samples), "--cache", str(args.cache), "--case", str(workers)]  # fmt: skip
-        if args.block is not None:
-            cmd += ["--block", str(args.block)]
-        proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
-        if proc.returncode != 0:
-            print(proc.stderr, file=sys.stderr)
-            return 1
-        rows.append(json.loads(proc.stdout.strip().splitlines()[-1]))
-    serial = rows[0]
-    ref = np.asarray(serial["estimate"])
-    t1 = next((r["wall_s"] for r in rows if r["workers"] == 1), None)
-    total = serial["n_samples"]
-    load = os.getloadavg()
-    print(
-        f"{ROBOT}, {args.files} files x {args.samples} samples = {total} samples, "
-        f"task = {'a file' if args.block is None else f'{args.block} samples'}; "
-        f"load average {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} on {os.cpu_count()} cores"
-    )
-    print(
-        "| case | start-up s | wall s | samples/s | vs serial | efficiency | task s (sum) "
-        "| busy | max rel diff |"
-    )
-    print("|---|---|---|---|---|---|---|---|---|")
-    for r in rows:
-        w = r["workers"]
-        diff = float(np.abs(np.asarray(r["estimate"]) - ref).max() / np.abs(ref).max())
-        eff = "" if w == 0 or t1 is None else f"{t1 / (w * r['wall_s']):.2f}"
-        name = "serial (no Dask)" if w == 0 else f"Dask, {w} worker{'s' * (w > 1)}"
-        start = f"{r['startup_s']:.2f}" if "startup_s" in r else ""
-        ts = r["task_seconds"]
-        busy = ts.get("scan", 0.0) + ts.get("accumulate_total", 0.0)  # summed over tasks
-        print(
-            f"| {name} | {start} | {r['wall_s']:.2f} | {total / r['wall_s']:,.0f} | "
-            f"{serial['wall_s'] / r['wall_s']:.2f} | {eff} | {busy:.2f} | "
-            f"{busy / (max(w, 1) * r['wall_s']):.2f} | {diff:.1e} |"
-        )
+    rounds = []
+    for _ in range(args.repeat):
+        rows = []
+        for workers in [0, *args.workers]:
+            cmd = [sys.executable, __file__, "--files", str(args.files), "--samples",
+                   str(args.samples), "--cache", str(args.cache),
+                   "--case", str(workers)]  # fmt: skip
+            if args.block is not None:
+                cmd += ["--block", str(args.block)]
+            proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+            if proc.returncode != 0:
+                print(proc.stderr, file=sys.stderr)
+                return 1
+            rows.append(json.loads(proc.stdout.strip().splitlines()[-1]))
+        rounds.append(rows)
+    _print_table(args, rounds)
     if args.json is not None:
-        args.json.write_text(json.dumps(rows, indent=1))
+        args.json.write_text(json.dumps(rounds, indent=1))
     return 0
 
 

@@ -37,12 +37,16 @@ import math
 import multiprocessing as mp
 import os
 import signal
+import warnings
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
 from ._io.reading import read_json
-from .errors import InputError
+from .compiled_regressor import planned, planned_samples
+from .datasets import FileSpec, open_source, parse_file_spec
+from .datasets.stream import infer_format
+from .errors import InputError, ManipIdError, ManipIdWarning
 from .robot import Robot
 from .robot_sources import RobotSource
 
@@ -62,12 +66,23 @@ CONNECT_TIMEOUT, TIMEOUT_VARIABLE = 5.0, "MANIP_ID_DASK_TIMEOUT"
 #: Worker processes of ``scheduler="local"``.
 DEFAULT_LOCAL_WORKERS = 2
 #: Environment of the LocalCluster's workers: one BLAS thread (the tasks' matrices are
-#: small), and no statistical profiler (it samples the task thread's Python stack every
-#: 10 ms, which slowed the regressor loop by about 20 % in ``experiments/bench_fleet.py``).
-WORKER_ENV = {
-    "OPENBLAS_NUM_THREADS": "1",
-    "OMP_NUM_THREADS": "1",
-    "DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED": "False",
+#: small; two threads per worker on two cores only take turns).
+WORKER_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+#: The LocalCluster's workers' periodic callbacks stopped once they run
+#: (:func:`quiet_worker`): the statistical profiler, which samples the task thread's
+#: Python stack every 10 ms. (A ``DASK_*`` variable in :data:`WORKER_ENV` cannot: a nanny
+#: hands its own configuration to its worker, over the environment.)
+STOPPED_CALLBACKS = ("profile", "profile-cycle")
+#: glibc's allocator settings of the LocalCluster's workers, read when a process starts
+#: (so set in this process's environment while the workers are spawned). Dask sets
+#: ``MALLOC_TRIM_THRESHOLD_=65536``, which also fixes glibc's mmap threshold at 128 KiB:
+#: every regressor chunk (a few MB) was then a fresh mapping, about 2 10^5 page faults
+#: and 0.13 s of system time per task of 10^5 ur5 samples, about 1 s per worker in a new
+#: cluster (``experiments/bench_payload_dask.py``). Blocks below 64 MiB come from the
+#: heap, and up to 128 MiB of free heap is kept for the next chunk.
+WORKER_MALLOC = {
+    "MALLOC_MMAP_THRESHOLD_": str(64 * 2**20),
+    "MALLOC_TRIM_THRESHOLD_": str(128 * 2**20),
 }
 
 
@@ -105,6 +120,39 @@ def resolve_workers(workers, n_samples: int | None) -> int:
     if n_samples is None or int(n_samples) < FORK_MIN_SAMPLES or mp.current_process().daemon:
         return 1
     return available_cores()
+
+
+#: Formats whose row count is in their headers (:func:`header_samples` reads no data).
+HEADER_FORMATS = ("npz",)
+
+
+def header_samples(specs: Iterable[str | os.PathLike | FileSpec]) -> int | None:
+    """Rows the files hold, from their headers alone, or None when any file's count
+    needs a pass over its data (a CSV, a ROS bag, a Panda log) or its header fails.
+
+    The size a run announces (:func:`~manip_id.compiled_regressor.planned_samples`) when
+    its files are read by the tasks, not by this process: the rows of a ``#A:#B`` window,
+    else all of them (an upper bound of the samples left by a time window and the
+    preprocessing), the same number for every back-end of the run.
+    A file that cannot be opened is left to the task that reads it to report, named.
+    """
+    total = 0
+    for item in specs:
+        try:
+            spec = parse_file_spec(item)
+            fmt = infer_format(spec.path) if spec.format is None else str(spec.format).lower()
+            if fmt not in HEADER_FORMATS:
+                return None
+            n = open_source(spec).n_rows
+        except (ManipIdError, OSError):
+            return None
+        if n is None:
+            return None
+        w = spec.window
+        if w is not None and w.unit == "index":  # rows #A:#B (a time window: all rows)
+            n = max(0, min(int(n), n if w.stop is None else int(w.stop)) - int(w.start or 0))
+        total += int(n)
+    return total
 
 
 def portable_robot(robot: Robot) -> Robot:
@@ -293,21 +341,30 @@ def parse_scheduler(spec: str) -> tuple[str, Any]:
 
 
 def connect(spec: str):
-    """A ``distributed.Client`` (and the LocalCluster it owns, or None) for a scheduler spec."""
-    kind, value = parse_scheduler(spec)
+    """A ``distributed.Client`` (and the LocalCluster it owns, or None) for a scheduler spec.
+
+    ``local:N`` starts at most :func:`available_cores` workers (:func:`cap_local_workers`;
+    a :class:`~manip_id.errors.ManipIdWarning` says so when N was more): on a shared
+    machine more single-threaded workers than cores only take turns.
+    """
+    capped, asked = cap_local_workers(spec)
+    if asked is not None:
+        warnings.warn(
+            ManipIdWarning(
+                f"scheduler local:{asked} capped at the {available_cores()} cores "
+                "this process may use"
+            ),
+            stacklevel=2,
+        )
+    kind, value = parse_scheduler(capped)
     dist = _distributed()
     try:
         if kind == "local":
-            cluster = dist.LocalCluster(
-                n_workers=value,
-                threads_per_worker=1,
-                processes=True,
-                host="127.0.0.1",
-                scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
-                env=WORKER_ENV,
-            )
+            cluster = _local_cluster(dist, value)
             try:
-                return dist.Client(cluster), cluster
+                client = dist.Client(cluster)
+                client.run(quiet_worker)
+                return client, cluster
             except BaseException:
                 cluster.close()
                 raise
@@ -318,6 +375,38 @@ def connect(spec: str):
             f"cannot reach the Dask scheduler {spec!r} within {connect_timeout()} s "
             f"(is it running? {TIMEOUT_VARIABLE} sets the wait): {_one_line(exc)}"
         ) from exc
+
+
+def quiet_worker(dask_worker) -> list[str]:
+    """Stop a worker's :data:`STOPPED_CALLBACKS` (run on it by ``Client.run``); their names."""
+    stopped = []
+    for name in STOPPED_CALLBACKS:
+        callback = dask_worker.periodic_callbacks.pop(name, None)
+        if callback is not None:
+            callback.stop()
+            stopped.append(name)
+    return stopped
+
+
+def _local_cluster(dist, n: int):
+    """A LocalCluster of ``n`` single-threaded worker processes on 127.0.0.1."""
+    saved = {k: os.environ.get(k) for k in WORKER_MALLOC}
+    os.environ.update(WORKER_MALLOC)  # inherited by the spawned workers (and over Dask's)
+    try:
+        return dist.LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            scheduler_kwargs={"dashboard": False, "dashboard_address": "127.0.0.1:0"},
+            env=WORKER_ENV,
+        )
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
 
 
 def connect_timeout() -> float:
@@ -349,6 +438,21 @@ def _one_line(exc: BaseException) -> str:
     return text[0] if text else type(exc).__name__
 
 
+def planned_task(n_planned: int, fn: Callable, *args):
+    """``fn(*args)`` inside :func:`~manip_id.compiled_regressor.planned_samples` of
+    ``n_planned`` (a Dask task of a run its client announced; 0: none).
+
+    The regressor path of ``auto`` mode then follows the run, not the history of the
+    worker that draws the task: a run announced at least
+    :data:`~manip_id.compiled_regressor.AUTO_SAMPLES` large is evaluated by the compiled
+    kernel from its first sample on every worker, as in the client's own process.
+    """
+    if n_planned <= 0:
+        return fn(*args)
+    with planned_samples(n_planned):
+        return fn(*args)
+
+
 class DaskBackend(Backend):
     """Tasks on a ``dask.distributed`` cluster (futures); only sums come back.
 
@@ -372,7 +476,11 @@ class DaskBackend(Backend):
         self.description = f"Dask at {self.client.scheduler.address} ({self.n_workers} workers)"
 
     def submit(self, fn, *args):
-        fut = self.client.submit(fn, *args, pure=False)
+        n = planned()  # the client's announced run size travels with the samples' tasks
+        if n > 0 and fn is not add_values:
+            fut = self.client.submit(planned_task, n, fn, *args, pure=False)
+        else:
+            fut = self.client.submit(fn, *args, pure=False)
         self._futures.append(fut)
         return fut
 
@@ -428,8 +536,11 @@ __all__ = [
     "AUTO",
     "DEFAULT_LOCAL_WORKERS",
     "FORK_MIN_SAMPLES",
+    "HEADER_FORMATS",
     "SPLIT_EVERY",
+    "STOPPED_CALLBACKS",
     "WORKER_ENV",
+    "WORKER_MALLOC",
     "Backend",
     "DaskBackend",
     "ForkBackend",
@@ -440,8 +551,11 @@ __all__ = [
     "connect",
     "open_backend",
     "parse_scheduler",
+    "planned_task",
+    "quiet_worker",
     "cap_local_workers",
     "connect_timeout",
+    "header_samples",
     "portable_robot",
     "reduce_tree",
     "resolve_workers",

@@ -43,15 +43,18 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Mapping, Sequence
+from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from .compiled_regressor import planned_samples
 from .datasets import FileSpec
 from .errors import InputError, RankDeficiencyError
 from .execution import (
     DEFAULT_LOCAL_WORKERS,
     SPLIT_EVERY,
     WORKER_ENV,
+    header_samples,
     parse_scheduler,
     portable_robot,
 )
@@ -247,19 +250,20 @@ def identify_files(
         scan.discard()
     base = resolve_base(robot, base, timings)
     uopts = UncertaintyOptions.from_value(uncertainty)
-    sums = distributed_problem(
-        robot,
-        paths,
-        validation,
-        base,
-        pre,
-        window=window,
-        timings=timings,
-        run=RunOptions.from_value(run),
-        model=mopts,
-        partition=part,
-        uncertainty=uopts,
-    )
+    with _announced([*paths, *(validation or [])]):
+        sums = distributed_problem(
+            robot,
+            paths,
+            validation,
+            base,
+            pre,
+            window=window,
+            timings=timings,
+            run=RunOptions.from_value(run),
+            model=mopts,
+            partition=part,
+            uncertainty=uopts,
+        )
     sums.problem.t_start = t_start
     result = solve(
         sums.problem, method, consistent=copts, minimum_norm=minimum_norm, uncertainty=uopts
@@ -275,6 +279,14 @@ def identify_files(
     result = replace(result, per_file=estimates)
     result.timings["total"] = time.perf_counter() - t_start
     return result
+
+
+def _announced(files: list):
+    """The run announced with the rows the files' headers declare
+    (:func:`~manip_id.execution.header_samples`), so that in ``auto`` regressor mode every
+    process of it takes the same regressor path; no announcement when a count is unknown."""
+    n = header_samples(files)
+    return planned_samples(n) if n else nullcontext()
 
 
 def _file_estimate(

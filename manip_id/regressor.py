@@ -126,16 +126,20 @@ class RegressorEvaluator:
     def kernel_for(self, n: int) -> CompiledModel | None:
         """The compiled kernel for a block of ``n`` samples, or None for Pinocchio.
 
-        Mode ``compiled``: whenever the model is covered; ``auto``: once this process
-        has seen :data:`~manip_id.compiled_regressor.AUTO_SAMPLES` samples, or from the
-        start of a run announced that large (:func:`~manip_id.compiled_regressor.
-        planned_samples`), or once a numba kernel has run in this process (the filter of
-        the log preprocessing: :func:`~manip_id._numba.numba_warm`);
-        ``pinocchio``: never (see :mod:`manip_id.compiled_regressor`).
+        Mode ``compiled``: whenever the model is covered; ``auto``: for a run announced
+        with at least :data:`~manip_id.compiled_regressor.AUTO_SAMPLES` samples
+        (:func:`~manip_id.compiled_regressor.planned_samples`), and outside any announced
+        run once this process has seen that many samples or once a numba kernel has run
+        in it (the filter of the log preprocessing: :func:`~manip_id._numba.numba_warm`);
+        ``pinocchio``: never (see :mod:`manip_id.compiled_regressor`). An announced run is
+        decided by its size alone, so every process of it (this one, forked workers, Dask
+        workers, whatever they evaluated before) takes the same path and gives the same
+        round-off.
         """
         self._seen += n
         current = mode()
-        large = max(count_samples(n), planned()) >= AUTO_SAMPLES or numba_warm()
+        seen, announced = count_samples(n), planned()
+        large = announced >= AUTO_SAMPLES if announced > 0 else seen >= AUTO_SAMPLES or numba_warm()
         if current == "pinocchio" or (current == "auto" and not large):
             return None
         return self.compiled

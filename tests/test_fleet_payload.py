@@ -19,6 +19,7 @@ import pytest
 from conftest import get_robot
 from test_payload import make_payload, make_runs
 
+from manip_id import compiled_regressor as cr
 from manip_id.cli import main
 from manip_id.errors import DataError
 from manip_id.payload import identify_drive_gains, identify_payload
@@ -27,13 +28,14 @@ RTOL = 1e-9
 
 
 @pytest.fixture(autouse=True, scope="module")
-def _one_regressor():
-    """Local and Dask runs on the same regressor path: in ``auto`` mode the kernel starts
-    once a process has seen 2e5 samples, so this long-lived test process and fresh workers
-    would differ in round-off, which the payload solve amplifies past 1e-9 on its smallest
-    quantities. The workers inherit the variable when they start."""
+def _long_lived_process():
+    """``auto`` regressor mode in a process that has evaluated many samples before (as a
+    long-lived one has) and fresh workers: each call announces its runs' size, which alone
+    decides the regressor path on every process of it, so both give the same round-off
+    (which the payload solve amplifies on its smallest quantities)."""
     mp = pytest.MonkeyPatch()
-    mp.setenv("MANIP_ID_REGRESSOR", "pinocchio")
+    mp.setenv(cr.ENV, "auto")
+    mp.setattr(cr, "_seen", 10 * cr.AUTO_SAMPLES)
     yield
     mp.undo()
 
@@ -68,11 +70,13 @@ def _same_payload(res, ref):
 @dataclass(frozen=True)
 class NpzRun:
     """One run read from an NPZ file with numpy, in two blocks. Picklable (a worker reads
-    the file); its ``label`` names the file in errors."""
+    the file); its ``label`` names the file in errors, ``n_samples`` (when given) its size
+    before it is read."""
 
     path: str
     start: int = 0
     stop: int | None = None
+    n_samples: int | None = None
 
     @property
     def label(self) -> str:
@@ -178,8 +182,8 @@ def test_runs_read_on_the_workers(ur5, runs, local_client):
     the workers, the local answer; and the answer of the arrays in one block up to the
     round-off of the other partition into chunks."""
     fu, fl = runs["files"]["u"], runs["files"]["l"]
-    unloaded = [NpzRun(p) for p in fu]
-    loaded = [NpzRun(p, 0, 300) for p in fl]
+    unloaded = [NpzRun(p, n_samples=N) for p in fu]
+    loaded = [NpzRun(p, 0, 300, n_samples=300) for p in fl]
     ref = identify_payload(ur5, unloaded, loaded, "tool0", velocity_deadband=0.05)
     res = identify_payload(
         ur5, unloaded, loaded, "tool0", velocity_deadband=0.05, scheduler=local_client

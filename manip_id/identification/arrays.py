@@ -14,6 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..compiled_regressor import planned_samples
 from ..errors import InputError
 from ..estimators import GradientEstimator, RLSEstimator
 from ..estimators.consistent.terms import missing_term_warnings
@@ -284,16 +285,17 @@ def _identify_acceleration_free(
     nv_rows = 1 if model.name == "energy" else robot.nv
     rows_unc = replace(opts.uncertainty, block_length=1)  # rows span windows: start at one
     window = model_window(model, q.shape[0], dt, base.n_base, robot.nv)
-    acc = accumulate(
-        robot,
-        q,
-        dq,
-        tau,
-        dt=dt,
-        window_length=window.length,
-        columns=base.independent,
-        blocks=rows_unc.blocks(base.n_base, nv_rows),
-    )
+    with planned_samples(q.shape[0]):  # one regressor path for the run, as for files
+        acc = accumulate(
+            robot,
+            q,
+            dq,
+            tau,
+            dt=dt,
+            window_length=window.length,
+            columns=base.independent,
+            blocks=rows_unc.blocks(base.n_base, nv_rows),
+        )
     timings["accumulate"] = time.perf_counter() - t0
     if acc.n_rows <= base.n_base:
         raise InputError(

@@ -8,21 +8,28 @@ accumulates them (``A = X^T X``, ``b = X^T z``, per joint) in one pass, and
 :func:`accumulate_runs` does so for every run, in this process or as Dask tasks,
 adding the sums in a tree. Everything downstream (the solve, the errors, the tests)
 works on these sums only.
+
+A call announces its size (:func:`~manip_id.compiled_regressor.planned_samples`) when
+every run's is known beforehand (:func:`run_samples`), so that in ``auto`` regressor mode
+this process and every worker take the same regressor path, whatever they ran before.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable, Sequence
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .._checks import as_float_array, check_finite
+from ..compiled_regressor import planned_samples
+from ..datasets import FileSpec
 from ..errors import DataError, InputError, ManipIdError
 from ..estimators import InformationAccumulator
 from ..estimators.uncertainty import UncertaintyOptions
-from ..execution import SPLIT_EVERY, open_backend, portable_robot, reduce_tree
+from ..execution import SPLIT_EVERY, header_samples, open_backend, portable_robot, reduce_tree
 from ..metrics import relative_error
 from ..regressor import DEFAULT_CHUNK, check_states
 from ..robot import Robot
@@ -231,6 +238,23 @@ def run_sums(
     return RunSums(acc, left_out, [summary() if callable(summary) else None])
 
 
+def run_samples(run: Run) -> int | None:
+    """The samples of ``run`` known before it is read, else None.
+
+    Its arrays' rows; for a callable, its ``n_samples`` attribute (an int) when it has
+    one, else, for one that reads a file (a ``spec`` attribute, a
+    :class:`~manip_id.datasets.FileSpec`, as the command line's runs), the rows the file's
+    header declares (:func:`~manip_id.execution.header_samples`: an upper bound).
+    """
+    if run.arrays is not None:
+        return int(np.shape(run.arrays[0])[0])
+    n = getattr(run.blocks, "n_samples", None)
+    if isinstance(n, (int, np.integer)) and not isinstance(n, bool):
+        return int(n)
+    spec = getattr(run.blocks, "spec", None)
+    return header_samples([spec]) if isinstance(spec, FileSpec) else None
+
+
 def accumulate_runs(
     robot: Robot,
     groups: Sequence[tuple[list[Run], Design]],
@@ -244,10 +268,14 @@ def accumulate_runs(
     ``scheduler``: None (this process, nothing of Dask imported) or any scheduler of
     :func:`manip_id.execution.open_backend` (``"local[:N]"``, ``"tcp://HOST:PORT"``, a
     scheduler JSON file, a ``distributed.Client``). The same tasks and the same tree
-    either way; a failing run fails the whole call (no partial sums).
+    either way; a failing run fails the whole call (no partial sums). The call is
+    announced as one run of the runs' samples when :func:`run_samples` knows them all.
     """
     worker_robot = robot if scheduler is None else portable_robot(robot)
-    with open_backend(scheduler=scheduler) as backend:
+    sizes = [run_samples(run) for runs, _ in groups for run in runs]
+    known = all(n is not None for n in sizes) and sum(sizes) > 0  # type: ignore[arg-type]
+    announced = planned_samples(sum(sizes)) if known else nullcontext()  # type: ignore[arg-type]
+    with announced, open_backend(scheduler=scheduler) as backend:
         roots, stream = [], 0
         for runs, design in groups:
             leaves = []
