@@ -53,11 +53,15 @@ def _rows(robot, path, chunk):
     return src, iter_rows(src, drop_bad_rows=True, chunk=chunk)
 
 
+@pytest.mark.parametrize("capacity", [None, "rows", 1000])
 @pytest.mark.parametrize("chunk", [64, 333, 100_000])
-def test_one_pass_equals_the_whole_array(robot, path, chunk, monkeypatch):
+def test_one_pass_equals_the_whole_array(robot, path, chunk, capacity, monkeypatch):
+    """Also with the positions filled in place: for the file's row count (an upper bound:
+    bad rows are dropped) and for a count too small (the rows so far become blocks)."""
     monkeypatch.setattr(reading, "FIT_ROWS", WINDOW)
     src, rows = _rows(robot, path, chunk)
-    got = read_pass(rows, src.layout, src.joint_names, STANDSTILL)
+    cap = src.n_rows if capacity == "rows" else capacity
+    got = read_pass(rows, src.layout, src.joint_names, STANDSTILL, cap)
     src, rows = _rows(robot, path, 100_000)
     ds = collect(rows, src.layout, src.joint_names)
     n = ds.n_samples

@@ -16,6 +16,7 @@ from manip_id.datasets import (
     load_panda_gaz2019,
     save_dataset,
 )
+from manip_id.datasets.quality import encoder_resolution
 from manip_id.errors import DataError, ManipIdError
 
 NAMES = ("j1", "j2", "j3")
@@ -259,3 +260,19 @@ def test_panda_log_with_wrong_count(tmp_path):
         warnings.simplefilter("error")
         with pytest.raises(DataError, match="has 20 values but 7 x 3 time stamps = 21"):
             load_dataset(tmp_path)
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 5, 65536, 65537, 65538, 140001])
+def test_encoder_resolution_in_blocks_is_the_smallest_step_of_the_whole(n):
+    """Evaluated in blocks of rows (no (N, nq) temporaries), the smallest non-zero step
+    per column equals numpy's on the whole array, across block edges; a joint that never
+    moves has inf."""
+    rng = np.random.default_rng(n)
+    q = np.round(rng.standard_normal((n, 3)).cumsum(axis=0) * 1e3) / 1e3  # [rad], 1 mrad steps
+    if n:
+        q[:, 2] = 0.25
+        q[min(n - 1, 65536), 0] += 1e-7  # one tiny step, at a block edge for the long ones
+    steps = np.abs(np.diff(q, axis=0))
+    steps[steps == 0] = np.inf
+    want = steps.min(axis=0) if steps.shape[0] else np.full(3, np.inf)
+    assert np.array_equal(encoder_resolution(q), want)

@@ -76,7 +76,7 @@ def _read(robot: Robot, spec: FileSpec, options: AuditOptions, eps: float, cache
         counts=counts,
     )
     try:
-        ds = read_pass(rows, lay, src.joint_names, eps)
+        ds = read_pass(rows, lay, src.joint_names, eps, getattr(src, "n_rows", None))
     except DataError as exc:
         msg = str(exc)
         raise DataError(msg if str(spec.path) in msg else f"{spec.label}: {msg}") from exc

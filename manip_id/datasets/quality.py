@@ -57,9 +57,16 @@ _MOTION_BINS = 4 * 20  # windows' motion: quarter decades from 1e-15 to 1e5
 def encoder_resolution(q) -> np.ndarray:
     """Per column, the smallest non-zero step ``|q_{k+1} - q_k|`` [rad or m]; inf when q
     never changes. Shape (nq,) from q of shape (N, nq)."""
-    steps = np.abs(np.diff(np.asarray(q, dtype=float), axis=0))
-    steps[steps == 0] = np.inf
-    return steps.min(axis=0) if steps.shape[0] else np.full(steps.shape[1], np.inf)
+    q = np.asarray(q, dtype=float)
+    out = np.full(q.shape[1], np.inf)
+    for a in range(0, q.shape[0] - 1, _STEP_BLOCK):  # blocks: no (N, nq) temporaries
+        steps = np.abs(np.diff(q[a : a + _STEP_BLOCK + 1], axis=0))
+        steps[steps == 0] = np.inf
+        out = np.minimum(out, steps.min(axis=0))
+    return out
+
+
+_STEP_BLOCK = 65536  # rows per block of encoder_resolution
 
 
 def static_span(resolution) -> np.ndarray:
