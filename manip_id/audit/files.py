@@ -127,6 +127,7 @@ def audit_file(
         audits = _static_fits(robot, ds, still)
         rest, kept = (0.0, 0.0), None
     else:
+        ds.q = np.empty((0, ds.q.shape[1]))  # every row's positions used: freed before the fits
         audits, gain = _motion_fits(robot, ds.central, still, eps, options, findings)
         rest, kept = _edges(ds, still, spec, counts)
         if max(rest) > EDGE_REST:

@@ -71,11 +71,9 @@ def read_pass(rows, layout, joint_names, eps: float, capacity: int | None = None
     """:class:`AuditRows` of the packed row blocks ``rows`` (one pass; see the module
     docstring); ``eps`` is the standstill speed [rad/s or m/s]. ``capacity``: at most that
     many rows come (the source's row count, when known): ``t`` and ``q`` are then filled in
-    place, one copy of the positions instead of the blocks and their concatenation."""
-    ts: list[np.ndarray] = []
-    qs: list[np.ndarray] = []
+    place without growing."""
     held: list = []  # (first row, fields) of the blocks that may be central
-    buf = _Positions(capacity, layout.nq) if capacity is not None else None
+    buf = _Positions(capacity or 0, layout.nq)
     n, still, tau_sum = 0, np.zeros(layout.nv), np.zeros(layout.nv)
     first = last = None
     with warnings.catch_warnings():
@@ -83,14 +81,7 @@ def read_pass(rows, layout, joint_names, eps: float, capacity: int | None = None
         for block in rows:
             f = layout.unpack(block)
             k = block.shape[0]
-            if buf is not None and buf.fits(k):
-                buf.add(f["t"], f["q"])
-            else:  # no (or a wrong) row count: the blocks, joined at the end
-                if buf is not None:
-                    buf.spill(ts, qs)
-                    buf = None
-                ts.append(np.array(f["t"], dtype=float))
-                qs.append(np.array(f["q"], dtype=float, order="C"))
+            buf.add(f["t"], f["q"])
             rest = np.abs(f["dq"]) < eps
             still += rest.sum(axis=0)
             tau_sum += f["tau"].sum(axis=0)
@@ -106,9 +97,7 @@ def read_pass(rows, layout, joint_names, eps: float, capacity: int | None = None
             bound = (n - FIT_ROWS) // 2
             while held and held[0][0] + next(iter(held[0][1].values())).shape[0] <= bound:
                 held.pop(0)
-    if buf is not None:
-        ts, qs = [buf.t[: buf.n]], [buf.q[: buf.n]]
-    t = np.concatenate(ts) if len(ts) > 1 else (ts[0] if ts else np.empty(0))
+    t = buf.t[: buf.n]
     start = (n - FIT_ROWS) // 2 if n > FIT_ROWS else 0
     stop = min(n, start + FIT_ROWS)
     fields, parts = {}, []
@@ -119,11 +108,11 @@ def read_pass(rows, layout, joint_names, eps: float, capacity: int | None = None
     del held, parts  # before the positions are joined: the peak is about two copies of q
     if "dq" not in fields:
         fields = {m: np.empty((0, layout.nv)) for m in ("dq", "tau")}
-    q = np.concatenate(qs) if len(qs) > 1 else (qs[0] if qs else np.empty((0, layout.nq)))
-    del qs, buf
+    q = buf.q[: buf.n]
+    del buf
     central = Dataset(
         t=t[start:stop],
-        q=q[start:stop],
+        q=q[start:stop].copy(),  # its own rows: the whole q can be freed
         dq=fields["dq"],
         tau=fields["tau"],
         ddq=fields.get("ddq"),
@@ -134,22 +123,23 @@ def read_pass(rows, layout, joint_names, eps: float, capacity: int | None = None
 
 
 class _Positions:
-    """``t`` and ``q`` of a pass filled in place, for at most ``capacity`` rows."""
+    """``t`` and ``q`` of a pass, filled in place: the arrays grow by doubling when a block
+    does not fit (``capacity``: the rows expected, e.g. the source's count; 0: unknown).
+    Their pages are touched only as rows come, so the resident memory is about one copy of
+    the rows, not the blocks and their concatenation."""
 
     def __init__(self, capacity: int, nq: int):
         self.t = np.empty(max(int(capacity), 0))
         self.q = np.empty((max(int(capacity), 0), nq))
         self.n = 0
 
-    def fits(self, k: int) -> bool:
-        return self.n + k <= self.t.shape[0]
-
     def add(self, t, q) -> None:
-        self.t[self.n : self.n + len(t)] = t
-        self.q[self.n : self.n + len(t)] = q
-        self.n += len(t)
-
-    def spill(self, ts: list, qs: list) -> None:
-        """More rows than announced: the rows so far become the first blocks."""
-        ts.append(self.t[: self.n].copy())
-        qs.append(self.q[: self.n].copy())
+        k = len(t)
+        if self.n + k > self.t.shape[0]:
+            size = max(2 * self.t.shape[0], self.n + k, 4096)
+            t_new, q_new = np.empty(size), np.empty((size, self.q.shape[1]))
+            t_new[: self.n], q_new[: self.n] = self.t[: self.n], self.q[: self.n]
+            self.t, self.q = t_new, q_new
+        self.t[self.n : self.n + k] = t
+        self.q[self.n : self.n + k] = q
+        self.n += k
