@@ -168,3 +168,31 @@ def test_header_samples_counts_what_the_headers_declare(tmp_path):
     assert header_samples([a, str(broken)]) is None  # its task will name it
     assert header_samples([str(tmp_path / "missing.npz")]) is None
     assert header_samples([]) == 0
+
+
+def _slow_square(x: int, seconds: float) -> tuple[int, int]:
+    import os
+    import time
+
+    time.sleep(seconds)
+    return x * x, os.getpid()
+
+
+def test_local_workers_take_one_task_at_a_time_and_map_keeps_order():
+    """A local cluster's scheduler hands a single-threaded worker one task at a time
+    (Dask's default 1.1 holds two: the last tasks of a run then wait behind a busy worker
+    while the other idles); ``DaskBackend.map`` submits the tasks in one graph and returns
+    them in order, the values of the serial map."""
+    client, cluster = connect("local:2")
+    try:
+        assert cluster.scheduler.WORKER_SATURATION == execution.LOCAL_SATURATION == 1.0
+        backend = DaskBackend(client)
+        args = [(k, 0.2) for k in range(8)]
+        got = backend.gather(backend.map(_slow_square, args))
+        assert [v for v, _ in got] == [k * k for k in range(8)]
+        pids = [p for _, p in got]
+        # eight equal tasks, handed out as workers free up: each worker ran some
+        assert len(set(pids)) == 2, pids
+    finally:
+        client.close()
+        cluster.close()

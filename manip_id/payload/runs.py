@@ -276,14 +276,16 @@ def accumulate_runs(
     known = all(n is not None for n in sizes) and sum(sizes) > 0  # type: ignore[arg-type]
     announced = planned_samples(sum(sizes)) if known else nullcontext()  # type: ignore[arg-type]
     with announced, open_backend(scheduler=scheduler) as backend:
-        roots, stream = [], 0
-        for runs, design in groups:
-            leaves = []
-            for run in runs:
-                args = (worker_robot, run, design, int(chunk), deadband, stream)
-                leaves.append(backend.submit(run_sums, *args))
-                stream += 1
-            roots.append(reduce_tree(backend, leaves, SPLIT_EVERY))
+        args = [
+            (worker_robot, run, design, int(chunk), deadband)
+            for runs, design in groups
+            for run in runs
+        ]
+        leaves = backend.map(run_sums, [(*a, stream) for stream, a in enumerate(args)])
+        roots, at = [], 0  # every run's task at once (balanced), then a tree per group
+        for runs, _ in groups:
+            roots.append(reduce_tree(backend, leaves[at : at + len(runs)], SPLIT_EVERY))
+            at += len(runs)
         return list(backend.gather(roots))
 
 
