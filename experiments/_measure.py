@@ -100,3 +100,15 @@ def machine() -> str:
     except (OSError, ValueError, IndexError):
         pass
     return f"{cpu}, {os.cpu_count()} cores{mem}, Python {platform.python_version()}"
+
+
+def local_cluster(workers: int) -> tuple:
+    """``(client, cluster, start-up [s])`` of ``manip_id.execution.connect("local:N")``
+    for ``workers`` > 0; ``(None, None, None)`` for 0 (the local case, no Dask)."""
+    if workers <= 0:
+        return None, None, None
+    from manip_id.execution import connect  # the benchmark's own import, timed apart
+
+    t0 = time.perf_counter()
+    client, cluster = connect(f"local:{workers}")
+    return client, cluster, time.perf_counter() - t0

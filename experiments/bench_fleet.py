@@ -47,6 +47,9 @@ import numpy as np
 
 from manip_id.identification import PartitionOptions, RunOptions
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _measure import local_cluster  # noqa: E402
+
 ROBOT = "ur10"
 FRICTION = ("viscous", "coulomb")
 
@@ -87,16 +90,13 @@ def _warm_worker() -> None:
 def run_case(paths: list[str], workers: int, block: int | None) -> dict:
     """One case in this process: 0 workers = serial (no Dask)."""
     from manip_id import load_robot
-    from manip_id.execution import connect
     from manip_id.fleet import identify_files
 
     robot = load_robot(ROBOT, friction=FRICTION)
     out: dict = {"workers": workers}
-    client = cluster = None
-    if workers > 0:
-        t0 = time.perf_counter()
-        client, cluster = connect(f"local:{workers}")
-        out["startup_s"] = time.perf_counter() - t0
+    client, cluster, startup = local_cluster(workers)
+    if client is not None:
+        out["startup_s"] = startup
     try:
         # the structural analysis is the same in every case: out of the clock
         from manip_id.identifiability import analyze

@@ -48,6 +48,9 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _measure import local_cluster  # noqa: E402
+
 ROBOT, FRAME = "ur5", "tool0"
 
 
@@ -115,16 +118,14 @@ def run_case(unloaded: list[str], loaded: list[str], workers: int) -> dict:
     """One case in this process: 0 workers = local (no Dask)."""
     from manip_id import load_robot
     from manip_id.compiled_regressor import AUTO_SAMPLES
-    from manip_id.execution import connect, portable_robot
+    from manip_id.execution import portable_robot
     from manip_id.payload import identify_payload
 
     robot = load_robot(ROBOT)
     out: dict = {"workers": workers}
-    client = cluster = None
-    if workers > 0:
-        t0 = time.perf_counter()
-        client, cluster = connect(f"local:{workers}")
-        out["startup_s"] = time.perf_counter() - t0
+    client, cluster, startup = local_cluster(workers)
+    if client is not None:
+        out["startup_s"] = startup
     try:
         light = portable_robot(robot) if client is not None else robot
         dist = client is not None
