@@ -243,7 +243,9 @@ def test_cli_missing_temperature_is_one_line(files, capsys):
     folder, _ = files
     argv = ["identify", "double_pendulum", "--friction", LAW, "--data"]
     assert main([*argv, str(folder / "plain.npz")]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
+    out = capsys.readouterr()
+    assert out.out == ""  # said before the pre-fit audit prints its table
+    err = out.err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("manip-id: error:")
     assert "temperature" in err[0] and "plain.npz" in err[0] and "temp array" in err[0]
     cols = [*("--column", "t=time", "--column", "q=p*", "--column", "dq=v*"),

@@ -33,6 +33,7 @@ from ..identification import (
 from ..identification.selection import select_model_files
 from ..identification.temperature import (
     check_scans_temperature,
+    check_sources_temperature,
     reference_from_scans,
     reference_text,
 )
@@ -82,6 +83,7 @@ def _scan(robot, args: argparse.Namespace, specs, vspecs, options, timings: dict
     """The pre-fit audit (printed), then each training and validation file scanned
     (``--split``: the one file cut first). A slow format (CSV, ROS bags) is parsed once:
     the audit's pass records its rows, which the scans read back."""
+    check_sources_temperature(robot, specs + (vspecs or []))  # before the audit's output
     with RowCache() as cache:
         t0 = time.perf_counter()
         audited, audit = before_fit(robot, specs + (vspecs or []), options, args, cache=cache)

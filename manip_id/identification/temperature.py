@@ -27,7 +27,7 @@ import numpy as np
 from ..errors import MissingTemperatureError
 from ..friction import NO_SHAPES, TemperatureStats
 from ..robot import Robot
-from .reading import scan_file
+from .reading import open_checked, scan_file
 from .tasks import file_specs
 
 
@@ -39,6 +39,18 @@ def check_scans_temperature(robot: Robot, scans) -> None:
     for scan in scans:
         if scan.temperature is None:
             raise MissingTemperatureError(scan.spec.label, scan.format, scan.layout.fields)
+
+
+def check_sources_temperature(robot: Robot, specs) -> None:
+    """:func:`check_scans_temperature` before any row is read: each file of ``specs``
+    (:class:`~manip_id.datasets.FileSpec`) opened for its fields only, so that a missing
+    temperature is said before the audit and the scans run."""
+    if not robot.layout.needs_temperature:
+        return
+    for spec in specs:
+        src, _ = open_checked(robot, spec)
+        if "temp" not in src.layout.fields:
+            raise MissingTemperatureError(spec.label, src.format, src.layout.fields)
 
 
 def scans_temperature(scans) -> TemperatureStats | None:
@@ -141,6 +153,7 @@ def reference_text(robot: Robot) -> str | None:
 __all__ = [
     "candidate_reference",
     "check_scans_temperature",
+    "check_sources_temperature",
     "note_reference",
     "reference_from_arrays",
     "reference_from_files",
