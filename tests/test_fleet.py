@@ -24,8 +24,8 @@ from conftest import get_robot
 
 from manip_id.datasets import parse_file_spec
 from manip_id.errors import DataError, InputError
-from manip_id.fleet import identify_files, parse_scheduler, portable_robot
 from manip_id.identification import ModelOptions, PartitionOptions, RunOptions, identify
+from manip_id.identification.fleet import identify_files, parse_scheduler, portable_robot
 
 VENV_BIN = Path(sys.executable).parent
 N_FILES, N_SAMPLES = 6, 1500
@@ -282,7 +282,8 @@ def test_preprocessed_files_any_partition(robot, tmp_path):
 
 def test_no_dask_without_a_scheduler(fleet):
     code = (
-        "import sys; from manip_id import load_robot; from manip_id.fleet import identify_files;"
+        "import sys; from manip_id import load_robot;"
+        " from manip_id.identification.fleet import identify_files;"
         "r = load_robot('ur10', friction='viscous,coulomb');"
         f"identify_files(r, {fleet[0][:2]!r}, partition=dict(per_file=True, block=700));"
         "from manip_id.cli import main;"
@@ -340,7 +341,7 @@ def test_portable_robot_pickles_small_and_identifies_the_same(robot, fleet, refe
 def test_accumulator_pickles(robot, fleet):
     import pickle
 
-    from manip_id.fleet import FilePart, part_sums
+    from manip_id.identification.fleet import FilePart, part_sums
 
     res = identify(robot, *fleet[1][0])
     spec = parse_file_spec(fleet[0][0])

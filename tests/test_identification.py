@@ -19,7 +19,7 @@ from manip_id.identification import (
     identify,
     identify_dataset,
 )
-from manip_id.regressor import iter_regressor
+from manip_id.robot.regressor import iter_regressor
 from manip_id.trajectories import FourierTrajectory
 
 

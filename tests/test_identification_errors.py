@@ -12,7 +12,6 @@ import pinocchio as pin
 import pytest
 from conftest import get_robot
 
-from manip_id.fleet import identify_files
 from manip_id.identification import (
     NOT_DETERMINED,
     PreprocessOptions,
@@ -21,6 +20,7 @@ from manip_id.identification import (
     iter_processed,
     scan_file,
 )
+from manip_id.identification.fleet import identify_files
 
 FV, FC = 0.3, 0.8  # viscous [N m s/rad], Coulomb [N m]
 DQ_NOISE = 0.002  # measured velocity noise [rad/s]

@@ -22,7 +22,7 @@ from manip_id.models import (
     momentum_regressors,
     momentum_rows,
 )
-from manip_id.robot import available_robots
+from manip_id.robot.model import available_robots
 from manip_id.simulation import MeasurementNoise, simulate
 from manip_id.trajectories import random_trajectory
 
@@ -376,7 +376,7 @@ def test_default_window_runs_where_the_default_gives_too_few_rows(panda, traject
 
 
 def test_files_path_chooses_the_same_window(panda, trajectory, tmp_path):
-    from manip_id.fleet import identify_files
+    from manip_id.identification.fleet import identify_files
 
     robot, _ = panda
     ds = _data(panda, trajectory, noise=0.01)

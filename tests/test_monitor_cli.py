@@ -17,7 +17,7 @@ from conftest import get_robot
 from manip_id.cli import main
 from manip_id.datasets import Dataset, save_dataset
 from manip_id.export import export_urdf
-from manip_id.fleet import identify_files
+from manip_id.identification.fleet import identify_files
 from manip_id.simulation import simulate
 from manip_id.trajectories import random_trajectory
 

@@ -1,7 +1,7 @@
 """``manip-id identify --scheduler SPEC / --per-file``: many files, one task each, on Dask.
 
 Each ``--data`` file (and each ``--block`` of one) is read, preprocessed and
-accumulated by one task (:func:`manip_id.fleet.identify_files`), on a Dask
+accumulated by one task (:func:`manip_id.identification.fleet.identify_files`), on a Dask
 cluster with ``--scheduler`` (``local[:N]``, ``tcp://HOST:PORT`` or a
 scheduler JSON file) or in this process without it; the client solves from
 the summed information. ``--per-file`` adds each file's own estimate and
@@ -16,8 +16,8 @@ from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
-from ..fleet import identify_files
 from ..identification import ModelOptions, PartitionOptions, RunOptions
+from ..identification.fleet import identify_files
 from ..identification.temperature import reference_from_files
 from ..signals import DEFAULT_CUTOFF
 from ..viz.report_document import RunContext, add_file_info, result_document

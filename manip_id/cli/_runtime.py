@@ -18,7 +18,7 @@ from ..execution import available_cores, cap_local_workers
 from ..export import export_texts, mjcf_text, sidecar_path
 from ..export.sidecar import identification_provenance
 from ..identification import ConsistentOptions, PreprocessOptions, result_text, verdict_text
-from ..robot import Robot, load_robot
+from ..robot.model import Robot, load_robot
 from ..viz.report_document import ReportOptions
 from ._common import (
     exports_wanted,

@@ -15,7 +15,7 @@ from typing import Any
 from ..datasets import Layout
 from ..estimators.consistent.terms import missing_term_warnings
 from ..identifiability import BaseParameters
-from ..robot import Robot
+from ..robot.model import Robot
 from .file_sums import accumulate_files, merge_accumulations
 from .options import (
     ConsistentOptions,

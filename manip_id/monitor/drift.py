@@ -2,7 +2,7 @@
 
 Each file (or each group of files: one robot's logs) is identified on its own with the
 reference's base parametrization (on the fleet path, one task per file:
-:func:`manip_id.fleet.identify_files`), and
+:func:`manip_id.identification.fleet.identify_files`), and
 its base parameters ``theta_f`` are compared with the reference's ``theta_r``, both with
 their covariances (independent data)::
 
@@ -30,13 +30,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import chdtrc, ndtr
 
-from .errors import InputError, ModelMismatchError, RankDeficiencyError
-from .fleet import identify_files
-from .identification import PartitionOptions, PreprocessOptions, RunOptions
-from .identification.document import single_standard
-from .monitor import covariance_kind
-from .parameters import JOINT_TERM
-from .robot import Robot
+from ..errors import InputError, ModelMismatchError, RankDeficiencyError
+from ..identification import PartitionOptions, PreprocessOptions, RunOptions
+from ..identification.document import single_standard
+from ..identification.fleet import identify_files
+from ..robot.model import Robot
+from ..robot.parameters import JOINT_TERM
+from . import covariance_kind
 
 #: Default significance level of the tests.
 DEFAULT_ALPHA = 0.05
@@ -227,11 +227,13 @@ def drift_files(
     robot: the robot, with the reference's joint terms
     reference: the reference :class:`~manip_id.identification.IdentificationResult`
         (e.g. :func:`~manip_id.identification.load_result` of ``manip-id identify --json``)
-    files: data files (file specs as :func:`~manip_id.fleet.identify_files` takes them),
+    files: data files (file specs as
+        :func:`~manip_id.identification.fleet.identify_files` takes them),
         each tested alone; or a mapping ``group -> files`` (e.g. one robot's logs), each
         group identified from all its files and tested as one
     alpha: significance level in (0, 1)
-    scheduler, options, window: as :func:`~manip_id.fleet.identify_files` (one task per
+    scheduler, options, window: as
+        :func:`~manip_id.identification.fleet.identify_files` (one task per
         file; with groups, one map-reduce per group: give a running scheduler or a
         ``distributed.Client`` rather than ``"local"``, which starts a cluster per group)
 

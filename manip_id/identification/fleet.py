@@ -47,10 +47,9 @@ from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from .compiled_regressor import planned_samples
-from .datasets import FileSpec
-from .errors import InputError, RankDeficiencyError
-from .execution import (
+from ..datasets import FileSpec
+from ..errors import InputError, RankDeficiencyError
+from ..execution import (
     DEFAULT_LOCAL_WORKERS,
     SPLIT_EVERY,
     WORKER_ENV,
@@ -58,8 +57,10 @@ from .execution import (
     parse_scheduler,
     portable_robot,
 )
-from .identifiability import BaseParameters
-from .identification import (
+from ..identifiability import BaseParameters
+from ..robot.compiled_regressor import planned_samples
+from ..robot.model import Robot
+from . import (
     LEAST_SQUARES,
     ConsistentOptions,
     FileRecord,
@@ -74,11 +75,10 @@ from .identification import (
     distributed_problem,
     solve,
 )
-from .identification.options import options_from
-from .identification.problem import resolve_base
-from .identification.tasks import FilePart, PartSums, file_length, part_sums
-from .identification.temperature import note_reference, reference_from_files
-from .robot import Robot
+from .options import options_from
+from .problem import resolve_base
+from .tasks import FilePart, PartSums, file_length, part_sums
+from .temperature import note_reference, reference_from_files
 
 #: Methods that accumulate (the online laws need the samples in order).
 FLEET_METHODS: tuple[str, ...] = LEAST_SQUARES
