@@ -20,8 +20,9 @@ and what it needs. To export a new name, add it to its submodule's tuple in
 
 from __future__ import annotations
 
-import importlib
 from typing import Any
+
+from ._lazy import LazyExports, by_module
 
 __version__ = "0.1.0"
 
@@ -110,28 +111,18 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
 }
 
 #: Public name -> (submodule, attribute) for names exported under another name.
-_ALIASES: dict[str, tuple[str, str]] = {
+_ALIASES: dict[str, tuple[str, str | None]] = {
     "simulate_adaptive": (".control.closed_loop", "simulate"),
 }
 
-_WHERE: dict[str, tuple[str, str]] = {
-    name: (module, name) for module, names in _EXPORTS.items() for name in names
-}
-_WHERE.update(_ALIASES)
-
-__all__ = sorted(_WHERE)
+_LAZY = LazyExports(__name__, {**by_module(_EXPORTS), **_ALIASES})
+__all__ = _LAZY.names
 
 
 def __getattr__(name: str) -> Any:
     """Import the submodule that defines ``name`` on first access (PEP 562)."""
-    try:
-        module, attr = _WHERE[name]
-    except KeyError:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
-    value = getattr(importlib.import_module(module, __name__), attr)
-    globals()[name] = value  # later look-ups skip this function
-    return value
+    return _LAZY.load(name, globals())
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+    return _LAZY.listing(globals())

@@ -347,3 +347,83 @@ def test_the_checks_bite():
     finally:
         SOURCES.clear()
         SOURCES.update(saved)
+
+
+def _layers_module():
+    """docs/layers.py, the one table of layers (loaded by path: docs/ is not a package)."""
+    import importlib.util
+
+    path = PACKAGE.parent / "docs" / "layers.py"
+    spec = importlib.util.spec_from_file_location("_manip_id_layers", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+LAYERS = _layers_module()
+
+
+def _layer(module: str) -> int | None:
+    return LAYERS.layer_of(module.removeprefix("manip_id").removeprefix("."))
+
+
+def test_every_module_has_a_layer():
+    missing = [m for m in SOURCES if _layer(m) is None]
+    _report("modules in no layer of docs/layers.py", missing)
+
+
+def test_no_upward_imports():
+    """A module imports only its own layer or lower ones (function-local imports too)."""
+    offenders = []
+    names = [layer for layer, _doc, _prefixes in LAYERS.LAYERS]
+    for module in SOURCES:
+        mine = _layer(module)
+        for target, imported, line, _local in _imports(module):
+            for dep in _internal(target, imported):
+                theirs = _layer(dep)
+                if mine is not None and theirs is not None and theirs > mine:
+                    offenders.append(
+                        f"{module}:{line} ({names[mine]}) imports {dep} ({names[theirs]})"
+                    )
+    _report("imports of a higher layer", offenders)
+
+
+def test_layout_page_is_generated_from_the_tree():
+    text = LAYERS.LAYOUT.read_text(encoding="utf-8")
+    assert LAYERS.MARKER in text
+    assert (
+        text.split(LAYERS.MARKER)[1].strip() == LAYERS.tables().split(LAYERS.MARKER)[1].strip()
+    ), "docs/layout.md has drifted from the tree: run python docs/layers.py"
+
+
+def _is_shim(tree: ast.Module) -> bool:
+    """A module that only re-exports: docstring, imports, ``__all__`` and nothing else."""
+    body = [
+        n
+        for n in tree.body
+        if not (isinstance(n, ast.Expr) and isinstance(n.value, ast.Constant))
+        and not isinstance(n, (ast.Import, ast.ImportFrom))
+        and not (
+            isinstance(n, ast.Assign) and [getattr(t, "id", None) for t in n.targets] == ["__all__"]
+        )
+    ]
+    has_imports = any(isinstance(n, ast.ImportFrom) and n.level for n in tree.body)
+    return has_imports and not body
+
+
+def test_no_shim_modules():
+    """No module kept only to re-export another's names under an old path (nothing was
+    released); a package's ``__init__`` may gather its own modules' names."""
+    offenders = [
+        m for m, (path, tree) in SOURCES.items() if path.name != "__init__.py" and _is_shim(tree)
+    ]
+    _report("modules that only re-export", offenders)
+
+
+def test_the_layer_checks_bite():
+    """An import from robot/ of identification/ is upward; a re-export module is a shim."""
+    assert _layer("manip_id.robot.model") < _layer("manip_id.identification.solve")
+    assert _layer("manip_id.errors") == 0
+    assert _is_shim(ast.parse('"""Old path."""\nfrom .x import a\n__all__ = ["a"]\n'))
+    assert not _is_shim(ast.parse("from .x import a\n\ndef f():\n    return a\n"))

@@ -200,17 +200,11 @@ def test_term_table_names_match_the_robot_flags():
         assert t.name in JointTerms(**flags).enabled
 
 
-def test_consistency_checks_are_reexported():
-    consistency = pytest.importorskip("manip_id.physics.consistency")
-    import manip_id.robot.parameters as parameters
-
-    assert parameters.check_consistency is consistency.check_consistency
-
-
 def test_pseudo_inertias_against_the_textbook_formula(panda_all):
-    pytest.importorskip("manip_id.physics.consistency")
+    from manip_id.physics.consistency import pseudo_inertia
+
     robot = panda_all
-    J = robot.layout.pseudo_inertias(robot.nominal_parameters)
+    J = pseudo_inertia(robot.layout.rigid_blocks(robot.nominal_parameters))
     assert J.shape == (robot.n_bodies, 4, 4)
     for i in range(1, robot.model.njoints):
         inertia = robot.model.inertias[i]

@@ -28,8 +28,9 @@ parameter (each parameter error non-increasing); :class:`ConcurrentLearningEstim
 adds a recorded history stack (convergence without persistent excitation).
 """
 
-import importlib
 from typing import Any
+
+from .._lazy import LazyExports
 
 #: Public name -> the submodule that defines it (imported on first use, PEP 562).
 _WHERE: dict[str, str] = {
@@ -60,44 +61,14 @@ _WHERE: dict[str, str] = {
 }
 
 
+_LAZY = LazyExports(__name__, {name: (module, name) for name, module in _WHERE.items()})
+__all__ = _LAZY.names
+
+
 def __getattr__(name: str) -> Any:
     """Import the submodule that defines ``name`` on first access (PEP 562)."""
-    try:
-        module = _WHERE[name]
-    except KeyError:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
-    value = getattr(importlib.import_module(module, __name__), name)
-    globals()[name] = value
-    return value
+    return _LAZY.load(name, globals())
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
-
-
-__all__ = [
-    "COND_LIMIT",
-    "INFO_RANK_RTOL",
-    "STACKED_RANK_RTOL",
-    "ConcurrentLearningEstimator",
-    "ConsistentSolution",
-    "DREMEstimator",
-    "GradientEstimator",
-    "InformationAccumulator",
-    "LeastSquaresSolution",
-    "OnlineHistory",
-    "RLSEstimator",
-    "ScoreBlocks",
-    "SolverError",
-    "StandardEstimate",
-    "Uncertainty",
-    "UncertaintyOptions",
-    "build_problem",
-    "estimate_uncertainty",
-    "format_direction",
-    "solve_accumulator",
-    "solve_consistent",
-    "solve_normal_equations",
-    "solve_stacked",
-    "solution_uncertainty",
-]
+    return _LAZY.listing(globals())

@@ -68,11 +68,6 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..errors import InputError
-from ..physics.consistency import ConsistencyReport as ConsistencyReport  # re-exported
-from ..physics.consistency import check_consistency as check_consistency  # re-exported
-from ..physics.consistency import parameters_from_pseudo_inertia as parameters_from_pseudo_inertia
-from ..physics.consistency import pseudo_inertia
-from ..physics.consistency import pseudo_inertia_basis as pseudo_inertia_basis  # re-exported
 from .friction import (
     MAX_HARMONICS,
     FrictionShapes,
@@ -582,16 +577,6 @@ class ParameterLayout:
         shapes, sig = self.shapes, (load, temp, history)
         vals = np.stack([t.column(angles, vel, acc, shapes, *sig) for t in self.term_table], -1)
         return vals if self.mask is None else vals * self.mask
-
-    # ------------------------------------------------------- physical consistency
-    def pseudo_inertias(self, theta: ArrayLike) -> np.ndarray:
-        """Each body's pseudo-inertia ``J = [[0.5 tr(I) 1 - I, h], [h^T, m]]``, shape (nb, 4, 4).
-
-        ``I`` about the joint frame origin [kg m^2], ``h = m c`` [kg m], ``m`` [kg]
-        (:func:`manip_id.physics.consistency.pseudo_inertia`); ``J`` is positive definite for a
-        physically realizable body.
-        """
-        return pseudo_inertia(self.rigid_blocks(theta))
 
     def __repr__(self) -> str:
         return (

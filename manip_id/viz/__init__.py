@@ -38,8 +38,9 @@ folder, then renamed).
 
 from __future__ import annotations
 
-import importlib
 from typing import Any
+
+from .._lazy import LazyExports
 
 #: Public name -> (submodule, attribute; None for the submodule itself), imported on
 #: first use (PEP 562): ``import manip_id.viz`` loads neither matplotlib nor meshcat.
@@ -52,41 +53,19 @@ _WHERE: dict[str, tuple[str, str | None]] = {
     "equivalent_ellipsoid": (".inertia_ellipsoid", "equivalent_ellipsoid"),
     "inertia_ellipsoids": (".inertia_ellipsoid", "inertia_ellipsoids"),
     "link_identifiability": (".link_colors", "link_identifiability"),
-    "ReportExistsError": ("..errors", "ReportExistsError"),
-    "check_report_target": ("manip_id._io", "check_report_target"),
     "write_report": (".report", "write_report"),
     "ReportContent": (".report", "ReportContent"),
 }
 
 
+_LAZY = LazyExports(__name__, _WHERE)
+__all__ = _LAZY.names
+
+
 def __getattr__(name: str) -> Any:
     """Import the submodule that defines ``name`` on first access (PEP 562)."""
-    try:
-        module, attr = _WHERE[name]
-    except KeyError:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
-    value = importlib.import_module(module, __name__)
-    if attr is not None:
-        value = getattr(value, attr)
-    globals()[name] = value
-    return value
+    return _LAZY.load(name, globals())
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
-
-
-__all__ = [
-    "EquivalentEllipsoid",
-    "LinkIdentifiability",
-    "RobotScene",
-    "check_trajectory",
-    "equivalent_ellipsoid",
-    "inertia_ellipsoids",
-    "link_identifiability",
-    "figures",
-    "ReportExistsError",
-    "check_report_target",
-    "ReportContent",
-    "write_report",
-]
+    return _LAZY.listing(globals())
