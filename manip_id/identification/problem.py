@@ -33,7 +33,29 @@ from ..execution import ForkBackend
 from ..identifiability import BaseParameters, analyze
 from ..regressor import DEFAULT_CHUNK, check_states, check_temperature
 from ..robot import Robot
-from .options import RunOptions, UncertaintyOptions
+from .options import ConsistentOptions, RunOptions, UncertaintyOptions
+
+
+@dataclass(frozen=True)
+class SolveSettings:
+    """How :func:`~manip_id.identification.solve` turns a problem into its result.
+
+    Attributes
+    ----------
+    method : str
+        "ols", "wls", or the online law ("rls", "gradient") whose pass the problem holds.
+    consistent : ConsistentOptions or None
+        A physically consistent estimate ("ols" / "wls").
+    minimum_norm : bool
+        Solve rank-deficient data with the minimum-norm solution instead of raising.
+    uncertainty : UncertaintyOptions or None
+        The covariance behind ``std`` (None: ``"auto"``).
+    """
+
+    method: str = "ols"
+    consistent: ConsistentOptions | None = None
+    minimum_norm: bool = False
+    uncertainty: UncertaintyOptions | None = None
 
 
 @dataclass
@@ -177,6 +199,15 @@ class Problem:
     still, raw : InformationAccumulator or None
         The training rows inside the velocity deadband (Coulomb column zero), and every
         training row against the raw, unfiltered torques (:class:`RowSums`).
+    settings : SolveSettings
+        The method and the solve's options (what :func:`solve` uses unless told otherwise).
+    context : dict
+        What the run knows besides the sums (source, preprocessing, audit, data quality,
+        the friction selection ...): merged into the result's ``context``.
+    post : list of callable
+        Steps ``result -> result`` run by :func:`solve` after the fit, in order (the
+        missing-term warnings of a consistent fit, the temperature reference, per-file
+        estimates).
     """
 
     robot: Robot
@@ -193,6 +224,9 @@ class Problem:
     chunk: int = DEFAULT_CHUNK
     still: InformationAccumulator | None = None
     raw: InformationAccumulator | None = None
+    settings: SolveSettings = field(default_factory=SolveSettings)
+    context: dict = field(default_factory=dict)
+    post: list = field(default_factory=list)
 
 
 # ------------------------------------------------------------------ checks
@@ -567,6 +601,7 @@ __all__ = [
     "OnlineRun",
     "RowSums",
     "Problem",
+    "SolveSettings",
     "accumulate_arrays",
     "accumulate_blocks",
     "accumulate_forked",
