@@ -30,6 +30,7 @@ import numpy as np
 
 from ..audit import AuditOptions, audit_files
 from ..datasets import Layout, RowCache, load_dataset
+from ..datasets.stream import torque_scale_vector
 from ..errors import InputError
 from ..identifiability import BaseParameters
 from ..robot import Robot
@@ -38,7 +39,7 @@ from .arrays import CallOptions, samples_problem
 from .data_sources import Samples
 from .files import distributed_files_problem, files_problem
 from .options import LEAST_SQUARES, PreprocessOptions, RunOptions, check_least_squares
-from .problem import Problem, SolveSettings, resolve_base
+from .problem import FileRecord, Problem, SolveSettings, resolve_base
 from .reading import iter_processed, scan_file, split_file
 from .result import IdentificationResult
 from .solve import solve
@@ -107,7 +108,8 @@ class FileOptions:
 
 def collect(robot: Robot, specs, options, scans) -> SimpleNamespace:
     """The preprocessed files in memory, one after the other (time shifted to increase):
-    ``t, q, dq, ddq, tau[, temp]``, ``n_samples`` and the preprocessing ``settings``."""
+    ``t, q, dq, ddq, tau[, temp]``, ``n_samples``, the preprocessing ``settings`` and
+    ``counts``, the samples of each file."""
     nq, nv = robot.nq, robot.nv
     parts: list[np.ndarray] = []
     settings = None
@@ -126,7 +128,17 @@ def collect(robot: Robot, specs, options, scans) -> SimpleNamespace:
     rows = np.vstack(parts)
     f = Layout.processed(nq, nv, rows.shape[1]).unpack(rows)
     fields: dict = {"temp": None, **f}  # temp: the temperature law's, when measured
-    return SimpleNamespace(**fields, n_samples=rows.shape[0], settings=settings)
+    counts = [p.shape[0] for p in parts]
+    return SimpleNamespace(**fields, n_samples=rows.shape[0], settings=settings, counts=counts)
+
+
+def _records(robot: Robot, specs, data, scans, options) -> list[FileRecord]:
+    """The records of files held in memory (:func:`collect`): nothing left out."""
+    scale = torque_scale_vector(options.torque_scale, robot.nv, "torque_scale")
+    return [
+        FileRecord(s, n, np.zeros(robot.nv, dtype=int), scans[s].quality, data.settings, scale)
+        for s, n in zip(specs, data.counts, strict=True)
+    ]
 
 
 def _scan(robot: Robot, specs, vspecs, fopts: FileOptions, run: RunOptions, timings: dict):
@@ -292,7 +304,14 @@ def files_build(
             robot, samples, None if vsamples is None else vsamples.arrays(), base, settings, opts
         )
         problem.timings.update(timings)
-        files, preprocess = None, train.settings
+        files = {
+            "train": _records(robot, f.specs, train, f.scans, options),
+            "validation": None
+            if valid is None
+            else _records(robot, f.vspecs, valid, f.scans, options),
+        }
+        problem.files = files
+        preprocess = train.settings
         n_valid = 0 if valid is None else valid.n_samples
         parts = _raw_parts(f.specs, f.vspecs, train, valid, options)
 
