@@ -44,8 +44,8 @@ from .document import (
     summary_rows,
     verdict_text,
 )
-from .file_sums import FileAccumulation, accumulate_file, accumulate_files, merge_accumulations
 from .file_run import FileOptions
+from .file_sums import FileAccumulation, accumulate_file, accumulate_files, merge_accumulations
 from .files import FileEstimate
 from .front import build_problem, identify
 from .options import (

@@ -42,9 +42,9 @@ from .options import LEAST_SQUARES, PreprocessOptions, RunOptions, check_least_s
 from .problem import FileRecord, Problem, SolveSettings, resolve_base
 from .reading import iter_processed, scan_file, split_file
 from .result import IdentificationResult
-from .solve import solve
 from .run_context import RunContext, file_keys, raw_reference, run_keys
 from .selection import SelectionOptions, select_model_files
+from .solve import solve
 from .tasks import PartitionOptions, file_specs
 from .temperature import (
     check_scans_temperature,
@@ -103,7 +103,9 @@ class FileOptions:
     def distributed(self, run: RunOptions) -> bool:
         """Whether the files are tasks (a scheduler, blocks, or per-file estimates)."""
         part = self.partition
-        return run.scheduler is not None or (part is not None and (part.per_file or bool(part.block)))
+        return run.scheduler is not None or (
+            part is not None and (part.per_file or bool(part.block))
+        )
 
 
 def collect(robot: Robot, specs, options, scans) -> SimpleNamespace:
@@ -155,7 +157,10 @@ def _scan(robot: Robot, specs, vspecs, fopts: FileOptions, run: RunOptions, timi
             run.say(audit.table())
             if fopts.trim_standstill:
                 trimmed = audit.trimmed()
-                specs, vspecs = trimmed[: len(specs)], None if vspecs is None else trimmed[len(specs) :]
+                specs, vspecs = (
+                    trimmed[: len(specs)],
+                    None if vspecs is None else trimmed[len(specs) :],
+                )
                 run.say("--trim-standstill: " + ", ".join(s.label for s in trimmed))
             timings["audit"] = time.perf_counter() - t0
         t0 = time.perf_counter()
@@ -233,7 +238,10 @@ def _raw_parts(specs, vspecs, train, valid, options) -> list:
     if len(specs) != 1 or (vspecs is not None and len(vspecs) != 1):
         return []
     parts, raws = [], {}
-    for name, spec, proc in (("train", specs[0], train), ("validation", (vspecs or [None])[0], valid)):
+    for name, spec, proc in (
+        ("train", specs[0], train),
+        ("validation", (vspecs or [None])[0], valid),
+    ):
         if spec is None:
             continue
         key = (str(spec.path), spec.topic)
@@ -299,7 +307,9 @@ def files_build(
         valid = None if f.vspecs is None else collect(robot, f.vspecs, options, f.scans)
         timings["preprocess"] = time.perf_counter() - t0
         samples = Samples(train.q, train.dq, train.ddq, train.tau, train.temp)
-        vsamples = None if valid is None else Samples(valid.q, valid.dq, valid.ddq, valid.tau, valid.temp)
+        vsamples = (
+            None if valid is None else Samples(valid.q, valid.dq, valid.ddq, valid.tau, valid.temp)
+        )
         problem = samples_problem(
             robot, samples, None if vsamples is None else vsamples.arrays(), base, settings, opts
         )

@@ -18,7 +18,7 @@ from ..errors import InputError
 from ..identifiability import BaseParameters
 from ..robot import Robot
 from .arrays import CallOptions, blocks_problem, samples_problem
-from .data_sources import Blocks, Files, Parts, Samples, data_source
+from .data_sources import Blocks, Files, Samples, data_source
 from .file_run import FileOptions, files_build
 from .options import (
     ConsistentOptions,
@@ -106,9 +106,9 @@ def _validation_arrays(validation) -> tuple | None:
     return v.arrays()
 
 
-def _blocks_of(source) -> list:
+def _blocks_of(source):
     if isinstance(source, Blocks):
-        return list(source.blocks)
+        return source.blocks
     raise InputError(
         f"with blocks as data, validation must be arrays or blocks, got {type(source).__name__}"
     )
