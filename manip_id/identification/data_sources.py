@@ -147,6 +147,9 @@ def data_source(data, what: str = "data") -> Source:
             raise InputError(f"{what} mixes kinds ({', '.join(kinds)}): give {EXPECTED}")
         if not items:
             raise InputError(f"{what} is empty: give {EXPECTED}")
+        if not all(isinstance(x, (tuple, list)) for x in items):
+            kinds = ", ".join(sorted({type(x).__name__ for x in items}))
+            raise InputError(f"{what} must be {EXPECTED}, got {type(data).__name__} of {kinds}")
         return Blocks(items)
     if isinstance(data, Iterable) and not isinstance(data, (bytes, dict, np.ndarray)):
         return Blocks(data)
