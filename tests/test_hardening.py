@@ -1138,7 +1138,7 @@ def _identify_kw(**kw):
     from manip_id.identification import identify
 
     a = msd_arrays()
-    return identify(_load_robot_kw(), a["q"], a["dq"], a["ddq"], a["tau"], **kw)
+    return identify(_load_robot_kw(), (a["q"], a["dq"], a["ddq"], a["tau"]), **kw)
 
 
 def _structural(**kw):

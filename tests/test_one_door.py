@@ -108,9 +108,12 @@ def test_friction_auto_same_in_both(files, tmp_path, capsys):
     doc, printed = _cli(tmp_path, capsys, argv)
     opts = SelectionOptions()
     result = identify(
-        plain, [train], validation=[valid], run=RunOptions(workers=1),
+        plain,
+        [train],
+        validation=[valid],
+        run=RunOptions(workers=1),
         files=FileOptions(select_friction=opts),
-    )  # fmt: skip
+    )
     _same(_strip(doc), _strip(json.loads(json.dumps(result.to_dict()))))
     assert "friction_selection" in doc and "joint_terms_per_joint" in doc
 
