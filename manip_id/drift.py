@@ -25,16 +25,19 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.special import chdtrc, ndtr
 
-from manip_id.identification import FileOptions
-
 from .errors import InputError, ModelMismatchError, RankDeficiencyError
-from .fleet import identify
-from .identification import PartitionOptions, PreprocessOptions, RunOptions
+from .identification import (
+    FileOptions,
+    PartitionOptions,
+    PreprocessOptions,
+    RunOptions,
+    identify,
+)
 from .identification.document import single_standard
 from .monitor import covariance_kind
 from .parameters import JOINT_TERM
@@ -254,14 +257,16 @@ def drift_files(
         run=RunOptions(scheduler=scheduler),
         method=method,
         base=reference.base,
-        options=options,
-        window=window,
     )
+    pre = (
+        options if isinstance(options, PreprocessOptions) else PreprocessOptions(**(options or {}))
+    )
+    plain = FileOptions(preprocess=pre, window=window, audit=False)
     out = []
     if isinstance(files, Mapping):
         for group, members in files.items():
             try:
-                res = identify(robot, list(members), files=FileOptions(audit=False), **kw)
+                res = identify(robot, list(members), files=plain, **kw)
             except RankDeficiencyError as exc:
                 out.append(FileDrift(str(group), 0, None, 0, None, None, [], str(exc)))
                 continue
@@ -270,7 +275,7 @@ def drift_files(
         pooled = identify(
             robot,
             list(files),
-            files=FileOptions(audit=False, partition=PartitionOptions(per_file=True)),
+            files=replace(plain, partition=PartitionOptions(per_file=True)),
             **kw,
         )
         for fe in pooled.per_file or []:

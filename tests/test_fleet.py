@@ -322,9 +322,11 @@ def test_preprocessed_files_any_partition(robot, tmp_path):
 
 def test_no_dask_without_a_scheduler(fleet):
     code = (
-        "import sys; from manip_id import load_robot; from manip_id.fleet import identify;"
+        "import sys; from manip_id import load_robot; from manip_id import identify;"
         "r = load_robot('ur10', friction='viscous,coulomb');"
-        f"identify(r, {fleet[0][:2]!r}, partition=dict(per_file=True, block=700));"
+        "from manip_id.identification import FileOptions, PartitionOptions;"
+        "tasks = FileOptions(audit=False, partition=PartitionOptions(per_file=True, block=700));"
+        f"identify(r, {fleet[0][:2]!r}, files=tasks);"
         "from manip_id.cli import main;"
         f"assert main(['identify', 'ur10', '--friction', 'viscous,coulomb', '--data', "
         f"*{fleet[0][:2]!r}, '--per-file']) == 0;"
