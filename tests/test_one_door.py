@@ -31,9 +31,9 @@ FRICTION = "viscous,coulomb"
 
 
 def _strip(doc):
-    """The document without run-time figures (timings)."""
+    """The document without run-time figures (timings, a solver's time)."""
     if isinstance(doc, dict):
-        return {k: _strip(v) for k, v in doc.items() if k != "timings"}
+        return {k: _strip(v) for k, v in doc.items() if k not in ("timings", "time")}
     if isinstance(doc, list):
         return [_strip(v) for v in doc]
     return doc
@@ -82,8 +82,9 @@ def _cli(tmp_path, capsys, argv):
             {"files": FileOptions(audit=False, partition=PartitionOptions(per_file=True))},
         ),
         (["--method", "rls"], {"method": "rls"}),
+        pytest.param(["--consistent"], {"consistent": True}, marks=pytest.mark.slow),
     ],
-    ids=["plain", "wls", "per-file", "online"],
+    ids=["plain", "wls", "per-file", "online", "consistent"],
 )
 def test_python_door_equals_cli(files, tmp_path, capsys, extra, kwargs):
     robot, train, valid = files
@@ -159,3 +160,25 @@ def test_file_options_only_for_files(files):
     t, q, dq, ddq, tau = log(robot, n=300, seed=0)
     with pytest.raises(InputError, match="files= applies to log files"):
         identify(robot, (q, dq, ddq, tau), files=FileOptions(preprocess=PreprocessOptions()))
+
+
+def test_temperature_reference_same_in_both(files, tmp_path, capsys):
+    """The temperature law's T0 (the training files' mean temperature) is set by the file
+    pipeline of the library, for Python and the command line alike."""
+    _, train, _ = files
+    friction = "viscous,coulomb,temperature"
+    robot = get_robot("ur5", friction=friction)
+    with np.load(train) as z:
+        arrays = dict(z)
+    t = arrays["t"]
+    arrays["temp"] = 30.0 + 5.0 * np.sin(0.3 * t)[:, None] + np.arange(robot.nv)  # [deg C]
+    path = tmp_path / "hot.npz"
+    np.savez(path, **arrays)
+    argv = ["identify", "ur5", "--friction", friction, "--data", str(path)]
+    doc, printed = _cli(tmp_path, capsys, argv)
+    result = identify(robot, str(path), run=RunOptions(workers=1))
+    mine = json.loads(json.dumps(result.to_dict()))
+    _same(_strip(doc), _strip(mine))
+    t0 = mine["friction_shapes"]["temperature_reference"]
+    np.testing.assert_allclose(t0, arrays["temp"].mean(axis=0), rtol=1e-9)  # the mean
+    assert "temperature law: T0" in printed
