@@ -29,6 +29,7 @@ from manip_id.identification import (
     FileOptions,
     ModelOptions,
     PartitionOptions,
+    PreprocessOptions,
     RunOptions,
     identify,
 )
@@ -314,7 +315,9 @@ def test_preprocessed_files_any_partition(robot, tmp_path):
             robot,
             paths,
             files=FileOptions(
-                preprocess=opts, audit=False, partition=PartitionOptions(block=block)
+                preprocess=PreprocessOptions(**opts),
+                audit=False,
+                partition=PartitionOptions(block=block),
             ),
         )
         _same(res, ref)
@@ -324,7 +327,7 @@ def test_no_dask_without_a_scheduler(fleet):
     code = (
         "import sys; from manip_id import load_robot; from manip_id import identify;"
         "r = load_robot('ur10', friction='viscous,coulomb');"
-        "from manip_id.identification import FileOptions, PartitionOptions;"
+        "from manip_id.identification import FileOptions, PreprocessOptions, PartitionOptions;"
         "tasks = FileOptions(audit=False, partition=PartitionOptions(per_file=True, block=700));"
         f"identify(r, {fleet[0][:2]!r}, files=tasks);"
         "from manip_id.cli import main;"
@@ -355,7 +358,7 @@ def test_bad_arguments(robot, fleet):
     paths = fleet[0]
     with pytest.raises(InputError, match="twice"):
         identify(robot, [paths[0], paths[0]], files=FileOptions(audit=False))
-    with pytest.raises(InputError, match="no files"):
+    with pytest.raises(InputError, match="empty"):
         identify(robot, [], files=FileOptions(audit=False))
     with pytest.raises(InputError, match="online laws"):
         identify(robot, paths, method="rls", files=FileOptions(audit=False))
@@ -583,7 +586,7 @@ def test_a_worker_killed_mid_run_changes_nothing(
                     robot,
                     fleet[0],
                     run=RunOptions(scheduler=client),
-                    partition=PartitionOptions(block=60),
+                    files=FileOptions(audit=False, partition=PartitionOptions(block=60)),
                     method="wls",
                 )
                 deadline = time.monotonic() + 120
@@ -760,13 +763,15 @@ def test_dask_carries_the_deadband_and_raw_torque_sums(robot, local_client, tmp_
     for k, p in enumerate(paths):
         _make_file(robot, Path(p), seed=90 + k, ddq=False)
     opts = PreprocessOptions(cutoff=20.0, velocity_deadband=0.05)
-    kw = dict(validation=paths[2:], options=opts, method="wls")
-    serial = identify(robot, paths[:2], files=FileOptions(audit=False), **kw).to_dict()
+    kw = dict(validation=paths[2:], method="wls")
+    serial = identify(
+        robot, paths[:2], files=FileOptions(preprocess=opts, audit=False), **kw
+    ).to_dict()
     dask = identify(
         robot,
         paths[:2],
         run=RunOptions(scheduler=local_client),
-        files=FileOptions(audit=False, partition=PartitionOptions(block=500)),
+        files=FileOptions(preprocess=opts, audit=False, partition=PartitionOptions(block=500)),
         **kw,
     ).to_dict()
     for key in ("train", "validation", "train_moving", "validation_moving"):

@@ -10,6 +10,7 @@ rendered: its ``to_dict()`` is the JSON.
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +25,7 @@ from ..identification import (
 )
 from ..identification.file_run import collect
 from ..identification.selection import SelectionOptions
+from ..signals import DEFAULT_CUTOFF
 from ..viz.report_document import ReportSamples
 from ._common import (
     data_column_map,
@@ -59,6 +61,8 @@ def files_call(args: argparse.Namespace):
     robot = robot_from_args(args)
     options = preprocess_options(args, robot, None if profile is None else profile.torque_scale)
     fleet = fleet_wanted(args)
+    if args.model != "dynamic" and options.cutoff is None:  # as the local path: q, dq filtered
+        options = replace(options, cutoff=DEFAULT_CUTOFF)
     files = FileOptions(
         preprocess=options,
         audit=not fleet,

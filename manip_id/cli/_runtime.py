@@ -24,6 +24,7 @@ from ..export import export_texts, mjcf_text, sidecar_path
 from ..export.sidecar import identification_provenance
 from ..identification import ConsistentOptions, PreprocessOptions, result_text, verdict_text
 from ..identification.run_context import run_keys, with_context
+from ..payload import load_torque_scale
 from ..robot import Robot, load_robot
 from ..viz.report_document import ReportOptions
 from ._common import (
@@ -91,8 +92,6 @@ def preprocess_options(args: argparse.Namespace, robot: Robot, profile_scale=Non
             parse_floats(args.torque_scale, "--torque-scale"), nv, "--torque-scale"
         )
     elif getattr(args, "torque_scale_from", None) is not None:
-        from ..payload import load_torque_scale  # only when asked: its estimators load late
-
         scale = np.asarray(load_torque_scale(args.torque_scale_from, robot), dtype=float)
     elif profile_scale is not None:  # the robot profile's [data] torque_scale
         scale = torque_scale_vector(profile_scale, nv, "the profile's torque_scale")

@@ -56,13 +56,13 @@ from .options import (
     OnlineOptions,
     PreprocessOptions,
     RunOptions,
+    SolveSettings,
     UncertaintyOptions,
 )
 from .problem import (
     FileRecord,
     FileSums,
     Problem,
-    SolveSettings,
     accumulate_blocks,
     row_supports,
 )

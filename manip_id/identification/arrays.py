@@ -35,6 +35,7 @@ from .options import (
     ModelOptions,
     OnlineOptions,
     RunOptions,
+    SolveSettings,
     UncertaintyOptions,
     check_least_squares,
     check_method,
@@ -42,7 +43,6 @@ from .options import (
 from .problem import (
     OnlineRun,
     Problem,
-    SolveSettings,
     accumulate_arrays,
     accumulate_blocks,
     accumulate_forked,
@@ -329,6 +329,11 @@ def blocks_problem(
     base = resolve_base(robot, base, timings)
     ind = base.independent
     t0 = time.perf_counter()
+    if isinstance(source, Blocks) and (run.scheduler is not None or run.workers_for(None) > 1):
+        raise InputError(
+            "with workers > 1 or a scheduler, data in blocks must be parts (func, args), "
+            f"got {type(source.blocks).__name__} of blocks"
+        )
     if isinstance(source, Parts):
         acc, times = accumulate_parts(robot, source.parts, ind, run, uncertainty=unc)
         timings["accumulate_wall"] = time.perf_counter() - t0

@@ -34,12 +34,17 @@ from ..datasets.stream import torque_scale_vector
 from ..errors import InputError
 from ..identifiability import BaseParameters
 from ..robot import Robot
-from ..signals import DEFAULT_CUTOFF
 from .arrays import CallOptions, samples_problem
 from .data_sources import Samples
 from .files import distributed_files_problem, files_problem
-from .options import LEAST_SQUARES, PreprocessOptions, RunOptions, check_least_squares
-from .problem import FileRecord, Problem, SolveSettings, resolve_base
+from .options import (
+    LEAST_SQUARES,
+    PreprocessOptions,
+    RunOptions,
+    SolveSettings,
+    check_least_squares,
+)
+from .problem import FileRecord, Problem, resolve_base
 from .reading import iter_processed, scan_file, split_file
 from .result import IdentificationResult
 from .run_context import RunContext, file_keys, raw_reference, run_keys
@@ -359,8 +364,6 @@ def _distributed(robot, specs, vspecs, base, settings: SolveSettings, opts, fopt
                 "estimates or the energy / momentum model"
             )
     options = fopts.preprocess
-    if model.name != "dynamic" and options.cutoff is None:  # q and dq filtered
-        options = replace(options, cutoff=DEFAULT_CUTOFF)
     robot, _, made = reference_from_files(robot, specs, vspecs, options)  # the law's T0
     for scan in made:  # (the tasks scan their files themselves)
         scan.discard()

@@ -25,10 +25,11 @@ from .options import (
     ModelOptions,
     OnlineOptions,
     RunOptions,
+    SolveSettings,
     UncertaintyOptions,
     check_method,
 )
-from .problem import Problem, SolveSettings
+from .problem import Problem
 from .result import IdentificationResult
 from .solve import solve
 

@@ -370,7 +370,30 @@ class OnlineOptions:
             raise InputError(f"online option(s) {given} do not apply to {law} (method={method!r})")
 
 
+@dataclass(frozen=True)
+class SolveSettings:
+    """How :func:`~manip_id.identification.solve` turns a problem into its result.
+
+    Attributes
+    ----------
+    method : str
+        "ols", "wls", or the online law ("rls", "gradient") whose pass the problem holds.
+    consistent : ConsistentOptions or None
+        A physically consistent estimate ("ols" / "wls").
+    minimum_norm : bool
+        Solve rank-deficient data with the minimum-norm solution instead of raising.
+    uncertainty : UncertaintyOptions or None
+        The covariance behind ``std`` (None: ``"auto"``).
+    """
+
+    method: str = "ols"
+    consistent: ConsistentOptions | None = None
+    minimum_norm: bool = False
+    uncertainty: UncertaintyOptions | None = None
+
+
 __all__ = [
+    "SolveSettings",
     "LEAST_SQUARES",
     "METHODS",
     "MODEL_NAMES",

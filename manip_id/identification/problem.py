@@ -33,29 +33,7 @@ from ..execution import ForkBackend
 from ..identifiability import BaseParameters, analyze
 from ..regressor import DEFAULT_CHUNK, check_states, check_temperature
 from ..robot import Robot
-from .options import ConsistentOptions, RunOptions, UncertaintyOptions
-
-
-@dataclass(frozen=True)
-class SolveSettings:
-    """How :func:`~manip_id.identification.solve` turns a problem into its result.
-
-    Attributes
-    ----------
-    method : str
-        "ols", "wls", or the online law ("rls", "gradient") whose pass the problem holds.
-    consistent : ConsistentOptions or None
-        A physically consistent estimate ("ols" / "wls").
-    minimum_norm : bool
-        Solve rank-deficient data with the minimum-norm solution instead of raising.
-    uncertainty : UncertaintyOptions or None
-        The covariance behind ``std`` (None: ``"auto"``).
-    """
-
-    method: str = "ols"
-    consistent: ConsistentOptions | None = None
-    minimum_norm: bool = False
-    uncertainty: UncertaintyOptions | None = None
+from .options import RunOptions, SolveSettings, UncertaintyOptions
 
 
 @dataclass
@@ -601,7 +579,6 @@ __all__ = [
     "OnlineRun",
     "RowSums",
     "Problem",
-    "SolveSettings",
     "accumulate_arrays",
     "accumulate_blocks",
     "accumulate_forked",

@@ -553,11 +553,13 @@ def select_model_files(
 ) -> tuple[Robot, FrictionSelection]:
     """:func:`select_model` on log files: ``fit(robot)`` is the files' least-squares
     identification with the candidate's joint terms (give it validation files for the
-    validation error). The ``temperature`` candidate joins the default ones when every
+    validation error). The ``temperature`` candidate joins the default ones (``selection``
+    None or the defaults) when every
     file (``specs``, ``vspecs``; ``scans`` holds their scans) carries a temperature (the
     reference ``T0`` from the training ones); otherwise the candidates are the defaults.
     Returns the robot with the chosen per-joint model and the selection."""
-    with_t0 = None if selection is not None else candidate_reference(robot, specs, vspecs, scans)
+    default = selection is None or selection == SelectionOptions()
+    with_t0 = candidate_reference(robot, specs, vspecs, scans) if default else None
     if with_t0 is not None:  # every file has a temperature: the temperature law joins
         robot, selection = with_t0, SelectionOptions(candidates=CANDIDATES)
     _, chosen = select_model(fit, robot, selection)
