@@ -148,8 +148,8 @@ def data_source(data, what: str = "data") -> Source:
         if not items:
             raise InputError(f"{what} is empty: give {EXPECTED}")
         if not all(isinstance(x, (tuple, list)) for x in items):
-            kinds = ", ".join(sorted({type(x).__name__ for x in items}))
-            raise InputError(f"{what} must be {EXPECTED}, got {type(data).__name__} of {kinds}")
+            names = ", ".join(sorted({type(x).__name__ for x in items}))
+            raise InputError(f"{what} must be {EXPECTED}, got {type(data).__name__} of {names}")
         return Blocks(items)
     if isinstance(data, Iterable) and not isinstance(data, (bytes, dict, np.ndarray)):
         return Blocks(data)

@@ -274,6 +274,7 @@ def files_build(
     t_start = time.perf_counter()
     run = opts.run
     specs = file_specs(files, "data", fopts.window)
+    records: dict | None
     vspecs = None if validation is None else file_specs(validation, "validation", fopts.window)
     if fopts.distributed(run) or opts.model.name != "dynamic":
         return _distributed(robot, specs, vspecs, base, settings, opts, fopts)
@@ -303,9 +304,9 @@ def files_build(
         )  # fmt: skip
         problem.settings = settings
         problem.post.append(lambda result: note_reference(result, robot))
-        files = problem.files or {}
-        preprocess = files["train"][0].settings
-        n_valid = sum(x.n_samples for x in files["validation"] or [])
+        records = problem.files or {}
+        preprocess = records["train"][0].settings
+        n_valid = sum(x.n_samples for x in records["validation"] or [])
     else:  # the online laws: the files in memory, in sample order
         t0 = time.perf_counter()
         train = collect(robot, f.specs, options, f.scans)
@@ -319,13 +320,13 @@ def files_build(
             robot, samples, None if vsamples is None else vsamples.arrays(), base, settings, opts
         )
         problem.timings.update(timings)
-        files = {
+        records = {
             "train": _records(robot, f.specs, train, f.scans, options),
             "validation": None
             if valid is None
             else _records(robot, f.vspecs, valid, f.scans, options),
         }
-        problem.files = files
+        problem.files = records
         preprocess = train.settings
         n_valid = 0 if valid is None else valid.n_samples
         parts = _raw_parts(f.specs, f.vspecs, train, valid, options)
@@ -338,7 +339,9 @@ def files_build(
     problem.t_start = t_start
     ctx = RunContext(source=f.source, n_validation=n_valid, settings=preprocess)
     problem.context.update(run_keys(robot, None, ctx))
-    problem.context.update(file_keys(robot, f.specs, f.vspecs, _qualities(f.scans), files, options))
+    problem.context.update(
+        file_keys(robot, f.specs, f.vspecs, _qualities(f.scans), records, options)
+    )
     problem.context.update(keys)
     return problem
 
