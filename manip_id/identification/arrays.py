@@ -1,4 +1,4 @@
-"""In-memory entry points: arrays, blocks and datasets -> a problem -> :func:`solve`.
+"""In-memory data -> a problem: arrays, datasets, blocks and parts (the rows of :func:`solve`).
 
 For N samples ``(q, dq, ddq, tau)`` (or blocks of them) the base-regressor rows are
 accumulated (:mod:`~manip_id.identification.problem`: serially, in forked parts, or
