@@ -360,8 +360,9 @@ def test_bad_arguments(robot, fleet):
         identify(robot, [paths[0], paths[0]], files=FileOptions(audit=False))
     with pytest.raises(InputError, match="empty"):
         identify(robot, [], files=FileOptions(audit=False))
-    with pytest.raises(InputError, match="online laws"):
-        identify(robot, paths, method="rls", files=FileOptions(audit=False))
+    per_file = FileOptions(audit=False, partition=PartitionOptions(per_file=True))
+    with pytest.raises(InputError, match="least squares"):  # tasks: sums, not sample order
+        identify(robot, paths, method="rls", files=per_file)
     with pytest.raises(InputError, match="block"):
         identify(robot, paths, files=FileOptions(audit=False, partition=PartitionOptions(block=0)))
     for spec in ("local:0", "local:x", "tcp://nowhere", "http//x", "missing.json"):

@@ -88,7 +88,7 @@ def test_bad_sources(ur10_data):
     robot, q, dq, ddq, tau = ur10_data
     with pytest.raises(InputError, match="parts"):
         identify(robot, [(q, dq, ddq, tau)], run=RunOptions(workers=2))
-    with pytest.raises(InputError, match="tuple"):
+    with pytest.raises(InputError, match="list of ndarray"):
         identify(robot, [q])
     with pytest.raises(InputError, match="workers"):
         identify(robot, (q, dq, ddq, tau), run=RunOptions(workers=0))

@@ -260,6 +260,36 @@ def _raw_parts(specs, vspecs, train, valid, options) -> list:
     return parts
 
 
+def _online_problem(robot: Robot, f, base, settings, opts: CallOptions, options, timings):
+    """The online laws' problem (the files preprocessed in memory, in sample order, their
+    records, the errors against the raw torques as a post-step) and the preprocessing."""
+    run = opts.run
+    t0 = time.perf_counter()
+    train = collect(robot, f.specs, options, f.scans)
+    valid = None if f.vspecs is None else collect(robot, f.vspecs, options, f.scans)
+    timings["preprocess"] = time.perf_counter() - t0
+    samples = Samples(train.q, train.dq, train.ddq, train.tau, train.temp)
+    vsamples = (
+        None if valid is None else Samples(valid.q, valid.dq, valid.ddq, valid.tau, valid.temp)
+    )
+    problem = samples_problem(
+        robot, samples, None if vsamples is None else vsamples.arrays(), base, settings, opts
+    )
+    problem.timings.update(timings)
+    problem.files = {
+        "train": _records(robot, f.specs, train, f.scans, options),
+        "validation": None if valid is None else _records(robot, f.vspecs, valid, f.scans, options),
+    }
+    parts = _raw_parts(f.specs, f.vspecs, train, valid, options)
+
+    def raw(result: IdentificationResult) -> IdentificationResult:
+        result.context.update(raw_reference(robot, result, parts, run.chunk))
+        return result
+
+    problem.post.append(raw)
+    return problem, train.settings
+
+
 def files_build(
     robot: Robot,
     files: list,
@@ -308,34 +338,9 @@ def files_build(
         preprocess = records["train"][0].settings
         n_valid = sum(x.n_samples for x in records["validation"] or [])
     else:  # the online laws: the files in memory, in sample order
-        t0 = time.perf_counter()
-        train = collect(robot, f.specs, options, f.scans)
-        valid = None if f.vspecs is None else collect(robot, f.vspecs, options, f.scans)
-        timings["preprocess"] = time.perf_counter() - t0
-        samples = Samples(train.q, train.dq, train.ddq, train.tau, train.temp)
-        vsamples = (
-            None if valid is None else Samples(valid.q, valid.dq, valid.ddq, valid.tau, valid.temp)
-        )
-        problem = samples_problem(
-            robot, samples, None if vsamples is None else vsamples.arrays(), base, settings, opts
-        )
-        problem.timings.update(timings)
-        records = {
-            "train": _records(robot, f.specs, train, f.scans, options),
-            "validation": None
-            if valid is None
-            else _records(robot, f.vspecs, valid, f.scans, options),
-        }
-        problem.files = records
-        preprocess = train.settings
-        n_valid = 0 if valid is None else valid.n_samples
-        parts = _raw_parts(f.specs, f.vspecs, train, valid, options)
-
-        def raw(result: IdentificationResult) -> IdentificationResult:
-            result.context.update(raw_reference(robot, result, parts, run.chunk))
-            return result
-
-        problem.post.append(raw)
+        problem, preprocess = _online_problem(robot, f, base, settings, opts, options, timings)
+        records = problem.files or {}
+        n_valid = sum(x.n_samples for x in records["validation"] or [])
     problem.t_start = t_start
     ctx = RunContext(source=f.source, n_validation=n_valid, settings=preprocess)
     problem.context.update(run_keys(robot, None, ctx))
