@@ -293,7 +293,7 @@ def test_real_panda_log_default_gives_plausible_link_masses(panda_split, solver)
     robot = get_robot("panda", friction="viscous,coulomb,offset")
     train, valid = panda_split
     v = (valid.q, valid.dq, valid.ddq, valid.tau)
-    args = (robot, train.q, train.dq, train.ddq, train.tau)
+    args = (robot, (train.q, train.dq, train.ddq, train.tau))
     ols = identify(*args, validation=v)
     cons = identify(*args, validation=v, consistent=ConsistentOptions(enabled=True, solver=solver))
     _assert_physical(robot, cons.standard.values)
