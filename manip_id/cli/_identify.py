@@ -132,8 +132,6 @@ def _check_files(args: argparse.Namespace) -> None:
             )
     if args.torque_scale is not None:
         parse_floats(args.torque_scale, "--torque-scale")
-    if args.per_file and getattr(args, "friction", None) == "auto":
-        raise InputError("--friction auto applies without --per-file")
     if args.window is not None:
         Window.parse(args.window, "--window")
     if args.split is not None and args.data is not None and len(args.data) > 1:
