@@ -24,8 +24,8 @@ import argparse
 import numpy as np
 
 from manip_id import load_robot
-from manip_id.adaptive import default_gains, lyapunov_function
-from manip_id.closed_loop import (
+from manip_id.control.adaptive import default_gains, lyapunov_function
+from manip_id.control.closed_loop import (
     ClosedLoopOptions,
     default_reference,
     simulate,

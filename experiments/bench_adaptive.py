@@ -18,9 +18,9 @@ import os
 import statistics
 
 from manip_id import load_robot
-from manip_id.adaptive import default_gains
 from manip_id.cli._common import write_json
-from manip_id.closed_loop import ClosedLoopOptions, simulate
+from manip_id.control.adaptive import default_gains
+from manip_id.control.closed_loop import ClosedLoopOptions, simulate
 from manip_id.simulation import perturb_parameters
 
 

@@ -25,9 +25,9 @@ CHILD = r"""
 import json, sys, time
 import numpy as np
 import pinocchio as pin
-from manip_id.robot import load_robot
-from manip_id import compiled_regressor as cr
-from manip_id.regressor import iter_regressor
+from manip_id.robot.model import load_robot
+from manip_id.robot import compiled_regressor as cr
+from manip_id.robot.regressor import iter_regressor
 
 kind, spec, n = sys.argv[1], sys.argv[2], int(sys.argv[3])
 robot = load_robot(spec)

@@ -65,7 +65,7 @@ def write_record(n: int, folder: Path) -> tuple[Path, str, str]:
     """The CLI's simulated record of ``n`` samples as NPZ; also the URDF and its package dir."""
     import numpy as np
 
-    from manip_id.robot import load_robot
+    from manip_id.robot.model import load_robot
     from manip_id.simulation import MeasurementNoise, SimulationStream
     from manip_id.trajectories import random_trajectory
 

@@ -12,7 +12,7 @@ scaled down to fit a shared 2-core machine (16 files of 2 10^4 samples).
 
 Each case runs in its own process:
 
-1. serial: :func:`manip_id.fleet.identify` without a scheduler (no Dask);
+1. serial: :func:`manip_id.identification.fleet.identify` without a scheduler (no Dask);
 2. dask N: ``manip_id.execution.connect("local:N")`` (N single-threaded worker
    processes on 127.0.0.1), started before the clock runs (its start-up is printed apart).
 
@@ -79,9 +79,9 @@ def make_files(cache: Path, n_files: int, n: int) -> list[str]:
 
 def _warm_worker() -> None:
     """Import what a task needs and load the compiled kernel (before the clock)."""
-    import manip_id.fleet  # noqa: F401
     import manip_id.identification  # noqa: F401
-    from manip_id import compiled_regressor as cr
+    import manip_id.identification.fleet  # noqa: F401
+    from manip_id.robot import compiled_regressor as cr
 
     with cr.planned_samples(cr.AUTO_SAMPLES):  # loads the kernel unless mode pinocchio
         pass

@@ -121,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
     import numpy as np
     import pinocchio as pin
 
-    from manip_id.robot import load_robot
+    from manip_id.robot.model import load_robot
 
     robot = load_robot("ur10")
     model = robot.model

@@ -31,7 +31,7 @@ from manip_id.identification import (
     RunOptions,
     identify,  # noqa: E402
 )
-from manip_id.regressor import iter_regressor  # noqa: E402
+from manip_id.robot.regressor import iter_regressor  # noqa: E402
 
 
 def main(argv=None) -> int:

@@ -69,7 +69,7 @@ def make_log(cache: Path, n: int) -> Path:
     import pinocchio as pin
 
     from manip_id import load_robot
-    from manip_id.regressor import joint_torques
+    from manip_id.robot.regressor import joint_torques
     from manip_id.trajectories import FourierTrajectory
 
     folder = log_dir(cache, n)
@@ -169,7 +169,7 @@ def case_dense(folder: Path) -> dict:
     import scipy.linalg
 
     from manip_id import load_robot
-    from manip_id.regressor import iter_regressor
+    from manip_id.robot.regressor import iter_regressor
 
     robot = load_robot(ROBOT, friction=FRICTION)
     n = json.loads((folder / "done").read_text())["n"]

@@ -33,11 +33,11 @@ MODELS = ("dynamic", "momentum", "energy")
 def child(model: str, robot_name: str, n: int, regressor: str) -> None:
     """One model's accumulation over ``n`` samples; prints ``{"seconds": ...}``."""
     sys.path.insert(0, str(ROOT))
-    from manip_id import compiled_regressor as cr
     from manip_id.estimators import InformationAccumulator
     from manip_id.models import accumulate_energy, accumulate_momentum
-    from manip_id.regressor import iter_regressor
-    from manip_id.robot import load_robot
+    from manip_id.robot import compiled_regressor as cr
+    from manip_id.robot.model import load_robot
+    from manip_id.robot.regressor import iter_regressor
 
     cr.set_mode(regressor)
     robot = load_robot(robot_name, friction=["viscous", "coulomb"])

@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 from manip_id import load_robot  # noqa: E402
 from manip_id.estimators import GradientEstimator, RLSEstimator  # noqa: E402
 from manip_id.identifiability import analyze  # noqa: E402
-from manip_id.regressor import RegressorEvaluator  # noqa: E402
+from manip_id.robot.regressor import RegressorEvaluator  # noqa: E402
 
 
 def timed_steps(step, q, dq, ddq, tau) -> np.ndarray:

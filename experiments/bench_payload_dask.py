@@ -108,7 +108,7 @@ def _summary(res) -> dict:
 def _warm() -> None:
     """Imports and the compiled kernel of this process (what a long-lived one has paid)."""
     import manip_id.payload  # noqa: F401
-    from manip_id import compiled_regressor as cr
+    from manip_id.robot import compiled_regressor as cr
 
     with cr.planned_samples(cr.AUTO_SAMPLES):  # loads the kernel unless mode pinocchio
         pass
@@ -117,9 +117,9 @@ def _warm() -> None:
 def run_case(unloaded: list[str], loaded: list[str], workers: int) -> dict:
     """One case in this process: 0 workers = local (no Dask)."""
     from manip_id import load_robot
-    from manip_id.compiled_regressor import AUTO_SAMPLES
     from manip_id.execution import portable_robot
     from manip_id.payload import identify_payload
+    from manip_id.robot.compiled_regressor import AUTO_SAMPLES
 
     robot = load_robot(ROBOT)
     out: dict = {"workers": workers}
@@ -167,7 +167,7 @@ def run_case(unloaded: list[str], loaded: list[str], workers: int) -> dict:
 
 def _worker_samples() -> int:
     """Samples a worker process evaluated in blocks."""
-    from manip_id import compiled_regressor as cr
+    from manip_id.robot import compiled_regressor as cr
 
     return cr.count_samples(0)
 

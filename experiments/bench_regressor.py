@@ -25,7 +25,7 @@ from manip_id import (
     regressor,
     slotine_li_regressor,
 )
-from manip_id.regressor import RegressorEvaluator
+from manip_id.robot.regressor import RegressorEvaluator
 
 
 def best_of(fn, repeat: int, n: int) -> float:

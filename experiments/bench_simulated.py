@@ -31,7 +31,7 @@ MEMORY_TARGET = 400.0  # [MB] at 10^6 samples
 FLOOR = """
 import sys
 import pinocchio as pin
-from manip_id.robot import load_robot
+from manip_id.robot.model import load_robot
 n = int(sys.argv[1])
 robot = load_robot("ur10")
 m, d = robot.model, robot.model.createData()

@@ -18,9 +18,9 @@ import time
 import numpy as np
 
 from manip_id import load_robot
-from manip_id.compiled_regressor import set_mode
 from manip_id.execution import available_cores
 from manip_id.identification import RunOptions, identify
+from manip_id.robot.compiled_regressor import set_mode
 from manip_id.simulation import MeasurementNoise, simulate
 from manip_id.trajectories import random_trajectory
 

@@ -29,8 +29,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from manip_id import load_robot  # noqa: E402
 from manip_id._io import atomic_write, write_json  # noqa: E402
-from manip_id.adaptive import CompositeLaw, default_gains  # noqa: E402
-from manip_id.closed_loop import ClosedLoopOptions, default_reference, simulate  # noqa: E402
+from manip_id.control.adaptive import CompositeLaw, default_gains  # noqa: E402
+from manip_id.control.closed_loop import ClosedLoopOptions, default_reference, simulate  # noqa: E402
 from manip_id.simulation import perturb_parameters  # noqa: E402
 from manip_id.trajectories import trajectory_to_configuration  # noqa: E402
 

@@ -36,7 +36,7 @@ from manip_id.identification import (
     identify,  # noqa: E402
 )
 from manip_id.models import check_energy_base  # noqa: E402
-from manip_id.robot import available_robots  # noqa: E402
+from manip_id.robot.model import available_robots  # noqa: E402
 from manip_id.simulation import MeasurementNoise, simulate  # noqa: E402
 from manip_id.trajectories import random_trajectory  # noqa: E402
 

@@ -27,9 +27,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from manip_id import load_robot  # noqa: E402
 from manip_id.datasets import load_dataset  # noqa: E402
-from manip_id.friction import FrictionShapes  # noqa: E402
 from manip_id.identification import identify  # noqa: E402
-from manip_id.robot import JointTerms  # noqa: E402
+from manip_id.robot.friction import FrictionShapes  # noqa: E402
+from manip_id.robot.model import JointTerms  # noqa: E402
 from manip_id.signals import preprocess  # noqa: E402
 
 

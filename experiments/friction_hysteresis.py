@@ -71,7 +71,6 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from manip_id import load_robot  # noqa: E402
-from manip_id.friction import FrictionShapes  # noqa: E402
 from manip_id.identification import (  # noqa: E402
     PreprocessOptions,
     iter_processed,
@@ -79,8 +78,9 @@ from manip_id.identification import (  # noqa: E402
     split_file,
 )
 from manip_id.metrics import relative_error  # noqa: E402
-from manip_id.regressor import regressor  # noqa: E402
-from manip_id.robot import JointTerms  # noqa: E402
+from manip_id.robot.friction import FrictionShapes  # noqa: E402
+from manip_id.robot.model import JointTerms  # noqa: E402
+from manip_id.robot.regressor import regressor  # noqa: E402
 
 XC_GRID = (2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2, 2e-2, 5e-2)  # [rad]
 DELAY_GRID = (0, 5, 10, 20, 40, 80, 160)  # [ms]

@@ -24,7 +24,7 @@ from scipy.integrate import solve_ivp
 
 from manip_id import load_robot
 from manip_id.identifiability import analyze, analyze_trajectory
-from manip_id.regressor import regressor
+from manip_id.robot.regressor import regressor
 
 M, C, K, B = 2.0, 0.8, 5.0, 1.5
 

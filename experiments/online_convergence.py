@@ -6,7 +6,7 @@ sampled at ``--rate`` Hz for ``--duration`` seconds; torques from
 ``pinocchio.rnea`` with the nominal parameters (plus optional white noise).
 The batch estimate (streamed OLS on the base parameters) is the reference;
 each law starts from zero and sees one sample per step, its regressor
-evaluated in the loop by :class:`manip_id.regressor.RegressorEvaluator`:
+evaluated in the loop by :class:`manip_id.robot.regressor.RegressorEvaluator`:
 
 - RLS, ``P0 = p0 I``, no forgetting;
 - RLS with forgetting 0.999 (bounded: trace(P) <= trace(P0));
@@ -42,7 +42,7 @@ from manip_id.cli._common import write_json  # noqa: E402
 from manip_id.estimators import GradientEstimator, RLSEstimator  # noqa: E402
 from manip_id.identifiability import analyze  # noqa: E402
 from manip_id.identification import identify  # noqa: E402
-from manip_id.regressor import RegressorEvaluator  # noqa: E402
+from manip_id.robot.regressor import RegressorEvaluator  # noqa: E402
 from manip_id.trajectories import FourierTrajectory  # noqa: E402
 
 

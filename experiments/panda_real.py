@@ -31,7 +31,7 @@ import numpy as np
 from manip_id import load_robot
 from manip_id.datasets import Dataset, check_robot, load_dataset
 from manip_id.identification import IdentificationResult, identify
-from manip_id.regressor import regressor
+from manip_id.robot.regressor import regressor
 from manip_id.signals import DEFAULT_CUTOFF, DEFAULT_ORDER, Lowpass, filter_regressor, preprocess
 from manip_id.signals import resample as resample_signal
 

@@ -85,7 +85,7 @@ def profile_one(n: int) -> dict:
 
     from manip_id.cli import identify as _cli_identify  # noqa: F401 (the CLI's own imports)
     from manip_id.identification import identify
-    from manip_id.robot import load_robot
+    from manip_id.robot.model import load_robot
     from manip_id.simulation import MeasurementNoise, SimulationStream
     from manip_id.trajectories import random_trajectory
 

@@ -88,8 +88,8 @@ def _stamped(fn, stamps: dict):
 
 def _load_kernels() -> None:
     """numba imported and the kernels the command uses loaded (from numba's cache)."""
-    from manip_id import compiled_regressor as cr
     from manip_id import load_robot
+    from manip_id.robot import compiled_regressor as cr
     from manip_id.signals import Lowpass
 
     if not cr.numba_available():

@@ -47,7 +47,7 @@ from _logs import FC, FV, fourier, truth  # noqa: E402
 from manip_id import load_robot  # noqa: E402
 from manip_id.estimators import InformationAccumulator, solve_accumulator  # noqa: E402
 from manip_id.identifiability import analyze  # noqa: E402
-from manip_id.regressor import regressor  # noqa: E402
+from manip_id.robot.regressor import regressor  # noqa: E402
 
 RATE = 200.0
 MOVE, REST = 4.0, 3.0  # [s]

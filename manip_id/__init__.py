@@ -21,8 +21,6 @@ and what it needs. To export a new name, add it to its submodule's tuple in
 from __future__ import annotations
 
 import importlib
-import sys
-import types
 from typing import Any
 
 __version__ = "0.1.0"
@@ -30,14 +28,14 @@ __version__ = "0.1.0"
 #: Public name -> the submodule (relative to this package) that defines it.
 #: Add new exports here; nothing else in this file needs editing.
 _EXPORTS: dict[str, tuple[str, ...]] = {
-    ".adaptive": (
+    ".control.adaptive": (
         "AdaptiveGains",
         "CompositeLaw",
         "SlotineLiController",
         "default_gains",
         "lyapunov_function",
     ),
-    ".closed_loop": ("ClosedLoopOptions", "ClosedLoopRun", "compare_fixed", "with_payload"),
+    ".control.closed_loop": ("ClosedLoopOptions", "ClosedLoopRun", "compare_fixed", "with_payload"),
     ".datasets": ("Dataset", "FileSpec", "check_robot", "load_dataset", "save_dataset"),
     ".errors": (
         "DataError",
@@ -47,7 +45,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
         "RankDeficiencyError",
         "RobotError",
     ),
-    ".consistency": ("PhysicalConsistencyError", "check_consistency", "pseudo_inertia"),
+    ".physics.consistency": ("PhysicalConsistencyError", "check_consistency", "pseudo_inertia"),
     ".export": ("export_mjcf", "export_payload_urdf", "export_urdf"),
     ".estimators": (
         "ConcurrentLearningEstimator",
@@ -90,16 +88,16 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
         "identify_payload",
         "load_torque_scale",
     ),
-    ".regressor": (
+    ".robot.regressor": (
         "iter_regressor",
         "iter_slotine_li_regressor",
         "joint_torques",
         "regressor",
         "slotine_li_regressor",
     ),
-    ".robot": ("JointTerms", "Robot", "available_robots", "load_robot"),
+    ".robot.model": ("JointTerms", "Robot", "available_robots", "load_robot"),
     ".signals": ("Lowpass", "preprocess"),
-    ".perturbation": ("perturb_parameters",),
+    ".physics.perturbation": ("perturb_parameters",),
     ".simulation": ("MeasurementNoise", "SimulatedData", "simulate"),
     ".trajectories": (
         "ExcitationResult",
@@ -112,7 +110,7 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
 
 #: Public name -> (submodule, attribute) for names exported under another name.
 _ALIASES: dict[str, tuple[str, str]] = {
-    "simulate_adaptive": (".closed_loop", "simulate"),
+    "simulate_adaptive": (".control.closed_loop", "simulate"),
 }
 
 _WHERE: dict[str, tuple[str, str]] = {
@@ -136,24 +134,3 @@ def __getattr__(name: str) -> Any:
 
 def __dir__() -> list[str]:
     return sorted(set(globals()) | set(__all__))
-
-
-class _Package(types.ModuleType):
-    """This package's module type: an export named like a submodule keeps the export.
-
-    Importing a submodule sets it as an attribute of its package; for
-    ``manip_id.regressor`` (the submodule) that would hide ``regressor`` (the
-    function exported here). The submodule stays in :data:`sys.modules` either way.
-    """
-
-    def __setattr__(self, name: str, value: Any) -> None:
-        if (
-            name in _WHERE
-            and isinstance(value, types.ModuleType)
-            and value.__name__ == f"{__name__}.{name}"
-        ):
-            return
-        super().__setattr__(name, value)
-
-
-sys.modules[__name__].__class__ = _Package

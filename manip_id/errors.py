@@ -251,7 +251,7 @@ class PhysicalConsistencyError(ManipIdError, ValueError):
     Attributes
     ----------
     what: the vector, e.g. ``"the prior (nominal parameters)"`` (message only).
-    violations: each broken condition (:class:`manip_id.consistency.Violation`: a body
+    violations: each broken condition (:class:`manip_id.physics.consistency.Violation`: a body
         or parameter name, the condition, the value); the message shows the first four.
     """
 

@@ -43,12 +43,12 @@ from pathlib import Path
 from typing import Any
 
 from ._io.reading import read_json
-from .compiled_regressor import planned, planned_samples
 from .datasets import FileSpec, open_source, parse_file_spec
 from .datasets.stream import infer_format
 from .errors import InputError, ManipIdError, ManipIdWarning
-from .robot import Robot
-from .robot_sources import RobotSource
+from .robot.compiled_regressor import planned, planned_samples
+from .robot.model import Robot
+from .robot.sources import RobotSource
 
 #: The automatic number of workers (:func:`resolve_workers`).
 AUTO = "auto"
@@ -135,7 +135,7 @@ def header_samples(specs: Iterable[str | os.PathLike | FileSpec]) -> int | None:
     """Rows the files hold, from their headers alone, or None when any file's count
     needs a pass over its data (a CSV, a ROS bag, a Panda log) or its header fails.
 
-    The size a run announces (:func:`~manip_id.compiled_regressor.planned_samples`) when
+    The size a run announces (:func:`~manip_id.robot.compiled_regressor.planned_samples`) when
     its files are read by the tasks, not by this process: the rows of a ``#A:#B`` window,
     else all of them (an upper bound of the samples left by a time window and the
     preprocessing), the same number for every back-end of the run.
@@ -446,12 +446,12 @@ def _one_line(exc: BaseException) -> str:
 
 
 def planned_task(n_planned: int, fn: Callable, *args):
-    """``fn(*args)`` inside :func:`~manip_id.compiled_regressor.planned_samples` of
+    """``fn(*args)`` inside :func:`~manip_id.robot.compiled_regressor.planned_samples` of
     ``n_planned`` (a Dask task of a run its client announced; 0: none).
 
     The regressor path of ``auto`` mode then follows the run, not the history of the
     worker that draws the task: a run announced at least
-    :data:`~manip_id.compiled_regressor.AUTO_SAMPLES` large is evaluated by the compiled
+    :data:`~manip_id.robot.compiled_regressor.AUTO_SAMPLES` large is evaluated by the compiled
     kernel from its first sample on every worker, as in the client's own process.
     """
     if n_planned <= 0:

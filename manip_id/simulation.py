@@ -7,7 +7,7 @@ Along a :class:`~manip_id.trajectories.FourierTrajectory` sampled at ``rate``
 
 ``model(theta)`` is :meth:`Robot.with_parameters` (rigid bodies, and the
 armature, which ``pinocchio.rnea`` includes); friction, offset and spring come
-from :func:`manip_id.regressor.joint_torques`. None of it goes through the
+from :func:`manip_id.robot.regressor.joint_torques`. None of it goes through the
 regressor, so ``regressor(robot, q, dq, ddq) @ theta_true`` reproducing the
 simulated torques is an independent check of both.
 
@@ -50,10 +50,10 @@ import pinocchio as pin
 from ._checks import as_real
 from .datasets import Dataset
 from .errors import InputError
-from .perturbation import parameter_vector, perturb_parameters, require_physical
-from .regressor import joint_torques
+from .physics.perturbation import parameter_vector, perturb_parameters, require_physical
 from .resources import check_memory
-from .robot import Robot
+from .robot.model import Robot
+from .robot.regressor import joint_torques
 from .trajectories import FourierTrajectory, trajectory_to_configuration
 
 
@@ -164,7 +164,7 @@ def inverse_dynamics(robot: Robot, theta, q, dq, ddq, temp=None) -> np.ndarray:
         shape (p,); q: (N, nq) [rad or m]; dq, ddq: (N, nv).
     temp : array_like or None
         the joints' temperature [degC or K] of the ``temperature`` law: a scalar, (1,),
-        (nv,), (N, 1) or (N, nv) (:func:`~manip_id.regressor.check_temperature`).
+        (nv,), (N, 1) or (N, nv) (:func:`~manip_id.robot.regressor.check_temperature`).
 
     Returns
     -------

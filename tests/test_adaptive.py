@@ -14,14 +14,14 @@ import pinocchio as pin
 import pytest
 from conftest import get_robot
 
-from manip_id.adaptive import (
+from manip_id.control.adaptive import (
     AdaptiveGains,
     CompositeLaw,
     SlotineLiController,
     default_gains,
     lyapunov_function,
 )
-from manip_id.closed_loop import (
+from manip_id.control.closed_loop import (
     ClosedLoopOptions,
     compare_fixed,
     default_reference,

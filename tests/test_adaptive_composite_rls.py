@@ -7,11 +7,16 @@ import json
 import numpy as np
 import pytest
 
-from manip_id.adaptive import AdaptiveGains, CompositeLaw, SlotineLiController, default_gains
 from manip_id.cli import main
-from manip_id.closed_loop import ClosedLoopOptions, default_reference, simulate
+from manip_id.control.adaptive import (
+    AdaptiveGains,
+    CompositeLaw,
+    SlotineLiController,
+    default_gains,
+)
+from manip_id.control.closed_loop import ClosedLoopOptions, default_reference, simulate
 from manip_id.errors import InputError
-from manip_id.robot import load_robot
+from manip_id.robot.model import load_robot
 from manip_id.simulation import perturb_parameters
 from manip_id.trajectories import trajectory_to_configuration
 

@@ -50,7 +50,7 @@ HEAVY = {
     "tomllib",  # profiles (the tomli backport on Python 3.10)
     "tomli",
     "webbrowser",  # opening a report only when asked
-    "manip_id._regressor_kernel",  # numba kernels: imports numba at module level
+    "manip_id.robot._regressor_kernel",  # numba kernels: imports numba at module level
     "manip_id.signals._filter_kernel",  # the compiled zero-phase filter: imports numba
     "manip_id.datasets._csv_kernel",  # the compiled CSV reader: imports numba
 }

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from manip_id.cli import main
-from manip_id.closed_loop import with_payload
-from manip_id.robot import load_robot
+from manip_id.control.closed_loop import with_payload
+from manip_id.robot.model import load_robot
 from manip_id.simulation import perturb_parameters
 
 

@@ -10,7 +10,7 @@ from conftest import get_robot
 
 from manip_id.cli import main
 from manip_id.datasets import Dataset, save_dataset
-from manip_id.regressor import regressor
+from manip_id.robot.regressor import regressor
 from manip_id.simulation import simulate
 from manip_id.trajectories import random_trajectory
 

@@ -12,8 +12,8 @@ import pinocchio as pin
 import pytest
 from conftest import get_robot
 
-from manip_id.adaptive import SlotineLiController, default_gains
-from manip_id.closed_loop import (
+from manip_id.control.adaptive import SlotineLiController, default_gains
+from manip_id.control.closed_loop import (
     ClosedLoopOptions,
     Plant,
     Recorder,
@@ -22,8 +22,8 @@ from manip_id.closed_loop import (
     simulate,
     step,
 )
-from manip_id.consistency import PhysicalConsistencyError
 from manip_id.errors import InputError, NumericalError
+from manip_id.physics.consistency import PhysicalConsistencyError
 from manip_id.simulation import perturb_parameters
 
 

@@ -14,11 +14,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from manip_id import _numba
-from manip_id import compiled_regressor as cr
 from manip_id.errors import InputError
 from manip_id.identification import identify
-from manip_id.regressor import iter_regressor, iter_slotine_li_regressor, slotine_li_regressor
-from manip_id.robot import load_robot
+from manip_id.robot import compiled_regressor as cr
+from manip_id.robot.model import load_robot
+from manip_id.robot.regressor import iter_regressor, iter_slotine_li_regressor, slotine_li_regressor
 
 pytest.importorskip("numba", reason="the compiled regressor needs numba (the 'fast' extra)")
 

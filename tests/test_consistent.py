@@ -14,12 +14,6 @@ import pytest
 from conftest import get_robot
 
 from manip_id import ManipIdError, identify, regressor
-from manip_id.consistency import (
-    PhysicalConsistencyError,
-    check_consistency,
-    parameters_from_pseudo_inertia,
-    pseudo_inertia,
-)
 from manip_id.errors import InputError
 from manip_id.estimators import InformationAccumulator, solve_accumulator
 from manip_id.estimators.consistent import (
@@ -32,6 +26,12 @@ from manip_id.estimators.consistent import (
 from manip_id.identifiability import analyze
 from manip_id.identification import ConsistentOptions
 from manip_id.identification.document import result_text, result_to_dict
+from manip_id.physics.consistency import (
+    PhysicalConsistencyError,
+    check_consistency,
+    parameters_from_pseudo_inertia,
+    pseudo_inertia,
+)
 
 FRICTION = "viscous,coulomb"
 

@@ -13,7 +13,6 @@ import pytest
 from conftest import get_robot
 
 from manip_id import regressor
-from manip_id.consistency import check_plausibility, ellipsoid_matrix, ellipsoid_rows
 from manip_id.errors import InputError
 from manip_id.estimators import InformationAccumulator, solve_accumulator
 from manip_id.estimators.consistent import consistent_estimate
@@ -25,7 +24,8 @@ from manip_id.estimators.consistent.bounds import (
     parse_total_mass,
 )
 from manip_id.identifiability import analyze
-from manip_id.robot import JointTerms, Robot
+from manip_id.physics.consistency import check_plausibility, ellipsoid_matrix, ellipsoid_rows
+from manip_id.robot.model import JointTerms, Robot
 
 
 def _random_ellipsoid(rng):

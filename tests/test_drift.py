@@ -16,9 +16,9 @@ from conftest import get_robot
 
 from manip_id.cli import main
 from manip_id.datasets import save_dataset
-from manip_id.drift import compare, drift_files
 from manip_id.errors import ModelMismatchError
 from manip_id.identification import FileOptions, identify
+from manip_id.monitor.drift import compare, drift_files
 from manip_id.simulation import MeasurementNoise, simulate
 from manip_id.trajectories import random_trajectory
 

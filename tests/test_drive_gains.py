@@ -22,7 +22,7 @@ from manip_id.payload import (
     identify_drive_gains,
     load_torque_scale,
 )
-from manip_id.robot import JointTerms, Robot
+from manip_id.robot.model import JointTerms, Robot
 
 GAINS_UR5 = np.array([0.45, 0.8, 1.1, 1.4, 1.7, 2.3])  # [N m / A]
 

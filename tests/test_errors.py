@@ -55,8 +55,8 @@ def test_format_direction_checks_its_names():
 
 
 def test_closed_loop_divergence_is_a_numerical_error():
-    from manip_id.adaptive import default_gains
-    from manip_id.closed_loop import ClosedLoopOptions, simulate
+    from manip_id.control.adaptive import default_gains
+    from manip_id.control.closed_loop import ClosedLoopOptions, simulate
 
     robot = get_robot("ur5")
     theta = robot.nominal_parameters
@@ -78,10 +78,10 @@ def test_moved_errors_live_in_errors_and_keep_their_old_homes():
     """SolverError, PhysicalConsistencyError and PayloadWarning are defined in
     manip_id.errors, carry their data through pickling, and import from where they did."""
     from manip_id import errors
-    from manip_id.consistency import PhysicalConsistencyError as PC
-    from manip_id.consistency import Violation
     from manip_id.estimators.consistent import SolverError as SE
     from manip_id.payload import PayloadWarning as PW
+    from manip_id.physics.consistency import PhysicalConsistencyError as PC
+    from manip_id.physics.consistency import Violation
 
     assert (PC, SE, PW) == (
         errors.PhysicalConsistencyError,

@@ -12,10 +12,10 @@ import os
 import numpy as np
 import pytest
 
-from manip_id import compiled_regressor as cr
 from manip_id import execution, load_robot
 from manip_id.errors import ManipIdWarning
 from manip_id.execution import DaskBackend, add_values, connect, header_samples, reduce_tree
+from manip_id.robot import compiled_regressor as cr
 
 pytest.importorskip("distributed")
 

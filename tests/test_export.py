@@ -18,11 +18,11 @@ from conftest import get_robot
 
 from manip_id import load_robot, regressor
 from manip_id.cli import main
-from manip_id.consistency import PhysicalConsistencyError, pseudo_inertia
 from manip_id.errors import CarriedInertiaError, ExportWarning, InputError
 from manip_id.export import export_urdf, sidecar_path
 from manip_id.export.links import SHARE_MARGIN
-from manip_id.robot import JointSelection
+from manip_id.physics.consistency import PhysicalConsistencyError, pseudo_inertia
+from manip_id.robot.model import JointSelection
 
 
 def _consistent_theta(robot, seed: int = 0) -> np.ndarray:

@@ -20,7 +20,7 @@ from manip_id import load_robot
 from manip_id.export import export_urdf, sidecar_path
 from manip_id.identification import identify
 from manip_id.identification.selection import SelectionOptions, candidate_terms, select_model
-from manip_id.regressor import regressor
+from manip_id.robot.regressor import regressor
 from manip_id.simulation import inverse_dynamics
 from manip_id.trajectories import random_trajectory
 

@@ -20,10 +20,10 @@ from test_export import CASES, _consistent_theta
 
 from manip_id import load_robot, regressor
 from manip_id.cli import main
-from manip_id.consistency import PhysicalConsistencyError
 from manip_id.datasets import load_dataset
 from manip_id.errors import ExportWarning, InputError
 from manip_id.export import export_mjcf, sidecar_path
+from manip_id.physics.consistency import PhysicalConsistencyError
 from manip_id.simulation import simulate
 from manip_id.trajectories import random_trajectory
 

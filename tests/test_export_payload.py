@@ -19,11 +19,11 @@ from test_payload import SYM6, loaded_model, make_payload, make_runs
 
 from manip_id import load_robot
 from manip_id.cli import main
-from manip_id.consistency import PhysicalConsistencyError
 from manip_id.errors import InputError
 from manip_id.export import PayloadLink, export_payload_urdf, sidecar_path
 from manip_id.payload import payload_regressor, standard_from_quantities
-from manip_id.robot import JointSelection
+from manip_id.physics.consistency import PhysicalConsistencyError
+from manip_id.robot.model import JointSelection
 
 MASS, COM = 1.3, np.array([0.02, -0.03, 0.08])  # [kg], [m]
 INERTIA = np.array([0.010, 0.001, 0.012, -0.0005, 0.0008, 0.006])  # about the CoM [kg m^2]

@@ -24,7 +24,6 @@ from conftest import get_robot
 
 from manip_id.datasets import parse_file_spec
 from manip_id.errors import DataError, InputError
-from manip_id.fleet import parse_scheduler, portable_robot
 from manip_id.identification import (
     FileOptions,
     ModelOptions,
@@ -33,6 +32,7 @@ from manip_id.identification import (
     RunOptions,
     identify,
 )
+from manip_id.identification.fleet import parse_scheduler, portable_robot
 
 VENV_BIN = Path(sys.executable).parent
 N_FILES, N_SAMPLES = 6, 1500
@@ -386,7 +386,7 @@ def test_portable_robot_pickles_small_and_identifies_the_same(robot, fleet, refe
 def test_accumulator_pickles(robot, fleet):
     import pickle
 
-    from manip_id.fleet import FilePart, part_sums
+    from manip_id.identification.fleet import FilePart, part_sums
 
     res = identify(robot, tuple(fleet[1][0]))
     spec = parse_file_spec(fleet[0][0])

@@ -19,10 +19,10 @@ import pytest
 from conftest import get_robot
 from test_payload import make_payload, make_runs
 
-from manip_id import compiled_regressor as cr
 from manip_id.cli import main
 from manip_id.errors import DataError
 from manip_id.payload import identify_drive_gains, identify_payload
+from manip_id.robot import compiled_regressor as cr
 
 RTOL = 1e-9
 

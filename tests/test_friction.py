@@ -13,10 +13,10 @@ import pytest
 
 from manip_id import load_robot
 from manip_id.errors import InputError
-from manip_id.friction import FrictionShapes, parse_friction
 from manip_id.identification import RunOptions, identify
 from manip_id.identification.selection import SelectionOptions, candidate_terms, select_model
-from manip_id.robot import JointTerms
+from manip_id.robot.friction import FrictionShapes, parse_friction
+from manip_id.robot.model import JointTerms
 from manip_id.trajectories import random_trajectory
 
 RATE = 200.0  # [Hz]
@@ -273,8 +273,8 @@ def test_dask_path_agrees_for_every_new_term(robot, tmp_path):
 
 
 def test_simulator_evaluates_shaped_and_per_joint_laws(robot):
-    from manip_id.closed_loop import Plant
-    from manip_id.regressor import joint_torques
+    from manip_id.control.closed_loop import Plant
+    from manip_id.robot.regressor import joint_torques
 
     shapes = FrictionShapes(stribeck_velocity=(0.08, 0.2), sigmoid_slope=(30.0, 10.0))
     per_dof = (("fv", "fc", "fs"), ("fv", "fsg"))  # joint 1 Stribeck, joint 2 sigmoid
@@ -353,9 +353,9 @@ def test_profile_takes_the_laws(tmp_path):
 
 
 def test_load_law_is_refused_where_there_is_no_acceleration(robot):
-    from manip_id.closed_loop import Plant
+    from manip_id.control.closed_loop import Plant
     from manip_id.models import accumulate_energy
-    from manip_id.regressor import slotine_li_regressor
+    from manip_id.robot.regressor import slotine_li_regressor
 
     r = robot.with_terms(JointTerms(viscous=True, load=True))
     (q, dq, ddq, tau), _ = _data(robot, "linear", seed=13, duration=2.0)

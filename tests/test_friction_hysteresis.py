@@ -20,7 +20,6 @@ from manip_id import load_robot
 from manip_id.datasets import Dataset, save_dataset
 from manip_id.errors import InputError
 from manip_id.export import export_urdf, sidecar_path
-from manip_id.friction import FrictionShapes, hysteresis_state, parse_friction
 from manip_id.identification import (
     FileOptions,
     PartitionOptions,
@@ -29,8 +28,9 @@ from manip_id.identification import (
     identify,
 )
 from manip_id.identification.selection import SelectionOptions, select_model
-from manip_id.regressor import iter_regressor, joint_torques, regressor
-from manip_id.robot import JointTerms
+from manip_id.robot.friction import FrictionShapes, hysteresis_state, parse_friction
+from manip_id.robot.model import JointTerms
+from manip_id.robot.regressor import iter_regressor, joint_torques, regressor
 from manip_id.simulation import NOISE_BLOCK, inverse_dynamics, simulate
 from manip_id.trajectories import random_trajectory
 

@@ -21,10 +21,10 @@ from manip_id.cli import main
 from manip_id.datasets import Dataset, load_dataset, save_dataset
 from manip_id.errors import InputError, MissingTemperatureError
 from manip_id.export import export_urdf
-from manip_id.friction import FrictionShapes, TemperatureStats
 from manip_id.identification import FileOptions, RunOptions, identify
-from manip_id.regressor import joint_torques, regressor
-from manip_id.robot import JointTerms
+from manip_id.robot.friction import FrictionShapes, TemperatureStats
+from manip_id.robot.model import JointTerms
+from manip_id.robot.regressor import joint_torques, regressor
 from manip_id.simulation import ThermalOptions, inverse_dynamics
 from manip_id.trajectories import random_trajectory
 
@@ -351,9 +351,9 @@ def test_consistent_friction_stays_physical_over_the_temperature_range(robot, mo
 
 
 def test_the_law_is_refused_where_there_is_no_temperature(robot):
-    from manip_id.closed_loop import Plant
+    from manip_id.control.closed_loop import Plant
     from manip_id.models import accumulate_energy
-    from manip_id.regressor import slotine_li_regressor
+    from manip_id.robot.regressor import slotine_li_regressor
 
     r = load_robot("double_pendulum", friction=LAW)
     _, q, dq, ddq, tau, _ = _record(robot, duration=2.0)

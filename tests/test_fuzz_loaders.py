@@ -68,13 +68,13 @@ def _stream(path: Path):
 
 
 def _robot(path: Path):
-    from manip_id.robot import load_robot
+    from manip_id.robot.model import load_robot
 
     return load_robot(str(path) if isinstance(path, Path) else path)
 
 
 def _profile(path: Path):
-    from manip_id.profiles import load_profile
+    from manip_id.robot.profiles import load_profile
 
     return load_profile(path)
 

@@ -994,7 +994,7 @@ def _api_cases():
     from manip_id.errors import DataError, InputError, OutputError, RobotError
 
     def robot(name="msd"):
-        from manip_id.robot import load_robot
+        from manip_id.robot.model import load_robot
 
         return load_robot(name)
 
@@ -1020,7 +1020,7 @@ def _api_cases():
         return simulate(r, random_trajectory(r, harmonics=3, seed=0), **args)
 
     def simulate_urdf(w, **arm):
-        from manip_id.robot import load_robot
+        from manip_id.robot.model import load_robot
         from manip_id.simulation import simulate
         from manip_id.trajectories import random_trajectory
 
@@ -1117,7 +1117,7 @@ def _api_cases():
 
 
 def _load_robot_kw(**kw):
-    from manip_id.robot import load_robot
+    from manip_id.robot.model import load_robot
 
     return load_robot("msd", **kw)
 
@@ -1155,7 +1155,7 @@ def _scene_label(label):
 
 
 def _reference(**kw):
-    from manip_id.closed_loop import default_reference
+    from manip_id.control.closed_loop import default_reference
 
     return default_reference(_load_robot_kw(), **kw)
 
@@ -1177,7 +1177,7 @@ def test_api_case(name, call, expected, work):
 
 
 def test_add_inertia_label_is_escaped(tmp_path):
-    from manip_id.robot import load_robot
+    from manip_id.robot.model import load_robot
     from manip_id.viz.meshcat_scene import RobotScene
 
     robot = load_robot("msd")

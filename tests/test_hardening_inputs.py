@@ -852,7 +852,7 @@ _KEYS = st.sampled_from(
 @_PROPERTY
 @given(tables=st.dictionaries(_TABLES, st.dictionaries(_KEYS, _TOML, max_size=3), max_size=4))
 def test_profile_reader_raises_only_ours(tables, tmp_path):
-    from manip_id.profiles import load_profile
+    from manip_id.robot.profiles import load_profile
 
     text = "\n".join(
         f"[{name}]\n" + "\n".join(f"{k} = {_toml_value(v)}" for k, v in body.items())
@@ -870,7 +870,7 @@ def test_profile_reader_raises_only_ours(tables, tmp_path):
 def test_locked_positions_are_finite(locked, tmp_path):
     from manip_id import load_robot
     from manip_id.errors import InputError
-    from manip_id.robot import JointSelection
+    from manip_id.robot.model import JointSelection
 
     urdf = arm_urdf(tmp_path / "arm.urdf")
     with pytest.raises(InputError, match="locked"):

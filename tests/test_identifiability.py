@@ -25,7 +25,7 @@ from manip_id.identifiability import (
     analyze_trajectory,
     structural_analysis,
 )
-from manip_id.robot import MANIPULATORS
+from manip_id.robot.model import MANIPULATORS
 
 FULL_FRICTION = ("viscous", "coulomb", "offset")
 

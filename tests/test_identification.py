@@ -17,7 +17,7 @@ from manip_id.identification import (
     RunOptions,
     identify,
 )
-from manip_id.regressor import iter_regressor
+from manip_id.robot.regressor import iter_regressor
 from manip_id.trajectories import FourierTrajectory
 
 

@@ -22,7 +22,7 @@ from manip_id.models import (
     momentum_regressors,
     momentum_rows,
 )
-from manip_id.robot import available_robots
+from manip_id.robot.model import available_robots
 from manip_id.simulation import MeasurementNoise, simulate
 from manip_id.trajectories import random_trajectory
 

@@ -10,7 +10,8 @@ import pytest
 
 from manip_id.errors import InputError
 from manip_id.identifiability import analyze
-from manip_id.parameters import (
+from manip_id.robot.model import Robot, load_robot
+from manip_id.robot.parameters import (
     INERTIAL_NAMES,
     JOINT_TERM_NAMES,
     UNSET_LIMIT,
@@ -19,8 +20,7 @@ from manip_id.parameters import (
     bounded_range,
     bounded_rate,
 )
-from manip_id.regressor import regressor
-from manip_id.robot import Robot, load_robot
+from manip_id.robot.regressor import regressor
 
 
 @pytest.fixture(scope="module")
@@ -189,26 +189,26 @@ def test_standard_base_maps_preserve_torques():
 
 
 def test_term_table_names_match_the_robot_flags():
-    from manip_id.parameters import JOINT_TERMS
-    from manip_id.robot import JointTerms
+    from manip_id.robot.model import JointTerms
+    from manip_id.robot.parameters import JOINT_TERMS
 
     assert tuple(t.name for t in JOINT_TERMS) == JOINT_TERM_NAMES
     for t in JOINT_TERMS[:5]:  # the one-column terms: their flag alone
         assert JointTerms(**{t.flag: True}).enabled == (t.name,)
-    for t in JOINT_TERMS[5:]:  # the friction laws of manip_id.friction: their kind
+    for t in JOINT_TERMS[5:]:  # the friction laws of manip_id.robot.friction: their kind
         flags = {"harmonics": 4} if t.flag == "position" else {t.flag: True}
         assert t.name in JointTerms(**flags).enabled
 
 
 def test_consistency_checks_are_reexported():
-    consistency = pytest.importorskip("manip_id.consistency")
-    import manip_id.parameters as parameters
+    consistency = pytest.importorskip("manip_id.physics.consistency")
+    import manip_id.robot.parameters as parameters
 
     assert parameters.check_consistency is consistency.check_consistency
 
 
 def test_pseudo_inertias_against_the_textbook_formula(panda_all):
-    pytest.importorskip("manip_id.consistency")
+    pytest.importorskip("manip_id.physics.consistency")
     robot = panda_all
     J = robot.layout.pseudo_inertias(robot.nominal_parameters)
     assert J.shape == (robot.n_bodies, 4, 4)

@@ -11,8 +11,8 @@ import tomllib
 
 from manip_id.cli import main
 from manip_id.errors import InputError, RobotError
-from manip_id.profiles import load_profile, parse_profile, robots_dir
-from manip_id.robot import load_robot
+from manip_id.robot.model import load_robot
+from manip_id.robot.profiles import load_profile, parse_profile, robots_dir
 from manip_id.trajectories import FourierTrajectory, random_trajectory
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -187,7 +187,7 @@ def test_deadband_rows_left_out_and_counted(robot, base, tmp_path):
     np.testing.assert_array_equal(fa.excluded, still.sum(axis=0))
     assert still.sum() > 50  # the test data do cross zero velocity
     # the sums are those of the moving rows only (independent: the regressor times masks)
-    from manip_id.regressor import regressor
+    from manip_id.robot.regressor import regressor
 
     Y = regressor(robot, q, dq, ddq)[:, :, base.independent]
     for j in range(robot.nv):

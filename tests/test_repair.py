@@ -10,9 +10,9 @@ import pytest
 from conftest import get_robot
 
 from manip_id.cli import main
-from manip_id.consistency import check_consistency
-from manip_id.repair import LENGTH_MIN, repair_body, repair_nominal
-from manip_id.robot import load_robot
+from manip_id.physics.consistency import check_consistency
+from manip_id.physics.repair import LENGTH_MIN, repair_body, repair_nominal
+from manip_id.robot.model import load_robot
 
 #: link -> (element, attribute, value): three ways of being non-physical
 BREAKS = {

@@ -19,7 +19,7 @@ from matplotlib.patches import Rectangle
 
 from manip_id.cli import _common as cli_common
 from manip_id.cli import main
-from manip_id.robot import load_robot
+from manip_id.robot.model import load_robot
 from manip_id.viz import figures
 from manip_id.viz.meshcat_scene import RobotScene, decimate_mesh
 

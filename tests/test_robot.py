@@ -8,8 +8,8 @@ import pytest
 from conftest import get_robot
 
 from manip_id import InputError, RobotError, available_robots, load_robot
-from manip_id.regressor import regressor
-from manip_id.robot import INERTIAL_NAMES, MANIPULATORS, JointSelection
+from manip_id.robot.model import INERTIAL_NAMES, MANIPULATORS, JointSelection
+from manip_id.robot.regressor import regressor
 from manip_id.simulation import perturb_parameters
 
 REQUIRED = ["panda", "ur3", "ur5", "ur10", "talos_arm", "z1", "xarm7", "kinova", "double_pendulum"]

@@ -93,7 +93,8 @@ def test_every_exported_name_resolves():
 
 
 def test_exports_are_the_submodules_objects():
-    from manip_id import closed_loop, identification, simulation
+    from manip_id import identification, simulation
+    from manip_id.control import closed_loop
     from manip_id.estimators import batch
 
     assert manip_id.identify is identification.identify
@@ -103,13 +104,13 @@ def test_exports_are_the_submodules_objects():
 
 
 def test_export_named_like_its_submodule_stays_the_function():
-    import manip_id.regressor  # noqa: F401 (imports the submodule of the same name)
+    import manip_id.robot.regressor  # noqa: F401 (imports the submodule of the same name)
     from manip_id import regressor
-    from manip_id.regressor import regressor as function
+    from manip_id.robot.regressor import regressor as function
 
     assert regressor is function
     assert callable(regressor) and not isinstance(regressor, type(manip_id))
-    assert sys.modules["manip_id.regressor"].regressor is function
+    assert sys.modules["manip_id.robot.regressor"].regressor is function
 
 
 def test_subpackage_exports_resolve():
@@ -138,8 +139,8 @@ def test_model_without_geometry_matches_the_loader(name):
     import numpy as np
     from example_robot_data.robots_loader import ROBOTS
 
-    from manip_id.robot import load_robot
-    from manip_id.robot_sources import load_erd
+    from manip_id.robot.model import load_robot
+    from manip_id.robot.sources import load_erd
 
     ref = ROBOTS[name]().robot
     model, source, _, geometry = load_erd(name)

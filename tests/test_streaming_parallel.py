@@ -101,7 +101,7 @@ def test_row_supports_give_the_full_information_sums(name):
     """Accumulating each row on its non-zero columns equals the dense per-joint sums."""
     from manip_id.estimators import InformationAccumulator
     from manip_id.identification import accumulate_blocks, row_supports
-    from manip_id.regressor import regressor
+    from manip_id.robot.regressor import regressor
 
     robot = get_robot(name, friction=("viscous", "coulomb"))
     q, dq, ddq = robot.random_states(300, seed=5)

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from manip_id.robot import load_robot
+from manip_id.robot.model import load_robot
 from manip_id.viz import RobotScene
 
 WIDTH, HEIGHT = 640, 480

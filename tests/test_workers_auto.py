@@ -20,10 +20,10 @@ from manip_id import load_robot
 from manip_id._numba import numba_available
 from manip_id.cli import main
 from manip_id.cli._common import REGRESSOR_ENV, REGRESSOR_MODES
-from manip_id.compiled_regressor import ENV, MODES
 from manip_id.datasets import Dataset, save_dataset
 from manip_id.errors import InputError
 from manip_id.identification import RunOptions, identify
+from manip_id.robot.compiled_regressor import ENV, MODES
 from manip_id.simulation import MeasurementNoise, simulate
 from manip_id.trajectories import random_trajectory
 
@@ -35,7 +35,7 @@ def large_input_path(monkeypatch):
     monkeypatch.setenv(ENV, "auto")  # restored after the test, whatever --regressor sets
     monkeypatch.setattr(execution, "FORK_MIN_SAMPLES", 100)
     monkeypatch.setattr(execution, "available_cores", lambda: 2)
-    monkeypatch.setattr(importlib.import_module("manip_id.regressor"), "AUTO_SAMPLES", 0)
+    monkeypatch.setattr(importlib.import_module("manip_id.robot.regressor"), "AUTO_SAMPLES", 0)
 
 
 def _data(robot, duration=4.0, rate=200.0, seed=3):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..regressor import regressor
+from ..robot.regressor import regressor
 
 #: Rows of the motion stream the delay search fits (evenly spaced over the file).
 LAG_ROWS = 12000

@@ -19,7 +19,7 @@ from ..datasets.adjust import check_rate
 from ..datasets.quality import STANDSTILL, encoder_resolution, static_span
 from ..datasets.stream import torque_scale_vector
 from ..errors import DataError, InputError
-from ..robot import Robot
+from ..robot.model import Robot
 from ..signals import DEFAULT_CUTOFF, preprocess
 from ..signals.butterworth import load_kernels
 from .delay import stream_lags

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from ..robot import Robot
+from ..robot.model import Robot
 from .report import JointAudit
 
 #: Measured / nominal torque ratios outside [1 / FAR, FAR] are reported (currents, gears).

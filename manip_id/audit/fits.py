@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from ..robot import Robot
+from ..robot.model import Robot
 
 #: Share of the residual torque variance the nominal column must explain for a scale.
 EXPLAINED_MIN = 0.3

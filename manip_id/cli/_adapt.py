@@ -8,8 +8,8 @@ import argparse
 
 import numpy as np
 
-from ..adaptive import CompositeLaw, default_gains
-from ..closed_loop import ClosedLoopOptions, compare_fixed, default_reference, with_payload
+from ..control.adaptive import CompositeLaw, default_gains
+from ..control.closed_loop import ClosedLoopOptions, compare_fixed, default_reference, with_payload
 from ..simulation import perturb_parameters, require_physical
 from ..trajectories import trajectory_to_configuration
 from ..viz.adapt_report import write_adapt_report

@@ -21,7 +21,7 @@ import warnings
 from .._io import OutputSet, write_json  # noqa: F401 (the commands import write_json here)
 from ..datasets import parse_file_spec
 from ..errors import InputError
-from ..profiles import find_profile, load_profile
+from ..robot.profiles import find_profile, load_profile
 from ..signals import DEFAULT_CUTOFF, preprocess
 
 
@@ -83,7 +83,7 @@ def workers_value(text: str) -> int | str:
     raise argparse.ArgumentTypeError(f"expected 'auto' or a positive integer, got {text!r}")
 
 
-#: ``manip_id.compiled_regressor.MODES`` and its environment variable, spelled here so that
+#: ``manip_id.robot.compiled_regressor.MODES`` and its environment variable, spelled here so that
 #: ``--help`` does not load Pinocchio (tests/test_workers_auto.py checks that they agree).
 REGRESSOR_MODES = ("auto", "compiled", "pinocchio")
 REGRESSOR_ENV = "MANIP_ID_REGRESSOR"
@@ -91,7 +91,7 @@ REGRESSOR_ENV = "MANIP_ID_REGRESSOR"
 
 class RegressorMode(argparse.Action):
     """``--regressor MODE``: sets the regressor mode of this process and of the workers it
-    starts (``MANIP_ID_REGRESSOR``, read by :mod:`manip_id.compiled_regressor`)."""
+    starts (``MANIP_ID_REGRESSOR``, read by :mod:`manip_id.robot.compiled_regressor`)."""
 
     def __call__(self, parser, namespace, values, option_string=None):
         os.environ[REGRESSOR_ENV] = str(values)
@@ -138,7 +138,7 @@ def profile_option(args: argparse.Namespace):
 
 
 def profile_from_args(args: argparse.Namespace):
-    """The :class:`~manip_id.profiles.RobotProfile` the options select, without loading the robot.
+    """The :class:`~manip_id.robot.profiles.RobotProfile` the options select (robot not loaded).
 
     ``--profile`` when given (``none``: no profile), else ``robots/ROBOT.toml`` for a
     robot given by name; None when there is none.

@@ -6,9 +6,9 @@ import argparse
 import os
 
 from .._io import OutputSet
-from ..drift import drift_files
 from ..errors import InputError
 from ..identification import PreprocessOptions, load_result
+from ..monitor.drift import drift_files
 from ._common import (
     reserve_outputs,
 )

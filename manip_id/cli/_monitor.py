@@ -22,7 +22,7 @@ from ..monitor import (  # the package loads with the command, not with --help
     load_thresholds,
     model_from_robot,
 )
-from ..robot import load_robot
+from ..robot.model import load_robot
 from ..viz.monitor_report import write_monitor_report
 from ._common import (
     reserve_outputs,

@@ -68,7 +68,7 @@ class StreamedRun:
 
     ``scan=False``: the file is scanned when the blocks are first asked for, where the
     run is accumulated (a Dask worker with ``--scheduler``: give a light robot,
-    :func:`manip_id.fleet.portable_robot`, so the run pickles small); its quality and
+    :func:`manip_id.identification.fleet.portable_robot`, so the run pickles small); its quality and
     preprocessing come back through :meth:`summary`.
     """
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from ..export import check_output, export_urdf, sidecar_path
-from ..repair import repair_nominal
+from ..physics.repair import repair_nominal
 from ._common import reserve_outputs
 from ._runtime import (
     robot_from_args,

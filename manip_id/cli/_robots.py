@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 
 from ..errors import RobotError
-from ..robot import available_robots, load_robot
+from ..robot.model import available_robots, load_robot
 
 
 def run(args: argparse.Namespace) -> int:

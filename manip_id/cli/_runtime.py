@@ -25,7 +25,7 @@ from ..export.sidecar import identification_provenance
 from ..identification import ConsistentOptions, PreprocessOptions, result_text, verdict_text
 from ..identification.run_context import run_keys, with_context
 from ..payload import load_torque_scale
-from ..robot import Robot, load_robot
+from ..robot.model import Robot, load_robot
 from ..viz.report_document import ReportOptions
 from ._common import (
     exports_wanted,

@@ -5,7 +5,7 @@ Run ``k`` of a group (``unloaded``, then one group per ``--payload`` mass) follo
 excitation (:func:`._simulated.excitation`, seed ``SEED + k``, the loaded groups after
 the unloaded ones), so any two files of the folder hold different motions: one may train
 and another validate. The truth is the robot's nominal parameter vector (with the payload
-on the last body for the loaded runs, :func:`manip_id.closed_loop.with_payload`).
+on the last body for the loaded runs, :func:`manip_id.control.closed_loop.with_payload`).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from .._io import write_json
-from ..closed_loop import with_payload
+from ..control.closed_loop import with_payload
 from ..datasets import Dataset, save_dataset
 from ..errors import InputError
 from ..simulation import MeasurementNoise, check_simulation_memory, simulate

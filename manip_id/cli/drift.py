@@ -2,7 +2,7 @@
 
 Each file (``--group-by folder``: the files of each folder together) is identified alone
 with the reference's base parameters (one task per file on the fleet path,
-:func:`manip_id.drift.drift_files`) and tested against the reference: a chi-square on all
+:func:`manip_id.monitor.drift.drift_files`) and tested against the reference: a chi-square on all
 base parameters, and a test per joint-level term ("panda_joint3 viscous friction +31 %
 (p < 1e-06)"). ``--json`` writes ``{"drift": {alpha, covariance_kind,
 reference, files: [{file, p_value, changed, terms: [{name, change, p_value, changed}]}]}}``.

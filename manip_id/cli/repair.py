@@ -1,7 +1,7 @@
 """``manip-id repair ROBOT OUT.urdf``: a URDF whose non-physical inertias are made physical.
 
 The bodies of ROBOT that fail the eigenvalue test of their pseudo-inertia are
-replaced by their nearest physical ones (:func:`manip_id.repair.repair_nominal`:
+replaced by their nearest physical ones (:func:`manip_id.physics.repair.repair_nominal`:
 mass and centre of mass kept, the second moments about the centre of mass
 projected onto the physical ones); the others are left as they are. The table
 says what changed per body; OUT (and its sidecar, :func:`manip_id.export.export_urdf`)

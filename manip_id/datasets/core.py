@@ -27,7 +27,7 @@ import numpy as np
 
 from .._checks import as_float_array, as_int, as_real, check_finite, check_magnitude
 from ..errors import DataError, InputError
-from ..parameters import bounded_range
+from ..robot.parameters import bounded_range
 
 #: Largest |q| [rad] taken as radians; beyond it positions look like degrees.
 DEGREES_THRESHOLD = 8 * np.pi

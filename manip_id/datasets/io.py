@@ -4,7 +4,7 @@ Formats: NPZ (:mod:`~.npz`), CSV (:mod:`~.csv`), ROS 2 bags of
 ``sensor_msgs/msg/JointState`` (:mod:`~.rosbag`) and the real Panda log folder
 (:mod:`~.panda`). Files are written through a temporary renamed into place, so
 a crash never leaves a partial file. For long logs read in chunks instead
-(:func:`~.stream.open_source`, :func:`manip_id.pipeline.accumulate_file`).
+(:func:`~.stream.open_source`, :func:`manip_id.identification.accumulate_file`).
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ A streamed reader yields float64 blocks of shape (k, width) whose columns are::
 
 so one buffer holds a block of every field, and overlapping blocks (filters,
 splines, differences) slice rows of one array. ``temp`` is the measured temperature
-[degC or K] of the ``temperature`` friction law (:mod:`manip_id.friction`): one column per
+[degC or K] of the ``temperature`` friction law (:mod:`manip_id.robot.friction`): one column per
 joint, or one for every joint.
 """
 

@@ -189,7 +189,7 @@ class QualityAccumulator:
         standstill_eps: float | None = None,
     ):
         """``robot``: an object with ``lower``, ``upper`` [rad or m], shape (nq,), and
-        ``effort_limit`` [N m or N], shape (nv,) (a :class:`~manip_id.robot.Robot`), whose
+        ``effort_limit`` [N m or N], shape (nv,) (a :class:`~manip_id.robot.model.Robot`), whose
         limits the data are checked against; None: no limit checks."""
         self.lay = layout
         nq, nv = layout.nq, layout.nv

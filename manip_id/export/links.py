@@ -2,7 +2,7 @@
 
 Pinocchio merges every link attached rigidly to an identified joint ``j`` (through fixed
 joints, or through joints locked for the identification at the robot's
-:attr:`~manip_id.robot.Robot.locked_configuration`) into the one body whose standard
+:attr:`~manip_id.robot.model.Robot.locked_configuration`) into the one body whose standard
 parameters ``theta_j`` (10,) were identified. The export writes:
 
 - each **carried** link ``l`` (every link of the composite but the joint's child link)
@@ -16,7 +16,7 @@ So the composite is exactly ``theta_j`` at the locked configuration, and every l
 the unreduced model has a physical inertia (a finger keeps its mass: ``crba`` stays
 positive definite and ``aba`` finite when the locked joints move again).
 
-The holder is checked consistent as :mod:`manip_id.consistency` checks a body: its
+The holder is checked consistent as :mod:`manip_id.physics.consistency` checks a body: its
 pseudo-inertia ``J(pi_hold) = J(theta_j) - s_j J_c`` positive definite beyond
 ``EIG_TOLERANCE``. When the nominal links do not fit (``s_j = 1`` fails):
 
@@ -38,8 +38,8 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from ..consistency import EIG_TOLERANCE, pseudo_inertia
 from ..errors import CarriedInertiaError, ExportWarning, InputError, RobotError
+from ..physics.consistency import EIG_TOLERANCE, pseudo_inertia
 
 #: Policies for the links a composite carries.
 CARRIED_POLICIES: tuple[str, ...] = ("auto", "nominal", "scaled")

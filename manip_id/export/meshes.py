@@ -5,7 +5,7 @@ reader must be given), by a path relative to the URDF, or absolutely. An exporte
 lives elsewhere, so the export rewrites every ``<mesh filename>`` it can resolve into an
 **absolute path** (``meshes="absolute"``, the default): ``package://PKG/path`` is the
 first ``DIR/PKG/path`` that exists among the robot's
-:attr:`~manip_id.robot.Robot.package_dirs`; a relative path is taken from the source
+:attr:`~manip_id.robot.model.Robot.package_dirs`; a relative path is taken from the source
 URDF's folder. ``pinocchio.RobotWrapper.BuildFromURDF(out)`` and MuJoCo then find them
 without ``package_dirs``. ``meshes="keep"`` leaves the references as they were.
 References that resolve to no file are left as they were and listed.

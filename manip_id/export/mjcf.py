@@ -42,7 +42,7 @@ import pinocchio as pin
 
 from .._io import atomic_write_text, json_text
 from ..errors import RobotError
-from ..parameters import bounded_range, bounded_rate
+from ..robot.parameters import bounded_range, bounded_rate
 from .links import Composite, urdf_floats
 from .sidecar import sidecar_path
 from .urdf import (

@@ -34,9 +34,9 @@ import pinocchio as pin
 
 from .._checks import as_float_array, check_finite
 from .._io import atomic_write_text, json_text
-from ..consistency import EIG_TOLERANCE, PhysicalConsistencyError, Violation, pseudo_inertia
 from ..errors import InputError, RobotError
-from ..robot import frame_id
+from ..physics.consistency import EIG_TOLERANCE, PhysicalConsistencyError, Violation, pseudo_inertia
+from ..robot.model import frame_id
 from .meshes import rewrite_meshes
 from .sidecar import sidecar_document
 from .urdf import ExportResult, body_check, check_output, read_urdf, set_inertial

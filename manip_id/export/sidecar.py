@@ -6,7 +6,7 @@
 - ``parameters``: the identified standard parameter vector (name, value, unit);
 - ``joints``: per joint its identified terms (armature ``Ia``, viscous ``fv``, Coulomb
   ``fc``, offset ``fo``, spring ``k``, and the coefficients of the other friction laws of
-  :mod:`manip_id.friction`: ``fvp, fvn, fcp, fcn, fs, fsg, hks, hkc, fl``): armature,
+  :mod:`manip_id.robot.friction`: ``fvp, fvn, fcp, fcn, fs, fsg, hks, hkc, fl``): armature,
   offset and the laws have no URDF field;
 - ``joint_model``: the laws (``JointTerms`` flags), the order of ``position``, the shapes
   (Stribeck ``vs``, sigmoid slope ``a`` and shift ``c`` per DoF) and each joint's own
@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 
 from ..metrics import finite_or_none
-from ..sidecar import (  # noqa: F401  (re-exported: the reading half lives in the model layer)
+from ..robot.sidecar import (  # noqa: F401  (re-exported: the reading half lives in the model layer)
     MODEL_FLAGS,
     SIDECAR_FORMAT,
     SIDECAR_VERSION,
@@ -60,7 +60,7 @@ def locked_joints(robot) -> dict[str, Any]:
 
 
 def joint_model_document(terms) -> dict:
-    """The sidecar's ``joint_model`` of a robot's :class:`~manip_id.robot.JointTerms`."""
+    """The sidecar's ``joint_model`` of a robot's :class:`~manip_id.robot.model.JointTerms`."""
     shapes = terms.shapes
     return {
         **{f: bool(getattr(terms, f)) for f in MODEL_FLAGS},

@@ -35,8 +35,8 @@ import pinocchio as pin
 from .._checks import as_float_array, check_finite
 from .._io import atomic_write_text, check_output_file, json_text
 from .._io.reading import read_text
-from ..consistency import EIG_TOLERANCE, pseudo_inertia, require_consistent
 from ..errors import ExportWarning, InputError, RobotError
+from ..physics.consistency import EIG_TOLERANCE, pseudo_inertia, require_consistent
 from .links import Composite, LinkTree, link_inertia, link_tree, split_composites
 from .meshes import rewrite_meshes
 from .sidecar import sidecar_document, sidecar_path
@@ -300,7 +300,7 @@ def export_urdf(
         The robot ``theta`` was identified for (its locked joints decide the composites).
     theta : array_like, shape (p,)
         Standard parameters; refused unless physically consistent
-        (:class:`~manip_id.consistency.PhysicalConsistencyError`).
+        (:class:`~manip_id.physics.consistency.PhysicalConsistencyError`).
     path : path
         The ``.urdf`` to write; refused if it exists unless ``force`` (checked first).
     source : path, optional

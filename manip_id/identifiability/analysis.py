@@ -15,9 +15,9 @@ import numpy as np
 
 from .._checks import as_float_array, as_int, as_real
 from ..errors import InputError
-from ..regressor import iter_regressor
 from ..resources import FLOAT, check_memory, check_regressor_buffer
-from ..robot import Robot
+from ..robot.model import Robot
+from ..robot.regressor import iter_regressor
 from .accumulator import RFactorAccumulator
 from .notes import robot_notes, zero_columns
 from .qr import EPS, analyze_factor, default_tolerance
@@ -68,7 +68,7 @@ def structural_analysis(
 
     ``n_samples`` defaults to ``max(MIN_SAMPLES, ceil(ROWS_PER_PARAMETER * p / nv))`` states
     from ``robot.random_states(n_samples, seed)``, streamed through
-    :func:`manip_id.regressor.iter_regressor` into a (p, p) factor.
+    :func:`manip_id.robot.regressor.iter_regressor` into a (p, p) factor.
     """
     p, nv = robot.n_parameters, robot.nv
     if n_samples is None:
@@ -121,7 +121,7 @@ def analyze(
     Parameters
     ----------
     source
-        a :class:`~manip_id.robot.Robot` (structural analysis, see
+        a :class:`~manip_id.robot.model.Robot` (structural analysis, see
         :func:`structural_analysis`; ``seed`` and ``n_samples`` apply), a
         regressor ``Y`` of shape (M, p) or (N, nv, p) (sample-major), or a
         :class:`~manip_id.datasets.Dataset` with accelerations (``robot`` required).

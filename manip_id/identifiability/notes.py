@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..robot import Robot
+    from ..robot.model import Robot
 
 
 def robot_notes(robot: Robot, analysis_zero: Sequence[int] | np.ndarray) -> list[str]:

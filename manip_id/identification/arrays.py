@@ -14,7 +14,6 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..compiled_regressor import planned_samples
 from ..errors import InputError
 from ..estimators import GradientEstimator, RLSEstimator
 from ..estimators.consistent.terms import missing_term_warnings
@@ -27,8 +26,9 @@ from ..models import (
     choose_window,
     window_samples,
 )
-from ..regressor import check_states, check_temperature, iter_regressor
-from ..robot import Robot
+from ..robot.compiled_regressor import planned_samples
+from ..robot.model import Robot
+from ..robot.regressor import check_states, check_temperature, iter_regressor
 from .data_sources import Blocks, Parts, Samples
 from .options import (
     ONLINE,

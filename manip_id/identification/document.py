@@ -51,9 +51,9 @@ from pathlib import Path
 import numpy as np
 
 from .._io.reading import read_json
-from ..consistency import NONNEGATIVE_TERMS
 from ..errors import DataError, InputError, format_direction
 from ..metrics import finite_list, finite_or_none
+from ..physics.consistency import NONNEGATIVE_TERMS
 
 #: std above this [%] flags a base parameter "poorly identified".
 POORLY_IDENTIFIED = 10.0

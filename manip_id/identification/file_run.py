@@ -33,7 +33,7 @@ from ..datasets import Layout, RowCache, load_dataset
 from ..datasets.stream import torque_scale_vector
 from ..errors import InputError
 from ..identifiability import BaseParameters
-from ..robot import Robot
+from ..robot.model import Robot
 from .arrays import CallOptions, samples_problem
 from .data_sources import Samples
 from .files import distributed_files_problem, files_problem

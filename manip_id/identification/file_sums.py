@@ -18,15 +18,15 @@ from typing import Any
 
 import numpy as np
 
-from ..compiled_regressor import planned_samples
 from ..datasets import FileSpec, Layout, parse_file_spec
 from ..datasets.stream import torque_scale_vector
 from ..errors import DataError, InputError
 from ..estimators import InformationAccumulator
 from ..execution import ForkBackend
 from ..identifiability import analyze
-from ..regressor import DEFAULT_CHUNK
-from ..robot import Robot
+from ..robot.compiled_regressor import planned_samples
+from ..robot.model import Robot
+from ..robot.regressor import DEFAULT_CHUNK
 from .options import PreprocessOptions, RunOptions, UncertaintyOptions
 from .problem import FileRecord, FileSums, RowSums, accumulate_rows
 from .reading import FileScan, iter_processed, processed_count, scan_file

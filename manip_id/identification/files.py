@@ -17,13 +17,13 @@ from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from ..compiled_regressor import planned_samples
 from ..datasets import Layout
 from ..errors import InputError, RankDeficiencyError
 from ..estimators.consistent.terms import missing_term_warnings
 from ..execution import header_samples
 from ..identifiability import BaseParameters
-from ..robot import Robot
+from ..robot.compiled_regressor import planned_samples
+from ..robot.model import Robot
 from .file_sums import accumulate_files, merge_accumulations
 from .options import ModelOptions, PreprocessOptions, RunOptions, UncertaintyOptions
 from .problem import FileRecord, Problem, check_equations

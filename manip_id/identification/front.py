@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from ..errors import InputError
 from ..identifiability import BaseParameters
-from ..robot import Robot
+from ..robot.model import Robot
 from .arrays import CallOptions, blocks_problem, samples_problem
 from .data_sources import Blocks, Files, Samples, data_source
 from .file_run import FileOptions, files_build

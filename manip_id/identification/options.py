@@ -28,7 +28,7 @@ from ..estimators.consistent import check_options as check_consistent_options
 from ..estimators.consistent.bounds import BoundsOptions
 from ..estimators.uncertainty import UncertaintyOptions
 from ..execution import AUTO, check_workers, resolve_workers
-from ..regressor import DEFAULT_CHUNK
+from ..robot.regressor import DEFAULT_CHUNK
 from ..signals import DEFAULT_BLOCK, DEFAULT_ORDER
 
 #: The estimation methods: name -> what it is. ``ols`` and ``wls`` solve from the

@@ -24,15 +24,15 @@ import numpy as np
 from scipy.linalg.blas import dsyrk
 
 from .._checks import as_float_array, check_finite, check_magnitude
-from ..compiled_regressor import planned_samples
 from ..datasets import FileSpec
 from ..errors import InputError
 from ..estimators import InformationAccumulator
 from ..estimators.blocks import ScoreBlocks
 from ..execution import ForkBackend
 from ..identifiability import BaseParameters, analyze
-from ..regressor import DEFAULT_CHUNK, check_states, check_temperature
-from ..robot import Robot
+from ..robot.compiled_regressor import planned_samples
+from ..robot.model import Robot
+from ..robot.regressor import DEFAULT_CHUNK, check_states, check_temperature
 from .options import RunOptions, SolveSettings, UncertaintyOptions
 
 
@@ -388,7 +388,7 @@ def accumulate_rows(
 ) -> RowSums:
     """Accumulate the base-column information of blocks ``(q, dq, ddq, tau[, tau_raw[,
     temp]])`` (``tau_raw`` may be None; ``temp`` the temperature of the ``temperature`` law,
-    (N, nv) or (N, 1), :func:`~manip_id.regressor.check_temperature`).
+    (N, nv) or (N, 1), :func:`~manip_id.robot.regressor.check_temperature`).
 
     Row ``j`` of the regressor is accumulated on its non-zero columns only
     (:func:`row_supports`): in a serial chain that about halves the work of the
@@ -525,7 +525,7 @@ def array_part(q, dq, ddq, tau, start: int, stop: int, temp=None):
 
 def path_part(robot: Robot, q, dq, ddq, tau, start: int, stop: int, temp=None):
     """:func:`array_part`, the robot's hysteresis state first run over the samples before
-    ``start`` (:meth:`~manip_id.regressor.RegressorEvaluator.advance`): the part's path
+    ``start`` (:meth:`~manip_id.robot.regressor.RegressorEvaluator.advance`): the part's path
     starts where the serial pass has it."""
     robot.evaluator.advance(q[:start])
     yield from array_part(q, dq, ddq, tau, start, stop, temp)

@@ -43,8 +43,8 @@ from ..datasets.core import check_position_range
 from ..datasets.quality import DataQuality, QualityAccumulator
 from ..datasets.stream import torque_scale_vector
 from ..errors import DataError, InputError
-from ..friction import TemperatureStats
-from ..robot import Robot
+from ..robot.friction import TemperatureStats
+from ..robot.model import Robot
 from ..signals import (
     DEFAULT_CUTOFF,
     PreprocessSettings,

@@ -18,8 +18,8 @@ from ..errors import DataError, InputError
 from ..estimators import OnlineHistory
 from ..estimators.consistent import StandardEstimate
 from ..identifiability import BaseParameters, RankAnalysis
-from ..regressor import DEFAULT_CHUNK, check_states, iter_regressor
-from ..robot import Robot
+from ..robot.model import Robot
+from ..robot.regressor import DEFAULT_CHUNK, check_states, iter_regressor
 from .document import OWN_KEYS, read_result_json, result_text, result_to_dict
 from .result_schema import check_result_document
 
@@ -108,8 +108,8 @@ class IdentificationResult:
     warnings
         e.g. the physical-consistency violations of a plain least-squares fit
     per_file
-        each file's own estimate (:class:`manip_id.fleet.FileEstimate`) when
-        :func:`manip_id.fleet.identify` was asked ``per_file=True``, else None
+        each file's own estimate (:class:`manip_id.identification.fleet.FileEstimate`) when
+        :func:`manip_id.identification.fleet.identify` was asked ``per_file=True``, else None
     model
         "dynamic" (tau = Y(q, dq, ddq) theta), "energy" or "momentum"
         (:mod:`manip_id.models`); the training errors, ``sigma2`` and
@@ -120,7 +120,7 @@ class IdentificationResult:
         for the energy model's one scalar row per window)
     files
         :func:`identify` only: ``{"train": [...], "validation": [...]}``,
-        the :class:`~manip_id.pipeline.FileAccumulation` of each file (its
+        the :class:`~manip_id.identification.FileAccumulation` of each file (its
         data-quality summary, samples, rows left out by the deadband)
     """
 

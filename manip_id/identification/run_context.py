@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from ..robot import Robot
+from ..robot.model import Robot
 
 
 def _finite(x) -> float | None:

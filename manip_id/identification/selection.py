@@ -3,7 +3,7 @@ projection.
 
 Candidates (:data:`CANDIDATES`; every one with the offset ``fo`` when
 ``SelectionOptions.offset``, the torque sensor's bias), in the laws of
-:mod:`manip_id.friction`::
+:mod:`manip_id.robot.friction`::
 
     linear       fv dq + fc sign(dq)
     asymmetric   fvp, fvn, and fcp, fcn (fc with the offset)
@@ -32,7 +32,7 @@ length ``xc``) are chosen by variable projection: the linear coefficients are so
 of a grid (one fit per value), each joint keeps its best value, then the best is refined
 by a bisection in log(shape) (two fits per round, each joint its own value); the
 sigmoid's shift ``c`` is then chosen among :data:`SIGMOID_SHIFTS` and 0. The
-chosen per-joint models make one :class:`~manip_id.robot.JointTerms` with ``per_dof``
+chosen per-joint models make one :class:`~manip_id.robot.model.JointTerms` with ``per_dof``
 (the terms each joint keeps) and ``shapes``; :func:`select_model` fits it last, and its
 result carries ``context["friction_selection"]``.
 """
@@ -46,9 +46,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import InputError, RankDeficiencyError
-from ..friction import FrictionShapes
 from ..metrics import finite_or_none
-from ..robot import JointTerms, Robot
+from ..robot.friction import FrictionShapes
+from ..robot.model import JointTerms, Robot
 from .result import IdentificationResult
 from .temperature import candidate_reference
 

@@ -25,7 +25,7 @@ from ..estimators.consistent import StandardEstimate, consistent_estimate, minim
 from ..estimators.uncertainty import Uncertainty, solution_uncertainty
 from ..identifiability import RankAnalysis, analyze_information
 from ..metrics import finite_or_none, relative_error
-from ..robot import Robot
+from ..robot.model import Robot
 from .options import LEAST_SQUARES, ConsistentOptions, UncertaintyOptions, check_method
 from .problem import FileSums, Problem, block_temperature, check_samples
 from .result import IdentificationResult, RelativeError

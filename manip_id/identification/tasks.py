@@ -35,8 +35,8 @@ from ..estimators import InformationAccumulator
 from ..execution import SPLIT_EVERY, Backend, open_backend, portable_robot, reduce_tree
 from ..identifiability import BaseParameters
 from ..models import accumulate_energy, accumulate_momentum, choose_window, window_samples
-from ..regressor import DEFAULT_CHUNK
-from ..robot import Robot
+from ..robot.model import Robot
+from ..robot.regressor import DEFAULT_CHUNK
 from .file_sums import accumulate_file, accumulate_span
 from .options import ModelOptions, PreprocessOptions, RunOptions, UncertaintyOptions
 from .problem import (

@@ -1,11 +1,11 @@
 """The data side of the ``temperature`` friction law: its reference T0 and its range.
 
-The law (:mod:`manip_id.friction`) adds the columns ``(T_j - T0_j) dq_j`` and ``(T_j - T0_j)
+The law (:mod:`manip_id.robot.friction`) adds the columns ``(T_j - T0_j) dq_j`` and ``(T_j - T0_j)
 sign(dq_j)``; ``T0`` is a shape, fixed before any sum is accumulated, so that sums of parts
 (files, forked processes, Dask tasks) add up to the sums of the whole. It is the mean
 temperature per DoF of the training data *as read* (the rows the fit reads, before the
 preprocessing's trim and filter), with the range ``[T_min, T_max]`` it spans, from
-:class:`~manip_id.friction.TemperatureStats` summed over the files' scans (or over the
+:class:`~manip_id.robot.friction.TemperatureStats` summed over the files' scans (or over the
 arrays of an in-memory fit)::
 
     T0_j = sum_k T_kj / N            T_min,j = min_k T_kj     T_max,j = max_k T_kj
@@ -25,8 +25,8 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import MissingTemperatureError
-from ..friction import NO_SHAPES, TemperatureStats
-from ..robot import Robot
+from ..robot.friction import NO_SHAPES, TemperatureStats
+from ..robot.model import Robot
 from .reading import open_checked, scan_file
 from .tasks import file_specs
 

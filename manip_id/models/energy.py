@@ -25,8 +25,8 @@ from ..errors import InputError
 from ..estimators import InformationAccumulator
 from ..estimators.blocks import ScoreBlocks
 from ..identifiability import analyze
-from ..regressor import check_states, iter_regressor
-from ..robot import Robot
+from ..robot.model import Robot
+from ..robot.regressor import check_states, iter_regressor
 from ..trajectories import random_trajectory, trajectory_to_configuration
 
 #: Default window (energy) and row spacing (momentum) [s].

@@ -13,7 +13,7 @@ dynamic parameters): ``K_i = 1/2 v_i^T I_i v_i`` gives
 
 with ``J_i = d v_i/d dq`` and ``d v_i/dq`` from Pinocchio's kinematic derivatives
 (``getJointVelocityDerivatives``, LOCAL frame), and ``g`` from the torque
-regressor at rest. The compiled kernel (:func:`manip_id.compiled_regressor.momentum_block`,
+regressor at rest. The compiled kernel (:func:`manip_id.robot.compiled_regressor.momentum_block`,
 used where the torque regressor's is) evaluates the same sums for a block of samples
 without them: ``d v_i/d q_j = iX_j (v_j x S_j)`` for ``j`` an ancestor-or-self of ``i``, so
 
@@ -37,11 +37,11 @@ from functools import lru_cache
 import numpy as np
 import pinocchio as pin
 
-from ..compiled_regressor import momentum_block
 from ..errors import InputError
 from ..estimators import InformationAccumulator
 from ..estimators.blocks import ScoreBlocks
-from ..robot import Robot
+from ..robot.compiled_regressor import momentum_block
+from ..robot.model import Robot
 from .energy import check_model_states, window_samples
 
 _CHUNK = 1024

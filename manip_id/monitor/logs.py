@@ -17,7 +17,7 @@ import numpy as np
 from ..datasets import Dataset, FileSpec, check_robot, iter_rows, open_source, parse_file_spec
 from ..datasets.stream import RowCounts, collect, infer_format, torque_scale_vector
 from ..errors import DataError, InputError
-from ..robot import Robot
+from ..robot.model import Robot
 
 
 @dataclass(frozen=True)

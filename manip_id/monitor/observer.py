@@ -29,7 +29,7 @@ longer delay (default ``K2 = K = 25`` [1/s], which on the real Panda log at 1 kH
 velocity glitches under the bounds); ``filter_gain=None`` is the first-order observer above.
 
 The model is the robot's Pinocchio model with the identified inertias and armature
-(:meth:`~manip_id.robot.Robot.with_parameters`) and the identified joint terms. A standard
+(:meth:`~manip_id.robot.model.Robot.with_parameters`) and the identified joint terms. A standard
 vector that has the identified base parameters gives the same ``M``, ``C^T dq``, ``g`` and
 ``f`` whatever its values on the regrouped directions (a direction with ``Y theta = 0`` for
 every ``q, dq, ddq`` has ``M = 0`` and ``g = 0``, hence ``C^T dq = dM/dt dq - C dq = 0``), so
@@ -47,7 +47,7 @@ from numpy.typing import ArrayLike
 from .._checks import as_float_array, check_finite, positive_vector
 from ..errors import InputError, ModelMismatchError
 from ..identification import load_result
-from ..robot import Robot, available_robots
+from ..robot.model import Robot, available_robots
 from .detections import MonitorRun
 
 #: Default observer gain [1/s]: a 25 rad/s bandwidth (time constant 40 ms).

@@ -39,8 +39,8 @@ from .._checks import as_real
 from .._io.fields import Fields
 from .._io.reading import read_json
 from ..errors import DataError, InputError
-from ..regressor import iter_regressor
-from ..robot import Robot
+from ..robot.model import Robot
+from ..robot.regressor import iter_regressor
 from .logs import MonitorLog, ReadOptions, as_logs
 from .observer import (
     DEFAULT_FILTER_GAIN,

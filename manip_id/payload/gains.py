@@ -22,7 +22,7 @@ from ..errors import DataError, InputError
 from ..estimators import InformationAccumulator, solve_accumulator
 from ..identifiability import BaseParameters, RankAnalysis, analyze, analyze_information
 from ..metrics import relative_error
-from ..robot import Robot
+from ..robot.model import Robot
 from .gain_estimators import check_payload_present, ml_gains, tls
 from .gain_uncertainty import GainUncertainty, gain_uncertainty
 from .geometry import (

@@ -18,11 +18,11 @@ import numpy as np
 import pinocchio as pin
 
 from .._checks import as_float_array
-from ..consistency import pseudo_inertia
 from ..errors import InputError
 from ..identifiability import RankAnalysis, analyze
-from ..regressor import DEFAULT_CHUNK, check_states
-from ..robot import INERTIAL_NAMES, Robot, frame_id
+from ..physics.consistency import pseudo_inertia
+from ..robot.model import INERTIAL_NAMES, Robot, frame_id
+from ..robot.regressor import DEFAULT_CHUNK, check_states
 
 #: The payload's standard parameter names, in Pinocchio's order, expressed in its frame.
 PAYLOAD_NAMES: tuple[str, ...] = tuple(f"payload.{n}" for n in INERTIAL_NAMES)

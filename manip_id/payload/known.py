@@ -17,7 +17,7 @@ from .._io.fields import Fields
 from ..errors import DataError, InputError
 from ..identifiability import BaseParameters
 from ..identification.document import read_result_json
-from ..robot import Robot
+from ..robot.model import Robot
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from typing import Any, TypeVar
 
 from ..errors import InputError
 from ..identifiability import BaseParameters
-from ..regressor import DEFAULT_CHUNK
+from ..robot.regressor import DEFAULT_CHUNK
 
 #: Methods of :func:`~manip_id.payload.identify_payload`.
 PAYLOAD_METHODS: tuple[str, ...] = ("wls", "ols")

@@ -18,10 +18,10 @@ from types import FrameType
 
 import numpy as np
 
-from ..consistency import EIG_TOLERANCE
 from ..errors import PayloadWarning
 from ..identifiability import RankAnalysis
 from ..metrics import finite_or_none
+from ..physics.consistency import EIG_TOLERANCE
 from .geometry import (
     DEPENDS,
     INERTIA_COMPONENTS,

@@ -9,7 +9,7 @@ accumulates them (``A = X^T X``, ``b = X^T z``, per joint) in one pass, and
 adding the sums in a tree. Everything downstream (the solve, the errors, the tests)
 works on these sums only.
 
-A call announces its size (:func:`~manip_id.compiled_regressor.planned_samples`) when
+A call announces its size (:func:`~manip_id.robot.compiled_regressor.planned_samples`) when
 every run's is known beforehand (:func:`run_samples`), so that in ``auto`` regressor mode
 this process and every worker take the same regressor path, whatever they ran before.
 """
@@ -24,15 +24,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._checks import as_float_array, check_finite
-from ..compiled_regressor import planned_samples
 from ..datasets import FileSpec
 from ..errors import DataError, InputError, ManipIdError
 from ..estimators import InformationAccumulator
 from ..estimators.uncertainty import UncertaintyOptions
 from ..execution import SPLIT_EVERY, header_samples, open_backend, portable_robot, reduce_tree
 from ..metrics import relative_error
-from ..regressor import DEFAULT_CHUNK, check_states
-from ..robot import Robot
+from ..robot.compiled_regressor import planned_samples
+from ..robot.model import Robot
+from ..robot.regressor import DEFAULT_CHUNK, check_states
 
 
 @dataclass(frozen=True)
@@ -61,7 +61,7 @@ def as_runs(data, what: str) -> list[Run]:
 
     Takes a Dataset (with ``ddq``), a tuple ``(q, dq, ddq, tau)`` of arrays, a function
     of no argument returning an iterable of such tuples (a long log read block by block,
-    e.g. from :func:`manip_id.pipeline.iter_processed`), or a list of those.
+    e.g. from :func:`manip_id.identification.iter_processed`), or a list of those.
     """
     if data is None:
         return []

@@ -30,7 +30,7 @@ from ..estimators.uncertainty import (
 )
 from ..identifiability import BaseParameters, RankAnalysis, analyze, analyze_information
 from ..metrics import relative_error
-from ..robot import Robot
+from ..robot.model import Robot
 from .geometry import (
     PAYLOAD_NAMES,
     QUANTITY_NAMES,

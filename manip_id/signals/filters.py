@@ -122,7 +122,8 @@ def filter_regressor(
     Parameters
     ----------
     Y : numpy.ndarray
-        stacked regressor, shape (N, nv, p), sample-major (as :func:`manip_id.regressor.regressor`
+        stacked regressor, shape (N, nv, p), sample-major (as
+        :func:`manip_id.robot.regressor.regressor`
         returns it); time runs along axis 0.
     filt : Lowpass
         the same :class:`Lowpass` applied to the torques (``filt(tau)``).

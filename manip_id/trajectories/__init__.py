@@ -28,7 +28,7 @@ Limits (:func:`check_limits`) with a relative ``margin`` ``m``::
     acceleration  |ddq_j(t)|  <= (1 - m) acceleration_limit_j           (when given)
 
 A limit that the description leaves unset (infinite, zero, inverted or wider
-than :data:`manip_id.parameters.UNSET_LIMIT` = 1e3) is not checked. Trajectory
+than :data:`manip_id.robot.parameters.UNSET_LIMIT` = 1e3) is not checked. Trajectory
 design (:func:`random_trajectory`, :func:`optimize_excitation`) still needs
 finite bounds: it uses
 :meth:`Robot.sampling_bounds` ([-pi, pi] for unset positions) and

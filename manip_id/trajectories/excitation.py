@@ -17,9 +17,9 @@ import pinocchio as pin
 from .._checks import as_int, as_real, random_generator
 from ..errors import InfeasibleTrajectoryError, InputError, NumericalError
 from ..identifiability import analyze
-from ..regressor import iter_regressor
 from ..resources import MAX_HARMONICS, check_count
-from ..robot import Robot
+from ..robot.model import Robot
+from ..robot.regressor import iter_regressor
 from .fourier import DEFAULT_WF, FourierTrajectory, trajectory_to_configuration
 from .limits import (
     DEFAULT_CHECK_POINTS,

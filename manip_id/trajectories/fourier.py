@@ -14,7 +14,7 @@ import numpy as np
 
 from .._checks import as_float_array, check_finite
 from ..errors import InputError
-from ..robot import Robot
+from ..robot.model import Robot
 
 #: Default base pulsation [rad/s]: a period of 10 s.
 DEFAULT_WF = 2.0 * math.pi / 10.0

@@ -1,7 +1,7 @@
 """Joint limits of a trajectory: URDF position, velocity and acceleration limits with a margin.
 
-A limit the description leaves unset (:func:`manip_id.parameters.bounded_range`,
-:func:`~manip_id.parameters.bounded_rate`) is not checked; design uses finite
+A limit the description leaves unset (:func:`manip_id.robot.parameters.bounded_range`,
+:func:`~manip_id.robot.parameters.bounded_rate`) is not checked; design uses finite
 bounds instead (:meth:`Robot.sampling_bounds`, :meth:`Robot.velocity_bounds`).
 """
 
@@ -14,8 +14,8 @@ import numpy as np
 
 from .._checks import as_float_array
 from ..errors import InfeasibleTrajectoryError, InputError
-from ..parameters import bounded_range, bounded_rate
-from ..robot import Robot
+from ..robot.model import Robot
+from ..robot.parameters import bounded_range, bounded_rate
 from .fourier import FourierTrajectory, dof_layout
 
 #: Default number of time samples per period for limit checks.

@@ -6,7 +6,7 @@ Conventions shared by the members of this subpackage
 Inputs are plain arrays and small typed objects; nothing here runs an
 identification. Shapes follow the package: ``t`` [s] of shape (N,), ``q`` of
 shape (N, nq) [rad or m], torques of shape (N, nv) [N m or N], parameter
-vectors of shape (p,) in :attr:`manip_id.robot.Robot.parameter_names` order.
+vectors of shape (p,) in :attr:`manip_id.robot.model.Robot.parameter_names` order.
 
 **Equivalent inertia ellipsoid** (:mod:`.inertia_ellipsoid`). A body block
 ``[m, mcx, mcy, mcz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]`` (first moment and inertia

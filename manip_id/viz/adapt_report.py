@@ -52,7 +52,7 @@ def write_adapt_report(
 ) -> Path:
     """The report folder of an adaptive run; returns its path.
 
-    cmp: the adaptive and fixed runs (:func:`manip_id.closed_loop.compare_fixed`);
+    cmp: the adaptive and fixed runs (:func:`manip_id.control.closed_loop.compare_fixed`);
     document: the run's JSON (result.json); settings: summary rows of the run's options
     (duration [s], rate [Hz]).
     """

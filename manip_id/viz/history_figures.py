@@ -14,7 +14,7 @@ from matplotlib.figure import Figure
 
 from .._checks import as_float_array, check_finite
 from ..errors import InputError
-from ..parameters import bounded_range
+from ..robot.parameters import bounded_range
 from .plotting import (
     PRED,
     VAL,

@@ -13,7 +13,7 @@ import numpy as np
 
 from .._checks import as_float_array, check_finite
 from ..errors import InputError
-from ..robot import Robot
+from ..robot.model import Robot
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from ..robot import Robot
+from ..robot.model import Robot
 
 
 @dataclass(frozen=True)

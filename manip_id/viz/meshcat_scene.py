@@ -34,7 +34,7 @@ from pinocchio.visualize.meshcat_visualizer import applyScalingOnHomegeneousTran
 
 from .._io import atomic_write_text
 from ..errors import InputError, ManipIdError
-from ..robot import Robot
+from ..robot.model import Robot
 from .camera import place_camera, view_direction
 from .inertia_ellipsoid import (
     EquivalentEllipsoid,

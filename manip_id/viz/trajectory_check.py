@@ -6,8 +6,8 @@ import numpy as np
 
 from .._checks import as_float_array, check_finite
 from ..errors import InfeasibleTrajectoryError, InputError
-from ..parameters import bounded_range
-from ..robot import Robot
+from ..robot.model import Robot
+from ..robot.parameters import bounded_range
 
 
 def check_trajectory(robot: Robot, t, q, *, tolerance: float = 1e-6):

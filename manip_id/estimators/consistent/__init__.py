@@ -17,7 +17,7 @@ with ``beta_ls`` the least-squares solution. Measured in standard deviations of
                                  + sum_t ((theta_t - theta0_t) / s_t)^2 ]
     subject to  J_i(theta) - eps_i 1 >= 0  (each body i),   Ia, fv, fc >= 0
 
-where ``J_i`` is body i's pseudo-inertia (:mod:`manip_id.consistency`) and
+where ``J_i`` is body i's pseudo-inertia (:mod:`manip_id.physics.consistency`) and
 
 - ``D(J || J0) = tr(J0^-1 J) - log det(J0^-1 J) - 4`` is the log-det (Bregman)
   divergence (Lee, Wensing & Park 2019): zero at ``J = J0``, invariant to the body

@@ -10,15 +10,15 @@ however far from the link. A body whose mass lies inside an ellipsoid
     Q_bar = [[-Q^-1,      Q^-1 c          ],        (4, 4)
              [c^T Q^-1,   1 - c^T Q^-1 c  ]]
 
-(:func:`manip_id.consistency.ellipsoid_matrix`), linear in the body's parameters
+(:func:`manip_id.physics.consistency.ellipsoid_matrix`), linear in the body's parameters
 ``pi``: ``tr(J(pi) Q_bar) = d . pi`` with ``d = E^T vec(Q_bar)`` (``E`` the basis of
-:func:`manip_id.consistency.pseudo_inertia_basis`). With ``J >= 0`` it is the
+:func:`manip_id.physics.consistency.pseudo_inertia_basis`). With ``J >= 0`` it is the
 condition that some density supported in ``E`` has these parameters.
 
 The ellipsoid of each body (:func:`body_bounds`, ``bounds="geometry"``):
 
 - from the link's collision geometry, else its visual geometry, when the robot's
-  URDF loads them (:attr:`manip_id.robot.Robot.collision_model`; loaded only when
+  URDF loads them (:attr:`manip_id.robot.model.Robot.collision_model`; loaded only when
   bounds are asked for): every geometry object on the body's joint (for a composite
   of links joined by fixed or locked joints, the union of their geometry), meshes
   by their vertices, primitives (boxes, cylinders, spheres, capsules, ...) by the
@@ -48,8 +48,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...consistency import ellipsoid_matrix, ellipsoid_rows, pseudo_inertia
 from ...errors import InputError, RobotError
+from ...physics.consistency import ellipsoid_matrix, ellipsoid_rows, pseudo_inertia
 
 #: Kinds of bounds: ellipsoids from the robot's geometry (or kinematics), or none.
 BOUNDS: tuple[str, ...] = ("geometry", "none")

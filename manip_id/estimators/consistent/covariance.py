@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...consistency import pseudo_inertia, pseudo_inertia_basis
+from ...physics.consistency import pseudo_inertia, pseudo_inertia_basis
 from .problem import ConsistentProblem
 
 #: A mass (total mass) bound counts as active within this relative distance.

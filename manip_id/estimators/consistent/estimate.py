@@ -12,13 +12,13 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ...consistency import (
+from ...metrics import finite_or_none
+from ...physics.consistency import (
     ConsistencyReport,
     PlausibilityReport,
     check_consistency,
     check_plausibility,
 )
-from ...metrics import finite_or_none
 from .bounds import BodyBounds, BoundsOptions, body_bounds
 from .covariance import active_constraints, sensitivity
 from .problem import (
@@ -69,7 +69,7 @@ class StandardEstimate:
         the plausibility bounds the estimate was solved with (None for none).
     plausibility
         per body, mass against nominal and position against its bounding
-        ellipsoid (:func:`manip_id.consistency.check_plausibility`); None for plain LS.
+        ellipsoid (:func:`manip_id.physics.consistency.check_plausibility`); None for plain LS.
     warnings
         what the user should know about these values (implausible bodies).
     sensitivity

@@ -18,8 +18,8 @@ import pinocchio as pin
 import scipy.linalg as sla
 
 from ..._checks import as_float_array
-from ...consistency import parameters_from_pseudo_inertia, pseudo_inertia
 from ...errors import InputError, SolverError
+from ...physics.consistency import parameters_from_pseudo_inertia, pseudo_inertia
 from .problem import ConsistentProblem, row_and_null_maps
 
 

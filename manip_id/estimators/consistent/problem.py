@@ -15,14 +15,14 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..._checks import as_float_array
-from ...consistency import (
+from ...errors import InputError, PhysicalConsistencyError
+from ...physics.consistency import (
     NONNEGATIVE_TERMS,
     ConsistencyReport,
     Violation,
     check_consistency,
     pseudo_inertia,
 )
-from ...errors import InputError, PhysicalConsistencyError
 from .bounds import BodyBounds
 
 SOLVERS: tuple[str, ...] = ("sdp", "logchol")

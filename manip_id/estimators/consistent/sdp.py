@@ -14,8 +14,8 @@ import warnings
 
 import numpy as np
 
-from ...consistency import pseudo_inertia_basis
 from ...errors import SolverError
+from ...physics.consistency import pseudo_inertia_basis
 from .bounds import bound_constraints
 from .problem import MARGIN, ConsistentProblem, row_and_null_maps
 

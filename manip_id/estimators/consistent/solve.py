@@ -6,8 +6,8 @@ import time
 
 import numpy as np
 
-from ...consistency import check_consistency, parameters_from_pseudo_inertia, pseudo_inertia
 from ...errors import InputError
+from ...physics.consistency import check_consistency, parameters_from_pseudo_inertia, pseudo_inertia
 from .logchol import solve_logchol
 from .problem import SOLVERS, ConsistentProblem, ConsistentSolution
 from .sdp import solve_sdp

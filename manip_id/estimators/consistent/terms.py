@@ -5,7 +5,7 @@ bodies standing in for a joint term the model does not have: a rotor inertia
 (armature, column ``ddq_j``) looks like link inertia, friction like gravity. For each
 term of :data:`CANDIDATES` the robot does not model, the least-squares fit of the
 robot's base columns ``Y_b`` is compared with the fit of ``[Y_b, C_t]``, ``C_t`` the
-term's columns (row ``j``: ``c_t(q_j, dq_j, ddq_j)``, :mod:`manip_id.parameters`),
+term's columns (row ``j``: ``c_t(q_j, dq_j, ddq_j)``, :mod:`manip_id.robot.parameters`),
 on the same accumulated sums (one accumulator over ``[Y_b, C]`` for every candidate
 at once; a candidate fit is the sub-problem of its columns)::
 
@@ -25,7 +25,7 @@ import numpy as np
 
 from ...errors import InputError
 from ...metrics import relative_error
-from ...parameters import JOINT_TERM
+from ...robot.parameters import JOINT_TERM
 from ..accumulator import InformationAccumulator
 from ..batch import solve_accumulator
 

@@ -21,8 +21,8 @@ from __future__ import annotations
 import math
 import xml.etree.ElementTree as ET
 
-from ._io.reading import read_text
-from .errors import RobotError
+from .._io.reading import read_text
+from ..errors import RobotError
 
 
 def _numbers(text: str | None, count: int, where: str) -> list[float] | None:

@@ -14,11 +14,11 @@ import math
 import numpy as np
 import pinocchio as pin
 
-from ._checks import as_float_array, as_real, check_finite, random_generator
+from .._checks import as_float_array, as_real, check_finite, random_generator
+from ..errors import InputError
+from ..resources import check_count
+from ..robot.model import Robot
 from .consistency import PhysicalConsistencyError, check_consistency
-from .errors import InputError
-from .resources import check_count
-from .robot import Robot
 
 #: Joint terms that must stay non-negative (offset may take either sign).
 _POSITIVE_TERMS = ("Ia", "fv", "fc", "k")
@@ -131,7 +131,7 @@ def require_physical(robot: Robot, theta) -> None:
     A body fails when its pseudo-inertia has a negative eigenvalue (negative mass,
     inertia not positive semi-definite about the centre of mass, triangle inequalities
     broken), and a joint when its armature or viscous / Coulomb friction is negative
-    (:func:`manip_id.consistency.check_consistency`); the message names the body.
+    (:func:`manip_id.physics.consistency.check_consistency`); the message names the body.
     A singular pseudo-inertia (a point mass, a massless frame) is accepted.
     """
     report = check_consistency(robot, theta)

@@ -17,9 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from ._io.fields import Fields
-from ._io.reading import read_json
-from .errors import DataError, InputError
+from .._io.fields import Fields
+from .._io.reading import read_json
+from ..errors import DataError, InputError
 from .friction import FrictionShapes
 
 #: ``format`` field of the sidecar JSON.
@@ -27,7 +27,7 @@ SIDECAR_FORMAT = "manip_id identified parameters"
 SIDECAR_VERSION = 3
 
 _TERM_FLAGS = {"Ia": "armature", "fv": "viscous", "fc": "coulomb", "fo": "offset", "k": "spring"}
-#: The on/off fields of :class:`~manip_id.robot.JointTerms` the sidecar's ``joint_model`` holds.
+#: The on/off fields of :class:`~manip_id.robot.model.JointTerms` in the sidecar's ``joint_model``.
 MODEL_FLAGS: tuple[str, ...] = (
     "armature",
     "viscous",
@@ -93,7 +93,7 @@ def identified_options(spec: str, identified, armature, friction, spring, active
     """The sidecar of an exported URDF and the load options it implies (explicit ones win).
 
     Returns ``(sidecar, armature, friction, spring, active_joints)`` for
-    :func:`manip_id.robot.load_robot`; :func:`locked_configuration` gives the positions
+    :func:`manip_id.robot.model.load_robot`; :func:`locked_configuration` gives the positions
     of the locked joints.
     """
     path = sidecar_path(spec) if identified is True else Path(identified)
@@ -117,7 +117,7 @@ def _toggle(per_dof, term: str, on: bool | None):
 
 
 def identified_joint_model(sidecar: dict, *, armature=None, friction=None, spring=None):
-    """The fields of the :class:`~manip_id.robot.JointTerms` the sidecar's ``joint_model``
+    """The fields of the :class:`~manip_id.robot.model.JointTerms` the sidecar's ``joint_model``
     records (its laws, ``harmonics``, ``shapes``, ``per_dof``), or None when the caller
     names the friction kinds (``friction`` not None: theirs win) or the sidecar has no
     joint model (version 2). An explicit ``armature`` or ``spring`` flag overrides the
@@ -144,7 +144,7 @@ def identified_joint_model(sidecar: dict, *, armature=None, friction=None, sprin
 
 def locked_configuration(sidecar: dict) -> dict[str, Any] | None:
     """The sidecar's locked joints as ``JointSelection(locked_configuration=...)`` of
-    :func:`manip_id.robot.load_robot` takes them (None for a sidecar without them, version 1)."""
+    :func:`manip_id.robot.model.load_robot` takes them (None without them, version 1)."""
     locked = sidecar.get("locked_joints")
     if not isinstance(locked, dict) or not locked:
         return None
@@ -163,7 +163,7 @@ def apply_identified(robot, sidecar: dict) -> None:
     """Put the sidecar's armature into ``robot.model``, its offset, spring and the
     coefficients of every other joint term into ``robot.settings`` (so that
     ``robot.nominal_parameters`` holds them), and the ``load`` law's inertias
-    (``settings["load_inertias"]``, :attr:`~manip_id.robot.Robot.load_model`)."""
+    (``settings["load_inertias"]``, :attr:`~manip_id.robot.model.Robot.load_model`)."""
     joints = sidecar["joints"]
     unknown = [j for j in joints if j not in robot.dof_names]
     if unknown:

@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 
+from ...resources import FLOAT, MAX_STEPS, check_count, check_memory
+from ...robot.model import Robot
 from ..adaptive import SlotineLiController
-from ..resources import FLOAT, MAX_STEPS, check_count, check_memory
-from ..robot import Robot
 
 
 class Recorder:

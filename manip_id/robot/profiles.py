@@ -1,14 +1,14 @@
 """Robot profiles: per-robot identification defaults, one TOML file per robot.
 
 A profile ``robots/NAME.toml`` holds what a user would otherwise type for that
-robot every time; :func:`manip_id.robot.load_robot` and the command line use it
+robot every time; :func:`manip_id.robot.model.load_robot` and the command line use it
 for ``NAME`` and explicit arguments or options override it. Every table and key
 is optional::
 
     description = "Franka Emika Panda: the arm without its fingers"
 
     [model]
-    friction = ["viscous", "coulomb"]   # default friction model (manip_id.friction kinds)
+    friction = ["viscous", "coulomb"]   # default friction model (manip_id.robot.friction kinds)
     armature = false                    # model a rotor inertia per joint
     spring = false                      # model a linear spring per joint
 
@@ -39,8 +39,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ._io.reading import read_toml
-from .errors import InputError, RobotError
+from .._io.reading import read_toml
+from ..errors import InputError, RobotError
 from .friction import FRICTION_KINDS
 
 #: Keys a profile may hold, per table ("" is the top level).
@@ -60,7 +60,7 @@ def robots_dir() -> Path:
     Installed: the package data ``manip_id/robots/``; in the source tree (editable
     install or a checkout): ``robots/`` beside ``manip_id/``.
     """
-    here = Path(__file__).resolve().parent
+    here = Path(__file__).resolve().parent.parent  # manip_id/
     installed = here / "robots"
     if (installed / "msd.urdf").is_file():
         return installed

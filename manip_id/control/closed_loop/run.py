@@ -1,5 +1,5 @@
 """One closed-loop run: a control step, the run over a reference, and the comparison with
-the wrong parameters held fixed (see :mod:`manip_id.closed_loop`)."""
+the wrong parameters held fixed (see :mod:`manip_id.control.closed_loop`)."""
 
 from __future__ import annotations
 
@@ -11,12 +11,12 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .._checks import as_float_array, random_generator
+from ..._checks import as_float_array, random_generator
+from ...errors import InputError, NumericalError
+from ...robot.model import Robot
+from ...robot.regressor import RegressorEvaluator
+from ...trajectories import FourierTrajectory
 from ..adaptive import AdaptiveGains, SlotineLiController, default_gains
-from ..errors import InputError, NumericalError
-from ..regressor import RegressorEvaluator
-from ..robot import Robot
-from ..trajectories import FourierTrajectory
 from .plant import Plant, SensorNoise
 from .recorder import Recorder
 from .reference import angles_to_q, check_reference, default_reference, validation_states
@@ -68,7 +68,7 @@ class ClosedLoopRun:
         integral of ``s^T (K_D + F_v) s + kappa |eps|^2 / m^2`` over the run [J] (the
         predicted decrease of the Lyapunov function in a noise-free, Coulomb-free run;
         with the RLS gain the composite part is ``kappa |eps|^2 / (2 m^2)`` and the
-        Lyapunov function uses ``P(t)^-1``, see :mod:`manip_id.adaptive`; forgetting not
+        Lyapunov function uses ``P(t)^-1``, see :mod:`manip_id.control.adaptive`; forgetting not
         counted)
     """
 

@@ -1,13 +1,13 @@
 """A nominal model made physical: the nearest consistent inertias to a URDF's non-physical ones.
 
-A body is physical when its pseudo-inertia (:mod:`manip_id.consistency`)::
+A body is physical when its pseudo-inertia (:mod:`manip_id.physics.consistency`)::
 
     J = [[Sigma_c + m c c^T, m c], [m c^T, m]],   Sigma_c = 0.5 tr(I_c) 1 - I_c
 
 is positive definite: ``m > 0`` and the second moment about the centre of mass
 ``Sigma_c`` (the inertia ``I_c`` about the CoM rearranged) positive definite, which
 is the triangle inequality of the principal moments. :func:`repair_nominal` leaves
-every body that passes :func:`~manip_id.consistency.check_consistency` exactly as
+every body that passes :func:`~manip_id.physics.consistency.check_consistency` exactly as
 it is and, for each other body, keeps what a URDF's author usually gets right (the
 mass and the centre of mass) and replaces ``Sigma_c`` by its nearest matrix in the
 Frobenius norm with eigenvalues at least ``sigma_min`` (eigenvalues clipped in the
@@ -36,8 +36,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import InputError
 from .consistency import NONNEGATIVE_TERMS, ConsistencyReport, check_consistency
-from .errors import InputError
 
 #: Smallest second moment about the CoM relative to the largest one.
 FLOOR = 1e-3
@@ -164,7 +164,7 @@ def repair_nominal(robot, theta=None) -> RepairResult:
 
     Parameters
     ----------
-    robot: a :class:`~manip_id.robot.Robot` (its URDF inertias and joint terms).
+    robot: a :class:`~manip_id.robot.model.Robot` (its URDF inertias and joint terms).
     theta: the parameters to repair, shape (p,); default ``robot.nominal_parameters``.
 
     Returns

@@ -65,7 +65,7 @@ from functools import partial
 
 import numpy as np
 
-from .errors import InputError
+from ..errors import InputError
 
 #: Friction kinds ``--friction`` accepts (``position`` takes ``position:K``).
 FRICTION_KINDS: tuple[str, ...] = (

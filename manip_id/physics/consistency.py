@@ -17,7 +17,7 @@ eigenvalue of its ``J`` exceeds ``tolerance * max(|eig J|)`` (default
 
 Joint terms: armature ``Ia``, viscous ``fv`` and Coulomb ``fc`` friction, their
 one-sided forms ``fvp fvn fcp fcn``, the Stribeck excess ``fs = f_static - fc`` and the
-sigmoid amplitude ``fsg`` must be ``>= 0`` (:mod:`manip_id.friction`; offset ``fo``,
+sigmoid amplitude ``fsg`` must be ``>= 0`` (:mod:`manip_id.robot.friction`; offset ``fo``,
 spring ``k`` and the position harmonics may have either sign).
 """
 
@@ -27,8 +27,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._checks import as_float_array, check_finite
-from .errors import InputError, PhysicalConsistencyError
+from .._checks import as_float_array, check_finite
+from ..errors import InputError, PhysicalConsistencyError
 
 #: Relative eigenvalue tolerance of the consistency check (``lambda_min > tol * lambda_max``).
 EIG_TOLERANCE = 1e-10

@@ -1,6 +1,6 @@
-"""numba kernels of :mod:`manip_id.compiled_regressor` (imported only when numba is installed).
+"""numba kernels of :mod:`manip_id.robot.compiled_regressor` (imported only with numba).
 
-The math and conventions are in :mod:`manip_id.compiled_regressor`. Four kernels: the
+The math and conventions are in :mod:`manip_id.robot.compiled_regressor`. Four kernels: the
 forward pass of one sample (placements, velocities, accelerations of every joint frame),
 the body regressor A(v, a) of one body, and the block loop that projects each body's
 A through its chain of ancestors; and the momentum loop of
@@ -167,7 +167,7 @@ def block(tree, q, dq, ddq, out):
     """Y_rigid of every sample of the block into ``out`` (N, nv, >= 10 n), in place.
 
     ``tree = (parent, kind, axis, rot0, pos0, idx_q, idx_v, gravity)``: the arrays of
-    :class:`~manip_id.compiled_regressor.CompiledModel`, gravity as used (zero for the
+    :class:`~manip_id.robot.compiled_regressor.CompiledModel`, gravity as used (zero for the
     gravity-free model).
     """
     parent, kind, axis, _, _, _, idx_v, _ = tree

@@ -30,9 +30,9 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from ._checks import as_float_array, random_generator
-from ._native import native_stderr_captured
-from .errors import InputError, RobotError
+from .._checks import as_float_array, random_generator
+from .._native import native_stderr_captured
+from ..errors import InputError, RobotError
 from .friction import NO_SHAPES
 from .parameters import (
     INERTIAL_NAMES,
@@ -45,7 +45,9 @@ from .parameters import (
 )
 from .profiles import RobotProfile
 from .regressor import RegressorEvaluator
-from .robot_sources import (
+from .sidecar import apply_identified, identified_joint_model, identified_options
+from .sidecar import locked_configuration as sidecar_locked
+from .sources import (
     FLOATING_JOINTS,
     FRICTION_KINDS,
     MANIPULATORS,
@@ -61,8 +63,6 @@ from .robot_sources import (
     reference_configuration,
     resolve_profile,
 )
-from .sidecar import apply_identified, identified_joint_model, identified_options
-from .sidecar import locked_configuration as sidecar_locked
 
 __all__ = [
     "FRICTION_KINDS",
@@ -270,7 +270,7 @@ class Robot:
         and zero otherwise: the model then holds exactly the dynamics ``theta``
         describes (a URDF armature the parameter vector cannot represent is
         dropped). Friction and spring terms are not part of a Pinocchio model:
-        apply them with :func:`manip_id.regressor.joint_torques`.
+        apply them with :func:`manip_id.robot.regressor.joint_torques`.
         """
         blocks = self.rigid_body_parameters(theta)
         model = self.model.copy()
@@ -286,7 +286,7 @@ class Robot:
     def sampling_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Finite position bounds for sampling, shape (nq,) each.
 
-        Unset limits (:func:`~manip_id.parameters.bounded_range`) are replaced by [-pi, pi].
+        Unset limits (:func:`~manip_id.robot.parameters.bounded_range`) are replaced by [-pi, pi].
         """
         lo, hi = self.lower.copy(), self.upper.copy()
         wide = ~bounded_range(lo, hi)
@@ -370,7 +370,7 @@ class Robot:
 
     @cached_property
     def evaluator(self) -> RegressorEvaluator:
-        """The robot's :class:`~manip_id.regressor.RegressorEvaluator` (built on first use)."""
+        """The :class:`~manip_id.robot.regressor.RegressorEvaluator` (built on first use)."""
         return RegressorEvaluator(self)
 
     @cached_property
@@ -474,8 +474,8 @@ def load_robot(
         offset and spring become the defaults and the nominal parameters (explicit
         arguments still win).
     profile
-        the identification profile (:mod:`manip_id.profiles`): a robot name or a
-        ``.toml`` path, a :class:`~manip_id.profiles.RobotProfile`, or False for none.
+        the identification profile (:mod:`manip_id.robot.profiles`): a robot name or a
+        ``.toml`` path, a :class:`~manip_id.robot.profiles.RobotProfile`, or False for none.
         Default: ``robots/NAME.toml`` for a robot loaded by name when it exists; a URDF
         loaded by path takes none (its file name decides nothing). Explicit arguments
         override the profile.

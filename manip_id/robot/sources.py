@@ -1,9 +1,9 @@
 """Where robot models come from: URDF files, example-robot-data, our own robots.
 
-The loading steps of :func:`manip_id.robot.load_robot`: find the model (a URDF path,
+The loading steps of :func:`manip_id.robot.model.load_robot`: find the model (a URDF path,
 an example-robot-data name, ``"msd"``), its joint-term flags (:class:`JointTerms`,
 from the arguments, else the robot's profile), the joints to lock at a reference
-configuration, and the profile (:mod:`manip_id.profiles`).
+configuration, and the profile (:mod:`manip_id.robot.profiles`).
 """
 
 from __future__ import annotations
@@ -17,10 +17,10 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
-from ._checks import as_float_array
-from ._io.reading import check_readable, read_json
-from ._native import native_stderr_captured
-from .errors import InputError, RobotError, did_you_mean
+from .._checks import as_float_array
+from .._io.reading import check_readable, read_json
+from .._native import native_stderr_captured
+from ..errors import InputError, RobotError, did_you_mean
 from .friction import FRICTION_KINDS as FRICTION_KINDS  # re-exported
 from .friction import FrictionShapes, FrictionSpec, friction_columns, parse_friction
 from .parameters import JOINT_TERM_NAMES
@@ -69,7 +69,7 @@ class JointTerms:
 
     ``asymmetric``, ``stribeck``, ``sigmoid``, ``harmonics`` (the order of the
     ``position`` law), ``load``, ``temperature`` and ``hysteresis`` are the friction laws of
-    :mod:`manip_id.friction`; ``shapes`` their per-DoF shape parameters; ``per_dof``
+    :mod:`manip_id.robot.friction`; ``shapes`` their per-DoF shape parameters; ``per_dof``
     (None: all) the terms each DoF keeps, one tuple of term names per DoF (the others'
     columns are zero: a per-joint model).
     """
@@ -91,7 +91,7 @@ class JointTerms:
 
     @property
     def friction(self) -> FrictionSpec:
-        """The friction kinds as a :class:`~manip_id.friction.FrictionSpec`."""
+        """The friction kinds as a :class:`~manip_id.robot.friction.FrictionSpec`."""
         flags = (
             ("viscous", self.viscous),
             ("coulomb", self.coulomb),
@@ -109,7 +109,7 @@ class JointTerms:
     @property
     def enabled(self) -> tuple[str, ...]:
         """Short names of the enabled terms, in column order (subset of
-        :data:`~manip_id.parameters.JOINT_TERM_NAMES`)."""
+        :data:`~manip_id.robot.parameters.JOINT_TERM_NAMES`)."""
         names = friction_columns(self.friction)
         if self.per_dof is not None:  # a per-joint model: the union of the joints' terms
             names = set().union(*self.per_dof)

@@ -42,15 +42,15 @@ tasks recomputed by Dask elsewhere; a bad file fails the run with a
 
 from __future__ import annotations
 
-from .execution import (
+from ..execution import (
     DEFAULT_LOCAL_WORKERS,
     SPLIT_EVERY,
     WORKER_ENV,
     parse_scheduler,
     portable_robot,
 )
-from .identification import LEAST_SQUARES, FileEstimate, PartitionOptions
-from .identification.tasks import FilePart, PartSums, file_length, part_sums
+from . import LEAST_SQUARES, FileEstimate, PartitionOptions
+from .tasks import FilePart, PartSums, file_length, part_sums
 
 #: Methods that accumulate (the online laws need the samples in order).
 FLEET_METHODS: tuple[str, ...] = LEAST_SQUARES

@@ -1,5 +1,5 @@
 """The true robot of a closed-loop run: forward dynamics with its joint terms, the
-integrator, and the sensors the controller reads (see :mod:`manip_id.closed_loop`)."""
+integrator, and the sensors the controller reads (see :mod:`manip_id.control.closed_loop`)."""
 
 from __future__ import annotations
 
@@ -10,10 +10,10 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike
 
-from .._checks import as_float_array, check_finite
-from ..errors import InputError
-from ..perturbation import require_physical
-from ..robot import Robot
+from ..._checks import as_float_array, check_finite
+from ...errors import InputError
+from ...physics.perturbation import require_physical
+from ...robot.model import Robot
 
 
 class Plant:

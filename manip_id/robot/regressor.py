@@ -1,6 +1,6 @@
 """Regressors: Y(q, dq, ddq) and the Slotine-Li Y(q, dq, v, w), with joint-level terms.
 
-Inverse dynamics is linear in the parameters of :class:`~manip_id.robot.Robot`::
+Inverse dynamics is linear in the parameters of :class:`~manip_id.robot.model.Robot`::
 
     tau = M(q) ddq + C(q, dq) dq + g(q) + joint terms = Y(q, dq, ddq) theta
 
@@ -42,8 +42,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pinocchio as pin
 
-from ._checks import as_float_array, check_finite
-from ._numba import numba_warm
+from .._checks import as_float_array, check_finite
+from .._numba import numba_warm
+from ..errors import InputError
+from ..resources import check_regressor_buffer
 from .compiled_regressor import (
     AUTO_SAMPLES,
     CompiledModel,
@@ -53,12 +55,10 @@ from .compiled_regressor import (
     planned,
     rigid_block,
 )
-from .errors import InputError
 from .friction import HysteresisCarry, hysteresis_state
-from .resources import check_regressor_buffer
 
 if TYPE_CHECKING:
-    from .robot import Robot
+    from .model import Robot
 
 DEFAULT_CHUNK = 1024
 _STACK = 32
@@ -127,11 +127,11 @@ class RegressorEvaluator:
         """The compiled kernel for a block of ``n`` samples, or None for Pinocchio.
 
         Mode ``compiled``: whenever the model is covered; ``auto``: for a run announced
-        with at least :data:`~manip_id.compiled_regressor.AUTO_SAMPLES` samples
-        (:func:`~manip_id.compiled_regressor.planned_samples`), and outside any announced
+        with at least :data:`~manip_id.robot.compiled_regressor.AUTO_SAMPLES` samples
+        (:func:`~manip_id.robot.compiled_regressor.planned_samples`), and outside any announced
         run once this process has seen that many samples or once a numba kernel has run
         in it (the filter of the log preprocessing: :func:`~manip_id._numba.numba_warm`);
-        ``pinocchio``: never (see :mod:`manip_id.compiled_regressor`). An announced run is
+        ``pinocchio``: never (see :mod:`manip_id.robot.compiled_regressor`). An announced run is
         decided by its size alone, so every process of it (this one, forked workers, Dask
         workers, whatever they evaluated before) takes the same path and gives the same
         round-off.
@@ -163,7 +163,7 @@ class RegressorEvaluator:
     @contextmanager
     def sequence(self):
         """One trajectory over several calls: the hysteresis state (the ``fh`` column,
-        :func:`~manip_id.friction.hysteresis_state`) carries from each block to the next.
+        :func:`~manip_id.robot.friction.hysteresis_state`) carries from each block to the next.
 
         Entering starts a trajectory (state 0 before its first sample); a nested entry
         joins the open one. Outside, each call's samples are a trajectory of their own.

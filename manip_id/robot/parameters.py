@@ -34,7 +34,7 @@ regressor column (only row ``j`` is non-zero), its units and its torque
     fh  hysteresis s_j, the Dahl state of q_j's path         [N m | N]
 
 (the friction laws, their shapes ``vs, a, c`` and how they combine:
-:mod:`manip_id.friction`). A layout may switch terms off for some DoFs
+:mod:`manip_id.robot.friction`). A layout may switch terms off for some DoFs
 (``mask``): their columns stay, identically zero, so the base parameters drop them.
 
 (revolute | prismatic units; ``q_j`` is the joint angle, ``atan2(sin, cos)``
@@ -54,7 +54,7 @@ regrouping ``K``::
                                                               support: zero on D)
 
 Physical consistency (pseudo-inertias, :func:`check_consistency`) lives in
-:mod:`manip_id.consistency`; this module re-exports it.
+:mod:`manip_id.physics.consistency`; this module re-exports it.
 """
 
 from __future__ import annotations
@@ -67,12 +67,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .consistency import ConsistencyReport as ConsistencyReport  # re-exported
-from .consistency import check_consistency as check_consistency  # re-exported
-from .consistency import parameters_from_pseudo_inertia as parameters_from_pseudo_inertia
-from .consistency import pseudo_inertia
-from .consistency import pseudo_inertia_basis as pseudo_inertia_basis  # re-exported
-from .errors import InputError
+from ..errors import InputError
+from ..physics.consistency import ConsistencyReport as ConsistencyReport  # re-exported
+from ..physics.consistency import check_consistency as check_consistency  # re-exported
+from ..physics.consistency import parameters_from_pseudo_inertia as parameters_from_pseudo_inertia
+from ..physics.consistency import pseudo_inertia
+from ..physics.consistency import pseudo_inertia_basis as pseudo_inertia_basis  # re-exported
 from .friction import (
     MAX_HARMONICS,
     FrictionShapes,
@@ -139,7 +139,7 @@ class JointTerm:
     name
         short name used in parameter names (``panda_joint3.fv``).
     flag
-        the :class:`~manip_id.robot.JointTerms` attribute that enables it.
+        the :class:`~manip_id.robot.model.JointTerms` attribute that enables it.
     column_text
         the regressor entry of row ``j``, as text (``"sign(dq_j)"``).
     unit_revolute, unit_prismatic
@@ -165,10 +165,10 @@ class JointTerm:
 
         ``angles`` (..., nv) [rad or m] (``k``, the harmonics; may be None otherwise), ``vel``
         [rad/s or m/s], ``acc`` [rad/s^2 or m/s^2] (``Ia``); ``shapes`` the per-DoF shapes
-        (None: defaults, :mod:`manip_id.friction`); the signals of :attr:`needs`: ``load`` the
+        (None: defaults, :mod:`manip_id.robot.friction`); the signals of :attr:`needs`: ``load`` the
         nominal rigid-body torque (..., nv) [N m or N] (``fl``), ``temp`` the temperature
         (..., nv) or (..., 1) [degC or K] (``fvt``, ``fct``), ``history`` the Dahl state
-        (..., nv) of the samples' path (:func:`~manip_id.friction.hysteresis_state`, ``fh``).
+        (..., nv) of the samples' path (:func:`~manip_id.robot.friction.hysteresis_state`, ``fh``).
         """
         if self.needs is not None:
             signal = {"load": load, "temp": temp, "history": history}[self.needs]
@@ -588,7 +588,7 @@ class ParameterLayout:
         """Each body's pseudo-inertia ``J = [[0.5 tr(I) 1 - I, h], [h^T, m]]``, shape (nb, 4, 4).
 
         ``I`` about the joint frame origin [kg m^2], ``h = m c`` [kg m], ``m`` [kg]
-        (:func:`manip_id.consistency.pseudo_inertia`); ``J`` is positive definite for a
+        (:func:`manip_id.physics.consistency.pseudo_inertia`); ``J`` is positive definite for a
         physically realizable body.
         """
         return pseudo_inertia(self.rigid_blocks(theta))

@@ -2,7 +2,7 @@
 
 Each file (or each group of files: one robot's logs) is identified on its own with the
 reference's base parametrization (on the fleet path, one task per file:
-:func:`manip_id.fleet.identify`), and
+:func:`manip_id.identification.fleet.identify`), and
 its base parameters ``theta_f`` are compared with the reference's ``theta_r``, both with
 their covariances (independent data)::
 
@@ -30,18 +30,18 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.special import chdtrc, ndtr
 
-from .errors import InputError, ModelMismatchError, RankDeficiencyError
-from .identification import (
+from ..errors import InputError, ModelMismatchError, RankDeficiencyError
+from ..identification import (
     FileOptions,
     PartitionOptions,
     PreprocessOptions,
     RunOptions,
     identify,
 )
-from .identification.document import single_standard
-from .monitor import covariance_kind
-from .parameters import JOINT_TERM
-from .robot import Robot
+from ..identification.document import single_standard
+from ..robot.model import Robot
+from ..robot.parameters import JOINT_TERM
+from . import covariance_kind
 
 #: Default significance level of the tests.
 DEFAULT_ALPHA = 0.05
@@ -232,11 +232,11 @@ def drift_files(
     robot: the robot, with the reference's joint terms
     reference: the reference :class:`~manip_id.identification.IdentificationResult`
         (e.g. :func:`~manip_id.identification.load_result` of ``manip-id identify --json``)
-    files: data files (file specs as :func:`~manip_id.fleet.identify` takes them),
+    files: data files (file specs as :func:`~manip_id.identification.fleet.identify` takes them),
         each tested alone; or a mapping ``group -> files`` (e.g. one robot's logs), each
         group identified from all its files and tested as one
     alpha: significance level in (0, 1)
-    scheduler, options, window: as :func:`~manip_id.fleet.identify` (one task per
+    scheduler, options, window: as :func:`~manip_id.identification.fleet.identify` (one task per
         file; with groups, one map-reduce per group: give a running scheduler or a
         ``distributed.Client`` rather than ``"local"``, which starts a cluster per group)
 

@@ -24,10 +24,10 @@ which stride, and the running sums) and :func:`step` (one control step: measure,
 record, plant over one period, adapt). :func:`simulate` checks its inputs and runs
 ``step`` over the reference, with the options of :class:`ClosedLoopOptions`.
 
-Modules: :mod:`~manip_id.closed_loop.reference` (the reference, its limits and the
-validation states; payloads), :mod:`~manip_id.closed_loop.plant` (plant and sensors),
-:mod:`~manip_id.closed_loop.recorder` (the log of a run) and
-:mod:`~manip_id.closed_loop.run` (a step, a run, the comparison with fixed parameters).
+Modules: :mod:`~manip_id.control.closed_loop.reference` (the reference, its limits and the
+validation states; payloads), :mod:`~manip_id.control.closed_loop.plant` (plant and sensors),
+:mod:`~manip_id.control.closed_loop.recorder` (the log of a run) and
+:mod:`~manip_id.control.closed_loop.run` (a step, a run, the comparison with fixed parameters).
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ Given a reference ``q_d(t)`` with ``dq_d``, ``ddq_d`` and the estimate ``theta_h
     d theta_hat/dt = -Gamma (Y^T s_D + kappa Y_f^T eps / m^2),  m^2 = 1 + tr(Y_f Gamma Y_f^T)
 
 with the Slotine-Li regressor ``Y(q, dq, v, w) theta = M v + C(q, dq) w + g + joint
-terms`` (:meth:`manip_id.regressor.RegressorEvaluator.slotine_li`). ``Lambda`` is positive
+terms`` (:meth:`manip_id.robot.regressor.RegressorEvaluator.slotine_li`). ``Lambda`` is positive
 diagonal, ``K_D`` and ``Gamma`` symmetric positive definite.
 
 Why it works. With the closed loop ``M ds/dt + C s + F_v s = -K_D s + Y theta_tilde``
@@ -74,10 +74,10 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from ._checks import as_float_array, check_finite, positive_vector, spd_matrix
-from .errors import InputError
-from .regressor import RegressorEvaluator
-from .robot import Robot
+from .._checks import as_float_array, check_finite, positive_vector, spd_matrix
+from ..errors import InputError
+from ..robot.model import Robot
+from ..robot.regressor import RegressorEvaluator
 
 
 @dataclass(frozen=True)

@@ -13,10 +13,10 @@ import math
 import numpy as np
 import pinocchio as pin
 
-from .._checks import as_float_array, random_generator
-from ..errors import InputError
-from ..robot import Robot
-from ..trajectories import FourierTrajectory, check_limits, trajectory_to_configuration
+from ..._checks import as_float_array, random_generator
+from ...errors import InputError
+from ...robot.model import Robot
+from ...trajectories import FourierTrajectory, check_limits, trajectory_to_configuration
 
 
 def with_payload(robot: Robot, theta, mass: float, lever=None) -> np.ndarray:

@@ -37,8 +37,8 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from ._numba import note_numba_warm, numba_available
-from .errors import InputError
+from .._numba import note_numba_warm, numba_available
+from ..errors import InputError
 
 # joint kinds of the compiled kernel
 REVOLUTE = 0

@@ -1,0 +1,1 @@
+"""Control that uses the parameters: adaptive laws and the closed-loop simulation."""

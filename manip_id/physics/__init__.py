@@ -1,0 +1,1 @@
+"""Physics of the parameters: physical consistency, perturbation and repair of bodies."""
