@@ -12,7 +12,7 @@ scaled down to fit a shared 2-core machine (16 files of 2 10^4 samples).
 
 Each case runs in its own process:
 
-1. serial: :func:`manip_id.identification.fleet.identify_files` without a scheduler (no Dask);
+1. serial: :func:`manip_id.identification.fleet.identify` without a scheduler (no Dask);
 2. dask N: ``manip_id.execution.connect("local:N")`` (N single-threaded worker
    processes on 127.0.0.1), started before the clock runs (its start-up is printed apart).
 
@@ -22,7 +22,7 @@ long-lived cluster pays once). ``--repeat R`` runs R rounds, the cases interleav
 each (the machine is shared); the figures are medians over the rounds, every ratio
 taken within a round.
 
-Printed per case: wall time of ``identify_files`` [s], throughput [samples/s],
+Printed per case: wall time of ``identify`` [s], throughput [samples/s],
 the ratio to the serial run, the scaling efficiency
 ``T(1 worker) / (N T(N workers))``, the tasks' own time summed over the tasks
 (scan and accumulation) and ``busy`` = that sum / (N wall): the share of the
@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from manip_id.identification import PartitionOptions, RunOptions
+from manip_id.identification import FileOptions, PartitionOptions, RunOptions
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _measure import local_cluster  # noqa: E402
@@ -90,7 +90,7 @@ def _warm_worker() -> None:
 def run_case(paths: list[str], workers: int, block: int | None) -> dict:
     """One case in this process: 0 workers = serial (no Dask)."""
     from manip_id import load_robot
-    from manip_id.identification.fleet import identify_files
+    from manip_id.identification import identify
 
     robot = load_robot(ROBOT, friction=FRICTION)
     out: dict = {"workers": workers}
@@ -107,17 +107,21 @@ def run_case(paths: list[str], workers: int, block: int | None) -> dict:
         _warm_worker()
         if client is not None:
             client.run(_warm_worker)
-        identify_files(
-            robot, paths[: 2 * max(workers, 1)], base=base, run=RunOptions(scheduler=client)
+        identify(
+            robot,
+            paths[: 2 * max(workers, 1)],
+            base=base,
+            run=RunOptions(scheduler=client),
+            files=FileOptions(audit=False),
         )
         out["warmup_s"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        res = identify_files(
+        res = identify(
             robot,
             paths,
             base=base,
             run=RunOptions(scheduler=client),
-            partition=PartitionOptions(block=block),
+            files=FileOptions(audit=False, partition=PartitionOptions(block=block)),
         )
         out["wall_s"] = time.perf_counter() - t0
     finally:

@@ -49,7 +49,7 @@ def main(argv=None) -> int:
 
     tracemalloc.start()
     t0 = time.perf_counter()
-    res = identify(robot, q, dq, ddq, tau, base=base, run=RunOptions(chunk=args.chunk))
+    res = identify(robot, (q, dq, ddq, tau), base=base, run=RunOptions(chunk=args.chunk))
     wall = time.perf_counter() - t0
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()

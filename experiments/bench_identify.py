@@ -12,7 +12,7 @@ file) and runs in its own process, so that its peak resident memory
 
 1. floor: only ``pinocchio.computeJointTorqueRegressor`` on each sample;
 2. manip_id: regressor with joint terms, streaming accumulation, base-parameter
-   solve with uncertainty (``manip_id.identification.identify_chunks``), on one
+   solve with uncertainty (``manip_id.identification.identify``), on one
    core and with every core (worker processes, accumulators merged by addition);
 3. dense: the full stacked regressor in memory, column-pivoted QR for the base
    columns and least squares on them (what the known tools do); skipped when
@@ -141,7 +141,7 @@ def case_floor(folder: Path) -> dict:
 def case_manip_id(folder: Path, workers: int) -> dict:
     from manip_id import load_robot
     from manip_id.identifiability import analyze
-    from manip_id.identification import identify_chunks
+    from manip_id.identification import identify
 
     robot = load_robot(ROBOT, friction=FRICTION)
     base = analyze(robot).base  # structural, once per robot (not part of the timing)
@@ -155,7 +155,7 @@ def case_manip_id(folder: Path, workers: int) -> dict:
             (read_chunks, (folder, robot.nv, int(a), int(b)))
             for a, b in zip(bounds[:-1], bounds[1:], strict=True)
         ]
-    result = identify_chunks(robot, source, base=base, run=RunOptions(workers=workers))
+    result = identify(robot, source, base=base, run=RunOptions(workers=workers))
     seconds = time.perf_counter() - t0
     return {
         "seconds": seconds,
@@ -296,7 +296,7 @@ def case_inmem(path: Path) -> dict:
     robot = load_robot(ROBOT, friction=FRICTION)
     t0 = time.perf_counter()
     ds = preprocess(load_dataset(path))
-    res = identify(robot, ds.q, ds.dq, ds.ddq, ds.tau)
+    res = identify(robot, (ds.q, ds.dq, ds.ddq, ds.tau))
     return {"seconds": time.perf_counter() - t0, "n_samples": res.n_samples}
 
 

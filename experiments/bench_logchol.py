@@ -69,10 +69,7 @@ def main() -> None:
                 t0 = time.perf_counter()
                 res = identify(
                     robot,
-                    d.q,
-                    d.dq,
-                    d.ddq,
-                    tau,
+                    (d.q, d.dq, d.ddq, tau),
                     consistent=ConsistentOptions(solver=solver, bounds=args.bounds),
                 )
                 times[solver] = time.perf_counter() - t0

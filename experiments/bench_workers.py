@@ -38,7 +38,7 @@ def main() -> None:
     traj = random_trajectory(robot, harmonics=5, seed=0)
     noise = MeasurementNoise(tau=0.01)
     d = simulate(robot, traj, duration=n_max / 1000.0, rate=1000.0, noise=noise).dataset
-    base = identify(robot, d.q[:2000], d.dq[:2000], d.ddq[:2000], d.tau[:2000]).base
+    base = identify(robot, (d.q[:2000], d.dq[:2000], d.ddq[:2000], d.tau[:2000])).base
     print(f"ur10 + friction, {cores} cores, regressor {args.regressor}; median of {args.repeat}")
     print(f"{'samples':>9s} {'1 process s':>12s} {f'{cores} processes s':>14s} {'speed-up':>9s}")
     for n in args.sizes:
@@ -46,8 +46,12 @@ def main() -> None:
         for _ in range(args.repeat):
             for w in times:
                 t0 = time.perf_counter()
-                identify(robot, d.q[:n], d.dq[:n], d.ddq[:n], d.tau[:n], base=base,
-                         run=RunOptions(workers=w))  # fmt: skip
+                identify(
+                    robot,
+                    (d.q[:n], d.dq[:n], d.ddq[:n], d.tau[:n]),
+                    base=base,
+                    run=RunOptions(workers=w),
+                )
                 times[w].append(time.perf_counter() - t0)
         t1, tc = float(np.median(times[1])), float(np.median(times[cores]))
         print(f"{n:9d} {t1:12.3f} {tc:14.3f} {t1 / tc:9.2f}", flush=True)

@@ -77,10 +77,7 @@ def simulated(seeds: int) -> None:
                 ddq = ds.ddq if model == "dynamic" else None
                 res = identify(
                     robot,
-                    ds.q,
-                    ds.dq,
-                    ddq,
-                    ds.tau,
+                    (ds.q, ds.dq, ddq, ds.tau),
                     model=ModelOptions(name=model, window_length=WINDOW, dt=1 / RATE),
                 )
                 took += time.perf_counter() - t0
@@ -108,7 +105,7 @@ def real(folder: Path, quick: bool) -> None:
     validation = (ref.q, ref.dq, ref.ddq, ref.tau)
     dyn = preprocess(train_raw)
     t0 = time.perf_counter()
-    res = identify(robot, dyn.q, dyn.dq, dyn.ddq, dyn.tau, validation=validation)
+    res = identify(robot, (dyn.q, dyn.dq, dyn.ddq, dyn.tau), validation=validation)
     print(f"== real Panda log, {len(res.estimate)} base parameters, split 70 % / 30 %")
     print(
         f"{'model':9s} {'states':>7s} {'window':>7s} {'rows':>6s} {'cond':>9s} "
@@ -141,10 +138,7 @@ def real(folder: Path, quick: bool) -> None:
         t0 = time.perf_counter()
         r = identify(
             robot,
-            states.q,
-            states.dq,
-            None,
-            states.tau,
+            (states.q, states.dq, None, states.tau),
             validation=validation,
             consistent=consistent,
             model=ModelOptions(name=model, window_length=window, dt=dt),

@@ -79,7 +79,7 @@ def main(argv=None) -> int:
               + ", ".join(f"{100 * x:.2f}" for x in joints) + " %)")  # fmt: skip
     tr = preprocess(train, cutoff=args.cutoff)
     va = preprocess(valid, cutoff=args.cutoff)
-    res = identify(r, tr.q, tr.dq, tr.ddq, tr.tau, validation=(va.q, va.dq, va.ddq, va.tau))
+    res = identify(r, (tr.q, tr.dq, tr.ddq, tr.tau), validation=(va.q, va.dq, va.ddq, va.tau))
     j = args.joint - 1
     e_tr = tr.tau[:, j] - res.predict(r, tr.q, tr.dq, tr.ddq)[:, j]
     e_va = va.tau[:, j] - res.predict(r, va.q, va.dq, va.ddq)[:, j]

@@ -100,7 +100,7 @@ def main(argv=None) -> int:
         valid, _ = data(robot, law, 2, 20.0, args.noise)
 
         def fit(r, train=train, valid=valid):
-            return identify(r, *train, validation=valid)
+            return identify(r, tuple(train), validation=valid)
 
         row: dict = {"law": law}
         if law in ("stribeck", "sigmoid"):

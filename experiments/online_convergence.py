@@ -92,7 +92,7 @@ def main(argv=None) -> int:
     tau += args.noise * rng.standard_normal(tau.shape)
 
     base = analyze(robot).base
-    batch = identify(robot, q, dq, ddq, tau, base=base)
+    batch = identify(robot, (q, dq, ddq, tau), base=base)
     ref = batch.estimate
     r = base.n_base
     print(

@@ -66,7 +66,7 @@ def main() -> None:
     data = load_dataset(DATA)
     train, valid = data.split(0.7)
     train, valid = preprocess(train), preprocess(valid)
-    args = (robot, train.q, train.dq, train.ddq, train.tau)
+    args = (robot, (train.q, train.dq, train.ddq, train.tau))
     v = (valid.q, valid.dq, valid.ddq, valid.tau)
     print(f"real Panda log {DATA}: {train.n_samples} training, {valid.n_samples} validation")
 

@@ -51,10 +51,7 @@ def prepared(raw: Dataset, cutoff: float, order: int = DEFAULT_ORDER, trim=None)
 def fit(robot, train: Dataset, valid: Dataset, method: str = "ols") -> IdentificationResult:
     return identify(
         robot,
-        train.q,
-        train.dq,
-        train.ddq,
-        train.tau,
+        (train.q, train.dq, train.ddq, train.tau),
         method=method,
         validation=(valid.q, valid.dq, valid.ddq, valid.tau),
     )

@@ -10,7 +10,7 @@ sampling the resident memory every 2 ms:
     imports      manip_id's CLI, identification, simulation (and so pinocchio, scipy.linalg)
     robot        load_robot (URDF and SRDF, no geometry)
     simulate     random excitation, noise-free torques of the record (rnea, per sample)
-    identify     identify_chunks: base columns, then per block the trajectory and noise
+    identify     identify: base columns, then per block the trajectory and noise
                  regenerated ("blocks"), the regressor ("regressor"), the rank-k updates
                  ("accumulate"); rank analysis and solve
     floor        the same samples through pinocchio.computeJointTorqueRegressor alone,
@@ -84,7 +84,7 @@ def profile_one(n: int) -> dict:
     import pinocchio as pin
 
     from manip_id.cli import identify as _cli_identify  # noqa: F401 (the CLI's own imports)
-    from manip_id.identification import identify_chunks
+    from manip_id.identification import identify
     from manip_id.robot.model import load_robot
     from manip_id.simulation import MeasurementNoise, SimulationStream
     from manip_id.trajectories import random_trajectory
@@ -105,7 +105,7 @@ def profile_one(n: int) -> dict:
     phase("simulate", time.perf_counter() - t0, f"tau_true {mib:.0f} MiB")
 
     t0 = time.perf_counter()
-    result = identify_chunks(robot, stream.blocks(), method="ols", run=RunOptions(chunk=1024))
+    result = identify(robot, stream.blocks(), method="ols", run=RunOptions(chunk=1024))
     wall = time.perf_counter() - t0
     tm = dict(result.timings)
     inner = ("structural_analysis", "regressor", "accumulate", "rank_analysis", "solve")

@@ -62,8 +62,8 @@ def child(argv: list[str], stamps_path: str, spawn: float) -> None:
     from manip_id.cli import _files, _simulated, main
 
     stamps["imported"] = time.time()
-    for module in (_files, _simulated):  # the run's end: its result document begins
-        module.result_document = _stamped(module.result_document, stamps)
+    for module in (_files, _simulated):  # the run's end: its result is printed
+        module.print_result = _stamped(module.print_result, stamps)
     if "--simulate" not in argv:  # a simulation of 10^5 samples loads no numba kernel
         _load_kernels()
     stamps["kernels"] = time.time()

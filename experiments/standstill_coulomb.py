@@ -39,6 +39,8 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from manip_id.identification import FileOptions
+
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from _logs import FC, FV, fourier, truth  # noqa: E402
 
@@ -168,15 +170,20 @@ def main() -> None:
             import tempfile
 
             from manip_id.datasets import Dataset, save_dataset
-            from manip_id.identification import PreprocessOptions, identify_datasets
+            from manip_id.identification import PreprocessOptions, identify
 
             with tempfile.TemporaryDirectory() as tmp:
                 path = save_dataset(
                     Dataset(t=train[0], q=q, dq=dq, tau=tau, ddq=ddq, joint_names=robot.dof_names),
                     Path(tmp) / "train.npz",
                 )
-                res = identify_datasets(
-                    robot, [path], options=PreprocessOptions(velocity_deadband=deadband), base=base
+                res = identify(
+                    robot,
+                    [path],
+                    base=base,
+                    files=FileOptions(
+                        preprocess=PreprocessOptions(velocity_deadband=deadband), audit=False
+                    ),
                 )
             gap = float(np.abs(res.estimate - est).max() / np.abs(est).max())
             rows[label]["pipeline_difference"] = gap

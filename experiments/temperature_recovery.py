@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from manip_id import load_robot  # noqa: E402
 from manip_id.datasets import Dataset  # noqa: E402
-from manip_id.identification import identify_dataset  # noqa: E402
+from manip_id.identification import identify  # noqa: E402
 from manip_id.trajectories import random_trajectory  # noqa: E402
 
 RATE, TREF = 200.0, 35.0  # [Hz], [degC]
@@ -53,8 +53,8 @@ def one(noise: float) -> dict:
     robot = load_robot("double_pendulum", friction=())
     train, valid = record(robot, noise).split(0.7)
     hot = load_robot("double_pendulum", friction="viscous,coulomb,temperature")
-    res = identify_dataset(hot, train, validation=valid)
-    plain = identify_dataset(
+    res = identify(hot, train, validation=valid)
+    plain = identify(
         load_robot("double_pendulum", friction="viscous,coulomb"), train, validation=valid
     )
     t0 = np.array(res.context["friction_shapes"]["temperature_reference"])

@@ -450,7 +450,7 @@ class SimulationStream:
     def blocks(self, start: int = 0, stop: int | None = None):
         """``(q, dq, ddq, tau)`` blocks of ``[start, stop)`` (``(q, dq, ddq, tau, None,
         temp)`` with :class:`ThermalOptions`), as
-        :func:`manip_id.identification.identify_chunks` takes them."""
+        :func:`manip_id.identification.identify` takes them."""
         at = self._range(start, stop)[0]
         for _, q, dq, ddq, tau in self.measurements(start, stop):
             temp = self.temperature(at, at + q.shape[0])
@@ -459,7 +459,7 @@ class SimulationStream:
 
     def parts(self, n_parts: int, start: int = 0, stop: int | None = None) -> list:
         """``[(self.blocks, (lo, hi)), ...]``: ``[start, stop)`` cut into ``n_parts`` contiguous
-        ranges, for ``identify_chunks(..., workers > 1)`` (each part simulated in its process)."""
+        ranges, for ``identify(..., workers > 1)`` (each part simulated in its process)."""
         start, stop = self._range(start, stop)
         self.tau_true  # noqa: B018 (computed once, before the workers fork)
         edges = np.linspace(start, stop, max(int(n_parts), 1) + 1).round().astype(int)

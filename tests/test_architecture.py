@@ -200,7 +200,7 @@ def _report(title: str, offenders: list[str]) -> None:
 def test_the_scan_sees_the_package():
     assert {"manip_id", "manip_id.identification", "manip_id.execution"} <= set(SOURCES)
     graph = _graph()
-    assert "manip_id.identification.solve" in graph["manip_id.identification.arrays"]
+    assert "manip_id.identification.solve" in graph["manip_id.identification.front"]
     assert "manip_id.errors" in graph["manip_id.identification.solve"]
 
 

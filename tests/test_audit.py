@@ -20,7 +20,7 @@ from manip_id.audit import EXPLAINED_MIN, AuditOptions, audit_file, audit_files
 from manip_id.cli import main
 from manip_id.datasets import FileSpec, Window
 from manip_id.errors import DataError
-from manip_id.identification import PreprocessOptions, identify_datasets, scan_file
+from manip_id.identification import FileOptions, PreprocessOptions, identify, scan_file
 
 RATE = 200.0  # [Hz]
 GAINS = np.array([0.1, 0.15, 0.2, 0.25, 0.3, 0.12])  # measured / true torque (currents)
@@ -37,7 +37,9 @@ def clean(robot):
 
 
 def _estimate(robot, specs, **options):
-    return identify_datasets(robot, specs, options=PreprocessOptions(**options)).estimate
+    return identify(
+        robot, specs, files=FileOptions(preprocess=PreprocessOptions(**options), audit=False)
+    ).estimate
 
 
 def _close(a, b, tol=1e-8):

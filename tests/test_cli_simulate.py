@@ -42,7 +42,7 @@ def test_noise_free_logs_are_rnea_and_identify_recovers_the_base_parameters(tmp_
     theta = np.array([truth["parameters"][n] for n in robot.parameter_names])
     np.testing.assert_array_equal(theta, robot.nominal_parameters)
     d = logs[0]
-    res = identify(robot, d.q, d.dq, d.ddq, d.tau)
+    res = identify(robot, (d.q, d.dq, d.ddq, d.tau))
     beta = res.base.to_base(theta)
     assert np.linalg.norm(res.estimate - beta) <= 1e-6 * np.linalg.norm(beta)
     assert "noise" in (out / "README.txt").read_text()

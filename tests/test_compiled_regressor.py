@@ -208,9 +208,9 @@ def test_identification_is_the_same_on_both_paths(monkeypatch, mode):
     tau += np.random.default_rng(1).normal(scale=0.05, size=tau.shape)
     sim = (q, dq, ddq, tau)
     monkeypatch.setenv(cr.ENV, "pinocchio")
-    ref = identify(robot, *sim)
+    ref = identify(robot, tuple(sim))
     monkeypatch.setenv(cr.ENV, mode)
-    got = identify(robot, *sim)
+    got = identify(robot, tuple(sim))
     np.testing.assert_allclose(got.estimate, ref.estimate, rtol=1e-9, atol=1e-9)
 
 

@@ -117,7 +117,7 @@ def test_noise_free_data_recover_the_base_parameters_exactly(solver, friction, a
     truth = _truth(robot)
     q, dq, ddq, tau = _data(robot, truth, 1500, 0.0, seed=1)
     res = identify(
-        robot, q, dq, ddq, tau, consistent=ConsistentOptions(enabled=True, solver=solver)
+        robot, (q, dq, ddq, tau), consistent=ConsistentOptions(enabled=True, solver=solver)
     )
     beta_true = res.base.to_base(truth)
     err = np.linalg.norm(res.estimate - beta_true) / np.linalg.norm(beta_true)
@@ -145,11 +145,11 @@ def test_light_wrist_under_heavy_noise_ols_is_not_physical_consistent_is():
     truth = _light_wrist(robot)
     _assert_physical(robot, truth)
     q, dq, ddq, tau = _data(robot, truth, 400, 0.3, seed=7)
-    ols = identify(robot, q, dq, ddq, tau)
+    ols = identify(robot, (q, dq, ddq, tau))
     # plain least squares: its standard vector breaks a condition, and it says so
     assert not ols.physically_consistent
     assert ols.warnings and "not physical" in ols.warnings[0]
-    cons = identify(robot, q, dq, ddq, tau, consistent=True)
+    cons = identify(robot, (q, dq, ddq, tau), consistent=True)
     theta = cons.standard.values
     _assert_physical(robot, theta)
     assert cons.physically_consistent
@@ -173,9 +173,9 @@ def test_real_panda_log_consistent_and_validation_close_to_ols(panda_log):
     train, valid = data.split(0.7)
     train, valid = preprocess(train), preprocess(valid)
     v = (valid.q, valid.dq, valid.ddq, valid.tau)
-    ols = identify(robot, train.q, train.dq, train.ddq, train.tau, validation=v)
+    ols = identify(robot, (train.q, train.dq, train.ddq, train.tau), validation=v)
     assert not ols.physically_consistent  # the real log: plain LS is not physical
-    cons = identify(robot, train.q, train.dq, train.ddq, train.tau, validation=v, consistent=True)
+    cons = identify(robot, (train.q, train.dq, train.ddq, train.tau), validation=v, consistent=True)
     _assert_physical(robot, cons.standard.values)
     assert cons.physically_consistent
     assert cons.relative_error.validation <= 1.15 * ols.relative_error.validation
@@ -210,7 +210,7 @@ def test_sdp_and_logchol_agree():
 def test_default_prior_weight_moves_a_physical_fit_by_less_than_its_std(seed):
     robot = get_robot("panda", friction=FRICTION)
     q, dq, ddq, tau = _data(robot, _truth(robot), 1500, 0.01, seed=seed)
-    res = identify(robot, q, dq, ddq, tau, consistent=True)
+    res = identify(robot, (q, dq, ddq, tau), consistent=True)
     # white noise: the OLS covariance is honest, the fit is not rescaled
     assert res.standard.fit_scale == 1.0
     assert res.standard.base_shift_std < 1.0
@@ -254,7 +254,7 @@ def test_real_panda_log_fit_scale_matches_batch_means(panda_split):
     """The fit scale k agrees with an independent honest-variance estimate (batch means)."""
     robot = get_robot("panda", friction="viscous,coulomb,offset")
     train, _ = panda_split
-    res = identify(robot, train.q, train.dq, train.ddq, train.tau, consistent=True)
+    res = identify(robot, (train.q, train.dq, train.ddq, train.tau), consistent=True)
     Y = regressor(robot, train.q, train.dq, train.ddq)
     Y = Y.reshape(-1, Y.shape[-1])[:, res.base.independent]
     tau = np.asarray(train.tau, dtype=float).reshape(-1)
@@ -270,7 +270,7 @@ def test_real_panda_log_fit_scale_matches_batch_means(panda_split):
     sim = get_robot("panda", friction=FRICTION)
     q, dq, ddq, tau_s = _data(sim, _truth(sim), 1500, 0.0, seed=11)
     tau_s = tau_s + 0.1 * np.random.default_rng(12).standard_normal(tau_s.shape)  # [N m]
-    cons = identify(sim, q, dq, ddq, tau_s, consistent=True)
+    cons = identify(sim, (q, dq, ddq, tau_s), consistent=True)
     Ys = regressor(sim, q, dq, ddq)
     Ys = Ys.reshape(-1, Ys.shape[-1])[:, cons.base.independent]
     assert 0.7 < _batch_means_inflation(Ys, tau_s.reshape(-1), sim.nv, blocks=16) < 1.4
@@ -293,7 +293,7 @@ def test_real_panda_log_default_gives_plausible_link_masses(panda_split, solver)
     robot = get_robot("panda", friction="viscous,coulomb,offset")
     train, valid = panda_split
     v = (valid.q, valid.dq, valid.ddq, valid.tau)
-    args = (robot, train.q, train.dq, train.ddq, train.tau)
+    args = (robot, (train.q, train.dq, train.ddq, train.tau))
     ols = identify(*args, validation=v)
     cons = identify(*args, validation=v, consistent=ConsistentOptions(enabled=True, solver=solver))
     _assert_physical(robot, cons.standard.values)
@@ -321,17 +321,19 @@ def test_unknown_solver_or_prior_and_bad_weight():
     robot = get_robot("ur5", friction=FRICTION)
     q, dq, ddq, tau = _data(robot, _truth(robot), 200, 0.0, seed=0)
     with pytest.raises(InputError, match="solver must be one of"):
-        identify(robot, q, dq, ddq, tau, consistent=ConsistentOptions(enabled=True, solver="mosek"))
+        identify(
+            robot, (q, dq, ddq, tau), consistent=ConsistentOptions(enabled=True, solver="mosek")
+        )
     with pytest.raises(InputError, match="prior must be one of"):
         identify(
-            robot, q, dq, ddq, tau, consistent=ConsistentOptions(enabled=True, prior="uniform")
+            robot, (q, dq, ddq, tau), consistent=ConsistentOptions(enabled=True, prior="uniform")
         )
     with pytest.raises(InputError, match="prior_weight"):
         identify(
-            robot, q, dq, ddq, tau, consistent=ConsistentOptions(enabled=True, prior_weight=-1.0)
+            robot, (q, dq, ddq, tau), consistent=ConsistentOptions(enabled=True, prior_weight=-1.0)
         )
     with pytest.raises(InputError, match="applies to ols and wls"):
-        identify(robot, q, dq, ddq, tau, consistent=True, method="rls")
+        identify(robot, (q, dq, ddq, tau), consistent=True, method="rls")
 
 
 def test_non_physical_prior_names_the_body():
@@ -375,7 +377,7 @@ def test_text_gives_each_link_mass_with_its_consistent_std():
     consistent standard parameters' covariance (the JSON's ``std`` of ``<link>.m``)."""
     robot = get_robot("panda", friction=FRICTION)
     q, dq, ddq, tau = _data(robot, _light_wrist(robot), 400, 0.3, seed=7)
-    cons = identify(robot, q, dq, ddq, tau, consistent=True)
+    cons = identify(robot, (q, dq, ddq, tau), consistent=True)
     doc = result_to_dict(cons)
     line = next(x for x in result_text(doc).splitlines() if x.startswith("link masses"))
     assert line.startswith("link masses [kg] +- std (x nominal): ")

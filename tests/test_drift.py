@@ -17,7 +17,7 @@ from conftest import get_robot
 from manip_id.cli import main
 from manip_id.datasets import save_dataset
 from manip_id.errors import ModelMismatchError
-from manip_id.identification.fleet import identify_files
+from manip_id.identification import FileOptions, identify
 from manip_id.monitor.drift import compare, drift_files
 from manip_id.simulation import MeasurementNoise, simulate
 from manip_id.trajectories import random_trajectory
@@ -59,7 +59,7 @@ def _file(robot, theta, folder, seed):
 def fleet(robot, theta, tmp_path_factory):
     folder = tmp_path_factory.mktemp("drift")
     ref_files = [_file(robot, theta, folder, s) for s in range(3)]
-    reference = identify_files(robot, ref_files, method="wls")
+    reference = identify(robot, ref_files, method="wls", files=FileOptions(audit=False))
     same = [_file(robot, theta, folder, 100 + s) for s in range(N_UNCHANGED)]
     worn = theta.copy()
     worn[robot.layout.joint_column(CHANGED_JOINT, "fv")] *= 1.3  # +30 % viscous friction
@@ -109,7 +109,7 @@ def test_bad_reference_is_a_clear_error(robot, fleet):
     other = get_robot("ur5", friction=("viscous",))
     with pytest.raises(ModelMismatchError):
         drift_files(other, reference, ref_files[:1])
-    plain = identify_files(other, ref_files[:2])
+    plain = identify(other, ref_files[:2], files=FileOptions(audit=False))
     with pytest.raises(ModelMismatchError):
         compare(reference, plain)
 

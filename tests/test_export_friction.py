@@ -48,7 +48,7 @@ def _identified(robot, law):
     else:
         terms = candidate_terms(robot.terms, law, SelectionOptions())
     r = robot.with_terms(terms)
-    res = identify(r, *train, consistent=True)
+    res = identify(r, tuple(train), consistent=True)
     return r, res
 
 

@@ -24,8 +24,15 @@ from conftest import get_robot
 
 from manip_id.datasets import parse_file_spec
 from manip_id.errors import DataError, InputError
-from manip_id.identification import ModelOptions, PartitionOptions, RunOptions, identify
-from manip_id.identification.fleet import identify_files, parse_scheduler, portable_robot
+from manip_id.identification import (
+    FileOptions,
+    ModelOptions,
+    PartitionOptions,
+    PreprocessOptions,
+    RunOptions,
+    identify,
+)
+from manip_id.identification.fleet import parse_scheduler, portable_robot
 
 VENV_BIN = Path(sys.executable).parent
 N_FILES, N_SAMPLES = 6, 1500
@@ -71,14 +78,17 @@ def fleet(robot, tmp_path_factory):
 @pytest.fixture(scope="module")
 def reference(robot, fleet):
     _, _, (q, dq, ddq, tau) = fleet
-    return {m: identify(robot, q, dq, ddq, tau, method=m) for m in ("ols", "wls")}
+    return {m: identify(robot, (q, dq, ddq, tau), method=m) for m in ("ols", "wls")}
 
 
 @pytest.fixture(scope="module")
 def files_reference(robot, fleet):
     """The files in this process, one task each: the reference of the honest std, whose
     blocks end at each file's end (the concatenated arrays' blocks run across them)."""
-    return {m: identify_files(robot, fleet[0], method=m) for m in ("ols", "wls")}
+    return {
+        m: identify(robot, fleet[0], method=m, files=FileOptions(audit=False))
+        for m in ("ols", "wls")
+    }
 
 
 def _same(res, ref, method="ols", std_rtol=None, honest=None):
@@ -114,15 +124,17 @@ def test_serial_any_partition_gives_the_concatenated_result(
             tau=tau,
         )
         paths = [str(Path(paths[0]).with_name("short.npz"))]
-        ref = identify(robot, q, dq, ddq, tau, method=method)
+        ref = identify(robot, (q, dq, ddq, tau), method=method)
         honest = ref  # one file: its blocks are the arrays'
     else:
         ref, honest = reference[method], files_reference[method]
-    res = identify_files(
+    res = identify(
         robot,
         paths,
         method=method,
-        partition=PartitionOptions(block=block, split_every=split_every),
+        files=FileOptions(
+            audit=False, partition=PartitionOptions(block=block, split_every=split_every)
+        ),
     )
     _same(res, ref, method, honest=honest)
 
@@ -130,7 +142,7 @@ def test_serial_any_partition_gives_the_concatenated_result(
 def test_wls_noise_variances_are_the_per_file_residual_sums(robot, fleet, reference):
     """The WLS variances equal the residuals summed file by file, computed sample by sample."""
     paths, arrays, _ = fleet
-    res = identify_files(robot, paths, method="wls")
+    res = identify(robot, paths, method="wls", files=FileOptions(audit=False))
     rss = np.zeros(robot.nv)
     for q, dq, ddq, tau in arrays:
         err = tau - res.predict(robot, q, dq, ddq)  # [N m]
@@ -143,10 +155,14 @@ def test_wls_noise_variances_are_the_per_file_residual_sums(robot, fleet, refere
 
 def test_per_file_estimates_are_each_files_own_identification(robot, fleet):
     paths, arrays, _ = fleet
-    res = identify_files(robot, paths, partition=PartitionOptions(block=500, per_file=True))
+    res = identify(
+        robot,
+        paths,
+        files=FileOptions(audit=False, partition=PartitionOptions(block=500, per_file=True)),
+    )
     assert [f.path for f in res.per_file] == paths
     for fe, (q, dq, ddq, tau) in zip(res.per_file, arrays, strict=True):
-        own = identify(robot, q, dq, ddq, tau, base=res.base)
+        own = identify(robot, (q, dq, ddq, tau), base=res.base)
         assert fe.error is None and fe.n_samples == N_SAMPLES and fe.n_tasks == 3
         _close(fe.result.estimate, own.estimate)
         _close(fe.result.std, own.std)
@@ -163,7 +179,11 @@ def test_a_file_that_excites_too_little_is_reported_not_fatal(robot, fleet, tmp_
     short = tmp_path / "short.npz"
     q, dq, ddq, tau = (a[:5] for a in arrays[0])  # 30 equations for 48+ parameters
     np.savez(short, t=np.arange(5) * 1e-3, q=q, dq=dq, ddq=ddq, tau=tau)
-    res = identify_files(robot, [*paths[:2], str(short)], partition=PartitionOptions(per_file=True))
+    res = identify(
+        robot,
+        [*paths[:2], str(short)],
+        files=FileOptions(audit=False, partition=PartitionOptions(per_file=True)),
+    )
     assert res.per_file[0].result is not None
     bad = res.per_file[2]
     assert bad.result is None and bad.n_samples == 5 and bad.error
@@ -177,10 +197,10 @@ def test_validation_files_pooled_and_per_file(robot, fleet, tmp_path):
         path = tmp_path / f"val{f}.npz"
         varrays.append(_make_file(robot, path, seed=50 + f, n=700))
         vpaths.append(str(path))
-    res = identify_files(robot, paths, validation=vpaths)
+    res = identify(robot, paths, validation=vpaths, files=FileOptions(audit=False))
     vcat = [np.concatenate([a[i] for a in varrays]) for i in range(4)]
     tcat = [np.concatenate([a[i] for a in arrays]) for i in range(4)]
-    ref = identify(robot, *tcat, validation=tuple(vcat))
+    ref = identify(robot, tuple(tcat), validation=tuple(vcat))
     re, rr = res.relative_error, ref.relative_error
     # from each file's sums (zz - 2 b.theta + theta.A.theta), which carry about 1e-8 of
     # the torque energy as round-off, against residuals sample by sample
@@ -224,34 +244,49 @@ def test_acceleration_free_models(robot, tmp_path, model):
     kw = dict(model=ModelOptions(model, window_length=0.02 if model == "energy" else 0.1))
     # one file: the local acceleration-free run of identify()
     q, dq, ddq, tau = arrays[0]
-    own = identify(robot, q, dq, None, tau, model=replace(kw["model"], dt=1 / 500.0))
-    one = identify_files(robot, paths[:1], **kw)
+    own = identify(robot, (q, dq, None, tau), model=replace(kw["model"], dt=1 / 500.0))
+    one = identify(robot, paths[:1], files=FileOptions(audit=False), **kw)
     _same(one, own, honest=own)  # the rows' blocks too
     assert own.uncertainty["method"] == "hac"
     assert one.model == model and one.n_samples == q.shape[0]
     # several files: any partition of the energy windows gives the same sums
-    whole = identify_files(robot, paths, partition=PartitionOptions(per_file=True), **kw)
+    whole = identify(
+        robot,
+        paths,
+        files=FileOptions(audit=False, partition=PartitionOptions(per_file=True)),
+        **kw,
+    )
     if model == "energy":
         for block in (50, 333):
             # the energy fit is nearly exact: sigma^2 comes from RSS = zz - 2 b.theta +
             # theta.A.theta, a difference of sums 1e7 times larger than itself
             _same(
-                identify_files(robot, paths, partition=PartitionOptions(block=block), **kw),
+                identify(
+                    robot,
+                    paths,
+                    files=FileOptions(audit=False, partition=PartitionOptions(block=block)),
+                    **kw,
+                ),
                 whole,
                 std_rtol=1e-6,
                 honest=whole,
             )
     else:
         with pytest.raises(InputError, match="no blocks"):
-            identify_files(robot, paths, partition=PartitionOptions(block=100), **kw)
+            identify(
+                robot,
+                paths,
+                files=FileOptions(audit=False, partition=PartitionOptions(block=100)),
+                **kw,
+            )
     assert whole.n_samples == 3 * 4001
     for fe, (q, dq, _, tau) in zip(whole.per_file, arrays, strict=True):
         _close(
             fe.result.estimate,
-            identify(robot, q, dq, None, tau, model=replace(kw["model"], dt=1 / 500)).estimate,
+            identify(robot, (q, dq, None, tau), model=replace(kw["model"], dt=1 / 500)).estimate,
         )
     # validation: the torque error of the dynamic model, on the validation files' sums
-    res = identify_files(robot, paths[1:], validation=paths[:1], **kw)
+    res = identify(robot, paths[1:], validation=paths[:1], files=FileOptions(audit=False), **kw)
     err = res.predict(robot, q := arrays[0][0], arrays[0][1], arrays[0][2]) - arrays[0][3]
     assert res.relative_error.validation == pytest.approx(
         np.linalg.norm(err) / np.linalg.norm(arrays[0][3]), rel=1e-6
@@ -274,18 +309,27 @@ def test_preprocessed_files_any_partition(robot, tmp_path):
     for p in paths:
         ds = preprocess(load_dataset(p), **opts)
         blocks.append((ds.q, ds.dq, ds.ddq, ds.tau))
-    ref = identify(robot, *(np.concatenate([b[i] for b in blocks]) for i in range(4)))
+    ref = identify(robot, tuple(np.concatenate([b[i] for b in blocks]) for i in range(4)))
     for block in (None, 250):
-        res = identify_files(robot, paths, options=opts, partition=PartitionOptions(block=block))
+        res = identify(
+            robot,
+            paths,
+            files=FileOptions(
+                preprocess=PreprocessOptions(**opts),
+                audit=False,
+                partition=PartitionOptions(block=block),
+            ),
+        )
         _same(res, ref)
 
 
 def test_no_dask_without_a_scheduler(fleet):
     code = (
-        "import sys; from manip_id import load_robot;"
-        " from manip_id.identification.fleet import identify_files;"
+        "import sys; from manip_id import load_robot; from manip_id import identify;"
         "r = load_robot('ur10', friction='viscous,coulomb');"
-        f"identify_files(r, {fleet[0][:2]!r}, partition=dict(per_file=True, block=700));"
+        "from manip_id.identification import FileOptions, PreprocessOptions, PartitionOptions;"
+        "tasks = FileOptions(audit=False, partition=PartitionOptions(per_file=True, block=700));"
+        f"identify(r, {fleet[0][:2]!r}, files=tasks);"
         "from manip_id.cli import main;"
         f"assert main(['identify', 'ur10', '--friction', 'viscous,coulomb', '--data', "
         f"*{fleet[0][:2]!r}, '--per-file']) == 0;"
@@ -307,19 +351,20 @@ def test_a_bad_file_is_named_serial(robot, fleet, tmp_path, where):
                  tau=np.zeros((10, 3)))  # fmt: skip
     paths.insert(1, str(bad))
     with pytest.raises(DataError, match=str(bad).replace(".", r"\.")):
-        identify_files(robot, paths)
+        identify(robot, paths, files=FileOptions(audit=False))
 
 
 def test_bad_arguments(robot, fleet):
     paths = fleet[0]
     with pytest.raises(InputError, match="twice"):
-        identify_files(robot, [paths[0], paths[0]])
-    with pytest.raises(InputError, match="no files"):
-        identify_files(robot, [])
-    with pytest.raises(InputError, match="online laws"):
-        identify_files(robot, paths, method="rls")
+        identify(robot, [paths[0], paths[0]], files=FileOptions(audit=False))
+    with pytest.raises(InputError, match="empty"):
+        identify(robot, [], files=FileOptions(audit=False))
+    per_file = FileOptions(audit=False, partition=PartitionOptions(per_file=True))
+    with pytest.raises(InputError, match="least squares"):  # tasks: sums, not sample order
+        identify(robot, paths, method="rls", files=per_file)
     with pytest.raises(InputError, match="block"):
-        identify_files(robot, paths, partition=PartitionOptions(block=0))
+        identify(robot, paths, files=FileOptions(audit=False, partition=PartitionOptions(block=0)))
     for spec in ("local:0", "local:x", "tcp://nowhere", "http//x", "missing.json"):
         with pytest.raises(InputError):
             parse_scheduler(spec)
@@ -334,7 +379,7 @@ def test_portable_robot_pickles_small_and_identifies_the_same(robot, fleet, refe
     light = portable_robot(robot)
     blob = pickle.dumps(light)
     assert len(blob) < 2_000_000
-    res = identify(pickle.loads(blob), *fleet[2])
+    res = identify(pickle.loads(blob), tuple(fleet[2]))
     _close(res.estimate, reference["ols"].estimate)
 
 
@@ -343,7 +388,7 @@ def test_accumulator_pickles(robot, fleet):
 
     from manip_id.identification.fleet import FilePart, part_sums
 
-    res = identify(robot, *fleet[1][0])
+    res = identify(robot, tuple(fleet[1][0]))
     spec = parse_file_spec(fleet[0][0])
     ps = part_sums(portable_robot(robot), FilePart(spec, 0), res.base.independent)
     back = pickle.loads(pickle.dumps(ps))
@@ -373,16 +418,19 @@ def local_client():
 def test_local_cluster_gives_the_local_result(
     robot, fleet, reference, files_reference, local_client, method
 ):
-    res = identify_files(
+    res = identify(
         robot,
         fleet[0],
         method=method,
         run=RunOptions(scheduler=local_client),
-        partition=PartitionOptions(block=700, per_file=True),
+        files=FileOptions(audit=False, partition=PartitionOptions(block=700, per_file=True)),
     )
     _same(res, reference[method], method, honest=files_reference[method])
-    serial = identify_files(
-        robot, fleet[0], method=method, partition=PartitionOptions(per_file=True)
+    serial = identify(
+        robot,
+        fleet[0],
+        method=method,
+        files=FileOptions(audit=False, partition=PartitionOptions(per_file=True)),
     )
     for a, b in zip(res.per_file, serial.per_file, strict=True):
         _close(a.result.estimate, b.result.estimate)
@@ -390,16 +438,16 @@ def test_local_cluster_gives_the_local_result(
 
 
 def _npz_block(path: str, start: int, stop: int):
-    """A part of :func:`identify_chunks`: one block of an NPZ file, read with numpy."""
+    """A part of :func:`identify`: one block of an NPZ file, read with numpy."""
     with np.load(path) as z:
         yield tuple(z[k][start:stop] for k in ("q", "dq", "ddq", "tau"))
 
 
 def test_identify_chunks_parts_as_dask_tasks(robot, fleet, reference, local_client):
-    from manip_id.identification import identify_chunks
+    from manip_id.identification import identify
 
     parts = [(_npz_block, (p, a, a + 500)) for p in fleet[0] for a in range(0, N_SAMPLES, 500)]
-    res = identify_chunks(robot, parts, method="wls", run=RunOptions(scheduler=local_client))
+    res = identify(robot, parts, method="wls", run=RunOptions(scheduler=local_client))
     _same(res, reference["wls"], "wls")
 
 
@@ -407,11 +455,11 @@ def test_local_cluster_bad_file_no_result(robot, fleet, local_client, tmp_path):
     bad = tmp_path / "broken.npz"
     bad.write_bytes(b"\x00" * 64)
     with pytest.raises(DataError, match="broken.npz"):
-        identify_files(
+        identify(
             robot,
             [*fleet[0], str(bad)],
             run=RunOptions(scheduler=local_client),
-            partition=PartitionOptions(block=500),
+            files=FileOptions(audit=False, partition=PartitionOptions(block=500)),
         )
     # the rest of the failed run is cancelled: nothing of it is left running
     deadline = time.monotonic() + 30
@@ -424,7 +472,9 @@ def test_local_spec_starts_and_stops_its_cluster(robot, fleet, reference, files_
     import psutil
 
     before = {p.pid for p in psutil.Process().children(recursive=True)}
-    res = identify_files(robot, fleet[0], run=RunOptions(scheduler="local:2"))
+    res = identify(
+        robot, fleet[0], run=RunOptions(scheduler="local:2"), files=FileOptions(audit=False)
+    )
     _same(res, reference["ols"], honest=files_reference["ols"])
     deadline = time.monotonic() + 30
     while time.monotonic() < deadline:
@@ -501,15 +551,20 @@ def dask_cli(tmp_path_factory):
 def test_cli_cluster_by_address_and_by_file(robot, fleet, reference, files_reference, dask_cli):
     address = json.loads(dask_cli["file"].read_text())["address"]
     assert address.startswith("tcp://127.0.0.1:")
-    res = identify_files(
+    res = identify(
         robot,
         fleet[0],
         method="wls",
         run=RunOptions(scheduler=address),
-        partition=PartitionOptions(block=600),
+        files=FileOptions(audit=False, partition=PartitionOptions(block=600)),
     )
     _same(res, reference["wls"], "wls", honest=files_reference["wls"])
-    res = identify_files(robot, fleet[0], run=RunOptions(scheduler=str(dask_cli["file"])))
+    res = identify(
+        robot,
+        fleet[0],
+        run=RunOptions(scheduler=str(dask_cli["file"])),
+        files=FileOptions(audit=False),
+    )
     _same(res, reference["ols"], honest=files_reference["ols"])
 
 
@@ -528,11 +583,11 @@ def test_a_worker_killed_mid_run_changes_nothing(
             )
             with ThreadPoolExecutor(1) as pool:
                 job = pool.submit(
-                    identify_files,
+                    identify,
                     robot,
                     fleet[0],
                     run=RunOptions(scheduler=client),
-                    partition=PartitionOptions(block=60),
+                    files=FileOptions(audit=False, partition=PartitionOptions(block=60)),
                     method="wls",
                 )
                 deadline = time.monotonic() + 120
@@ -554,7 +609,11 @@ def test_a_worker_killed_mid_run_changes_nothing(
 def test_per_file_figure(robot, fleet, tmp_path):
     from manip_id.viz.figures import per_file_parameters, png_size
 
-    res = identify_files(robot, fleet[0][:3], partition=PartitionOptions(per_file=True))
+    res = identify(
+        robot,
+        fleet[0][:3],
+        files=FileOptions(audit=False, partition=PartitionOptions(per_file=True)),
+    )
     out = tmp_path / "per_file.png"
     est = np.array([f.result.estimate for f in res.per_file])
     std = np.array([f.result.std for f in res.per_file])
@@ -594,13 +653,13 @@ def test_cli_per_file_validation_and_report(robot, fleet, tmp_path, capsys):
     )  # fmt: skip
     assert status == 0, cap.err
     train = [np.concatenate([arrays[0][i], arrays[1][i]]) for i in range(4)]
-    pooled = identify(robot, *train, validation=tuple(arrays[2]))
+    pooled = identify(robot, tuple(train), validation=tuple(arrays[2]))
     _close([p["value"] for p in rep["base_parameters"]], pooled.estimate)
     assert rep["n_samples"] == 2 * N_SAMPLES
     assert [e["file"] for e in rep["per_file"]] == paths[:2]
     for entry, data in zip(rep["per_file"], arrays[:2], strict=True):
         assert entry["n_tasks"] == 4 and entry["n_samples"] == N_SAMPLES
-        own = identify(robot, *data, base=pooled.base)
+        own = identify(robot, tuple(data), base=pooled.base)
         _close([p["value"] for p in entry["parameters"]], own.estimate)
     assert rep["relative_error"]["validation"] == pytest.approx(
         pooled.relative_error.validation, rel=1e-6
@@ -639,7 +698,7 @@ def test_cli_scheduler_local(robot, fleet, reference, tmp_path, capsys):
         tmp_path, capsys,
     )  # fmt: skip
     assert status == 0, cap.err
-    own = identify(robot, *arrays[0], method="wls")
+    own = identify(robot, tuple(arrays[0]), method="wls")
     _close([p["value"] for p in rep["base_parameters"]], own.estimate)
     assert rep["source"]["scheduler"] == "local:2"
 
@@ -650,7 +709,7 @@ def test_cli_scheduler_file(robot, fleet, dask_cli, tmp_path, capsys):
         ["--data", paths[2], "--scheduler", str(dask_cli["file"])], tmp_path, capsys
     )
     assert status == 0, cap.err
-    _close([p["value"] for p in rep["base_parameters"]], identify(robot, *arrays[2]).estimate)
+    _close([p["value"] for p in rep["base_parameters"]], identify(robot, tuple(arrays[2])).estimate)
 
 
 @pytest.mark.parametrize(
@@ -705,13 +764,15 @@ def test_dask_carries_the_deadband_and_raw_torque_sums(robot, local_client, tmp_
     for k, p in enumerate(paths):
         _make_file(robot, Path(p), seed=90 + k, ddq=False)
     opts = PreprocessOptions(cutoff=20.0, velocity_deadband=0.05)
-    kw = dict(validation=paths[2:], options=opts, method="wls")
-    serial = identify_files(robot, paths[:2], **kw).to_dict()
-    dask = identify_files(
+    kw = dict(validation=paths[2:], method="wls")
+    serial = identify(
+        robot, paths[:2], files=FileOptions(preprocess=opts, audit=False), **kw
+    ).to_dict()
+    dask = identify(
         robot,
         paths[:2],
         run=RunOptions(scheduler=local_client),
-        partition=PartitionOptions(block=500),
+        files=FileOptions(preprocess=opts, audit=False, partition=PartitionOptions(block=500)),
         **kw,
     ).to_dict()
     for key in ("train", "validation", "train_moving", "validation_moving"):
@@ -724,15 +785,18 @@ def test_dask_carries_the_deadband_and_raw_torque_sums(robot, local_client, tmp_
 
 
 def test_identify_datasets_with_a_scheduler(robot, fleet, local_client):
-    from manip_id.identification import identify_datasets
+    from manip_id.identification import identify
 
-    local = identify_datasets(robot, fleet[0][:3], validation=fleet[0][3:4], method="wls")
-    res = identify_datasets(
+    local = identify(
+        robot, fleet[0][:3], validation=fleet[0][3:4], method="wls", files=FileOptions(audit=False)
+    )
+    res = identify(
         robot,
         fleet[0][:3],
         validation=fleet[0][3:4],
         method="wls",
         run=RunOptions(scheduler=local_client),
+        files=FileOptions(audit=False),
     )
     _same(res, local, "wls", honest=local)
     assert res.relative_error.validation == pytest.approx(local.relative_error.validation, 1e-9)
@@ -744,7 +808,7 @@ def test_identify_datasets_with_a_scheduler(robot, fleet, local_client):
 def test_identify_files_equals_identify_datasets_nominal_errors_included(tmp_path):
     """The fleet path and the local file path give the same document (the fleet once
     rebuilt the validation errors without the nominal model's)."""
-    from manip_id.identification import identify_datasets
+    from manip_id.identification import identify
 
     robot = get_robot("double_pendulum", friction=("viscous", "coulomb"))
     paths, arrays = [], []
@@ -762,8 +826,8 @@ def test_identify_files_equals_identify_datasets_nominal_errors_included(tmp_pat
         ]
         arrays.append((tau0 + fv0 * dq, tau))  # the nominal model: URDF and its fv
     kw = dict(validation=paths[2:], method="wls")
-    local = identify_datasets(robot, paths[:2], **kw).to_dict()
-    fleet = identify_files(robot, paths[:2], **kw).to_dict()
+    local = identify(robot, paths[:2], files=FileOptions(audit=False), **kw).to_dict()
+    fleet = identify(robot, paths[:2], files=FileOptions(audit=False), **kw).to_dict()
     local.pop("timings"), fleet.pop("timings")
     assert fleet == local
     # the nominal model by rnea and numpy on the validation file's arrays

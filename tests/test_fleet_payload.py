@@ -202,7 +202,7 @@ def test_local_cluster_known_base_and_consistent(ur5, runs, local_client):
     from manip_id.identification import identify
 
     q, dq, ddq, tau = (np.concatenate([r[i] for r in runs["u"]]) for i in range(4))
-    known = identify(ur5, q, dq, ddq, tau, method="wls")
+    known = identify(ur5, (q, dq, ddq, tau), method="wls")
     ref = identify_payload(ur5, None, runs["l"], "tool0", known_base=known, consistent=True)
     res = identify_payload(
         ur5, None, runs["l"], "tool0", known_base=known, consistent=True, scheduler=local_client

@@ -78,7 +78,7 @@ def _data(robot, law: str, seed: int, duration: float = 40.0):
 
 def _fit(robot, train, valid):
     def fit(r):
-        return identify(r, *train, validation=valid)
+        return identify(r, tuple(train), validation=valid)
 
     return fit
 
@@ -143,7 +143,7 @@ def test_linear_laws_recover_their_coefficients(robot, law):
     train, coef = _data(robot, law, seed=1)
     terms = candidate_terms(robot.terms, law, SelectionOptions())
     r = robot.with_terms(terms)
-    res = identify(r, *train)
+    res = identify(r, tuple(train))
     checked = 0
     for name, true in coef.items():
         # 0.3 % torque noise: within 2 % of the largest coefficient of the law
@@ -191,7 +191,7 @@ def test_linear_truth_is_not_fitted_worse(robot):
     train, _ = _data(robot, "linear", seed=5)
     valid, _ = _data(robot, "linear", seed=6, duration=20.0)
     linear = robot.with_terms(candidate_terms(robot.terms, "linear", SelectionOptions()))
-    before = identify(linear, *train, validation=valid).relative_error.validation
+    before = identify(linear, tuple(train), validation=valid).relative_error.validation
     res, sel = select_model(_fit(robot, train, valid), robot, SelectionOptions(combine=False))
     # the laws that contain the linear one win on noise by a hair only: within the 0.5 %
     # tolerance, the simpler model is kept, and predicts as well as before
@@ -205,7 +205,7 @@ def test_linear_truth_is_not_fitted_worse(robot):
 def test_bic_without_validation_data(robot):
     train, _ = _data(robot, "stribeck", seed=7)
     opts = SelectionOptions(candidates=("linear", "stribeck"), combine=False)
-    _, sel = select_model(lambda r: identify(r, *train), robot, opts)
+    _, sel = select_model(lambda r: identify(r, tuple(train)), robot, opts)
     assert sel.criterion == "BIC"
     assert [j.chosen for j in sel.joints] == ["stribeck", "stribeck"]
 
@@ -213,22 +213,22 @@ def test_bic_without_validation_data(robot):
 # ------------------------------------------------------------------ back-ends
 @pytest.mark.parametrize("law", ["asymmetric", "stribeck", "sigmoid", "position", "load"])
 def test_streamed_and_forked_paths_agree(robot, law):
-    from manip_id.identification import identify_chunks
+    from manip_id.identification import identify
 
     train, _ = _data(robot, law, seed=8, duration=10.0)
     shapes = FrictionShapes(stribeck_velocity=tuple(VS), sigmoid_slope=tuple(SLOPE))
     r = robot.with_terms(candidate_terms(robot.terms, law, SelectionOptions(), shapes))
-    serial = identify(r, *train)
-    forked = identify(r, *train, base=serial.base, run=RunOptions(workers=2))
+    serial = identify(r, tuple(train))
+    forked = identify(r, tuple(train), base=serial.base, run=RunOptions(workers=2))
     blocks = [tuple(a[k : k + 500] for a in train) for k in range(0, train[0].shape[0], 500)]
-    streamed = identify_chunks(r, iter(blocks), base=serial.base)
+    streamed = identify(r, iter(blocks), base=serial.base)
     scale = np.abs(serial.estimate).max()
     for other in (forked, streamed):
         assert np.abs(other.estimate - serial.estimate).max() <= 1e-9 * scale
 
 
 def _npz_block(path: str, start: int, stop: int):
-    """A part of :func:`identify_chunks`: one block of an NPZ file (a Dask task)."""
+    """A part of :func:`identify`: one block of an NPZ file (a Dask task)."""
     with np.load(path) as z:
         yield tuple(z[k][start:stop] for k in ("q", "dq", "ddq", "tau"))
 
@@ -238,7 +238,7 @@ def test_dask_path_agrees_for_every_new_term(robot, tmp_path):
     pytest.importorskip("distributed")
     from distributed import Client, LocalCluster
 
-    from manip_id.identification import identify_chunks
+    from manip_id.identification import identify
 
     train, _ = _data(robot, "stribeck", seed=9, duration=10.0)
     path = str(tmp_path / "joints.npz")
@@ -254,7 +254,7 @@ def test_dask_path_agrees_for_every_new_term(robot, tmp_path):
         shapes=shapes,
     )
     r = robot.with_terms(terms)
-    serial = identify(r, *train)
+    serial = identify(r, tuple(train))
     parts = [(_npz_block, (path, a, a + 500)) for a in range(0, train[0].shape[0], 500)]
     cluster = LocalCluster(
         n_workers=2,
@@ -264,7 +264,7 @@ def test_dask_path_agrees_for_every_new_term(robot, tmp_path):
     )
     client = Client(cluster)
     try:
-        dask = identify_chunks(r, parts, base=serial.base, run=RunOptions(scheduler=client))
+        dask = identify(r, parts, base=serial.base, run=RunOptions(scheduler=client))
     finally:
         client.close()
         cluster.close()
@@ -376,7 +376,7 @@ def test_a_law_the_data_cannot_carry_is_no_candidate(robot):
     tau = np.array([pin.rnea(m, d, a, b, c) for a, b, c in zip(q, dq, ddq, strict=True)])
     tau += 0.3 * dq + 0.5 * np.sign(dq) + 1e-3 * np.random.default_rng(0).standard_normal(tau.shape)
     opts = SelectionOptions(candidates=("linear", "position"), harmonics=4, combine=False)
-    res, sel = select_model(lambda r: identify(r, q, dq, ddq, tau), robot, opts)
+    res, sel = select_model(lambda r: identify(r, (q, dq, ddq, tau)), robot, opts)
     assert [j.chosen for j in sel.joints] == ["linear", "linear"]
     position = res.context["friction_selection"][0]["candidates"][1]
     assert position["model"] == "position" and position["bic"] is None

@@ -21,15 +21,12 @@ from manip_id.datasets import Dataset, save_dataset
 from manip_id.errors import InputError
 from manip_id.export import export_urdf, sidecar_path
 from manip_id.identification import (
+    FileOptions,
     PartitionOptions,
     PreprocessOptions,
     RunOptions,
     identify,
-    identify_chunks,
-    identify_dataset,
-    identify_datasets,
 )
-from manip_id.identification.fleet import identify_files
 from manip_id.identification.selection import SelectionOptions, select_model
 from manip_id.robot.friction import FrictionShapes, hysteresis_state, parse_friction
 from manip_id.robot.model import JointTerms
@@ -146,7 +143,7 @@ def test_recovery_and_selection_on_validation_data(robot, data):
     train, valid = data
 
     def fit(r):
-        return identify(r, *train, validation=valid)
+        return identify(r, tuple(train), validation=valid)
 
     opts = SelectionOptions(
         candidates=("linear", "stribeck", "hysteresis"),
@@ -172,7 +169,7 @@ def test_selection_keeps_linear_without_hysteresis(robot):
     valid = _data(robot, seed=5, duration=15.0, hysteresis=False)
 
     def fit(r):
-        return identify(r, *train, validation=valid)
+        return identify(r, tuple(train), validation=valid)
 
     opts = SelectionOptions(candidates=("linear", "hysteresis"), combine=False, refine=2)
     _, sel = select_model(fit, robot, opts)
@@ -183,18 +180,18 @@ def test_selection_keeps_linear_without_hysteresis(robot):
 def test_streamed_forked_and_in_memory_agree(robot, data, tmp_path):
     r = _hysteresis_robot(robot)
     q, dq, ddq, tau = data[0]
-    ref = identify(r, q, dq, ddq, tau, run=RunOptions(workers=1))
+    ref = identify(r, (q, dq, ddq, tau), run=RunOptions(workers=1))
     runs = {
         "chunk 97": identify(
-            r, q, dq, ddq, tau, base=ref.base, run=RunOptions(chunk=97, workers=1)
+            r, (q, dq, ddq, tau), base=ref.base, run=RunOptions(chunk=97, workers=1)
         ),
-        "forked": identify(r, q, dq, ddq, tau, base=ref.base, run=RunOptions(workers=2)),
-        "blocks": identify_chunks(
+        "forked": identify(r, (q, dq, ddq, tau), base=ref.base, run=RunOptions(workers=2)),
+        "blocks": identify(
             r,
             [
                 (q[a : a + 333], dq[a : a + 333], ddq[a : a + 333], tau[a : a + 333])
                 for a in range(0, len(q), 333)
-            ],  # fmt: skip
+            ],
             base=ref.base,
             run=RunOptions(workers=1),
         ),
@@ -221,13 +218,27 @@ def test_file_spans_in_processes_give_the_serial_result(robot, data, tmp_path):
         tmp_path / "hyst.npz",
     )
     small = PreprocessOptions(read_chunk=500)  # the file's stream in blocks of 500 rows
-    serial = identify_datasets(r, [path], options=small, run=RunOptions(workers=1, chunk=211))
-    forked = identify_datasets(
-        r, [path], options=small, base=serial.base, run=RunOptions(workers=2, chunk=211)
+    serial = identify(
+        r,
+        [path],
+        run=RunOptions(workers=1, chunk=211),
+        files=FileOptions(preprocess=small, audit=False),
     )
-    mem = identify(r, q, dq, ddq, tau, base=serial.base, run=RunOptions(workers=1))
+    forked = identify(
+        r,
+        [path],
+        base=serial.base,
+        run=RunOptions(workers=2, chunk=211),
+        files=FileOptions(preprocess=small, audit=False),
+    )
+    mem = identify(r, (q, dq, ddq, tau), base=serial.base, run=RunOptions(workers=1))
     # the tasks of the Dask path (here on the serial back-end): spans of 700 rows
-    parts = identify_files(r, [str(path)], base=serial.base, partition=PartitionOptions(block=700))
+    parts = identify(
+        r,
+        [str(path)],
+        base=serial.base,
+        files=FileOptions(audit=False, partition=PartitionOptions(block=700)),
+    )
     scale = np.abs(serial.estimate).max()
     for name, res in (("forked", forked), ("in memory", mem), ("task spans", parts)):
         np.testing.assert_allclose(
@@ -238,7 +249,7 @@ def test_file_spans_in_processes_give_the_serial_result(robot, data, tmp_path):
 # ------------------------------------------------------------------ the sidecar
 def test_sidecar_round_trip_and_the_simulator(robot, data, tmp_path):
     r = _hysteresis_robot(robot)
-    res = identify(r, *data[0], consistent=True)
+    res = identify(r, tuple(data[0]), consistent=True)
     theta = res.standard.values
     out = tmp_path / "hyst.urdf"
     export_urdf(r, theta, out)
@@ -322,12 +333,12 @@ def test_with_the_temperature_law_every_path_alike_and_both_recovered(robot, tmp
     assert r.terms.enabled == ("fv", "fc", "fvt", "fct", "fh")
     t, q, dq, ddq, tau, temp = _hot_data(robot, seed=1, duration=30.0)
     ds = Dataset(t, q, dq, tau, ddq=ddq, joint_names=r.joint_names, temp=temp)
-    mem = identify_dataset(r, ds, run=RunOptions(workers=1))
+    mem = identify(r, ds, run=RunOptions(workers=1))
     t0 = np.array(mem.context["friction_shapes"]["temperature_reference"])
     np.testing.assert_allclose(t0, temp.mean(axis=0), rtol=1e-12)  # the data's mean
     path = save_dataset(ds, tmp_path / "both.npz")
     small = PreprocessOptions(read_chunk=500)  # the file's stream in blocks of 500 rows
-    fixed = r.with_terms(  # T0 given beforehand: the blocks of identify_chunks carry no sums
+    fixed = r.with_terms(  # T0 given beforehand: the blocks of identify carry no sums
         replace(r.terms, shapes=replace(r.terms.shapes, temperature_reference=tuple(t0)))
     )
     n = 333
@@ -336,18 +347,29 @@ def test_with_the_temperature_law_every_path_alike_and_both_recovered(robot, tmp
         for a in range(0, len(q), n)
     ]
     runs = {
-        "chunk 97": identify_dataset(r, ds, base=mem.base, run=RunOptions(chunk=97, workers=1)),
-        "forked": identify_dataset(r, ds, base=mem.base, run=RunOptions(workers=2)),
-        "file": identify_datasets(
-            r, [path], options=small, base=mem.base, run=RunOptions(workers=1, chunk=211)
+        "chunk 97": identify(r, ds, base=mem.base, run=RunOptions(chunk=97, workers=1)),
+        "forked": identify(r, ds, base=mem.base, run=RunOptions(workers=2)),
+        "file": identify(
+            r,
+            [path],
+            base=mem.base,
+            run=RunOptions(workers=1, chunk=211),
+            files=FileOptions(preprocess=small, audit=False),
         ),
-        "file forked": identify_datasets(
-            r, [path], options=small, base=mem.base, run=RunOptions(workers=2, chunk=211)
+        "file forked": identify(
+            r,
+            [path],
+            base=mem.base,
+            run=RunOptions(workers=2, chunk=211),
+            files=FileOptions(preprocess=small, audit=False),
         ),
-        "task spans": identify_files(
-            r, [str(path)], base=mem.base, partition=PartitionOptions(block=700)
+        "task spans": identify(
+            r,
+            [str(path)],
+            base=mem.base,
+            files=FileOptions(audit=False, partition=PartitionOptions(block=700)),
         ),
-        "blocks": identify_chunks(fixed, blocks, base=mem.base, run=RunOptions(workers=1)),
+        "blocks": identify(fixed, blocks, base=mem.base, run=RunOptions(workers=1)),
     }
     scale = np.abs(mem.estimate).max()
     for name, res in runs.items():
@@ -373,5 +395,5 @@ def test_with_the_temperature_law_every_path_alike_and_both_recovered(robot, tmp
         if "hysteresis" in law:
             shapes = FrictionShapes(hysteresis_length=tuple(XC))
             lesser = lesser.with_terms(replace(lesser.terms, shapes=shapes))
-        other = identify_dataset(lesser, ds, run=RunOptions(workers=1))
+        other = identify(lesser, ds, run=RunOptions(workers=1))
         assert mem.relative_error.train < 0.1 * other.relative_error.train, law

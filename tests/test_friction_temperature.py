@@ -21,8 +21,7 @@ from manip_id.cli import main
 from manip_id.datasets import Dataset, load_dataset, save_dataset
 from manip_id.errors import InputError, MissingTemperatureError
 from manip_id.export import export_urdf
-from manip_id.identification import RunOptions, identify, identify_dataset, identify_datasets
-from manip_id.identification.fleet import identify_files
+from manip_id.identification import FileOptions, RunOptions, identify
 from manip_id.robot.friction import FrictionShapes, TemperatureStats
 from manip_id.robot.model import JointTerms
 from manip_id.robot.regressor import joint_torques, regressor
@@ -113,7 +112,7 @@ def test_recovers_the_coefficients_and_beats_the_constant_model(robot):
     rec = _record(robot)
     train, valid = _dataset(robot, rec).split(0.7)  # validation: the hottest 30 %
     r = load_robot("double_pendulum", friction=LAW)
-    res = identify_dataset(r, train, validation=valid)
+    res = identify(r, train, validation=valid)
     t0 = np.array(res.context["friction_shapes"]["temperature_reference"])
     np.testing.assert_allclose(t0, train.temp.mean(axis=0), rtol=1e-12)  # the training mean
     fv, fc = _coef(res, r, "fv"), _coef(res, r, "fc")
@@ -124,8 +123,9 @@ def test_recovers_the_coefficients_and_beats_the_constant_model(robot):
     np.testing.assert_allclose(fc, FC0 + FC1 * (t0 - TREF), atol=2e-3)  # [N m]
     np.testing.assert_allclose(fvt, FV1, atol=1e-4)  # [N m s/(rad K)]: 2.5 % of FV1[1]
     np.testing.assert_allclose(fct, FC1, atol=1e-4)  # [N m/K]: 1.3 % of FC1[1]
-    plain = identify_dataset(load_robot("double_pendulum", friction="viscous,coulomb"), train,
-                             validation=valid)  # fmt: skip
+    plain = identify(
+        load_robot("double_pendulum", friction="viscous,coulomb"), train, validation=valid
+    )
     assert res.relative_error.validation < 0.5 * plain.relative_error.validation
     assert res.relative_error.validation < 3 * NOISE
 
@@ -138,7 +138,7 @@ def test_noise_free_recovery_is_exact(robot):
     tau = tau + (FV0 + FV1 * (temp - TREF)) * dq + (FC0 + FC1 * (temp - TREF)) * np.sign(dq)
     r = load_robot("double_pendulum", friction=LAW)
     ds = Dataset(t=t, q=q, dq=dq, ddq=ddq, tau=tau, temp=temp)
-    res = identify_dataset(r, ds)
+    res = identify(r, ds)
     t0 = temp.mean(axis=0)
     np.testing.assert_allclose(_coef(res, r, "fvt"), FV1, atol=1e-10)
     np.testing.assert_allclose(_coef(res, r, "fct"), FC1, atol=1e-10)
@@ -198,11 +198,15 @@ def test_streamed_forked_dask_and_in_memory_agree(robot, files):
         ("forked", RunOptions(workers=2)),
         ("dask", RunOptions(scheduler="local:2")),
     ):
-        out[name] = identify_datasets(r, [train], validation=[valid], run=run)
-    out["fleet"] = identify_files(r, [train], validation=[valid], run=RunOptions(chunk=700))
+        out[name] = identify(
+            r, [train], validation=[valid], run=run, files=FileOptions(audit=False)
+        )
+    out["fleet"] = identify(
+        r, [train], validation=[valid], run=RunOptions(chunk=700), files=FileOptions(audit=False)
+    )
     ds = load_dataset(folder / "run.npz")
     k = int(np.searchsorted(ds.t, ds.t[0] + 20.0))  # the window [0, 20) s
-    out["memory"] = identify_dataset(r, ds.slice(0, k), validation=ds.slice(k, ds.n_samples))
+    out["memory"] = identify(r, ds.slice(0, k), validation=ds.slice(k, ds.n_samples))
     ref = out["streamed"]
     assert ref.context["friction_shapes"]["temperature_reference"] == pytest.approx(
         rec[5][:k].mean(axis=0), rel=1e-12
@@ -254,15 +258,13 @@ def test_cli_missing_temperature_is_one_line(files, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--column temp=" in err[0] and "run.csv" in err[0]
     with pytest.raises(MissingTemperatureError, match="no temp field"):
-        identify_dataset(
-            load_robot("double_pendulum", friction=LAW), load_dataset(folder / "plain.npz")
-        )
+        identify(load_robot("double_pendulum", friction=LAW), load_dataset(folder / "plain.npz"))
 
 
 def test_identify_arrays_without_temperature_is_refused(robot):
     t, q, dq, ddq, tau, _ = _record(robot, duration=5.0)
     with pytest.raises(MissingTemperatureError):
-        identify(load_robot("double_pendulum", friction=LAW), q, dq, ddq, tau)
+        identify(load_robot("double_pendulum", friction=LAW), (q, dq, ddq, tau))
 
 
 # ------------------------------------------------------------------- export
@@ -270,7 +272,7 @@ def test_sidecar_round_trip(robot, files, tmp_path):
     folder, rec = files
     r = load_robot("double_pendulum", friction=LAW)
     ds = load_dataset(folder / "run.npz")
-    res = identify_dataset(r, ds, consistent=True)
+    res = identify(r, ds, consistent=True)
     t0 = tuple(res.context["friction_shapes"]["temperature_reference"])
     fit = r.with_terms(JointTerms(viscous=True, coulomb=True, temperature=True,
                                   shapes=FrictionShapes(temperature_reference=t0)))  # fmt: skip
@@ -327,8 +329,8 @@ def test_consistent_friction_stays_physical_over_the_temperature_range(robot, mo
     monkeypatch.setattr(sys.modules[__name__], "FV0", np.array([0.02, 0.2]))
     rec = _record(robot, seed=5, duration=20.0)
     r = load_robot("double_pendulum", friction=LAW)
-    ls = identify_dataset(r, _dataset(robot, rec))
-    res = identify_dataset(r, _dataset(robot, rec), consistent={"solver": solver})
+    ls = identify(r, _dataset(robot, rec))
+    res = identify(r, _dataset(robot, rec), consistent={"solver": solver})
     shapes = res.context["friction_shapes"]
     t0, lo, hi = (np.array(shapes[k]) for k in ("temperature_reference", "temperature_low",
                                                  "temperature_high"))  # fmt: skip

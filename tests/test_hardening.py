@@ -1033,7 +1033,7 @@ def _api_cases():
         a = msd_arrays()
         args = dict(q=a["q"], dq=a["dq"], ddq=a["ddq"], tau=a["tau"])
         args.update(kw)
-        return ident(robot(), args["q"], args["dq"], args["ddq"], args["tau"])
+        return ident(robot(), (args["q"], args["dq"], args["ddq"], args["tau"]))
 
     def report(w, *, force=False, **kw):
         from manip_id.viz.report import ReportContent, write_report
@@ -1138,7 +1138,7 @@ def _identify_kw(**kw):
     from manip_id.identification import identify
 
     a = msd_arrays()
-    return identify(_load_robot_kw(), a["q"], a["dq"], a["ddq"], a["tau"], **kw)
+    return identify(_load_robot_kw(), (a["q"], a["dq"], a["ddq"], a["tau"]), **kw)
 
 
 def _structural(**kw):

@@ -14,10 +14,8 @@ from manip_id.errors import InputError, RankDeficiencyError
 from manip_id.estimators import InformationAccumulator, solve_accumulator
 from manip_id.identifiability import analyze
 from manip_id.identification import (
-    RankOptions,
     RunOptions,
     identify,
-    identify_dataset,
 )
 from manip_id.robot.regressor import iter_regressor
 from manip_id.trajectories import FourierTrajectory
@@ -61,7 +59,7 @@ def noise_free(request):
 @pytest.mark.parametrize("method", ["ols", "wls"])
 def test_noise_free_recovery(noise_free, method):
     robot, theta, data, val = noise_free
-    res = identify(robot, *data, method=method, validation=val, run=RunOptions(chunk=256))
+    res = identify(robot, tuple(data), method=method, validation=val, run=RunOptions(chunk=256))
     expected = res.base.to_base(theta)
     assert np.linalg.norm(res.estimate - expected) <= 1e-8 * np.linalg.norm(expected)
     vq, vdq, vddq, vtau = val
@@ -75,7 +73,7 @@ def test_noise_free_recovery(noise_free, method):
 
 def test_result_is_reported(noise_free):
     robot, _, data, val = noise_free
-    res = identify(robot, *data, validation=val)
+    res = identify(robot, tuple(data), validation=val)
     d = json.loads(json.dumps(res.to_dict()))
     assert d["n_base"] == res.base.n_base == len(d["base_parameters"])
     assert d["base_parameters"][0]["expression"] == res.expressions[0]
@@ -110,7 +108,7 @@ def test_monte_carlo_predicted_std_matches_empirical(name):
         assert np.all(np.abs(bias) < 5 * np.std(est, axis=0) / np.sqrt(200))
     # identify() on one noisy run gives the same numbers as the accumulator path
     tau = tau0 + 0.5 * rng.standard_normal(tau0.shape)
-    res = identify(robot, q, dq, ddq, tau, base=base)
+    res = identify(robot, (q, dq, ddq, tau), base=base)
     sol = solve_accumulator(InformationAccumulator(base.n_base, robot.nv).add(Yb, tau))
     np.testing.assert_allclose(res.estimate, sol.estimate, rtol=1e-10)
     np.testing.assert_allclose(res.std, sol.std, rtol=1e-8)
@@ -132,9 +130,9 @@ def panda_fourier():
 
 def test_rls_converges_to_the_batch_estimate(panda_fourier):
     robot, theta, data = panda_fourier
-    batch = identify(robot, *data)
+    batch = identify(robot, tuple(data))
     rls = identify(
-        robot, *data, method="rls", online={"P0": 10000.0, "record_every": 100, "dt": 0.01}
+        robot, tuple(data), method="rls", online={"P0": 10000.0, "record_every": 100, "dt": 0.01}
     )
     scale = np.linalg.norm(batch.estimate)
     assert np.linalg.norm(rls.estimate - batch.estimate) <= 1e-4 * scale
@@ -148,8 +146,8 @@ def test_rls_converges_to_the_batch_estimate(panda_fourier):
 
 def test_gradient_law_reduces_the_error(panda_fourier):
     robot, _, data = panda_fourier
-    batch = identify(robot, *data)
-    grad = identify(robot, *data, method="gradient", online={"record_every": 500})
+    batch = identify(robot, tuple(data))
+    grad = identify(robot, tuple(data), method="gradient", online={"record_every": 500})
     h = grad.history
     err = np.linalg.norm(h.theta - batch.estimate, axis=1)
     assert np.all(np.diff(err) < 0)  # slow (condition number ~200) but steady
@@ -163,11 +161,11 @@ def test_rank_deficient_data_name_the_unexcited_directions():
     dq, ddq = np.zeros((200, 7)), np.zeros((200, 7))  # static: only gravity is excited
     tau = _torques(robot, robot.nominal_parameters, q, dq, ddq)
     with pytest.raises(RankDeficiencyError) as info:
-        identify(robot, q, dq, ddq, tau)
+        identify(robot, (q, dq, ddq, tau))
     err = info.value
     assert err.rank < err.n_columns and len(err.directions) == err.n_columns - err.rank
     assert "unexcited" in str(err) and err.directions[0].split()[0] in str(err)
-    res = identify(robot, q, dq, ddq, tau, rank=RankOptions(minimum_norm=True))
+    res = identify(robot, (q, dq, ddq, tau), minimum_norm=True)
     assert "minimum-norm" in res.solver
     assert res.relative_error.train < 1e-6  # gravity torques are still fitted
     pred = res.predict(
@@ -180,10 +178,10 @@ def test_identify_dataset(noise_free):
     robot, theta, (q, dq, ddq, tau), _ = noise_free
     t = 0.01 * np.arange(q.shape[0])
     ds = Dataset(t, q, dq, tau, ddq=ddq)
-    res = identify_dataset(robot, ds, validation=ds)
+    res = identify(robot, ds, validation=ds)
     assert res.relative_error.validation < 1e-8
     with pytest.raises(InputError, match="no accelerations"):
-        identify_dataset(robot, Dataset(t, q, dq, tau))
+        identify(robot, Dataset(t, q, dq, tau))
 
 
 def test_bad_input():
@@ -191,21 +189,21 @@ def test_bad_input():
     q, dq, ddq = robot.random_states(50, seed=0)
     tau = np.ones((50, 6))
     with pytest.raises(InputError, match=r"tau.shape=\(49, 6\) but expected \(50, robot.nv=6\)"):
-        identify(robot, q, dq, ddq, tau[:49])
+        identify(robot, (q, dq, ddq, tau[:49]))
     with pytest.raises(InputError, match=r"dq.shape=\(50, 5\) but robot.nv=6"):
-        identify(robot, q, dq[:, :5], ddq, tau)
+        identify(robot, (q, dq[:, :5], ddq, tau))
     bad = tau.copy()
     bad[17, 2] = np.nan
     with pytest.raises(InputError, match="tau holds nan at sample 17, elbow_joint"):
-        identify(robot, q, dq, ddq, bad)
+        identify(robot, (q, dq, ddq, bad))
     bad_q = q.copy()
     bad_q[33, 0] = np.inf
     with pytest.raises(InputError, match="q holds inf at sample 33"):
-        identify(robot, bad_q, dq, ddq, tau)
+        identify(robot, (bad_q, dq, ddq, tau))
     with pytest.raises(InputError, match="method must be one of"):
-        identify(robot, q, dq, ddq, tau, method="lasso")
+        identify(robot, (q, dq, ddq, tau), method="lasso")
     with pytest.raises(InputError, match="validation"):
-        identify(robot, q, dq, ddq, tau, validation=(q, dq))
+        identify(robot, (q, dq, ddq, tau), validation=(q, dq))
 
 
 def test_progress_and_chunks_do_not_change_the_result(noise_free):
@@ -213,10 +211,10 @@ def test_progress_and_chunks_do_not_change_the_result(noise_free):
     calls = []
     a = identify(
         robot,
-        *data,
+        tuple(data),
         run=RunOptions(chunk=64, progress=lambda done, total: calls.append((done, total))),
     )
-    b = identify(robot, *data, base=a.base, run=RunOptions(chunk=1000))
+    b = identify(robot, tuple(data), base=a.base, run=RunOptions(chunk=1000))
     assert calls[0] == (64, 600) and calls[-1] == (600, 600) and len(calls) == 10
     np.testing.assert_allclose(
         a.estimate, b.estimate, rtol=0, atol=1e-12 * np.abs(b.estimate).max()

@@ -40,9 +40,8 @@ def test_rls_options_match_the_estimator_stepped_by_hand(ur5_data, as_dict):
     robot, q, dq, ddq, tau = ur5_data
     opts = {"P0": 1e3, "forgetting": 0.999, "record_every": 10, "dt": 0.01}
     res = identify(
-        robot, q, dq, ddq, tau, method="rls",
-        online=opts if as_dict else OnlineOptions(**opts),
-    )  # fmt: skip
+        robot, (q, dq, ddq, tau), method="rls", online=opts if as_dict else OnlineOptions(**opts)
+    )
     ind = res.base.independent
     est = RLSEstimator(np.zeros(len(ind)), 1e3, forgetting=0.999, record_every=10)
     for k, Yk in enumerate(_rows(robot, q, dq, ddq, ind)):
@@ -53,7 +52,7 @@ def test_rls_options_match_the_estimator_stepped_by_hand(ur5_data, as_dict):
 
 def test_gradient_defaults_are_the_normalized_law_with_unit_gain(ur5_data):
     robot, q, dq, ddq, tau = ur5_data
-    res = identify(robot, q, dq, ddq, tau, method="gradient")
+    res = identify(robot, (q, dq, ddq, tau), method="gradient")
     ind = res.base.independent
     est = GradientEstimator(np.zeros(len(ind)), 1.0, normalized=True)
     for k, Yk in enumerate(_rows(robot, q, dq, ddq, ind)):
@@ -76,13 +75,13 @@ def test_gradient_defaults_are_the_normalized_law_with_unit_gain(ur5_data):
 def test_bad_online_options_are_input_errors(ur5_data, method, online, match):
     robot, q, dq, ddq, tau = ur5_data
     with pytest.raises(InputError, match=match):
-        identify(robot, q, dq, ddq, tau, method=method, online=online)
+        identify(robot, (q, dq, ddq, tau), method=method, online=online)
 
 
 def test_forked_back_end_equals_serial_and_leaves_no_state(ur5_data):
     robot, q, dq, ddq, tau = ur5_data
-    serial = identify(robot, q, dq, ddq, tau)
-    forked = identify(robot, q, dq, ddq, tau, base=serial.base, run=RunOptions(workers=2))
+    serial = identify(robot, (q, dq, ddq, tau))
+    forked = identify(robot, (q, dq, ddq, tau), base=serial.base, run=RunOptions(workers=2))
     scale = np.abs(serial.estimate).max()
     assert np.abs(forked.estimate - serial.estimate).max() <= 1e-9 * scale
     assert "accumulate_wall" in forked.timings and "accumulate_wall" not in serial.timings

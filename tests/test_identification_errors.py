@@ -14,13 +14,12 @@ from conftest import get_robot
 
 from manip_id.identification import (
     NOT_DETERMINED,
+    FileOptions,
     PreprocessOptions,
     identify,
-    identify_datasets,
     iter_processed,
     scan_file,
 )
-from manip_id.identification.fleet import identify_files
 
 FV, FC = 0.3, 0.8  # viscous [N m s/rad], Coulomb [N m]
 DQ_NOISE = 0.002  # measured velocity noise [rad/s]
@@ -83,9 +82,11 @@ def _deadband_prediction(res, robot, a, eps):
 
 def test_all_rows_error_with_a_deadband_is_no_worse_on_stop_and_go_data(robot, files):
     (train, _), (valid, va) = files
-    plain = identify_datasets(robot, [train], validation=[valid])
+    plain = identify(robot, [train], validation=[valid], files=FileOptions(audit=False))
     opts = PreprocessOptions(velocity_deadband=EPS)
-    band = identify_datasets(robot, [train], validation=[valid], options=opts)
+    band = identify(
+        robot, [train], validation=[valid], files=FileOptions(preprocess=opts, audit=False)
+    )
     re0, re1 = plain.relative_error, band.relative_error
     # the all-rows errors are comparable: the deadband fit is no worse there
     assert re1.validation <= re0.validation
@@ -105,7 +106,9 @@ def test_all_rows_error_with_a_deadband_is_no_worse_on_stop_and_go_data(robot, f
         np.linalg.norm(va["tau"] - pred0) / np.linalg.norm(va["tau"]), rel=1e-6
     )
     # the fleet path reports the same
-    fleet = identify_files(robot, [train], validation=[valid], options=opts).to_dict()
+    fleet = identify(
+        robot, [train], validation=[valid], files=FileOptions(preprocess=opts, audit=False)
+    ).to_dict()
     local = band.to_dict()
     fleet.pop("timings"), local.pop("timings")
     assert fleet == local and "validation_moving" in fleet["relative_error"]
@@ -131,23 +134,30 @@ def test_errors_against_the_raw_torques_for_one_and_several_files(robot, files, 
         np.savez(p, t=a["t"], q=a["q"], dq=a["dq"], tau=a["tau"])
         paths.append(str(p))
     opts = PreprocessOptions(cutoff=10.0)
-    one = identify_datasets(robot, paths[:1], options=opts)
+    one = identify(robot, paths[:1], files=FileOptions(preprocess=opts, audit=False))
     raw = one.to_dict()["relative_error_raw"]
     assert raw["train"] == pytest.approx(
         _raw_reference(robot, paths[0], files[0][1], opts, one), rel=1e-6
     )
     # the filtered torques fit better than the raw ones (noise and the sign steps removed)
     assert raw["train"] > one.relative_error.train
-    two = identify_datasets(robot, paths[:1], validation=paths[1:], options=opts)
+    two = identify(
+        robot, paths[:1], validation=paths[1:], files=FileOptions(preprocess=opts, audit=False)
+    )
     raw2 = two.to_dict()["relative_error_raw"]
     assert raw2["validation"] == pytest.approx(
         _raw_reference(robot, paths[1], files[1][1], opts, two), rel=1e-6
     )
     assert raw2["nominal_validation"] is not None
-    fleet = identify_files(robot, paths[:1], validation=paths[1:], options=opts).to_dict()
+    fleet = identify(
+        robot, paths[:1], validation=paths[1:], files=FileOptions(preprocess=opts, audit=False)
+    ).to_dict()
     assert fleet["relative_error_raw"] == raw2
     # unfiltered torques: nothing to compare against
-    assert "relative_error_raw" not in identify_datasets(robot, [files[0][0]]).to_dict()
+    assert (
+        "relative_error_raw"
+        not in identify(robot, [files[0][0]], files=FileOptions(audit=False)).to_dict()
+    )
 
 
 def test_parameters_a_minimum_norm_solution_cannot_fix_are_not_shown_as_numbers():
@@ -155,7 +165,7 @@ def test_parameters_a_minimum_norm_solution_cannot_fix_are_not_shown_as_numbers(
     q, _, _ = robot.random_states(200, seed=3)  # postures at rest: gravity only
     dq = ddq = np.zeros((200, robot.nv))
     tau = np.array([pin.rnea(robot.model, robot.data, *x) for x in zip(q, dq, ddq, strict=True)])
-    res = identify(robot, q, dq, ddq, tau, rank={"minimum_norm": True})
+    res = identify(robot, (q, dq, ddq, tau), minimum_norm=True)
     doc = res.to_dict()
     undetermined = [p for p in doc["base_parameters"] if NOT_DETERMINED in p["flags"]]
     assert 0 < len(undetermined) < len(doc["base_parameters"])

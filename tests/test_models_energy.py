@@ -14,7 +14,7 @@ import pytest
 from manip_id import load_robot
 from manip_id.errors import InputError
 from manip_id.identifiability import analyze
-from manip_id.identification import ModelOptions, identify
+from manip_id.identification import FileOptions, ModelOptions, identify
 from manip_id.models import (
     accumulate_energy,
     check_energy_base,
@@ -111,10 +111,7 @@ def test_noise_free_recovery_without_accelerations(panda, trajectory, model):
     ds = _data(panda, trajectory)
     res = identify(
         robot,
-        ds.q,
-        ds.dq,
-        None,
-        ds.tau,
+        (ds.q, ds.dq, None, ds.tau),
         model=ModelOptions(name=model, window_length=0.05, dt=1 / RATE),
     )
     base = analyze(robot).base
@@ -130,20 +127,17 @@ def test_noise_free_recovery_without_accelerations(panda, trajectory, model):
 def test_identify_dataset_takes_the_models_without_ddq(panda, trajectory):
     import dataclasses
 
-    from manip_id.identification import identify_dataset
+    from manip_id.identification import identify
 
     robot, _ = panda
     ds = _data(panda, trajectory)
     no_ddq = dataclasses.replace(ds, ddq=None)
-    res = identify_dataset(
+    res = identify(
         robot, no_ddq, model=ModelOptions(name="energy", window_length=0.05)
     )  # dt from ds.t
     ref = identify(
         robot,
-        ds.q,
-        ds.dq,
-        None,
-        ds.tau,
+        (ds.q, ds.dq, None, ds.tau),
         model=ModelOptions(name="energy", window_length=0.05, dt=1 / RATE),
     )
     np.testing.assert_allclose(res.estimate, ref.estimate, rtol=1e-9)
@@ -158,10 +152,7 @@ def test_noisy_estimates_are_within_their_predicted_std(panda, trajectory, model
         ds = _data(panda, trajectory, noise=0.02, seed=seed)
         res = identify(
             robot,
-            ds.q,
-            ds.dq,
-            None,
-            ds.tau,
+            (ds.q, ds.dq, None, ds.tau),
             model=ModelOptions(name=model, window_length=0.05, dt=1 / RATE),
         )
         z.append((res.estimate - expected) / res.std)
@@ -240,14 +231,11 @@ def test_bad_input(panda, trajectory):
     robot, _ = panda
     ds = _data(panda, trajectory)
     with pytest.raises(InputError, match="model must be one of"):
-        identify(robot, ds.q, ds.dq, None, ds.tau, model=ModelOptions(name="lagrange", dt=0.002))
+        identify(robot, (ds.q, ds.dq, None, ds.tau), model=ModelOptions(name="lagrange", dt=0.002))
     with pytest.raises(InputError, match="least squares"):
         identify(
             robot,
-            ds.q,
-            ds.dq,
-            None,
-            ds.tau,
+            (ds.q, ds.dq, None, ds.tau),
             method="rls",
             model=ModelOptions(name="energy", dt=0.002),
         )
@@ -256,19 +244,13 @@ def test_bad_input(panda, trajectory):
     with pytest.raises(InputError, match="give more samples or a shorter window_length"):
         identify(
             robot,
-            ds.q[:2000],
-            ds.dq[:2000],
-            None,
-            ds.tau[:2000],
+            (ds.q[:2000], ds.dq[:2000], None, ds.tau[:2000]),
             model=ModelOptions(name="energy", window_length=0.2, dt=0.002),
         )
     with pytest.raises(InputError, match=r"tau.shape=\(10, 7\) but expected \(20, robot.nv=7\)"):
         identify(
             robot,
-            ds.q[:20],
-            ds.dq[:20],
-            None,
-            ds.tau[:10],
+            (ds.q[:20], ds.dq[:20], None, ds.tau[:10]),
             model=ModelOptions(name="momentum", dt=0.002),
         )
 
@@ -292,7 +274,7 @@ def test_real_panda_log_momentum_and_energy(panda_real):
     robot, train, validation = panda_real
     dyn_data = preprocess(train)
     dynamic = identify(
-        robot, dyn_data.q, dyn_data.dq, dyn_data.ddq, dyn_data.tau, validation=validation
+        robot, (dyn_data.q, dyn_data.dq, dyn_data.ddq, dyn_data.tau), validation=validation
     )
     # only positions and velocities filtered: no ddq, raw (resampled) torques
     errors = {}
@@ -305,10 +287,7 @@ def test_real_panda_log_momentum_and_energy(panda_real):
         dt = float(np.mean(np.diff(states.t)))
         res = identify(
             robot,
-            states.q,
-            states.dq,
-            None,
-            states.tau,
+            (states.q, states.dq, None, states.tau),
             validation=validation,
             consistent=consistent,
             model=ModelOptions(name=model, window_length=window, dt=dt),
@@ -369,21 +348,23 @@ def test_default_window_runs_where_the_default_gives_too_few_rows(panda, traject
     robot, theta = panda
     ds = _data(panda, trajectory)
     # 20.9 s at 500 Hz: 104 rows of the default 0.2 s window for 69 base parameters
-    res = identify(robot, ds.q, ds.dq, None, ds.tau, model=ModelOptions("energy", dt=1 / RATE))
+    res = identify(robot, (ds.q, ds.dq, None, ds.tau), model=ModelOptions("energy", dt=1 / RATE))
     window = res.context["window"]
     assert window["chosen"] and window["rows"] >= 5 * len(res.names)
     assert res.relative_error.train < 1e-3  # noise-free: the fit is exact up to Simpson
 
 
 def test_files_path_chooses_the_same_window(panda, trajectory, tmp_path):
-    from manip_id.identification.fleet import identify_files
+    from manip_id.identification import identify
 
     robot, _ = panda
     ds = _data(panda, trajectory, noise=0.01)
     path = tmp_path / "log.npz"
     np.savez(path, t=ds.t, q=ds.q, dq=ds.dq, ddq=ds.ddq, tau=ds.tau)
-    own = identify(robot, ds.q, ds.dq, None, ds.tau, model=ModelOptions("energy", dt=1 / RATE))
+    own = identify(robot, (ds.q, ds.dq, None, ds.tau), model=ModelOptions("energy", dt=1 / RATE))
     assert own.context["window"]["chosen"]  # the default 0.2 s gives too few rows here
-    files = identify_files(robot, [str(path)], model=ModelOptions("energy"))
+    files = identify(
+        robot, [str(path)], model=ModelOptions("energy"), files=FileOptions(audit=False)
+    )
     scale = np.abs(own.estimate).max()
     assert np.abs(files.estimate - own.estimate).max() <= 1e-8 * scale

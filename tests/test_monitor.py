@@ -172,7 +172,7 @@ def identified(robot, theta):
     dq = np.vstack([d.dq for d in runs])
     ddq = np.vstack([d.ddq for d in runs])
     tau = np.vstack([d.tau for d in runs])
-    return identify(robot, q, dq, ddq, tau), runs
+    return identify(robot, (q, dq, ddq, tau)), runs
 
 
 def test_false_alarm_rate_on_new_collision_free_runs(robot, theta, identified):

@@ -227,7 +227,7 @@ def _pseudo_inertia(phi):
 def test_known_base_equals_joint_fit(ur5, ur5_base):
     payload = make_payload(0.8, (0.0, 0.05, 0.1))
     u, ld = make_runs(ur5, "tool0", payload)
-    earlier = identify(ur5, *u, base=ur5_base)
+    earlier = identify(ur5, tuple(u), base=ur5_base)
     res = identify_payload(ur5, None, ld, "tool0", known_base=earlier, base=ur5_base)
     assert res.known_base
     assert np.allclose(res.payload.values, truth(payload), atol=1e-6)

@@ -87,7 +87,7 @@ def test_known_base_payload_std_matches_the_spread_under_correlated_noise():
     robot = get_robot("ur5")
     base = analyze(robot).base
     m0, m1 = loaded_model(robot, "tool0", make_payload())
-    known = identify(robot, *_clean_run(robot, m0, 1), base=base)
+    known = identify(robot, tuple(_clean_run(robot, m0, 1)), base=base)
     clean = [_clean_run(robot, m1, s, n=3000) for s in (3, 4)]
     values, std, infl = [], [], []
     for draw in range(30):

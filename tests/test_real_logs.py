@@ -19,11 +19,11 @@ from manip_id.datasets import Dataset, save_dataset
 from manip_id.errors import DataError, InputError
 from manip_id.identifiability import analyze
 from manip_id.identification import (
+    FileOptions,
     PreprocessOptions,
     RunOptions,
     accumulate_file,
     identify,
-    identify_datasets,
     scan_file,
 )
 from manip_id.signals import preprocess
@@ -56,16 +56,16 @@ def two_logs(robot, tmp_path):
 # ------------------------------------------------------------------ several files
 def test_two_files_give_the_estimate_of_their_concatenation(robot, base, two_logs):
     pa, pb, a, b = two_logs
-    res = identify_datasets(robot, [pa, pb], base=base)
+    res = identify(robot, [pa, pb], base=base, files=FileOptions(audit=False))
     assert res.n_samples == 1200 + 900
     cat = [np.concatenate([x, y]) for x, y in zip(a[1:], b[1:], strict=True)]
-    ref = identify(robot, *cat, base=base)  # the in-memory path on the concatenation
+    ref = identify(robot, tuple(cat), base=base)  # the in-memory path on the concatenation
     scale = np.abs(ref.estimate).max()
     np.testing.assert_allclose(res.estimate, ref.estimate, rtol=0, atol=1e-9 * scale)
     beta = base.to_base(truth(robot))  # noise-free: the truth itself
     np.testing.assert_allclose(res.estimate, beta, rtol=0, atol=1e-7 * np.abs(beta).max())
     # one file alone is not the concatenation
-    alone = identify_datasets(robot, [pa], base=base)
+    alone = identify(robot, [pa], base=base, files=FileOptions(audit=False))
     assert alone.n_samples == 1200
 
 
@@ -76,7 +76,7 @@ def test_pooled_and_per_file_validation(robot, base, two_logs, tmp_path):
     for k, (t, q, dq, ddq, tau) in enumerate((a, b)):
         tau_n = tau + 0.05 * rng.standard_normal(tau.shape) * (1 + k)
         noisy.append(save_npz(tmp_path / f"v{k}.npz", robot, t, q, dq, ddq, tau_n))
-    res = identify_datasets(robot, [pa], validation=noisy, base=base)
+    res = identify(robot, [pa], validation=noisy, base=base, files=FileOptions(audit=False))
     per = res.relative_error.validation_per_file
     assert [e["file"] for e in per] == [str(p) for p in noisy]
     sse = zz = 0.0
@@ -111,10 +111,10 @@ def test_a_window_keeps_exactly_the_samples_inside_it(robot, base, two_logs, win
     keep = mask(t, np.arange(t.shape[0]))
     fa = accumulate_file(robot, f"{pa}@{window}", None, base.independent)
     assert fa.n_samples == keep.sum()
-    ref = identify(robot, q[keep], dq[keep], ddq[keep], tau[keep], base=base)
+    ref = identify(robot, (q[keep], dq[keep], ddq[keep], tau[keep]), base=base)
     acc = fa.accumulator
     np.testing.assert_allclose(acc.zz_joint, (tau[keep] ** 2).sum(axis=0), rtol=1e-12)
-    res = identify_datasets(robot, [f"{pa}@{window}"], base=base)
+    res = identify(robot, [f"{pa}@{window}"], base=base, files=FileOptions(audit=False))
     np.testing.assert_allclose(
         res.estimate, ref.estimate, rtol=0, atol=1e-9 * np.abs(ref.estimate).max()
     )
@@ -127,9 +127,12 @@ def test_a_window_on_a_file_without_ddq_is_preprocessed_alone(robot, base, tmp_p
     ref = preprocess(Dataset(t=t[keep], q=q[keep], dq=dq[keep], tau=tau[keep]), cutoff=8.0)
     fa = accumulate_file(robot, f"{path}@1:6", PreprocessOptions(cutoff=8.0), base.independent)
     assert fa.n_samples == ref.n_samples
-    inmem = identify(robot, ref.q, ref.dq, ref.ddq, ref.tau, base=base)
-    res = identify_datasets(
-        robot, [f"{path}@1:6"], options=PreprocessOptions(cutoff=8.0), base=base
+    inmem = identify(robot, (ref.q, ref.dq, ref.ddq, ref.tau), base=base)
+    res = identify(
+        robot,
+        [f"{path}@1:6"],
+        base=base,
+        files=FileOptions(preprocess=PreprocessOptions(cutoff=8.0), audit=False),
     )
     np.testing.assert_allclose(
         res.estimate, inmem.estimate, rtol=0, atol=1e-9 * np.abs(inmem.estimate).max()
@@ -156,13 +159,22 @@ def test_currents_times_the_scale_give_the_torque_result(robot, base, two_logs, 
     t, q, dq, ddq, tau = a
     gains = np.array([40.0, 55.0, 30.0, 8.0, 9.5, 7.0])  # [N m / A]
     cur = save_npz(tmp_path / "cur.npz", robot, t, q, dq, ddq, tau / gains)
-    ref = identify_datasets(robot, [pa], base=base)
-    res = identify_datasets(robot, [cur], options=PreprocessOptions(torque_scale=gains), base=base)
+    ref = identify(robot, [pa], base=base, files=FileOptions(audit=False))
+    res = identify(
+        robot,
+        [cur],
+        base=base,
+        files=FileOptions(preprocess=PreprocessOptions(torque_scale=gains), audit=False),
+    )
     np.testing.assert_allclose(
         res.estimate, ref.estimate, rtol=0, atol=1e-9 * np.abs(ref.estimate).max()
     )
     with pytest.raises(InputError, match=r"takes one value or one per joint \(6\), got 4"):
-        identify_datasets(robot, [cur], options=PreprocessOptions(torque_scale=(1, 2, 3, 4)))
+        identify(
+            robot,
+            [cur],
+            files=FileOptions(preprocess=PreprocessOptions(torque_scale=(1, 2, 3, 4)), audit=False),
+        )
 
 
 # ----------------------------------------------------------------------- deadband
@@ -246,9 +258,9 @@ def test_bad_file_in_a_list_is_named(robot, base, two_logs, tmp_path):
     bad = tmp_path / "bad.npz"
     np.savez(bad, t=a[0], q=a[1][:, :3], dq=a[2][:, :3], tau=a[4][:, :3])  # another robot
     with pytest.raises(DataError, match=r"bad.npz: the data have 3 joints"):
-        identify_datasets(robot, [pa, bad, pb], base=base)
+        identify(robot, [pa, bad, pb], base=base, files=FileOptions(audit=False))
     with pytest.raises(DataError, match=r"no such data file or folder: .*missing.npz"):
-        identify_datasets(robot, [pa, tmp_path / "missing.npz"], base=base)
+        identify(robot, [pa, tmp_path / "missing.npz"], base=base, files=FileOptions(audit=False))
 
 
 # ----------------------------------------------------------------------------- CLI
@@ -402,8 +414,14 @@ def test_parts_and_workers_add_up_to_the_whole_file(robot, base, tmp_path):
     np.testing.assert_array_equal(sum(p.excluded for p in parts), whole.excluded)
     A = sum(p.accumulator.A for p in parts)
     np.testing.assert_allclose(A, whole.accumulator.A, rtol=1e-10, atol=1e-8 * np.abs(A).max())
-    serial = identify_datasets(robot, [path], options=opts, base=base)
-    forked = identify_datasets(robot, [path], options=opts, base=base, run=RunOptions(workers=2))
+    serial = identify(robot, [path], base=base, files=FileOptions(preprocess=opts, audit=False))
+    forked = identify(
+        robot,
+        [path],
+        base=base,
+        run=RunOptions(workers=2),
+        files=FileOptions(preprocess=opts, audit=False),
+    )
     assert forked.n_samples == serial.n_samples
     scale = np.abs(serial.estimate).max()
     np.testing.assert_allclose(forked.estimate, serial.estimate, rtol=0, atol=1e-9 * scale)

@@ -10,7 +10,7 @@ from conftest import get_robot
 from manip_id.datasets import load_dataset
 from manip_id.errors import DataError
 from manip_id.identifiability import analyze
-from manip_id.identification import PreprocessOptions, identify_datasets, scan_file
+from manip_id.identification import FileOptions, PreprocessOptions, identify, scan_file
 
 rosbags = pytest.importorskip("rosbags")
 from rosbags.rosbag2 import StoragePlugin, Writer  # noqa: E402
@@ -81,8 +81,8 @@ def test_bag_with_shuffled_joints_gives_the_npz_result(robot, data, tmp_path, st
     np.testing.assert_allclose(ds.t, t, rtol=0, atol=1e-9)
     base = analyze(robot).base
     opts = PreprocessOptions(cutoff=10.0)
-    from_bag = identify_datasets(robot, [bag], options=opts, base=base)
-    from_npz = identify_datasets(robot, [npz], options=opts, base=base)
+    from_bag = identify(robot, [bag], base=base, files=FileOptions(preprocess=opts, audit=False))
+    from_npz = identify(robot, [npz], base=base, files=FileOptions(preprocess=opts, audit=False))
     assert from_bag.n_samples == from_npz.n_samples
     scale = np.abs(from_npz.estimate).max()
     np.testing.assert_allclose(from_bag.estimate, from_npz.estimate, rtol=0, atol=1e-7 * scale)

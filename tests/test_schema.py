@@ -17,7 +17,6 @@ from conftest import get_robot
 from manip_id.cli import main
 from manip_id.errors import DataError
 from manip_id.identification import (
-    RankOptions,
     identify,
     load_result,
     result_from_dict,
@@ -44,7 +43,7 @@ def _data(robot, seed: int, n: int = 800):
 def ur5_result():
     robot = get_robot("ur5")
     train, valid = _data(robot, 1), _data(robot, 2, n=300)
-    return robot, train, valid, identify(robot, *train, validation=valid)
+    return robot, train, valid, identify(robot, tuple(train), validation=valid)
 
 
 def _nominal_error(robot, q, dq, ddq, tau) -> tuple[float, np.ndarray]:
@@ -179,7 +178,7 @@ def test_thresholds_are_configurable(ur5_result):
 def test_gradient_not_converged_is_a_warning():
     robot = get_robot("ur5")
     train = _data(robot, 3, n=400)
-    res = identify(robot, *train, method="gradient", online={"gamma": 1e-3})
+    res = identify(robot, tuple(train), method="gradient", online={"gamma": 1e-3})
     assert res.history is not None and res.convergence is not None
     d = res.to_dict()
     assert any("has not converged" in w for w in d["warnings"])
@@ -200,7 +199,7 @@ def test_rls_on_noise_free_data_converges():
     model = robot.with_parameters(theta)
     data = model.createData()
     tau = np.array([pin.rnea(model, data, q[k], dq[k], ddq[k]) for k in range(600)])
-    res = identify(robot, q, dq, ddq, tau, method="rls")
+    res = identify(robot, (q, dq, ddq, tau), method="rls")
     assert res.convergence["prediction_change"] < 1e-6
     assert not any("converged" in w for w in res.to_dict()["warnings"])
 
@@ -272,7 +271,7 @@ def test_not_excited_flags_the_columns_these_data_leave_zero():
     model = robot.with_parameters(robot.nominal_parameters)
     data = model.createData()
     tau = np.array([pin.rnea(model, data, q[k], dq[k], ddq[k]) for k in range(200)])
-    res = identify(robot, q, dq, ddq, tau, rank=RankOptions(minimum_norm=True))
+    res = identify(robot, (q, dq, ddq, tau), minimum_norm=True)
     assert res.rank_analysis.rank < res.base.n_base
     Y = np.stack([robot.evaluator.regressor(q[k], dq[k], ddq[k]) for k in range(200)])
     zero = np.abs(Y[:, :, res.base.independent]).max(axis=(0, 1)) == 0

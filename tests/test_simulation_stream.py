@@ -8,7 +8,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from manip_id import identify, identify_chunks, load_robot, regressor
+from manip_id import identify, load_robot, regressor
 from manip_id import simulation as sim_mod
 from manip_id.cli import main
 from manip_id.errors import InputError
@@ -106,18 +106,16 @@ def test_torque_noise_scale_and_independence(ur10, monkeypatch):
 def test_streamed_least_squares_equal_whole_arrays(ur10):
     stream = _stream(ur10, duration=20.0, rate=50.0)
     ds = stream.dataset()
-    whole = identify(ur10, ds.q, ds.dq, ds.ddq, ds.tau, method="ols")
-    blocks = identify_chunks(ur10, stream.blocks(), method="ols", run=RunOptions(chunk=100))
+    whole = identify(ur10, (ds.q, ds.dq, ds.ddq, ds.tau), method="ols")
+    blocks = identify(ur10, stream.blocks(), method="ols", run=RunOptions(chunk=100))
     np.testing.assert_allclose(blocks.estimate, whole.estimate, rtol=1e-9, atol=1e-12)
-    parallel = identify_chunks(
-        ur10, stream.parts(2), method="ols", run=RunOptions(chunk=100, workers=2)
-    )
+    parallel = identify(ur10, stream.parts(2), method="ols", run=RunOptions(chunk=100, workers=2))
     np.testing.assert_allclose(parallel.estimate, whole.estimate, rtol=1e-9, atol=1e-12)
 
 
 def test_noise_free_stream_recovers_the_truth(ur10):
     stream = _stream(ur10, duration=20.0, noise=MeasurementNoise(), perturb=0.3)
-    res = identify_chunks(ur10, stream.blocks(), method="ols")
+    res = identify(ur10, stream.blocks(), method="ols")
     beta = res.base.to_base(stream.theta_true)
     np.testing.assert_allclose(res.estimate, beta, rtol=1e-7, atol=1e-9)
 
@@ -137,10 +135,7 @@ def test_cli_streamed_simulation_equals_whole_array_identification(ur10, tmp_pat
     train, valid = data.split(0.7)
     ref = identify(
         ur10,
-        train.q,
-        train.dq,
-        train.ddq,
-        train.tau,
+        (train.q, train.dq, train.ddq, train.tau),
         method=method,
         validation=(valid.q, valid.dq, valid.ddq, valid.tau),
     )

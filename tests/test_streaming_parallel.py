@@ -7,7 +7,7 @@ import pytest
 from conftest import get_robot
 
 from manip_id import InputError
-from manip_id.identification import RunOptions, identify, identify_chunks
+from manip_id.identification import RunOptions, identify
 from manip_id.simulation import inverse_dynamics
 
 
@@ -30,13 +30,13 @@ def _close(a, b, rtol=1e-9):
 @pytest.fixture(scope="module")
 def serial(ur10_data):
     robot, q, dq, ddq, tau = ur10_data
-    return identify(robot, q, dq, ddq, tau, run=RunOptions(chunk=1024))
+    return identify(robot, (q, dq, ddq, tau), run=RunOptions(chunk=1024))
 
 
 @pytest.mark.parametrize("chunk", [1, 7, 500, 5000])
 def test_chunk_size_does_not_change_the_result(ur10_data, serial, chunk):
     robot, q, dq, ddq, tau = ur10_data
-    res = identify(robot, q, dq, ddq, tau, base=serial.base, run=RunOptions(chunk=chunk))
+    res = identify(robot, (q, dq, ddq, tau), base=serial.base, run=RunOptions(chunk=chunk))
     _close(serial.estimate, res.estimate)
     _close(serial.std, res.std)
     assert res.relative_error.train == pytest.approx(serial.relative_error.train, rel=1e-9)
@@ -46,9 +46,9 @@ def test_chunk_size_does_not_change_the_result(ur10_data, serial, chunk):
 @pytest.mark.parametrize("workers", [2, 3])
 def test_workers_give_the_serial_result(ur10_data, method, workers):
     robot, q, dq, ddq, tau = ur10_data
-    ref = identify(robot, q, dq, ddq, tau, method=method)
+    ref = identify(robot, (q, dq, ddq, tau), method=method)
     res = identify(
-        robot, q, dq, ddq, tau, method=method, base=ref.base, run=RunOptions(workers=workers)
+        robot, (q, dq, ddq, tau), method=method, base=ref.base, run=RunOptions(workers=workers)
     )
     _close(ref.estimate, res.estimate)
     # WLS weights come from residual sums (see below), which carry more round-off
@@ -68,7 +68,7 @@ def _blocks(arrays, edges):
 def test_blocks_from_a_stream_and_parts_in_processes(ur10_data, serial):
     robot, q, dq, ddq, tau = ur10_data
     arrays = (q, dq, ddq, tau)
-    res = identify_chunks(
+    res = identify(
         robot,
         _blocks(arrays, [0, 100, 101, 1700, 3000]),
         base=serial.base,
@@ -80,20 +80,20 @@ def test_blocks_from_a_stream_and_parts_in_processes(ur10_data, serial):
     # validation on the training data equals the training error computed from the sums
     assert res.relative_error.validation == pytest.approx(res.relative_error.train, rel=1e-6)
     parts = [(_blocks, (arrays, [0, 1000, 1500])), (_blocks, (arrays, [1500, 3000]))]
-    par = identify_chunks(robot, parts, base=serial.base, run=RunOptions(workers=2))
+    par = identify(robot, parts, base=serial.base, run=RunOptions(workers=2))
     _close(serial.estimate, par.estimate)
 
 
 def test_bad_sources(ur10_data):
     robot, q, dq, ddq, tau = ur10_data
     with pytest.raises(InputError, match="parts"):
-        identify_chunks(robot, [(q, dq, ddq, tau)], run=RunOptions(workers=2))
-    with pytest.raises(InputError, match="tuple"):
-        identify_chunks(robot, [q])
+        identify(robot, [(q, dq, ddq, tau)], run=RunOptions(workers=2))
+    with pytest.raises(InputError, match="list of ndarray"):
+        identify(robot, [q])
     with pytest.raises(InputError, match="workers"):
-        identify(robot, q, dq, ddq, tau, run=RunOptions(workers=0))
+        identify(robot, (q, dq, ddq, tau), run=RunOptions(workers=0))
     with pytest.raises(InputError, match="ols, wls"):
-        identify_chunks(robot, [(q, dq, ddq, tau)], method="rls")
+        identify(robot, [(q, dq, ddq, tau)], method="rls")
 
 
 @pytest.mark.parametrize("name", ["ur10", "baxter", "kinova", "msd"])

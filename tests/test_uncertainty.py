@@ -365,8 +365,8 @@ def test_identify_reports_the_honest_std_and_keeps_the_white_one(ur5_correlated,
     from manip_id.identification import RunOptions, identify, load_result
 
     robot, data = ur5_correlated
-    honest = identify(robot, *data)  # "auto"
-    white = identify(robot, *data, uncertainty="white")
+    honest = identify(robot, tuple(data))  # "auto"
+    white = identify(robot, tuple(data), uncertainty="white")
     np.testing.assert_array_equal(honest.estimate, white.estimate)  # the same fit
     np.testing.assert_array_equal(honest.std_white, white.std)
     assert white.uncertainty["method"] == "white" and white.uncertainty["n_blocks"] == 0
@@ -376,7 +376,7 @@ def test_identify_reports_the_honest_std_and_keeps_the_white_one(ur5_correlated,
     assert u["inflation"] > 2.5
     np.testing.assert_allclose(honest.std, np.sqrt(np.diag(honest.covariance)))
     # forked parts give the serial blocks (parts of one record merge exactly)
-    forked = identify(robot, *data, run=RunOptions(workers=2))
+    forked = identify(robot, tuple(data), run=RunOptions(workers=2))
     np.testing.assert_allclose(forked.std, honest.std, rtol=1e-8)
     # the flags use the honest std: a threshold between the white and the honest std %
     white_pct = 100 * honest.std_white / np.abs(honest.estimate)
@@ -401,20 +401,20 @@ def test_short_records_fall_back_to_white_and_hac_can_be_forced(ur5_correlated):
 
     robot, data = ur5_correlated
     short = tuple(a[:300] for a in data)  # 300 samples: 10 blocks of 32
-    auto = identify(robot, *short)
+    auto = identify(robot, tuple(short))
     assert auto.uncertainty["method"] == "white" and "10 blocks" in auto.uncertainty["reason"]
     np.testing.assert_array_equal(auto.std, auto.std_white)
-    forced = identify(robot, *short, uncertainty={"method": "hac", "bandwidth": 1.0})
+    forced = identify(robot, tuple(short), uncertainty={"method": "hac", "bandwidth": 1.0})
     assert forced.uncertainty["method"] == "hac" and forced.uncertainty["bandwidth"] == 1.0
     with pytest.raises(InputError, match="uncertainty must be one of"):
-        identify(robot, *short, uncertainty="newey")
+        identify(robot, tuple(short), uncertainty="newey")
 
 
 def test_online_methods_get_the_honest_std_at_their_estimate(ur5_correlated):
     from manip_id.identification import identify
 
     robot, data = ur5_correlated
-    res = identify(robot, *data, method="rls")
+    res = identify(robot, tuple(data), method="rls")
     assert res.uncertainty["method"] == "hac" and res.uncertainty["inflation"] > 2.5
 
 
@@ -449,7 +449,7 @@ def test_monte_carlo_through_identify(ur5_excitation):
     estimates, honest, white = [], [], []
     for run in range(30):
         noise = _ar1_noise(np.random.default_rng(500 + run), d.tau.shape[0], 6, np.exp(-1 / 30))
-        res = identify(robot, d.q, d.dq, d.ddq, d.tau + scale * noise)
+        res = identify(robot, (d.q, d.dq, d.ddq, d.tau + scale * noise))
         assert res.uncertainty["method"] == "hac"
         estimates.append(res.estimate)
         honest.append(res.std)

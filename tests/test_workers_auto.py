@@ -70,10 +70,10 @@ def test_available_cores_is_the_affinity():
 def test_library_default_equals_pinocchio_one_process(large_input_path, monkeypatch, method):
     robot = load_robot("ur10", friction=("viscous", "coulomb"))
     d = _data(robot).dataset
-    default = identify(robot, d.q, d.dq, d.ddq, d.tau, method=method)
+    default = identify(robot, (d.q, d.dq, d.ddq, d.tau), method=method)
     assert default.timings.get("accumulate_wall") is not None  # it forked
     monkeypatch.setenv(ENV, "pinocchio")
-    ref = identify(robot, d.q, d.dq, d.ddq, d.tau, method=method, run=RunOptions(workers=1))
+    ref = identify(robot, (d.q, d.dq, d.ddq, d.tau), method=method, run=RunOptions(workers=1))
     assert "accumulate_wall" not in ref.timings
     scale = np.abs(ref.estimate).max()
     np.testing.assert_allclose(default.estimate, ref.estimate, rtol=0, atol=1e-9 * scale)

@@ -16,10 +16,17 @@ import numpy as np
 from ..datasets import check_robot, load_dataset
 from ..errors import InputError
 from ..identification import ModelOptions, RunOptions, identify
+from ..identification.run_context import RunContext
 from ..signals import DEFAULT_CUTOFF, preprocess
-from ..viz.report_document import ReportSamples, RunContext, result_document
+from ..viz.report_document import ReportSamples
 from ._common import column_map, explicit_workers, fleet_wanted, note_window, prepare
-from ._runtime import consistent_kwargs, print_result, robot_from_args, write_outputs
+from ._runtime import (
+    consistent_options,
+    print_result,
+    robot_from_args,
+    run_document,
+    write_outputs,
+)
 from ._simulated import simulate_record
 
 
@@ -103,10 +110,7 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     timings["preprocess"] = time.perf_counter() - t0
     result = identify(
         robot,
-        train.q,
-        train.dq,
-        None,
-        train.tau,
+        (train.q, train.dq, None, train.tau),
         method=args.method,
         validation=None if valid is None else (valid.q, valid.dq, valid.ddq, valid.tau),
         run=RunOptions(chunk=args.chunk),
@@ -114,21 +118,17 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
             args.model, window_length=args.window_length, dt=_uniform_step(train.t, args.model)
         ),
         uncertainty=args.uncertainty,
-        **consistent_kwargs(args),
+        consistent=consistent_options(args),
     )
     timings.update({k: float(v) for k, v in dict(result.timings).items()})
     timings["total"] = time.perf_counter() - t_start
     ctx = RunContext(
-        method=args.method,
         source=source,
         n_validation=0 if valid is None else int(valid.n_samples),
         settings=train.meta.get("preprocess"),
         theta_true=theta_true,
-        timings=timings,
-        poorly_identified=getattr(args, "poorly_identified", None),
-        condition_limit=getattr(args, "condition_limit", None),
     )
-    report = result_document(robot, result, ctx)
+    result, report = run_document(robot, result, args, ctx, timings)
     report["model"] = args.model
     note_window(report, result, args.window_length)
     report["outputs"] = list(result.output_names)

@@ -438,7 +438,7 @@ def note_window(report: dict, result, window_length) -> None:
 
 
 def fleet_wanted(args: argparse.Namespace) -> bool:
-    """Whether an identify run goes through :func:`manip_id.identification.fleet.identify_files`."""
+    """Whether an identify run sends the files as tasks (a scheduler or per-file estimates)."""
     return getattr(args, "scheduler", None) is not None or bool(getattr(args, "per_file", False))
 
 

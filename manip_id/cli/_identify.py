@@ -1,6 +1,6 @@
 """``manip-id identify`` once it runs: the options checked (before any work), the outputs
-reserved, then one run path: log files (:mod:`._files`), many files on Dask
-(:mod:`._fleet`), the acceleration-free models (:mod:`._acceleration_free`) or a
+reserved, then one run path: log files, here or on Dask (:mod:`._files`), the
+acceleration-free models (:mod:`._acceleration_free`) or a
 simulation (:mod:`._simulated`). The options are declared in :mod:`.identify`.
 """
 
@@ -8,17 +8,14 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import importlib
 import io
 import math
 import time
 
 from ..datasets import Window
 from ..errors import InputError
-from ..estimators.consistent import DEFAULT_PRIOR_WEIGHT, check_options
-from ..estimators.consistent.bounds import bound_options
 from ..export import check_output, sidecar_path
-from . import _acceleration_free, _files, _fleet, _simulated
+from . import _acceleration_free, _files, _simulated
 from ._common import (
     FLEET_METHODS,
     check_preprocess_args,
@@ -27,7 +24,7 @@ from ._common import (
     parse_floats,
     reserve_outputs,
 )
-from ._runtime import check_scheduler, robot_from_args
+from ._runtime import check_scheduler, consistent_options
 
 
 # -------------------------------------------------------------------- checks
@@ -84,10 +81,7 @@ def _check_consistent_args(args) -> None:
         )
         if getattr(args, n) != default
     ]
-    if args.prior_weight is None:
-        args.prior_weight = DEFAULT_PRIOR_WEIGHT
-    check_options(args.solver, args.prior, args.prior_weight)
-    args.bound_options = bound_options(args.bounds, args.mass_range, args.total_mass)
+    consistent_options(args)  # the options' own checks (solver, prior, weight, bounds)
     if not args.consistent:
         exports = (("--export-urdf", args.export_urdf), ("--export-mjcf", args.export_mjcf))
         for flag, value in exports:
@@ -111,9 +105,7 @@ def _check_files(args: argparse.Namespace) -> None:
     if getattr(args, "torque_scale_from", None) is not None:  # manip-id drive-gains --json
         if args.simulate or args.torque_scale is not None:
             raise InputError("--torque-scale-from applies to --data files, without --torque-scale")
-        # checked against the robot: its name and its joints, in order
-        gains = _load_torque_scale(args.torque_scale_from, robot_from_args(args))
-        args.torque_scale = ",".join(repr(float(g)) for g in gains)
+        # checked against the robot (its name and its joints, in order) once it is loaded
     if args.simulate:
         for name in ("window", "torque_scale", "velocity_deadband", "topic", "delay", "time_unit"):
             if getattr(args, name, None) is not None:
@@ -147,13 +139,6 @@ def _check_files(args: argparse.Namespace) -> None:
             "--split cuts one file; with several --data files give --validate files "
             "(or windows FILE@START:STOP)"
         )
-
-
-def _load_torque_scale(path, robot):
-    """:func:`manip_id.payload.load_torque_scale`, its package imported only when
-    ``--torque-scale-from`` is given: a run without it never needs the payload and
-    drive-gain estimators (about 15 ms of start-up)."""
-    return importlib.import_module("manip_id.payload").load_torque_scale(path, robot)
 
 
 def _check_fleet(args: argparse.Namespace) -> None:
@@ -197,7 +182,7 @@ def _run(args: argparse.Namespace) -> int:
         outputs.file(args.export_mjcf, "--export-mjcf")
         outputs.file(sidecar_path(args.export_mjcf), "--export-mjcf sidecar")
     if fleet_wanted(args):  # many files, one task each (Dask with --scheduler)
-        return _fleet.run(args, outputs, t_start)
+        return _files.run(args, outputs, t_start)
     if args.model != "dynamic":  # energy / momentum: whole arrays, no ddq
         return _acceleration_free.run(args, outputs, t_start)
     if not args.simulate:  # log files: read in chunks, each preprocessed alone

@@ -9,15 +9,22 @@ identification, and is imported by the modules that run the commands.
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
+
+import numpy as np
 
 from .._native import native_stderr_captured
 from ..audit import AuditOptions, audit_files
 from ..datasets.stream import torque_scale_vector
 from ..errors import InputError, did_you_mean
+from ..estimators.consistent import DEFAULT_PRIOR_WEIGHT, check_options
+from ..estimators.consistent.bounds import bound_options
 from ..execution import available_cores, cap_local_workers
 from ..export import export_texts, mjcf_text, sidecar_path
 from ..export.sidecar import identification_provenance
 from ..identification import ConsistentOptions, PreprocessOptions, result_text, verdict_text
+from ..identification.run_context import run_keys, with_context
+from ..payload import load_torque_scale
 from ..robot.model import Robot, load_robot
 from ..viz.report_document import ReportOptions
 from ._common import (
@@ -72,17 +79,20 @@ def check_scheduler(args: argparse.Namespace) -> None:
             )
 
 
-def preprocess_options(args: argparse.Namespace, nv: int, profile_scale=None):
+def preprocess_options(args: argparse.Namespace, robot: Robot, profile_scale=None):
     """The :class:`~manip_id.identification.PreprocessOptions` of identify's data-file options.
 
-    ``--torque-scale`` (one gain or one per joint), else the profile's [data] torque_scale.
+    ``--torque-scale`` (one gain or one per joint), else ``--torque-scale-from`` (the gains
+    of ``manip-id drive-gains --json``, checked against ``robot``), else the profile's
+    [data] torque_scale.
     """
-
-    scale = None
+    nv, scale = robot.nv, None
     if args.torque_scale is not None:
         scale = torque_scale_vector(
             parse_floats(args.torque_scale, "--torque-scale"), nv, "--torque-scale"
         )
+    elif getattr(args, "torque_scale_from", None) is not None:
+        scale = np.asarray(load_torque_scale(args.torque_scale_from, robot), dtype=float)
     elif profile_scale is not None:  # the robot profile's [data] torque_scale
         scale = torque_scale_vector(profile_scale, nv, "the profile's torque_scale")
     return PreprocessOptions(
@@ -90,26 +100,40 @@ def preprocess_options(args: argparse.Namespace, nv: int, profile_scale=None):
         order=args.order,
         trim=args.trim,
         decimate=args.decimate,
-        torque_scale=None if scale is None else tuple(scale.tolist()),
+        torque_scale=None if scale is None else tuple(float(g) for g in scale),
         velocity_deadband=args.velocity_deadband,
         drop_bad_rows=args.drop_bad_rows,
     )
 
 
-def consistent_kwargs(args: argparse.Namespace) -> dict:
-    """The physically consistent estimation options of identify, as keyword arguments."""
-
-    return dict(
-        consistent=ConsistentOptions(
-            enabled=args.consistent,
-            solver=args.solver,
-            prior=args.prior,
-            prior_weight=args.prior_weight,
-            bounds=args.bound_options.bounds,
-            mass_range=args.bound_options.mass_range,
-            total_mass=args.bound_options.total_mass,
-        )
+def consistent_options(args: argparse.Namespace) -> ConsistentOptions:
+    """The physically consistent estimation options of identify (checked by their own
+    constructor; the bounds parsed from their texts)."""
+    b = bound_options(args.bounds, args.mass_range, args.total_mass)
+    enabled = bool(args.consistent)
+    if not enabled:
+        check_options(args.solver, args.prior, args.prior_weight or DEFAULT_PRIOR_WEIGHT)
+    return ConsistentOptions(
+        enabled=enabled,
+        solver=args.solver,
+        prior=args.prior,
+        prior_weight=args.prior_weight,
+        bounds=b.bounds,
+        mass_range=b.mass_range,
+        total_mass=b.total_mass,
     )
+
+
+def run_document(robot, result, args: argparse.Namespace, ctx, timings: dict, extra=None):
+    """The result with the run's context (:mod:`manip_id.identification.run_context`) and
+    its timings, and its JSON (``to_dict`` with the flag thresholds of the options)."""
+    keys = {**run_keys(robot, result, ctx), **(extra or {})}
+    result = replace(with_context(result, keys), timings={k: float(v) for k, v in timings.items()})
+    report = result.to_dict(
+        poorly_identified=getattr(args, "poorly_identified", None),
+        condition_limit=getattr(args, "condition_limit", None),
+    )
+    return result, report
 
 
 def stage_export(robot, result, args: argparse.Namespace, outputs) -> None:

@@ -17,10 +17,11 @@ import numpy as np
 from ..datasets import check_robot, load_dataset
 from ..errors import InputError
 from ..execution import resolve_workers
-from ..identification import RunOptions, identify, identify_chunks
+from ..identification import RunOptions, identify
+from ..identification.run_context import RunContext, raw_reference
 from ..simulation import MeasurementNoise, SimulationStream, check_simulation_memory
 from ..trajectories import optimize_excitation, random_trajectory
-from ..viz.report_document import ReportSamples, RunContext, add_raw_reference, result_document
+from ..viz.report_document import ReportSamples
 from ._common import (
     SIM_DEFAULTS,
     column_map,
@@ -31,10 +32,11 @@ from ._common import (
     progress,
 )
 from ._runtime import (
-    consistent_kwargs,
+    consistent_options,
     note_exports,
     print_result,
     robot_from_args,
+    run_document,
     stage_export,
     write_outputs,
 )
@@ -89,19 +91,6 @@ def _streams(args: argparse.Namespace) -> bool:
     )
 
 
-def _context(args, source, *, n_validation=0, settings=None, theta_true=None, timings=None):
-    return RunContext(
-        method=args.method,
-        source=source,
-        n_validation=n_validation,
-        settings=settings,
-        theta_true=theta_true,
-        timings=timings or {},
-        poorly_identified=getattr(args, "poorly_identified", None),
-        condition_limit=getattr(args, "condition_limit", None),
-    )
-
-
 def _run_stream(robot, args, outputs, timings: dict, t_start: float) -> int:
     """``--simulate`` with least squares, the record simulated and accumulated in blocks.
 
@@ -126,20 +115,20 @@ def _run_stream(robot, args, outputs, timings: dict, t_start: float) -> int:
             report_progress(done, total if workers > 1 else k)
 
     train = stream.parts(workers, 0, k) if workers > 1 else stream.blocks(0, k)
-    result = identify_chunks(
+    result = identify(
         robot,
         train,
         method=args.method,
         validation=stream.blocks(k, n) if k < n else None,
         run=RunOptions(chunk=args.chunk, workers=workers, progress=on_progress),
         uncertainty=args.uncertainty,
-        **consistent_kwargs(args),
+        consistent=consistent_options(args),
     )
     timings.update({name: float(v) for name, v in dict(result.timings).items()})
     timings["total"] = time.perf_counter() - t_start
     theta_true = np.asarray(stream.theta_true, dtype=float)
-    ctx = _context(args, source, n_validation=n - k, theta_true=theta_true, timings=timings)
-    report = result_document(robot, result, ctx)
+    ctx = RunContext(source, n_validation=n - k, theta_true=theta_true)
+    result, report = run_document(robot, result, args, ctx, timings)
     print_result(report)
     print_warnings(report)
     note_exports(args, report)
@@ -187,10 +176,7 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     timings["preprocess"] = time.perf_counter() - t0
     result = identify(
         robot,
-        train.q,
-        train.dq,
-        train.ddq,
-        train.tau,
+        (train.q, train.dq, train.ddq, train.tau),
         method=args.method,
         validation=None if valid is None else (valid.q, valid.dq, valid.ddq, valid.tau),
         run=RunOptions(
@@ -199,24 +185,18 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
             progress=progress(args, train.n_samples + (0 if valid is None else valid.n_samples)),
         ),
         uncertainty=args.uncertainty,
-        **consistent_kwargs(args),
+        consistent=consistent_options(args),
     )
     timings.update({k: float(v) for k, v in dict(result.timings).items()})
     timings["total"] = time.perf_counter() - t_start
     n_valid = 0 if valid is None else int(valid.n_samples)
     settings = train.meta.get("preprocess")
-    ctx = _context(
-        args,
-        source,
-        n_validation=n_valid,
-        settings=settings,
-        theta_true=theta_true,
-        timings=timings,
-    )
-    report = result_document(robot, result, ctx)
+    ctx = RunContext(source, n_validation=n_valid, settings=settings, theta_true=theta_true)
+    result, _ = run_document(robot, result, args, ctx, timings)
     parts = [("train", train, data.t, data.tau)]
     if valid is not None and validation is not None:  # valid is validation preprocessed
         parts.append(("validation", valid, validation.t, validation.tau))
-    add_raw_reference(report, robot, result, parts, args.chunk)
+    raw = raw_reference(robot, result, parts, args.chunk)
+    result, report = run_document(robot, result, args, ctx, timings, raw)
     print_result(report)
     return write_outputs(args, outputs, robot, result, report, ReportSamples(train, valid, full))

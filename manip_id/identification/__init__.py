@@ -1,7 +1,8 @@
 """Identification: robot + data -> base parameters with their uncertainty, streamed.
 
-Every entry point builds one :class:`Problem` (the accumulated information of a data
-set) and calls one :func:`solve`, for N samples ``(q, dq, ddq, tau)``::
+One door, :func:`identify` = :func:`build_problem` (the accumulated information of a
+data set: arrays, a dataset, log files or blocks, :mod:`~.data_sources`) + :func:`solve`,
+for N samples ``(q, dq, ddq, tau)``::
 
     base parameters     theta_b = theta_1 + K theta_2        (structural rank analysis)
     regressor chunks    Y_b = Y(q, dq, ddq)[..., independent]    (N, nv, r), chunk by chunk
@@ -15,16 +16,20 @@ The relative torque error is ``||tau - tau_hat|| / ||tau||`` over all samples an
 joints, also per joint; the training one comes from the sums
 (``RSS_j = zz_j - 2 b_j.theta + theta.A_j.theta``), so its floor is about 1e-8.
 
-Members: :mod:`~.options` (one frozen dataclass per concern), :mod:`~.problem` (sums,
-counts, records; the accumulation), :mod:`~.solve`, :mod:`~.result` and
-:mod:`~.document` (the one schema and its text), :mod:`~.arrays` (in-memory entry
-points), :mod:`~.reading`, :mod:`~.file_sums`, :mod:`~.files` (log files),
-:mod:`~.tasks` (the tasks of a distributed run).
+Members: :mod:`~.front` (the door), :mod:`~.data_sources` (what ``data`` is),
+:mod:`~.options` (one frozen dataclass per concern), :mod:`~.problem` (sums, counts,
+records; the accumulation), :mod:`~.solve`, :mod:`~.result` and :mod:`~.document` (the
+one schema and its text), :mod:`~.run_context` (what a run adds to it), :mod:`~.arrays`
+(in-memory data and blocks), :mod:`~.file_run` (the file pipeline: audit, scans,
+temperature reference, friction choice), :mod:`~.reading`, :mod:`~.file_sums`,
+:mod:`~.files` (log files accumulated, here or as tasks), :mod:`~.tasks` (the tasks of a
+distributed run).
 """
 
 from __future__ import annotations
 
-from .arrays import accumulate_parts, identify, identify_chunks, identify_dataset
+from .arrays import accumulate_parts
+from .data_sources import data_source
 from .document import (
     CONDITION_LIMIT,
     CONVERGENCE_LIMIT,
@@ -39,8 +44,10 @@ from .document import (
     summary_rows,
     verdict_text,
 )
+from .file_run import FileOptions
 from .file_sums import FileAccumulation, accumulate_file, accumulate_files, merge_accumulations
-from .files import identify_datasets
+from .files import FileEstimate
+from .front import build_problem, identify
 from .options import (
     LEAST_SQUARES,
     METHODS,
@@ -48,11 +55,17 @@ from .options import (
     ModelOptions,
     OnlineOptions,
     PreprocessOptions,
-    RankOptions,
     RunOptions,
+    SolveSettings,
     UncertaintyOptions,
 )
-from .problem import FileRecord, FileSums, Problem, accumulate_blocks, row_supports
+from .problem import (
+    FileRecord,
+    FileSums,
+    Problem,
+    accumulate_blocks,
+    row_supports,
+)
 from .reading import FileScan, iter_processed, processed_count, scan_file, split_file
 from .result import IdentificationResult, RelativeError, load_result, result_from_dict
 from .solve import solve, validation_errors
@@ -67,6 +80,8 @@ __all__ = [
     "POORLY_IDENTIFIED",
     "ConsistentOptions",
     "FileAccumulation",
+    "FileEstimate",
+    "FileOptions",
     "FileRecord",
     "FileScan",
     "FileSums",
@@ -76,19 +91,18 @@ __all__ = [
     "PartitionOptions",
     "PreprocessOptions",
     "Problem",
-    "RankOptions",
     "RelativeError",
     "RunOptions",
+    "SolveSettings",
     "UncertaintyOptions",
     "accumulate_blocks",
     "accumulate_file",
     "accumulate_files",
     "accumulate_parts",
+    "build_problem",
+    "data_source",
     "distributed_problem",
     "identify",
-    "identify_chunks",
-    "identify_dataset",
-    "identify_datasets",
     "iter_processed",
     "load_result",
     "merge_accumulations",

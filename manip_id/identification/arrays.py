@@ -1,4 +1,4 @@
-"""In-memory entry points: arrays, blocks and datasets -> a problem -> :func:`solve`.
+"""In-memory data -> a problem: arrays, datasets, blocks and parts (the rows of :func:`solve`).
 
 For N samples ``(q, dq, ddq, tau)`` (or blocks of them) the base-regressor rows are
 accumulated (:mod:`~manip_id.identification.problem`: serially, in forked parts, or
@@ -10,7 +10,7 @@ Every path ends in the same :func:`~manip_id.identification.solve`.
 from __future__ import annotations
 
 import time
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -29,13 +29,13 @@ from ..models import (
 from ..robot.compiled_regressor import planned_samples
 from ..robot.model import Robot
 from ..robot.regressor import check_states, check_temperature, iter_regressor
+from .data_sources import Blocks, Parts, Samples
 from .options import (
     ONLINE,
-    ConsistentOptions,
     ModelOptions,
     OnlineOptions,
-    RankOptions,
     RunOptions,
+    SolveSettings,
     UncertaintyOptions,
     check_least_squares,
     check_method,
@@ -54,7 +54,6 @@ from .problem import (
     validation_blocks,
 )
 from .result import IdentificationResult
-from .solve import solve
 from .tasks import PartSums, blocks_sums
 from .temperature import note_reference, reference_from_arrays
 
@@ -80,105 +79,52 @@ def online_estimator(method: str, r: int, options: OnlineOptions, n: int):
     return est, what
 
 
-def identify(
+def samples_problem(
     robot: Robot,
-    q,
-    dq,
-    ddq,
-    tau,
-    *,
-    method: str = "ols",
-    validation: tuple | None = None,
-    base: BaseParameters | None = None,
-    consistent: ConsistentOptions | bool | dict | None = None,
-    online: OnlineOptions | dict | None = None,
-    model: ModelOptions | str | dict | None = None,
-    rank: RankOptions | dict | None = None,
-    run: RunOptions | dict | None = None,
-    uncertainty: UncertaintyOptions | str | dict | None = None,
-) -> IdentificationResult:
-    """Identify the base parameters of ``robot`` from N samples, streamed.
-
-    Parameters
-    ----------
-    robot : Robot
-        The robot (its joint terms decide the columns).
-    q, dq, ddq, tau : array_like
-        Positions [rad or m], shape (N, nq); velocities [rad/s], accelerations
-        [rad/s^2] and torques [N m], shape (N, nv). ``ddq`` may be None for the
-        energy and momentum models.
-    method : str
-        "ols" (ordinary least squares), "wls" (weighted by per-joint noise variances
-        from the OLS residuals), "rls" (one pass of recursive least squares),
-        "gradient" (one pass of the normalized gradient law); see :data:`METHODS`.
-    validation : tuple or None
-        ``(q, dq, ddq, tau)`` for the validation error (``(q, dq, ddq, tau, temp)`` with
-        the temperature law).
-    base : BaseParameters or None
-        Base parametrization; default the structural one of ``analyze(robot)``.
-    consistent : ConsistentOptions, bool or None
-        Physically consistent standard parameters ("ols"/"wls"); True: the defaults.
-    online : OnlineOptions or dict or None
-        Options of the online law (an unknown key is an :class:`InputError`).
-    model : ModelOptions, str or None
-        "dynamic" (default, needs ``ddq``), "energy" or "momentum", with the window
-        length and the sample time ``dt`` [s] (default 1).
-    rank : RankOptions or None
-        ``minimum_norm=True`` solves rank-deficient data instead of raising.
-    run : RunOptions or None
-        ``chunk``, ``workers`` (forked contiguous parts for "ols"/"wls", equal to the
-        serial result to round-off) and ``progress(done, total)``.
-    uncertainty : UncertaintyOptions, str, dict or None
-        The covariance behind ``std``: "auto" (default: autocorrelation-consistent,
-        from per-block sums of the accumulation, when the data give at least 16
-        blocks; else white), "white" (``sigma^2 (Y^T Y)^-1``) or "hac"; see
-        :mod:`manip_id.estimators.uncertainty`. ``std_white`` keeps the white one.
-
-    Returns
-    -------
-    IdentificationResult
-        The robot's ``temperature`` friction law needs the measured temperature: give a
-        :class:`~manip_id.datasets.Dataset` with ``temp`` to :func:`identify_dataset`.
-    """
-    opts = _Opts(consistent, model, rank, run, uncertainty, online)
-    return _identify(robot, (q, dq, ddq, tau, None), method, validation, base, opts)
-
-
-def _identify(robot: Robot, samples: tuple, method: str, validation, base, opts: _Opts):
-    """The body of :func:`identify` on ``samples = (q, dq, ddq, tau, temp)`` (``temp``
-    the measured temperature of the ``temperature`` law, (N, nv) or (N, 1), or None: when
-    the robot's reference ``T0`` is unset it becomes the mean of ``temp`` per joint,
-    :mod:`~manip_id.identification.temperature`, recorded in
-    ``context["friction_shapes"]``)."""
+    samples: Samples,
+    validation,
+    base: BaseParameters | None,
+    settings: SolveSettings,
+    opts: CallOptions,
+) -> Problem:
+    """The problem of N samples in memory (``validation``: a tuple ``(q, dq, ddq, tau[,
+    temp])`` or None). ``samples.temp``: the measured temperature of the ``temperature``
+    law, (N, nv) or (N, 1), or None: when the robot's reference ``T0`` is unset it becomes
+    the mean of ``temp`` per joint (:mod:`~manip_id.identification.temperature`, recorded
+    in ``context["friction_shapes"]`` by a post-step)."""
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
+    method = settings.method
     check_method(method)
-    q, dq, ddq, tau, temp = samples
-    online_options = opts.online
     if opts.model.name != "dynamic":
-        return _identify_acceleration_free(robot, (q, dq, tau), method, validation, base, opts)
-    q, dq, ddq, tau = check_samples(robot, q, dq, ddq, tau)
-    robot = reference_from_arrays(robot, temp)  # the temperature law's T0 (else robot)
-    temp = check_temperature(robot, temp, dq) if robot.layout.needs_temperature else None
+        return _free_problem(robot, samples, validation, base, settings, opts)
+    if samples.ddq is None:
+        raise InputError(
+            "the data have no accelerations (ddq): estimate them first (manip_id.signals) "
+            "or use the energy or momentum model"
+        )
+    q, dq, ddq, tau = check_samples(robot, samples.q, samples.dq, samples.ddq, samples.tau)
+    robot = reference_from_arrays(robot, samples.temp)  # the temperature law's T0
+    temp = check_temperature(robot, samples.temp, dq) if robot.layout.needs_temperature else None
     n = q.shape[0]
     blocks = validation_blocks(robot, validation)
     timings["checks"] = time.perf_counter() - t_start
     base = resolve_base(robot, base, timings)
     ind, r = base.independent, base.n_base
     check_equations(n * robot.nv, r, f"{n} samples")
-    run_o = opts.run
+    run_o, online_options = opts.run, opts.online
     dt = 1.0 if online_options.dt is None else float(online_options.dt)
     online_run = None
     if method in ONLINE:
         est, what = online_estimator(method, r, online_options, n)
         states = (q, dq, ddq, tau, temp)
         acc, times = accumulate_online(
-            robot, states, ind, est, dt, run=run_o, uncertainty=opts.uncertainty
+            robot, states, ind, est, dt, run=run_o, uncertainty=settings.uncertainty
         )
         online_run = OnlineRun(est, what)
     else:
         acc, times = accumulate_arrays(
-            robot, q, dq, ddq, tau, ind, run=run_o, uncertainty=opts.uncertainty, temp=temp
+            robot, q, dq, ddq, tau, ind, run=run_o, uncertainty=settings.uncertainty, temp=temp
         )
     timings.update(times)
     problem = Problem(
@@ -191,14 +137,19 @@ def _identify(robot: Robot, samples: tuple, method: str, validation, base, opts:
         validation_blocks=blocks,
         online=online_run,
         chunk=run_o.chunk,
+        settings=settings,
     )
-    result = _solve(problem, method, opts)
-    # an implausible consistent fit: would a joint term the model lacks lower the error?
     train = next(array_part(q, dq, ddq, tau, 0, n, temp))
-    result.warnings.extend(
-        missing_term_warnings(robot, result.standard, [train], blocks, ind, run_o.chunk)
-    )
-    return note_reference(result, robot)  # the T0 the coefficients fvt, fct refer to
+
+    def terms(result: IdentificationResult) -> IdentificationResult:
+        # an implausible consistent fit: would a joint term the model lacks lower the error?
+        result.warnings.extend(
+            missing_term_warnings(robot, result.standard, [train], blocks, ind, run_o.chunk)
+        )
+        return note_reference(result, robot)  # the T0 the coefficients fvt, fct refer to
+
+    problem.post.append(terms)
+    return problem
 
 
 def accumulate_online(
@@ -238,40 +189,35 @@ def accumulate_online(
     return acc, {"regressor": t_reg, "accumulate": t_acc, "online": t_onl}
 
 
-class _Opts:
-    """The option objects of one call, each from its value (None: the defaults)."""
+@dataclass(frozen=True)
+class CallOptions:
+    """The option objects of one call that shape the problem (not the solve's).
 
-    def __init__(
-        self, consistent=None, model=None, rank=None, run=None, uncertainty=None, online=None
-    ):
-        self.online = OnlineOptions.from_value(online)
-        self.consistent = ConsistentOptions.from_value(consistent)
-        self.model = ModelOptions.from_value(model)
-        self.rank = RankOptions.from_value(rank)
-        self.run = RunOptions.from_value(run)
-        self.uncertainty = UncertaintyOptions.from_value(uncertainty)
+    Attributes
+    ----------
+    model : ModelOptions
+        "dynamic", "energy" or "momentum".
+    online : OnlineOptions
+        The online law's options (``rls``, ``gradient``).
+    run : RunOptions
+        Chunk, workers, scheduler, progress.
+    """
 
-
-def _solve(problem: Problem, method: str, opts: _Opts) -> IdentificationResult:
-    """:func:`solve` with the call's options."""
-    return solve(
-        problem,
-        method,
-        consistent=opts.consistent,
-        minimum_norm=opts.rank.minimum_norm,
-        uncertainty=opts.uncertainty,
-    )
+    model: ModelOptions = field(default_factory=ModelOptions)
+    online: OnlineOptions = field(default_factory=OnlineOptions)
+    run: RunOptions = field(default_factory=RunOptions)
 
 
-def _identify_acceleration_free(
-    robot: Robot, data: tuple, method: str, validation, base, opts: _Opts
-) -> IdentificationResult:
-    """The energy / momentum path of :func:`identify`: their rows, the usual solve."""
+def _free_problem(
+    robot: Robot, samples: Samples, validation, base, settings: SolveSettings, opts: CallOptions
+) -> Problem:
+    """The energy / momentum problem: their rows (``dt`` the model's, else the data's mean
+    sample time, else 1 s), the usual solve."""
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
     model = opts.model
-    check_least_squares(method, f"the {model.name} model is solved by")
-    q, dq, tau = data
+    check_least_squares(settings.method, f"the {model.name} model is solved by")
+    q, dq, tau = samples.q, samples.dq, samples.tau
     batched, (q, dq) = check_states(robot, q=q, dq=dq)
     if not batched:
         raise InputError(f"identification takes N samples (2-D arrays), got q.shape={q.shape}")
@@ -281,9 +227,10 @@ def _identify_acceleration_free(
     base = resolve_base(robot, base, timings)
     t0 = time.perf_counter()
     accumulate = accumulate_energy if model.name == "energy" else accumulate_momentum
-    dt = 1.0 if model.dt is None else float(model.dt)
+    dt = float(model.dt if model.dt is not None else samples.dt or 1.0)
     nv_rows = 1 if model.name == "energy" else robot.nv
-    rows_unc = replace(opts.uncertainty, block_length=1)  # rows span windows: start at one
+    unc = settings.uncertainty or UncertaintyOptions()
+    rows_unc = replace(unc, block_length=1)  # rows span windows: start at one
     window = model_window(model, q.shape[0], dt, base.n_base, robot.nv)
     with planned_samples(q.shape[0]):  # one regressor path for the run, as for files
         acc = accumulate(
@@ -312,33 +259,10 @@ def _identify_acceleration_free(
         validation_blocks=blocks,
         model=model.name,
         chunk=opts.run.chunk,
+        settings=settings,
+        context={"window": window.to_dict()},
     )
-    result = _solve(problem, method, opts)
-    return replace(result, context={**result.context, "window": window.to_dict()})
-
-
-def _are_parts(items: list) -> bool:
-    """Whether every item is a part ``(func, args)`` (not a block of arrays)."""
-    return all(isinstance(p, tuple) and len(p) == 2 and callable(p[0]) for p in items)
-
-
-def _takes_parts(source, run: RunOptions) -> bool:
-    """Whether :func:`identify_chunks` reads ``source`` as parts: with a scheduler, with
-    ``workers > 1``, and with ``"auto"`` when it is a non-empty list or tuple of parts."""
-    if run.scheduler is not None:
-        return True
-    if run.workers == AUTO:
-        return isinstance(source, (list, tuple)) and bool(source) and _are_parts(list(source))
-    return int(run.workers) > 1
-
-
-def _check_parts(parts: list) -> None:
-    for k, part in enumerate(parts):
-        if not (isinstance(part, tuple) and len(part) == 2 and callable(part[0])):
-            raise InputError(
-                f"with workers > 1 or a scheduler, source must be parts (func, args); "
-                f"part {k} is {type(part).__name__}"
-            )
+    return problem
 
 
 def accumulate_parts(
@@ -380,52 +304,47 @@ def accumulate_parts(
     return total.acc, dict(total.timings)
 
 
-def identify_chunks(
+def blocks_problem(
     robot: Robot,
-    source,
-    *,
-    method: str = "ols",
-    validation=None,
-    base: BaseParameters | None = None,
-    consistent: ConsistentOptions | bool | dict | None = None,
-    rank: RankOptions | dict | None = None,
-    run: RunOptions | dict | None = None,
-    uncertainty: UncertaintyOptions | str | dict | None = None,
-) -> IdentificationResult:
-    """Least-squares identification from data that arrive in blocks (files, logs, streams).
+    source: Blocks | Parts,
+    validation,
+    base: BaseParameters | None,
+    settings: SolveSettings,
+    run: RunOptions,
+) -> Problem:
+    """The problem of data that arrive in blocks (files, logs, streams).
 
-    ``source`` is either an iterable of blocks ``(q, dq, ddq, tau)`` (shapes
-    (n, nq), (n, nv), (n, nv), (n, nv); processed in one process), or, with
-    ``run.workers > 1``, ``"auto"`` or ``run.scheduler``, a list of parts ``(func, args)`` where
-    ``func(*args)`` yields such blocks: each part is accumulated in its own forked
-    process (or Dask task) and the accumulators merge by addition. Memory stays
-    O(chunk nv p + nv r^2) per process however many samples flow through.
-    ``validation`` is an iterable of blocks too. Methods: "ols" and "wls" (the online
-    laws need the samples in order: use :func:`identify`). Options as :func:`identify`;
-    for ``uncertainty`` the blocks of one iterable follow each other, each part is a
-    record of its own.
+    :class:`Blocks` (an iterable of blocks ``(q, dq, ddq, tau)``) are accumulated in this
+    process, in order; :class:`Parts` (``(func, args)``, ``func(*args)`` yielding blocks)
+    each in its own forked process or Dask task, the accumulators merged by addition.
+    Memory stays O(chunk nv p + nv r^2) per process however many samples flow through.
+    ``validation`` is an iterable of blocks too. Least squares only (the online laws need
+    the samples in order: give arrays); for the covariance's per-block sums the blocks of
+    one iterable follow each other, each part is a record of its own.
     """
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
-    check_least_squares(method, "identify_chunks solves")
-    opts = _Opts(consistent, None, rank, run, uncertainty)
+    check_least_squares(settings.method, "data in blocks or parts are solved by")
+    unc = settings.uncertainty or UncertaintyOptions()
     base = resolve_base(robot, base, timings)
     ind = base.independent
     t0 = time.perf_counter()
-    run_o = opts.run
-    if _takes_parts(source, run_o):
-        parts = list(source)
-        _check_parts(parts)
-        acc, times = accumulate_parts(robot, parts, ind, run_o, uncertainty=opts.uncertainty)
+    if isinstance(source, Blocks) and (run.scheduler is not None or run.workers_for(None) > 1):
+        raise InputError(
+            "with workers > 1 or a scheduler, data in blocks must be parts (func, args), "
+            f"got {type(source.blocks).__name__} of blocks"
+        )
+    if isinstance(source, Parts):
+        acc, times = accumulate_parts(robot, source.parts, ind, run, uncertainty=unc)
         timings["accumulate_wall"] = time.perf_counter() - t0
     else:
-        record = opts.uncertainty.blocks(len(ind), robot.nv)
+        record = unc.blocks(len(ind), robot.nv)
         acc, times = accumulate_blocks(
-            robot, source, ind, run_o.chunk, progress=run_o.progress, record=record
+            robot, source.blocks, ind, run.chunk, progress=run.progress, record=record
         )
     timings.update(times)
     check_equations(acc.n * robot.nv, base.n_base, f"{acc.n} samples")
-    problem = Problem(
+    return Problem(
         robot,
         base,
         acc,
@@ -433,9 +352,9 @@ def identify_chunks(
         timings,
         t_start,
         validation_blocks=validation,
-        chunk=run_o.chunk,
+        chunk=run.chunk,
+        settings=settings,
     )
-    return _solve(problem, method, opts)
 
 
 def model_window(model: ModelOptions, n_samples: int, dt: float, n_base: int, nv: int):
@@ -452,49 +371,11 @@ def model_window(model: ModelOptions, n_samples: int, dt: float, n_base: int, nv
     return WindowChoice(w * dt, w, rows, False, "given")
 
 
-def identify_dataset(robot: Robot, dataset, *, ddq=None, validation=None, **kwargs):
-    """:func:`identify` on a :class:`~manip_id.datasets.Dataset` (``ddq`` from the dataset
-    unless given; its ``temp``, the measured temperature of the ``temperature`` friction
-    law, with ``T0`` its mean when the robot has none); ``validation`` may be another
-    Dataset. Other keywords as :func:`identify`.
-    With the energy or momentum model no ddq is needed and the model's ``dt`` defaults to
-    the dataset's mean sample time."""
-    if validation is not None and hasattr(validation, "tau"):
-        if validation.ddq is None:
-            raise InputError("the validation dataset has no accelerations (ddq)")
-        v = validation
-        validation = (v.q, v.dq, v.ddq, v.tau) + (() if v.temp is None else (v.temp,))
-    model = ModelOptions.from_value(kwargs.pop("model", None))
-    if model.name != "dynamic":
-        if model.dt is None:
-            model = ModelOptions(
-                model.name, model.window_length, float(np.mean(np.diff(dataset.t)))
-            )
-        return identify(
-            robot,
-            dataset.q,
-            dataset.dq,
-            None,
-            dataset.tau,
-            validation=validation,
-            model=model,
-            **kwargs,
-        )
-    acc_arr = dataset.ddq if ddq is None else ddq
-    if acc_arr is None:
-        raise InputError(
-            "the dataset has no accelerations (ddq): estimate them first "
-            "(manip_id.signals) or pass ddq="
-        )
-    method, base = kwargs.pop("method", "ols"), kwargs.pop("base", None)
-    samples = (dataset.q, dataset.dq, acc_arr, dataset.tau, dataset.temp)
-    return _identify(robot, samples, method, validation, base, _Opts(model=model, **kwargs))
-
-
 __all__ = [
+    "CallOptions",
     "accumulate_parts",
-    "identify",
-    "identify_chunks",
-    "identify_dataset",
+    "blocks_problem",
+    "model_window",
     "online_estimator",
+    "samples_problem",
 ]

@@ -4,7 +4,6 @@
 - :class:`ConsistentOptions`: a physically consistent estimate (solver, prior, weight).
 - :class:`OnlineOptions`: the online laws (RLS, gradient).
 - :class:`ModelOptions`: the acceleration-free models (energy, momentum).
-- :class:`RankOptions`: what to do with rank-deficient data (minimum norm).
 - :class:`RunOptions`: how the work is executed (chunk, workers, scheduler, progress).
 - :class:`UncertaintyOptions`: the covariance of the estimate ("auto", "white", "hac";
   defined with its estimators in :mod:`manip_id.estimators.uncertainty`).
@@ -58,7 +57,7 @@ def check_method(method: str, allowed=tuple(METHODS), what: str = "method") -> s
 
 def check_least_squares(method: str, who: str) -> str:
     """``method`` if it solves from sums (:data:`LEAST_SQUARES`), else an :class:`InputError`
-    saying that ``who`` (e.g. "identify_chunks solves") takes only those."""
+    saying that ``who`` (e.g. "data in blocks are solved by") takes only those."""
     check_method(method)
     if method not in LEAST_SQUARES:
         raise InputError(f"{who} least squares ({', '.join(LEAST_SQUARES)}), got {method!r}")
@@ -217,26 +216,6 @@ class ConsistentOptions:
 
 
 @dataclass(frozen=True)
-class RankOptions:
-    """What the solve does with data that do not excite every base parameter.
-
-    Attributes
-    ----------
-    minimum_norm : bool
-        Solve rank-deficient data with the minimum-norm solution instead of raising
-        :class:`~manip_id.errors.RankDeficiencyError` (the parameters it cannot
-        determine are flagged "not determined by these data").
-    """
-
-    minimum_norm: bool = False
-
-    @classmethod
-    def from_value(cls, value) -> RankOptions:
-        """None (the defaults), an instance or a mapping of its fields."""
-        return options_from(cls, value, "rank")
-
-
-@dataclass(frozen=True)
 class ModelOptions:
     """The acceleration-free models (:mod:`manip_id.models`).
 
@@ -289,12 +268,22 @@ class RunOptions:
         one task and the sums are added in a tree on the cluster.
     progress : callable or None
         Called as ``progress(done, total)`` as the work goes by.
+    echo : callable or None
+        Called as ``echo(text)`` with what a file run finds before the fit (the pre-fit
+        audit's table, each file's data quality, the temperature reference, the friction
+        selection), as it finds it; the same texts are in the result. None: silent.
     """
 
     chunk: int = DEFAULT_CHUNK
     workers: int | str = AUTO
     scheduler: Any = None
     progress: Callable[[int, int], None] | None = None
+    echo: Callable[[str], None] | None = None
+
+    def say(self, text: str) -> None:
+        """``echo(text)`` when there is an echo."""
+        if self.echo is not None:
+            self.echo(text)
 
     def __post_init__(self):
         if as_int(self.chunk, "chunk") < 1:
@@ -381,7 +370,30 @@ class OnlineOptions:
             raise InputError(f"online option(s) {given} do not apply to {law} (method={method!r})")
 
 
+@dataclass(frozen=True)
+class SolveSettings:
+    """How :func:`~manip_id.identification.solve` turns a problem into its result.
+
+    Attributes
+    ----------
+    method : str
+        "ols", "wls", or the online law ("rls", "gradient") whose pass the problem holds.
+    consistent : ConsistentOptions or None
+        A physically consistent estimate ("ols" / "wls").
+    minimum_norm : bool
+        Solve rank-deficient data with the minimum-norm solution instead of raising.
+    uncertainty : UncertaintyOptions or None
+        The covariance behind ``std`` (None: ``"auto"``).
+    """
+
+    method: str = "ols"
+    consistent: ConsistentOptions | None = None
+    minimum_norm: bool = False
+    uncertainty: UncertaintyOptions | None = None
+
+
 __all__ = [
+    "SolveSettings",
     "LEAST_SQUARES",
     "METHODS",
     "MODEL_NAMES",
@@ -391,7 +403,6 @@ __all__ = [
     "OnlineOptions",
     "PreprocessOptions",
     "RunOptions",
-    "RankOptions",
     "UncertaintyOptions",
     "check_least_squares",
     "check_method",

@@ -33,7 +33,7 @@ from ..identifiability import BaseParameters, analyze
 from ..robot.compiled_regressor import planned_samples
 from ..robot.model import Robot
 from ..robot.regressor import DEFAULT_CHUNK, check_states, check_temperature
-from .options import RunOptions, UncertaintyOptions
+from .options import RunOptions, SolveSettings, UncertaintyOptions
 
 
 @dataclass
@@ -177,6 +177,15 @@ class Problem:
     still, raw : InformationAccumulator or None
         The training rows inside the velocity deadband (Coulomb column zero), and every
         training row against the raw, unfiltered torques (:class:`RowSums`).
+    settings : SolveSettings
+        The method and the solve's options (what :func:`solve` uses unless told otherwise).
+    context : dict
+        What the run knows besides the sums (source, preprocessing, audit, data quality,
+        the friction selection ...): merged into the result's ``context``.
+    post : list of callable
+        Steps ``result -> result`` run by :func:`solve` after the fit, in order (the
+        missing-term warnings of a consistent fit, the temperature reference, per-file
+        estimates).
     """
 
     robot: Robot
@@ -193,6 +202,9 @@ class Problem:
     chunk: int = DEFAULT_CHUNK
     still: InformationAccumulator | None = None
     raw: InformationAccumulator | None = None
+    settings: SolveSettings = field(default_factory=SolveSettings)
+    context: dict = field(default_factory=dict)
+    post: list = field(default_factory=list)
 
 
 # ------------------------------------------------------------------ checks

@@ -109,7 +109,7 @@ class IdentificationResult:
         e.g. the physical-consistency violations of a plain least-squares fit
     per_file
         each file's own estimate (:class:`manip_id.identification.fleet.FileEstimate`) when
-        :func:`manip_id.identification.fleet.identify_files` was asked ``per_file=True``, else None
+        :func:`manip_id.identification.fleet.identify` was asked ``per_file=True``, else None
     model
         "dynamic" (tau = Y(q, dq, ddq) theta), "energy" or "momentum"
         (:mod:`manip_id.models`); the training errors, ``sigma2`` and
@@ -119,7 +119,7 @@ class IdentificationResult:
         names of the model's outputs (default ``dof_names``; "energy"
         for the energy model's one scalar row per window)
     files
-        :func:`identify_datasets` only: ``{"train": [...], "validation": [...]}``,
+        :func:`identify` only: ``{"train": [...], "validation": [...]}``,
         the :class:`~manip_id.identification.FileAccumulation` of each file (its
         data-quality summary, samples, rows left out by the deadband)
     """

@@ -49,7 +49,6 @@ from ..errors import InputError, RankDeficiencyError
 from ..metrics import finite_or_none
 from ..robot.friction import FrictionShapes
 from ..robot.model import JointTerms, Robot
-from .files import identify_datasets
 from .result import IdentificationResult
 from .temperature import candidate_reference
 
@@ -544,24 +543,27 @@ def _combine(fit, robot, opts, joints: list[JointSelection], shapes, use_val) ->
 
 
 def select_model_files(
-    robot: Robot, files, *, selection: SelectionOptions | None = None, **kwargs
-) -> tuple[Robot, IdentificationResult, FrictionSelection]:
-    """:func:`select_model` on log files: each fit is
-    :func:`~manip_id.identification.identify_datasets` ``(robot, files, **kwargs)``
-    (give ``validation=`` files for the validation error). The ``temperature`` candidate
-    joins the default ones when every file (training and validation) carries a temperature
-    (``kwargs["scans"]`` holds their scans; the reference ``T0`` from the training ones);
-    otherwise the candidates are the defaults. Returns the robot with the chosen per-joint
-    model, its result and the selection."""
-
-    def fit(r: Robot) -> IdentificationResult:
-        return identify_datasets(r, files, **kwargs)
-
-    with_t0 = None if selection is not None else candidate_reference(robot, files, kwargs)
+    robot: Robot,
+    fit: Callable[[Robot], IdentificationResult],
+    specs: list,
+    vspecs: list | None,
+    scans: dict,
+    *,
+    selection: SelectionOptions | None = None,
+) -> tuple[Robot, FrictionSelection]:
+    """:func:`select_model` on log files: ``fit(robot)`` is the files' least-squares
+    identification with the candidate's joint terms (give it validation files for the
+    validation error). The ``temperature`` candidate joins the default ones (``selection``
+    None or the defaults) when every
+    file (``specs``, ``vspecs``; ``scans`` holds their scans) carries a temperature (the
+    reference ``T0`` from the training ones); otherwise the candidates are the defaults.
+    Returns the robot with the chosen per-joint model and the selection."""
+    default = selection is None or selection == SelectionOptions()
+    with_t0 = candidate_reference(robot, specs, vspecs, scans) if default else None
     if with_t0 is not None:  # every file has a temperature: the temperature law joins
         robot, selection = with_t0, SelectionOptions(candidates=CANDIDATES)
-    result, chosen = select_model(fit, robot, selection)
-    return robot.with_terms(chosen.terms), result, chosen
+    _, chosen = select_model(fit, robot, selection)
+    return robot.with_terms(chosen.terms), chosen
 
 
 def _shapes(trials: dict[str, _Trial]) -> FrictionShapes | None:

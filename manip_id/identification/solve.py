@@ -305,25 +305,29 @@ def _validation(problem: Problem, estimate, nominal, chunk: int) -> RelativeErro
 
 def solve(
     problem: Problem,
-    method: str = "ols",
+    method: str | None = None,
     *,
     consistent: ConsistentOptions | None = None,
-    minimum_norm: bool = False,
+    minimum_norm: bool | None = None,
     chunk: int | None = None,
     uncertainty: UncertaintyOptions | str | dict | None = None,
 ) -> IdentificationResult:
     """The identification result of an accumulated problem (module docstring).
 
+    Every option left None is the problem's own (``problem.settings``, set by
+    :func:`~manip_id.identification.build_problem`); the problem's ``context`` joins the
+    result's, and its ``post`` steps run last.
+
     Parameters
     ----------
     problem : Problem
         The sums, counts and records of the data.
-    method : str
+    method : str or None
         "ols", "wls", or the online law "rls" / "gradient" whose pass
         ``problem.online`` holds (its final estimate, the least-squares covariance at it).
     consistent : ConsistentOptions or None
         A physically consistent estimate (``ols`` / ``wls``).
-    minimum_norm : bool
+    minimum_norm : bool or None
         Solve rank-deficient data with the minimum-norm solution instead of raising.
     chunk : int or None
         Samples per regressor chunk of a streamed validation pass (default the problem's).
@@ -338,6 +342,11 @@ def solve(
     RankDeficiencyError
         These data do not excite every base parameter (and not ``minimum_norm``).
     """
+    settings = problem.settings
+    method = settings.method if method is None else method
+    consistent = settings.consistent if consistent is None else consistent
+    minimum_norm = settings.minimum_norm if minimum_norm is None else minimum_norm
+    uncertainty = settings.uncertainty if uncertainty is None else uncertainty
     copts = consistent if consistent is not None else ConsistentOptions(enabled=False)
     check_method(method)
     if copts.enabled and method not in LEAST_SQUARES:
@@ -355,7 +364,7 @@ def solve(
     std_pct = np.where(np.isnan(std_pct), np.inf, std_pct)
     timings["total"] = time.perf_counter() - problem.t_start
     est_online = None if problem.online is None else problem.online.estimator
-    return IdentificationResult(
+    result = IdentificationResult(
         method=method,
         robot_name=robot.name,
         names=list(base.base_names),
@@ -387,7 +396,11 @@ def solve(
         output_names=[] if problem.model == "dynamic" else _outputs(robot, problem.model),
         files=problem.files,
         raw_error=raw_errors(problem, fit.estimate, nominal_b),
+        context=dict(problem.context),
     )
+    for step in problem.post:
+        result = step(result)
+    return result
 
 
 @dataclass

@@ -104,15 +104,11 @@ def reference_from_files(robot: Robot, files, validation, options, window=None, 
     return reference_from_scans(robot, [scans[s] for s in specs]), scans, made
 
 
-def candidate_reference(robot: Robot, files, kwargs: dict) -> Robot | None:
+def candidate_reference(robot: Robot, specs, vspecs, scans: dict) -> Robot | None:
     """``robot`` with ``T0`` (whatever its laws, for the candidates of a model selection)
-    when every file's scan in ``kwargs["scans"]`` has a temperature, else None (``files``
-    and ``kwargs`` those of :func:`~.selection.select_model_files`)."""
-    scans = kwargs.get("scans") or {}
-    specs = file_specs(files, "paths", kwargs.get("window"))
-    valid = kwargs.get("validation")
-    vspecs = [] if valid is None else file_specs(valid, "validation", kwargs.get("window"))
-    found = [scans.get(s) for s in specs + vspecs]
+    when every file's scan in ``scans`` (training ``specs`` and validation ``vspecs``) has a
+    temperature, else None."""
+    found = [scans.get(s) for s in list(specs) + list(vspecs or [])]
     if not found or any(s is None or s.temperature is None for s in found):
         return None
     return with_temperature_reference(robot, scans_temperature(found[: len(specs)]), modelled=False)

@@ -2,7 +2,7 @@
 
 Each file (or each group of files: one robot's logs) is identified on its own with the
 reference's base parametrization (on the fleet path, one task per file:
-:func:`manip_id.identification.fleet.identify_files`), and
+:func:`manip_id.identification.fleet.identify`), and
 its base parameters ``theta_f`` are compared with the reference's ``theta_r``, both with
 their covariances (independent data)::
 
@@ -25,15 +25,20 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.special import chdtrc, ndtr
 
 from ..errors import InputError, ModelMismatchError, RankDeficiencyError
-from ..identification import PartitionOptions, PreprocessOptions, RunOptions
+from ..identification import (
+    FileOptions,
+    PartitionOptions,
+    PreprocessOptions,
+    RunOptions,
+    identify,
+)
 from ..identification.document import single_standard
-from ..identification.fleet import identify_files
 from ..robot.model import Robot
 from ..robot.parameters import JOINT_TERM
 from . import covariance_kind
@@ -227,13 +232,11 @@ def drift_files(
     robot: the robot, with the reference's joint terms
     reference: the reference :class:`~manip_id.identification.IdentificationResult`
         (e.g. :func:`~manip_id.identification.load_result` of ``manip-id identify --json``)
-    files: data files (file specs as
-        :func:`~manip_id.identification.fleet.identify_files` takes them),
+    files: data files (file specs as :func:`~manip_id.identification.fleet.identify` takes them),
         each tested alone; or a mapping ``group -> files`` (e.g. one robot's logs), each
         group identified from all its files and tested as one
     alpha: significance level in (0, 1)
-    scheduler, options, window: as
-        :func:`~manip_id.identification.fleet.identify_files` (one task per
+    scheduler, options, window: as :func:`~manip_id.identification.fleet.identify` (one task per
         file; with groups, one map-reduce per group: give a running scheduler or a
         ``distributed.Client`` rather than ``"local"``, which starts a cluster per group)
 
@@ -254,20 +257,27 @@ def drift_files(
         run=RunOptions(scheduler=scheduler),
         method=method,
         base=reference.base,
-        options=options,
-        window=window,
     )
+    pre = (
+        options if isinstance(options, PreprocessOptions) else PreprocessOptions(**(options or {}))
+    )
+    plain = FileOptions(preprocess=pre, window=window, audit=False)
     out = []
     if isinstance(files, Mapping):
         for group, members in files.items():
             try:
-                res = identify_files(robot, list(members), **kw)
+                res = identify(robot, list(members), files=plain, **kw)
             except RankDeficiencyError as exc:
                 out.append(FileDrift(str(group), 0, None, 0, None, None, [], str(exc)))
                 continue
             out.append(compare(reference, res, alpha=float(alpha), file=str(group)))
     else:
-        pooled = identify_files(robot, list(files), partition=PartitionOptions(per_file=True), **kw)
+        pooled = identify(
+            robot,
+            list(files),
+            files=replace(plain, partition=PartitionOptions(per_file=True)),
+            **kw,
+        )
         for fe in pooled.per_file or []:
             if fe.result is None:
                 out.append(FileDrift(fe.path, int(fe.n_samples), None, 0, None, None, [], fe.error))

@@ -198,7 +198,7 @@ def write_identify_report(
     """The report folder of one identification run; returns its path.
 
     folder: a :class:`~manip_id._io.ReportFolder` claimed before the work (or a path);
-    report: the run's document (:func:`~manip_id.viz.report_document.result_document`).
+    report: the run's document (:meth:`~manip_id.identification.IdentificationResult.to_dict`).
     """
     run_name = (
         f"{robot.name}, {report['method']}, {options.source}, "

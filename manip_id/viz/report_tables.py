@@ -1,6 +1,6 @@
 """The tables and text of an identification run's report, from its document.
 
-Every function reads the run's JSON document (:func:`manip_id.viz.report_document.result_document`)
+Every function reads the run's JSON document (``IdentificationResult.to_dict()``)
 and returns rows (dicts) for :func:`manip_id.viz.report.write_report` or text for the
 terminal. Errors are relative torque errors ``||tau - tau_hat|| / ||tau||`` in percent.
 """
