@@ -39,8 +39,11 @@ INFO_RANK_RTOL = 1e-6
 STACKED_RANK_RTOL = 1e-10
 #: Scaled condition number of the regressor above which Cholesky gives way to eigen.
 COND_LIMIT = 1e6
-#: Weighted least squares: no joint variance counts below this fraction of the largest.
-WLS_MIN_VARIANCE_RATIO = 1e-6
+#: Weighted least squares: no joint's noise standard deviation counts below this
+#: fraction of that joint's own root-mean-square output (a per-joint floor: a floor
+#: relative to the largest joint's variance would cap the weight of a quiet wrist,
+#: 0.3 N m beside 40 N m, and hand its parameters back to the loud joints' noise).
+WLS_MIN_RELATIVE_NOISE = 1e-7
 
 
 def _rank_error(null: np.ndarray, rank: int, names, scale: np.ndarray) -> RankDeficiencyError:
@@ -214,11 +217,12 @@ def solve_accumulator(
 def _weights(var: np.ndarray, zz: np.ndarray, n: int) -> np.ndarray:
     """Inverse variances ``1/sigma_j^2``, floored so that no joint gets an absurd weight.
 
-    A variance counts at least ``WLS_MIN_VARIANCE_RATIO * max_j sigma_j^2`` (weight
-    ratios stay below 1e6) and at least the round-off level ``(1e-7)^2 zz_j / n`` of
-    a noise-free fit.
+    Joint ``j``'s variance counts at least ``(WLS_MIN_RELATIVE_NOISE)^2 zz_j / n``, the
+    round-off level of a noise-free fit of that joint's own outputs; the floor is per
+    joint, never relative to another joint's variance. A joint with no output and no
+    residual gets weight 1.
     """
-    floor = np.maximum(WLS_MIN_VARIANCE_RATIO * float(var.max()), 1e-14 * zz / max(n, 1))
+    floor = WLS_MIN_RELATIVE_NOISE**2 * np.asarray(zz, dtype=float) / max(n, 1)
     floor = np.where(floor > 0, floor, 1.0)
     return 1.0 / np.maximum(var, floor)
 
