@@ -54,6 +54,7 @@ from .._io.reading import read_json
 from ..consistency import NONNEGATIVE_TERMS
 from ..errors import DataError, InputError, format_direction
 from ..metrics import finite_list, finite_or_none
+from .nominal_check import WORSE_PREFIX, result_worse_than_nominal
 
 #: std above this [%] flags a base parameter "poorly identified".
 POORLY_IDENTIFIED = 10.0
@@ -156,7 +157,8 @@ def result_warnings(
     convergence_limit: float = CONVERGENCE_LIMIT,
 ) -> list[str]:
     """Plain sentences: non-physical values by name, a large condition number, an online
-    estimate still moving; then the result's own warnings (no repeats)."""
+    estimate still moving, joints predicted worse than by the nominal model (with a "Do:"
+    line); then the result's own warnings (no repeats)."""
     out = []
     bad = [
         f"{n} = {x:.4g} {u}".rstrip()
@@ -199,6 +201,9 @@ def result_warnings(
                 f"changed by {100 * moved:.3g} % of the torque (limit "
                 f"{100 * convergence_limit:g} %)"
             )
+    worse = result_worse_than_nominal(result)
+    if worse is not None:
+        out.append(worse)
     for w in result.warnings:
         if w not in out:
             out.append(w)
@@ -565,6 +570,8 @@ def verdict_text(doc: dict) -> str:
     consistent = doc.get("physically_consistent")
     if consistent is not None:
         text += ", physically consistent" if consistent else ", NOT physically consistent"
+    if any(str(w).startswith(WORSE_PREFIX) for w in doc.get("warnings") or []):
+        text += ", WORSE than the nominal model on some joints (warning above)"
     n = len(doc.get("warnings") or [])
     return text + (
         f", {n} warning(s) on the result (above)" if n else ", no warnings on the result"

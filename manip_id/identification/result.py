@@ -22,6 +22,7 @@ from ..regressor import DEFAULT_CHUNK, check_states, iter_regressor
 from ..robot import Robot
 from .document import OWN_KEYS, read_result_json, result_text, result_to_dict
 from .result_schema import check_result_document
+from .nominal_check import WORSE_PREFIX
 
 
 def _array(x, dtype=float):
@@ -399,7 +400,7 @@ def _rank_from_dict(doc: dict, base: BaseParameters, names: list[str]) -> RankAn
 
 def _recomputed_warnings(doc: dict) -> set[str]:
     """The warnings :func:`result_to_dict` derives itself (recomputed on writing again)."""
-    starts = ("non-physical values: ", "the condition number ")
+    starts = ("non-physical values: ", "the condition number ", WORSE_PREFIX)
     undetermined = "base parameter(s) not determined by these data"
     return {
         w

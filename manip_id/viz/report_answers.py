@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ..identification import NOT_DETERMINED
+from ..identification.nominal_check import WORSE_PREFIX
 from .report import html_table
 from .report_tables import not_determined, number
 
@@ -84,6 +85,13 @@ def model_quality(doc: Mapping) -> tuple[str, str]:
     if raw_id is not None:
         text += f"; against the raw torques {_pct(raw_id)} and {_pct(raw_nom)}"
     text += ".</p>"
+    for w in doc.get("warnings") or []:
+        if str(w).startswith(WORSE_PREFIX):  # the first thing a user must know
+            said, _, do = str(w).partition(" Do: ")
+            text += (
+                f'<p class="verdict"><span class="no">Worse than the nominal model</span>'
+                f"{_esc(said[len('worse than the nominal model') :])}. <b>Do:</b> {_esc(do)}.</p>"
+            )
     joints = doc.get("joints") or []
     per_id = rel.get("per_joint_validation") if val else rel.get("train_per_joint")
     per_nom = rel.get("nominal_per_joint_validation" if val else "nominal_train_per_joint")
@@ -348,9 +356,9 @@ def next_steps(warnings: Sequence[str]) -> tuple[str, str]:
         return "What to do next?", "<p>Nothing to fix: no warning.</p>"
     items = []
     for w in warnings:
-        text = str(w).strip()
+        text, _, own = str(w).strip().partition(" Do: ")  # a warning may carry its own
         sentence = text[:1].upper() + text[1:] + ("" if text.endswith(".") else ".")
-        advice = next((a for key, a in ADVICE if key in text), None)
+        advice = own.rstrip(".") or next((a for key, a in ADVICE if key in text), None)
         items.append(
             f"<li>{_esc(sentence)}" + (f" <b>Do:</b> {_esc(advice)}." if advice else "") + "</li>"
         )
