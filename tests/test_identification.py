@@ -111,7 +111,9 @@ def test_monte_carlo_predicted_std_matches_empirical(name):
     # identify() (WLS by default) on one noisy run gives the same numbers as the accumulator path
     tau = tau0 + 0.5 * rng.standard_normal(tau0.shape)
     res = identify(robot, q, dq, ddq, tau, base=base)
-    sol = solve_accumulator(InformationAccumulator(base.n_base, robot.nv).add(Yb, tau), method="wls")
+    sol = solve_accumulator(
+        InformationAccumulator(base.n_base, robot.nv).add(Yb, tau), method="wls"
+    )
     np.testing.assert_allclose(res.estimate, sol.estimate, rtol=1e-10)
     np.testing.assert_allclose(res.std, sol.std, rtol=1e-8)
 

@@ -7,7 +7,13 @@ import numpy as np
 import pytest
 from conftest import get_robot
 
-from manip_id.identification import identify, result_text, result_to_dict, verdict_text
+from manip_id.identification import (
+    ConsistentOptions,
+    identify,
+    result_text,
+    result_to_dict,
+    verdict_text,
+)
 from manip_id.simulation import MeasurementNoise, simulate
 from manip_id.trajectories import random_trajectory
 
@@ -54,3 +60,80 @@ def test_default_method_keeps_every_joint_at_the_noise_floor(panda_demo):
     assert all(name in warning for name in bad) and "Do: refit with --method wls" in warning
     assert "WORSE than the nominal model" in verdict_text(doc)
     assert warning in result_text(doc)
+
+
+@pytest.fixture(scope="module")
+def ur5_record():
+    robot = get_robot("ur5")
+    traj = random_trajectory(robot, seed=3)
+    sim = simulate(
+        robot,
+        traj,
+        duration=10.0,
+        rate=100.0,
+        perturb=0.3,
+        noise=MeasurementNoise(tau=0.01),
+        seed=3,
+    )
+    return robot, sim
+
+
+def test_consistent_fit_says_which_values_come_from_the_prior(ur5_record):
+    """A column of Pinocchio's regressor that is zero on every sample is a parameter the
+    data never see: its value is the prior's, without a data std (text, JSON)."""
+    import pinocchio as pin
+
+    robot, sim = ur5_record
+    d = sim.dataset
+    res = identify(robot, d.q, d.dq, d.ddq, d.tau, consistent=ConsistentOptions())
+    doc = result_to_dict(res)
+    seen = np.zeros(10 * robot.model.nv, dtype=bool)
+    for k in range(0, len(d.q), 50):
+        Y = pin.computeJointTorqueRegressor(robot.model, robot.data, d.q[k], d.dq[k], d.ddq[k])
+        seen |= np.abs(Y).max(axis=0) > 1e-9
+    rows = {r["name"]: r for r in doc["standard_parameters"]}
+    names = robot.parameter_names[: 10 * robot.model.nv]
+    for name, enters in zip(names, seen, strict=True):
+        assert rows[name]["source"] == ("data" if enters else "prior"), name
+        assert (rows[name]["std"] is None) == (not enters), name
+    assert rows["shoulder_pan_joint.m"]["source"] == "prior"
+    text = result_text(doc)
+    assert "shoulder_pan_joint 3.7 from the prior (not in the dynamics, no data std)" in text
+    assert text.splitlines()[0] == "identification: WLS + consistent (SDP) of ur5"
+    assert "masses set by the bounds" not in verdict_text(doc)
+
+
+def test_masses_held_by_tight_bounds_are_reported_at_their_bounds(ur5_record):
+    """Masses of a robot perturbed by 30 % and bounded to 0.1 % of nominal sit on the
+    bound (value = nominal x 0.999 or 1.001, checked directly): text, JSON and report say
+    so, and no data std is printed for them."""
+    from manip_id.viz.report_answers import body_rows
+
+    robot, sim = ur5_record
+    d = sim.dataset
+    lo, hi = 0.999, 1.001
+    res = identify(
+        robot, d.q, d.dq, d.ddq, d.tau, consistent=ConsistentOptions(mass_range=(lo, hi))
+    )
+    doc = result_to_dict(res)
+    masses = [r for r in doc["standard_parameters"] if r["name"].endswith(".m")]
+    at_bound = {
+        r["name"][:-2]
+        for r in masses
+        if min(abs(r["value"] - lo * r["nominal"]), abs(r["value"] - hi * r["nominal"]))
+        <= 1e-4 * r["nominal"]
+    }
+    assert len(at_bound) >= 4  # 30 % off nominal: the data push most masses to a bound
+    assert {r["name"][:-2] for r in masses if r["source"] == "bound"} == at_bound
+    assert all(r["std"] is None for r in masses if r["source"] == "bound")
+    text = result_text(doc)
+    for body in at_bound:
+        assert f"{body} " in text and any(
+            f"{body} {m['value']:.3g} at bound" in text for m in masses if m["name"] == f"{body}.m"
+        )
+    if at_bound == {r["name"][:-2] for r in masses}:
+        assert "masses set by the bounds, not the data" in verdict_text(doc)
+    else:
+        assert "set by the bounds, not the data" in verdict_text(doc)
+    report = {row["body"]: row.get("mass from") for row in body_rows(doc)}
+    assert all(report[b] == "bound" for b in at_bound)

@@ -418,6 +418,15 @@ def _per_joint(names, values) -> str:
     return ", ".join(f"{n} {_pct(v)}" for n, v in zip(names, values, strict=True))
 
 
+def method_label(doc: dict) -> str:
+    """The method of the model a document shows: "WLS", "OLS + consistent (SDP)", ..."""
+    label = str(doc.get("method", "")).upper()
+    solver = doc.get("consistent_solver") or {}
+    if doc.get("standard_parameters_kind") == "consistent" and solver:
+        label += f" + consistent ({str(solver.get('solver', '')).upper()})"
+    return label
+
+
 def summary_rows(doc: dict) -> dict[str, str]:
     """The headline figures of a saved result, label -> text (errors in percent, the nominal
     model beside the identified one): the first lines of :func:`result_text`, and the
@@ -425,7 +434,7 @@ def summary_rows(doc: dict) -> dict[str, str]:
     e = doc["relative_error"]
     model = doc.get("model", "dynamic")
     rows = {
-        "identification": f"{str(doc['method']).upper()} of {doc['robot']}"
+        "identification": f"{method_label(doc)} of {doc['robot']}"
         + ("" if model == "dynamic" else f" ({model} model)"),
         "base parameters": f"{doc['n_base']} of {doc.get('n_parameters', '?')}",
         "training samples": str(doc["n_samples"]),
@@ -516,18 +525,32 @@ def _standard_lines(doc: dict) -> list[str]:
         )
     plaus = doc.get("plausibility")
     if plaus:  # the consistent estimate's masses against the nominal ones
-        std = _mass_std(doc)
+        std, source = _mass_std(doc), mass_sources(doc)
         lines.append(
-            f"link masses [kg]{' +- std' if std else ''} (x nominal): "
+            f"link masses [kg]{' +- std' if std else ''} (x nominal; source): "
             + ", ".join(
                 f"{b['name']} {b['mass']:.3g}"
-                + ("" if std.get(b["name"]) is None else f" +- {std[b['name']]:.2g}")
+                + _mass_note(std.get(b["name"]), source.get(b["name"]))
                 + ("" if b.get("mass_ratio") is None else f" ({b['mass_ratio']:.2g}x)")
                 for b in plaus["bodies"]
             )
             + f"; total {plaus['total_mass']:.3g} (nominal {plaus['nominal_total_mass']:.3g})"
         )
+    active = doc.get("constraints_active") or []
+    if active:
+        lines.append("constraints active (values held there, std 'at bound'): " + ", ".join(active))
     return lines
+
+
+def _mass_note(std: float | None, source: str | None) -> str:
+    """`` +- std`` of a mass from the data; `` from the prior`` / `` at bound`` otherwise."""
+    if source == "prior":
+        return " from the prior (not in the dynamics, no data std)"
+    if source == "bound":
+        return " at bound"
+    if source == "not determined":
+        return " not determined"
+    return "" if std is None else f" +- {std:.2g}"
 
 
 def _mass_std(doc: dict) -> dict[str, float]:
@@ -535,6 +558,15 @@ def _mass_std(doc: dict) -> dict[str, float]:
     rows = doc.get("standard_parameters") or []
     masses = [r for r in rows if r["name"].endswith(".m") and r.get("std") is not None]
     return {r["name"][:-2]: float(r["std"]) for r in masses}
+
+
+def mass_sources(doc: dict) -> dict[str, str]:
+    """Link name -> where its mass comes from ("data", "prior", "bound", "not determined";
+    empty for documents without sources)."""
+    rows = doc.get("standard_parameters") or []
+    return {
+        r["name"][:-2]: str(r["source"]) for r in rows if r["name"].endswith(".m") and "source" in r
+    }
 
 
 def result_text(doc: dict, max_rows: int | None = None) -> str:
@@ -570,6 +602,12 @@ def verdict_text(doc: dict) -> str:
     consistent = doc.get("physically_consistent")
     if consistent is not None:
         text += ", physically consistent" if consistent else ", NOT physically consistent"
+    if doc.get("standard_parameters_kind") == "consistent":
+        held = [n for n, s in mass_sources(doc).items() if s == "bound"]
+        if held and all(s in ("bound", "prior") for s in mass_sources(doc).values()):
+            text += ", masses set by the bounds, not the data"
+        elif held:
+            text += f", the masses of {', '.join(held)} set by the bounds, not the data"
     if any(str(w).startswith(WORSE_PREFIX) for w in doc.get("warnings") or []):
         text += ", WORSE than the nominal model on some joints (warning above)"
     n = len(doc.get("warnings") or [])
@@ -587,6 +625,7 @@ def _white_covariance(result) -> dict:
 
 
 __all__ = [
+    "method_label",
     "CONDITION_LIMIT",
     "CONVERGENCE_LIMIT",
     "NOT_DETERMINED",

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ..identification import NOT_DETERMINED
+from ..identification.document import mass_sources
 from ..identification.nominal_check import WORSE_PREFIX
 from .report import html_table
 from .report_tables import not_determined, number
@@ -210,6 +211,7 @@ def body_rows(doc: Mapping) -> list[dict]:
         if kind in ("m", "mcx", "mcy", "mcz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz"):
             blocks.setdefault(body, {})[kind] = (p.get("value"), p.get("nominal"))
     flags = _plausibility_flags(doc)
+    sources = mass_sources(doc)
     rows = []
     for body, b in blocks.items():
         if len(b) != 10 or any(v is None for pair in b.values() for v in pair):
@@ -226,6 +228,7 @@ def body_rows(doc: Mapping) -> list[dict]:
                 "mass [kg]": number(ident["m"]),
                 "nominal [kg]": number(nom["m"]),
                 "mass ratio": number(ratio, 3),
+                **({"mass from": sources[body]} if body in sources else {}),
                 "centre of mass [m]": _vector(ident["c"]),
                 "nominal [m]": _vector(nom["c"]),
                 "shift [m]": number(float(np.linalg.norm(ident["c"] - nom["c"])), 3),
