@@ -21,8 +21,8 @@ from ..identifiability import BaseParameters, RankAnalysis
 from ..regressor import DEFAULT_CHUNK, check_states, iter_regressor
 from ..robot import Robot
 from .document import OWN_KEYS, read_result_json, result_text, result_to_dict
-from .result_schema import check_result_document
 from .nominal_check import WORSE_PREFIX
+from .result_schema import check_result_document
 
 
 def _array(x, dtype=float):
