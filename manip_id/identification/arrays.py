@@ -110,7 +110,8 @@ def identify(
     method : str
         "wls" (default: weighted by per-joint noise variances from the OLS residuals,
         re-estimated from the weighted ones), "ols" (ordinary least squares), "rls" (one
-        pass of recursive least squares), "gradient" (one pass of the normalized gradient law); see :data:`METHODS`.
+        pass of recursive least squares), "gradient" (one pass of the normalized gradient
+        law); see :data:`METHODS`.
     validation : tuple or None
         ``(q, dq, ddq, tau)`` for the validation error (``(q, dq, ddq, tau, temp)`` with
         the temperature law).
