@@ -137,3 +137,30 @@ def test_masses_held_by_tight_bounds_are_reported_at_their_bounds(ur5_record):
         assert "set by the bounds, not the data" in verdict_text(doc)
     report = {row["body"]: row.get("mass from") for row in body_rows(doc)}
     assert all(report[b] == "bound" for b in at_bound)
+
+
+def test_friction_auto_chooses_the_same_laws_with_and_without_validation_data():
+    """The choice is made on the training data alone: giving validation data changes
+    neither the laws nor their BICs; the JSON says how the choice was made."""
+    from test_friction import _data
+
+    from manip_id.identification.selection import SelectionOptions, select_model
+    from manip_id.robot import load_robot
+
+    robot = load_robot("double_pendulum", friction=())
+    train, _ = _data(robot, "stribeck", seed=3, duration=20.0)
+    valid, _ = _data(robot, "asymmetric", seed=4, duration=20.0)  # another law: a trap
+    opts = SelectionOptions(
+        candidates=("linear", "asymmetric", "stribeck"),
+        combine=False,
+        stribeck_grid=(0.03, 0.1, 0.3),
+        refine=1,
+    )
+    with_val, sel_val = select_model(lambda r: identify(r, *train, validation=valid), robot, opts)
+    alone, sel = select_model(lambda r: identify(r, *train), robot, opts)
+    assert [j.chosen for j in sel_val.joints] == [j.chosen for j in sel.joints]
+    for a, b in zip(sel_val.joints, sel.joints, strict=True):
+        np.testing.assert_allclose([c.bic for c in a.candidates], [c.bic for c in b.candidates])
+    assert [j.chosen for j in sel.joints] == ["stribeck", "stribeck"]  # the training law
+    for res in (with_val, alone):
+        assert res.to_dict()["friction_criterion"] == "BIC on the training data"
