@@ -38,8 +38,8 @@ def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
         help="comma-separated friction laws per joint: viscous, coulomb, offset, asymmetric, "
         "stribeck, sigmoid, position[:K], load, temperature (needs a temp field: --column "
         "temp=...), hysteresis (docs/friction.md); 'auto' (identify --data): "
-        "chosen per joint by the training data's BIC (never the validation data) [default: the robot profile's "
-        "(robots/ROBOT.toml), else none]",
+        "chosen per joint by the training data's BIC (never the validation data) "
+        "[default: the robot profile's (robots/ROBOT.toml), else none]",
     )
     parser.add_argument(
         "--armature",

@@ -46,6 +46,7 @@ one, ``tau_hat = Y_b theta_b_nominal`` with ``theta_b_nominal = base.to_base(nom
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -560,7 +561,7 @@ def _mass_std(doc: dict) -> dict[str, float]:
     return {r["name"][:-2]: float(r["std"]) for r in masses}
 
 
-def mass_sources(doc: dict) -> dict[str, str]:
+def mass_sources(doc: Mapping) -> dict[str, str]:
     """Link name -> where its mass comes from ("data", "prior", "bound", "not determined";
     empty for documents without sources)."""
     rows = doc.get("standard_parameters") or []

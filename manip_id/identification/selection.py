@@ -28,14 +28,15 @@ each joint is scored on its own row by the information criterion of the training
 The choice never looks at validation data: a validation error of the model chosen on
 that same validation file would no longer be independent (it was, before: chosen and
 reported on one file). When the fits carry validation data, each candidate's validation
-error is shown beside its BIC, for information only. The shapes (Stribeck ``vs``, sigmoid slope ``a``, hysteresis
-length ``xc``) are chosen by variable projection: the linear coefficients are solved for every value
-of a grid (one fit per value), each joint keeps its best value, then the best is refined
-by a bisection in log(shape) (two fits per round, each joint its own value); the
-sigmoid's shift ``c`` is then chosen among :data:`SIGMOID_SHIFTS` and 0. The
-chosen per-joint models make one :class:`~manip_id.robot.JointTerms` with ``per_dof``
-(the terms each joint keeps) and ``shapes``; :func:`select_model` fits it last, and its
-result carries ``context["friction_selection"]``.
+error is shown beside its BIC, for information only. The shapes (Stribeck ``vs``,
+sigmoid slope ``a``, hysteresis length ``xc``) are chosen by variable projection: the
+linear coefficients are solved for every value of a grid (one fit per value), each
+joint keeps its best value, then the best is refined by a bisection in log(shape) (two
+fits per round, each joint its own value); the sigmoid's shift ``c`` is then chosen
+among :data:`SIGMOID_SHIFTS` and 0. The chosen per-joint models make one
+:class:`~manip_id.robot.JointTerms` with ``per_dof`` (the terms each joint keeps) and
+``shapes``; :func:`select_model` fits it last, and its result carries
+``context["friction_selection"]``.
 """
 
 from __future__ import annotations
