@@ -345,11 +345,18 @@ def iter_rows(
                 break
         if not block.shape[0]:
             continue
-        for name, s in () if checked else lay.slices.items():
-            if name == "t":
-                check_values("t", block[:, 0], 1, offset=int(raw[0]))
-            else:
-                check_values(name, block[:, s], 2, names if name != "q" else None, int(raw[0]))
+        try:
+            for name, s in () if checked else lay.slices.items():
+                if name == "t":
+                    check_values("t", block[:, 0], 1, offset=int(raw[0]))
+                else:
+                    check_values(name, block[:, s], 2, names if name != "q" else None, int(raw[0]))
+        except DataError as exc:
+            if drop_bad_rows:
+                raise
+            raise DataError(
+                f"{exc} (pass --drop-bad-rows / drop_bad_rows=True to drop such rows)"
+            ) from exc
         t = block[:, t_col]
         try:
             check_time(t, previous=previous_t, rows=raw, previous_row=previous_row)
