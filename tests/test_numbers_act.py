@@ -164,3 +164,125 @@ def test_friction_auto_chooses_the_same_laws_with_and_without_validation_data():
     assert [j.chosen for j in sel.joints] == ["stribeck", "stribeck"]  # the training law
     for res in (with_val, alone):
         assert res.to_dict()["friction_criterion"] == "BIC on the training data"
+
+
+# ------------------------------------------------------------------ the auditor
+@pytest.fixture(scope="module")
+def synchronous_logs(tmp_path_factory):
+    """Exactly synchronous simulated logs of every command: identify's runs, payload's
+    unloaded and loaded runs (a 2 kg payload the nominal model lacks), and drive-gains'
+    runs in currents (G = 10 N m/A)."""
+    from manip_id.cli import main
+
+    root = tmp_path_factory.mktemp("sync")
+    sim = ["--files", "1", "--duration", "20", "--seed", "0", "--force"]
+    assert main(["simulate", "ur5", "--out", str(root / "plain"), *sim]) == 0
+    assert main(["simulate", "ur5", "--out", str(root / "pl"), "--payload", "2", *sim]) == 0
+    gains = ["--payload", "2", "--drive-gains", "10"]
+    assert main(["simulate", "ur5", "--out", str(root / "dg"), *gains, *sim]) == 0
+    return root
+
+
+@pytest.mark.parametrize(("folder", "currents"), [("plain", False), ("pl", False), ("dg", True)])
+def test_auditor_finds_no_delay_on_synchronous_logs(synchronous_logs, folder, currents):
+    from manip_id.audit import AuditOptions, audit_files
+
+    robot = get_robot("ur5")
+    files = sorted(str(p) for p in (synchronous_logs / folder).glob("*.npz"))
+    assert len(files) == (1 if folder == "plain" else 2)
+    audit = audit_files(robot, files, AuditOptions(currents=currents))
+    for fa in audit.files:
+        assert "delay" not in fa.suggestions, (fa.file, fa.findings)
+        assert not [f for f in fa.findings if "motion stream" in f], fa.findings
+        step = 1.0 / fa.rate
+        assert abs(fa.joints[0].delay or 0.0) < step  # the lag searched is below a sample
+
+
+def _corrupt(path, out):
+    d = dict(np.load(path))
+    d["t"] = d["t"].copy()
+    d["q"] = d["q"].copy()
+    d["t"][4] = 2.68e154  # [s] a stamp of the real arm's log
+    d["q"][700, 2] = 253.0  # [rad] a position spike of the real arm's log
+    np.savez(out, **d)
+    return d
+
+
+def test_drop_bad_rows_drops_a_corrupted_stamp_and_a_spike(synchronous_logs, tmp_path):
+    """One corrupted time stamp and one q spike: refused without --drop-bad-rows (with the
+    hint), dropped and counted per reason with it, in the audit and in identify; the
+    rows kept are exactly the others."""
+    from manip_id.audit import AuditOptions, audit_files
+    from manip_id.datasets import RowCounts, iter_rows, open_source, parse_file_spec
+    from manip_id.errors import DataError
+
+    robot = get_robot("ur5")
+    src_path = next((synchronous_logs / "plain").glob("*.npz"))
+    bad = tmp_path / "bad.npz"
+    d = _corrupt(src_path, bad)
+    with pytest.raises(DataError, match="drop-bad-rows"):
+        audit_files(robot, [str(bad)])
+    audit = audit_files(robot, [str(bad)], AuditOptions(drop_bad_rows=True))
+    (fa,) = audit.files
+    assert fa.dropped == {"time stamp": 1, "position spike": 1}
+    assert fa.n_rows == d["t"].shape[0] - 2
+    counts = RowCounts()
+    spec = parse_file_spec(str(bad))
+    rows = np.concatenate(list(iter_rows(open_source(spec), drop_bad_rows=True, counts=counts)))
+    keep = np.ones(d["t"].shape[0], dtype=bool)
+    keep[[4, 700]] = False
+    np.testing.assert_array_equal(rows[:, 0], d["t"][keep])
+    assert counts.reasons == {"time stamp": 1, "position spike": 1}
+
+
+def test_truncated_last_line_is_dropped_with_a_note(synchronous_logs, tmp_path):
+    from manip_id.datasets import RowCounts, iter_rows, open_source, parse_file_spec
+
+    src = np.load(next((synchronous_logs / "plain").glob("*.npz")))
+    n = 50
+    cols = [src["t"][:n, None], src["q"][:n], src["dq"][:n], src["tau"][:n]]
+    table = np.hstack(cols)
+    names = [str(x) for x in src["joint_names"]]
+    head = ["t"] + [f"{f}_{j}" for f in ("q", "dq", "tau") for j in names]
+    text = ",".join(head) + "\n" + "\n".join(",".join(repr(float(v)) for v in r) for r in table)
+    path = tmp_path / "cut.csv"
+    path.write_text(text[: text.rindex(",", 0, text.rindex(","))])  # two cells short, no end
+    counts = RowCounts()
+    with pytest.warns(UserWarning, match="truncated last line"):
+        rows = np.concatenate(
+            list(iter_rows(open_source(parse_file_spec(str(path))), counts=counts))
+        )
+    assert rows.shape[0] == n - 1 and counts.reasons == {"truncated last line": 1}
+    np.testing.assert_allclose(rows, table[: n - 1])
+
+
+def test_multi_file_audit_reports_every_file(synchronous_logs, tmp_path):
+    from manip_id.audit import audit_files
+    from manip_id.errors import DataError
+
+    robot = get_robot("ur5")
+    good = [str(p) for p in sorted((synchronous_logs / "pl").glob("*.npz"))]
+    bad = tmp_path / "bad.npz"
+    _corrupt(good[0], bad)
+    audit = audit_files(robot, [str(bad), *good])
+    assert [fa.file for fa in audit.files] == good
+    assert list(audit.failed) == [str(bad)]
+    assert f"{bad}: not audited" in audit.table()
+    with pytest.raises(DataError, match="1 of 3 file"):
+        audit.check()
+
+
+def test_scale_suggestion_only_for_determined_joints():
+    from manip_id.audit.findings import torque_findings
+    from manip_id.audit.report import JointAudit
+
+    joints = [
+        JointAudit("a", 0.1, None, 0.0, 0.0),  # currents of a 10 N m/A drive
+        JointAudit("b", None, None, 0.0, 0.0),  # not determined
+        JointAudit("c", 1.0, None, 0.0, 0.0),  # already in N m
+    ]
+    suggestions: dict = {}
+    text = " ".join(torque_findings(joints, 0.005, None, suggestions))
+    assert suggestions["torque_scale"] == [10.0, None, 1.0]
+    assert "try --torque-scale 10,?,1" in text
+    assert "scale not determined for b" in text and "give their gains" in text
