@@ -286,3 +286,27 @@ def test_scale_suggestion_only_for_determined_joints():
     assert suggestions["torque_scale"] == [10.0, None, 1.0]
     assert "try --torque-scale 10,?,1" in text
     assert "scale not determined for b" in text and "give their gains" in text
+
+
+def test_consistent_fit_on_a_non_physical_urdf_gives_the_repair_hint(tmp_path):
+    """Bodies made non-physical by hand (a negative moment, a negative mass): the prior is
+    refused with the bodies named and the way out (``manip-id repair``)."""
+    import xml.etree.ElementTree as ET
+
+    from manip_id.errors import PhysicalConsistencyError
+    from manip_id.robot import load_robot
+
+    tree = ET.parse(get_robot("ur5").source)
+    links = {lk.get("name"): lk for lk in tree.getroot().findall("link")}
+    links["shoulder_link"].find("inertial/inertia").set("ixx", "-0.01")
+    links["wrist_2_link"].find("inertial/mass").set("value", "-1.219")
+    path = tmp_path / "ur5_broken.urdf"
+    tree.write(path)
+    robot = load_robot(str(path))
+    sim = _demo_like(get_robot("ur5"), 3)
+    d = sim.dataset
+    with pytest.raises(PhysicalConsistencyError) as info:
+        identify(robot, d.q, d.dq, d.ddq, d.tau, consistent=ConsistentOptions())
+    text = str(info.value)
+    assert "manip-id repair ROBOT OUT.urdf" in text
+    assert "shoulder_pan_joint" in text and "wrist_2_joint" in text
