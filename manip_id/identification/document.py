@@ -597,9 +597,17 @@ def verdict_text(doc: dict) -> str:
     e = doc["relative_error"]
     key = "validation" if e.get("validation") is not None else "train"
     part, mine, nominal = key.replace("train", "training"), e[key], e.get(f"nominal_{key}")
-    text = f"verdict: the identified model predicts the {part} torques to {100 * mine:.3f} %"
+    raw = doc.get("relative_error_raw") or {}
+    filtered = "filtered " if raw.get(key) is not None else ""
+    text = (
+        f"verdict: the identified model predicts the {filtered}{part} torques to {100 * mine:.3f} %"
+    )
     if nominal is not None:
         text += f" (nominal model {100 * nominal:.3f} %)"
+    if filtered:  # the raw figure too: it is the one a paper reports
+        text += f", the raw ones to {100 * raw[key]:.3f} %"
+        if raw.get(f"nominal_{key}") is not None:
+            text += f" (nominal model {100 * raw[f'nominal_{key}']:.3f} %)"
     consistent = doc.get("physically_consistent")
     if consistent is not None:
         text += ", physically consistent" if consistent else ", NOT physically consistent"
