@@ -322,3 +322,25 @@ def test_verdict_gives_the_raw_error_beside_the_filtered_one():
     assert "predicts the filtered validation torques to 0.741 % (nominal model 1.230 %)" in text
     assert "the raw ones to 2.460 % (nominal model 2.880 %)" in text
     assert "filtered" not in verdict_text({"relative_error": doc["relative_error"]})
+
+
+def test_point_mass_payload_is_reported_as_such(synchronous_logs, tmp_path, capsys):
+    """The simulated payload is a 2 kg point mass (truth.json): reported as a point mass,
+    without the "not physically consistent" warning."""
+    import json
+
+    from manip_id.cli import main
+
+    folder = synchronous_logs / "pl"
+    truth = (folder / "truth.json").read_text()
+    assert "point mass" in (folder / "README.txt").read_text() or "point" in truth
+    out = tmp_path / "p.json"
+    argv = ["payload", "ur5", "--unloaded", str(folder / "run_0.npz"), "--loaded"]
+    argv += [str(folder / "payload_2kg_0.npz"), "--frame", "wrist_3_joint", "--json", str(out)]
+    assert main(argv) == 0
+    text = capsys.readouterr()
+    assert "a point mass: its inertia about the centre of mass is zero" in text.out
+    assert "not physically consistent" not in text.out + text.err
+    doc = json.loads(out.read_text())
+    assert doc["payload"]["point_mass"] is True
+    assert abs(doc["payload"]["mass"] - 2.0) < 0.01
