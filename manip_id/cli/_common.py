@@ -341,8 +341,10 @@ def add_file_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--drop-bad-rows",
         action="store_true",
-        help="drop (and count) bad rows instead of refusing the file: NaN/Inf, values beyond "
-        "the plausible magnitudes of their unit, malformed CSV lines [default: refuse]",
+        help="drop (and count per reason) bad rows instead of refusing the file: NaN/Inf, "
+        "values beyond the plausible magnitudes of their unit, malformed CSV lines, "
+        "corrupted time stamps and isolated position spikes (running median) "
+        "[default: refuse; a truncated last CSV line is always dropped, with a note]",
     )
 
 
