@@ -135,7 +135,7 @@ class Audit:
         return [f"{fa.file}: {f}" for fa in self.files for f in fa.findings]
 
     def to_dict(self) -> dict:
-        out = {"robot": self.robot, "files": [fa.to_dict() for fa in self.files]}
+        out: dict = {"robot": self.robot, "files": [fa.to_dict() for fa in self.files]}
         if self.failed:
             out["failed"] = dict(self.failed)
         return out

@@ -279,8 +279,8 @@ def _mark_truncated(bad: dict[int, str], raw: list, lines: list, line_no: int) -
     """Say so in ``bad`` when the chunk's last line is malformed and has no line end."""
     k = len(lines) - 1
     last = raw[-1] if raw else ""
-    end = b"\n" if isinstance(last, bytes) else "\n"
-    if k in bad and raw and not last.endswith(end):
+    ended = last.endswith(b"\n") if isinstance(last, bytes) else str(last).endswith("\n")
+    if k in bad and raw and not ended:
         bad[k] = f"{TRUNCATED} {line_no + k + 1} (no line end; {bad[k]})"
 
 
