@@ -44,6 +44,10 @@ COND_LIMIT = 1e6
 #: relative to the largest joint's variance would cap the weight of a quiet wrist,
 #: 0.3 N m beside 40 N m, and hand its parameters back to the loud joints' noise).
 WLS_MIN_RELATIVE_NOISE = 1e-7
+#: ... and no weight exceeds the smallest by more than this (a noise-free joint beside
+#: noisy ones would otherwise make the weighted information matrix numerically singular;
+#: 1e10 is a noise-std ratio of 1e5, far beyond a quiet wrist's 1e-2 of a shoulder's).
+WLS_MAX_WEIGHT_RATIO = 1e10
 
 
 def _rank_error(null: np.ndarray, rank: int, names, scale: np.ndarray) -> RankDeficiencyError:
@@ -218,11 +222,13 @@ def _weights(var: np.ndarray, zz: np.ndarray, n: int) -> np.ndarray:
     """Inverse variances ``1/sigma_j^2``, floored so that no joint gets an absurd weight.
 
     Joint ``j``'s variance counts at least ``(WLS_MIN_RELATIVE_NOISE)^2 zz_j / n``, the
-    round-off level of a noise-free fit of that joint's own outputs; the floor is per
-    joint, never relative to another joint's variance. A joint with no output and no
-    residual gets weight 1.
+    round-off level of a noise-free fit of that joint's own outputs, and at least
+    ``max_j sigma_j^2 / WLS_MAX_WEIGHT_RATIO`` (numerical safety only: the old floor of
+    1e-6 of the largest variance is what capped a quiet wrist's weight). A joint with no
+    output and no residual gets weight 1.
     """
     floor = WLS_MIN_RELATIVE_NOISE**2 * np.asarray(zz, dtype=float) / max(n, 1)
+    floor = np.maximum(floor, WLS_MAX_WEIGHT_RATIO**-1 * float(np.max(var)))
     floor = np.where(floor > 0, floor, 1.0)
     return 1.0 / np.maximum(var, floor)
 
