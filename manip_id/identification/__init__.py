@@ -19,7 +19,8 @@ Members: :mod:`~.options` (one frozen dataclass per concern), :mod:`~.problem` (
 counts, records; the accumulation), :mod:`~.solve`, :mod:`~.result` and
 :mod:`~.document` (the one schema and its text), :mod:`~.arrays` (in-memory entry
 points), :mod:`~.reading`, :mod:`~.file_sums`, :mod:`~.files` (log files),
-:mod:`~.tasks` (the tasks of a distributed run).
+:mod:`~.tasks` (the tasks of a distributed run), :mod:`~.nominal_check` (joints the fit
+made worse than the nominal model).
 """
 
 from __future__ import annotations

@@ -87,7 +87,7 @@ def identify(
     ddq,
     tau,
     *,
-    method: str = "ols",
+    method: str = "wls",
     validation: tuple | None = None,
     base: BaseParameters | None = None,
     consistent: ConsistentOptions | bool | dict | None = None,
@@ -108,9 +108,10 @@ def identify(
         [rad/s^2] and torques [N m], shape (N, nv). ``ddq`` may be None for the
         energy and momentum models.
     method : str
-        "ols" (ordinary least squares), "wls" (weighted by per-joint noise variances
-        from the OLS residuals), "rls" (one pass of recursive least squares),
-        "gradient" (one pass of the normalized gradient law); see :data:`METHODS`.
+        "wls" (default: weighted by per-joint noise variances from the OLS residuals,
+        re-estimated from the weighted ones), "ols" (ordinary least squares), "rls" (one
+        pass of recursive least squares), "gradient" (one pass of the normalized gradient
+        law); see :data:`METHODS`.
     validation : tuple or None
         ``(q, dq, ddq, tau)`` for the validation error (``(q, dq, ddq, tau, temp)`` with
         the temperature law).
@@ -384,7 +385,7 @@ def identify_chunks(
     robot: Robot,
     source,
     *,
-    method: str = "ols",
+    method: str = "wls",
     validation=None,
     base: BaseParameters | None = None,
     consistent: ConsistentOptions | bool | dict | None = None,
@@ -486,7 +487,7 @@ def identify_dataset(robot: Robot, dataset, *, ddq=None, validation=None, **kwar
             "the dataset has no accelerations (ddq): estimate them first "
             "(manip_id.signals) or pass ddq="
         )
-    method, base = kwargs.pop("method", "ols"), kwargs.pop("base", None)
+    method, base = kwargs.pop("method", "wls"), kwargs.pop("base", None)
     samples = (dataset.q, dataset.dq, acc_arr, dataset.tau, dataset.temp)
     return _identify(robot, samples, method, validation, base, _Opts(model=model, **kwargs))
 

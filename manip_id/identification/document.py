@@ -46,6 +46,7 @@ one, ``tau_hat = Y_b theta_b_nominal`` with ``theta_b_nominal = base.to_base(nom
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -54,6 +55,7 @@ from .._io.reading import read_json
 from ..errors import DataError, InputError, format_direction
 from ..metrics import finite_list, finite_or_none
 from ..physics.consistency import NONNEGATIVE_TERMS
+from .nominal_check import WORSE_PREFIX, result_worse_than_nominal
 
 #: std above this [%] flags a base parameter "poorly identified".
 POORLY_IDENTIFIED = 10.0
@@ -156,7 +158,8 @@ def result_warnings(
     convergence_limit: float = CONVERGENCE_LIMIT,
 ) -> list[str]:
     """Plain sentences: non-physical values by name, a large condition number, an online
-    estimate still moving; then the result's own warnings (no repeats)."""
+    estimate still moving, joints predicted worse than by the nominal model (with a "Do:"
+    line); then the result's own warnings (no repeats)."""
     out = []
     bad = [
         f"{n} = {x:.4g} {u}".rstrip()
@@ -199,6 +202,9 @@ def result_warnings(
                 f"changed by {100 * moved:.3g} % of the torque (limit "
                 f"{100 * convergence_limit:g} %)"
             )
+    worse = result_worse_than_nominal(result)
+    if worse is not None:
+        out.append(worse)
     for w in result.warnings:
         if w not in out:
             out.append(w)
@@ -413,6 +419,15 @@ def _per_joint(names, values) -> str:
     return ", ".join(f"{n} {_pct(v)}" for n, v in zip(names, values, strict=True))
 
 
+def method_label(doc: dict) -> str:
+    """The method of the model a document shows: "WLS", "OLS + consistent (SDP)", ..."""
+    label = str(doc.get("method", "")).upper()
+    solver = doc.get("consistent_solver") or {}
+    if doc.get("standard_parameters_kind") == "consistent" and solver:
+        label += f" + consistent ({str(solver.get('solver', '')).upper()})"
+    return label
+
+
 def summary_rows(doc: dict) -> dict[str, str]:
     """The headline figures of a saved result, label -> text (errors in percent, the nominal
     model beside the identified one): the first lines of :func:`result_text`, and the
@@ -420,7 +435,7 @@ def summary_rows(doc: dict) -> dict[str, str]:
     e = doc["relative_error"]
     model = doc.get("model", "dynamic")
     rows = {
-        "identification": f"{str(doc['method']).upper()} of {doc['robot']}"
+        "identification": f"{method_label(doc)} of {doc['robot']}"
         + ("" if model == "dynamic" else f" ({model} model)"),
         "base parameters": f"{doc['n_base']} of {doc.get('n_parameters', '?')}",
         "training samples": str(doc["n_samples"]),
@@ -511,18 +526,32 @@ def _standard_lines(doc: dict) -> list[str]:
         )
     plaus = doc.get("plausibility")
     if plaus:  # the consistent estimate's masses against the nominal ones
-        std = _mass_std(doc)
+        std, source = _mass_std(doc), mass_sources(doc)
         lines.append(
-            f"link masses [kg]{' +- std' if std else ''} (x nominal): "
+            f"link masses [kg]{' +- std' if std else ''} (x nominal; source): "
             + ", ".join(
                 f"{b['name']} {b['mass']:.3g}"
-                + ("" if std.get(b["name"]) is None else f" +- {std[b['name']]:.2g}")
+                + _mass_note(std.get(b["name"]), source.get(b["name"]))
                 + ("" if b.get("mass_ratio") is None else f" ({b['mass_ratio']:.2g}x)")
                 for b in plaus["bodies"]
             )
             + f"; total {plaus['total_mass']:.3g} (nominal {plaus['nominal_total_mass']:.3g})"
         )
+    active = doc.get("constraints_active") or []
+    if active:
+        lines.append("constraints active (values held there, std 'at bound'): " + ", ".join(active))
     return lines
+
+
+def _mass_note(std: float | None, source: str | None) -> str:
+    """`` +- std`` of a mass from the data; `` from the prior`` / `` at bound`` otherwise."""
+    if source == "prior":
+        return " from the prior (not in the dynamics, no data std)"
+    if source == "bound":
+        return " at bound"
+    if source == "not determined":
+        return " not determined"
+    return "" if std is None else f" +- {std:.2g}"
 
 
 def _mass_std(doc: dict) -> dict[str, float]:
@@ -530,6 +559,15 @@ def _mass_std(doc: dict) -> dict[str, float]:
     rows = doc.get("standard_parameters") or []
     masses = [r for r in rows if r["name"].endswith(".m") and r.get("std") is not None]
     return {r["name"][:-2]: float(r["std"]) for r in masses}
+
+
+def mass_sources(doc: Mapping) -> dict[str, str]:
+    """Link name -> where its mass comes from ("data", "prior", "bound", "not determined";
+    empty for documents without sources)."""
+    rows = doc.get("standard_parameters") or []
+    return {
+        r["name"][:-2]: str(r["source"]) for r in rows if r["name"].endswith(".m") and "source" in r
+    }
 
 
 def result_text(doc: dict, max_rows: int | None = None) -> str:
@@ -559,12 +597,28 @@ def verdict_text(doc: dict) -> str:
     e = doc["relative_error"]
     key = "validation" if e.get("validation") is not None else "train"
     part, mine, nominal = key.replace("train", "training"), e[key], e.get(f"nominal_{key}")
-    text = f"verdict: the identified model predicts the {part} torques to {100 * mine:.3f} %"
+    raw = doc.get("relative_error_raw") or {}
+    filtered = "filtered " if raw.get(key) is not None else ""
+    text = (
+        f"verdict: the identified model predicts the {filtered}{part} torques to {100 * mine:.3f} %"
+    )
     if nominal is not None:
         text += f" (nominal model {100 * nominal:.3f} %)"
+    if filtered:  # the raw figure too: it is the one a paper reports
+        text += f", the raw ones to {100 * raw[key]:.3f} %"
+        if raw.get(f"nominal_{key}") is not None:
+            text += f" (nominal model {100 * raw[f'nominal_{key}']:.3f} %)"
     consistent = doc.get("physically_consistent")
     if consistent is not None:
         text += ", physically consistent" if consistent else ", NOT physically consistent"
+    if doc.get("standard_parameters_kind") == "consistent":
+        held = [n for n, s in mass_sources(doc).items() if s == "bound"]
+        if held and all(s in ("bound", "prior") for s in mass_sources(doc).values()):
+            text += ", masses set by the bounds, not the data"
+        elif held:
+            text += f", the masses of {', '.join(held)} set by the bounds, not the data"
+    if any(str(w).startswith(WORSE_PREFIX) for w in doc.get("warnings") or []):
+        text += ", WORSE than the nominal model on some joints (warning above)"
     n = len(doc.get("warnings") or [])
     return text + (
         f", {n} warning(s) on the result (above)" if n else ", no warnings on the result"
@@ -580,6 +634,7 @@ def _white_covariance(result) -> dict:
 
 
 __all__ = [
+    "method_label",
     "CONDITION_LIMIT",
     "CONVERGENCE_LIMIT",
     "NOT_DETERMINED",

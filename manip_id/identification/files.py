@@ -40,7 +40,7 @@ def identify_datasets(
     validation=None,
     options: PreprocessOptions | None = None,
     window=None,
-    method: str = "ols",
+    method: str = "wls",
     base: BaseParameters | None = None,
     consistent: ConsistentOptions | bool | dict | None = None,
     rank: RankOptions | dict | None = None,
@@ -65,7 +65,7 @@ def identify_datasets(
     window : str or None
         Window applied to every file (training and validation) that has none.
     method : str
-        "ols" or "wls"; ``consistent``, ``rank`` as :func:`identify`.
+        "wls" (default) or "ols"; ``consistent``, ``rank`` as :func:`identify`.
     run : RunOptions or None
         ``workers``: several files in up to that many forked processes (one file: its
         samples in parts); ``scheduler``: each file one Dask task, the sums added there;

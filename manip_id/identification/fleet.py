@@ -165,7 +165,7 @@ def identify_files(
     robot: Robot,
     paths: Sequence[str | os.PathLike | FileSpec],
     *,
-    method: str = "ols",
+    method: str = "wls",
     validation: Sequence[str | os.PathLike | FileSpec] | None = None,
     base: BaseParameters | None = None,
     window=None,
@@ -188,7 +188,7 @@ def identify_files(
         :class:`~manip_id.datasets.FileSpec`), any format the real-log pipeline reads;
         each preprocessed on its own.
     method : str
-        ``"ols"`` or ``"wls"``.
+        ``"wls"`` (default) or ``"ols"``.
     validation : sequence or None
         Files for the validation error (each one task).
     base : BaseParameters or None

@@ -21,6 +21,7 @@ from ..identifiability import BaseParameters, RankAnalysis
 from ..robot.model import Robot
 from ..robot.regressor import DEFAULT_CHUNK, check_states, iter_regressor
 from .document import OWN_KEYS, read_result_json, result_text, result_to_dict
+from .nominal_check import WORSE_PREFIX
 from .result_schema import check_result_document
 
 
@@ -399,7 +400,7 @@ def _rank_from_dict(doc: dict, base: BaseParameters, names: list[str]) -> RankAn
 
 def _recomputed_warnings(doc: dict) -> set[str]:
     """The warnings :func:`result_to_dict` derives itself (recomputed on writing again)."""
-    starts = ("non-physical values: ", "the condition number ")
+    starts = ("non-physical values: ", "the condition number ", WORSE_PREFIX)
     undetermined = "base parameter(s) not determined by these data"
     return {
         w

@@ -305,7 +305,7 @@ def _validation(problem: Problem, estimate, nominal, chunk: int) -> RelativeErro
 
 def solve(
     problem: Problem,
-    method: str = "ols",
+    method: str = "wls",
     *,
     consistent: ConsistentOptions | None = None,
     minimum_norm: bool = False,
@@ -319,7 +319,7 @@ def solve(
     problem : Problem
         The sums, counts and records of the data.
     method : str
-        "ols", "wls", or the online law "rls" / "gradient" whose pass
+        "wls" (default), "ols", or the online law "rls" / "gradient" whose pass
         ``problem.online`` holds (its final estimate, the least-squares covariance at it).
     consistent : ConsistentOptions or None
         A physically consistent estimate (``ols`` / ``wls``).
