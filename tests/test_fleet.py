@@ -379,8 +379,8 @@ def test_portable_robot_pickles_small_and_identifies_the_same(robot, fleet, refe
     light = portable_robot(robot)
     blob = pickle.dumps(light)
     assert len(blob) < 2_000_000
-    res = identify(pickle.loads(blob), tuple(fleet[2]))
-    _close(res.estimate, reference["ols"].estimate)
+    res = identify(pickle.loads(blob), tuple(fleet[2]))  # WLS by default
+    _close(res.estimate, reference["wls"].estimate)
 
 
 def test_accumulator_pickles(robot, fleet):
@@ -474,8 +474,8 @@ def test_local_spec_starts_and_stops_its_cluster(robot, fleet, reference, files_
     before = {p.pid for p in psutil.Process().children(recursive=True)}
     res = identify(
         robot, fleet[0], run=RunOptions(scheduler="local:2"), files=FileOptions(audit=False)
-    )
-    _same(res, reference["ols"], honest=files_reference["ols"])
+    )  # WLS by default
+    _same(res, reference["wls"], "wls", honest=files_reference["wls"])
     deadline = time.monotonic() + 30
     while time.monotonic() < deadline:
         left = {p.pid for p in psutil.Process().children(recursive=True)} - before
@@ -562,6 +562,7 @@ def test_cli_cluster_by_address_and_by_file(robot, fleet, reference, files_refer
     res = identify(
         robot,
         fleet[0],
+        method="ols",
         run=RunOptions(scheduler=str(dask_cli["file"])),
         files=FileOptions(audit=False),
     )

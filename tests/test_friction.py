@@ -170,14 +170,14 @@ def test_nonlinear_laws_recover_shape_and_coefficients(robot, law, true_shape):
 
 
 @pytest.mark.parametrize("law", ["asymmetric", "stribeck", "sigmoid", "position", "load"])
-def test_selection_picks_the_true_law_on_validation_data(robot, law):
+def test_selection_picks_the_true_law_on_training_data(robot, law):
     train, _ = _data(robot, law, seed=3)
     valid, _ = _data(robot, law, seed=4, duration=20.0)
     opts = SelectionOptions(
         combine=False, stribeck_grid=(0.03, 0.1, 0.3), sigmoid_grid=(8.0, 25.0, 80.0)
     )
     res, sel = select_model(_fit(robot, train, valid), robot, opts)
-    assert sel.criterion == "validation error"
+    assert sel.criterion == "BIC on the training data"
     assert [j.chosen for j in sel.joints] == [law, law]
     doc = res.to_dict()["friction_selection"]
     assert [d["chosen"] for d in doc] == [law, law]
@@ -193,8 +193,8 @@ def test_linear_truth_is_not_fitted_worse(robot):
     linear = robot.with_terms(candidate_terms(robot.terms, "linear", SelectionOptions()))
     before = identify(linear, tuple(train), validation=valid).relative_error.validation
     res, sel = select_model(_fit(robot, train, valid), robot, SelectionOptions(combine=False))
-    # the laws that contain the linear one win on noise by a hair only: within the 0.5 %
-    # tolerance, the simpler model is kept, and predicts as well as before
+    # the laws that contain the linear one win on noise by a hair only: the BIC's
+    # ln(n) per parameter keeps the simpler model, which predicts as well as before
     assert [j.chosen for j in sel.joints] == ["linear", "linear"]
     assert res.relative_error.validation <= before * (1 + 1e-9)
     for j in sel.joints:
@@ -206,7 +206,7 @@ def test_bic_without_validation_data(robot):
     train, _ = _data(robot, "stribeck", seed=7)
     opts = SelectionOptions(candidates=("linear", "stribeck"), combine=False)
     _, sel = select_model(lambda r: identify(r, tuple(train)), robot, opts)
-    assert sel.criterion == "BIC"
+    assert sel.criterion == "BIC on the training data"
     assert [j.chosen for j in sel.joints] == ["stribeck", "stribeck"]
 
 
@@ -314,7 +314,7 @@ def test_cli_friction_auto_on_data_files(robot, tmp_path, capsys):
     argv = ["identify", "double_pendulum", "--data", paths[0], "--validate", paths[1]]
     assert main([*argv, "--friction", "auto", "--json", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "friction model per joint (by validation error):" in text
+    assert "friction model per joint (by BIC on the training data):" in text
     report = json.loads(out.read_text())
     table = report["friction_selection"]
     assert [j["joint"] for j in table] == robot.dof_names

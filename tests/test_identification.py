@@ -106,10 +106,12 @@ def test_monte_carlo_predicted_std_matches_empirical(name):
         assert np.all(np.abs(ratio - 1) < 0.2), (method, ratio.min(), ratio.max())
         bias = np.mean(est, axis=0) - base.to_base(theta)
         assert np.all(np.abs(bias) < 5 * np.std(est, axis=0) / np.sqrt(200))
-    # identify() on one noisy run gives the same numbers as the accumulator path
+    # identify() (WLS by default) on one noisy run gives the same numbers as the accumulator path
     tau = tau0 + 0.5 * rng.standard_normal(tau0.shape)
     res = identify(robot, (q, dq, ddq, tau), base=base)
-    sol = solve_accumulator(InformationAccumulator(base.n_base, robot.nv).add(Yb, tau))
+    sol = solve_accumulator(
+        InformationAccumulator(base.n_base, robot.nv).add(Yb, tau), method="wls"
+    )
     np.testing.assert_allclose(res.estimate, sol.estimate, rtol=1e-10)
     np.testing.assert_allclose(res.std, sol.std, rtol=1e-8)
 

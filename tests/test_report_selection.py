@@ -28,8 +28,15 @@ def test_report_shows_the_candidate_table(tmp_path, capsys):
     capsys.readouterr()
     doc = json.loads(out.read_text())
     page = html.unescape((folder / "index.html").read_text())
-    assert "Friction model per joint (chosen by validation error)" in page
-    for heading in ("joint", "model", "chosen", "parameters", "shape", "validation error [%]"):
+    assert "Friction model per joint (chosen by BIC on the training data)" in page
+    for heading in (
+        "joint",
+        "model",
+        "chosen",
+        "parameters",
+        "shape",
+        "validation error [%] (not used)",
+    ):
         assert f">{heading}<" in page
     rows = report_selection_rows(doc)
     table = doc["friction_selection"]

@@ -167,14 +167,27 @@ def audit_files(
     """:func:`audit_file` for every file of ``files`` (specs or their texts), in order.
 
     ``window`` (text or :class:`~manip_id.datasets.Window`) applies to each file that has
-    none; ``cache``: see :func:`audit_file`.
+    none; ``cache``: see :func:`audit_file`. A file that cannot be read does not stop the
+    others: it is named in :attr:`Audit.failed` with its reason (:meth:`Audit.check`
+    raises for them all at once); when no file can be read, the one error names each.
     """
     if isinstance(files, (str, FileSpec)) or not hasattr(files, "__iter__"):
         files = [files]
     specs = [parse_file_spec(f, window=window) for f in files]
     if not specs:
         raise InputError("no data files given")
-    return Audit(robot.name, [audit_file(robot, s, options, cache=cache) for s in specs])
+    done, failed = [], {}
+    for s in specs:
+        try:
+            done.append(audit_file(robot, s, options, cache=cache))
+        except DataError as exc:
+            failed[s.label] = str(exc)
+    audit = Audit(robot.name, done, failed)
+    if not done:
+        if len(failed) == 1:
+            raise DataError(next(iter(failed.values())))
+        audit.check()
+    return audit
 
 
 # ---------------------------------------------------------------- motion

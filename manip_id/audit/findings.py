@@ -38,10 +38,18 @@ def torque_findings(
             )
         bad = s is not None and (s < 0 or not 1.0 / FAR <= abs(s) <= FAR)
         flagged |= bad
-        gains.append(float(f"{1.0 / s:.4g}") if bad and s is not None else 1.0)
+        gains.append(None if s is None else float(f"{1.0 / s:.4g}") if bad else 1.0)
     if flagged:
         suggestions["torque_scale"] = gains
-        out.append("try --torque-scale " + ",".join(f"{g:g}" for g in gains))
+        out.append("try --torque-scale " + ",".join("?" if g is None else f"{g:g}" for g in gains))
+        unknown = [j.joint for j, g in zip(audits, gains, strict=True) if g is None]
+        if unknown:  # a 1 there would keep their amperes: say so instead
+            out.append(
+                f"scale not determined for {', '.join(unknown)} (the nominal model explains "
+                "too little of their torque, or they hardly move): give their gains in place "
+                "of ? (the drive's torque constant times the gear ratio [N m / A]; "
+                "manip-id drive-gains measures them)"
+            )
     d = next((j.delay for j in audits if j.delay is not None), None)  # the file's
     if d is not None and abs(d) > DELAY_STEPS * step and gain is not None and gain >= DELAY_GAIN:
         word = "lags" if d > 0 else "leads"

@@ -9,7 +9,7 @@ import numpy as np
 
 from ..datasets import FileSpec, Window
 from ..datasets.stream import READ_CHUNK
-from ..errors import InputError
+from ..errors import DataError, InputError
 
 
 @dataclass(frozen=True)
@@ -81,7 +81,8 @@ class FileAudit:
     """The audit of one file: its joints, its findings (sentences) and what to pass.
 
     ``suggestions`` holds the options the findings recommend: ``torque_scale`` (one
-    per joint), ``delay`` [s] (one per joint), ``trim_standstill`` (bool). ``kept``:
+    per joint; None for a joint whose scale these data do not determine), ``delay`` [s]
+    (one per joint), ``trim_standstill`` (bool). ``kept``:
     the window ``--trim-standstill`` keeps (None: nothing to trim). ``delay_gain``: the
     share of the held-out torque error the file's delay removes against no delay (a
     delay is reported as a finding only when it removes at least :data:`DELAY_GAIN`).
@@ -125,6 +126,8 @@ class Audit:
 
     robot: str
     files: list[FileAudit]
+    #: the files that could not be audited: label -> why (the others are audited all the same)
+    failed: dict[str, str] = field(default_factory=dict)
 
     @property
     def findings(self) -> list[str]:
@@ -132,7 +135,19 @@ class Audit:
         return [f"{fa.file}: {f}" for fa in self.files for f in fa.findings]
 
     def to_dict(self) -> dict:
-        return {"robot": self.robot, "files": [fa.to_dict() for fa in self.files]}
+        out: dict = {"robot": self.robot, "files": [fa.to_dict() for fa in self.files]}
+        if self.failed:
+            out["failed"] = dict(self.failed)
+        return out
+
+    def check(self) -> None:
+        """Raise one :class:`DataError` naming every file that could not be audited."""
+        if self.failed:
+            n = len(self.failed) + len(self.files)
+            raise DataError(
+                f"{len(self.failed)} of {n} file(s) cannot be read: "
+                + "; ".join(self.failed.values())
+            )
 
     def trimmed(self) -> list[FileSpec]:
         """The files with the windows ``--trim-standstill`` keeps (others as they were)."""
@@ -160,6 +175,8 @@ class Audit:
                     f"{100 * fa.delay_gain:.2g} % of the held-out torque error)"
                 )
             lines += [f"  - {f}" for f in fa.findings] or ["  - no finding"]
+        for label, why in self.failed.items():
+            lines += [f"{label}: not audited", f"  - {why}"]
         return "\n".join(lines)
 
 

@@ -63,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
     )
     audit = audit_files(robot, specs, options)
     print(audit.table())
+    audit.check()  # every file audited first; then one error naming each unreadable one
     if args.json:
         outputs.write_json(args.json, {"audit": audit.to_dict()})
     if args.report_claim is not None:

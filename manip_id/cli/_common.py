@@ -38,8 +38,8 @@ def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
         help="comma-separated friction laws per joint: viscous, coulomb, offset, asymmetric, "
         "stribeck, sigmoid, position[:K], load, temperature (needs a temp field: --column "
         "temp=...), hysteresis (docs/friction.md); 'auto' (identify --data): "
-        "chosen per joint by validation error, else BIC [default: the robot profile's "
-        "(robots/ROBOT.toml), else none]",
+        "chosen per joint by the training data's BIC (never the validation data) "
+        "[default: the robot profile's (robots/ROBOT.toml), else none]",
     )
     parser.add_argument(
         "--armature",
@@ -341,8 +341,10 @@ def add_file_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument(
         "--drop-bad-rows",
         action="store_true",
-        help="drop (and count) bad rows instead of refusing the file: NaN/Inf, values beyond "
-        "the plausible magnitudes of their unit, malformed CSV lines [default: refuse]",
+        help="drop (and count per reason) bad rows instead of refusing the file: NaN/Inf, "
+        "values beyond the plausible magnitudes of their unit, malformed CSV lines, "
+        "corrupted time stamps and isolated position spikes (running median) "
+        "[default: refuse; a truncated last CSV line is always dropped, with a note]",
     )
 
 

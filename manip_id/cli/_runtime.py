@@ -162,6 +162,7 @@ def before_fit(robot, specs, options, args, *, currents: bool = False, cache=Non
     """
     audit = audit_files(robot, specs, _audit_options(options, currents), cache=cache)
     print(audit.table())
+    audit.check()  # every file audited first; then one error naming each unreadable one
     if getattr(args, "trim_standstill", False):
         specs = audit.trimmed()
         kept = [s.label for s in specs]

@@ -98,7 +98,7 @@ def register(sub) -> None:
         action="store_true",
         help="optimize the excitation (condition number) instead of a random one",
     )
-    p.add_argument("--method", choices=METHODS, default="ols", help="estimator [default ols]")
+    p.add_argument("--method", choices=METHODS, default="wls", help="estimator [default wls]")
     p.add_argument(
         "--uncertainty",
         choices=("auto", "white", "hac"),

@@ -270,6 +270,20 @@ def _parse(
     return table, bad
 
 
+#: The message of a malformed last line without a line end (a log cut short) starts so;
+#: the streamed reader drops such a line with a note instead of refusing the file.
+TRUNCATED = "truncated last line"
+
+
+def _mark_truncated(bad: dict[int, str], raw: list, lines: list, line_no: int) -> None:
+    """Say so in ``bad`` when the chunk's last line is malformed and has no line end."""
+    k = len(lines) - 1
+    last = raw[-1] if raw else ""
+    ended = last.endswith(b"\n") if isinstance(last, bytes) else str(last).endswith("\n")
+    if k in bad and raw and not ended:
+        bad[k] = f"{TRUNCATED} {line_no + k + 1} (no line end; {bad[k]})"
+
+
 class CsvSource:
     """Rows of a CSV dataset read ``chunk`` lines at a time (see the module docstring).
 
@@ -315,6 +329,7 @@ class CsvSource:
                     if not lines:
                         return
                     table, bad = _parse(lines, c.delimiter, self.path, line_no, width)
+                    _mark_truncated(bad, raw, lines, line_no)
                 self.malformed.update({row + k: msg for k, msg in bad.items()})
                 row += len(lines)
                 line_no += len(lines)

@@ -12,8 +12,10 @@ an object with ``path``, ``format``, ``layout`` (:class:`~.layout.Layout`),
 2. bad rows: refused (the error names the file, field, row and joint, or the CSV
    line) or, with ``drop_bad_rows``, dropped and counted per reason
    (:attr:`RowCounts.reasons`): non-finite values, malformed CSV lines (a wrong
-   field count, a truncated last line) and values beyond the magnitude bounds that
-   would refuse the file (:data:`~manip_id._checks.MEASURED_LIMITS`, e.g. 1e184);
+   field count), values beyond the magnitude bounds that would refuse the file
+   (:data:`~manip_id._checks.MEASURED_LIMITS`, e.g. 1e184), corrupted time stamps and
+   isolated position spikes (:mod:`~.outliers`: running medians); a truncated last CSV
+   line (no line end: a log cut short) is always dropped, with a note;
 3. the value checks of :func:`~.core.check_values` on every field, and time
    increasing strictly across blocks;
 4. the torque scale: ``tau_j <- G_j tau_j`` (drive gains [N m / A], gear ratios).
@@ -35,9 +37,10 @@ from .._io.reading import check_data_path
 from ..errors import DataError, InputError
 from .adjust import TIME_UNITS, AdjustedSource, delay_vector
 from .core import Dataset, check_time, check_values
-from .csv import CsvSource
+from .csv import TRUNCATED, CsvSource
 from .layout import Layout
 from .npz import NpzSource
+from .outliers import bad_time_stamps, position_spikes
 from .panda import PANDA_FILES, is_panda_log, load_panda_gaz2019
 from .replay import RowCache
 from .rosbag import BagSource, is_bag
@@ -163,7 +166,8 @@ class RowCounts:
     t_file_start: float | None = None
     n_file_rows: int | None = None
     #: rows dropped per reason: "non-finite", "implausible" (beyond the magnitude bounds
-    #: of :data:`~manip_id._checks.MEASURED_LIMITS`), "malformed line" (CSV)
+    #: of :data:`~manip_id._checks.MEASURED_LIMITS`), "malformed line" (CSV),
+    #: "truncated last line" (CSV), "time stamp", "position spike" (:mod:`~.outliers`)
     reasons: dict[str, int] = field(default_factory=dict)
 
     def drop(self, reason: str, rows: np.ndarray) -> None:
@@ -224,6 +228,18 @@ def _drop_non_finite(source, block, raw, finite, drop_bad_rows: bool, counts: Ro
     lay: Layout = source.layout
     malformed = getattr(source, "malformed", None) or {}
     bad = np.flatnonzero(~finite)
+    cut = np.array([malformed.get(int(r), "").startswith(TRUNCATED) for r in raw[bad]], bool)
+    if cut.any():  # a log cut short: its last line goes, whatever drop_bad_rows says
+        warnings.warn(f"{source.path}: {malformed[int(raw[bad[cut][0]])]}: dropped", stacklevel=4)
+        counts.drop("truncated last line", raw[bad[cut]])
+        finite = finite.copy()
+        finite[bad[cut]] = True  # not to be seen again below
+        keep = np.ones(block.shape[0], dtype=bool)
+        keep[bad[cut]] = False
+        block, raw, finite, bad = block[keep], raw[keep], finite[keep], bad[~cut]
+        bad = np.flatnonzero(~finite)
+        if not bad.size:
+            return block, raw
     if not drop_bad_rows:
         hint = " (pass --drop-bad-rows / drop_bad_rows=True to drop such rows)"
         lines = [int(r) for r in raw[bad] if int(r) in malformed]
@@ -255,6 +271,31 @@ def _drop_implausible(lay: Layout, block, raw, counts: RowCounts):
             counts, lay, int(np.flatnonzero(_implausible_cells(block[b : b + 1], lay)[0])[0])
         )
     return block[~wild], raw[~wild]
+
+
+def _drop_outliers(lay: Layout, block, raw, counts: RowCounts, previous_t):
+    """``(block, raw)`` without corrupted time stamps and position spikes (counted)."""
+    stamps = bad_time_stamps(block[:, 0], previous_t)
+    spikes = position_spikes(block[:, lay.slices["q"]]) & ~stamps
+    for reason, rows, name in (("time stamp", stamps, "t"), ("position spike", spikes, "q")):
+        if rows.any():
+            counts.drop(reason, raw[rows])
+            counts.dropped_fields[name] = counts.dropped_fields.get(name, 0) + int(rows.sum())
+    bad = stamps | spikes
+    return (block[~bad], raw[~bad]) if bad.any() else (block, raw)
+
+
+def _seconds_window(block: np.ndarray, raw: np.ndarray, window: Window, t0):
+    """The rows of ``block`` inside a window in seconds from the file's first stamp
+    ``t0``, and whether the block's last row is already past its stop."""
+    rel = block[:, 0] - t0
+    inside = np.ones(rel.shape, dtype=bool)
+    if window.start is not None:
+        inside &= rel >= window.start
+    if window.stop is not None:
+        inside &= rel < window.stop
+    past = window.stop is not None and bool(rel[-1] >= window.stop)
+    return block[inside], raw[inside], past
 
 
 def iter_rows(
@@ -303,24 +344,25 @@ def iter_rows(
             block, raw = _drop_non_finite(source, block, raw, finite, drop_bad_rows, counts)
         if drop_bad_rows and block.shape[0]:
             block, raw = _drop_implausible(lay, block, raw, counts)
+            block, raw = _drop_outliers(lay, block, raw, counts, previous_t)
         if window is not None and window.unit == "s" and block.shape[0]:
-            rel = block[:, t_col] - t0
-            inside = np.ones(rel.shape, dtype=bool)
-            if window.start is not None:
-                inside &= rel >= window.start
-            if window.stop is not None:
-                inside &= rel < window.stop
-            past = window.stop is not None and rel[-1] >= window.stop
-            block, raw = block[inside], raw[inside]
+            block, raw, past = _seconds_window(block, raw, window, t0)
             if past and not block.shape[0]:
                 break
         if not block.shape[0]:
             continue
-        for name, s in () if checked else lay.slices.items():
-            if name == "t":
-                check_values("t", block[:, 0], 1, offset=int(raw[0]))
-            else:
-                check_values(name, block[:, s], 2, names if name != "q" else None, int(raw[0]))
+        try:
+            for name, s in () if checked else lay.slices.items():
+                if name == "t":
+                    check_values("t", block[:, 0], 1, offset=int(raw[0]))
+                else:
+                    check_values(name, block[:, s], 2, names if name != "q" else None, int(raw[0]))
+        except DataError as exc:
+            if drop_bad_rows:
+                raise
+            raise DataError(
+                f"{exc} (pass --drop-bad-rows / drop_bad_rows=True to drop such rows)"
+            ) from exc
         t = block[:, t_col]
         try:
             check_time(t, previous=previous_t, rows=raw, previous_row=previous_row)

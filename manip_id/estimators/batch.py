@@ -39,8 +39,15 @@ INFO_RANK_RTOL = 1e-6
 STACKED_RANK_RTOL = 1e-10
 #: Scaled condition number of the regressor above which Cholesky gives way to eigen.
 COND_LIMIT = 1e6
-#: Weighted least squares: no joint variance counts below this fraction of the largest.
-WLS_MIN_VARIANCE_RATIO = 1e-6
+#: Weighted least squares: no joint's noise standard deviation counts below this
+#: fraction of that joint's own root-mean-square output (a per-joint floor: a floor
+#: relative to the largest joint's variance would cap the weight of a quiet wrist,
+#: 0.3 N m beside 40 N m, and hand its parameters back to the loud joints' noise).
+WLS_MIN_RELATIVE_NOISE = 1e-7
+#: ... and no weight exceeds the smallest by more than this (a noise-free joint beside
+#: noisy ones would otherwise make the weighted information matrix numerically singular;
+#: 1e10 is a noise-std ratio of 1e5, far beyond a quiet wrist's 1e-2 of a shoulder's).
+WLS_MAX_WEIGHT_RATIO = 1e10
 
 
 def _rank_error(null: np.ndarray, rank: int, names, scale: np.ndarray) -> RankDeficiencyError:
@@ -214,11 +221,14 @@ def solve_accumulator(
 def _weights(var: np.ndarray, zz: np.ndarray, n: int) -> np.ndarray:
     """Inverse variances ``1/sigma_j^2``, floored so that no joint gets an absurd weight.
 
-    A variance counts at least ``WLS_MIN_VARIANCE_RATIO * max_j sigma_j^2`` (weight
-    ratios stay below 1e6) and at least the round-off level ``(1e-7)^2 zz_j / n`` of
-    a noise-free fit.
+    Joint ``j``'s variance counts at least ``(WLS_MIN_RELATIVE_NOISE)^2 zz_j / n``, the
+    round-off level of a noise-free fit of that joint's own outputs, and at least
+    ``max_j sigma_j^2 / WLS_MAX_WEIGHT_RATIO`` (numerical safety only: the old floor of
+    1e-6 of the largest variance is what capped a quiet wrist's weight). A joint with no
+    output and no residual gets weight 1.
     """
-    floor = np.maximum(WLS_MIN_VARIANCE_RATIO * float(var.max()), 1e-14 * zz / max(n, 1))
+    floor = WLS_MIN_RELATIVE_NOISE**2 * np.asarray(zz, dtype=float) / max(n, 1)
+    floor = np.maximum(floor, WLS_MAX_WEIGHT_RATIO**-1 * float(np.max(var)))
     floor = np.where(floor > 0, floor, 1.0)
     return 1.0 / np.maximum(var, floor)
 

@@ -19,12 +19,12 @@ joints, also per joint; the training one comes from the sums
 Members: :mod:`~.front` (the door), :mod:`~.data_sources` (what ``data`` is),
 :mod:`~.options` (one frozen dataclass per concern), :mod:`~.problem` (sums, counts,
 records; the accumulation), :mod:`~.solve`, :mod:`~.result` and :mod:`~.document` (the
-one schema and its text), :mod:`~.run_context` (what a run adds to it), :mod:`~.arrays`
-(in-memory data and blocks), :mod:`~.file_run` (the file pipeline: audit, scans,
-temperature reference, friction choice), :mod:`~.reading`, :mod:`~.file_sums`,
-:mod:`~.files` (log files accumulated, here or as tasks), :mod:`~.tasks` (the tasks of a
-distributed run).
-"""
+one schema), :mod:`~.document_text` (its text), :mod:`~.run_context` (what a run adds to
+it), :mod:`~.arrays` (in-memory data and blocks), :mod:`~.file_run` (the file pipeline:
+audit, scans, temperature reference, friction choice), :mod:`~.reading`,
+:mod:`~.file_sums`, :mod:`~.files` (log files accumulated, here or as tasks),
+:mod:`~.tasks` (the tasks of a distributed run), :mod:`~.nominal_check` (joints the fit
+made worse than the nominal model)."""
 
 from __future__ import annotations
 
@@ -37,13 +37,11 @@ from .document import (
     POORLY_IDENTIFIED,
     parameter_flags,
     read_result_json,
-    result_text,
     result_to_dict,
     result_warnings,
     structural_directions,
-    summary_rows,
-    verdict_text,
 )
+from .document_text import result_text, summary_rows, verdict_text
 from .file_run import FileOptions
 from .file_sums import FileAccumulation, accumulate_file, accumulate_files, merge_accumulations
 from .files import FileEstimate

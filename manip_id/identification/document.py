@@ -1,10 +1,10 @@
-"""One schema for identification results: the JSON of ``--json`` and result.json, and its text.
+"""One schema for identification results: the JSON of ``--json`` and result.json.
 
 :meth:`IdentificationResult.to_dict() <manip_id.identification.IdentificationResult.to_dict>`
 builds the dictionary (:func:`result_to_dict`), :func:`manip_id.identification.load_result`
 reads it back (through :func:`read_result_json`, the one reader of a saved result), and
-:func:`result_text` is the one text rendering of a result (``table()``, the CLI, ``show``,
-reports; :func:`summary_rows` its headline figures). The keys::
+:func:`~manip_id.identification.document_text.result_text` is the one text rendering of
+a result (``table()``, the CLI, ``show``, reports). The keys::
 
     method, model, robot, n_samples, n_validation_samples, n_parameters, n_base,
     joints, joint_terms, outputs
@@ -54,6 +54,7 @@ from .._io.reading import read_json
 from ..errors import DataError, InputError, format_direction
 from ..metrics import finite_list, finite_or_none
 from ..physics.consistency import NONNEGATIVE_TERMS
+from .nominal_check import result_worse_than_nominal
 
 #: std above this [%] flags a base parameter "poorly identified".
 POORLY_IDENTIFIED = 10.0
@@ -156,7 +157,8 @@ def result_warnings(
     convergence_limit: float = CONVERGENCE_LIMIT,
 ) -> list[str]:
     """Plain sentences: non-physical values by name, a large condition number, an online
-    estimate still moving; then the result's own warnings (no repeats)."""
+    estimate still moving, joints predicted worse than by the nominal model (with a "Do:"
+    line); then the result's own warnings (no repeats)."""
     out = []
     bad = [
         f"{n} = {x:.4g} {u}".rstrip()
@@ -199,6 +201,9 @@ def result_warnings(
                 f"changed by {100 * moved:.3g} % of the torque (limit "
                 f"{100 * convergence_limit:g} %)"
             )
+    worse = result_worse_than_nominal(result)
+    if worse is not None:
+        out.append(worse)
     for w in result.warnings:
         if w not in out:
             out.append(w)
@@ -405,172 +410,6 @@ def read_result_json(path, what: str = "result") -> dict:
     return doc
 
 
-def _pct(x) -> str:
-    return "n/a" if x is None else f"{100 * float(x):.3f} %"
-
-
-def _per_joint(names, values) -> str:
-    return ", ".join(f"{n} {_pct(v)}" for n, v in zip(names, values, strict=True))
-
-
-def summary_rows(doc: dict) -> dict[str, str]:
-    """The headline figures of a saved result, label -> text (errors in percent, the nominal
-    model beside the identified one): the first lines of :func:`result_text`, and the
-    summary table of a report."""
-    e = doc["relative_error"]
-    model = doc.get("model", "dynamic")
-    rows = {
-        "identification": f"{str(doc['method']).upper()} of {doc['robot']}"
-        + ("" if model == "dynamic" else f" ({model} model)"),
-        "base parameters": f"{doc['n_base']} of {doc.get('n_parameters', '?')}",
-        "training samples": str(doc["n_samples"]),
-        "solver": str(doc.get("solver", "")),
-        "condition number": "n/a"
-        if doc.get("condition_number") is None
-        else f"{doc['condition_number']:.4g}",
-        "relative torque error, train": f"{_pct(e.get('train'))} (nominal model "
-        f"{_pct(e.get('nominal_train'))})",
-        "relative torque error, validation": f"{_pct(e.get('validation'))} (nominal model "
-        f"{_pct(e.get('nominal_validation'))})",
-    }
-    if doc.get("n_validation_samples") is not None:
-        rows["validation samples"] = str(doc["n_validation_samples"])
-    for key in ("train_moving", "validation_moving"):
-        if e.get(key) is not None:
-            rows[f"relative torque error, {key.replace('_', ' ')} rows"] = _pct(e[key])
-    raw = doc.get("relative_error_raw")
-    if raw:
-        rows["relative error against the raw torques"] = (
-            f"train {_pct(raw.get('train'))}, validation {_pct(raw.get('validation'))}"
-        )
-    if doc.get("reference_torques"):
-        rows["reference torques"] = str(doc["reference_torques"])
-    if doc.get("uncertainty"):
-        rows["standard deviations"] = uncertainty_text(doc["uncertainty"])
-    return rows
-
-
-def uncertainty_text(u: dict) -> str:
-    """How the standard deviations were made, in words (the ``uncertainty`` section)."""
-    if u.get("method") == "hac":
-        bw = u.get("bandwidth")
-        text = (
-            f"autocorrelation-consistent (hac, {u.get('n_blocks')} blocks of "
-            f"{u.get('block_samples') or 0:.0f} samples"
-            + ("" if bw is None else f", bandwidth {bw:.3g} blocks")
-            + ")"
-        )
-        if u.get("inflation") is not None:
-            text += f", {u['inflation']:.3g} x the white-noise ones"
-        return text
-    text = "white noise, sigma^2 (Y^T Y)^-1"
-    return text + (f" ({u['reason']})" if u.get("reason") else "")
-
-
-def _parameter_lines(rows: list[dict], max_rows: int | None) -> list[str]:
-    w = max([len("parameter")] + [len(r["name"]) for r in rows])
-    lines = [
-        f"{'parameter':<{w}}  {'value':>12}  {'std':>10}  {'std %':>8}  {'nominal':>12}  "
-        f"{'unit':<8}  flags"
-    ]
-    shown = rows if max_rows is None else rows[:max_rows]
-    for r in shown:
-        if NOT_DETERMINED in r.get("flags", []) or r["value"] is None:
-            val, std, sp = f"{'not determined':>12}", f"{'-':>10}", f"{'-':>8}"
-        else:
-            val = f"{r['value']:12.6g}"
-            std = "n/a" if r.get("std") is None else f"{r['std']:10.4g}"
-            sp = "inf" if r["std_percent"] is None else f"{r['std_percent']:8.3g}"
-        nom = "n/a" if r.get("nominal") is None else f"{r['nominal']:12.6g}"
-        lines.append(
-            f"{r['name']:<{w}}  {val:>12}  {std:>10}  {sp:>8}  {nom:>12}  "
-            f"{r.get('unit', ''):<8}  " + ", ".join(r.get("flags", []))
-        )
-    if len(shown) < len(rows):
-        lines.append(f"... {len(rows) - len(shown)} more")
-    return lines
-
-
-def _standard_lines(doc: dict) -> list[str]:
-    if doc.get("physically_consistent") is None:
-        return []
-    kind = doc.get("standard_parameters_kind", "standard parameters")
-    solver = doc.get("consistent_solver") or {}
-    what = (
-        f"consistent estimate ({solver.get('solver')}, {solver.get('status')}, prior "
-        f"{solver.get('prior')}, weight {solver.get('prior_weight')})"
-        if solver
-        else f"{kind} standard parameters of the least-squares fit"
-    )
-    lines = [f"{what}: physically consistent {'yes' if doc['physically_consistent'] else 'NO'}"]
-    bodies = (doc.get("consistency") or {}).get("bodies") or []
-    if bodies:
-        lines.append(
-            "min eigenvalue of each pseudo-inertia J: "
-            + ", ".join(f"{b['name']} {b['min_eigenvalue']:.3g}" for b in bodies)
-        )
-    plaus = doc.get("plausibility")
-    if plaus:  # the consistent estimate's masses against the nominal ones
-        std = _mass_std(doc)
-        lines.append(
-            f"link masses [kg]{' +- std' if std else ''} (x nominal): "
-            + ", ".join(
-                f"{b['name']} {b['mass']:.3g}"
-                + ("" if std.get(b["name"]) is None else f" +- {std[b['name']]:.2g}")
-                + ("" if b.get("mass_ratio") is None else f" ({b['mass_ratio']:.2g}x)")
-                for b in plaus["bodies"]
-            )
-            + f"; total {plaus['total_mass']:.3g} (nominal {plaus['nominal_total_mass']:.3g})"
-        )
-    return lines
-
-
-def _mass_std(doc: dict) -> dict[str, float]:
-    """Link name -> the std of its mass [kg] among the standard parameters (those with one)."""
-    rows = doc.get("standard_parameters") or []
-    masses = [r for r in rows if r["name"].endswith(".m") and r.get("std") is not None]
-    return {r["name"][:-2]: float(r["std"]) for r in masses}
-
-
-def result_text(doc: dict, max_rows: int | None = None) -> str:
-    """A result (its :func:`result_to_dict` dictionary) as text: the headline figures
-    (:func:`summary_rows`), the errors per joint, the parameter table with std, nominal
-    values, units and flags ("not determined" instead of a number no one can use), the
-    standard parameters' check and the warnings. The one rendering of a result."""
-    lines = [f"{k}: {v}" for k, v in summary_rows(doc).items()]
-    e = doc["relative_error"]
-    outputs = doc.get("outputs") or doc.get("joints") or []
-    if e.get("train_per_joint") is not None and outputs:
-        lines.append("train error per joint: " + _per_joint(outputs, e["train_per_joint"]))
-    if e.get("per_joint_validation") is not None:
-        lines.append(
-            "validation error per joint: " + _per_joint(doc["joints"], e["per_joint_validation"])
-        )
-    lines += _parameter_lines(list(doc["base_parameters"]), max_rows)
-    lines += _standard_lines(doc)
-    lines += [f"warning: {x}" for x in doc.get("warnings", [])]
-    return "\n".join(lines)
-
-
-def verdict_text(doc: dict) -> str:
-    """The one-line verdict of a result document: the relative torque error of the
-    identified and the nominal model on validation (else training) data, whether the
-    standard parameters are physical, and how many warnings were given."""
-    e = doc["relative_error"]
-    key = "validation" if e.get("validation") is not None else "train"
-    part, mine, nominal = key.replace("train", "training"), e[key], e.get(f"nominal_{key}")
-    text = f"verdict: the identified model predicts the {part} torques to {100 * mine:.3f} %"
-    if nominal is not None:
-        text += f" (nominal model {100 * nominal:.3f} %)"
-    consistent = doc.get("physically_consistent")
-    if consistent is not None:
-        text += ", physically consistent" if consistent else ", NOT physically consistent"
-    n = len(doc.get("warnings") or [])
-    return text + (
-        f", {n} warning(s) on the result (above)" if n else ", no warnings on the result"
-    )
-
-
 def _white_covariance(result) -> dict:
     """``{"covariance_white": rows}`` when the result carries the white-noise covariance."""
     cov = getattr(result, "covariance_white", None)
@@ -587,12 +426,8 @@ __all__ = [
     "POORLY_IDENTIFIED",
     "parameter_flags",
     "read_result_json",
-    "result_text",
     "result_to_dict",
     "errors_to_dict",
     "result_warnings",
     "structural_directions",
-    "summary_rows",
-    "uncertainty_text",
-    "verdict_text",
 ]

@@ -39,7 +39,7 @@ def build_problem(
     data,
     *,
     validation=None,
-    method: str = "ols",
+    method: str = "wls",
     base: BaseParameters | None = None,
     consistent: ConsistentOptions | bool | dict | None = None,
     minimum_norm: bool = False,
@@ -120,7 +120,7 @@ def identify(
     data,
     *,
     validation=None,
-    method: str = "ols",
+    method: str = "wls",
     base: BaseParameters | None = None,
     consistent: ConsistentOptions | bool | dict | None = None,
     minimum_norm: bool = False,
@@ -157,8 +157,9 @@ def identify(
         Data for the validation error, of the same kind (arrays or a Dataset with arrays,
         files with files, blocks with blocks).
     method : str
-        "ols", "wls" (weighted by per-joint noise variances), "rls" or "gradient" (one
-        pass of the online law, in sample order; arrays and files).
+        "wls" (default: weighted by per-joint noise variances from the OLS residuals,
+        re-estimated from the weighted ones), "ols" (ordinary least squares), "rls" or
+        "gradient" (one pass of the online law, in sample order; arrays and files).
     base : BaseParameters or None
         Base parametrization; default the structural one of ``analyze(robot)``.
     consistent : ConsistentOptions, bool or None

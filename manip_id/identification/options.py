@@ -386,7 +386,7 @@ class SolveSettings:
         The covariance behind ``std`` (None: ``"auto"``).
     """
 
-    method: str = "ols"
+    method: str = "wls"
     consistent: ConsistentOptions | None = None
     minimum_norm: bool = False
     uncertainty: UncertaintyOptions | None = None

@@ -20,7 +20,9 @@ from ..estimators.consistent import StandardEstimate
 from ..identifiability import BaseParameters, RankAnalysis
 from ..robot.model import Robot
 from ..robot.regressor import DEFAULT_CHUNK, check_states, iter_regressor
-from .document import OWN_KEYS, read_result_json, result_text, result_to_dict
+from .document import OWN_KEYS, read_result_json, result_to_dict
+from .document_text import result_text
+from .nominal_check import WORSE_PREFIX
 from .result_schema import check_result_document
 
 
@@ -243,7 +245,7 @@ class IdentificationResult:
         )
 
     def table(self, max_rows: int | None = None) -> str:
-        """The result as text (:func:`~manip_id.identification.document.result_text` of
+        """The result as text (:func:`~manip_id.identification.document_text.result_text` of
         :meth:`to_dict`): headline figures, errors per joint, parameters, warnings."""
         return result_text(self.to_dict(), max_rows=max_rows)
 
@@ -399,7 +401,7 @@ def _rank_from_dict(doc: dict, base: BaseParameters, names: list[str]) -> RankAn
 
 def _recomputed_warnings(doc: dict) -> set[str]:
     """The warnings :func:`result_to_dict` derives itself (recomputed on writing again)."""
-    starts = ("non-physical values: ", "the condition number ")
+    starts = ("non-physical values: ", "the condition number ", WORSE_PREFIX)
     undetermined = "base parameter(s) not determined by these data"
     return {
         w

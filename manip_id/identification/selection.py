@@ -19,22 +19,24 @@ Candidates (:data:`CANDIDATES`; every one with the offset ``fo`` when
 Each fit is the usual one (``fit(robot) -> IdentificationResult``: the same accumulated
 sums, streamed, forked or on Dask, whichever path ``fit`` takes), with one candidate on
 every joint at once: a joint's friction columns appear only in its own torque row, so
-each joint is scored on its own row by
+each joint is scored on its own row by the information criterion of the training data
 
-    validation error  ||tau_j - tau_hat_j|| / ||tau_j|| on the validation data (the
-                      first candidate within 0.5 % of the least: simpler ones first), or
     BIC_j = n ln(sigma_j^2) + k_j ln(n)           (training sums: sigma_j^2 the joint's
                                                    residual variance, k_j its base
                                                    joint-term parameters, n samples)
 
-when no validation data are given. The shapes (Stribeck ``vs``, sigmoid slope ``a``, hysteresis
-length ``xc``) are chosen by variable projection: the linear coefficients are solved for every value
-of a grid (one fit per value), each joint keeps its best value, then the best is refined
-by a bisection in log(shape) (two fits per round, each joint its own value); the
-sigmoid's shift ``c`` is then chosen among :data:`SIGMOID_SHIFTS` and 0. The
-chosen per-joint models make one :class:`~manip_id.robot.model.JointTerms` with ``per_dof``
-(the terms each joint keeps) and ``shapes``; :func:`select_model` fits it last, and its
-result carries ``context["friction_selection"]``.
+The choice never looks at validation data: a validation error of the model chosen on
+that same validation file would no longer be independent (it was, before: chosen and
+reported on one file). When the fits carry validation data, each candidate's validation
+error is shown beside its BIC, for information only. The shapes (Stribeck ``vs``,
+sigmoid slope ``a``, hysteresis length ``xc``) are chosen by variable projection: the
+linear coefficients are solved for every value of a grid (one fit per value), each
+joint keeps its best value, then the best is refined by a bisection in log(shape) (two
+fits per round, each joint its own value); the sigmoid's shift ``c`` is then chosen
+among :data:`SIGMOID_SHIFTS` and 0. The chosen per-joint models make one
+:class:`~manip_id.robot.model.JointTerms` with ``per_dof`` (the terms each joint keeps) and
+``shapes``; :func:`select_model` fits it last, and its result carries
+``context["friction_selection"]``.
 """
 
 from __future__ import annotations
@@ -52,6 +54,8 @@ from ..robot.model import JointTerms, Robot
 from .result import IdentificationResult
 from .temperature import candidate_reference
 
+#: How every choice is made (the JSON's ``friction_criterion``).
+CRITERION = "BIC on the training data"
 #: The candidate models, in the order they are tried.
 CANDIDATES: tuple[str, ...] = (
     "linear",
@@ -112,11 +116,6 @@ class SelectionOptions:
         half the grid step, then a quarter, ...; two fits per round).
     sigmoid_shifts : tuple of float
         Sigmoid shifts c [rad/s] tried at the chosen slopes, besides 0 (Gaz's phi3).
-    tolerance : float
-        By validation error, the first candidate (simpler ones first) within
-        ``(1 + tolerance)`` of the least error is chosen: a law that contains another one
-        must predict better by more than this share to win (noise alone lets it win by a
-        hair).
     combine : bool
         Also try, per joint, its best nonlinear law plus the ``position`` harmonics
         (one more fit; candidates ``"<law>+position"``).
@@ -131,13 +130,10 @@ class SelectionOptions:
     sigmoid_grid: tuple[float, ...] = SIGMOID_GRID
     refine: int = 3
     sigmoid_shifts: tuple[float, ...] = SIGMOID_SHIFTS
-    tolerance: float = 0.005
     combine: bool = True
     hysteresis_grid: tuple[float, ...] = HYSTERESIS_GRID
 
     def __post_init__(self):
-        if not (math.isfinite(self.tolerance) and self.tolerance >= 0):
-            raise InputError(f"tolerance must be >= 0 (relative), got {self.tolerance}")
         if int(self.refine) < 0:
             raise InputError(f"refine must be a number of rounds >= 0, got {self.refine}")
         bad = [c for c in self.candidates if c not in CANDIDATES]
@@ -196,7 +192,7 @@ class FrictionSelection:
     joints : list of JointSelection
         Per joint its candidates and the chosen model.
     criterion : str
-        "validation error" or "BIC".
+        how the choice was made: :data:`CRITERION` (the training data's BIC).
     terms : JointTerms
         The chosen per-joint model (``per_dof`` and ``shapes``).
     n_fits : int
@@ -220,10 +216,10 @@ class FrictionSelection:
             for c in j.candidates:
                 if not math.isfinite(c.bic):
                     score = "n/a (not excited)"
-                elif c.validation_error is not None:
-                    score = f"{100 * c.validation_error:.3f} %"
                 else:
                     score = f"BIC {c.bic:.1f}"
+                    if c.validation_error is not None:  # shown, not used
+                        score += f", validation {100 * c.validation_error:.3f} %"
                 cells.append(f"{c.model} {score}")
             lines.append(f"  {j.joint}: {j.chosen} ({', '.join(cells)})")
         return "\n".join(lines)
@@ -303,7 +299,8 @@ def joint_scores(
 
 
 def _score(val, bic):
-    return val if val is not None else bic
+    """The score a choice uses: the training BIC (never the validation error)."""
+    return bic
 
 
 @dataclass
@@ -418,7 +415,10 @@ def _winners(trials: list[_Trial]) -> _Trial:
     shift = None
     if any(t.shift is not None for t in pick):
         shift = np.array([0.0 if t.shift is None else t.shift[j] for j, t in enumerate(pick)])
-    return _Trial(shape, val, bic, shift)
+    k = None
+    if all(t.k is not None for t in pick):  # each joint's coefficients in its winning fit
+        k = np.array([t.k[j] for j, t in enumerate(pick)])  # type: ignore[index]
+    return _Trial(shape, val, bic, shift, k)
 
 
 def select_model(
@@ -453,23 +453,20 @@ def select_model(
         else:
             trials[model], n = _fit_trial(fit, robot, model, opts, None), 1
         n_fits += n
-    use_val = all(t.val is not None for t in trials.values() if np.isfinite(t.bic).any())
     shapes = _shapes(trials)
     joints = [
         JointSelection(name, "", [_candidate(m, t, j) for m, t in trials.items()])
         for j, name in enumerate(robot.dof_names)
     ]
     if opts.combine and "position" in trials and len(trials) > 1:
-        n_fits += _combine(fit, robot, opts, joints, shapes, use_val)
+        n_fits += _combine(fit, robot, opts, joints, shapes)
     per_joint = []
     for js in joints:
-        js.chosen = _choose(js.candidates, use_val, opts.tolerance)
+        js.chosen = _choose(js.candidates)
         per_joint.append(_model_terms(robot.terms, js.chosen, opts, shapes))
     terms = combined_terms(robot.terms, per_joint, shapes)
     result = fit(robot.with_terms(terms))
-    selection = FrictionSelection(
-        joints, "validation error" if use_val else "BIC", terms, n_fits + 1
-    )
+    selection = FrictionSelection(joints, CRITERION, terms, n_fits + 1)
     ctx = {
         **result.context,
         "friction_selection": selection.to_dict(),
@@ -484,19 +481,10 @@ def select_model(
     return replace(result, context=ctx), selection
 
 
-def _choose(candidates: list[Candidate], use_val: bool, tolerance: float) -> str:
-    """The chosen model: the least BIC, or the first candidate (the simpler ones come
-    first) whose validation error is within ``(1 + tolerance)`` of the least."""
-    if not use_val:
-        bic = np.array([c.bic for c in candidates], dtype=float)
-        return candidates[int(np.nanargmin(np.where(np.isfinite(bic), bic, np.inf)))].model
-    val = np.array(
-        [np.inf if c.validation_error is None else c.validation_error for c in candidates]
-    )
-    best = float(np.min(val))
-    return next(
-        c.model for c, v in zip(candidates, val, strict=True) if v <= best * (1 + tolerance)
-    )
+def _choose(candidates: list[Candidate]) -> str:
+    """The chosen model: the least training BIC (the first such, simpler ones first)."""
+    bic = np.array([c.bic for c in candidates], dtype=float)
+    return candidates[int(np.nanargmin(np.where(np.isfinite(bic), bic, np.inf)))].model
 
 
 def _candidate(model: str, trial: _Trial, j: int, name: str | None = None) -> Candidate:
@@ -517,7 +505,7 @@ def _model_terms(base: JointTerms, name: str, opts: SelectionOptions, shapes) ->
     return replace(terms, harmonics=opts.harmonics) if extra == "position" else terms
 
 
-def _combine(fit, robot, opts, joints: list[JointSelection], shapes, use_val) -> int:
+def _combine(fit, robot, opts, joints: list[JointSelection], shapes) -> int:
     """Each joint's best law other than ``linear``/``position`` plus the harmonics, in one
     fit (each joint its own law); adds the candidates ``"<law>+position"``. Returns 1."""
     names = []
@@ -525,7 +513,7 @@ def _combine(fit, robot, opts, joints: list[JointSelection], shapes, use_val) ->
         laws = [c for c in js.candidates if c.model not in ("linear", "position")]
         if not laws:
             return 0
-        best = min(laws, key=lambda c: float(c.validation_error if use_val else c.bic))  # type: ignore[arg-type]
+        best = min(laws, key=lambda c: float(c.bic))
         names.append(best)
     per_joint = [_model_terms(robot.terms, c.model + "+position", opts, shapes) for c in names]
     r = robot.with_terms(combined_terms(robot.terms, per_joint, shapes))
@@ -583,6 +571,7 @@ def _shapes(trials: dict[str, _Trial]) -> FrictionShapes | None:
 
 __all__ = [
     "CANDIDATES",
+    "CRITERION",
     "DEFAULT_CANDIDATES",
     "Candidate",
     "FrictionSelection",

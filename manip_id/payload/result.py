@@ -132,6 +132,17 @@ class PayloadEstimate:
         """Inertia about the CoM (Ixx, Ixy, Iyy, Ixz, Iyz, Izz) [kg m^2], shape (6,)."""
         return self.values[4:].copy()
 
+    @property
+    def point_mass(self) -> bool:
+        """A positive mass whose inertia about its centre of mass is zero within 3 std
+        (every moment identified): a point mass, whose pseudo-inertia is singular, so that
+        noise alone makes its smallest eigenvalue slightly negative or positive."""
+        ok = self.identifiable[4:] | self.known[4:]
+        if not (self.mass > 0 and ok.all()):
+            return False
+        sd = np.where(self.known[4:], 0.0, np.asarray(self.std[4:], dtype=float))
+        return bool(np.all(np.abs(self.inertia) <= 3.0 * sd + 1e-12 * self.mass))
+
     def _shown(self, i: int, arr: np.ndarray):
         return finite_or_none(arr[i]) if (self.identifiable[i] or self.known[i]) else None
 
@@ -183,6 +194,7 @@ class PayloadEstimate:
                 None if self.physically_consistent is None else bool(self.physically_consistent)
             ),
             "pseudo_inertia_min_eigenvalue": finite_or_none(self.min_eigenvalue),
+            "point_mass": self.point_mass,
         }
 
     def table(self) -> str:
@@ -199,6 +211,12 @@ class PayloadEstimate:
             lines.append(
                 "  physically consistent: not decided (unidentifiable directions are free; "
                 "a consistent fit chooses them)"
+            )
+        elif self.point_mass and not self.physically_consistent:
+            lines.append(
+                "  a point mass: its inertia about the centre of mass is zero within 3 std "
+                f"(smallest pseudo-inertia eigenvalue {self.min_eigenvalue:.3g}, noise about "
+                "a singular one); physical as a point mass"
             )
         else:
             state = "yes" if self.physically_consistent else "NO"

@@ -413,7 +413,7 @@ def _payload_warnings(robot: Robot, pf: PayloadFrame, est: PayloadEstimate, mess
             f"the identified payload mass is {est.mass:.4g} kg (not positive): are the "
             "unloaded and loaded runs swapped? (or use consistent=True / --consistent)",
         )
-    elif est.physically_consistent is False:
+    elif est.physically_consistent is False and not est.point_mass:
         record_warning(
             messages,
             f"the identified payload is not physically consistent (smallest pseudo-inertia "

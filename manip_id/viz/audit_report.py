@@ -80,7 +80,11 @@ def _fixes(fa: Mapping) -> list[str]:
     s = fa.get("suggestions") or {}
     out = []
     if s.get("torque_scale") is not None:
-        out.append("--torque-scale " + ",".join(f"{g:g}" for g in s["torque_scale"]))
+        out.append(
+            "--torque-scale "
+            + ",".join("?" if g is None else f"{g:g}" for g in s["torque_scale"])
+            + (" (? : not determined, give the gain)" if None in s["torque_scale"] else "")
+        )
     if s.get("delay") is not None:
         out.append(f"--delay {s['delay']:g}")
     if s.get("trim_standstill"):

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InfeasibleTrajectoryError
+from ..identification.document_text import method_label
 from . import figures
 from .meshcat_scene import RobotScene, link_identifiability
 from .report import ReportContent, write_report
@@ -201,7 +202,7 @@ def write_identify_report(
     report: the run's document (:meth:`~manip_id.identification.IdentificationResult.to_dict`).
     """
     run_name = (
-        f"{robot.name}, {report['method']}, {options.source}, "
+        f"{robot.name}, {method_label(report)}, {options.source}, "
         f"{samples.train.n_samples} training samples"
     )
     figs = _fit_figures(robot, result, report, samples, run_name, options.chunk)
@@ -242,7 +243,9 @@ def write_fleet_report(
     """The report of many files: summary, parameters, singular values and (``per_file``)
     each file's parameters against the pooled fit; returns the folder's path."""
     files = report["source"]["data"]
-    run_name = f"{robot.name}, {report['method']}, {len(files)} files, {result.n_samples} samples"
+    run_name = (
+        f"{robot.name}, {method_label(report)}, {len(files)} files, {result.n_samples} samples"
+    )
     ra = result.rank_analysis
     figs = {
         "singular_values": lambda path: figures.singular_values(

@@ -25,6 +25,8 @@ from pathlib import Path
 import numpy as np
 
 from ..identification import NOT_DETERMINED
+from ..identification.document_text import mass_sources
+from ..identification.nominal_check import WORSE_PREFIX
 from .report import html_table
 from .report_tables import not_determined, number
 
@@ -84,6 +86,13 @@ def model_quality(doc: Mapping) -> tuple[str, str]:
     if raw_id is not None:
         text += f"; against the raw torques {_pct(raw_id)} and {_pct(raw_nom)}"
     text += ".</p>"
+    for w in doc.get("warnings") or []:
+        if str(w).startswith(WORSE_PREFIX):  # the first thing a user must know
+            said, _, do = str(w).partition(" Do: ")
+            text += (
+                f'<p class="verdict"><span class="no">Worse than the nominal model</span>'
+                f"{_esc(said[len('worse than the nominal model') :])}. <b>Do:</b> {_esc(do)}.</p>"
+            )
     joints = doc.get("joints") or []
     per_id = rel.get("per_joint_validation") if val else rel.get("train_per_joint")
     per_nom = rel.get("nominal_per_joint_validation" if val else "nominal_train_per_joint")
@@ -202,6 +211,7 @@ def body_rows(doc: Mapping) -> list[dict]:
         if kind in ("m", "mcx", "mcy", "mcz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz"):
             blocks.setdefault(body, {})[kind] = (p.get("value"), p.get("nominal"))
     flags = _plausibility_flags(doc)
+    sources = mass_sources(doc)
     rows = []
     for body, b in blocks.items():
         if len(b) != 10 or any(v is None for pair in b.values() for v in pair):
@@ -218,6 +228,7 @@ def body_rows(doc: Mapping) -> list[dict]:
                 "mass [kg]": number(ident["m"]),
                 "nominal [kg]": number(nom["m"]),
                 "mass ratio": number(ratio, 3),
+                **({"mass from": sources[body]} if body in sources else {}),
                 "centre of mass [m]": _vector(ident["c"]),
                 "nominal [m]": _vector(nom["c"]),
                 "shift [m]": number(float(np.linalg.norm(ident["c"] - nom["c"])), 3),
@@ -348,9 +359,9 @@ def next_steps(warnings: Sequence[str]) -> tuple[str, str]:
         return "What to do next?", "<p>Nothing to fix: no warning.</p>"
     items = []
     for w in warnings:
-        text = str(w).strip()
+        text, _, own = str(w).strip().partition(" Do: ")  # a warning may carry its own
         sentence = text[:1].upper() + text[1:] + ("" if text.endswith(".") else ".")
-        advice = next((a for key, a in ADVICE if key in text), None)
+        advice = own.rstrip(".") or next((a for key, a in ADVICE if key in text), None)
         items.append(
             f"<li>{_esc(sentence)}" + (f" <b>Do:</b> {_esc(advice)}." if advice else "") + "</li>"
         )

@@ -190,7 +190,9 @@ def report_selection_rows(report: dict) -> list[dict]:
                     "chosen": "chosen" if chosen else "",
                     "parameters": "n/a" if c.get("n_parameters") is None else c["n_parameters"],
                     "shape": _shape_text(c.get("parameters")),
-                    "validation error [%]": "n/a" if err is None else number(100 * err, 4),
+                    "validation error [%] (not used)": "n/a"
+                    if err is None
+                    else number(100 * err, 4),
                     "BIC": "n/a (not excited)" if bic is None else number(bic, 6),
                 }
             )

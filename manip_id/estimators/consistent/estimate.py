@@ -29,6 +29,7 @@ from .problem import (
     build_problem,
     check_options,
 )
+from .provenance import parameter_sources
 from .solve import solve_consistent
 
 
@@ -81,6 +82,10 @@ class StandardEstimate:
     std, std_white
         the honest and the white-noise std of ``values``, shape (p,), once
         :meth:`with_covariance` gave the base covariances (None before).
+    sources
+        where each value comes from, length p: "data", "prior", "bound" or "not
+        determined" (:mod:`manip_id.estimators.consistent.provenance`); only "data"
+        values have a std in :meth:`to_dict` (None when not known).
     """
 
     names: list[str]
@@ -105,6 +110,7 @@ class StandardEstimate:
     active: list[str] = field(default_factory=list)
     std: np.ndarray | None = None
     std_white: np.ndarray | None = None
+    sources: list[str] | None = None
 
     def with_covariance(self, honest, white) -> StandardEstimate:
         """The estimate with ``std`` and ``std_white`` from the base covariances ``honest``
@@ -156,9 +162,12 @@ class StandardEstimate:
         }
 
     def _std_entries(self, k: int) -> dict:
+        source = {} if self.sources is None else {"source": self.sources[k]}
         if self.std is None or self.std_white is None:
-            return {}
-        return {
+            return source
+        if source and source["source"] != "data":  # the prior's or the bound's: no data std
+            return source | {"std": None, "std_white": None}
+        return source | {
             "std": finite_or_none(float(self.std[k])),
             "std_white": finite_or_none(float(self.std_white[k])),
         }
@@ -238,6 +247,7 @@ def consistent_estimate(
         est,
         sensitivity=sensitivity(final, sol.theta),
         active=[names[i] for i in held.bodies] + [robot.parameter_names[t] for t in held.terms],
+        sources=parameter_sources(problem.P, held.rows, prior=prior != "none"),
     )
 
 
@@ -316,4 +326,5 @@ def minimum_norm_standard(robot, base, beta) -> StandardEstimate:
         nominal=np.array(robot.nominal_parameters, dtype=float),
         consistency=check_consistency(robot, theta),
         prior="minimum norm",
+        sources=parameter_sources(P, prior=False),
     )

@@ -376,7 +376,14 @@ def _prior_margins(robot, theta0, prior: str, nonneg) -> tuple[np.ndarray, np.nd
         bad = [v for v in report.violations if "." not in v.name]
         neg = [Violation(names[k], ">= 0", float(theta0[k])) for k in nonneg if theta0[k] < 0]
         if bad or neg:
-            raise PhysicalConsistencyError("the prior (nominal parameters)", bad + neg)
+            named = list(dict.fromkeys(v.name for v in bad))
+            hint = (
+                f" (bodies {', '.join(named)}; 'manip-id repair ROBOT OUT.urdf' writes the "
+                "nearest physical model to identify from, or prior='none' / --prior none)"
+                if named
+                else " (prior='none' / --prior none does without it)"
+            )
+            raise PhysicalConsistencyError(f"the prior (nominal parameters){hint}", bad + neg)
         return J0, np.minimum(MARGIN * lam0[:, -1], 0.5 * lam0[:, 0])
     scale = np.abs(lam0).max(axis=1)
     fallback = float(scale[scale > 0].mean()) if np.any(scale > 0) else 1.0
