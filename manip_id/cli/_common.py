@@ -444,9 +444,15 @@ def fleet_wanted(args: argparse.Namespace) -> bool:
 
 def print_warnings(document: dict) -> None:
     """Every warning of the document (its JSON ``warnings``), once each, on stderr as
-    ``manip-id: warning: ...``: what is saved is what is printed."""
+    ``manip-id: warning: ...``: what is saved is what is printed, followed by ``Do: ...``
+    when the report's advice table (:data:`manip_id.viz.report_answers.ADVICE`) has an
+    answer to it."""
+    # at run time only: the advice table's module loads the identification
+    from ..viz.report_answers import ADVICE
+
     for text in document.get("warnings") or []:
-        warn(str(text))
+        advice = next((a for key, a in ADVICE if key in str(text)), None)
+        warn(str(text) + ("" if advice is None else f" Do: {advice}."))
 
 
 def prepare(ds, args: argparse.Namespace, what: str):

@@ -127,7 +127,7 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
         report["model"] = model
         note_window(report, result, args.window_length)
         report["outputs"] = list(result.output_names)
-    print_result(report)
+    print_result(report, args)
     if args.per_file:
         print(_per_file_table(result))
     print_warnings(report)

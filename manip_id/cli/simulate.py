@@ -115,7 +115,5 @@ def register(sub) -> None:
         action="store_true",
         help="replace an --out folder that manip-id wrote [default: refuse]",
     )
-    p.add_argument(
-        "--quiet", action="store_true", help="print nothing but errors and warnings"
-    )
+    p.add_argument("--quiet", action="store_true", help="print nothing but errors and warnings")
     p.set_defaults(func=command("manip_id.cli._simulate"))
