@@ -26,10 +26,10 @@ from .._io import write_json
 from ..closed_loop import with_payload
 from ..datasets import Dataset, save_dataset
 from ..errors import InputError
+from ..perturbation import MAX_REL, perturb_parameters
 from ..simulation import MeasurementNoise, check_simulation_memory, simulate
 from ._common import parse_floats, reserve_outputs
 from ._runtime import robot_from_args
-from ..perturbation import MAX_REL, perturb_parameters
 from ._simulated import excitation
 from .simulate import LEVER
 
