@@ -106,6 +106,11 @@ def flagged_lines(rows: Sequence[Mapping]) -> list[str]:
             continue
         shown = ", ".join(names[:NAMED_FLAGS]) + (", ..." if len(names) > NAMED_FLAGS else "")
         lines.append(f"{flag}: {len(names)} of {len(rows)} ({shown})")
+    if any(str(r["name"]).endswith("R") for r in rows if r.get("flags")):
+        lines.append(
+            "(a name ending in R is a base parameter that regroups others: "
+            "'manip-id rank ROBOT' writes it out)"
+        )
     return lines or [f"flagged: none of the {len(rows)} base parameters"]
 
 
