@@ -138,9 +138,9 @@ def before_fit(robot, specs, options, args, *, currents: bool = False, cache=Non
     formats for the scan that follows. Returns ``(specs, audit)``.
     """
     audit = audit_files(robot, specs, _audit_options(options, currents), cache=cache)
-    text = audit_text(audit, verbose=bool(getattr(args, "verbose", False)))
-    if audit.findings or getattr(args, "command", None) != "identify":  # identify's answer
-        print(text)  # says a clean audit in its line (after the gain, not before it)
+    verbose = bool(getattr(args, "verbose", False))
+    if verbose or audit.findings or getattr(args, "command", None) != "identify":
+        print(audit_text(audit, verbose=verbose))  # identify's answer says a clean audit
     if getattr(args, "trim_standstill", False):
         specs = audit.trimmed()
         kept = [s.label for s in specs]
