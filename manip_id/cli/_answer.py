@@ -20,6 +20,7 @@ from collections.abc import Mapping, Sequence
 
 from ..identification import NOT_DETERMINED, result_text, verdict_text
 from ..identification.document import uncertainty_text
+from ..viz.report_answers import ADVICE
 
 #: Error ratios within [1 / SAME, SAME] say "about as good as the nominal model".
 SAME = 1.2
@@ -58,16 +59,15 @@ def joint_table(doc: Mapping) -> list[str]:
     e = doc.get("relative_error") or {}
     joints = list(doc.get("outputs") or doc.get("joints") or [])
     valid = e.get("per_joint_validation") is not None
-    columns = [("train", e.get("train_per_joint"))]
-    if valid:
-        columns.append(("validation", e.get("per_joint_validation")))
-    columns.append(
-        (
-            "nominal",
-            e.get("nominal_per_joint_validation") if valid else e.get("nominal_train_per_joint"),
-        )
-    )
-    columns = [(name, list(v)) for name, v in columns if v is not None and len(v) == len(joints)]
+    nominal = "nominal_per_joint_validation" if valid else "nominal_train_per_joint"
+    wanted = [("train", "train_per_joint")]
+    wanted += [("validation", "per_joint_validation")] if valid else []
+    wanted += [("nominal", nominal)]
+    columns: list[tuple[str, list]] = [
+        (name, list(e[key]))
+        for name, key in wanted
+        if e.get(key) is not None and len(e[key]) == len(joints)
+    ]
     if not joints or not columns:
         return []
     head = "error per joint [%]"
@@ -151,6 +151,11 @@ def answer_text(doc: Mapping, *, verbose: bool = False) -> str:
     return "\n".join(lines)
 
 
+def advice_for(warning: str) -> str | None:
+    """What addresses ``warning``: the report's advice (its "Do:"), or None."""
+    return next((a for key, a in ADVICE if key in warning), None)
+
+
 def _pct(x: float) -> str:
     return f"{100 * float(x):#.3g} %"
 
@@ -165,4 +170,4 @@ def _ratio(r: float) -> str:
     return f"{r:.3g}" if r < 100 else f"{r:.0f}"
 
 
-__all__ = ["answer_text", "audit_line", "flagged_lines", "gain_text", "joint_table"]
+__all__ = ["advice_for", "answer_text", "audit_line", "flagged_lines", "gain_text", "joint_table"]

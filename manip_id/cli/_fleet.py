@@ -28,7 +28,6 @@ from ._common import (
     finish,
     identify_report,
     note_window,
-    print_warnings,
     profile_from_args,
 )
 from ._runtime import (
@@ -36,6 +35,7 @@ from ._runtime import (
     note_exports,
     preprocess_options,
     print_result,
+    print_warnings,
     report_options,
     robot_from_args,
     stage_export,

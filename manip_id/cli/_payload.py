@@ -24,11 +24,10 @@ from ._common import (
     check_preprocess_args,
     column_map,
     parse_floats,
-    print_warnings,
     spec_options,
     write_json,
 )
-from ._runtime import before_fit, check_frame, check_scheduler, robot_from_args
+from ._runtime import before_fit, check_frame, check_scheduler, print_warnings, robot_from_args
 
 
 # ------------------------------------------------------------------ reading

@@ -20,13 +20,12 @@ from ..export.sidecar import identification_provenance
 from ..identification import ConsistentOptions, PreprocessOptions
 from ..robot import Robot, load_robot
 from ..viz.report_document import ReportOptions
-from ._answer import answer_text
+from ._answer import advice_for, answer_text
 from ._common import (
     exports_wanted,
     finish,
     identify_report,
     parse_floats,
-    print_warnings,
     profile_option,
     warn,
 )
@@ -182,6 +181,15 @@ def report_options(args: argparse.Namespace, source: str | None = None):
         scene_assets=getattr(args, "scene_assets", "inline"),
         force=args.force,
     )
+
+
+def print_warnings(document: dict) -> None:
+    """Every warning of the document (its JSON ``warnings``), once each, on stderr as
+    ``manip-id: warning: ...``: what is saved is what is printed, followed by ``Do: ...``
+    when an option addresses it (:func:`._answer.advice_for`)."""
+    for text in document.get("warnings") or []:
+        advice = advice_for(str(text))
+        warn(str(text) + ("" if advice is None else f" Do: {advice}."))
 
 
 def print_result(report: dict, args: argparse.Namespace | None = None) -> None:

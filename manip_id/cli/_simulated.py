@@ -27,13 +27,13 @@ from ._common import (
     exports_wanted,
     finish,
     prepare,
-    print_warnings,
     progress,
 )
 from ._runtime import (
     consistent_kwargs,
     note_exports,
     print_result,
+    print_warnings,
     robot_from_args,
     stage_export,
     write_outputs,

@@ -25,6 +25,7 @@ from .._numba import numba_available
 from ..datasets import save_dataset
 from ..robot import load_robot
 from ..simulation import simulate
+from . import build_parser  # the command line's own parser
 from ._simulated import excitation
 
 #: The robot and the log the kernels are compiled on (their types do not depend on it).
@@ -45,8 +46,6 @@ def _logs(folder: Path) -> tuple[Path, Path]:
 def _identify(argv: list[str]) -> None:
     """``manip-id identify ARGV`` in this process, its output and warnings discarded (the
     compile note, on the ``manip_id`` logger, is said)."""
-    from . import build_parser  # the command line's own parser (imported at run time)
-
     args = build_parser().parse_args(["identify", *argv])
     args.outputs = OutputSet()
     with contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():

@@ -200,10 +200,10 @@ def _compiled_parser():
     """The compiled reader of comma-separated lines (``bytes, width -> table or None``),
     or None (numba cannot be imported)."""
     try:
-        from ._csv_kernel import _parse, parse_lines  # imports numba (optional, heavy)
+        from ._csv_kernel import COMPILED, parse_lines  # imports numba (optional, heavy)
     except ImportError:
         return None
-    note_compile(_parse)
+    note_compile(*COMPILED)
     return parse_lines
 
 
