@@ -105,10 +105,11 @@ def _scan(robot, args: argparse.Namespace, specs, vspecs, options, timings: dict
     if vspecs is not None:
         source["validate"] = [s.label for s in vspecs]
     timings["scan"] = time.perf_counter() - t0
-    for s in specs:
-        print(scans[s].quality.text())
-    for s in vspecs or []:
-        print("validation " + scans[s].quality.text())
+    if getattr(args, "verbose", False):  # else in the JSON and the report only
+        for s in specs:
+            print(scans[s].quality.text())
+        for s in vspecs or []:
+            print("validation " + scans[s].quality.text())
     return SimpleNamespace(specs=specs, vspecs=vspecs, scans=scans, source=source, audit=audit)
 
 
@@ -261,6 +262,6 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     if train is not None:  # the samples are in memory anyway
         parts = _raw_parts(f.specs, f.vspecs, train, valid, options)
         add_raw_reference(report, robot, result, parts, args.chunk)
-    print_result(report)
+    print_result(report, args)
     _print_files(args, report, files is not None)
     return write_outputs(args, outputs, robot, result, report, ReportSamples(train, valid, train))

@@ -28,7 +28,6 @@ from ._common import (
     finish,
     identify_report,
     note_window,
-    print_warnings,
     profile_from_args,
 )
 from ._runtime import (
@@ -36,6 +35,7 @@ from ._runtime import (
     note_exports,
     preprocess_options,
     print_result,
+    print_warnings,
     report_options,
     robot_from_args,
     stage_export,
@@ -127,7 +127,7 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
         report["model"] = model
         note_window(report, result, args.window_length)
         report["outputs"] = list(result.output_names)
-    print_result(report)
+    print_result(report, args)
     if args.per_file:
         print(_per_file_table(result))
     print_warnings(report)

@@ -17,15 +17,15 @@ from ..errors import InputError, did_you_mean
 from ..execution import available_cores, cap_local_workers
 from ..export import export_texts, mjcf_text, sidecar_path
 from ..export.sidecar import identification_provenance
-from ..identification import ConsistentOptions, PreprocessOptions, result_text, verdict_text
+from ..identification import ConsistentOptions, PreprocessOptions
 from ..robot.model import Robot, load_robot
 from ..viz.report_document import ReportOptions
+from ._answer import advice_for, answer_text
 from ._common import (
     exports_wanted,
     finish,
     identify_report,
     parse_floats,
-    print_warnings,
     profile_option,
     warn,
 )
@@ -137,12 +137,26 @@ def before_fit(robot, specs, options, args, *, currents: bool = False, cache=Non
     formats for the scan that follows. Returns ``(specs, audit)``.
     """
     audit = audit_files(robot, specs, _audit_options(options, currents), cache=cache)
-    print(audit.table())
+    verbose = bool(getattr(args, "verbose", False))
+    if verbose or audit.findings or getattr(args, "command", None) != "identify":
+        print(audit_text(audit, verbose=verbose))  # identify's answer says a clean audit
     if getattr(args, "trim_standstill", False):
         specs = audit.trimmed()
         kept = [s.label for s in specs]
         print("--trim-standstill: " + ", ".join(kept))
     return specs, audit
+
+
+def audit_text(audit, *, verbose: bool = False) -> str:
+    """The pre-fit audit as printed: its findings, one line when it found nothing; the full
+    table (every file and joint) with ``verbose``."""
+    if verbose:
+        return audit.table()
+    found = audit.findings
+    head = f"pre-fit audit against the nominal model of {audit.robot}"
+    if not found:
+        return f"{head}: nothing found in {len(audit.files)} file(s)"
+    return "\n".join([f"{head}: {len(found)} finding(s)"] + [f"  - {f}" for f in found])
 
 
 def _audit_options(options, currents: bool):
@@ -169,18 +183,22 @@ def report_options(args: argparse.Namespace, source: str | None = None):
     )
 
 
-def print_result(report: dict) -> None:
-    """The run's result on stdout: the one text rendering of its document
-    (:func:`manip_id.identification.result_text`; the warnings go to stderr,
-    :func:`print_warnings`), then a simulation's base-parameter error against its truth."""
+def print_warnings(document: dict) -> None:
+    """Every warning of the document (its JSON ``warnings``), once each, on stderr as
+    ``manip-id: warning: ...``: what is saved is what is printed, followed by ``Do: ...``
+    when an option addresses it (:func:`._answer.advice_for`)."""
+    for text in document.get("warnings") or []:
+        advice = advice_for(str(text))
+        warn(str(text) + ("" if advice is None else f" Do: {advice}."))
 
-    print(result_text({**report, "warnings": []}))
-    if report.get("parameter_error") is not None:
-        worst = report.get("parameter_error_in_std")
-        print(
-            f"base parameter error vs truth: {100 * report['parameter_error']:.3f} %"
-            + ("" if worst is None else f" (max {worst:.2f} std)")
-        )
+
+def print_result(report: dict, args: argparse.Namespace | None = None) -> None:
+    """The run's answer on stdout, first: how much better than the nominal model, the
+    verdict, the errors per joint, the flagged parameters (:func:`._answer.answer_text`;
+    with ``--verbose`` the full rendering, :func:`manip_id.identification.result_text`).
+    The warnings go to stderr (:func:`print_warnings`)."""
+
+    print(answer_text(report, verbose=bool(getattr(args, "verbose", False))))
 
 
 def note_exports(args: argparse.Namespace, report: dict) -> None:
@@ -212,6 +230,4 @@ def write_outputs(args: argparse.Namespace, outputs, robot, result, report: dict
         )
     if exports_wanted(args):
         stage_export(robot, result, args, outputs)
-    status = finish(args, outputs, path)
-    print(verdict_text(report))  # the last line: the run in one sentence
-    return status
+    return finish(args, outputs, path)

@@ -27,13 +27,13 @@ from ._common import (
     exports_wanted,
     finish,
     prepare,
-    print_warnings,
     progress,
 )
 from ._runtime import (
     consistent_kwargs,
     note_exports,
     print_result,
+    print_warnings,
     robot_from_args,
     stage_export,
     write_outputs,
@@ -140,7 +140,7 @@ def _run_stream(robot, args, outputs, timings: dict, t_start: float) -> int:
     theta_true = np.asarray(stream.theta_true, dtype=float)
     ctx = _context(args, source, n_validation=n - k, theta_true=theta_true, timings=timings)
     report = result_document(robot, result, ctx)
-    print_result(report)
+    print_result(report, args)
     print_warnings(report)
     note_exports(args, report)
     if args.json:
@@ -218,5 +218,5 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     if valid is not None and validation is not None:  # valid is validation preprocessed
         parts.append(("validation", valid, validation.t, validation.tau))
     add_raw_reference(report, robot, result, parts, args.chunk)
-    print_result(report)
+    print_result(report, args)
     return write_outputs(args, outputs, robot, result, report, ReportSamples(train, valid, full))

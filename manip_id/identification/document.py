@@ -567,7 +567,7 @@ def verdict_text(doc: dict) -> str:
         text += ", physically consistent" if consistent else ", NOT physically consistent"
     n = len(doc.get("warnings") or [])
     return text + (
-        f", {n} warning(s) on the result (above)" if n else ", no warnings on the result"
+        f", {n} warning(s) on the result (as warnings)" if n else ", no warnings on the result"
     )
 
 
