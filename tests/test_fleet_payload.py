@@ -293,8 +293,8 @@ def test_cli_scheduler_gives_the_local_json(runs, tmp_path, capsys):
     assert doc["preprocess"] == ref["preprocess"]
     assert doc["source"]["scheduler"] == "local:2"
     assert ref["source"]["scheduler"] == "this process"
-    # the data-quality lines are printed either way
-    assert cap_d.out.count("loaded ") >= N_RUNS and "u0.npz" in cap_d.out
+    # the data quality is in the JSON either way (above); printed only with --verbose
+    assert "standstill (" not in cap_d.out
 
 
 def _values(node) -> list[float]:

@@ -153,6 +153,17 @@ class Audit:
         """The files with the windows ``--trim-standstill`` keeps (others as they were)."""
         return [fa.spec if fa.kept is None else fa.spec.with_window(fa.kept) for fa in self.files]
 
+    def text(self, *, verbose: bool = False) -> str:
+        """The audit as printed before a fit: its findings (one line when it found
+        nothing); with ``verbose`` the full :meth:`table` (every file and joint)."""
+        if verbose:
+            return self.table()
+        found = self.findings
+        head = f"pre-fit audit against the nominal model of {self.robot}"
+        if not found:
+            return f"{head}: nothing found in {len(self.files)} file(s)"
+        return "\n".join([f"{head}: {len(found)} finding(s)"] + [f"  - {f}" for f in found])
+
     def table(self) -> str:
         """One compact table: a row per file and joint, then the findings."""
         head = (

@@ -132,5 +132,5 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     report["model"] = args.model
     note_window(report, result, args.window_length)
     report["outputs"] = list(result.output_names)
-    print_result(report)
+    print_result(report, args)
     return write_outputs(args, outputs, robot, result, report, ReportSamples(train, valid, full))

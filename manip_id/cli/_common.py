@@ -444,13 +444,6 @@ def fleet_wanted(args: argparse.Namespace) -> bool:
     return getattr(args, "scheduler", None) is not None or bool(getattr(args, "per_file", False))
 
 
-def print_warnings(document: dict) -> None:
-    """Every warning of the document (its JSON ``warnings``), once each, on stderr as
-    ``manip-id: warning: ...``: what is saved is what is printed."""
-    for text in document.get("warnings") or []:
-        warn(str(text))
-
-
 def prepare(ds, args: argparse.Namespace, what: str):
     """The dataset preprocessed when ddq is missing or a cut-off was asked for."""
     if ds.ddq is not None and args.cutoff is None and args.decimate == 1 and args.trim is None:

@@ -11,7 +11,7 @@ import time
 from ..errors import InputError
 from ..payload import check_known_payload, identify_drive_gains
 from ..viz.payload_report import write_drive_gain_report
-from ._common import parse_floats, print_warnings
+from ._common import parse_floats
 from ._payload import (
     check_run_args,
     input_paths,
@@ -21,7 +21,7 @@ from ._payload import (
     reserve_json,
     reserve_report,
 )
-from ._runtime import check_frame, robot_from_args
+from ._runtime import check_frame, print_warnings, robot_from_args
 
 
 def run(args: argparse.Namespace) -> int:

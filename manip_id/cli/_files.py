@@ -35,7 +35,6 @@ from ._common import (
     fleet_wanted,
     identify_report,
     note_window,
-    print_warnings,
     profile_from_args,
     progress,
 )
@@ -44,6 +43,7 @@ from ._runtime import (
     note_exports,
     preprocess_options,
     print_result,
+    print_warnings,
     report_options,
     robot_from_args,
     stage_export,
@@ -82,6 +82,7 @@ def files_call(args: argparse.Namespace):
             scheduler=args.scheduler,
             progress=progress(args),
             echo=print,
+            verbose=bool(getattr(args, "verbose", False)),
         ),
         uncertainty=args.uncertainty,
         files=files,
@@ -133,7 +134,7 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     )
     if args.model != "dynamic":
         note_window(report, result, args.window_length)
-    print_result(report)
+    print_result(report, args)
     if fleet_wanted(args):
         return _finish_fleet(args, outputs, robot, result, report, len(specs))
     _print_files(report)

@@ -24,11 +24,10 @@ from ._common import (
     check_preprocess_args,
     column_map,
     parse_floats,
-    print_warnings,
     spec_options,
     write_json,
 )
-from ._runtime import before_fit, check_frame, check_scheduler, robot_from_args
+from ._runtime import before_fit, check_frame, check_scheduler, print_warnings, robot_from_args
 
 
 # ------------------------------------------------------------------ reading
@@ -147,7 +146,8 @@ def read_runs(args, robot, scale=None, scan: bool = True) -> tuple[list, list, d
             for spec in specs:
                 run = StreamedRun(robot, spec, options, scan=scan, cache=cache)
                 if run.scan is not None:
-                    print(f"{what} " + run.scan.quality.text())
+                    if getattr(args, "verbose", False):  # else in the JSON only
+                        print(f"{what} " + run.scan.quality.text())
                     quality[what].append(run.scan.quality.to_dict())
                 runs[what].append(run)
     source = {
@@ -227,7 +227,7 @@ def input_paths(args) -> list[str]:
     return out
 
 
-def run_quality(result) -> tuple[dict, list]:
+def run_quality(result, *, verbose: bool = False) -> tuple[dict, list]:
     """From the runs' summaries a result brings back (files scanned on the workers): the
     data quality per kind of run (printed) and the preprocessing per run."""
     quality: dict[str, list] = {"unloaded": [], "loaded": []}
@@ -235,7 +235,8 @@ def run_quality(result) -> tuple[dict, list]:
     for what in ("unloaded", "loaded"):
         for info in result.runs.get(what, []):
             q, s = info["quality"], info["settings"]
-            print(f"{what} " + q.text())
+            if verbose:
+                print(f"{what} " + q.text())
             quality[what].append(q.to_dict())
             settings.append(
                 {
@@ -308,7 +309,7 @@ def run(args: argparse.Namespace) -> int:
     quality = source.pop("data_quality")
     settings = None
     if distributed:
-        quality, settings = run_quality(result)
+        quality, settings = run_quality(result, verbose=getattr(args, "verbose", False))
     doc["data_quality"] = quality
     doc["source"] = source
     doc["torque_scale"] = scale

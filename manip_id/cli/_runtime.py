@@ -22,17 +22,17 @@ from ..estimators.consistent.bounds import bound_options
 from ..execution import available_cores, cap_local_workers
 from ..export import export_texts, mjcf_text, sidecar_path
 from ..export.sidecar import identification_provenance
-from ..identification import ConsistentOptions, PreprocessOptions, result_text, verdict_text
+from ..identification import ConsistentOptions, PreprocessOptions
 from ..identification.run_context import run_keys, with_context
 from ..payload import load_torque_scale
 from ..robot.model import Robot, load_robot
 from ..viz.report_document import ReportOptions
+from ._answer import advice_for, answer_text
 from ._common import (
     exports_wanted,
     finish,
     identify_report,
     parse_floats,
-    print_warnings,
     profile_option,
     warn,
 )
@@ -161,7 +161,7 @@ def before_fit(robot, specs, options, args, *, currents: bool = False, cache=Non
     formats for the scan that follows. Returns ``(specs, audit)``.
     """
     audit = audit_files(robot, specs, _audit_options(options, currents), cache=cache)
-    print(audit.table())
+    print(audit.text(verbose=bool(getattr(args, "verbose", False))))
     audit.check()  # every file audited first; then one error naming each unreadable one
     if getattr(args, "trim_standstill", False):
         specs = audit.trimmed()
@@ -194,18 +194,22 @@ def report_options(args: argparse.Namespace, source: str | None = None):
     )
 
 
-def print_result(report: dict) -> None:
-    """The run's result on stdout: the one text rendering of its document
-    (:func:`manip_id.identification.result_text`; the warnings go to stderr,
-    :func:`print_warnings`), then a simulation's base-parameter error against its truth."""
+def print_warnings(document: dict) -> None:
+    """Every warning of the document (its JSON ``warnings``), once each, on stderr as
+    ``manip-id: warning: ...``: what is saved is what is printed, followed by ``Do: ...``
+    when an option addresses it (:func:`._answer.advice_for`)."""
+    for text in document.get("warnings") or []:
+        advice = advice_for(str(text))
+        warn(str(text) + ("" if advice is None else f" Do: {advice}."))
 
-    print(result_text({**report, "warnings": []}))
-    if report.get("parameter_error") is not None:
-        worst = report.get("parameter_error_in_std")
-        print(
-            f"base parameter error vs truth: {100 * report['parameter_error']:.3f} %"
-            + ("" if worst is None else f" (max {worst:.2f} std)")
-        )
+
+def print_result(report: dict, args: argparse.Namespace | None = None) -> None:
+    """The run's answer on stdout, first: how much better than the nominal model, the
+    verdict, the errors per joint, the flagged parameters (:func:`._answer.answer_text`;
+    with ``--verbose`` the full rendering, :func:`manip_id.identification.result_text`).
+    The warnings go to stderr (:func:`print_warnings`)."""
+
+    print(answer_text(report, verbose=bool(getattr(args, "verbose", False))))
 
 
 def note_exports(args: argparse.Namespace, report: dict) -> None:
@@ -237,6 +241,4 @@ def write_outputs(args: argparse.Namespace, outputs, robot, result, report: dict
         )
     if exports_wanted(args):
         stage_export(robot, result, args, outputs)
-    status = finish(args, outputs, path)
-    print(verdict_text(report))  # the last line: the run in one sentence
-    return status
+    return finish(args, outputs, path)

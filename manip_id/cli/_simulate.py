@@ -4,8 +4,12 @@ published complete (the options are declared in :mod:`.simulate`).
 Run ``k`` of a group (``unloaded``, then one group per ``--payload`` mass) follows its own
 excitation (:func:`._simulated.excitation`, seed ``SEED + k``, the loaded groups after
 the unloaded ones), so any two files of the folder hold different motions: one may train
-and another validate. The truth is the robot's nominal parameter vector (with the payload
-on the last body for the loaded runs, :func:`manip_id.control.closed_loop.with_payload`).
+and another validate. The truth (:func:`truth_parameters`) is the robot's nominal
+parameter vector, or one that differs from it as a real robot's does: its joint terms set
+(``--joint-terms``), then perturbed within physics (``--perturb``,
+:func:`manip_id.physics.perturbation.perturb_parameters`), then a tool mass on the last body
+(``--tool``); the loaded runs add their payload on the last body
+(:func:`manip_id.control.closed_loop.with_payload`).
 """
 
 from __future__ import annotations
@@ -22,13 +26,15 @@ from .._io import write_json
 from ..control.closed_loop import with_payload
 from ..datasets import Dataset, save_dataset
 from ..errors import InputError
+from ..physics.perturbation import MAX_REL, perturb_parameters
 from ..simulation import MeasurementNoise, check_simulation_memory, simulate
 from ._common import parse_floats, reserve_outputs
 from ._runtime import robot_from_args
 from ._simulated import excitation
+from .simulate import LEVER
 
-#: The payload's lever in the last joint's frame: 0.1 m along its axis (``with_payload``).
-LEVER = 0.1  # [m]
+#: The joint-term names ``--joint-terms`` takes (those of :mod:`manip_id.robot.parameters`).
+JOINT_TERMS = ("Ia", "fv", "fc", "fo", "k")
 
 
 @dataclass(frozen=True)
@@ -54,6 +60,10 @@ def _check(args: argparse.Namespace) -> tuple[list[float], list[Run]]:
         raise InputError(
             f"--duration {args.duration:g} s at --rate {args.rate:g} Hz gives fewer than 10 samples"
         )
+    if not (math.isfinite(args.perturb) and 0 <= args.perturb <= MAX_REL):
+        raise InputError(f"--perturb must be a fraction in [0, {MAX_REL:g}], got {args.perturb}")
+    if not (math.isfinite(args.tool) and args.tool >= 0):
+        raise InputError(f"--tool must be a mass >= 0 [kg], got {args.tool}")
     masses = [] if args.payload is None else parse_floats(args.payload, "--payload")
     if any(m <= 0 for m in masses):
         raise InputError(f"--payload masses must be > 0 [kg], got {args.payload}")
@@ -65,6 +75,49 @@ def _check(args: argparse.Namespace) -> tuple[list[float], list[Run]]:
         for k in range(args.files)
     ]
     return masses, runs
+
+
+def joint_term_values(text: str | None) -> dict[str, float]:
+    """``--joint-terms fv=0.4,fc=0.6`` -> {"fv": 0.4, "fc": 0.6} (one value for every joint)."""
+    if text is None:
+        return {}
+    out: dict[str, float] = {}
+    for item in str(text).split(","):
+        name, sep, value = item.partition("=")
+        name = name.strip()
+        if not sep or name not in JOINT_TERMS:
+            raise InputError(
+                f"--joint-terms expects TERM=VALUE items with TERM one of {', '.join(JOINT_TERMS)}"
+                f", e.g. fv=0.4,fc=0.6; got {item!r}"
+            )
+        try:
+            number = float(value)
+        except ValueError:
+            raise InputError(f"--joint-terms: {name} takes a number, got {value!r}") from None
+        if not math.isfinite(number) or (name != "fo" and number < 0):
+            raise InputError(f"--joint-terms: {name} must be a finite number >= 0, got {value!r}")
+        out[name] = number
+    return out
+
+
+def truth_parameters(robot, args: argparse.Namespace) -> np.ndarray:
+    """The parameters behind the logs, shape (p,): the nominal ones with ``--joint-terms``
+    set for every joint, perturbed by ``--perturb`` (seed ``--seed``), plus the ``--tool``
+    mass on the last body."""
+    theta = robot.nominal_parameters.copy()
+    values = joint_term_values(args.joint_terms)
+    missing = [t for t in values if t not in robot.terms.enabled]
+    if missing:
+        raise InputError(
+            f"--joint-terms sets {', '.join(missing)}, which the robot's model does not have "
+            f"(modelled: {', '.join(robot.terms.enabled) or 'none'}); add --friction viscous,"
+            "coulomb (fv, fc), offset (fo), --armature (Ia) or --spring (k)"
+        )
+    joint = robot.layout.joint_block(theta)  # a view into theta, shape (nv, n_terms)
+    for term, value in values.items():
+        joint[:, robot.terms.enabled.index(term)] = value
+    theta = perturb_parameters(robot, args.perturb, seed=args.seed, theta=theta)
+    return with_payload(robot, theta, args.tool) if args.tool else theta
 
 
 def _gains(args: argparse.Namespace, nv: int) -> np.ndarray | None:
@@ -105,7 +158,7 @@ def _readme(robot, args, masses: list[float], runs: list[Run], gains) -> str:
         f"Simulated logs of {robot.name} written by manip-id simulate.",
         "",
         f"robot: {robot.name}; joint terms: {', '.join(robot.terms.enabled) or 'none'}",
-        "truth: the robot's nominal parameters (truth.json: every parameter by name)",
+        "truth: " + _truth_words(args) + " (truth.json: every parameter by name)",
         f"motion: one random Fourier excitation per file (seed {runs[0].seed} for the first, "
         "+1 per file); no two files repeat a motion",
         f"samples: {args.duration:g} s at {args.rate:g} Hz per file; q, dq and ddq exact"
@@ -128,9 +181,20 @@ def _readme(robot, args, masses: list[float], runs: list[Run], gains) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _truth(robot, args, masses: list[float], runs: list[Run], gains) -> dict:
+def _truth_words(args) -> str:
+    """How the truth differs from the URDF, in words."""
+    parts = [f"joint terms {args.joint_terms}"] if args.joint_terms else []
+    if args.perturb:
+        parts.append(f"inertial parameters perturbed by about {100 * args.perturb:g} %")
+    if args.tool:
+        parts.append(f"a {args.tool:g} kg tool (not in the URDF) at {LEVER:g} m on the last body")
+    if not parts:
+        return "the robot's nominal parameters"
+    return "the robot's nominal parameters with " + ", ".join(parts)
+
+
+def _truth(robot, args, theta, masses: list[float], runs: list[Run], gains) -> dict:
     """truth.json: the parameters behind the logs, by name."""
-    theta = robot.nominal_parameters
     return {
         "robot": robot.name,
         "joint_terms": list(robot.terms.enabled),
@@ -142,6 +206,12 @@ def _truth(robot, args, masses: list[float], runs: list[Run], gains) -> dict:
         }
         if masses
         else None,
+        "differs_from_urdf": {
+            "joint_terms": joint_term_values(args.joint_terms),
+            "perturb": args.perturb,
+            "perturb_seed": args.seed,
+            "tool_mass": args.tool,
+        },
         "noise": {"tau_relative": args.noise},
         "duration": args.duration,
         "rate": args.rate,
@@ -164,17 +234,19 @@ def run(args: argparse.Namespace) -> int:
     robot = robot_from_args(args)
     gains = _gains(args, robot.nv)
     check_simulation_memory(robot, int(round(args.duration * args.rate)))
-    theta = robot.nominal_parameters
+    theta = truth_parameters(robot, args)
 
     def fill(folder: Path) -> None:
         for r in runs:
             truth = with_payload(robot, theta, r.mass) if r.mass else theta
             save_dataset(_log(robot, r, truth, args, gains), folder / r.name, format=args.format)
-            print(f"simulated {r.name}")
+            if not args.quiet:
+                print(f"simulated {r.name}")
         (folder / "README.txt").write_text(_readme(robot, args, masses, runs, gains))
-        write_json(folder / "truth.json", _truth(robot, args, masses, runs, gains))
+        write_json(folder / "truth.json", _truth(robot, args, theta, masses, runs, gains))
 
     path = claim.build(fill)
     outputs.publish()  # the folder appears complete, or not at all
-    print(f"wrote {len(runs)} log(s), README.txt and truth.json to {path}")
+    if not args.quiet:
+        print(f"wrote {len(runs)} log(s), README.txt and truth.json to {path}")
     return 0

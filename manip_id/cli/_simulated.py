@@ -28,13 +28,13 @@ from ._common import (
     exports_wanted,
     finish,
     prepare,
-    print_warnings,
     progress,
 )
 from ._runtime import (
     consistent_options,
     note_exports,
     print_result,
+    print_warnings,
     robot_from_args,
     run_document,
     stage_export,
@@ -129,7 +129,7 @@ def _run_stream(robot, args, outputs, timings: dict, t_start: float) -> int:
     theta_true = np.asarray(stream.theta_true, dtype=float)
     ctx = RunContext(source, n_validation=n - k, theta_true=theta_true)
     result, report = run_document(robot, result, args, ctx, timings)
-    print_result(report)
+    print_result(report, args)
     print_warnings(report)
     note_exports(args, report)
     if args.json:
@@ -198,5 +198,5 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
         parts.append(("validation", valid, validation.t, validation.tau))
     raw = raw_reference(robot, result, parts, args.chunk)
     result, report = run_document(robot, result, args, ctx, timings, raw)
-    print_result(report)
+    print_result(report, args)
     return write_outputs(args, outputs, robot, result, report, ReportSamples(train, valid, full))

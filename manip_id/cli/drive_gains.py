@@ -59,4 +59,10 @@ def register(sub) -> None:
         action="store_true",
         help="replace a --report folder manip-id wrote [default: refuse]",
     )
+    p.add_argument(
+        "--verbose",
+        action="store_true",
+        help="also print each file's data quality and the pre-fit audit's table "
+        "[default: the audit in one line; the data quality is in --json]",
+    )
     p.set_defaults(func=command("manip_id.cli._drive_gains"))

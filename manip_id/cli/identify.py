@@ -175,6 +175,13 @@ def register(sub) -> None:
         action="store_true",
         help="print nothing but errors and warnings (no progress bar, no tables)",
     )
+    p.add_argument(
+        "--verbose",
+        action="store_true",
+        help="also print every base parameter (value, std, nominal, unit, flags), the audit's "
+        "table and each file's data quality [default: the answer in about 25 lines; the full "
+        "table is always in --json and --report]",
+    )
     rep = p.add_argument_group("report and flags")
     rep.add_argument(
         "--scene-assets",

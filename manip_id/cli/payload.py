@@ -156,4 +156,10 @@ def register(sub) -> None:
         "each file is one task (read, preprocessed and accumulated on a worker), the sums "
         "are added on the cluster and the payload is solved here",
     )
+    p.add_argument(
+        "--verbose",
+        action="store_true",
+        help="also print each file's data quality and the pre-fit audit's table "
+        "[default: the audit in one line; the data quality is in --json]",
+    )
     p.set_defaults(func=command("manip_id.cli._payload"))

@@ -1,9 +1,11 @@
 """``manip-id simulate``: simulated logs, with the truth behind them, to try every command on.
 
 Each file is one excitation (a random Fourier trajectory within the joint limits, its own
-seed) simulated with the robot's nominal parameters and torque noise relative to each
-joint's RMS torque; ``--payload`` adds runs carrying a point mass on the last body, and
-``--drive-gains`` writes motor currents instead of torques. The folder also holds
+seed) simulated with the robot's nominal parameters, or a robot that differs from its
+URDF as real ones do (``--joint-terms`` friction values, ``--perturb`` inertias, a
+``--tool`` mass on the last body), with torque noise relative to each joint's RMS torque;
+``--payload`` adds runs carrying a point mass on the last body, and ``--drive-gains``
+writes motor currents instead of torques. The folder also holds
 ``README.txt`` and ``truth.json``: the robot, the parameters, the payload and the noise
 used, so that identified values can be compared with them.
 """
@@ -13,6 +15,8 @@ from __future__ import annotations
 from ._common import SIM_DEFAULTS, add_robot_arguments, command
 
 FORMATS = ("npz", "csv", "mcap")
+#: The payload's and the tool's lever: 0.1 m along the last joint's axis (``with_payload``).
+LEVER = 0.1  # [m]
 
 
 def register(sub) -> None:
@@ -63,6 +67,32 @@ def register(sub) -> None:
         help="also write --files loaded runs per mass [kg]: a point mass 0.1 m along the last "
         "joint's axis, on the last body [default: none]",
     )
+    truth = p.add_argument_group("a robot that differs from its URDF (the truth of the logs)")
+    truth.add_argument(
+        "--joint-terms",
+        default=None,
+        metavar="TERM=VALUE[,...]",
+        help="the truth's joint terms, one value for every joint, e.g. fv=0.4,fc=0.6 "
+        "(fv [N m s/rad], fc [N m], fo [N m], Ia [kg m^2], k [N m/rad]; the terms must be "
+        "modelled: --friction, --armature, --spring) [default: the URDF's]",
+    )
+    truth.add_argument(
+        "--perturb",
+        type=float,
+        default=0.0,
+        metavar="FRACTION",
+        help="perturb every body's mass, inertia and centre of mass and the joint terms by "
+        "about FRACTION (0.3: tens of percent), physically valid, drawn from --seed "
+        "[default 0: the URDF's]",
+    )
+    truth.add_argument(
+        "--tool",
+        type=float,
+        default=0.0,
+        metavar="KG",
+        help=f"a tool mass [kg] not in the URDF, in every run: a point mass {LEVER:g} m along "
+        "the last joint's axis, on the last body [default 0]",
+    )
     p.add_argument(
         "--drive-gains",
         default=None,
@@ -85,4 +115,5 @@ def register(sub) -> None:
         action="store_true",
         help="replace an --out folder that manip-id wrote [default: refuse]",
     )
+    p.add_argument("--quiet", action="store_true", help="print nothing but errors and warnings")
     p.set_defaults(func=command("manip_id.cli._simulate"))

@@ -201,6 +201,10 @@ def _parse(buf, out):
     return row
 
 
+#: The compiled functions of this module (the compile note asks numba's cache about them).
+COMPILED = (_parse,)
+
+
 def parse_lines(text: bytes, width: int | None) -> np.ndarray | None:
     """The lines ``text`` (comma-separated, ``width`` cells each; None: those of the first
     line) as a float64 table, shape (lines, width); None when the kernel cannot read them

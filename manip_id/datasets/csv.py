@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._numba import note_compile
 from ..errors import DataError
 from .core import Dataset, check_time
 from .layout import FIELDS, Layout
@@ -199,9 +200,10 @@ def _compiled_parser():
     """The compiled reader of comma-separated lines (``bytes, width -> table or None``),
     or None (numba cannot be imported)."""
     try:
-        from ._csv_kernel import parse_lines  # imports numba (optional, heavy)
+        from ._csv_kernel import COMPILED, parse_lines  # imports numba (optional, heavy)
     except ImportError:
         return None
+    note_compile(*COMPILED)
     return parse_lines
 
 

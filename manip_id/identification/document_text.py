@@ -227,7 +227,7 @@ def verdict_text(doc: dict) -> str:
         text += ", WORSE than the nominal model on some joints (warning above)"
     n = len(doc.get("warnings") or [])
     return text + (
-        f", {n} warning(s) on the result (above)" if n else ", no warnings on the result"
+        f", {n} warning(s) on the result (as warnings)" if n else ", no warnings on the result"
     )
 
 

@@ -159,7 +159,8 @@ def _scan(robot: Robot, specs, vspecs, fopts: FileOptions, run: RunOptions, timi
         t0 = time.perf_counter()
         if fopts.audit:
             audit = audit_files(robot, specs + (vspecs or []), _audit_options(options), cache=cache)
-            run.say(audit.table())
+            if run.verbose or audit.findings:  # a clean audit: one line in the answer
+                run.say(audit.text(verbose=run.verbose))
             if fopts.trim_standstill:
                 trimmed = audit.trimmed()
                 specs, vspecs = (
@@ -183,9 +184,9 @@ def _scan(robot: Robot, specs, vspecs, fopts: FileOptions, run: RunOptions, timi
     if vspecs is not None:
         source["validate"] = [s.label for s in vspecs]
     timings["scan"] = time.perf_counter() - t0
-    for s in specs:
+    for s in specs if run.verbose else ():  # else in the result's files only
         run.say(scans[s].quality.text())
-    for s in vspecs or []:
+    for s in (vspecs or []) if run.verbose else ():
         run.say("validation " + scans[s].quality.text())
     return SimpleNamespace(specs=specs, vspecs=vspecs, scans=scans, source=source, audit=audit)
 
@@ -384,9 +385,9 @@ def _distributed(robot, specs, vspecs, base, settings: SolveSettings, opts, fopt
     problem.settings = settings
     problem.t_start = t_start
     files = problem.files or {"train": [], "validation": None}
-    for info in files["train"]:
+    for info in files["train"] if run.verbose else ():
         run.say(info.quality.text())
-    for info in files["validation"] or []:
+    for info in (files["validation"] or []) if run.verbose else ():
         run.say("validation " + info.quality.text())
     source = {"data": [s.label for s in specs], "scheduler": _scheduler_name(run.scheduler)}
     if vspecs is not None:

@@ -272,6 +272,9 @@ class RunOptions:
         Called as ``echo(text)`` with what a file run finds before the fit (the pre-fit
         audit's table, each file's data quality, the temperature reference, the friction
         selection), as it finds it; the same texts are in the result. None: silent.
+    verbose : bool
+        Echo the full pre-fit audit table and each file's data quality too (else the
+        audit's findings only, and the per-file quality stays in the result).
     """
 
     chunk: int = DEFAULT_CHUNK
@@ -279,6 +282,7 @@ class RunOptions:
     scheduler: Any = None
     progress: Callable[[int, int], None] | None = None
     echo: Callable[[str], None] | None = None
+    verbose: bool = False
 
     def say(self, text: str) -> None:
         """``echo(text)`` when there is an echo."""

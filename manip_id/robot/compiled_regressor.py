@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from .._numba import note_numba_warm, numba_available
+from .._numba import note_compile, note_numba_warm, numba_available
 from ..errors import InputError
 
 # joint kinds of the compiled kernel
@@ -144,6 +144,7 @@ def _kernel():
         from ._regressor_kernel import build  # imports numba, compiles or loads the cache
 
         _KERNEL = build()
+        note_compile(_KERNEL)  # one line when it compiles (nothing cached)
     return _KERNEL
 
 
@@ -242,5 +243,6 @@ def momentum_block(desc: CompiledModel, q, dq, yp: np.ndarray, yh: np.ndarray) -
         from ._regressor_kernel import build_momentum  # imports numba (optional, heavy)
 
         _MOMENTUM = build_momentum()
+        note_compile(_MOMENTUM)
     tree = (desc.parent, desc.kind, desc.axis, desc.rot0, desc.pos0, desc.idx_q, desc.idx_v)
     _MOMENTUM((*tree, desc.gravity), q, dq, yp, yh)

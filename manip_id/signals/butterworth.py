@@ -29,7 +29,7 @@ import math
 
 import numpy as np
 
-from .._numba import note_numba_warm, numba_available
+from .._numba import note_compile, note_numba_warm, numba_available
 
 
 def butterworth_poles(order: int, cutoff: float, rate: float) -> tuple[np.ndarray, float]:
@@ -133,6 +133,7 @@ def impulse_response(sos: np.ndarray, n: int) -> np.ndarray:
     if numba_available():
         from ._filter_kernel import run_sections  # numba kernels (optional heavy library)
 
+        note_compile(run_sections)
         run_sections(sos, np.zeros((sos.shape[0], 2, 1)), x, False)
         note_numba_warm()
         return x[:, 0]
@@ -151,6 +152,8 @@ def zero_phase(sos: np.ndarray, x: np.ndarray, axis: int = 0) -> np.ndarray:
 
         return _signal.sosfiltfilt(sos, x, axis=axis)
     from ._filter_kernel import filtfilt  # numba kernels (optional heavy library)
+
+    note_compile(filtfilt)
 
     moved = np.moveaxis(np.asarray(x, dtype=float), axis, 0)
     flat = np.ascontiguousarray(moved.reshape(moved.shape[0], -1))
