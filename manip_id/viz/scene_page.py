@@ -99,6 +99,7 @@ body {{ margin: 0; }}
   vertical-align: middle; margin: 0 3px; box-sizing: border-box; }}
 #legend .sw.wire {{ background: transparent !important; border: 2px dashed; }}
 #legend .note {{ color: #a33; }}
+#legend details details summary {{ font-weight: normal; color: #a33; }}
 </style></head>
 <body>
 <div id="wrap">
