@@ -53,6 +53,7 @@ import numpy as np
 from .._io.reading import read_json
 from ..consistency import NONNEGATIVE_TERMS
 from ..errors import DataError, InputError, format_direction
+from ..identifiability.qr import REGROUPED_NOTE, has_regrouped
 from ..metrics import finite_list, finite_or_none
 
 #: std above this [%] flags a base parameter "poorly identified".
@@ -488,6 +489,8 @@ def _parameter_lines(rows: list[dict], max_rows: int | None) -> list[str]:
         )
     if len(shown) < len(rows):
         lines.append(f"... {len(rows) - len(shown)} more")
+    if has_regrouped(r["name"] for r in shown):
+        lines.append(f"({REGROUPED_NOTE})")
     return lines
 
 
