@@ -45,6 +45,7 @@ from .parameters import (
 )
 from .profiles import RobotProfile
 from .regressor import RegressorEvaluator
+from .resources import check_model_size
 from .robot_sources import (
     FLOATING_JOINTS,
     FRICTION_KINDS,
@@ -108,6 +109,7 @@ class Robot:
             )
         if model.nv == 0:
             raise RobotError(f"robot {name!r} has no movable joint")
+        check_model_size(model.nv)  # before the first Data is built
         self.name = name
         self.model = model
         self.data = model.createData()
