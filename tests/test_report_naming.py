@@ -8,7 +8,7 @@ from conftest import get_robot
 
 from manip_id.identifiability import REGROUPED_NOTE, analyze, has_regrouped
 from manip_id.viz import ReportContent, write_report
-from manip_id.viz.meshcat_scene import link_names
+from manip_id.viz.link_colors import link_names
 from manip_id.viz.report_document import data_in_words
 
 

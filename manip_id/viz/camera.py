@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.spatial import ConvexHull, QhullError
 
 from ..errors import InputError
 
@@ -177,3 +178,13 @@ def place_camera(
         target, dist, cy, cx = trial, trial_dist, ty, tx
     h, w = image_extent(points - target, dist * d, **kw)
     return CameraPlacement(position=dist * d, fill=h, width_fill=w, target=target)
+
+
+def convex_hull(points: np.ndarray) -> np.ndarray:
+    """The vertices of the convex hull of ``points`` (shape (n, 3) [m]): their image spans
+    what all the points' image spans (a perspective image's extremes over a convex set lie
+    at its vertices), at a fraction of the cost. All points when the hull is flat."""
+    try:
+        return points[ConvexHull(points).vertices]
+    except (QhullError, ValueError):
+        return points

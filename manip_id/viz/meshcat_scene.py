@@ -22,7 +22,7 @@ import base64
 import html as html_lib
 import json
 import warnings
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 
 import meshcat.geometry as mg
@@ -31,12 +31,11 @@ import pinocchio as pin
 from meshcat.animation import Animation
 from pinocchio.visualize import MeshcatVisualizer
 from pinocchio.visualize.meshcat_visualizer import applyScalingOnHomegeneousTransform
-from scipy.spatial import ConvexHull, QhullError
 
 from .._io import atomic_write_text
 from ..errors import InputError, ManipIdError
 from ..robot import Robot
-from .camera import place_camera, view_direction
+from .camera import convex_hull, place_camera, view_direction
 from .inertia_ellipsoid import (
     EquivalentEllipsoid,
     degenerate_shape,
@@ -48,11 +47,12 @@ from .link_colors import (
     css_color,
     hex_color,
     link_identifiability,
+    link_names,
     share_color,
 )
 from .meshcat_server import LiveView, replay
 from .meshes import MAX_TRIANGLES, decimate_mesh, mesh_arrays
-from .scene_page import OfflineVisualizer, RecordingWindow, page_html, viewer_js
+from .scene_page import LegendSection, OfflineVisualizer, RecordingWindow, page_html, viewer_js
 from .trajectory_check import check_trajectory
 
 #: Re-exported: the scene's parts of earlier releases live in their own modules now.
@@ -92,17 +92,6 @@ SWEPT_POSES = 60
 SWEPT_VERTICES = 40
 
 
-def link_names(model) -> list[str]:
-    """The link each joint moves, per joint ``1 .. njoints - 1`` of a Pinocchio model: the
-    first BODY frame the joint carries (the URDF's child link; the joint's name when none)."""
-    names: dict[int, str] = {}
-    for frame in model.frames:  # in the order the URDF's links were added
-        j = int(frame.parentJoint)
-        if frame.type == pin.BODY and j > 0:
-            names.setdefault(j, frame.name)
-    return [names.get(j, model.names[j]) for j in range(1, model.njoints)]
-
-
 def _rotation_y_to(axis: np.ndarray) -> np.ndarray:
     """A rotation matrix taking the y axis to the unit vector ``axis``, shape (3, 3)."""
     y = np.array([0.0, 1.0, 0.0])
@@ -112,16 +101,6 @@ def _rotation_y_to(axis: np.ndarray) -> np.ndarray:
         return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
     vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
     return np.eye(3) + vx + vx @ vx / (1.0 + c)
-
-
-def _hull(points: np.ndarray) -> np.ndarray:
-    """The vertices of the convex hull of ``points`` (shape (n, 3) [m]): their image spans
-    what all the points' image spans (a perspective image's extremes over a convex set lie
-    at its vertices), at a fraction of the cost. All points when the hull is flat."""
-    try:
-        return points[ConvexHull(points).vertices]
-    except (QhullError, ValueError):
-        return points
 
 
 # ------------------------------------------------------------------ trajectory
@@ -140,23 +119,6 @@ def _set_entry(label: str, color, wire: bool, shown: bool, count: str) -> str:
         f'{css_color(color)}; border-color:{css_color(color)}"></span> '
         f"{html_lib.escape(label)}: {count}{' (wire frame)' if wire else ''}</label>"
     )
-
-
-@dataclass
-class _Legend:
-    title: str
-    lines: list[str] = field(default_factory=list)
-    notes: list[str] = field(default_factory=list)  # short, shown folded
-
-    def html(self) -> str:
-        parts = [f"<b>{self.title}</b>", *self.lines]
-        if self.notes:
-            items = "<br>".join(
-                f'<span class="note">{html_lib.escape(n)}</span>' for n in self.notes
-            )
-            count = f"{len(self.notes)} note{'s' if len(self.notes) > 1 else ''}"
-            parts.append(f"<details><summary>{count}</summary>{items}</details>")
-        return "<br>".join(parts)
 
 
 class RobotScene:
@@ -216,7 +178,7 @@ class RobotScene:
         self._geom_data = self._geom.createData()
         self._capsules: list[tuple[str, int, np.ndarray]] = []
         self._sets: list[tuple[str, list[EquivalentEllipsoid], tuple]] = []
-        self._legend: list[_Legend] = []
+        self._legend: list[LegendSection] = []
         self._t: np.ndarray | None = None
         self._q: np.ndarray | None = None
         self._link_colors: dict[int, tuple] | None = None
@@ -362,7 +324,7 @@ class RobotScene:
         swept = np.vstack([self._points(q, vertices=SWEPT_VERTICES) for q in poses])
         center = 0.5 * (swept.min(axis=0) + swept.max(axis=0))
         pad = center + 0.1 * np.vstack([np.eye(3), -np.eye(3)])  # a robot of a point: 20 cm
-        swept = _hull(np.vstack([swept, pad]) - center)
+        swept = convex_hull(np.vstack([swept, pad]) - center)
         self.camera = place_camera(swept, direction=view_direction(swept), fill=FILL)
         center = center + self.camera.target  # the image of the swept volume centred
         self.view_center = center  # [m], world: the point the camera looks at
@@ -501,7 +463,7 @@ class RobotScene:
         self._vis[f"inertia/{label}"].set_property("visible", shown)
         entry = _set_entry(label, color, wire, shown, f"{drawn} of {n_bodies} bodies")
         self._legend.append(
-            _Legend(f"inertia ellipsoids: {html_lib.escape(label)}", [entry], short)
+            LegendSection(f"inertia ellipsoids: {html_lib.escape(label)}", [entry], short)
         )
         self._place_all(self._q_static, self._vis)
         self._build_animation()
@@ -543,7 +505,7 @@ class RobotScene:
             for s in (0.0, 0.25, 0.5, 0.75, 1.0)
         )
         self._legend.append(
-            _Legend(
+            LegendSection(
                 f"identifiability ({html_lib.escape(ident.criterion)})",
                 [f"share determined: {scale}", *lines],
             )
