@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+try:
+    import resource
+except ImportError:  # not a Unix
+    resource = None  # type: ignore[assignment]
+
 import numpy as np
 
 from .errors import InputError
@@ -91,10 +96,6 @@ def memory_budget(share: float = 0.5, cap: int | None = None) -> int:
     import psutil  # optional heavy library, asked only when a memory budget is needed
 
     available = psutil.virtual_memory().available  # [bytes]
-    try:
-        import resource
-    except ImportError:  # not a Unix
-        resource = None  # type: ignore[assignment]
     if resource is not None:
         soft, _ = resource.getrlimit(resource.RLIMIT_AS)
         if soft != resource.RLIM_INFINITY:
