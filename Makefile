@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 export OPENBLAS_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
 
-.PHONY: demo test lint format system-deps bench clean docs docs-check
+.PHONY: demo test test-quick lint format system-deps bench clean docs docs-check
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -31,8 +31,13 @@ system-deps:
 		fi; \
 	fi
 
+# the whole suite (CI runs it); tests/README.md says what it costs
 test: $(STAMP) system-deps
 	$(PY) -m pytest -q
+
+# the suite without the tests marked slow (browser, end-to-end, Monte Carlo)
+test-quick: $(STAMP)
+	$(PY) -m pytest -q -m "not slow"
 
 # train on one simulated excitation, validate on another (demo-data/run_0.npz, seed 1)
 demo: $(STAMP)

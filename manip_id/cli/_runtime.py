@@ -19,7 +19,7 @@ from ..export import export_texts, mjcf_text, sidecar_path
 from ..export.sidecar import identification_provenance
 from ..identification import ConsistentOptions, PreprocessOptions, result_text, verdict_text
 from ..robot.model import Robot, load_robot
-from ..viz.report_document import ReportOptions
+from ..viz.report_document import ReportOptions, data_in_words
 from ._common import (
     exports_wanted,
     finish,
@@ -159,7 +159,7 @@ def report_options(args: argparse.Namespace, source: str | None = None):
     """The :class:`~manip_id.viz.report_document.ReportOptions` of identify's options."""
 
     if source is None:
-        source = "simulated" if args.simulate else ", ".join(map(str, args.data))
+        source = "simulated" if args.simulate else data_in_words(args.data)
     return ReportOptions(
         source=source,
         simulated=bool(args.simulate),

@@ -52,6 +52,7 @@ import numpy as np
 
 from .._io.reading import read_json
 from ..errors import DataError, InputError, format_direction
+from ..identifiability.qr import REGROUPED_NOTE, has_regrouped
 from ..metrics import finite_list, finite_or_none
 from ..physics.consistency import NONNEGATIVE_TERMS
 
@@ -486,9 +487,9 @@ def _parameter_lines(rows: list[dict], max_rows: int | None) -> list[str]:
             f"{r['name']:<{w}}  {val:>12}  {std:>10}  {sp:>8}  {nom:>12}  "
             f"{r.get('unit', ''):<8}  " + ", ".join(r.get("flags", []))
         )
-    if len(shown) < len(rows):
-        lines.append(f"... {len(rows) - len(shown)} more")
-    return lines
+    more = [f"... {len(rows) - len(shown)} more"] if len(shown) < len(rows) else []
+    note = [f"({REGROUPED_NOTE})"] if has_regrouped(r["name"] for r in shown) else []
+    return lines + more + note
 
 
 def _standard_lines(doc: dict) -> list[str]:
