@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 export OPENBLAS_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
 
-.PHONY: demo test warmup lint format system-deps bench clean docs docs-check
+.PHONY: demo test test-quick warmup lint format system-deps bench clean docs docs-check
 
 $(PY):
 	@$(PYTHON) -m venv $(VENV)
@@ -37,8 +37,13 @@ system-deps:
 warmup: $(STAMP)
 	@$(VENV)/bin/manip-id warmup
 
+# the whole suite (CI runs it); tests/README.md says what it costs
 test: $(STAMP) system-deps warmup
 	$(PY) -m pytest -q
+
+# the suite without the tests marked slow (browser, end-to-end, Monte Carlo)
+test-quick: $(STAMP) warmup
+	$(PY) -m pytest -q -m "not slow"
 
 # A panda that differs from its URDF as a real one does (a 0.8 kg tool, friction, inertias
 # off by ~30 %): trained on one excitation (demo-data/run_0.npz), validated on another

@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+try:
+    import resource
+except ImportError:  # not a Unix
+    resource = None  # type: ignore[assignment]
+
 import numpy as np
 
 from .errors import InputError
@@ -84,10 +89,19 @@ def random_generator(seed, name: str = "seed") -> np.random.Generator:
 
 
 def memory_budget(share: float = 0.5, cap: int | None = None) -> int:
-    """``share`` of the memory available now [bytes] (at most ``cap``): what one job may take."""
+    """``share`` of the memory available now [bytes] (at most ``cap``): what one job may take.
+
+    Available is the system's free memory, or less under an address-space limit
+    (``RLIMIT_AS``, ``ulimit -v``: its soft limit minus the address space in use)."""
     import psutil  # optional heavy library, asked only when a memory budget is needed
 
-    budget = int(share * psutil.virtual_memory().available)
+    available = psutil.virtual_memory().available  # [bytes]
+    if resource is not None:
+        soft, _ = resource.getrlimit(resource.RLIMIT_AS)
+        if soft != resource.RLIM_INFINITY:
+            used = psutil.Process().memory_info().vms  # [bytes] of address space
+            available = min(available, max(int(soft) - used, 0))
+    budget = int(share * available)
     return budget if cap is None else min(budget, int(cap))
 
 

@@ -74,6 +74,29 @@ def check_regressor_buffer(chunk: int, nv: int, p: int) -> None:
         check_memory(need, f"the regressor of {nv} joints and {p} parameters needs")
 
 
+#: Bytes of one Pinocchio ``Data`` per nv^3 [bytes]: its second-order derivative tensors
+#: (``d2tau_dqdq`` and three more, nv x nv x nv each) outgrow everything else (measured:
+#: 36 MiB at nv = 100, 111 MiB at nv = 150).
+DATA_BYTES_PER_NV3 = 4 * FLOAT
+#: The largest Pinocchio ``Data`` [bytes] a robot may need (nv of about 200): a robot holds
+#: several (its own, a pool's, each worker's), and a model this large is refused by the
+#: regressor's limit anyway (:data:`REGRESSOR_BUFFER_LIMIT`), after its Data were built.
+DATA_LIMIT = 256 * 2**20
+
+
+def check_model_size(nv: int) -> None:
+    """Refuse a model of ``nv`` joints whose Pinocchio ``Data`` would exceed
+    :data:`DATA_LIMIT`, before any is built (a 300-joint chain's takes 0.8 GiB)."""
+    need = DATA_BYTES_PER_NV3 * float(nv) ** 3
+    if need > DATA_LIMIT:
+        raise ResourceError(
+            f"a model of {nv} joints needs about {gib(need)} for each Pinocchio Data (its "
+            f"second-order derivative tensors hold 4 nv^3 values), above the limit of "
+            f"{gib(DATA_LIMIT)}: the model is too large for manip-id (split the chain or lock "
+            "joints)"
+        )
+
+
 def check_count(value: float, limit: float, what: str, unit: str = "") -> None:
     """Refuse ``value`` above ``limit`` (a count or size with a fixed bound), naming both."""
     if value > limit:

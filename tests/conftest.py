@@ -9,7 +9,9 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
+import ctypes  # noqa: E402
 import functools  # noqa: E402
+import gc  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import pytest  # noqa: E402
@@ -49,3 +51,38 @@ def panda_log() -> Path:
     """The real Panda log folder; skips when the shared data are absent (fails on CI)."""
     require_shared_data(PANDA_LOG / "rbt_log_time.txt", "real Panda log")
     return PANDA_LOG
+
+
+# ------------------------------------------------------------------ memory between tests
+#: Resident-set growth [bytes] since the last release after which the memory freed by the
+#: tests is collected (cycles) and handed back to the system (glibc keeps freed heap pages
+#: otherwise, and the suite's resident set only ever grows).
+_RELEASE_STEP = 256 * 2**20
+_released_at = [0]
+
+
+def _rss() -> int:
+    """This process's resident set [bytes] (0 where /proc is absent)."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return 0
+
+
+def _malloc_trim() -> None:
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):  # not glibc
+        pass
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_runtest_teardown(item, nextitem):
+    """After a test whose leftovers grew the resident set by :data:`_RELEASE_STEP`: collect
+    the garbage and trim the heap (cheap: a /proc read per test, a collection rarely)."""
+    rss = _rss()
+    if rss > _released_at[0] + _RELEASE_STEP:
+        gc.collect()
+        _malloc_trim()
+        _released_at[0] = _rss()

@@ -119,7 +119,9 @@ def test_ols_shrinks_a_noisy_small_current_ml_does_not(ur5, ur5_base):
     """Errors in variables: with 0.02 A of noise on wrist_3's 0.07 A current, OLS's gain
     comes out low by several predicted (white-noise, as the noise is white) std, on every
     seed; ML's does not."""
-    _, z_ols, _, _ = _monte_carlo(ur5, ur5_base, "ols", 0.02, seeds=range(5), white=True)
+    # OLS warns that its wrist_3 gain is far from ML's (the bias this test shows)
+    with pytest.warns(PayloadWarning, match="OLS drive gain differs.*wrist_3_joint"):
+        _, z_ols, _, _ = _monte_carlo(ur5, ur5_base, "ols", 0.02, seeds=range(5), white=True)
     _, z_ml, _, _ = _monte_carlo(ur5, ur5_base, "ml", 0.02, seeds=range(5))
     assert np.all(z_ols[:, 5] < -3.0)
     assert np.all(np.abs(z_ml[:, 5]) < 3.5)

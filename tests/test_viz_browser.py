@@ -97,24 +97,53 @@ def test_robot_is_drawn_and_moves(name, amplitude, tmp_path):
     assert moved_robot / moved.sum() > 0.95
 
 
+#: The default view of a scene page (a laptop browser window) [px].
+VIEW = (1400, 900)
+
+
+def frames_in_view(page, tmp_path, times, size=VIEW) -> dict:
+    """Photograph ``page`` at each of ``times`` [s] and once with the robot hidden (the
+    same camera; the background); from the pixels that differ, per frame and over all:
+    whether the robot stays inside the canvas and right of the legend panel (found by its
+    background colour #f6f6f4), and the share of the canvas the motion spans."""
+    text = page.read_text()
+    empty = tmp_path / "empty.html"
+    hide = '<script>viewer.set_property(["meshcat", "robot"], "visible", false);</script>'
+    empty.write_text(text.replace("</body>", hide + "</body>"))
+    background = screenshot(empty, tmp_path / "empty.png", tmp_path, "#t=0", size=size)
+    panel = np.abs(background - np.array([0xF6, 0xF6, 0xF4]) / 255.0).max(axis=2) < 0.01
+    legend_right = int(np.nonzero(panel.mean(axis=0) > 0.5)[0].max())
+    union = np.zeros(background.shape[:2], dtype=bool)
+    inside = []
+    for k, t in enumerate(times):
+        shot = screenshot(page, tmp_path / f"t{k}.png", tmp_path, f"#t={t:g}", size=size)
+        robot = _changed(shot, background)
+        rows, cols = np.nonzero(robot)
+        assert rows.size > 0.002 * robot.size, f"no robot drawn at t={t}"
+        inside.append(
+            bool(rows.min() > 0 and rows.max() < size[1] - 1)
+            and bool(cols.min() > legend_right and cols.max() < size[0] - 1)
+        )
+        union |= robot
+    rows, cols = np.nonzero(union)
+    return {
+        "inside": inside,
+        "height": (rows.max() - rows.min() + 1) / size[1],
+        "width": (cols.max() - cols.min() + 1) / (size[0] - 1 - legend_right),
+    }
+
+
 @pytest.mark.parametrize("name", ["panda", "ur5"])
-def test_robot_fills_the_view_beside_the_legend(name, tmp_path):
-    """At its start pose the robot spans >= 60 % of the view height, and the legend (a
-    side panel) never covers it: the robot's pixels all lie right of the panel."""
+def test_the_whole_motion_fills_the_default_view_beside_the_legend(name, tmp_path):
+    """At 1400 x 900 px the camera frames the robot's swept volume: in every photographed
+    frame of the motion the robot lies inside the canvas, right of the legend (a side
+    panel, whatever the title's length), and over the frames it spans >= 70 % of the
+    canvas's height or of its width beside the legend."""
     robot = load_robot(name)
-    t, q = swing(robot, 0.2)
+    t, q = swing(robot, 0.1)  # 4 s: 1 s and 3 s are the swing's extremes
     scene = RobotScene(robot, title=f"{name}: a long title " * 4).animate(t, q)
-    page, page_empty = tmp_path / "scene.html", tmp_path / "empty.html"
+    page = tmp_path / "scene.html"
     scene.write_html(page)
-    scene._vis["robot"].set_property("visible", False)  # the same camera, no robot
-    scene.write_html(page_empty)
-    start = screenshot(page, tmp_path / "t0.png", tmp_path, "#t=0")
-    background = screenshot(page_empty, tmp_path / "e0.png", tmp_path, "#t=0")
-    panel = min(270, int(0.32 * WIDTH))  # the legend's width (scene_page's CSS)
-    robot_px = _changed(start, background)
-    rows, cols = np.nonzero(robot_px)
-    assert rows.size > 0.005 * robot_px.size
-    height = (rows.max() - rows.min() + 1) / HEIGHT
-    assert height >= 0.6, f"the robot spans {height:.2f} of the view height"
-    assert scene.camera.fill >= 0.6
-    assert cols.min() > panel, cols.min()  # nothing of the robot under the legend panel
+    fig = frames_in_view(page, tmp_path, (0, 1, 2.5, 3))
+    assert all(fig["inside"]), fig
+    assert max(fig["height"], fig["width"]) >= 0.7, fig

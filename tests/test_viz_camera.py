@@ -3,9 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+import pinocchio as pin
 import pytest
+from conftest import get_robot
 
+from manip_id.viz import RobotScene
 from manip_id.viz.camera import (
+    ASPECT,
     DIRECTION,
     FOV,
     image_coordinates,
@@ -29,28 +33,42 @@ def test_a_vertical_rod_seen_side_on(h, fill):
     assert cam.fill == pytest.approx(fill, rel=1e-6)
 
 
-def test_the_motion_never_pushes_the_start_pose_below_min_fill():
-    start = _rod(1.0)
-    motion = np.vstack([start, [[0.0, 5.0, 0.0], [0.0, -5.0, 4.0]]])  # a wide sweep
-    cam = place_camera(start, motion, direction=(1.0, 0.0, 0.0), fill=0.8, min_fill=0.65)
-    assert cam.fill == pytest.approx(0.65, rel=1e-6)
-    small = np.vstack([start, [[0.0, 0.0, 0.6]]])  # a motion inside the view
-    assert place_camera(start, small, direction=(1.0, 0.0, 0.0)).fill == pytest.approx(0.8)
+def _pinhole(points, position, fov=FOV, aspect=ASPECT):
+    """Normalized image coordinates (y up, x right) of world ``points`` for a camera at
+    ``position`` looking at the origin, z up: three.js's perspective camera."""
+    p = np.asarray(position, dtype=float)
+    forward = -p / np.linalg.norm(p)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    rel = np.asarray(points) - p
+    depth = rel @ forward
+    t = np.tan(np.radians(fov) / 2)
+    return rel @ up / (depth * t), rel @ right / (depth * t * aspect)
 
 
-def test_min_fill_holds_for_the_height_of_a_wide_start_pose():
-    # a start pose 4 times wider than tall: the height share, not the width's, keeps min_fill
-    # (the pinhole: 0.5 m tall at distance D spans 0.5 / (2 D tan(fov / 2)))
-    start = np.column_stack([np.zeros(11), np.linspace(-1, 1, 11), np.zeros(11)])
-    start = np.vstack([start, [[0.0, 0.0, 0.25], [0.0, 0.0, -0.25]]])
-    motion = np.vstack([start, [[0.0, 8.0, 0.0], [0.0, -8.0, 6.0]]])
-    cam = place_camera(start, motion, direction=(1.0, 0.0, 0.0), fill=0.8, min_fill=0.25)
-    assert cam.fill == pytest.approx(0.25, rel=1e-6)  # the width share is 0.83
-    d = np.linalg.norm(cam.position)
-    assert 0.5 / (2 * d * np.tan(np.radians(FOV) / 2)) == pytest.approx(0.25, rel=1e-6)
-    # taller than min_fill would push the start pose out of the view: it stays within 0.98
-    cam = place_camera(start, motion, direction=(1.0, 0.0, 0.0), fill=0.8, min_fill=0.6)
-    assert max(cam.fill, cam.width_fill) == pytest.approx(0.98, rel=1e-6)
+@pytest.mark.parametrize("name", ["ur5", "panda"])
+def test_an_animated_scene_frames_every_pose_of_its_motion(name):
+    """The camera frames the swept volume, not the start pose: the joint origins of every
+    frame (Pinocchio's forward kinematics, through the pinhole above) stay inside the view,
+    and over the motion they span a good part of it, more than the start pose alone."""
+    robot = get_robot(name)
+    lo, hi = robot.sampling_bounds()
+    t = np.linspace(0.0, 4.0, 81)
+    q = 0.5 * (lo + hi) + 0.3 * (hi - lo) * np.sin(2 * np.pi * t / 4.0)[:, None]
+    scene = RobotScene(robot).animate(t, q)
+    data = robot.model.createData()
+    ys, xs = [], []
+    for qk in q:
+        pin.forwardKinematics(robot.model, data, qk)
+        origins = np.array([data.oMi[i].translation for i in range(robot.model.njoints)])
+        y, x = _pinhole(origins - scene.view_center, scene.camera.position)
+        ys.append(y)
+        xs.append(x)
+    y, x = np.concatenate(ys), np.concatenate(xs)
+    assert np.abs(y).max() < 0.95 and np.abs(x).max() < 0.95  # every frame in view
+    assert max(np.ptp(y), np.ptp(x)) / 2 > 0.5  # and the motion fills the view
+    assert np.ptp(ys[0]) < np.ptp(y)  # the start pose alone spans less
 
 
 def test_the_target_centres_a_pose_stretched_towards_the_camera():

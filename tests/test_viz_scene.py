@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pinocchio as pin
 import pytest
+import umsgpack
 from conftest import get_robot
 
 from manip_id import InfeasibleTrajectoryError, InputError
@@ -82,7 +85,44 @@ def test_grouped_terms_note_only_for_a_set_estimated_from_data():
     scene = RobotScene(panda)
     given = scene.add_inertia(panda.nominal_parameters, label="true")
     estimate = scene.add_inertia(panda.nominal_parameters, label="estimate", estimated=True)
-    rods = [n for n in given if "panda_joint1's ellipsoid is a rod" in n]
+    rods = [n for n in given if "panda_link1's ellipsoid is a rod" in n]  # named by its link
     assert len(rods) == 1 and "grouped terms" not in rods[0]
     assert not any("grouped terms" in n for n in given)
-    assert any("panda_joint1" in n and "rod" in n and "grouped terms" in n for n in estimate)
+    assert any("panda_link1" in n and "rod" in n and "grouped terms" in n for n in estimate)
+
+
+def test_ellipsoids_are_translucent_off_at_first_and_their_notes_folded():
+    """Every parameter set starts hidden (its check box unticked) unless asked, is drawn
+    translucent, and its notes sit in a closed <details> of the legend, one short line
+    per body named by its link."""
+    panda = get_robot("panda")
+    scene = RobotScene(panda)
+    scene.add_inertia(panda.nominal_parameters, label="nominal")
+    scene.add_inertia(panda.nominal_parameters, label="identified", estimated=True)
+    scene.add_inertia(panda.nominal_parameters, label="shown", visible=True)
+    commands = [umsgpack.unpackb(c) for c in scene.commands()]
+    visible = {
+        c["path"]: c["value"]
+        for c in commands
+        if c["type"] == "set_property" and c["property"] == "visible" and "inertia" in c["path"]
+    }
+    assert visible == {
+        "/meshcat/inertia/nominal": False,
+        "/meshcat/inertia/identified": False,
+        "/meshcat/inertia/shown": True,
+    }
+    materials = [
+        c["object"]["materials"][0]
+        for c in commands
+        if c["type"] == "set_object" and "/inertia/" in c["path"]
+    ]
+    assert len(materials) == 3 * panda.n_bodies
+    assert all(m["transparent"] and m["opacity"] <= 0.6 for m in materials)
+    legend = scene.html().split('<aside id="legend">')[1].split("</aside>")[0]
+    assert legend.count('type="checkbox" checked') == 1  # only "shown"
+    folded = re.findall(r"<details><summary>(\d+) notes?</summary>(.*?)</details>", legend)
+    assert [int(n) for n, _ in folded] == [3, 4, 3]  # rod, 2 discs (+ the grouped terms)
+    lines = folded[0][1].split("<br>")
+    assert "panda_link1: a rod, 1.68 m across" in lines[0]
+    assert all(len(re.sub("<[^>]+>", "", line)) < 50 for line in lines)
+    assert "panda_joint" not in legend.split("inertia ellipsoids")[1]

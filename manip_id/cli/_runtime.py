@@ -26,7 +26,7 @@ from ..identification import ConsistentOptions, PreprocessOptions
 from ..identification.run_context import run_keys, with_context
 from ..payload import load_torque_scale
 from ..robot.model import Robot, load_robot
-from ..viz.report_document import ReportOptions
+from ..viz.report_document import ReportOptions, data_in_words
 from ._answer import advice_for, answer_text
 from ._common import (
     exports_wanted,
@@ -184,7 +184,7 @@ def report_options(args: argparse.Namespace, source: str | None = None):
     """The :class:`~manip_id.viz.report_document.ReportOptions` of identify's options."""
 
     if source is None:
-        source = "simulated" if args.simulate else ", ".join(map(str, args.data))
+        source = "simulated" if args.simulate else data_in_words(args.data)
     return ReportOptions(
         source=source,
         simulated=bool(args.simulate),

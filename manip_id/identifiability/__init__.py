@@ -81,9 +81,11 @@ from .analysis import (
 from .qr import (
     COEFFICIENT_THRESHOLD,
     EXCITATION_TOLERANCE,
+    REGROUPED_NOTE,
     ROUNDOFF_THRESHOLD,
     TOLERANCE_FLOOR,
     default_tolerance,
+    has_regrouped,
 )
 from .results import BaseParameters, RankAnalysis
 
@@ -91,6 +93,7 @@ __all__ = [
     "COEFFICIENT_THRESHOLD",
     "EXCITATION_TOLERANCE",
     "MIN_SAMPLES",
+    "REGROUPED_NOTE",
     "ROUNDOFF_THRESHOLD",
     "ROWS_PER_PARAMETER",
     "TOLERANCE_FLOOR",
@@ -103,5 +106,6 @@ __all__ = [
     "analyze_trajectory",
     "default_tolerance",
     "format_direction",
+    "has_regrouped",
     "structural_analysis",
 ]

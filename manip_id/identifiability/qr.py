@@ -28,6 +28,19 @@ EXCITATION_TOLERANCE = 1e-6
 #: Smallest default rank tolerance (relative, on the column-scaled regressor).
 TOLERANCE_FLOOR = 1e-8
 EPS = float(np.finfo(float).eps)
+#: The suffix of a regrouped base parameter's name, and what it means in words (printed
+#: under every table of base parameters that holds one).
+REGROUPED_SUFFIX = "R"
+REGROUPED_NOTE = (
+    "a name ending in R is a regrouped base parameter: that standard parameter plus the "
+    "others the data cannot tell apart from it (its expression)"
+)
+
+
+def has_regrouped(names) -> bool:
+    """Whether one of the base-parameter ``names`` is regrouped (ends in ``R``: no standard
+    parameter's name does)."""
+    return any(str(n).endswith(REGROUPED_SUFFIX) for n in names)
 
 
 def default_tolerance(n_rows: int, n_parameters: int) -> float:
@@ -134,7 +147,7 @@ def _base_parameters(
         v[dep] = K[i]
         expressions.append(_vector_expression(v, names, int(j), scale))
         regrouped = bool(np.any(np.abs(Ks[i]) >= COEFFICIENT_THRESHOLD))
-        base_names.append(names[j] + ("R" if regrouped else ""))
+        base_names.append(names[j] + (REGROUPED_SUFFIX if regrouped else ""))
     base = BaseParameters(ind, dep, K, list(names), base_names, expressions)
     return base, null, unidentifiable
 

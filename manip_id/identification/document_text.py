@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+from ..identifiability.qr import REGROUPED_NOTE, has_regrouped
 from .document import (
     NOT_DETERMINED,
 )
@@ -107,9 +108,9 @@ def _parameter_lines(rows: list[dict], max_rows: int | None) -> list[str]:
             f"{r['name']:<{w}}  {val:>12}  {std:>10}  {sp:>8}  {nom:>12}  "
             f"{r.get('unit', ''):<8}  " + ", ".join(r.get("flags", []))
         )
-    if len(shown) < len(rows):
-        lines.append(f"... {len(rows) - len(shown)} more")
-    return lines
+    more = [f"... {len(rows) - len(shown)} more"] if len(shown) < len(rows) else []
+    note = [f"({REGROUPED_NOTE})"] if has_regrouped(r["name"] for r in shown) else []
+    return lines + more + note
 
 
 def _standard_lines(doc: dict) -> list[str]:

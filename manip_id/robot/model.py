@@ -33,6 +33,7 @@ import pinocchio as pin
 from .._checks import as_float_array, random_generator
 from .._native import native_stderr_captured
 from ..errors import InputError, RobotError
+from ..resources import check_model_size
 from .friction import NO_SHAPES
 from .parameters import (
     INERTIAL_NAMES,
@@ -108,6 +109,7 @@ class Robot:
             )
         if model.nv == 0:
             raise RobotError(f"robot {name!r} has no movable joint")
+        check_model_size(model.nv)  # before the first Data is built
         self.name = name
         self.model = model
         self.data = model.createData()

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from scipy.spatial import ConvexHull, QhullError
 
 from ..errors import InputError
 
@@ -36,13 +37,13 @@ class CameraPlacement:
     position : numpy.ndarray
         Camera position [m], shape (3,), world frame (z up).
     fill : float
-        Share of the view height the start pose spans [-].
+        Share of the view height the framed points span [-].
     width_fill : float
-        Share of the view width it spans [-].
+        Share of the view width they span [-].
     target : numpy.ndarray
-        Where the camera looks, relative to the centre of the start pose's box [m],
-        shape (3,): perspective draws the near side larger, so the box's centre is not
-        the image's; the target puts the start pose's image in the middle of the view.
+        Where the camera looks, relative to the centre of the points' box [m], shape (3,):
+        perspective draws the near side larger, so the box's centre is not the image's;
+        the target puts the points' image in the middle of the view.
     """
 
     position: np.ndarray
@@ -81,16 +82,13 @@ def image_coordinates(points, position, *, fov: float = FOV, aspect: float = ASP
     return (rel @ u) / (depth * t), (rel @ r) / (depth * t * aspect)
 
 
-def _distance(
-    points, direction, share: float, *, fov: float, aspect: float, height_only: bool = False
-) -> float:
+def _distance(points, direction, share: float, *, fov: float, aspect: float) -> float:
     """The distance along ``direction`` where ``points`` span ``share`` of the view in
-    height and at most ``share`` in width (``height_only``: in height, whatever the width;
-    bisection on a decreasing function)."""
+    height and at most ``share`` in width (bisection on a decreasing function)."""
 
     def extent(dist: float) -> float:
         h, w = image_extent(points, dist * direction, fov=fov, aspect=aspect)
-        return h if height_only else max(h, w)
+        return max(h, w)
 
     lo, hi = 1e-6, 1.0
     while extent(hi) > share:
@@ -140,61 +138,53 @@ def view_direction(points, default=DIRECTION) -> np.ndarray:
 
 
 def place_camera(
-    start,
-    motion=None,
+    points,
     *,
     direction=DIRECTION,
     fill: float = 0.8,
-    min_fill: float = 0.68,
-    motion_fill: float = 0.98,
     fov: float = FOV,
     aspect: float = ASPECT,
 ) -> CameraPlacement:
-    """The camera for points ``start`` (the start pose, shape (n, 3) [m], centred on the
-    origin) and ``motion`` (every pose of an animation, or None).
-
-    The start pose spans ``fill`` of the view (height, or width when it is wider); the
-    camera backs off to keep the whole motion within ``motion_fill`` of the view, but
-    never so far that the start pose spans less than ``min_fill`` of the view height
-    (unless that would push the start pose itself out of ``motion_fill`` of the view).
-    """
+    """The camera for ``points`` (shape (n, 3) [m], centred on the origin; a scene passes
+    every pose of its animation, the robot's swept volume): they span ``fill`` of the view
+    height, or of its width when they are wider, seen along ``direction`` and centred."""
     d = np.asarray(direction, dtype=float)
     d = d / np.linalg.norm(d)
     kw: dict[str, Any] = dict(fov=fov, aspect=aspect)
-    start = np.asarray(start, dtype=float)
-    motion = None if motion is None or not len(motion) else np.asarray(motion, dtype=float)
+    points = np.asarray(points, dtype=float)
     r = np.cross(-d, [0.0, 0.0, 1.0])
     r = r / np.linalg.norm(r) if np.linalg.norm(r) > 1e-12 else np.array([1.0, 0.0, 0.0])
     u = np.cross(r, -d)
     t = np.tan(np.radians(fov) / 2)
 
-    def distance(target: np.ndarray) -> float:
-        pts = start - target
-        dist = _distance(pts, d, fill, **kw)
-        if motion is not None:
-            dist = max(dist, _distance(motion - target, d, motion_fill, **kw))
-            tall = _distance(pts, d, min_fill, **kw, height_only=True)
-            dist = min(dist, max(tall, _distance(pts, d, motion_fill, **kw)))
-        return dist
-
     def off_centre(target: np.ndarray, dist: float) -> tuple[float, float]:
-        coords = image_coordinates(start - target, dist * d, **kw)
+        coords = image_coordinates(points - target, dist * d, **kw)
         if coords is None:
             return np.inf, np.inf
         y, x = coords
         return 0.5 * (y.max() + y.min()), 0.5 * (x.max() + x.min())  # [-]
 
     target = np.zeros(3)
-    dist = distance(target)
+    dist = _distance(points, d, fill, **kw)
     cy, cx = off_centre(target, dist)
     for _ in range(12):  # damped steps towards the target that centres the image
         if max(abs(cy), abs(cx)) < 1e-3:
             break
         trial = target + 0.5 * dist * t * (cy * u + cx * aspect * r)  # [m]
-        trial_dist = distance(trial)
+        trial_dist = _distance(points - trial, d, fill, **kw)
         ty, tx = off_centre(trial, trial_dist)
         if max(abs(ty), abs(tx)) >= max(abs(cy), abs(cx)):
             break  # no better: keep the last
         target, dist, cy, cx = trial, trial_dist, ty, tx
-    h, w = image_extent(start - target, dist * d, **kw)
+    h, w = image_extent(points - target, dist * d, **kw)
     return CameraPlacement(position=dist * d, fill=h, width_fill=w, target=target)
+
+
+def convex_hull(points: np.ndarray) -> np.ndarray:
+    """The vertices of the convex hull of ``points`` (shape (n, 3) [m]): their image spans
+    what all the points' image spans (a perspective image's extremes over a convex set lie
+    at its vertices), at a fraction of the cost. All points when the hull is flat."""
+    try:
+        return points[ConvexHull(points).vertices]
+    except (QhullError, ValueError):
+        return points

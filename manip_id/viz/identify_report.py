@@ -42,12 +42,9 @@ def build_scene(robot, result, full, title: str, notes: list, assets: str = "inl
                 notes.append(f"scene not animated: {exc}")
         scene.add_inertia(robot.nominal_parameters, label="nominal")
         if result.standard is not None and result.standard.solver:  # --consistent
-            # the estimate the user asked for: shown at first (the nominal set may be hidden)
+            # off at first like the nominal set (they hide the arm); the legend shows them
             scene.add_inertia(
-                result.standard.values,
-                label="identified (consistent)",
-                visible=True,
-                estimated=True,
+                result.standard.values, label="identified (consistent)", estimated=True
             )
         ind = result.base.independent
         flags = np.zeros(robot.n_parameters, dtype=bool)

@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import pinocchio as pin
 
 from ..errors import InputError
 from ..robot.model import Robot
@@ -108,3 +109,14 @@ def hex_color(color) -> int:
 
 def css_color(color) -> str:
     return f"#{hex_color(color):06x}"
+
+
+def link_names(model) -> list[str]:
+    """The link each joint moves, per joint ``1 .. njoints - 1`` of a Pinocchio model: the
+    first BODY frame the joint carries (the URDF's child link; the joint's name when none)."""
+    names: dict[int, str] = {}
+    for frame in model.frames:  # in the order the URDF's links were added
+        j = int(frame.parentJoint)
+        if frame.type == pin.BODY and j > 0:
+            names.setdefault(j, frame.name)
+    return [names.get(j, model.names[j]) for j in range(1, model.njoints)]

@@ -22,7 +22,7 @@ import base64
 import html as html_lib
 import json
 import warnings
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 
 import meshcat.geometry as mg
@@ -35,7 +35,7 @@ from pinocchio.visualize.meshcat_visualizer import applyScalingOnHomegeneousTran
 from .._io import atomic_write_text
 from ..errors import InputError, ManipIdError
 from ..robot.model import Robot
-from .camera import place_camera, view_direction
+from .camera import convex_hull, place_camera, view_direction
 from .inertia_ellipsoid import (
     EquivalentEllipsoid,
     degenerate_shape,
@@ -47,11 +47,12 @@ from .link_colors import (
     css_color,
     hex_color,
     link_identifiability,
+    link_names,
     share_color,
 )
 from .meshcat_server import LiveView, replay
 from .meshes import MAX_TRIANGLES, decimate_mesh, mesh_arrays
-from .scene_page import OfflineVisualizer, RecordingWindow, page_html, viewer_js
+from .scene_page import LegendSection, OfflineVisualizer, RecordingWindow, page_html, viewer_js
 from .trajectory_check import check_trajectory
 
 #: Re-exported: the scene's parts of earlier releases live in their own modules now.
@@ -69,21 +70,26 @@ __all__ = [
 ]
 
 #: Styles of successive parameter sets, (RGBA, wire frame): the first (the reference, e.g.
-#: the nominal model) a dark wire frame, the next ones solid and translucent in blue,
-#: purple and teal; none of them on the links' red-yellow-green identifiability scale.
+#: the nominal model) a dark translucent wire frame, the next ones solid and translucent in
+#: blue, purple and teal (the arm shows through them); none of them on the links'
+#: red-yellow-green identifiability scale.
 SET_STYLES: tuple[tuple[tuple[float, float, float, float], bool], ...] = (
-    ((0.12, 0.12, 0.12, 0.85), True),
-    ((0.10, 0.35, 0.90, 0.50), False),
-    ((0.55, 0.15, 0.75, 0.50), False),
-    ((0.00, 0.55, 0.65, 0.50), False),
+    ((0.12, 0.12, 0.12, 0.55), True),
+    ((0.10, 0.35, 0.90, 0.35), False),
+    ((0.55, 0.15, 0.75, 0.35), False),
+    ((0.00, 0.55, 0.65, 0.35), False),
 )
 #: The colours of :data:`SET_STYLES` (earlier releases' name).
 SET_COLORS = tuple(c for c, _ in SET_STYLES)
 GREY = (0.6, 0.6, 0.6, 1.0)
 _ROBOT_ROOT = "robot"
-#: A parameter set is hidden at first when one of its ellipsoids is wider than this
-#: fraction of the robot's size (the diagonal of its bounding box); a toggle shows it.
-HIDE_WIDER_THAN = 0.5
+#: Share of the view (height, or width when wider) the robot's swept volume spans: every
+#: pose of the animation (or the one pose of a still scene) fits in the view.
+FILL = 0.9
+#: Poses of an animation whose points make up the swept volume the camera frames.
+SWEPT_POSES = 60
+#: Mesh vertices per mesh and pose in the swept volume (a sample of each mesh's).
+SWEPT_VERTICES = 40
 
 
 def _rotation_y_to(axis: np.ndarray) -> np.ndarray:
@@ -100,7 +106,7 @@ def _rotation_y_to(axis: np.ndarray) -> np.ndarray:
 # ------------------------------------------------------------------ trajectory
 def _set_entry(label: str, color, wire: bool, shown: bool, count: str) -> str:
     """A parameter set's legend line: a check box that shows or hides it, its swatch
-    (dashed for a wire frame), its label and how many bodies it draws."""
+    (dashed for a wire frame), its label and how many bodies it draws (translucent)."""
     path = json.dumps(["meshcat", "inertia", label])
     box = (
         f'<input type="checkbox" {"checked " if shown else ""}'
@@ -111,15 +117,8 @@ def _set_entry(label: str, color, wire: bool, shown: bool, count: str) -> str:
         f"<label>{box}"
         f'<span class="sw{" wire" if wire else ""}" style="background:'
         f'{css_color(color)}; border-color:{css_color(color)}"></span> '
-        f"{html_lib.escape(label)}: {count}, {'wire frame' if wire else 'solid'}</label>"
+        f"{html_lib.escape(label)}: {count}{' (wire frame)' if wire else ''}</label>"
     )
-
-
-@dataclass
-class _Legend:
-    title: str
-    lines: list[str] = field(default_factory=list)
-    notes: list[str] = field(default_factory=list)
 
 
 class RobotScene:
@@ -179,7 +178,7 @@ class RobotScene:
         self._geom_data = self._geom.createData()
         self._capsules: list[tuple[str, int, np.ndarray]] = []
         self._sets: list[tuple[str, list[EquivalentEllipsoid], tuple]] = []
-        self._legend: list[_Legend] = []
+        self._legend: list[LegendSection] = []
         self._t: np.ndarray | None = None
         self._q: np.ndarray | None = None
         self._link_colors: dict[int, tuple] | None = None
@@ -293,10 +292,10 @@ class RobotScene:
         for path, T in self._transforms(q).items():
             vis[path].set_transform(T)
 
-    def _points(self, q, vertices: bool = False) -> np.ndarray:
+    def _points(self, q, vertices: int = 0) -> np.ndarray:
         """Every joint origin and the corners of every placed mesh (or capsule) box at
-        configuration ``q`` (``vertices``: a sample of each mesh's vertices instead of its
-        box), world frame [m], shape (n, 3)."""
+        configuration ``q`` (``vertices`` > 0: about that many of each mesh's vertices
+        instead of its box), world frame [m], shape (n, 3)."""
         corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
         pin.forwardKinematics(self._model, self._data, q)
         found = [self._data.oMi[i].translation.copy() for i in range(self._model.njoints)]
@@ -305,32 +304,32 @@ class RobotScene:
             if box is None:
                 continue
             local = self._vertices.get(path) if vertices else None
-            if local is None:
+            if local is not None:
+                local = local[:: max(1, len(local) // vertices)]
+            else:
                 local = np.where(corners == 0, box[0], box[1])  # (8, 3) [m]
             found += list(local @ T[:3, :3].T + T[:3, 3])  # T carries the mesh scale
         return np.array(found)
 
     def _set_camera(self, q_start, qs=None) -> None:
-        """Frame the robot: its start pose ``q_start`` spans about 0.8 of the view height
-        (at least 0.68), the motion ``qs`` (shape (N, nq), or None) stays in view when it
-        can (:func:`~manip_id.viz.camera.place_camera`)."""
-        start = self._points(q_start, vertices=True)
-        center = 0.5 * (start.min(axis=0) + start.max(axis=0))
-        pad = center + 0.1 * np.vstack([np.eye(3), -np.eye(3)])  # a robot of a point: 20 cm
-        start = np.vstack([start, pad])
-        motion = None
+        """Frame the robot's swept volume: the points of every pose of the motion ``qs``
+        (shape (N, nq), :data:`SWEPT_POSES` of them spread evenly; the start pose
+        ``q_start`` alone without a motion) span :data:`FILL` of the view, seen broadside
+        and centred (:func:`~manip_id.viz.camera.place_camera`), so the whole motion stays
+        in view."""
+        poses = [np.asarray(q_start, dtype=float)]
         if qs is not None:
             qs = np.atleast_2d(qs)
-            qs = qs[np.linspace(0, len(qs) - 1, min(len(qs), 60)).astype(int)]
-            motion = np.vstack([self._points(q) for q in qs] + [pad])
-        self.camera = place_camera(
-            start - center,
-            None if motion is None else motion - center,
-            direction=view_direction(start - center),
-        )
-        center = center + self.camera.target  # the image of the start pose centred
+            poses += list(qs[np.linspace(0, len(qs) - 1, min(len(qs), SWEPT_POSES)).astype(int)])
+        swept = np.vstack([self._points(q, vertices=SWEPT_VERTICES) for q in poses])
+        center = 0.5 * (swept.min(axis=0) + swept.max(axis=0))
+        pad = center + 0.1 * np.vstack([np.eye(3), -np.eye(3)])  # a robot of a point: 20 cm
+        swept = convex_hull(np.vstack([swept, pad]) - center)
+        self.camera = place_camera(swept, direction=view_direction(swept), fill=FILL)
+        center = center + self.camera.target  # the image of the swept volume centred
+        self.view_center = center  # [m], world: the point the camera looks at
         # The viewer's orbit controls always aim at the world origin: shift the scene
-        # (robot and world axes) so that the centre of the start pose sits there; the
+        # (robot and world axes) so that the centre of the swept volume sits there; the
         # viewer's grid would no longer be the floor, so it is hidden.
         shift = pin.SE3(np.eye(3), -center).homogeneous
         for node in ("/meshcat", "/Axes"):
@@ -358,6 +357,7 @@ class RobotScene:
             raise InputError(f"need fps > 0 and max_frames >= 2, got {fps=}, {max_frames=}")
         self._t, self._q = t, q
         self._anim_options = (float(fps), int(max_frames), bool(play))
+        self._framed = False  # the camera frames this motion once
         self._build_animation()
         return self
 
@@ -383,7 +383,9 @@ class RobotScene:
                 for path, T in self._transforms(q[k]).items():
                     f[path].set_transform(T)
         self._place_all(q[idx[0]], self._vis)
-        self._set_camera(q[idx[0]], q[idx])
+        if not self._framed:
+            self._set_camera(q[idx[0]], q[idx])
+            self._framed = True
         self._vis.set_animation(anim, play=play, repetitions=1)
         self.duration = (n_frames - 1) / fps
 
@@ -401,12 +403,12 @@ class RobotScene:
         """Draw the equivalent inertia ellipsoid of each body of ``theta`` (shape (p,)).
 
         Bodies whose block is not physically consistent are skipped; the
-        returned notes (also in :attr:`notes` and in the HTML legend) say why.
-        visible: shown at first; default: unless one of its ellipsoids is wider
-        than :data:`HIDE_WIDER_THAN` times the robot's size (it would hide the arm).
-        The page's legend has a check box per set that shows or hides it.
+        returned notes (also in :attr:`notes`, and shortened and folded in the HTML legend)
+        say why, and which ellipsoids are degenerate. Bodies are named by their link.
+        visible: shown at first (default False: ellipsoids hide the arm; the page's legend
+        has a check box per set that shows or hides it).
         color, wireframe: the set's style; default: the next of :data:`SET_STYLES` (the
-        first set a dark wire frame, the others solid translucent blue, purple, teal).
+        first set a dark translucent wire frame, the others translucent blue, purple, teal).
         bodies: names of the joints whose bodies are drawn (default: every body), e.g.
         the one carrying a payload.
         estimated: the set was estimated from data (not a given model such as the nominal
@@ -435,43 +437,33 @@ class RobotScene:
             transparent=float(color[3]) < 1.0,
             wireframe=wire,
         )
-        notes = []
+        notes, short = [], []
+        links = dict(zip(self.robot.joint_names, link_names(self._model), strict=True))
+        grouped = ": the data fix only grouped terms of this body's inertia" if estimated else ""
         for ell in ellipsoids:
+            link = links.get(ell.joint, ell.joint)
             if ell.physical:
                 radii = np.maximum(ell.semi_axes, 1e-4)
                 self._vis[f"inertia/{label}/{ell.joint}"].set_object(mg.Ellipsoid(radii), material)
                 shape = degenerate_shape(radii)
                 if shape:
-                    notes.append(
-                        f"{label}: {ell.joint}'s ellipsoid is {shape} "
-                        f"({2 * float(np.max(radii)):.2f} m across)"
-                        + (
-                            ": the data fix only grouped terms of this body's inertia"
-                            if estimated
-                            else ""
-                        )
-                    )
+                    across = f"{2 * float(np.max(radii)):.2f} m across"
+                    notes.append(f"{label}: {link}'s ellipsoid is {shape} ({across}){grouped}")
+                    short.append(f"{link}: {shape.split(' (')[0]}, {across}")
             elif ell.note:
-                notes.append(f"{label}: {ell.note} (not drawn)")
+                notes.append(f"{label}: {link}: {ell.note} (not drawn)")
+                short.append(f"{link}: not drawn ({ell.note.removeprefix(ell.joint + ': ')})")
+        if estimated and any("grouped" in n for n in notes):
+            short.append("degenerate: the data fix only grouped terms of these bodies' inertia")
         self._sets.append((label, ellipsoids, color))
         self.notes.extend(notes)
         drawn = sum(e.physical for e in ellipsoids)
         n_bodies = len(ellipsoids) if bodies is None else len(set(bodies))
-        widest = max(
-            (2.0 * float(np.max(e.semi_axes)) for e in ellipsoids if e.physical), default=0.0
-        )  # [m]
-        too_wide = widest > HIDE_WIDER_THAN * self._size
-        shown = (not too_wide) if visible is None else bool(visible)
+        shown = bool(visible)
         self._vis[f"inertia/{label}"].set_property("visible", shown)
-        why = (
-            f" (hidden at first: {widest:.2f} m wide, more than {HIDE_WIDER_THAN:g} of the "
-            f"robot's {self._size:.2f} m)"
-            if too_wide and visible is None
-            else ""
-        )
         entry = _set_entry(label, color, wire, shown, f"{drawn} of {n_bodies} bodies")
         self._legend.append(
-            _Legend(f"inertia ellipsoids: {html_lib.escape(label)}", [entry + why], notes)
+            LegendSection(f"inertia ellipsoids: {html_lib.escape(label)}", [entry], short)
         )
         self._place_all(self._q_static, self._vis)
         self._build_animation()
@@ -495,19 +487,25 @@ class RobotScene:
         self._place_all(self._q_static, self._vis)
         self._build_animation()
         lines = []
-        for j, s, d, n in zip(
-            ident.joints, ident.share, ident.determined, ident.total, strict=True
+        for j, link, s, d, n in zip(
+            ident.joints,
+            link_names(self._model),
+            ident.share,
+            ident.determined,
+            ident.total,
+            strict=True,
         ):
             lines.append(
                 f'<span class="sw" style="background:{css_color(share_color(s))}"></span> '
-                f"{html_lib.escape(j)}: {int(d)}/{int(n)} determined ({100 * s:.0f}%)"
+                f'<span title="parameters {html_lib.escape(j)}.*">{html_lib.escape(link)}</span>'
+                f": {int(d)}/{int(n)} determined ({100 * s:.0f}%)"
             )
         scale = " ".join(
             f'<span class="sw" style="background:{css_color(share_color(s))}"></span>{s:g}'
             for s in (0.0, 0.25, 0.5, 0.75, 1.0)
         )
         self._legend.append(
-            _Legend(
+            LegendSection(
                 f"identifiability ({html_lib.escape(ident.criterion)})",
                 [f"share determined: {scale}", *lines],
             )
@@ -572,10 +570,7 @@ class RobotScene:
                 f"motion: {len(self._t)} samples over {self._t[-1] - self._t[0]:.3g} s "
                 "(Animations panel: play, pause, time)"
             )
-        for leg in self._legend:
-            parts.append(f"<b>{leg.title}</b>")
-            parts.extend(leg.lines)
-            parts.extend(f'<span class="note">{html_lib.escape(n)}</span>' for n in leg.notes)
+        parts.extend(leg.html() for leg in self._legend)
         return "<br>".join(parts)
 
     def write_html(self, path) -> Path:

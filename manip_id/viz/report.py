@@ -28,6 +28,7 @@ from .._io import (
     json_text,
 )
 from ..errors import InputError, ReportExistsError
+from ..identifiability.qr import REGROUPED_NOTE, has_regrouped
 
 INDEX, RESULT, SCENE = "index.html", "result.json", "scene.html"
 
@@ -118,6 +119,11 @@ def _index(c: ReportContent, figures: list[str]) -> str:
         f'<section class="answer"><h2>{html_lib.escape(str(q))}</h2>\n{a}</section>'
         for q, a in c.questions
     )
+    regrouped = ""  # the R suffix explained under the table that shows it
+    if has_regrouped(r.get("name", "") for r in rows or []):
+        note = html_lib.escape(REGROUPED_NOTE[0].upper() + REGROUPED_NOTE[1:])
+        regrouped = f'<p class="regrouped">{note}.</p>\n'
+
     note_html = "".join(f"<li>{html_lib.escape(str(n))}</li>" for n in notes)
     extra = "\n".join(
         f"<h2>{html_lib.escape(str(name))}</h2>\n{html_table(t, '(none)')}"
@@ -150,7 +156,7 @@ p.verdict {{ font-size: 1.1em; margin: 0.3em 0 1em 0; }}
 <h2>Figures</h2>
 {figs or "<p>(no figures)</p>"}
 <h2>Parameters</h2>
-{html_table(rows)}
+{regrouped}{html_table(rows)}
 {extra}
 <p><a href="{RESULT}">{RESULT}</a>: the full result.</p>
 </body></html>

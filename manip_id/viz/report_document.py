@@ -7,6 +7,7 @@ The run's JSON document is the result's own
 
 from __future__ import annotations
 
+import posixpath
 from dataclasses import dataclass
 from typing import Any
 
@@ -54,3 +55,17 @@ class ReportOptions:
     chunk: int = 1024
     scene_assets: str = "inline"
     force: bool = False
+
+
+def data_in_words(paths) -> str:
+    """The data of a run in a few words, for titles: one file's path, else how many files,
+    their folder when they share one and the first and last names
+    (``"12 files in logs/ (run_0.npz ... run_11.npz)"``); the JSON keeps every path."""
+    paths = [str(p) for p in paths]
+    if len(paths) == 1:
+        return paths[0]
+    folders = {posixpath.dirname(p) for p in paths}
+    names = [posixpath.basename(p) for p in paths]
+    where = f" in {folders.pop() or '.'}/" if len(folders) == 1 else ""
+    listed = ", ".join(names) if len(names) <= 3 else f"{names[0]} ... {names[-1]}"
+    return f"{len(paths)} files{where} ({listed})"

@@ -8,6 +8,8 @@ that replays them (three.js from the meshcat package embedded, or loaded beside 
 
 from __future__ import annotations
 
+import html as html_lib
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import meshcat
@@ -99,6 +101,7 @@ body {{ margin: 0; }}
   vertical-align: middle; margin: 0 3px; box-sizing: border-box; }}
 #legend .sw.wire {{ background: transparent !important; border: 2px dashed; }}
 #legend .note {{ color: #a33; }}
+#legend details details summary {{ font-weight: normal; color: #a33; }}
 </style></head>
 <body>
 <div id="wrap">
@@ -135,3 +138,23 @@ for (const b64 of commands) {{
 def page_html(title: str, legend: str, viewer: str, data: str) -> str:
     """The standalone page: ``title`` and ``legend`` HTML, the viewer and data scripts."""
     return _PAGE.format(title=title, legend=legend, viewer=viewer, data=data)
+
+
+@dataclass
+class LegendSection:
+    """A section of the page's legend: a bold title, lines of HTML, short notes (text)
+    folded in a closed ``<details>``."""
+
+    title: str
+    lines: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)  # short, shown folded
+
+    def html(self) -> str:
+        parts = [f"<b>{self.title}</b>", *self.lines]
+        if self.notes:
+            items = "<br>".join(
+                f'<span class="note">{html_lib.escape(n)}</span>' for n in self.notes
+            )
+            count = f"{len(self.notes)} note{'s' if len(self.notes) > 1 else ''}"
+            parts.append(f"<details><summary>{count}</summary>{items}</details>")
+        return "<br>".join(parts)
