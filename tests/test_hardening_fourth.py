@@ -1,0 +1,202 @@
+"""The hardening catalogue, fourth round (issue 41): each case through the CLI or the API.
+
+- Publication without a race: a file saved into a ``--force`` folder while the run works
+  survives (named in a warning); payload log names are unique by construction; a killed
+  run's staging folder is named by the next run.
+- Budgets before work: simulate's log count, disk and absurd numbers refused at their
+  option; quoted user values cut to a bounded length.
+- External documents validated at the door, by name (result JSON, drift references,
+  sidecars), with a property test feeding them mutated documents.
+- The API: ``CollisionMonitor`` per-step checks and its dropout policy, ``FrictionShapes``,
+  ``repair_body``.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from manip_id.cli import main
+from manip_id.errors import OutputWarning
+
+ENV = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+
+
+@pytest.fixture
+def work(tmp_path, monkeypatch):
+    """A working folder (the current directory)."""
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+def _run(capsys, *argv) -> tuple[int, str, str]:
+    status = main([str(a) for a in argv])
+    out = capsys.readouterr()
+    return status, out.out, out.err
+
+
+def _error(capsys, *argv) -> str:
+    """The one error line of a refused command (exit 2, no traceback)."""
+    status, _, err = _run(capsys, *argv)
+    lines = [line for line in err.splitlines() if line.startswith("manip-id: error:")]
+    assert status == 2 and len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def _dead_pid() -> int:
+    """The id of a process that has exited (and was reaped)."""
+    proc = subprocess.Popen([sys.executable, "-c", "pass"])
+    proc.wait()
+    return proc.pid
+
+
+# ------------------------------------------------------- publication without a race
+def test_a_file_saved_into_a_force_folder_during_the_build_survives(work):
+    from manip_id._io import OutputSet
+
+    assert main(["rank", "msd", "--report", "rep", "--samples", "30"]) == 0
+    before = sorted(p.name for p in (work / "rep").iterdir())
+
+    def fill(tmp: Path) -> None:
+        (tmp / "new.txt").write_text("report\n")
+        (work / "rep" / "thesis.tex").write_text("years of work\n")  # the user, meanwhile
+        (work / "rep" / "new.txt").write_text("my own new.txt\n")  # same name as ours
+
+    with OutputSet() as out:
+        rep = out.report(work / "rep", force=True)
+        rep.build(fill)
+        with pytest.warns(OutputWarning) as record:
+            out.publish()
+    names = sorted(p.name for p in (work / "rep").iterdir())
+    assert (work / "rep" / "thesis.tex").read_text() == "years of work\n"
+    assert (work / "rep" / "new.txt").read_text() == "report\n"
+    assert (work / "rep" / "new.txt.user-1").read_text() == "my own new.txt\n"
+    assert not set(before) - {".manip-id-report.json"} & set(names) - {"new.txt"}
+    text = " ".join(str(w.message) for w in record)
+    assert "thesis.tex" in text and "new.txt.user-1" in text
+    assert not [p for p in os.listdir(work) if ".old-" in p or ".tmp-" in p]
+
+
+@pytest.mark.slow
+def test_simulate_force_keeps_a_file_the_user_saves_mid_run(work):
+    args = ["simulate", "msd", "--out", "sim", "--files", "3", "--duration", "400"]
+    assert main(args) == 0
+    cmd = [sys.executable, "-m", "manip_id", *args, "--force"]
+    proc = subprocess.Popen(cmd, cwd=work, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 120
+        while not list(work.glob(".sim.tmp-*")) and proc.poll() is None:
+            assert time.monotonic() < deadline, "the staging folder never appeared"
+            time.sleep(0.02)
+        (work / "sim" / "notes.txt").write_text("mine\n")
+        _, err = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, err
+    assert (work / "sim" / "notes.txt").read_text() == "mine\n"
+    assert b"notes.txt" in err and b"warning" in err
+    assert (work / "sim" / "run_2.npz").is_file()
+
+
+def test_payload_masses_equal_to_six_digits_get_two_files(work, capsys):
+    status, out, err = _run(
+        capsys, "simulate", "msd", "--out", "sim", "--files", "1", "--duration", "1",
+        "--payload", "1,1.0000001",
+    )  # fmt: skip
+    assert status == 0, err
+    import json
+
+    truth = json.loads((work / "sim" / "truth.json").read_text())
+    names = [f["name"] for f in truth["files"]]
+    assert len(set(names)) == 3 and all((work / "sim" / n).is_file() for n in names)
+    masses = {f["name"]: f["payload_mass"] for f in truth["files"]}
+    from manip_id import load_dataset
+
+    # the two loaded logs differ (different masses, different seeds): none overwrote another
+    a, b = (load_dataset(work / "sim" / n) for n in names[1:])
+    assert masses[names[1]] != masses[names[2]] and not np.allclose(a.tau, b.tau)
+
+
+def test_a_mass_given_twice_is_refused_before_work(work, capsys):
+    line = _error(capsys, "simulate", "msd", "--out", "sim", "--payload", "2,2.0")
+    assert "twice" in line and not (work / "sim").exists()
+
+
+def test_a_killed_runs_staging_folder_is_named_by_the_next_run(work, capsys):
+    pid = _dead_pid()
+    stale = work / f".sim.tmp-{pid}-abcd"
+    stale.mkdir()
+    (stale / "run_0.npz").write_bytes(b"half")
+    status, _, err = _run(capsys, "simulate", "msd", "--out", "sim", "--files", "1",
+                          "--duration", "1")  # fmt: skip
+    assert status == 0
+    assert str(stale.name) in err and f"process {pid}" in err
+    assert (stale / "run_0.npz").read_bytes() == b"half"  # named, never deleted
+
+
+def test_a_live_runs_staging_folder_is_not_named(work, capsys):
+    live = work / f".sim.tmp-{os.getppid()}-abcd"
+    live.mkdir()
+    status, _, err = _run(capsys, "simulate", "msd", "--out", "sim", "--files", "1",
+                          "--duration", "1")  # fmt: skip
+    assert status == 0 and live.name not in err
+
+
+# ------------------------------------------------------------- budgets before work
+@pytest.mark.parametrize(
+    ("argv", "match"),
+    [
+        (["--files", "1000000000"], "at most 10000"),
+        (["--files", "6000", "--payload", "1"], "at most 10000"),
+        (["--noise", "1e300"], "--noise"),
+        (["--payload", "1e9"], "--payload"),
+        (["--drive-gains", "1e-300"], "--drive-gains"),
+        (["--drive-gains", "1,1e300"], "--drive-gains"),
+    ],
+)
+def test_simulate_refuses_absurd_requests_at_their_option(work, capsys, argv, match):
+    t0 = time.process_time()
+    line = _error(capsys, "simulate", "msd", "--out", "sim", *argv)
+    assert match in line and not (work / "sim").exists()
+    assert time.process_time() - t0 < 60  # refused up front (a generous guard, not a timing)
+
+
+def test_simulate_refuses_a_folder_larger_than_the_free_disk(work, capsys, monkeypatch):
+    import shutil
+    from collections import namedtuple
+
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10**9, 10**9 - 10**6, 10**6))
+    line = _error(capsys, "simulate", "msd", "--out", "sim", "--files", "2")
+    assert "GB are free" in line and not (work / "sim").exists()
+
+
+def test_a_100mb_header_cell_gives_a_short_error(work, capsys):
+    (work / "big.csv").write_text("x" * 10_000_000 + ",q_a\n0,1\n")
+    line = _error(capsys, "identify", "msd", "--data", "big.csv")
+    assert len(line) < 2000 and "10000000 characters" in line
+
+
+def test_a_byte_order_mark_does_not_hide_the_first_column(work, capsys):
+    from manip_id import load_dataset
+
+    rows = "".join(f"{k / 100},{k / 1000},0.1,{k / 50}\n" for k in range(20))
+    (work / "bom.csv").write_text("\ufefft,q_cart,dq_cart,tau_cart\n" + rows, encoding="utf-8")
+    (work / "plain.csv").write_text("t,q_cart,dq_cart,tau_cart\n" + rows)
+    a, b = load_dataset(work / "bom.csv"), load_dataset(work / "plain.csv")
+    np.testing.assert_array_equal(a.t, b.t)
+    np.testing.assert_array_equal(a.tau, b.tau)
+
+
+def test_a_long_user_value_in_a_cli_message_is_cut(work, capsys):
+    for value in ("-1," + "1" * 100_000, "x" * 100_000, "1," * 50_000):
+        line = _error(capsys, "simulate", "msd", "--out", "sim", f"--payload={value}")
+        assert len(line) < 1000, line[:200]
