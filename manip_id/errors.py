@@ -274,6 +274,11 @@ class ManipIdWarning(UserWarning):
     """Root of the warnings manip_id issues (each also recorded in its result's ``warnings``)."""
 
 
+class RobotWarning(ManipIdWarning):
+    """A robot model loaded with a simplification the user should know of (a ``<mimic>``
+    joint of an example-robot-data robot modelled as independent)."""
+
+
 class OutputWarning(ManipIdWarning):
     """An output was published, but something beside it needs the user's eye: a file saved
     into a ``--force`` folder during the run (kept, under a name given), or the staging

@@ -63,6 +63,7 @@ from .robot_sources import (
 )
 from .sidecar import apply_identified, identified_joint_model, identified_options
 from .sidecar import locked_configuration as sidecar_locked
+from .urdf_structure import check_no_active_mimic
 
 __all__ = [
     "FRICTION_KINDS",
@@ -507,6 +508,9 @@ def load_robot(
     if active_joints is None and prof is not None:
         active_joints = prof.active_for(all_joints)
     locked = locked_names(name, all_joints, active_joints)
+    if src.source is not None and str(src.source).endswith(".urdf"):
+        active = [j for j in all_joints if j not in locked]
+        check_no_active_mimic(src.source, name, active, refuse=src.by_path)
     full_model = model
     locked_ids: list[int] = []
     qref = None

@@ -200,3 +200,56 @@ def test_a_long_user_value_in_a_cli_message_is_cut(work, capsys):
     for value in ("-1," + "1" * 100_000, "x" * 100_000, "1," * 50_000):
         line = _error(capsys, "simulate", "msd", "--out", "sim", f"--payload={value}")
         assert len(line) < 1000, line[:200]
+
+
+# ------------------------------------------------------------ robots read from the text
+def _chain_urdf(n: int, mimic: bool = False) -> str:
+    """A serial chain of ``n`` revolute joints (joint ``j1`` mimics ``j0`` with ``mimic``)."""
+    links = "".join(
+        f'<link name="l{k}"><inertial><mass value="1"/><origin xyz="0 0 0.1"/>'
+        f'<inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>'
+        for k in range(n + 1)
+    )
+    joints = "".join(
+        f'<joint name="j{k}" type="revolute"><parent link="l{k}"/><child link="l{k + 1}"/>'
+        f'<origin xyz="0 0 0.2"/><axis xyz="0 1 0"/>'
+        f'<limit lower="-3" upper="3" velocity="2" effort="100"/>'
+        + ('<mimic joint="j0" multiplier="1"/>' if mimic and k == 1 else "")
+        + "</joint>"
+        for k in range(n)
+    )
+    return f'<?xml version="1.0"?><robot name="chain">{links}{joints}</robot>'
+
+
+def test_a_1000_joint_urdf_is_refused_from_its_text(work, monkeypatch):
+    import pinocchio as pin
+
+    from manip_id import load_robot
+    from manip_id.errors import RobotError
+
+    (work / "big.urdf").write_text(_chain_urdf(1000))
+    built = []
+    monkeypatch.setattr(pin, "buildModelFromUrdf", lambda *a, **k: built.append(a))
+    with pytest.raises(RobotError, match="1000 movable joints.*limit of 300"):
+        load_robot(work / "big.urdf")
+    assert built == []  # refused before Pinocchio saw it
+
+
+def test_a_user_urdf_with_a_moving_mimic_joint_is_refused(work, capsys):
+    from manip_id import load_robot
+
+    (work / "m.urdf").write_text(_chain_urdf(3, mimic=True))
+    line = _error(capsys, "rank", "m.urdf", "--samples", "30")
+    assert "'j1' mimics 'j0'" in line and "lock both" in line
+    # locking both ends is the documented way out: the robot then loads with j2 alone
+    robot = load_robot(work / "m.urdf", active_joints=["j2"])
+    assert robot.nv == 1 and list(robot.joint_names) == ["j2"]
+
+
+def test_an_example_robot_with_mimic_grippers_is_loaded_with_a_warning():
+    from manip_id import load_robot
+    from manip_id.errors import RobotWarning
+
+    with pytest.warns(RobotWarning, match="mimics"):
+        robot = load_robot("baxter")
+    assert robot.nv == 19  # the documented 19 independent joints
