@@ -134,6 +134,8 @@ class Robot:
                         f"a spring term needs one-DoF joints, but {model.names[i]} is "
                         f"{jm.shortname()}"
                     )
+        if terms.shapes is not None:
+            terms.shapes.check_size(self.nv, f"robot {name!r}")
         self.layout = ParameterLayout(
             self.joint_names, self.dofs, terms.enabled, terms.shapes, terms.mask(self.nv)
         )

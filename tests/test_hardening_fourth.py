@@ -253,3 +253,102 @@ def test_an_example_robot_with_mimic_grippers_is_loaded_with_a_warning():
     with pytest.warns(RobotWarning, match="mimics"):
         robot = load_robot("baxter")
     assert robot.nv == 19  # the documented 19 independent joints
+
+
+# --------------------------------------------------------------------------- the API
+def _monitor():
+    from manip_id.monitor import CollisionMonitor
+
+    robot = _robot("double_pendulum")
+    return robot, CollisionMonitor(robot, robot.nominal_parameters, thresholds=0.5)
+
+
+def _robot(name):
+    from conftest import get_robot
+
+    return get_robot(name)
+
+
+def _external_torque_run(monitor, robot, dropout: int | None):
+    """Residuals of the monitor on a held pose with a 2 N m push on joint 0 from sample 200
+    (the torque needed to hold plus the push: tau_ext = -push is what the observer sees)."""
+    import pinocchio as pin
+
+    q = np.array([0.3, -0.2])
+    g = pin.computeGeneralizedGravity(robot.model, robot.model.createData(), q)
+    monitor.reset()
+    steps = []
+    for k in range(400):
+        tau = g - (np.array([2.0, 0.0]) if k >= 200 else 0.0)
+        qk = np.full(2, np.nan) if k == dropout else q
+        steps.append(monitor.step(qk, np.zeros(2), tau, 0.005))
+    return steps
+
+
+def test_a_dropout_is_skipped_and_does_not_blind_the_monitor():
+    robot, monitor = _monitor()
+    clean = _external_torque_run(monitor, robot, dropout=None)
+    holed = _external_torque_run(monitor, robot, dropout=100)
+    assert holed[100].skipped and monitor.dropouts == 1
+    assert not any(s.skipped for s in clean)
+    # the push is seen after the dropout, as without it: |r_0| -> 2 N m (-tau_ext)
+    assert holed[-1].detected[0] and clean[-1].detected[0]
+    np.testing.assert_allclose(holed[-1].residual, clean[-1].residual, atol=1e-9)
+    np.testing.assert_allclose(clean[-1].residual, [2.0, 0.0], atol=1e-3)
+
+
+@pytest.mark.parametrize("dt", [-0.01, 0.0, float("nan"), float("inf"), "0.01", True])
+def test_the_monitor_refuses_a_bad_time_step_on_every_call(dt):
+    from manip_id.errors import InputError
+
+    _, monitor = _monitor()
+    with pytest.raises(InputError, match="dt"):
+        monitor.step(np.zeros(2), np.zeros(2), np.zeros(2), dt)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"stribeck_velocity": "abc"}, "one real number per DoF"),
+        ({"sigmoid_slope": [[1.0, 2.0]]}, "one real number per DoF"),
+        ({"sigmoid_shift": [1j, 2]}, "one real number per DoF"),
+        ({"stribeck_velocity": [0.1, -1]}, "positive"),
+    ],
+)
+def test_friction_shapes_refuse_bad_values_with_our_error(kwargs, match):
+    from manip_id.errors import InputError
+    from manip_id.friction import FrictionShapes
+
+    with pytest.raises(InputError, match=match):
+        FrictionShapes(**kwargs)
+
+
+def test_friction_shapes_of_another_size_are_refused_by_the_robot():
+    from manip_id import load_robot
+    from manip_id.errors import InputError
+    from manip_id.friction import FrictionShapes
+    from manip_id.robot import JointTerms
+
+    terms = JointTerms(viscous=True, coulomb=True, stribeck=True,
+                       shapes=FrictionShapes(stribeck_velocity=(0.1, 0.2, 0.3)))  # fmt: skip
+    with pytest.raises(InputError, match="3 value.*nv=2"):
+        load_robot("double_pendulum").__class__(
+            "double_pendulum", load_robot("double_pendulum").model, terms
+        )
+
+
+@pytest.mark.parametrize(
+    ("pi", "match"),
+    [
+        ([1.0 + 1j] + [0.0] * 9, "complex"),
+        ([1.0, 0.0, 0.0], "10 parameters"),
+        ([1.0, 0, 0, 0, np.nan, 0, 0.1, 0, 0, 0.1], "finite"),
+        ("abc", "numeric"),
+    ],
+)
+def test_repair_body_refuses_bad_input_with_our_error(pi, match):
+    from manip_id.errors import InputError
+    from manip_id.repair import repair_body
+
+    with pytest.raises(InputError, match=match):
+        repair_body(pi)
