@@ -352,3 +352,148 @@ def test_repair_body_refuses_bad_input_with_our_error(pi, match):
 
     with pytest.raises(InputError, match=match):
         repair_body(pi)
+
+
+# ------------------------------------------- external documents: a property test of readers
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+BAD_VALUES = ["abc", None, True, [], {}, float("nan"), float("inf"), -1.0, 1e308, [1.0, "x"]]
+PROPERTY = settings(max_examples=60, deadline=None,
+                    suppress_health_check=[HealthCheck.function_scoped_fixture])  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def reference_doc(tmp_path_factory) -> dict:
+    import json
+
+    folder = tmp_path_factory.mktemp("ref")
+    path = folder / "ref.json"
+    argv = ["identify", "msd", "--simulate", "--duration", "4", "--json", str(path)]
+    assert main(argv) == 0
+    return json.loads(path.read_text())
+
+
+def _read_result(doc: dict):
+    """``load_result`` of ``doc`` written to a file: the result, or the DataError."""
+    import json
+    import tempfile
+
+    from manip_id.errors import DataError
+    from manip_id.identification import load_result
+
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "r.json"
+        path.write_text(json.dumps(doc))
+        try:
+            return load_result(path)
+        except DataError as exc:
+            assert "\n" not in str(exc) and len(str(exc)) < 1000
+            return exc
+
+
+def _by_name(res) -> dict:
+    return dict(zip(res.names, res.estimate.tolist(), strict=True))
+
+
+@PROPERTY
+@given(st.permutations(range(3)))
+def test_a_reordered_reference_reads_as_the_same_result(reference_doc, order):
+    import copy
+
+    doc = copy.deepcopy(reference_doc)
+    rows = doc["base_parameters"]
+    assert len(rows) == 3
+    doc["base_parameters"] = [rows[i] for i in order]
+    res, ref = _read_result(doc), _read_result(reference_doc)
+    assert _by_name(res) == _by_name(ref) and list(res.names) == list(ref.names)
+    np.testing.assert_array_equal(res.covariance, ref.covariance)
+
+
+def _paths(doc, prefix=()):
+    """Every (path, value) of a JSON document's leaves and objects."""
+    if isinstance(doc, dict):
+        for k, v in doc.items():
+            yield (*prefix, k), v
+            yield from _paths(v, (*prefix, k))
+    elif isinstance(doc, list):
+        for i, v in enumerate(doc[:4]):
+            yield (*prefix, i), v
+            yield from _paths(v, (*prefix, i))
+
+
+@PROPERTY
+@given(st.data())
+def test_a_mutated_result_reads_the_same_or_gives_one_clear_error(reference_doc, data):
+    import copy
+
+    from manip_id.errors import DataError
+
+    doc = copy.deepcopy(reference_doc)
+    paths = [p for p, _ in _paths(doc)]
+    path = data.draw(st.sampled_from(paths))
+    parent = doc
+    for key in path[:-1]:
+        parent = parent[key]
+    if data.draw(st.booleans()) and isinstance(parent, dict):
+        del parent[path[-1]]
+    else:
+        parent[path[-1]] = data.draw(st.sampled_from(BAD_VALUES))
+    res = _read_result(doc)
+    if not isinstance(res, DataError):  # a field not read, or one whose change is harmless
+        ref = _read_result(reference_doc)
+        assert set(res.names) == set(ref.names)
+
+
+@PROPERTY
+@given(st.integers(0, 2), st.floats(-1e3, -1e-12))
+def test_a_negative_variance_is_refused(reference_doc, k, value):
+    import copy
+
+    from manip_id.errors import DataError
+
+    doc = copy.deepcopy(reference_doc)
+    doc["covariance"][k][k] = value
+    res = _read_result(doc)
+    assert isinstance(res, DataError) and "negative variance" in str(res)
+
+
+@pytest.fixture(scope="module")
+def sidecar_doc() -> dict:
+    from manip_id.export.sidecar import sidecar_document
+
+    robot = _robot("msd")
+    return sidecar_document(robot, robot.nominal_parameters, target="urdf", source="msd")
+
+
+@PROPERTY
+@given(st.data())
+def test_a_mutated_sidecar_reads_the_same_or_gives_one_clear_error(sidecar_doc, data):
+    import copy
+    import json
+    import tempfile
+
+    from manip_id.errors import InputError
+    from manip_id.sidecar import MAX_TERM, read_sidecar
+
+    doc = copy.deepcopy(sidecar_doc)
+    paths = [p for p, _ in _paths(doc) if p[0] in ("joints", "parameters", "active_joints")]
+    path = data.draw(st.sampled_from(paths))
+    parent = doc
+    for key in path[:-1]:
+        parent = parent[key]
+    parent[path[-1]] = data.draw(st.sampled_from(BAD_VALUES))
+    with tempfile.TemporaryDirectory() as d:
+        p = Path(d) / "s.json"
+        p.write_text(json.dumps(doc))
+        try:
+            out = read_sidecar(p)
+        except InputError as exc:
+            assert "\n" not in str(exc) and len(str(exc)) < 1000
+            return
+    # accepted: then every joint term is a finite number within the bound
+    for terms in out["joints"].values():
+        for v in terms.values():
+            assert isinstance(v, (int, float)) and np.isfinite(v) and abs(v) <= MAX_TERM
+    for row in out.get("parameters", []):
+        assert np.isfinite(row["value"]) and abs(row["value"]) <= 1e12

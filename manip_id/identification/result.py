@@ -352,7 +352,7 @@ def result_from_dict(doc: dict) -> IdentificationResult:
             uncertainty=doc.get("uncertainty"),
             covariance_white=_matrix(doc.get("covariance_white"), len(rows)),
         )
-    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError) as exc:
         raise DataError(f"a malformed identification result: {type(exc).__name__}: {exc}") from exc
 
 
