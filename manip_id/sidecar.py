@@ -102,7 +102,6 @@ def read_sidecar(path) -> dict:
 
 def _check_parameters(f: Fields, data: dict) -> None:
     """``parameters`` and ``load_inertias`` of a sidecar, when present (module docstring)."""
-    bound = {"minimum": -MAX_PARAMETER, "maximum": MAX_PARAMETER}
     seen: set[str] = set()
     for k, row in enumerate(f.list(data.get("parameters", []), "parameters")):
         row = f.object(row, f"parameters[{k}]")
@@ -110,14 +109,21 @@ def _check_parameters(f: Fields, data: dict) -> None:
         if name in seen:
             raise DataError(f"{f.where}: parameter {name!r} is listed twice")
         seen.add(name)
-        f.number(row.get("value"), f"parameters[{k}].value ({name})", **bound)
+        f.number(
+            row.get("value"),
+            f"parameters[{k}].value ({name})",
+            minimum=-MAX_PARAMETER,
+            maximum=MAX_PARAMETER,
+        )
     blocks = data.get("load_inertias")
     if blocks is not None:
         rows = f.list(blocks, "load_inertias", nonempty=True)
         f.matrix(rows, "load_inertias", (len(rows), 10))
         for i, row in enumerate(rows):
             for j, v in enumerate(row):
-                f.number(v, f"load_inertias[{i}][{j}]", **bound)
+                f.number(
+                    v, f"load_inertias[{i}][{j}]", minimum=-MAX_PARAMETER, maximum=MAX_PARAMETER
+                )
 
 
 def identified_options(spec: str, identified, armature, friction, spring, active_joints):

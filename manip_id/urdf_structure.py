@@ -35,7 +35,6 @@ import xml.etree.ElementTree as ET
 from ._io.reading import read_text
 from .errors import RobotError, RobotWarning
 
-
 #: The most movable (not fixed) joints of a URDF: beyond it the per-sample regressor is
 #: out of reach anyway (:data:`manip_id.resources.REGRESSOR_BUFFER_LIMIT`, some 300 joints).
 MAX_JOINTS = 300

@@ -107,7 +107,8 @@ def _one_line(text: str) -> str:
     parts = [line.strip() for line in str(text).splitlines() if line.strip()]
     line = "; ".join(parts) if parts else ""
     if len(line) > MAX_LINE:
-        line = f"{line[: MAX_LINE // 2]} ... {line[-MAX_LINE // 4 :]} (message cut: {len(line)} characters)"
+        head, tail = line[: MAX_LINE // 2], line[-MAX_LINE // 4 :]
+        line = f"{head} ... {tail} (message cut: {len(line)} characters)"
     return line
 
 
