@@ -497,3 +497,14 @@ def test_a_mutated_sidecar_reads_the_same_or_gives_one_clear_error(sidecar_doc, 
             assert isinstance(v, (int, float)) and np.isfinite(v) and abs(v) <= MAX_TERM
     for row in out.get("parameters", []):
         assert np.isfinite(row["value"]) and abs(row["value"]) <= 1e12
+
+
+# ------------------------------------------------------------------------ repair outputs
+def test_repair_json_onto_the_sidecar_is_refused(work, capsys):
+    line = _error(capsys, "repair", "msd", "out.urdf", "--json", "out.identified.json")
+    assert "sidecar" in line and not list(work.iterdir())
+
+
+def test_repair_into_a_missing_folder_is_refused(work, capsys):
+    line = _error(capsys, "repair", "msd", "missing/out.urdf")
+    assert "does not exist" in line and not (work / "missing").exists()
