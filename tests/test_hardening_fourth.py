@@ -508,3 +508,11 @@ def test_repair_json_onto_the_sidecar_is_refused(work, capsys):
 def test_repair_into_a_missing_folder_is_refused(work, capsys):
     line = _error(capsys, "repair", "msd", "missing/out.urdf")
     assert "does not exist" in line and not (work / "missing").exists()
+
+
+def test_validate_equal_to_data_is_said(work, capsys):
+    assert main(["simulate", "msd", "--out", "sim", "--files", "1", "--duration", "4"]) == 0
+    capsys.readouterr()
+    status, _, err = _run(capsys, "identify", "msd", "--data", "sim/run_0.npz",
+                          "--validate", "./sim/run_0.npz")  # fmt: skip
+    assert status == 0 and "is also --data" in err and "training data" in err
