@@ -516,3 +516,17 @@ def test_validate_equal_to_data_is_said(work, capsys):
     status, _, err = _run(capsys, "identify", "msd", "--data", "sim/run_0.npz",
                           "--validate", "./sim/run_0.npz")  # fmt: skip
     assert status == 0 and "is also --data" in err and "training data" in err
+
+
+def test_thresholds_of_another_robot_are_refused_by_joint_names_before_their_gains():
+    from manip_id.errors import ModelMismatchError
+    from manip_id.monitor import CollisionMonitor, Thresholds
+
+    one = np.ones(1)
+    th = Thresholds(dof_names=["cart"], bound=one, noise_bound=one, model_bound=0 * one,
+                    gain=25 * one, filter_gain=None, false_alarm=1e-3,
+                    methods=["empirical quantile"], rate=0.0, rate_per_joint=0 * one,
+                    n_samples=100)  # fmt: skip
+    robot = _robot("double_pendulum")
+    with pytest.raises(ModelMismatchError, match="double_pendulum moves other joints.*cart"):
+        CollisionMonitor(robot, robot.nominal_parameters, th, gain=th.gain)

@@ -223,13 +223,13 @@ class CollisionMonitor:
             theta = theta.theta
         self.robot = robot
         self.theta = check_parameters(robot, theta)
+        self.thresholds = _bounds(robot, thresholds)  # before the gains: they may be theirs
         self.gain = positive_vector(gain, "gain", robot.nv, "1/s")
         self.filter_gain = (
             None
             if filter_gain is None
             else positive_vector(filter_gain, "filter_gain", robot.nv, "1/s")
         )
-        self.thresholds = _bounds(robot, thresholds)
         _check_gains(thresholds, self.gain, self.filter_gain)
         self.model = robot.with_parameters(self.theta)
         self.data = self.model.createData()
@@ -358,7 +358,9 @@ def _bounds(robot: Robot, thresholds) -> np.ndarray:
     if names is not None:
         if list(names) != list(robot.dof_names):
             raise ModelMismatchError(
-                "the thresholds' joints", f"{list(robot.dof_names)}", f"{list(names)}"
+                f"the thresholds' joints (robot {robot.name} moves other joints)",
+                f"{list(robot.dof_names)}",
+                f"{list(names)}",
             )
         thresholds = thresholds.bound
     arr = as_float_array(thresholds, "thresholds", ndim=(0, 1))
