@@ -530,3 +530,24 @@ def test_thresholds_of_another_robot_are_refused_by_joint_names_before_their_gai
     robot = _robot("double_pendulum")
     with pytest.raises(ModelMismatchError, match="double_pendulum moves other joints.*cart"):
         CollisionMonitor(robot, robot.nominal_parameters, th, gain=th.gain)
+
+
+# ------------------------------------------------------------------------------- MJCF out
+def test_an_mjcf_with_a_world_link_and_a_missing_mesh_loads_in_mujoco(work):
+    mujoco = pytest.importorskip("mujoco")
+    from manip_id import load_robot
+    from manip_id.errors import ExportWarning
+    from manip_id.export import export_mjcf
+
+    text = _chain_urdf(2).replace('"l2"', '"world"')  # the last link is called world
+    missing = work / "nowhere" / "arm.stl"
+    text = text.replace(
+        '<link name="l1">',
+        f'<link name="l1"><visual><geometry><mesh filename="{missing}"/></geometry></visual>',
+    )
+    (work / "w.urdf").write_text(text)
+    robot = load_robot(work / "w.urdf")
+    with pytest.warns(ExportWarning, match="'world'.*'world_1'"):
+        out = export_mjcf(robot, robot.nominal_parameters, work / "w.xml")
+    model = mujoco.MjModel.from_xml_path(str(work / "w.xml"))  # loads: no missing file
+    assert model.nbody == 3 and str(missing) in out.skipped
