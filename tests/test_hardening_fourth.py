@@ -551,3 +551,13 @@ def test_an_mjcf_with_a_world_link_and_a_missing_mesh_loads_in_mujoco(work):
         out = export_mjcf(robot, robot.nominal_parameters, work / "w.xml")
     model = mujoco.MjModel.from_xml_path(str(work / "w.xml"))  # loads: no missing file
     assert model.nbody == 3 and str(missing) in out.skipped
+
+
+def test_consistent_with_the_fleet_path_is_refused_as_documented(work, capsys):
+    assert main(["simulate", "msd", "--out", "sim", "--files", "1", "--duration", "4"]) == 0
+    capsys.readouterr()
+    line = _error(capsys, "identify", "msd", "--data", "sim/run_0.npz", "--per-file",
+                  "--consistent")  # fmt: skip
+    assert "--scheduler or --per-file" in line
+    docs = Path(__file__).resolve().parents[1] / "docs" / "fleet.md"
+    assert "`--consistent` does not\ncombine with `--scheduler` or `--per-file`" in docs.read_text()
