@@ -10,6 +10,7 @@ refuses each with one line naming the joint or link:
 - every joint axis is three finite numbers, not all zero;
 - every limit of a revolute or prismatic joint is finite where given, ``lower <= upper``,
   and ``velocity`` and ``effort`` are >= 0;
+- every link's mass and inertia entries are finite and within :data:`MAX_INERTIAL`;
 - the robot's size is within :data:`MAX_JOINTS` movable joints, :data:`MAX_LINKS` links and
   :data:`MAX_GEOMETRIES` visual and collision elements, counted in the text before
   Pinocchio builds a model and its data (a 1000-joint file took 23 GB and 44 s to build).
@@ -21,7 +22,7 @@ mimicking joint would silently break its constraint. Lock both joints (a profile
 ``--joints``), or remove the element. A robot of example-robot-data keeps its independent
 joints (baxter's grippers: 19 joints), with a warning.
 
-Inertias are not structure: ``manip-id view`` needs none, and the commands that use them
+Inertias are not structure beyond their magnitude: ``manip-id view`` needs none, and the commands that use them
 check them (a negative mass in a simulated URDF is refused by the simulation's check of
 the nominal parameters).
 """
@@ -65,6 +66,32 @@ def _check_size(root: ET.Element, where: str) -> None:
                 f"{where} has {n} {what}, above manip-id's limit of {limit}: split the robot "
                 "or remove what it does not need (checked before the model is built)"
             )
+
+
+#: The largest magnitude of a link's mass [kg] and inertia entries [kg m^2]: beyond it the
+#: number is no robot's (1e300 kg overflows every torque to inf).
+MAX_INERTIAL = 1e6
+
+
+def _check_inertial(link: ET.Element, where: str) -> None:
+    """Refuse a link whose mass or inertia is beyond :data:`MAX_INERTIAL` (or not finite)."""
+    inertial = link.find("inertial")
+    if inertial is None:
+        return
+    name = link.get("name")
+    items = [("mass", inertial.find("mass"), ("value",))]
+    items.append(("inertia", inertial.find("inertia"), ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")))
+    for what, el, keys in items:
+        if el is None:
+            continue
+        for key in keys:
+            text = el.get(key)
+            value = _numbers(text, 1, f"{where}: the {what} {key} of link {name!r}")
+            if value is not None and abs(value[0]) > MAX_INERTIAL:
+                raise RobotError(
+                    f"{where}: link {name!r} has {what} {key}={value[0]:g}, beyond manip-id's "
+                    f"bound of {MAX_INERTIAL:g} [kg or kg m^2]: check the URDF's units"
+                )
 
 
 def mimic_joints(path) -> dict[str, str]:
@@ -171,6 +198,8 @@ def check_urdf_structure(path) -> None:
     if root.tag != "robot":
         return
     _check_size(root, str(path))
+    for link in root.iter("link"):
+        _check_inertial(link, str(path))
     parents: dict[str, str] = {}
     for joint in root.iter("joint"):
         if joint.find("child") is not None:  # a transmission's <joint> has no child

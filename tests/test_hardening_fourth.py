@@ -561,3 +561,18 @@ def test_consistent_with_the_fleet_path_is_refused_as_documented(work, capsys):
     assert "--scheduler or --per-file" in line
     docs = Path(__file__).resolve().parents[1] / "docs" / "fleet.md"
     assert "`--consistent` does not\ncombine with `--scheduler` or `--per-file`" in docs.read_text()
+
+
+# ---------------------------------------------------- absurd numbers named at their option
+def test_a_torque_scale_of_1e308_is_refused_at_the_option(work, capsys):
+    assert main(["simulate", "msd", "--out", "sim", "--files", "1", "--duration", "4"]) == 0
+    capsys.readouterr()
+    line = _error(capsys, "identify", "msd", "--data", "sim/run_0.npz", "--torque-scale", "1e308")
+    assert "--torque-scale" in line and "1e+308" in line
+
+
+def test_a_urdf_mass_of_1e300_is_refused_naming_the_link(work, capsys):
+    text = _chain_urdf(2).replace('<mass value="1"/>', '<mass value="1e300"/>', 1)
+    (work / "heavy.urdf").write_text(text)
+    line = _error(capsys, "simulate", "heavy.urdf", "--out", "sim", "--duration", "1")
+    assert "link 'l0'" in line and "mass" in line and not (work / "sim").exists()
