@@ -22,8 +22,8 @@ mimicking joint would silently break its constraint. Lock both joints (a profile
 ``--joints``), or remove the element. A robot of example-robot-data keeps its independent
 joints (baxter's grippers: 19 joints), with a warning.
 
-Inertias are not structure beyond their magnitude: ``manip-id view`` needs none, and the commands that use them
-check them (a negative mass in a simulated URDF is refused by the simulation's check of
+Inertias are not structure beyond their magnitude: ``manip-id view`` needs none, and the
+commands that use them check them (a negative mass in a simulated URDF is refused by the simulation's check of
 the nominal parameters).
 """
 
