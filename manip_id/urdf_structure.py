@@ -23,8 +23,8 @@ mimicking joint would silently break its constraint. Lock both joints (a profile
 joints (baxter's grippers: 19 joints), with a warning.
 
 Inertias are not structure beyond their magnitude: ``manip-id view`` needs none, and the
-commands that use them check them (a negative mass in a simulated URDF is refused by the simulation's check of
-the nominal parameters).
+commands that use them check them (a negative mass in a simulated URDF is refused by the
+simulation's check of the nominal parameters).
 """
 
 from __future__ import annotations
@@ -79,8 +79,10 @@ def _check_inertial(link: ET.Element, where: str) -> None:
     if inertial is None:
         return
     name = link.get("name")
-    items = [("mass", inertial.find("mass"), ("value",))]
-    items.append(("inertia", inertial.find("inertia"), ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")))
+    items: list[tuple[str, ET.Element | None, tuple[str, ...]]] = [
+        ("mass", inertial.find("mass"), ("value",)),
+        ("inertia", inertial.find("inertia"), ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")),
+    ]
     for what, el, keys in items:
         if el is None:
             continue
