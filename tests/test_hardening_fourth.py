@@ -576,3 +576,12 @@ def test_a_urdf_mass_of_1e300_is_refused_naming_the_link(work, capsys):
     (work / "heavy.urdf").write_text(text)
     line = _error(capsys, "simulate", "heavy.urdf", "--out", "sim", "--duration", "1")
     assert "link 'l0'" in line and "mass" in line and not (work / "sim").exists()
+
+
+def test_a_killed_runs_staged_file_is_named_by_the_next_run(work, capsys):
+    pid = _dead_pid()
+    stale = work / f".o.json.tmp-{pid}-x1y2.json"
+    stale.write_text("{")
+    status, _, err = _run(capsys, "rank", "msd", "--samples", "30", "--json", "o.json")
+    assert status == 0 and stale.name in err and stale.exists()
+    assert not [p for p in os.listdir(work) if ".tmp-" in p and str(os.getpid()) in p]
