@@ -20,6 +20,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from .._io.files import same_file
 from ..datasets import Layout, RowCache, load_dataset
 from ..errors import InputError
 from ..identification import (
@@ -44,7 +45,7 @@ from ..viz.report_document import (
     add_raw_reference,
     result_document,
 )
-from ._common import data_column_map, file_specs, profile_from_args, progress
+from ._common import data_column_map, file_specs, profile_from_args, progress, warn
 from ._runtime import (
     before_fit,
     consistent_kwargs,
@@ -200,6 +201,18 @@ def _print_files(args, report: dict, accumulated: bool) -> None:
         )
 
 
+def _warn_shared_files(specs, vspecs) -> None:
+    """A warning for a --validate file that is also a --data file (same file, both whole
+    or the same window): its "validation" error would be measured on training data."""
+    for v in vspecs or ():
+        for s in specs:
+            if same_file(v.path, s.path) and v.window == s.window:
+                warn(
+                    f"--validate {v.label} is also --data {s.label}: its validation error is "
+                    "measured on the training data, not on new data"
+                )
+
+
 def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     """``manip-id identify --data ...`` (after the outputs were reserved)."""
     timings: dict[str, float] = {}
@@ -207,6 +220,7 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     colmap = data_column_map(args, profile)
     specs = file_specs(args.data, args, colmap)  # bad specs fail before the robot loads
     vspecs = file_specs(args.validate, args, colmap) if args.validate is not None else None
+    _warn_shared_files(specs, vspecs)
     robot = robot_from_args(args)
     options = preprocess_options(args, robot.nv, None if profile is None else profile.torque_scale)
     f = _scan(robot, args, specs, vspecs, options, timings)

@@ -21,7 +21,7 @@ from ..identifiability import BaseParameters, RankAnalysis
 from ..robot.model import Robot
 from ..robot.regressor import DEFAULT_CHUNK, check_states, iter_regressor
 from .document import OWN_KEYS, read_result_json, result_text, result_to_dict
-from .result_schema import check_result_document
+from .result_schema import check_covariance, check_result_document, rows_in_base_order
 
 
 def _array(x, dtype=float):
@@ -295,7 +295,8 @@ def result_from_dict(doc: dict) -> IdentificationResult:
             "manip-id identify --json or IdentificationResult.to_dict())"
         )
     try:
-        rows = doc["base_parameters"]
+        rows = rows_in_base_order(doc)
+        doc = {**doc, "base_parameters": rows}
         b = doc["base"]
         names = [str(r["name"]) for r in rows]
         base = BaseParameters(
@@ -310,6 +311,7 @@ def result_from_dict(doc: dict) -> IdentificationResult:
         std = _array([r["std"] for r in rows])
         std_pct = _array([np.inf if r["std_percent"] is None else r["std_percent"] for r in rows])
         cov = _array([v for row in doc["covariance"] for v in row]).reshape(len(rows), len(rows))
+        check_covariance(cov, "covariance")
         ra = _rank_from_dict(doc, base, names)
         joints = list(doc.get("joints", []))
         outputs = list(doc.get("outputs", joints))
@@ -350,7 +352,7 @@ def result_from_dict(doc: dict) -> IdentificationResult:
             uncertainty=doc.get("uncertainty"),
             covariance_white=_matrix(doc.get("covariance_white"), len(rows)),
         )
-    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError) as exc:
         raise DataError(f"a malformed identification result: {type(exc).__name__}: {exc}") from exc
 
 
