@@ -274,6 +274,17 @@ class ManipIdWarning(UserWarning):
     """Root of the warnings manip_id issues (each also recorded in its result's ``warnings``)."""
 
 
+class RobotWarning(ManipIdWarning):
+    """A robot model loaded with a simplification the user should know of (a ``<mimic>``
+    joint of an example-robot-data robot modelled as independent)."""
+
+
+class OutputWarning(ManipIdWarning):
+    """An output was published, but something beside it needs the user's eye: a file saved
+    into a ``--force`` folder during the run (kept, under a name given), or the staging
+    folder of an earlier run that was killed."""
+
+
 class PayloadWarning(ManipIdWarning):
     """A payload or drive-gain result the user should look at (also in ``result.warnings``)."""
 
@@ -374,6 +385,17 @@ class CarriedInertiaError(ManipIdError):
 
 class ExportWarning(ManipIdWarning):
     """An export changed something the user should know of (a scaled share of carried links)."""
+
+
+#: The most characters of a user's value that a message quotes (:func:`shorten`).
+QUOTE_LIMIT = 80
+
+
+def shorten(value, n: int = QUOTE_LIMIT) -> str:
+    """``str(value)`` cut to ``n`` characters for quoting in a message (a 100 MB CSV header
+    cell must not make a 100 MB error line): ``"abc... (1234567 characters)"``."""
+    text = str(value)
+    return text if len(text) <= n else f"{text[:n]}... ({len(text)} characters)"
 
 
 def did_you_mean(word: str, choices, n: int = 1) -> str:

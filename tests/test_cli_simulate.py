@@ -105,8 +105,8 @@ def test_drive_gains_write_currents_and_the_drive_gains_command_finds_the_gains(
     ("argv", "message"),
     [
         (["--files", "0"], "--files must be >= 1, got 0"),
-        (["--payload", "-1"], "--payload masses must be > 0"),
-        (["--noise", "-0.1"], "--noise must be >= 0"),
+        (["--payload", "-1"], "--payload masses must be in (0, 10000]"),
+        (["--noise", "-0.1"], "--noise must be in [0, 100]"),
         (["--drive-gains", "1,2"], "--drive-gains takes 1 or 6 gains"),
         (["--format", "xls"], "invalid choice: 'xls'"),
     ],

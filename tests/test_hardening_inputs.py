@@ -537,7 +537,7 @@ PHYSICAL = [
         "urdf-inertia-inf",
         ["rank", "bad.urdf", "--samples", "20"],
         _urdf('ixx="0.01"', 'ixx="inf"'),
-        "ixx is not a valid double",
+        "ixx of link .l2. must be 1 finite numbers",
     ),
     Case(
         "drive-gains-mass-1e30",

@@ -16,16 +16,19 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import stat
 import tempfile
 import threading
+import warnings
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import numpy as np
+import psutil
 
-from ..errors import OutputError
+from ..errors import OutputError, OutputWarning
 
 # ------------------------------------------------------------ cleanup registry
 _TEMPORARIES: dict[str, int] = {}  # path -> pid of the process that created it
@@ -42,6 +45,49 @@ def unregister_temporary(path) -> None:
     """Forget ``path`` (it was renamed into place or removed)."""
     with _LOCK:
         _TEMPORARIES.pop(os.fspath(path), None)
+
+
+def temporary_prefix(target: Path) -> str:
+    """The name prefix of this process's temporaries beside ``target``: ``.NAME.tmp-PID-``.
+
+    The process id in the name lets a later run tell the leftovers of a killed run
+    (:func:`stale_temporaries`) from those of a run still working.
+    """
+    return f".{target.name}.tmp-{os.getpid()}-"
+
+
+def stale_temporaries(target) -> list[Path]:
+    """The temporaries beside ``target`` left by runs that are no longer alive.
+
+    Those named ``.NAME.tmp-PID-*`` or ``.NAME.old-PID-*`` (:func:`temporary_prefix`) whose
+    process ``PID`` does not exist: a run killed with SIGKILL (or a power cut) cannot
+    remove its staging folder, so the next run into ``target`` names it (it deletes
+    nothing: the folder may hold the only copy of an hour's work).
+    """
+    target = Path(target)
+    pattern = re.compile(rf"\.{re.escape(target.name)}\.(?:tmp|old)-(\d+)-")
+    try:
+        names = os.listdir(target.parent)
+    except OSError:
+        return []
+    stale = []
+    for name in sorted(names):
+        m = pattern.match(name)
+        if m and int(m.group(1)) != os.getpid() and not psutil.pid_exists(int(m.group(1))):
+            stale.append(target.parent / name)
+    return stale
+
+
+def warn_stale_temporaries(target) -> None:
+    """An :class:`~manip_id.errors.OutputWarning` naming each of :func:`stale_temporaries`."""
+    for p in stale_temporaries(target):
+        pid = p.name.split("-")[1]
+        warnings.warn(
+            f"{p} was left by an earlier manip-id run (process {pid}) that was killed before "
+            f"it finished; nothing uses it: look inside, then remove it (rm -r '{p}')",
+            OutputWarning,
+            stacklevel=3,
+        )
 
 
 def remove_temporaries() -> list[str]:
@@ -200,10 +246,11 @@ class StagedFile:
 
     def __init__(self, path, *, inputs: Iterable = (), what: str = "output"):
         self.path = check_output_file(path, inputs=inputs, what=what)
+        warn_stale_temporaries(self.path)
         try:
             fd, name = tempfile.mkstemp(
                 dir=self.path.parent,
-                prefix=f".{self.path.name}.",
+                prefix=temporary_prefix(self.path),
                 suffix=self.path.suffix or ".tmp",
             )
         except OSError as exc:

@@ -16,6 +16,14 @@ Rules (issue 14):
   size and hash; the first foreign, edited or non-file entry is named in the refusal and
   nothing is deleted. A manifest of an older manip-id (names without hashes) cannot prove
   the files unchanged: such a folder is refused, the message says to delete it by hand.
+- **A file saved during the run survives** (issue 41): the check above is made when the
+  folder is claimed; at the end only the entries that are still ours (the claim, the
+  manifest, listed files of the listed size and hash) are deleted; anything that appeared
+  or changed meanwhile is moved into the new folder and named in an
+  :class:`~manip_id.errors.OutputWarning`.
+- **A killed run's staging folder is named**: temporaries are called ``.NAME.tmp-PID-*``
+  (``.NAME.old-PID-*`` while swapping); the next run into ``NAME`` names those whose
+  process is gone (:func:`~.files.stale_temporaries`) and leaves them to the user.
 - **A report path that is a symbolic link is refused** (never followed, never replaced):
   nothing is created, neither beside it nor in its target.
 
@@ -31,18 +39,27 @@ import re
 import shutil
 import stat
 import tempfile
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
 import psutil
 
-from ..errors import InputError, OutputError, ReportBusyError, ReportExistsError
+from ..errors import (
+    InputError,
+    OutputError,
+    OutputWarning,
+    ReportBusyError,
+    ReportExistsError,
+)
 from .files import (
     atomic_write_text,
     check_output_dir,
     json_text,
     register_temporary,
+    temporary_prefix,
     unregister_temporary,
+    warn_stale_temporaries,
 )
 from .reading import read_json
 
@@ -215,7 +232,7 @@ class ReportFolder:
         if self._tmp is not None:
             raise InputError(f"report {self.path} was already written")
         try:
-            tmp = Path(tempfile.mkdtemp(dir=self.path.parent, prefix=f".{self.path.name}.tmp-"))
+            tmp = Path(tempfile.mkdtemp(dir=self.path.parent, prefix=temporary_prefix(self.path)))
         except OSError as exc:
             raise OutputError(f"cannot create a folder beside {self.path}: {exc.strerror}") from exc
         register_temporary(tmp)
@@ -279,6 +296,7 @@ def claim_report(
     :class:`~manip_id.errors.ReportBusyError`.
     """
     path = check_report_target(directory, force, inputs=inputs, what=what)
+    warn_stale_temporaries(path)
     created = False
     try:
         path.mkdir()
@@ -322,11 +340,19 @@ def check_report_target_claimed(path: Path, force: bool) -> None:
 
 
 def _swap(new: Path, target: Path) -> None:
-    """Move the complete folder ``new`` to ``target``, replacing it (renamed aside first)."""
+    """Move the complete folder ``new`` to ``target``; of the old folder, delete only ours.
+
+    The old folder is renamed aside (readers see the old report or the new one, never a
+    mix), the new one renamed into place, and then the aside folder is emptied entry by
+    entry: the claim, the manifest and the files the manifest lists, unchanged, are
+    deleted; anything else (a file the user saved into the folder while this run worked,
+    or edited) is moved back into ``target``, under its own name when the new report has
+    none such, else as ``NAME.user-K``, and named in an :class:`~manip_id.errors.OutputWarning`.
+    """
     if not target.exists():
         os.replace(new, target)
         return
-    old = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.old-"))
+    old = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.old-{os.getpid()}-"))
     old.rmdir()
     os.replace(target, old)
     try:
@@ -334,4 +360,45 @@ def _swap(new: Path, target: Path) -> None:
     except BaseException:
         os.replace(old, target)
         raise
-    shutil.rmtree(old, ignore_errors=True)
+    _empty_aside(old, target)
+
+
+def _empty_aside(old: Path, target: Path) -> None:
+    """Delete our own entries of the aside folder ``old``; move the others into ``target``."""
+    try:
+        listed = _manifest_entries(old)
+    except OutputError:  # a folder this run created holds no manifest: nothing but the claim
+        listed = {}
+    for _ in range(3):  # entries may still appear (a writer with the old folder open)
+        for entry in sorted(old.iterdir()):
+            name = entry.name
+            info = entry.lstat()
+            ours = name in (MANIFEST, CLAIM) or (
+                name in listed
+                and stat.S_ISREG(info.st_mode)
+                and info.st_size == listed[name][0]
+                and file_digest(entry) == listed[name][1]
+            )
+            if ours:
+                entry.unlink()
+                continue
+            dest, k = target / name, 1
+            while dest.exists() or dest.is_symlink():
+                dest, k = target / f"{name}.user-{k}", k + 1
+            os.rename(entry, dest)
+            warnings.warn(
+                f"{entry.name} appeared in {target} while manip-id was writing it (or was "
+                f"changed): kept, as {dest}; the report's own files were replaced",
+                OutputWarning,
+                stacklevel=5,
+            )
+        try:
+            old.rmdir()
+            return
+        except OSError:
+            continue
+    warnings.warn(
+        f"the previous contents of {target} could not all be moved back: they are in {old}",
+        OutputWarning,
+        stacklevel=5,
+    )

@@ -98,9 +98,18 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {_one_line(message)} (see {self.prog} --help)\n")
 
 
+#: The longest message line printed [characters]; longer ones are cut (a safety net: the
+#: messages themselves quote user values cut to :data:`~manip_id.errors.QUOTE_LIMIT`).
+MAX_LINE = 4000
+
+
 def _one_line(text: str) -> str:
     parts = [line.strip() for line in str(text).splitlines() if line.strip()]
-    return "; ".join(parts) if parts else ""
+    line = "; ".join(parts) if parts else ""
+    if len(line) > MAX_LINE:
+        head, tail = line[: MAX_LINE // 2], line[-MAX_LINE // 4 :]
+        line = f"{head} ... {tail} (message cut: {len(line)} characters)"
+    return line
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -20,7 +20,7 @@ import warnings
 
 from .._io import OutputSet, write_json  # noqa: F401 (the commands import write_json here)
 from ..datasets import parse_file_spec
-from ..errors import InputError
+from ..errors import InputError, shorten
 from ..robot.profiles import find_profile, load_profile
 from ..signals import DEFAULT_CUTOFF, preprocess
 
@@ -262,13 +262,17 @@ def parse_floats(text: str, what: str, n: int | None = None) -> list[float]:
     try:
         values = [float(x) for x in str(text).split(",") if x.strip()]
     except ValueError:
-        raise InputError(f"{what} expects numbers separated by commas, got {text!r}") from None
+        raise InputError(
+            f"{what} expects numbers separated by commas, got {shorten(text)!r}"
+        ) from None
     if not values:
-        raise InputError(f"{what} expects at least one number, got {text!r}")
+        raise InputError(f"{what} expects at least one number, got {shorten(text)!r}")
     if n is not None and len(values) != n:
-        raise InputError(f"{what} takes {n} comma-separated numbers, got {len(values)}: {text!r}")
+        raise InputError(
+            f"{what} takes {n} comma-separated numbers, got {len(values)}: {shorten(text)!r}"
+        )
     if not all(math.isfinite(v) for v in values):
-        raise InputError(f"{what} takes finite numbers, got {text!r}")
+        raise InputError(f"{what} takes finite numbers, got {shorten(text)!r}")
     return values
 
 

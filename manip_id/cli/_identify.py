@@ -93,7 +93,10 @@ def _check_consistent_args(args) -> None:
     if args.method not in ("ols", "wls"):
         raise InputError(f"--consistent applies to --method ols or wls, got {args.method}")
     if fleet_wanted(args):
-        raise InputError("--consistent is not available with several data files yet")
+        raise InputError(
+            "--consistent does not combine with --scheduler or --per-file (the fleet path) "
+            "yet: run it without them (several --data files are accumulated alike)"
+        )
     if args.export_urdf:
         check_output(args.export_urdf, force=args.force)
     if args.export_mjcf:

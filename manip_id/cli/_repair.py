@@ -16,9 +16,14 @@ from ._runtime import (
 
 def run(args: argparse.Namespace) -> int:
 
-    check_output(args.out, args.force)  # before the work
-    if args.json and Path(args.json).resolve() == Path(args.out).resolve():
-        raise InputError(f"--json {args.json} is OUT.urdf")
+    parent = Path(args.out).absolute().parent
+    if not parent.is_dir():  # as every other output: the folder must exist
+        raise InputError(f"the folder of OUT.urdf {args.out} does not exist ({parent})")
+    _, side = check_output(args.out, args.force)  # before the work
+    if args.json:
+        for other, what in ((Path(args.out), "OUT.urdf"), (side, "its sidecar")):
+            if Path(args.json).absolute().resolve() == other.absolute().resolve():
+                raise InputError(f"--json {args.json} is {what} ({other}); give another path")
     outputs = reserve_outputs(args)
     robot = robot_from_args(args)
     result = repair_nominal(robot)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,7 +26,7 @@ import numpy as np
 from .._io import write_json
 from ..control.closed_loop import with_payload
 from ..datasets import Dataset, save_dataset
-from ..errors import InputError
+from ..errors import InputError, ResourceError
 from ..physics.perturbation import MAX_REL, perturb_parameters
 from ..simulation import MeasurementNoise, check_simulation_memory, simulate
 from ._common import parse_floats, reserve_outputs
@@ -35,6 +36,16 @@ from .simulate import LEVER
 
 #: The joint-term names ``--joint-terms`` takes (those of :mod:`manip_id.robot.parameters`).
 JOINT_TERMS = ("Ia", "fv", "fc", "fo", "k")
+#: At most this many logs in one folder (``--files`` times the number of groups).
+MAX_LOGS = 10_000
+#: Bounds of the numbers that shape the logs, refused at their option beyond them.
+MAX_NOISE = 100.0  # relative to the RMS torque
+MAX_PAYLOAD = 1e4  # [kg]
+GAIN_RANGE = (1e-6, 1e6)  # [N m/A]
+#: Bytes per stored value of each format (CSV: a printed float and its comma).
+BYTES_PER_VALUE = {"npz": 8, "csv": 25, "mcap": 12}
+#: Free disk kept beyond the estimated size of the folder.
+DISK_MARGIN = 2**28  # [bytes]
 
 
 @dataclass(frozen=True)
@@ -54,8 +65,10 @@ def _check(args: argparse.Namespace) -> tuple[list[float], list[Run]]:
         value = getattr(args, name)
         if not (math.isfinite(value) and value > 0):
             raise InputError(f"--{name} must be a positive number, got {value}")
-    if not (math.isfinite(args.noise) and args.noise >= 0):
-        raise InputError(f"--noise must be >= 0 (relative to the RMS torque), got {args.noise}")
+    if not (math.isfinite(args.noise) and 0 <= args.noise <= MAX_NOISE):
+        raise InputError(
+            f"--noise must be in [0, {MAX_NOISE:g}] (relative to the RMS torque), got {args.noise}"
+        )
     if args.duration * args.rate < 10:
         raise InputError(
             f"--duration {args.duration:g} s at --rate {args.rate:g} Hz gives fewer than 10 samples"
@@ -65,15 +78,30 @@ def _check(args: argparse.Namespace) -> tuple[list[float], list[Run]]:
     if not (math.isfinite(args.tool) and args.tool >= 0):
         raise InputError(f"--tool must be a mass >= 0 [kg], got {args.tool}")
     masses = [] if args.payload is None else parse_floats(args.payload, "--payload")
-    if any(m <= 0 for m in masses):
-        raise InputError(f"--payload masses must be > 0 [kg], got {args.payload}")
+    if any(not 0 < m <= MAX_PAYLOAD for m in masses):
+        raise InputError(
+            f"--payload masses must be in (0, {MAX_PAYLOAD:g}] [kg], got {_cut(args.payload)}"
+        )
+    if len(set(masses)) != len(masses):
+        twice = next(m for m in masses if masses.count(m) > 1)
+        raise InputError(f"--payload lists the mass {twice!r} kg twice; give each mass once")
+    if args.files * (1 + len(masses)) > MAX_LOGS:
+        raise InputError(
+            f"--files {args.files} with {len(masses)} payload mass(es) asks for "
+            f"{args.files * (1 + len(masses))} logs; at most {MAX_LOGS} in one folder"
+        )
     width = len(str(args.files - 1))
-    groups = [("run", 0.0)] + [(f"payload_{m:g}kg", m) for m in masses]
+    # the shortest decimal that reads back as the same float: distinct masses, distinct names
+    groups = [("run", 0.0)] + [
+        (f"payload_{np.format_float_positional(m, trim='-')}kg", m) for m in masses
+    ]
     runs = [
         Run(f"{prefix}_{k:0{width}d}.{args.format}", args.seed + g * args.files + k, mass)
         for g, (prefix, mass) in enumerate(groups)
         for k in range(args.files)
     ]
+    if len({r.name for r in runs}) != len(runs):  # pragma: no cover - unique by construction
+        raise InputError("two simulated logs would have the same file name")
     return masses, runs
 
 
@@ -120,6 +148,27 @@ def truth_parameters(robot, args: argparse.Namespace) -> np.ndarray:
     return with_payload(robot, theta, args.tool) if args.tool else theta
 
 
+def _cut(text, n: int = 80) -> str:
+    """``text`` as quoted in a message, at most ``n`` characters."""
+    text = str(text)
+    return text if len(text) <= n else f"{text[:n]}... ({len(text)} characters)"
+
+
+def _check_disk(robot, args, runs: list[Run]) -> None:
+    """Refuse a folder whose estimated size exceeds the free disk beside ``--out``."""
+    n = int(round(args.duration * args.rate)) + 1
+    values = n * (1 + robot.nq + 3 * robot.nv)  # t, q, dq, ddq, tau per sample
+    need = len(runs) * values * BYTES_PER_VALUE[args.format]  # [bytes]
+    free = shutil.disk_usage(Path(args.out).absolute().parent).free
+    if need + DISK_MARGIN > free:
+        raise ResourceError(
+            f"{len(runs)} log(s) of {n} samples of {robot.nv} joints need about "
+            f"{need / 1e9:.3g} GB, but {free / 1e9:.3g} GB are free beside {args.out} "
+            f"(keeping {DISK_MARGIN / 1e9:.2g} GB): fewer --files, a shorter --duration or "
+            "a lower --rate"
+        )
+
+
 def _gains(args: argparse.Namespace, nv: int) -> np.ndarray | None:
     """The ``--drive-gains`` per joint [N m/A], shape (nv,), or None (torques written)."""
     if args.drive_gains is None:
@@ -129,8 +178,11 @@ def _gains(args: argparse.Namespace, nv: int) -> np.ndarray | None:
         gains = np.full(nv, gains[0])
     if gains.shape != (nv,):
         raise InputError(f"--drive-gains takes 1 or {nv} gains (one per joint), got {gains.size}")
-    if np.any(gains <= 0):
-        raise InputError(f"--drive-gains must be > 0 [N m/A], got {args.drive_gains}")
+    lo, hi = GAIN_RANGE
+    if np.any(gains < lo) or np.any(gains > hi):
+        raise InputError(
+            f"--drive-gains must be in [{lo:g}, {hi:g}] [N m/A], got {_cut(args.drive_gains)}"
+        )
     return gains
 
 
@@ -234,6 +286,7 @@ def run(args: argparse.Namespace) -> int:
     robot = robot_from_args(args)
     gains = _gains(args, robot.nv)
     check_simulation_memory(robot, int(round(args.duration * args.rate)))
+    _check_disk(robot, args, runs)
     theta = truth_parameters(robot, args)
 
     def fill(folder: Path) -> None:

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from .._numba import note_compile
-from ..errors import DataError
+from ..errors import DataError, shorten
 from .core import Dataset, check_time
 from .layout import FIELDS, Layout
 
@@ -54,7 +54,7 @@ class CsvColumns:
 
 def _head(path: Path) -> tuple[str | None, list[str] | None]:
     try:
-        with open(path) as fh:
+        with open(path, encoding="utf-8-sig") as fh:  # a byte-order mark is not a column name
             first = fh.readline()
     except (OSError, UnicodeDecodeError) as exc:
         raise DataError(f"cannot read {path} as CSV: {exc}") from exc
@@ -80,7 +80,8 @@ def _column_index(spec, header: list[str] | None, path: Path, field_name: str) -
         return header.index(str(spec))
     except ValueError:
         raise DataError(
-            f"column {spec!r} of {field_name!r} is not in {path} (columns: {', '.join(header)})"
+            f"column {shorten(spec)!r} of {field_name!r} is not in {path} "
+            f"(columns: {_listed(header)})"
         ) from None
 
 
@@ -89,8 +90,8 @@ def _columns_for(spec, header, path, field_name) -> list[int]:
         idx = [i for i, h in enumerate(header) if fnmatch.fnmatchcase(h, spec)]
         if not idx:
             raise DataError(
-                f"pattern {spec!r} of {field_name!r} matches no column of {path} "
-                f"(columns: {', '.join(header)})"
+                f"pattern {shorten(spec)!r} of {field_name!r} matches no column of {path} "
+                f"(columns: {_listed(header)})"
             )
         return idx
     specs = [spec] if isinstance(spec, (str, int, np.integer)) else list(spec)
@@ -502,11 +503,17 @@ def write_csv(fh, blocks, layout: Layout, joint_names=None) -> None:
         np.savetxt(fh, block, delimiter=",", fmt="%.17g")
 
 
+def _listed(header: Sequence[str], n: int = 10) -> str:
+    """The first ``n`` column names, each cut to a bounded length (:func:`.shorten`)."""
+    more = f", ... ({len(header)} columns)" if len(header) > n else ""
+    return ", ".join(shorten(h) for h in header[:n]) + more
+
+
 def _column_hint(header: Sequence[str]) -> str:
     """What to do about a CSV whose header is not ours: its columns, and how to map them
     (``--column FIELD=COLUMNS`` on the command line, ``columns=`` in the API)."""
-    shown = ", ".join(header[:10]) + (", ..." if len(header) > 10 else "")
-    first = header[0] if header else "stamp"
+    shown = _listed(header)
+    first = shorten(header[0]) if header else "stamp"
     return (
         f"; this file's columns are {shown}: map them with --column FIELD=COLUMNS "
         f"(columns={{...}} in the API), e.g. --column t={first} --column q='pos*' "

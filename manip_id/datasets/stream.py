@@ -180,6 +180,10 @@ class RowCounts:
         self.first_dropped = first if self.first_dropped is None else min(self.first_dropped, first)
 
 
+#: The magnitudes a torque scale may have: from the logged unit (mN m, A, counts) to N m.
+TORQUE_SCALE_RANGE = (1e-9, 1e9)
+
+
 def torque_scale_vector(scale, nv: int, what: str = "torque scale") -> np.ndarray | None:
     """A per-joint torque scale of shape (nv,) from a scalar or nv values (None: no scale)."""
     if scale is None:
@@ -189,6 +193,12 @@ def torque_scale_vector(scale, nv: int, what: str = "torque scale") -> np.ndarra
         raise InputError(f"{what} takes one value or one per joint ({nv}), got {arr.size} values")
     if not np.isfinite(arr).all() or np.any(arr == 0):
         raise InputError(f"{what} must be finite and non-zero, got {arr.tolist()}")
+    lo, hi = TORQUE_SCALE_RANGE
+    if np.any(np.abs(arr) < lo) or np.any(np.abs(arr) > hi):
+        raise InputError(
+            f"{what} must have a magnitude in [{lo:g}, {hi:g}] (a gain from the logged unit "
+            f"to N m or N), got {arr.tolist()}"
+        )
     return np.broadcast_to(arr, (nv,)).copy()
 
 

@@ -32,6 +32,7 @@ load it (the optional extra ``manip_id[mujoco]``).
 
 from __future__ import annotations
 
+import warnings
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -41,7 +42,7 @@ import numpy as np
 import pinocchio as pin
 
 from .._io import atomic_write_text, json_text
-from ..errors import RobotError
+from ..errors import ExportWarning, RobotError
 from ..robot.parameters import bounded_range, bounded_rate
 from .links import Composite, urdf_floats
 from .sidecar import sidecar_path
@@ -85,7 +86,8 @@ class _Assets:
 
     def mesh(self, filename: str, scale: str) -> str | None:
         path = Path(filename)
-        if path.suffix.lower() not in MUJOCO_MESH_FORMATS or not path.is_absolute():
+        readable = path.is_absolute() and path.is_file()  # MuJoCo refuses a missing mesh
+        if path.suffix.lower() not in MUJOCO_MESH_FORMATS or not readable:
             if filename not in self.skipped:
                 self.skipped.append(filename)
             return None
@@ -190,12 +192,31 @@ def _inertial(inertia: pin.Inertia) -> ET.Element:
     )
 
 
+def _body_name(name: str, used: set[str]) -> str:
+    """``name``, or ``name_1``, ``name_2``... when MuJoCo reserves it (``world``) or it is
+    taken; renamed bodies are said in an :class:`~manip_id.errors.ExportWarning`."""
+    out, k = name, 0
+    while out in used:
+        k += 1
+        out = f"{name}_{k}"
+    used.add(out)
+    if out != name:
+        warnings.warn(
+            f"MJCF export: link {name!r} is a name MuJoCo reserves or already used: written "
+            f"as body {out!r}",
+            ExportWarning,
+            stacklevel=4,
+        )
+    return out
+
+
 def _bodies(robot, theta, exp: ExportedTree, model: pin.Model, world: ET.Element, assets) -> None:
     """Fill ``world`` with one nested ``<body>`` per joint of ``model`` and the geoms."""
     bodies: dict[int, ET.Element] = {0: world}
+    used = {"world"}  # MuJoCo's own body: a link of that name would not load
     for i in range(1, model.njoints):  # parents come first in Pinocchio's order
         M = model.jointPlacements[i]
-        name = exp.tree.child_of.get(model.names[i], model.names[i])
+        name = _body_name(exp.tree.child_of.get(model.names[i], model.names[i]), used)
         body = ET.SubElement(
             bodies[model.parents[i]],
             "body",

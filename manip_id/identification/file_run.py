@@ -28,6 +28,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from .._io.files import same_file
 from ..audit import AuditOptions, audit_files
 from ..datasets import Layout, RowCache, load_dataset
 from ..datasets.stream import torque_scale_vector
@@ -183,12 +184,26 @@ def _scan(robot: Robot, specs, vspecs, fopts: FileOptions, run: RunOptions, timi
             source["split"] = fopts.split
     if vspecs is not None:
         source["validate"] = [s.label for s in vspecs]
+        source.update(shared_files(specs, vspecs))
     timings["scan"] = time.perf_counter() - t0
     for s in specs if run.verbose else ():  # else in the result's files only
         run.say(scans[s].quality.text())
     for s in (vspecs or []) if run.verbose else ():
         run.say("validation " + scans[s].quality.text())
     return SimpleNamespace(specs=specs, vspecs=vspecs, scans=scans, source=source, audit=audit)
+
+
+def shared_files(specs, vspecs) -> dict:
+    """``{"validation_in_training": [[validation label, training label], ...]}`` for each
+    validation file that is also a training file (the same file, both whole or with the
+    same window): its validation error would be measured on training data. Else {}."""
+    pairs = [
+        [v.label, s.label]
+        for v in vspecs or ()
+        for s in specs
+        if same_file(v.path, s.path) and v.window == s.window
+    ]
+    return {"validation_in_training": pairs} if pairs else {}
 
 
 def _audit_options(options: PreprocessOptions) -> AuditOptions:
@@ -392,6 +407,7 @@ def _distributed(robot, specs, vspecs, base, settings: SolveSettings, opts, fopt
     source = {"data": [s.label for s in specs], "scheduler": _scheduler_name(run.scheduler)}
     if vspecs is not None:
         source["validate"] = [s.label for s in vspecs]
+        source.update(shared_files(specs, vspecs))
     n_valid = sum(x.n_samples for x in files["validation"] or [])
     ctx = RunContext(source=source, n_validation=n_valid, settings=files["train"][0].settings)
     qualities = {x.spec: x.quality for x in files["train"] + (files["validation"] or [])}

@@ -23,7 +23,7 @@ from ..robot.regressor import DEFAULT_CHUNK, check_states, iter_regressor
 from .document import OWN_KEYS, read_result_json, result_to_dict
 from .document_text import result_text
 from .nominal_check import WORSE_PREFIX
-from .result_schema import check_result_document
+from .result_schema import check_covariance, check_result_document, rows_in_base_order
 
 
 def _array(x, dtype=float):
@@ -271,6 +271,18 @@ def errors_from_dict(e: dict) -> RelativeError:
     )
 
 
+#: The keys every saved result has (:func:`result_from_dict` refuses a document without one).
+REQUIRED_KEYS = (
+    "method",
+    "robot",
+    "base_parameters",
+    "relative_error",
+    "base",
+    "rank_analysis",
+    "covariance",
+)
+
+
 def result_from_dict(doc: dict) -> IdentificationResult:
     """An :class:`~manip_id.identification.IdentificationResult` from :func:`result_to_dict`'s
     dictionary. What the schema does not model (standard parameters, files, per-file
@@ -278,26 +290,15 @@ def result_from_dict(doc: dict) -> IdentificationResult:
     if not isinstance(doc, dict):
         raise DataError(f"an identification result is a JSON object, got {type(doc).__name__}")
     check_result_document(doc)
-    missing = [
-        k
-        for k in (
-            "method",
-            "robot",
-            "base_parameters",
-            "relative_error",
-            "base",
-            "rank_analysis",
-            "covariance",
-        )
-        if k not in doc
-    ]
+    missing = [k for k in REQUIRED_KEYS if k not in doc]
     if missing:
         raise DataError(
             f"not an identification result of this schema: missing {missing} (write it with "
             "manip-id identify --json or IdentificationResult.to_dict())"
         )
     try:
-        rows = doc["base_parameters"]
+        rows = rows_in_base_order(doc)
+        doc = {**doc, "base_parameters": rows}
         b = doc["base"]
         names = [str(r["name"]) for r in rows]
         base = BaseParameters(
@@ -312,6 +313,7 @@ def result_from_dict(doc: dict) -> IdentificationResult:
         std = _array([r["std"] for r in rows])
         std_pct = _array([np.inf if r["std_percent"] is None else r["std_percent"] for r in rows])
         cov = _array([v for row in doc["covariance"] for v in row]).reshape(len(rows), len(rows))
+        check_covariance(cov, "covariance")
         ra = _rank_from_dict(doc, base, names)
         joints = list(doc.get("joints", []))
         outputs = list(doc.get("outputs", joints))
@@ -352,7 +354,7 @@ def result_from_dict(doc: dict) -> IdentificationResult:
             uncertainty=doc.get("uncertainty"),
             covariance_white=_matrix(doc.get("covariance_white"), len(rows)),
         )
-    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError) as exc:
         raise DataError(f"a malformed identification result: {type(exc).__name__}: {exc}") from exc
 
 

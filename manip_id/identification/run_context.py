@@ -62,6 +62,13 @@ def run_warnings(settings, source) -> list[str]:
             f"(zero-phase Butterworth, order {settings.order}): the errors and figures "
             "compare the models with the filtered torques, not the raw ones"
         )
+    for valid, train in (
+        source.get("validation_in_training", []) if isinstance(source, dict) else ()
+    ):
+        out.append(
+            f"the validation file {valid} is also --data {train}: its validation error is "
+            "measured on the training data, not on new data"
+        )
     sim = source.get("simulated") if isinstance(source, dict) else None
     if sim and source.get("split") is not None and sim.get("period"):
         trained = float(source["split"]) * float(sim["duration"])  # [s]

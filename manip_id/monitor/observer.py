@@ -178,10 +178,12 @@ def model_from_robot(robot: Robot) -> MonitorModel:
 
 @dataclass(frozen=True)
 class MonitorStep:
-    """One observer step: ``residual`` [N m or N] and ``detected`` per joint, shape (nv,)."""
+    """One observer step: ``residual`` [N m or N] and ``detected`` per joint, shape (nv,);
+    ``skipped``: the sample was not finite and was left out (:meth:`CollisionMonitor.step`)."""
 
     residual: np.ndarray
     detected: np.ndarray
+    skipped: bool = False
 
 
 class CollisionMonitor:
@@ -200,6 +202,12 @@ class CollisionMonitor:
 
     Use :meth:`step` once per sample (the first call only initializes, ``r = 0``) and
     :meth:`reset` between runs; :meth:`run` runs a whole log.
+
+    **Dropouts**: a sample holding NaN or Inf (a sensor dropout) is skipped: the observer's
+    state is left as it was, its ``dt`` is added to the next sample's (the integral spans
+    the gap), the returned :class:`MonitorStep` has ``skipped=True`` and the last residual,
+    and :attr:`dropouts` counts them. One dropout therefore never blinds the monitor. The
+    check costs three ``isfinite`` calls of nv values a step (about a microsecond).
     """
 
     def __init__(
@@ -215,13 +223,13 @@ class CollisionMonitor:
             theta = theta.theta
         self.robot = robot
         self.theta = check_parameters(robot, theta)
+        self.thresholds = _bounds(robot, thresholds)  # before the gains: they may be theirs
         self.gain = positive_vector(gain, "gain", robot.nv, "1/s")
         self.filter_gain = (
             None
             if filter_gain is None
             else positive_vector(filter_gain, "filter_gain", robot.nv, "1/s")
         )
-        self.thresholds = _bounds(robot, thresholds)
         _check_gains(thresholds, self.gain, self.filter_gain)
         self.model = robot.with_parameters(self.theta)
         self.data = self.model.createData()
@@ -237,6 +245,8 @@ class CollisionMonitor:
 
     def reset(self) -> None:
         """Forget the past: the next :meth:`step` starts a new run."""
+        self.dropouts = 0  # samples skipped as not finite since the last reset
+        self._gap = 0.0  # [s] the steps of skipped samples, added to the next one
         self._p: np.ndarray | None = None
         self._u = np.zeros(self.nv)
         self._r = np.zeros(self.nv)  # the first-order residual [N m or N]
@@ -265,13 +275,18 @@ class CollisionMonitor:
         q: joint positions, shape (nq,) [rad or m]
         dq: joint velocities, shape (nv,) [rad/s or m/s]
         tau: measured joint torques, shape (nv,) [N m or N]
-        dt: time since the previous sample [s] (ignored on the first call)
+        dt: time since the previous sample [s], a finite number > 0 (checked on every
+            call; its value is not used on the first)
 
         Returns
         -------
         :class:`MonitorStep`: the residual (the estimated external torque) and
-        ``|r_j| > bound_j`` per joint.
+        ``|r_j| > bound_j`` per joint; a sample with NaN or Inf is skipped (class docstring).
         """
+        if isinstance(dt, bool) or not isinstance(dt, (int, float, np.floating, np.integer)):
+            raise InputError(f"dt must be a number of seconds, got {type(dt).__name__}")
+        if not (np.isfinite(dt) and dt > 0):
+            raise InputError(f"dt must be a finite positive time step [s], got {dt}")
         q = np.asarray(q, dtype=float)
         dq = np.asarray(dq, dtype=float)
         tau = np.asarray(tau, dtype=float)
@@ -280,10 +295,15 @@ class CollisionMonitor:
                 f"step takes one sample: {q.shape=}, {dq.shape=}, {tau.shape=} but "
                 f"robot.nq={self.nq}, robot.nv={self.nv}"
             )
+        if not (np.isfinite(q).all() and np.isfinite(dq).all() and np.isfinite(tau).all()):
+            self.dropouts += 1
+            if self._p is not None:
+                self._gap += float(dt)
+            last = self.residual.copy()
+            return MonitorStep(last, np.abs(last) > self.thresholds, skipped=True)
         p, u = self.momentum_and_input(q, dq, tau)
         if self._p is not None:
-            if not dt > 0:
-                raise InputError(f"dt must be a positive time step [s], got {dt}")
+            dt, self._gap = float(dt) + self._gap, 0.0
             if dt != self._dt:  # decay factors, recomputed when the step changes
                 self._dt = dt
                 self._a = np.exp(-self.gain * dt)
@@ -338,7 +358,9 @@ def _bounds(robot: Robot, thresholds) -> np.ndarray:
     if names is not None:
         if list(names) != list(robot.dof_names):
             raise ModelMismatchError(
-                "the thresholds' joints", f"{list(robot.dof_names)}", f"{list(names)}"
+                f"the thresholds' joints (robot {robot.name} moves other joints)",
+                f"{list(robot.dof_names)}",
+                f"{list(names)}",
             )
         thresholds = thresholds.bound
     arr = as_float_array(thresholds, "thresholds", ndim=(0, 1))

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._checks import as_float_array
 from ..errors import InputError
 from .consistency import NONNEGATIVE_TERMS, ConsistencyReport, check_consistency
 
@@ -127,8 +128,20 @@ def _parameters(m: float, c: np.ndarray, I_c: np.ndarray) -> np.ndarray:
 
 
 def repair_body(pi) -> np.ndarray:
-    """The repaired parameters of one body (see the module docstring), shape (10,)."""
-    pi = np.asarray(pi, dtype=float)
+    """The repaired parameters of one body (see the module docstring), shape (10,).
+
+    ``pi``: ``[m, mcx, mcy, mcz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]`` (kg, kg m, kg m^2), real and
+    finite; anything else raises :class:`~manip_id.errors.InputError` (complex values, a
+    wrong length, NaN or Inf).
+    """
+    pi = as_float_array(pi, "repair_body's body parameters pi", ndim=1)
+    if pi.shape != (10,):
+        raise InputError(
+            f"repair_body takes the 10 parameters of one body [m, mcx, mcy, mcz, Ixx, Ixy, "
+            f"Iyy, Ixz, Iyz, Izz], got {pi.shape=}"
+        )
+    if not np.isfinite(pi).all():
+        raise InputError(f"repair_body's body parameters must be finite, got {pi.tolist()}")
     m = float(pi[0])
     if not np.isfinite(m) or m == 0:
         m_new, c, I_c = MASS_MIN, np.zeros(3), np.zeros((3, 3))

@@ -135,6 +135,19 @@ class FrictionShapes:
     hysteresis_length: tuple[float, ...] | None = None
 
     def __post_init__(self):
+        for name in SHAPE_FIELDS:  # each None or a sequence of real numbers, kept as floats
+            v = getattr(self, name)
+            if v is None:
+                continue
+            if isinstance(v, (str, bytes)) or np.iscomplexobj(v):
+                raise InputError(f"{name} takes one real number per DoF, got {v!r:.80}")
+            try:
+                values = tuple(float(x) for x in np.atleast_1d(np.asarray(v, dtype=float)))
+            except (TypeError, ValueError) as exc:
+                raise InputError(f"{name} takes one real number per DoF, got {v!r:.80}") from exc
+            if np.ndim(v) > 1 or not values:
+                raise InputError(f"{name} takes one real number per DoF, got {v!r:.80}")
+            object.__setattr__(self, name, values)
         for name in ("stribeck_velocity", "sigmoid_slope", "hysteresis_length"):
             v = getattr(self, name)
             if v is not None and not all(np.isfinite(x) and x > 0 for x in v):
@@ -143,6 +156,15 @@ class FrictionShapes:
             v = getattr(self, name)
             if v is not None and not all(np.isfinite(v)):
                 raise InputError(f"{name} must be finite per DoF, got {v}")
+
+    def check_size(self, nv: int, robot: str = "the robot") -> None:
+        """Raise :class:`~manip_id.errors.InputError` unless every set field has ``nv`` values."""
+        for name in SHAPE_FIELDS:
+            v = getattr(self, name)
+            if v is not None and len(v) != nv:
+                raise InputError(
+                    f"FrictionShapes.{name} has {len(v)} value(s) but {robot} has nv={nv} DoF"
+                )
 
     def values(self, name: str, default: float) -> np.ndarray | float:
         """The per-DoF values of field ``name`` (an array), or ``default`` when unset."""

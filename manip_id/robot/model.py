@@ -64,6 +64,7 @@ from .sources import (
     reference_configuration,
     resolve_profile,
 )
+from .urdf_structure import check_no_active_mimic
 
 __all__ = [
     "FRICTION_KINDS",
@@ -135,6 +136,8 @@ class Robot:
                         f"a spring term needs one-DoF joints, but {model.names[i]} is "
                         f"{jm.shortname()}"
                     )
+        if terms.shapes is not None:
+            terms.shapes.check_size(self.nv, f"robot {name!r}")
         self.layout = ParameterLayout(
             self.joint_names, self.dofs, terms.enabled, terms.shapes, terms.mask(self.nv)
         )
@@ -509,6 +512,9 @@ def load_robot(
     if active_joints is None and prof is not None:
         active_joints = prof.active_for(all_joints)
     locked = locked_names(name, all_joints, active_joints)
+    if src.source is not None and str(src.source).endswith(".urdf"):
+        active = [j for j in all_joints if j not in locked]
+        check_no_active_mimic(src.source, name, active, refuse=src.by_path)
     full_model = model
     locked_ids: list[int] = []
     qref = None

@@ -57,13 +57,23 @@ def sidecar_path(path) -> Path:
 _NONNEGATIVE = ("Ia", "fv", "fc", "fvp", "fvn", "fcp", "fcn", "fs", "fsg", "fh")
 
 
+#: The largest magnitude of a joint term's coefficient (armature [kg m^2], friction [N m],
+#: [N m s/rad], spring [N m/rad], ...) a sidecar may hold: beyond it no drive is described
+#: (armature 1e308 would overflow every torque computed with it).
+MAX_TERM = 1e9
+#: The largest magnitude of a standard parameter (``parameters``, ``load_inertias``).
+MAX_PARAMETER = 1e12
+
+
 def read_sidecar(path) -> dict:
     """Read and check a sidecar JSON written by an export.
 
     Every field used is checked before use: ``joints`` an object of per-joint objects of
-    finite numbers (armature and friction >= 0), ``active_joints`` and ``joint_terms``
-    lists of strings, ``locked_joints`` an object of finite positions. A tampered sidecar
-    is refused with one :class:`~manip_id.errors.InputError` line naming the field.
+    finite numbers within +-:data:`MAX_TERM` (armature and friction >= 0), ``active_joints``
+    and ``joint_terms`` lists of strings, ``locked_joints`` an object of finite positions,
+    ``parameters`` a list of ``{name, value}`` with distinct names and finite values, and
+    ``load_inertias`` rows of 10 finite numbers (within +-:data:`MAX_PARAMETER`). A tampered
+    sidecar is refused with one :class:`~manip_id.errors.InputError` line naming the field.
     """
     p = Path(path)
     data = read_json(p, "identified-parameter sidecar", error=InputError)
@@ -77,16 +87,43 @@ def read_sidecar(path) -> dict:
         f.texts(data.get("joint_terms", []), "joint_terms")
         for joint, terms in data["joints"].items():
             for term, value in f.object(terms, f"joints.{joint}").items():
-                low = 0.0 if term in _NONNEGATIVE else None
-                f.number(value, f"joints.{joint}.{term}", minimum=low)
+                low = 0.0 if term in _NONNEGATIVE else -MAX_TERM
+                f.number(value, f"joints.{joint}.{term}", minimum=low, maximum=MAX_TERM)
         locked = data.get("locked_joints")
         if locked is not None:
             for joint, value in f.object(locked, "locked_joints").items():
                 for k, v in enumerate(value if isinstance(value, list) else [value]):
                     f.number(v, f"locked_joints.{joint}[{k}]")
+        _check_parameters(f, data)
     except DataError as exc:
         raise InputError(str(exc)) from exc
     return data
+
+
+def _check_parameters(f: Fields, data: dict) -> None:
+    """``parameters`` and ``load_inertias`` of a sidecar, when present (module docstring)."""
+    seen: set[str] = set()
+    for k, row in enumerate(f.list(data.get("parameters", []), "parameters")):
+        row = f.object(row, f"parameters[{k}]")
+        name = f.text(row.get("name"), f"parameters[{k}].name")
+        if name in seen:
+            raise DataError(f"{f.where}: parameter {name!r} is listed twice")
+        seen.add(name)
+        f.number(
+            row.get("value"),
+            f"parameters[{k}].value ({name})",
+            minimum=-MAX_PARAMETER,
+            maximum=MAX_PARAMETER,
+        )
+    blocks = data.get("load_inertias")
+    if blocks is not None:
+        rows = f.list(blocks, "load_inertias", nonempty=True)
+        f.matrix(rows, "load_inertias", (len(rows), 10))
+        for i, row in enumerate(rows):
+            for j, v in enumerate(row):
+                f.number(
+                    v, f"load_inertias[{i}][{j}]", minimum=-MAX_PARAMETER, maximum=MAX_PARAMETER
+                )
 
 
 def identified_options(spec: str, identified, armature, friction, spring, active_joints):

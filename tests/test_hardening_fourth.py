@@ -1,0 +1,587 @@
+"""The hardening catalogue, fourth round (issue 41): each case through the CLI or the API.
+
+- Publication without a race: a file saved into a ``--force`` folder while the run works
+  survives (named in a warning); payload log names are unique by construction; a killed
+  run's staging folder is named by the next run.
+- Budgets before work: simulate's log count, disk and absurd numbers refused at their
+  option; quoted user values cut to a bounded length.
+- External documents validated at the door, by name (result JSON, drift references,
+  sidecars), with a property test feeding them mutated documents.
+- The API: ``CollisionMonitor`` per-step checks and its dropout policy, ``FrictionShapes``,
+  ``repair_body``.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from manip_id.cli import main
+from manip_id.errors import OutputWarning
+
+ENV = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+
+
+@pytest.fixture
+def work(tmp_path, monkeypatch):
+    """A working folder (the current directory)."""
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+def _run(capsys, *argv) -> tuple[int, str, str]:
+    status = main([str(a) for a in argv])
+    out = capsys.readouterr()
+    return status, out.out, out.err
+
+
+def _error(capsys, *argv) -> str:
+    """The one error line of a refused command (exit 2, no traceback)."""
+    status, _, err = _run(capsys, *argv)
+    lines = [line for line in err.splitlines() if line.startswith("manip-id: error:")]
+    assert status == 2 and len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def _dead_pid() -> int:
+    """The id of a process that has exited (and was reaped)."""
+    proc = subprocess.Popen([sys.executable, "-c", "pass"])
+    proc.wait()
+    return proc.pid
+
+
+# ------------------------------------------------------- publication without a race
+def test_a_file_saved_into_a_force_folder_during_the_build_survives(work):
+    from manip_id._io import OutputSet
+
+    assert main(["rank", "msd", "--report", "rep", "--samples", "30"]) == 0
+    before = sorted(p.name for p in (work / "rep").iterdir())
+
+    def fill(tmp: Path) -> None:
+        (tmp / "new.txt").write_text("report\n")
+        (work / "rep" / "thesis.tex").write_text("years of work\n")  # the user, meanwhile
+        (work / "rep" / "new.txt").write_text("my own new.txt\n")  # same name as ours
+
+    with OutputSet() as out:
+        rep = out.report(work / "rep", force=True)
+        rep.build(fill)
+        with pytest.warns(OutputWarning) as record:
+            out.publish()
+    names = sorted(p.name for p in (work / "rep").iterdir())
+    assert (work / "rep" / "thesis.tex").read_text() == "years of work\n"
+    assert (work / "rep" / "new.txt").read_text() == "report\n"
+    assert (work / "rep" / "new.txt.user-1").read_text() == "my own new.txt\n"
+    assert not set(before) - {".manip-id-report.json"} & set(names) - {"new.txt"}
+    text = " ".join(str(w.message) for w in record)
+    assert "thesis.tex" in text and "new.txt.user-1" in text
+    assert not [p for p in os.listdir(work) if ".old-" in p or ".tmp-" in p]
+
+
+@pytest.mark.slow
+def test_simulate_force_keeps_a_file_the_user_saves_mid_run(work):
+    args = ["simulate", "msd", "--out", "sim", "--files", "3", "--duration", "400"]
+    assert main(args) == 0
+    cmd = [sys.executable, "-m", "manip_id", *args, "--force"]
+    proc = subprocess.Popen(cmd, cwd=work, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 120
+        while not list(work.glob(".sim.tmp-*")) and proc.poll() is None:
+            assert time.monotonic() < deadline, "the staging folder never appeared"
+            time.sleep(0.02)
+        (work / "sim" / "notes.txt").write_text("mine\n")
+        _, err = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 0, err
+    assert (work / "sim" / "notes.txt").read_text() == "mine\n"
+    assert b"notes.txt" in err and b"warning" in err
+    assert (work / "sim" / "run_2.npz").is_file()
+
+
+def test_payload_masses_equal_to_six_digits_get_two_files(work, capsys):
+    status, out, err = _run(
+        capsys, "simulate", "msd", "--out", "sim", "--files", "1", "--duration", "1",
+        "--payload", "1,1.0000001",
+    )  # fmt: skip
+    assert status == 0, err
+    import json
+
+    truth = json.loads((work / "sim" / "truth.json").read_text())
+    names = [f["name"] for f in truth["files"]]
+    assert len(set(names)) == 3 and all((work / "sim" / n).is_file() for n in names)
+    masses = {f["name"]: f["payload_mass"] for f in truth["files"]}
+    from manip_id import load_dataset
+
+    # the two loaded logs differ (different masses, different seeds): none overwrote another
+    a, b = (load_dataset(work / "sim" / n) for n in names[1:])
+    assert masses[names[1]] != masses[names[2]] and not np.allclose(a.tau, b.tau)
+
+
+def test_a_mass_given_twice_is_refused_before_work(work, capsys):
+    line = _error(capsys, "simulate", "msd", "--out", "sim", "--payload", "2,2.0")
+    assert "twice" in line and not (work / "sim").exists()
+
+
+def test_a_killed_runs_staging_folder_is_named_by_the_next_run(work, capsys):
+    pid = _dead_pid()
+    stale = work / f".sim.tmp-{pid}-abcd"
+    stale.mkdir()
+    (stale / "run_0.npz").write_bytes(b"half")
+    status, _, err = _run(capsys, "simulate", "msd", "--out", "sim", "--files", "1",
+                          "--duration", "1")  # fmt: skip
+    assert status == 0
+    assert str(stale.name) in err and f"process {pid}" in err
+    assert (stale / "run_0.npz").read_bytes() == b"half"  # named, never deleted
+
+
+def test_a_live_runs_staging_folder_is_not_named(work, capsys):
+    live = work / f".sim.tmp-{os.getppid()}-abcd"
+    live.mkdir()
+    status, _, err = _run(capsys, "simulate", "msd", "--out", "sim", "--files", "1",
+                          "--duration", "1")  # fmt: skip
+    assert status == 0 and live.name not in err
+
+
+# ------------------------------------------------------------- budgets before work
+@pytest.mark.parametrize(
+    ("argv", "match"),
+    [
+        (["--files", "1000000000"], "at most 10000"),
+        (["--files", "6000", "--payload", "1"], "at most 10000"),
+        (["--noise", "1e300"], "--noise"),
+        (["--payload", "1e9"], "--payload"),
+        (["--drive-gains", "1e-300"], "--drive-gains"),
+        (["--drive-gains", "1,1e300"], "--drive-gains"),
+    ],
+)
+def test_simulate_refuses_absurd_requests_at_their_option(work, capsys, argv, match):
+    t0 = time.process_time()
+    line = _error(capsys, "simulate", "msd", "--out", "sim", *argv)
+    assert match in line and not (work / "sim").exists()
+    assert time.process_time() - t0 < 60  # refused up front (a generous guard, not a timing)
+
+
+def test_simulate_refuses_a_folder_larger_than_the_free_disk(work, capsys, monkeypatch):
+    import shutil
+    from collections import namedtuple
+
+    usage = namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage(10**9, 10**9 - 10**6, 10**6))
+    line = _error(capsys, "simulate", "msd", "--out", "sim", "--files", "2")
+    assert "GB are free" in line and not (work / "sim").exists()
+
+
+def test_a_100mb_header_cell_gives_a_short_error(work, capsys):
+    (work / "big.csv").write_text("x" * 10_000_000 + ",q_a\n0,1\n")
+    line = _error(capsys, "identify", "msd", "--data", "big.csv")
+    assert len(line) < 2000 and "10000000 characters" in line
+
+
+def test_a_byte_order_mark_does_not_hide_the_first_column(work, capsys):
+    from manip_id import load_dataset
+
+    rows = "".join(f"{k / 100},{k / 1000},0.1,{k / 50}\n" for k in range(20))
+    (work / "bom.csv").write_text("\ufefft,q_cart,dq_cart,tau_cart\n" + rows, encoding="utf-8")
+    (work / "plain.csv").write_text("t,q_cart,dq_cart,tau_cart\n" + rows)
+    a, b = load_dataset(work / "bom.csv"), load_dataset(work / "plain.csv")
+    np.testing.assert_array_equal(a.t, b.t)
+    np.testing.assert_array_equal(a.tau, b.tau)
+
+
+def test_a_long_user_value_in_a_cli_message_is_cut(work, capsys):
+    for value in ("-1," + "1" * 100_000, "x" * 100_000, "1," * 50_000):
+        line = _error(capsys, "simulate", "msd", "--out", "sim", f"--payload={value}")
+        assert len(line) < 1000, line[:200]
+
+
+# ------------------------------------------------------------ robots read from the text
+def _chain_urdf(n: int, mimic: bool = False) -> str:
+    """A serial chain of ``n`` revolute joints (joint ``j1`` mimics ``j0`` with ``mimic``)."""
+    links = "".join(
+        f'<link name="l{k}"><inertial><mass value="1"/><origin xyz="0 0 0.1"/>'
+        f'<inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>'
+        for k in range(n + 1)
+    )
+    joints = "".join(
+        f'<joint name="j{k}" type="revolute"><parent link="l{k}"/><child link="l{k + 1}"/>'
+        f'<origin xyz="0 0 0.2"/><axis xyz="0 1 0"/>'
+        f'<limit lower="-3" upper="3" velocity="2" effort="100"/>'
+        + ('<mimic joint="j0" multiplier="1"/>' if mimic and k == 1 else "")
+        + "</joint>"
+        for k in range(n)
+    )
+    return f'<?xml version="1.0"?><robot name="chain">{links}{joints}</robot>'
+
+
+def test_a_1000_joint_urdf_is_refused_from_its_text(work, monkeypatch):
+    import pinocchio as pin
+
+    from manip_id import load_robot
+    from manip_id.errors import RobotError
+
+    (work / "big.urdf").write_text(_chain_urdf(1000))
+    built = []
+    monkeypatch.setattr(pin, "buildModelFromUrdf", lambda *a, **k: built.append(a))
+    with pytest.raises(RobotError, match="1000 movable joints.*limit of 300"):
+        load_robot(work / "big.urdf")
+    assert built == []  # refused before Pinocchio saw it
+
+
+def test_a_user_urdf_with_a_moving_mimic_joint_is_refused(work, capsys):
+    from manip_id import load_robot
+
+    (work / "m.urdf").write_text(_chain_urdf(3, mimic=True))
+    line = _error(capsys, "rank", "m.urdf", "--samples", "30")
+    assert "'j1' mimics 'j0'" in line and "lock both" in line
+    # locking both ends is the documented way out: the robot then loads with j2 alone
+    robot = load_robot(work / "m.urdf", active_joints=["j2"])
+    assert robot.nv == 1 and list(robot.joint_names) == ["j2"]
+
+
+def test_an_example_robot_with_mimic_grippers_is_loaded_with_a_warning():
+    from manip_id import load_robot
+    from manip_id.errors import RobotWarning
+
+    with pytest.warns(RobotWarning, match="mimics"):
+        robot = load_robot("baxter")
+    assert robot.nv == 19  # the documented 19 independent joints
+
+
+# --------------------------------------------------------------------------- the API
+def _monitor():
+    from manip_id.monitor import CollisionMonitor
+
+    robot = _robot("double_pendulum")
+    return robot, CollisionMonitor(robot, robot.nominal_parameters, thresholds=0.5)
+
+
+def _robot(name):
+    from conftest import get_robot
+
+    return get_robot(name)
+
+
+def _external_torque_run(monitor, robot, dropout: int | None):
+    """Residuals of the monitor on a held pose with a 2 N m push on joint 0 from sample 200
+    (the torque needed to hold plus the push: tau_ext = -push is what the observer sees)."""
+    import pinocchio as pin
+
+    q = np.array([0.3, -0.2])
+    g = pin.computeGeneralizedGravity(robot.model, robot.model.createData(), q)
+    monitor.reset()
+    steps = []
+    for k in range(400):
+        tau = g - (np.array([2.0, 0.0]) if k >= 200 else 0.0)
+        qk = np.full(2, np.nan) if k == dropout else q
+        steps.append(monitor.step(qk, np.zeros(2), tau, 0.005))
+    return steps
+
+
+def test_a_dropout_is_skipped_and_does_not_blind_the_monitor():
+    robot, monitor = _monitor()
+    clean = _external_torque_run(monitor, robot, dropout=None)
+    holed = _external_torque_run(monitor, robot, dropout=100)
+    assert holed[100].skipped and monitor.dropouts == 1
+    assert not any(s.skipped for s in clean)
+    # the push is seen after the dropout, as without it: |r_0| -> 2 N m (-tau_ext)
+    assert holed[-1].detected[0] and clean[-1].detected[0]
+    np.testing.assert_allclose(holed[-1].residual, clean[-1].residual, atol=1e-9)
+    np.testing.assert_allclose(clean[-1].residual, [2.0, 0.0], atol=1e-3)
+
+
+@pytest.mark.parametrize("dt", [-0.01, 0.0, float("nan"), float("inf"), "0.01", True])
+def test_the_monitor_refuses_a_bad_time_step_on_every_call(dt):
+    from manip_id.errors import InputError
+
+    _, monitor = _monitor()
+    with pytest.raises(InputError, match="dt"):
+        monitor.step(np.zeros(2), np.zeros(2), np.zeros(2), dt)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"stribeck_velocity": "abc"}, "one real number per DoF"),
+        ({"sigmoid_slope": [[1.0, 2.0]]}, "one real number per DoF"),
+        ({"sigmoid_shift": [1j, 2]}, "one real number per DoF"),
+        ({"stribeck_velocity": [0.1, -1]}, "positive"),
+    ],
+)
+def test_friction_shapes_refuse_bad_values_with_our_error(kwargs, match):
+    from manip_id.errors import InputError
+    from manip_id.robot.friction import FrictionShapes
+
+    with pytest.raises(InputError, match=match):
+        FrictionShapes(**kwargs)
+
+
+def test_friction_shapes_of_another_size_are_refused_by_the_robot():
+    from manip_id import load_robot
+    from manip_id.errors import InputError
+    from manip_id.robot.friction import FrictionShapes
+    from manip_id.robot.model import JointTerms
+
+    terms = JointTerms(viscous=True, coulomb=True, stribeck=True,
+                       shapes=FrictionShapes(stribeck_velocity=(0.1, 0.2, 0.3)))  # fmt: skip
+    with pytest.raises(InputError, match="3 value.*nv=2"):
+        load_robot("double_pendulum").__class__(
+            "double_pendulum", load_robot("double_pendulum").model, terms
+        )
+
+
+@pytest.mark.parametrize(
+    ("pi", "match"),
+    [
+        ([1.0 + 1j] + [0.0] * 9, "complex"),
+        ([1.0, 0.0, 0.0], "10 parameters"),
+        ([1.0, 0, 0, 0, np.nan, 0, 0.1, 0, 0, 0.1], "finite"),
+        ("abc", "numeric"),
+    ],
+)
+def test_repair_body_refuses_bad_input_with_our_error(pi, match):
+    from manip_id.errors import InputError
+    from manip_id.physics.repair import repair_body
+
+    with pytest.raises(InputError, match=match):
+        repair_body(pi)
+
+
+# ------------------------------------------- external documents: a property test of readers
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+BAD_VALUES = ["abc", None, True, [], {}, float("nan"), float("inf"), -1.0, 1e308, [1.0, "x"]]
+PROPERTY = settings(max_examples=60, deadline=None,
+                    suppress_health_check=[HealthCheck.function_scoped_fixture])  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def reference_doc(tmp_path_factory) -> dict:
+    import json
+
+    folder = tmp_path_factory.mktemp("ref")
+    path = folder / "ref.json"
+    argv = ["identify", "msd", "--simulate", "--duration", "4", "--json", str(path)]
+    assert main(argv) == 0
+    return json.loads(path.read_text())
+
+
+def _read_result(doc: dict):
+    """``load_result`` of ``doc`` written to a file: the result, or the DataError."""
+    import json
+    import tempfile
+
+    from manip_id.errors import DataError
+    from manip_id.identification import load_result
+
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "r.json"
+        path.write_text(json.dumps(doc))
+        try:
+            return load_result(path)
+        except DataError as exc:
+            assert "\n" not in str(exc) and len(str(exc)) < 1000
+            return exc
+
+
+def _by_name(res) -> dict:
+    return dict(zip(res.names, res.estimate.tolist(), strict=True))
+
+
+@PROPERTY
+@given(st.permutations(range(3)))
+def test_a_reordered_reference_reads_as_the_same_result(reference_doc, order):
+    import copy
+
+    doc = copy.deepcopy(reference_doc)
+    rows = doc["base_parameters"]
+    assert len(rows) == 3
+    doc["base_parameters"] = [rows[i] for i in order]
+    res, ref = _read_result(doc), _read_result(reference_doc)
+    assert _by_name(res) == _by_name(ref) and list(res.names) == list(ref.names)
+    np.testing.assert_array_equal(res.covariance, ref.covariance)
+
+
+def _paths(doc, prefix=()):
+    """Every (path, value) of a JSON document's leaves and objects."""
+    if isinstance(doc, dict):
+        for k, v in doc.items():
+            yield (*prefix, k), v
+            yield from _paths(v, (*prefix, k))
+    elif isinstance(doc, list):
+        for i, v in enumerate(doc[:4]):
+            yield (*prefix, i), v
+            yield from _paths(v, (*prefix, i))
+
+
+@PROPERTY
+@given(st.data())
+def test_a_mutated_result_reads_the_same_or_gives_one_clear_error(reference_doc, data):
+    import copy
+
+    from manip_id.errors import DataError
+
+    doc = copy.deepcopy(reference_doc)
+    paths = [p for p, _ in _paths(doc)]
+    path = data.draw(st.sampled_from(paths))
+    parent = doc
+    for key in path[:-1]:
+        parent = parent[key]
+    if data.draw(st.booleans()) and isinstance(parent, dict):
+        del parent[path[-1]]
+    else:
+        parent[path[-1]] = data.draw(st.sampled_from(BAD_VALUES))
+    res = _read_result(doc)
+    if not isinstance(res, DataError):  # a field not read, or one whose change is harmless
+        ref = _read_result(reference_doc)
+        assert set(res.names) == set(ref.names)
+
+
+@PROPERTY
+@given(st.integers(0, 2), st.floats(-1e3, -1e-12))
+def test_a_negative_variance_is_refused(reference_doc, k, value):
+    import copy
+
+    from manip_id.errors import DataError
+
+    doc = copy.deepcopy(reference_doc)
+    doc["covariance"][k][k] = value
+    res = _read_result(doc)
+    assert isinstance(res, DataError) and "negative variance" in str(res)
+
+
+@pytest.fixture(scope="module")
+def sidecar_doc() -> dict:
+    from manip_id.export.sidecar import sidecar_document
+
+    robot = _robot("msd")
+    return sidecar_document(robot, robot.nominal_parameters, target="urdf", source="msd")
+
+
+@PROPERTY
+@given(st.data())
+def test_a_mutated_sidecar_reads_the_same_or_gives_one_clear_error(sidecar_doc, data):
+    import copy
+    import json
+    import tempfile
+
+    from manip_id.errors import InputError
+    from manip_id.robot.sidecar import MAX_TERM, read_sidecar
+
+    doc = copy.deepcopy(sidecar_doc)
+    paths = [p for p, _ in _paths(doc) if p[0] in ("joints", "parameters", "active_joints")]
+    path = data.draw(st.sampled_from(paths))
+    parent = doc
+    for key in path[:-1]:
+        parent = parent[key]
+    parent[path[-1]] = data.draw(st.sampled_from(BAD_VALUES))
+    with tempfile.TemporaryDirectory() as d:
+        p = Path(d) / "s.json"
+        p.write_text(json.dumps(doc))
+        try:
+            out = read_sidecar(p)
+        except InputError as exc:
+            assert "\n" not in str(exc) and len(str(exc)) < 1000
+            return
+    # accepted: then every joint term is a finite number within the bound
+    for terms in out["joints"].values():
+        for v in terms.values():
+            assert isinstance(v, (int, float)) and np.isfinite(v) and abs(v) <= MAX_TERM
+    for row in out.get("parameters", []):
+        assert np.isfinite(row["value"]) and abs(row["value"]) <= 1e12
+
+
+# ------------------------------------------------------------------------ repair outputs
+def test_repair_json_onto_the_sidecar_is_refused(work, capsys):
+    line = _error(capsys, "repair", "msd", "out.urdf", "--json", "out.identified.json")
+    assert "sidecar" in line and not list(work.iterdir())
+
+
+def test_repair_into_a_missing_folder_is_refused(work, capsys):
+    line = _error(capsys, "repair", "msd", "missing/out.urdf")
+    assert "does not exist" in line and not (work / "missing").exists()
+
+
+def test_validate_equal_to_data_is_said(work, capsys):
+    assert main(["simulate", "msd", "--out", "sim", "--files", "1", "--duration", "4"]) == 0
+    capsys.readouterr()
+    status, _, err = _run(capsys, "identify", "msd", "--data", "sim/run_0.npz",
+                          "--validate", "./sim/run_0.npz")  # fmt: skip
+    assert status == 0 and "is also --data" in err and "training data" in err
+
+
+def test_thresholds_of_another_robot_are_refused_by_joint_names_before_their_gains():
+    from manip_id.errors import ModelMismatchError
+    from manip_id.monitor import CollisionMonitor, Thresholds
+
+    one = np.ones(1)
+    th = Thresholds(dof_names=["cart"], bound=one, noise_bound=one, model_bound=0 * one,
+                    gain=25 * one, filter_gain=None, false_alarm=1e-3,
+                    methods=["empirical quantile"], rate=0.0, rate_per_joint=0 * one,
+                    n_samples=100)  # fmt: skip
+    robot = _robot("double_pendulum")
+    with pytest.raises(ModelMismatchError, match="double_pendulum moves other joints.*cart"):
+        CollisionMonitor(robot, robot.nominal_parameters, th, gain=th.gain)
+
+
+# ------------------------------------------------------------------------------- MJCF out
+def test_an_mjcf_with_a_world_link_and_a_missing_mesh_loads_in_mujoco(work):
+    mujoco = pytest.importorskip("mujoco")
+    from manip_id import load_robot
+    from manip_id.errors import ExportWarning
+    from manip_id.export import export_mjcf
+
+    text = _chain_urdf(2).replace('"l2"', '"world"')  # the last link is called world
+    missing = work / "nowhere" / "arm.stl"
+    text = text.replace(
+        '<link name="l1">',
+        f'<link name="l1"><visual><geometry><mesh filename="{missing}"/></geometry></visual>',
+    )
+    (work / "w.urdf").write_text(text)
+    robot = load_robot(work / "w.urdf")
+    with pytest.warns(ExportWarning, match="'world'.*'world_1'"):
+        out = export_mjcf(robot, robot.nominal_parameters, work / "w.xml")
+    model = mujoco.MjModel.from_xml_path(str(work / "w.xml"))  # loads: no missing file
+    assert model.nbody == 3 and str(missing) in out.skipped
+
+
+def test_consistent_with_the_fleet_path_is_refused_as_documented(work, capsys):
+    assert main(["simulate", "msd", "--out", "sim", "--files", "1", "--duration", "4"]) == 0
+    capsys.readouterr()
+    line = _error(capsys, "identify", "msd", "--data", "sim/run_0.npz", "--per-file",
+                  "--consistent")  # fmt: skip
+    assert "--scheduler or --per-file" in line
+    docs = Path(__file__).resolve().parents[1] / "docs" / "fleet.md"
+    assert "`--consistent` does not\ncombine with `--scheduler` or `--per-file`" in docs.read_text()
+
+
+# ---------------------------------------------------- absurd numbers named at their option
+def test_a_torque_scale_of_1e308_is_refused_at_the_option(work, capsys):
+    assert main(["simulate", "msd", "--out", "sim", "--files", "1", "--duration", "4"]) == 0
+    capsys.readouterr()
+    line = _error(capsys, "identify", "msd", "--data", "sim/run_0.npz", "--torque-scale", "1e308")
+    assert "--torque-scale" in line and "1e+308" in line
+
+
+def test_a_urdf_mass_of_1e300_is_refused_naming_the_link(work, capsys):
+    text = _chain_urdf(2).replace('<mass value="1"/>', '<mass value="1e300"/>', 1)
+    (work / "heavy.urdf").write_text(text)
+    line = _error(capsys, "simulate", "heavy.urdf", "--out", "sim", "--duration", "1")
+    assert "link 'l0'" in line and "mass" in line and not (work / "sim").exists()
+
+
+def test_a_killed_runs_staged_file_is_named_by_the_next_run(work, capsys):
+    pid = _dead_pid()
+    stale = work / f".o.json.tmp-{pid}-x1y2.json"
+    stale.write_text("{")
+    status, _, err = _run(capsys, "rank", "msd", "--samples", "30", "--json", "o.json")
+    assert status == 0 and stale.name in err and stale.exists()
+    assert not [p for p in os.listdir(work) if ".tmp-" in p and str(os.getpid()) in p]
