@@ -259,6 +259,9 @@ class RegressorEvaluator:
         ``vel`` is the velocity the friction terms see and ``acc`` the acceleration
         of the armature (``dq, ddq`` for Y(q, dq, ddq); ``w, v`` for Slotine-Li).
         """
+        motors = self.layout.motors
+        if motors is not None:  # the motor terms, mapped to the joints by R^T
+            Y[..., self.layout.motor_start :] = motors.columns(vel, acc)
         if not self.terms:
             return
         if Y.ndim == 2:  # one sample: a few flat writes into the diagonal entries
@@ -327,17 +330,21 @@ class RegressorEvaluator:
         """
         n, nv, nr = q.shape[0], self.nv, self.n_rigid
         columns = np.asarray(columns, dtype=np.intp)
-        joint_cols = columns[columns >= nr] - nr
+        ms = self.layout.motor_start
+        motor_cols = columns[columns >= ms] - ms
+        joint_cols = columns[(columns >= nr) & (columns < ms)] - nr
         owners = [self.layout.owner(nr + int(c)) for c in joint_cols]
         jc_dof = [o.index for o in owners]
         jc_term = [self.terms.index(o.parameter) for o in owners]
         # in the wide buffer, joint-term column i of ``columns`` sits at nr + i
         wide_index = np.where(columns < nr, columns, 0)
-        wide_index[columns >= nr] = nr + np.arange(joint_cols.size)
+        n_extra = joint_cols.size + motor_cols.size  # joint terms, then motor terms
+        wide_index[columns >= nr] = nr + np.arange(n_extra)
         selections = [wide_index[np.asarray(sj, dtype=np.intp)] for sj in supports]
         size = min(chunk, max(n, 1))
-        wide = np.zeros((size, nv, nr + joint_cols.size))
-        flat = wide.reshape(size * nv, nr + joint_cols.size)
+        wide = np.zeros((size, nv, nr + n_extra))
+        flat = wide.reshape(size * nv, nr + n_extra)
+        motors = self.layout.motors
         outs = [np.empty((size, sel.size)) for sel in selections]
         for start in self.sequential(range(0, n, chunk)):  # one path (hysteresis)
             stop = min(start + chunk, n)
@@ -353,6 +360,9 @@ class RegressorEvaluator:
                 vals = self.joint_values(qs, dqs, ddqs, None if temp is None else temp[s])
                 for i, (j, t) in enumerate(zip(jc_dof, jc_term, strict=True)):
                     wide[:size_k, j, nr + i] = vals[:, j, t]
+            if motor_cols.size and motors is not None:
+                first = nr + joint_cols.size
+                wide[:size_k, :, first:] = motors.columns(dqs, ddqs)[:, :, motor_cols]
             blocks = []
             for j in range(nv):
                 out = outs[j][:size_k]
@@ -559,7 +569,10 @@ def joint_torques(
     ``Ia ddq + fv dq + fc sign(dq) + fo + k q + ...`` for the enabled terms with the
     values in ``theta`` (shape (p,)). With ``ddq=None`` or ``armature=False`` the
     armature term is left out (for inverse and forward dynamics by Pinocchio, where
-    armature belongs in the mass matrix: see :meth:`Robot.with_parameters`); the
+    armature belongs in the mass matrix: see :meth:`Robot.with_parameters`). The motor
+    terms of a transmission (:mod:`manip_id.transmission`) are added through ``R^T``; their
+    rotor inertia ``R^T diag(Ia) R ddq`` (not a Pinocchio armature when ``R`` couples
+    joints) is left out only with ``ddq=None``. The
     ``load`` law needs ``ddq``, the ``temperature`` law ``temp`` (module docstring).
     """
     theta = as_float_array(theta, "theta", ndim=1)
@@ -571,11 +584,18 @@ def joint_torques(
     acc = np.zeros_like(np.asarray(dq, dtype=float)) if ddq is None else ddq
     _, (q, dq, acc) = check_states(robot, q=q, dq=dq, ddq=acc)
     temp = check_temperature(robot, temp, dq)
+    motors = robot.layout.motors
+    out = np.zeros_like(dq)
+    if motors is not None:  # motor terms through R^T (rotor inertia: with the armature)
+        coef_m = robot.layout.motor_block(theta).copy()
+        if ddq is None and "Ia" in motors.term_names:
+            coef_m.reshape(motors.n, -1)[:, 0] = 0.0  # Ia is the first motor term
+        out += motors.torques(coef_m, dq, acc)
     if not ev.terms:
-        return np.zeros_like(dq)
+        return out
     vals = ev.joint_values(q, dq, acc, temp)  # (..., nv, nt)
     coef = robot.layout.joint_block(theta)
     if (ddq is None or not armature) and "Ia" in ev.terms:
         coef = coef.copy()
         coef[:, ev.terms.index("Ia")] = 0.0
-    return np.einsum("...jt,jt->...j", vals, coef)
+    return out + np.einsum("...jt,jt->...j", vals, coef)

@@ -63,6 +63,7 @@ from .robot_sources import (
 )
 from .sidecar import apply_identified, identified_joint_model, identified_options
 from .sidecar import locked_configuration as sidecar_locked
+from .transmission import Transmission, load_transmission
 
 __all__ = [
     "FRICTION_KINDS",
@@ -98,6 +99,7 @@ class Robot:
         origin: RobotSource | None = None,
         reduction: Reduction | None = None,
         profile: RobotProfile | None = None,
+        transmission: Transmission | None = None,
     ):
         kinds = [model.joints[i].shortname() for i in range(1, model.njoints)]
         floating = [k for k in kinds if k in FLOATING_JOINTS]
@@ -133,8 +135,17 @@ class Robot:
                         f"a spring term needs one-DoF joints, but {model.names[i]} is "
                         f"{jm.shortname()}"
                     )
+        if transmission is not None:
+            transmission.check_size(model.nv, f"robot {name!r}")
+        #: the drive train (:mod:`manip_id.transmission`): motor-side logs, motor terms
+        self.transmission = transmission
         self.layout = ParameterLayout(
-            self.joint_names, self.dofs, terms.enabled, terms.shapes, terms.mask(self.nv)
+            self.joint_names,
+            self.dofs,
+            terms.enabled,
+            terms.shapes,
+            terms.mask(self.nv),
+            motors=transmission,
         )
 
     # ----------------------------------------------------------------- sizes
@@ -235,7 +246,12 @@ class Robot:
         for t, v in self.settings.get("joint_term_values", {}).items():
             per_term[t] = np.asarray(v, dtype=float)
         joint = [[per_term.get(t, zero)[dof] for t in self.terms.enabled] for dof in range(self.nv)]
-        return np.concatenate([np.concatenate(rigid), np.asarray(joint, dtype=float).ravel()])
+        motor = np.zeros(self.layout.n_motor)  # no nominal value, unless identified
+        known = self.settings.get("motor_term_values")
+        if known is not None and len(known) == motor.size:
+            motor = np.asarray(known, dtype=float)
+        parts = [np.concatenate(rigid), np.asarray(joint, dtype=float).ravel(), motor]
+        return np.concatenate(parts)
 
     def with_terms(self, terms: JointTerms) -> Robot:
         """The same robot with other joint terms (a new :class:`Robot`; the model is shared)."""
@@ -248,8 +264,24 @@ class Robot:
             origin=self._origin,
             reduction=self._reduction,
             profile=self.profile,
+            transmission=self.transmission,
         )
         out.settings = dict(self.settings)  # an identified robot's offsets, load inertias
+        return out
+
+    def with_transmission(self, transmission) -> Robot:
+        """The same robot with another drive train (a :class:`~manip_id.transmission.
+        Transmission`, a table or a ``.toml`` path; None: none); the model is shared."""
+        out = Robot(
+            self.name,
+            self.model,
+            self.terms,
+            origin=self._origin,
+            reduction=self._reduction,
+            profile=self.profile,
+            transmission=load_transmission(transmission),
+        )
+        out.settings = dict(self.settings)
         return out
 
     def parameter_index(self, name: str) -> int:
@@ -443,6 +475,7 @@ def load_robot(
     package_dirs: Sequence[str | Path] = (),
     identified: bool | str | Path | None = None,
     profile: str | Path | RobotProfile | bool | None = None,
+    transmission: Transmission | Mapping | str | Path | None = None,
 ) -> Robot:
     """Load a fixed-base robot.
 
@@ -479,6 +512,10 @@ def load_robot(
         Default: ``robots/NAME.toml`` for a robot loaded by name when it exists; a URDF
         loaded by path takes none (its file name decides nothing). Explicit arguments
         override the profile.
+    transmission
+        the drive train (:mod:`manip_id.transmission`): a
+        :class:`~manip_id.transmission.Transmission`, a table or a ``.toml`` path. Default:
+        the sidecar's (``identified``), else the profile's ``[transmission]``, else none.
     """
     selection = (
         active_joints
@@ -521,7 +558,19 @@ def load_robot(
         origin=src,
         reduction=Reduction(full_model, tuple(locked_ids), qref) if locked_ids else None,
         profile=prof,
+        transmission=_transmission_of(transmission, sidecar, prof),
     )
     if sidecar is not None:
         apply_identified(robot, sidecar)
     return robot
+
+
+def _transmission_of(spec, sidecar, profile) -> Transmission | None:
+    """The explicit transmission, else the sidecar's, else the profile's, else None."""
+    if spec is not None:
+        return load_transmission(spec)
+    if sidecar is not None and sidecar.get("transmission"):
+        return Transmission.from_dict(sidecar["transmission"], source="sidecar")
+    if profile is not None and profile.transmission is not None:
+        return Transmission.from_dict(profile.transmission, source=profile.source or profile.name)
+    return None
