@@ -360,6 +360,5 @@ def load_transmission(spec) -> Transmission | None:
     if isinstance(spec, str | Path):
         return Transmission.from_toml(spec)
     raise InputError(
-        f"a transmission must be a Transmission, a table or a .toml path, got "
-        f"{type(spec).__name__}"
+        f"a transmission must be a Transmission, a table or a .toml path, got {type(spec).__name__}"
     )

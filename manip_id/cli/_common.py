@@ -23,6 +23,7 @@ from ..datasets import parse_file_spec
 from ..errors import InputError
 from ..profiles import find_profile, load_profile
 from ..signals import DEFAULT_CUTOFF, preprocess
+from ..transmission import Transmission, load_transmission
 
 
 def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
@@ -362,6 +363,22 @@ def add_stream_arguments(parser: argparse.ArgumentParser, trim: bool = True) -> 
         default=None,
         help="unit of the files' time stamps [default s]",
     )
+    g.add_argument(
+        "--rate",
+        type=float,
+        metavar="HZ",
+        default=None,
+        help="sampling rate of files without a time column (t_k = k / HZ) [default: the "
+        "files' own time column]",
+    )
+    g.add_argument(
+        "--transmission",
+        metavar="FILE.toml",
+        default=None,
+        help="the drive train: matrix R (theta = R (q - offset)), offset, signals = "
+        '"motor" (the logs are motor-side, converted to the joints) or "joint", '
+        "motor_terms [default: the robot profile's [transmission], else none]",
+    )
     if trim:
         g.add_argument(
             "--trim-standstill",
@@ -378,7 +395,31 @@ def spec_options(args: argparse.Namespace) -> dict:
     return {
         "time_unit": getattr(args, "time_unit", None),
         "delay": None if values is None else tuple(values),
+        "rate": getattr(args, "rate", None),
+        "transmission": transmission_option(args),
     }
+
+
+def transmission_option(args: argparse.Namespace):
+    """The ``--transmission`` file read once (kept on ``args``), or None."""
+    value = getattr(args, "transmission", None)
+    if value is None or isinstance(value, Transmission):
+        return value
+    args.transmission = load_transmission(value)
+    return args.transmission
+
+
+def cutoff_value(text: str) -> float | str:
+    """``--cutoff``: a frequency [Hz] or ``auto`` (from each file's velocity spectrum)."""
+    if str(text).strip().lower() == "auto":
+        return "auto"
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a frequency [Hz] or 'auto', got {text!r}"
+        ) from None
+    return value
 
 
 def file_specs(values, args: argparse.Namespace, colmap) -> list:

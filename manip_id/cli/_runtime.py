@@ -27,6 +27,7 @@ from ._common import (
     parse_floats,
     print_warnings,
     profile_option,
+    transmission_option,
     warn,
 )
 
@@ -44,6 +45,7 @@ def robot_from_args(args: argparse.Namespace) -> Robot:
             active_joints=joints,
             package_dirs=args.package_dir,
             profile=profile_option(args),
+            transmission=transmission_option(args),
         )
 
 

@@ -26,6 +26,7 @@ from ._common import (
     add_scheduler_argument,
     add_stream_arguments,
     command,
+    cutoff_value,
 )
 
 METHODS = ("ols", "wls", "rls", "gradient")
@@ -141,9 +142,10 @@ def register(sub) -> None:
     )
     sig.add_argument(
         "--cutoff",
-        type=float,
+        type=cutoff_value,
         default=None,
-        help=f"low-pass cut-off [Hz] [default {DEFAULT_CUTOFF:g}]",
+        help=f"low-pass cut-off [Hz], or auto: 3 x the frequency below which 99 %% of each "
+        f"file's velocity power lies (printed with its reason) [default {DEFAULT_CUTOFF:g}]",
     )
     sig.add_argument(
         "--order",

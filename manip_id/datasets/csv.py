@@ -427,7 +427,9 @@ def stamped(blocks: Iterator[np.ndarray], rate: float) -> Iterator[np.ndarray]:
         yield block
 
 
-def derive_velocity(blocks: Iterator[np.ndarray], layout: Layout, path: Path) -> Iterator[np.ndarray]:
+def derive_velocity(
+    blocks: Iterator[np.ndarray], layout: Layout, path: Path
+) -> Iterator[np.ndarray]:
     """Fill the dq columns with ``numpy.gradient(q, t, edge_order=2)`` across blocks.
 
     Each block is differentiated with the last row of the previous block and

@@ -208,9 +208,7 @@ class NpzSource:
 
     format = "npz"
 
-    def __init__(
-        self, path: Path, fortran_budget: int = 256 * 2**20, rate: float | None = None
-    ):
+    def __init__(self, path: Path, fortran_budget: int = 256 * 2**20, rate: float | None = None):
         self.path = Path(path)
         self.members, self.layout = inspect_npz(self.path)
         self.n_rows = self.members["q"].shape[0]
