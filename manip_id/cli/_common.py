@@ -23,6 +23,7 @@ from ..datasets import parse_file_spec
 from ..errors import InputError
 from ..profiles import find_profile, load_profile
 from ..signals import DEFAULT_CUTOFF, preprocess
+from ..signals.bandwidth import choose_cutoff
 from ..transmission import Transmission, load_transmission
 
 
@@ -347,8 +348,11 @@ def add_file_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def add_stream_arguments(parser: argparse.ArgumentParser, trim: bool = True) -> None:
-    """``--delay``, ``--time-unit`` and (``trim``) ``--trim-standstill``."""
+def add_stream_arguments(
+    parser: argparse.ArgumentParser, trim: bool = True, rate: bool = True
+) -> None:
+    """``--delay``, ``--time-unit``, ``--transmission``, (``rate``) ``--rate`` and
+    (``trim``) ``--trim-standstill``."""
     g = parser.add_argument_group("streams (the audit's findings)")
     g.add_argument(
         "--delay",
@@ -363,14 +367,15 @@ def add_stream_arguments(parser: argparse.ArgumentParser, trim: bool = True) -> 
         default=None,
         help="unit of the files' time stamps [default s]",
     )
-    g.add_argument(
-        "--rate",
-        type=float,
-        metavar="HZ",
-        default=None,
-        help="sampling rate of files without a time column (t_k = k / HZ) [default: the "
-        "files' own time column]",
-    )
+    if rate:
+        g.add_argument(
+            "--rate",
+            type=float,
+            metavar="HZ",
+            default=None,
+            help="sampling rate of files without a time column (t_k = k / HZ) [default: the "
+            "files' own time column]",
+        )
     g.add_argument(
         "--transmission",
         metavar="FILE.toml",
@@ -496,6 +501,10 @@ def prepare(ds, args: argparse.Namespace, what: str):
         return ds
     cutoff = DEFAULT_CUTOFF if args.cutoff is None else args.cutoff
     try:
+        if cutoff == "auto":  # from the positions' velocity spectrum (signals.bandwidth)
+            choice = choose_cutoff(ds.t, ds.q, decimate=args.decimate)
+            print(f"{what}: cut-off {choice.cutoff:.3g} Hz ({choice.reason})")
+            cutoff = choice.cutoff
         return preprocess(
             ds, cutoff=cutoff, order=args.order, decimate=args.decimate, trim=args.trim
         )
@@ -506,8 +515,9 @@ def prepare(ds, args: argparse.Namespace, what: str):
 def check_preprocess_args(args: argparse.Namespace) -> None:
     """The checks of the preprocessing and streaming options (``--cutoff``, ``--trim``,
     ``--decimate``, ``--chunk``) that need no data."""
-    if args.cutoff is not None and not (math.isfinite(args.cutoff) and args.cutoff > 0):
-        raise InputError(f"--cutoff must be a positive frequency [Hz], got {args.cutoff}")
+    c = args.cutoff
+    if c is not None and c != "auto" and not (math.isfinite(c) and c > 0):
+        raise InputError(f"--cutoff must be a positive frequency [Hz] or auto, got {c}")
     if args.trim is not None and not (math.isfinite(args.trim) and args.trim >= 0):
         raise InputError(f"--trim must be >= 0 seconds, got {args.trim}")
     if args.decimate < 1:

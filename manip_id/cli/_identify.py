@@ -33,7 +33,10 @@ from ._runtime import check_scheduler, robot_from_args
 # -------------------------------------------------------------------- checks
 def _check_args(args) -> None:
     if not args.simulate:
-        given = [n for n in ("duration", "rate", "noise", "seed") if getattr(args, n) is not None]
+        given = [n for n in ("duration", "noise", "seed") if getattr(args, n) is not None]
+        rate = getattr(args, "rate", None)  # with --data: files without a time column
+        if rate is not None and not (math.isfinite(rate) and rate > 0):
+            raise InputError(f"--rate must be a positive frequency [Hz], got {rate}")
         if given or args.optimize:
             raise InputError(f"--{(given or ['optimize'])[0]} applies to --simulate only")
     else:

@@ -79,7 +79,8 @@ def register(sub) -> None:
         "--rate",
         type=float,
         default=None,
-        help=f"sampling rate [Hz] [default {SIM_DEFAULTS['rate']:g}]",
+        help=f"sampling rate [Hz] of the simulation [default {SIM_DEFAULTS['rate']:g}]; with "
+        "--data, the rate of files without a time column (t_k = k / HZ)",
     )
     sim.add_argument(
         "--noise",
@@ -263,7 +264,7 @@ def register(sub) -> None:
     )
     add_file_arguments(p)
     _add_fleet_arguments(p)
-    add_stream_arguments(p)
+    add_stream_arguments(p, rate=False)  # --rate: the simulation's, above
     p.set_defaults(func=command("manip_id.cli._identify"))
 
 
