@@ -222,6 +222,25 @@ def test_positions_only_log_without_time_column(wrist):
     assert errors["positions"] < 1.2 * errors["true_dq"], errors
 
 
+def test_positions_only_coupled_wrist_at_the_noise_floor(wrist):
+    """The issue's "done when": a motor-side, positions-only, coupled-wrist log at 1 %
+    torque noise, cut-off auto: every joint's validation error against the raw torques
+    within 1.5x of the noise floor (1 % of each joint's torque RMS)."""
+    folder, tr, robot, coeffs, runs = wrist
+    rng = np.random.default_rng(5)
+    specs = []
+    for k in ("train", "valid"):
+        t, q, dq, ddq, tau = runs[k]
+        rms = np.sqrt(np.mean(tau**2, axis=0))
+        noisy = tau + 0.01 * rms * rng.standard_normal(tau.shape)
+        path = motor_log(folder / f"floor_{k}.npz", tr, t, q, dq, ddq, noisy, positions_only=True)
+        specs.append(FileSpec(path, transmission=tr, rate=200.0))
+    result = _identify(robot, *specs, options=PreprocessOptions(cutoff="auto"))
+    raw = np.asarray(result.raw_error.validation_per_joint)
+    floor = 0.01 / np.sqrt(1 + 0.01**2)
+    assert np.all(raw / floor < 1.5), raw / floor
+
+
 def test_file_without_time_or_rate_is_refused(tmp_path):
     np.savez(tmp_path / "a.npz", q=np.zeros((10, 2)), tau=np.zeros((10, 2)))
     from manip_id.datasets import open_source
@@ -247,11 +266,19 @@ def test_derived_velocities_match_the_true_ones(wrist):
 @pytest.mark.parametrize("rate", [100.0, 5000.0])
 def test_cutoff_from_the_velocity_spectrum(rate):
     t = np.arange(0.0, 40.0, 1.0 / rate)
-    q = np.stack([np.sin(2 * np.pi * 0.4 * t) + 0.2 * np.sin(2 * np.pi * 2.0 * t)], axis=1)
+    q = np.stack([np.sin(2 * np.pi * 1.6 * t) + 0.2 * np.sin(2 * np.pi * 8.0 * t)], axis=1)
     q += np.random.default_rng(0).normal(0.0, 1e-4, q.shape)  # encoder noise
     choice = choose_cutoff(t, q)
-    # 2 Hz holds 0.2^2 * 5^2 = 1 of the velocity power against 1 at 0.4 Hz: f_99 = 2 Hz,
+    # 8 Hz holds 0.2^2 * 5^2 = 1 of the velocity power against 1 at 1.6 Hz: f_99 = 8 Hz,
     # within the Hann window's main lobe (+-2 bins of 1 / 10 s)
-    assert choice.bandwidth[0] == pytest.approx(2.0, abs=0.2)
-    assert choice.cutoff == pytest.approx(3 * choice.bandwidth[0])
-    assert "99%" in choice.reason and "3 x" in choice.reason
+    assert choice.bandwidth[0] == pytest.approx(8.0, abs=0.2)
+    want = min(3 * choice.bandwidth[0], rate / 5)  # 24 Hz, or capped at 20 Hz for 100 Hz
+    assert choice.cutoff == pytest.approx(want)
+    assert "99%" in choice.reason and ("3 x" in choice.reason or "capped" in choice.reason)
+
+
+def test_slow_motion_gets_the_minimum_cutoff():
+    t = np.arange(0.0, 30.0, 1e-3)
+    choice = choose_cutoff(t, np.sin(2 * np.pi * 0.5 * t)[:, None])
+    assert choice.bandwidth[0] == pytest.approx(0.5, abs=0.2)
+    assert choice.cutoff == 20.0 and "minimum" in choice.reason

@@ -18,7 +18,7 @@ preprocessing from the positions of the log itself:
    (99 %) of the remaining power of joint ``j`` lies; the log's bandwidth is the
    largest over the joints;
 5. ``cutoff = FACTOR * bandwidth`` (:data:`FACTOR` = 3: a zero-phase Butterworth of order
-   4 passes ``f_99`` with a gain of ``1 - 3^-8``), raised to :data:`MIN_CUTOFF` and
+   4 passes ``f_99`` with a gain of ``1 - 3^-8``), raised to :data:`MIN_CUTOFF` (20 Hz) and
    capped at ``rate / (5 decimate)`` (0.4 times the Nyquist frequency of the kept
    samples).
 
@@ -40,8 +40,10 @@ SEGMENT_SECONDS = 10.0
 POWER_FRACTION = 0.99
 #: Cut-off over bandwidth [-].
 FACTOR = 3.0
-#: Lowest cut-off chosen [Hz].
-MIN_CUTOFF = 1.0
+#: Lowest cut-off chosen [Hz]: the torques' Coulomb steps and the regressor's sign(dq)
+#: columns are wider-band than the motion; below ~20 Hz the filter's smearing of them
+#: exceeds 1 % torque noise on the simulated coupled wrist (tests/test_transmission.py).
+MIN_CUTOFF = 20.0
 #: Power over the noise floor a frequency needs to count as motion [-].
 NOISE_MARGIN = 10.0
 
