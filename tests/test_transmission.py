@@ -282,3 +282,22 @@ def test_slow_motion_gets_the_minimum_cutoff():
     choice = choose_cutoff(t, np.sin(2 * np.pi * 0.5 * t)[:, None])
     assert choice.bandwidth[0] == pytest.approx(0.5, abs=0.2)
     assert choice.cutoff == 20.0 and "minimum" in choice.reason
+
+
+def test_sidecar_round_trip_carries_the_transmission(tmp_path):
+    from manip_id.export import export_urdf
+
+    tr = Transmission(wrist_matrix(), signals="motor", motor_terms=TERMS)
+    robot = load_robot("ur5", transmission=tr)
+    theta = robot.nominal_parameters.copy()
+    theta[robot.layout.motor_start :] = motor_truth(6)
+    out = export_urdf(robot, theta, tmp_path / "ur5_id.urdf")
+    back = load_robot(out.path, identified=True)
+    assert back.transmission is not None
+    assert np.array_equal(back.transmission.R, tr.R)
+    assert back.transmission.signals == "motor"
+    assert back.parameter_names == robot.parameter_names
+    q, dq, ddq = robot.random_states(10, seed=2)
+    a = regressor(robot, q, dq, ddq) @ theta
+    b = regressor(back, q, dq, ddq) @ back.nominal_parameters
+    assert np.abs(a - b).max() < 1e-9 * np.abs(a).max()
