@@ -301,3 +301,19 @@ def test_sidecar_round_trip_carries_the_transmission(tmp_path):
     a = regressor(robot, q, dq, ddq) @ theta
     b = regressor(back, q, dq, ddq) @ back.nominal_parameters
     assert np.abs(a - b).max() < 1e-9 * np.abs(a).max()
+
+
+def test_diagonal_transmission_written_as_urdf_transmissions(tmp_path):
+    import xml.etree.ElementTree as ET
+
+    from manip_id.export import export_urdf
+
+    R = np.diag([100.0, -80.0, 60.0, 50.0, 50.0, 40.0])
+    robot = load_robot("ur5", transmission=Transmission(R, motor_terms=["viscous"]))
+    out = export_urdf(robot, robot.nominal_parameters, tmp_path / "ur5_diag.urdf")
+    root = ET.parse(out.path).getroot()
+    got = {
+        t.find("joint").get("name"): float(t.find("actuator/mechanicalReduction").text)
+        for t in root.findall("transmission")
+    }
+    assert got == dict(zip(robot.dof_names, np.diag(R).tolist(), strict=True))
