@@ -92,8 +92,6 @@ from .friction import (
 if TYPE_CHECKING:  # pragma: no cover
     import pinocchio as pin
 
-    from .transmission import Transmission
-
 #: Inertial parameter names of one body, in Pinocchio's order.
 INERTIAL_NAMES: tuple[str, ...] = tuple("m mcx mcy mcz Ixx Ixy Iyy Ixz Iyz Izz".split())
 #: Units of the inertial parameters of one body, aligned with :data:`INERTIAL_NAMES`.
@@ -412,9 +410,6 @@ class ParameterLayout:
     mask
         which terms each DoF carries, bool shape (nv, nt) (None: all); a masked-out
         entry's column is identically zero.
-    motors
-        the :class:`~manip_id.transmission.Transmission` whose motor terms are the last
-        columns (after the joint terms, named ``motor6.Ia``), or None.
     """
 
     def __init__(
@@ -424,7 +419,6 @@ class ParameterLayout:
         terms: Sequence[str],
         shapes: FrictionShapes | None = None,
         mask: ArrayLike | None = None,
-        motors: Transmission | None = None,
     ):
         self.body_names: tuple[str, ...] = tuple(body_names)
         self.dofs = dofs
@@ -444,10 +438,6 @@ class ParameterLayout:
                     f"mask.shape={m.shape} but expected (nv, nt)={dofs.nv, len(terms)}"
                 )
             self.mask = None if m.all() else m
-        if motors is not None:
-            motors.check_size(dofs.nv)
-        #: the transmission of the motor-term columns (None: no motor terms)
-        self.motors = motors if motors is not None and motors.n_parameters else None
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -471,24 +461,9 @@ class ParameterLayout:
         return len(self.terms)
 
     @property
-    def n_joint_terms(self) -> int:
-        """Number of joint-term columns nt nv."""
-        return self.n_terms * self.nv
-
-    @property
-    def n_motor(self) -> int:
-        """Number of motor-term columns (0 without a transmission's motor terms)."""
-        return 0 if self.motors is None else self.motors.n_parameters
-
-    @property
-    def motor_start(self) -> int:
-        """First motor-term column, 10 nb + nt nv."""
-        return self.n_rigid + self.n_joint_terms
-
-    @property
     def n_parameters(self) -> int:
-        """Number of standard parameters p = 10 nb + nt nv + motor terms."""
-        return self.n_rigid + self.n_joint_terms + self.n_motor
+        """Number of standard parameters p = 10 nb + nt nv."""
+        return self.n_rigid + self.n_terms * self.nv
 
     # ------------------------------------------------------------ names, units
     @cached_property
@@ -497,8 +472,6 @@ class ParameterLayout:
         names = [f"{j}.{p}" for j in self.body_names for p in INERTIAL_NAMES]
         for dof in self.dofs.names:
             names += [f"{dof}.{t}" for t in self.terms]
-        if self.motors is not None:
-            names += list(self.motors.parameter_names)
         return tuple(names)
 
     @cached_property
@@ -507,8 +480,6 @@ class ParameterLayout:
         units = list(INERTIAL_UNITS) * self.n_bodies
         for prismatic in self.dofs.prismatic:
             units += [t.unit(bool(prismatic)) for t in self.term_table]
-        if self.motors is not None:
-            units += list(self.motors.parameter_units)
         return tuple(units)
 
     @cached_property
@@ -556,12 +527,7 @@ class ParameterLayout:
     def joint_block(self, theta: ArrayLike) -> np.ndarray:
         """The joint-term parameters, (..., p) -> (..., nv, nt); a view when possible."""
         arr = self._check_theta(theta)
-        block = arr[..., self.n_rigid : self.motor_start]
-        return block.reshape(*arr.shape[:-1], self.nv, self.n_terms)
-
-    def motor_block(self, theta: ArrayLike) -> np.ndarray:
-        """The motor-term parameters, (..., p) -> (..., n_motor); a view."""
-        return self._check_theta(theta)[..., self.motor_start :]
+        return arr[..., self.n_rigid :].reshape(*arr.shape[:-1], self.nv, self.n_terms)
 
     def has_term(self, term: str) -> bool:
         """Whether the joint term ``term`` (``"Ia"``, ``"fv"``, ...) is enabled."""
@@ -590,9 +556,6 @@ class ParameterLayout:
         if col < self.n_rigid:
             body, k = divmod(col, BODY_SIZE)
             return ColumnOwner("body", body, self.body_names[body], INERTIAL_NAMES[k])
-        if col >= self.motor_start and self.motors is not None:
-            motor, k = divmod(col - self.motor_start, len(self.motors.motor_terms))
-            return ColumnOwner("motor", motor, self.dofs.joints[motor], self.motors.term_names[k])
         dof, k = divmod(col - self.n_rigid, self.n_terms)
         return ColumnOwner("joint", dof, self.dofs.joints[dof], self.terms[k])
 
@@ -633,5 +596,5 @@ class ParameterLayout:
     def __repr__(self) -> str:
         return (
             f"ParameterLayout(bodies={self.n_bodies}, nv={self.nv}, "
-            f"terms={self.terms}, motor={self.n_motor}, p={self.n_parameters})"
+            f"terms={self.terms}, p={self.n_parameters})"
         )

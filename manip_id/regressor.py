@@ -105,6 +105,9 @@ class RegressorEvaluator:
         # flat indices into a (nv, p) block of the diagonal entries of each term
         rows = np.arange(self.nv) * self.p
         self._flat = [(t, rows + self.layout.joint_columns(t.name)) for t in self.layout.term_table]
+        tr = robot.transmission
+        self.motors = tr if tr is not None and tr.n_parameters else None  # motor-term columns
+        self.motor_start = self.n_rigid + nt * self.nv  # [-] (p: no motor terms)
         self._needs_angles = any(t.needs_angles for t in self.layout.term_table)
         self._load_model = robot.load_model  # the load law's rnea: the nominal inertias
         self._load_data = self._load_model.createData()
@@ -259,9 +262,8 @@ class RegressorEvaluator:
         ``vel`` is the velocity the friction terms see and ``acc`` the acceleration
         of the armature (``dq, ddq`` for Y(q, dq, ddq); ``w, v`` for Slotine-Li).
         """
-        motors = self.layout.motors
-        if motors is not None:  # the motor terms, mapped to the joints by R^T
-            Y[..., self.layout.motor_start :] = motors.columns(vel, acc)
+        if self.motors is not None:  # the motor terms, mapped to the joints by R^T
+            Y[..., self.motor_start :] = self.motors.columns(vel, acc)
         if not self.terms:
             return
         if Y.ndim == 2:  # one sample: a few flat writes into the diagonal entries
@@ -330,7 +332,7 @@ class RegressorEvaluator:
         """
         n, nv, nr = q.shape[0], self.nv, self.n_rigid
         columns = np.asarray(columns, dtype=np.intp)
-        ms = self.layout.motor_start
+        ms = self.motor_start
         motor_cols = columns[columns >= ms] - ms
         joint_cols = columns[(columns >= nr) & (columns < ms)] - nr
         owners = [self.layout.owner(nr + int(c)) for c in joint_cols]
@@ -344,7 +346,6 @@ class RegressorEvaluator:
         size = min(chunk, max(n, 1))
         wide = np.zeros((size, nv, nr + n_extra))
         flat = wide.reshape(size * nv, nr + n_extra)
-        motors = self.layout.motors
         outs = [np.empty((size, sel.size)) for sel in selections]
         for start in self.sequential(range(0, n, chunk)):  # one path (hysteresis)
             stop = min(start + chunk, n)
@@ -360,9 +361,9 @@ class RegressorEvaluator:
                 vals = self.joint_values(qs, dqs, ddqs, None if temp is None else temp[s])
                 for i, (j, t) in enumerate(zip(jc_dof, jc_term, strict=True)):
                     wide[:size_k, j, nr + i] = vals[:, j, t]
-            if motor_cols.size and motors is not None:
-                first = nr + joint_cols.size
-                wide[:size_k, :, first:] = motors.columns(dqs, ddqs)[:, :, motor_cols]
+            if motor_cols.size and self.motors is not None:
+                mc = self.motors.columns(dqs, ddqs)
+                wide[:size_k, :, nr + joint_cols.size :] = mc[:, :, motor_cols]
             blocks = []
             for j in range(nv):
                 out = outs[j][:size_k]
@@ -584,13 +585,11 @@ def joint_torques(
     acc = np.zeros_like(np.asarray(dq, dtype=float)) if ddq is None else ddq
     _, (q, dq, acc) = check_states(robot, q=q, dq=dq, ddq=acc)
     temp = check_temperature(robot, temp, dq)
-    motors = robot.layout.motors
-    out = np.zeros_like(dq)
-    if motors is not None:  # motor terms through R^T (rotor inertia: with the armature)
-        coef_m = robot.layout.motor_block(theta).copy()
-        if ddq is None and "Ia" in motors.term_names:
-            coef_m.reshape(motors.n, -1)[:, 0] = 0.0  # Ia is the first motor term
-        out += motors.torques(coef_m, dq, acc)
+    out, motors = np.zeros_like(dq), ev.motors
+    if motors is not None:  # motor terms through R^T (Ia: its reflected inertia R^T Ia R ddq)
+        coef_m = theta[ev.motor_start :].reshape(motors.n, -1).copy()
+        coef_m[:, 0] *= ddq is not None or "Ia" not in motors.term_names  # Ia: the first
+        out += motors.torques(coef_m.ravel(), dq, acc)
     if not ev.terms:
         return out
     vals = ev.joint_values(q, dq, acc, temp)  # (..., nv, nt)

@@ -63,7 +63,7 @@ from .robot_sources import (
 )
 from .sidecar import apply_identified, identified_joint_model, identified_options
 from .sidecar import locked_configuration as sidecar_locked
-from .transmission import Transmission, load_transmission
+from .transmission import MotorLayout, Transmission, load_transmission
 
 __all__ = [
     "FRICTION_KINDS",
@@ -139,13 +139,11 @@ class Robot:
             transmission.check_size(model.nv, f"robot {name!r}")
         #: the drive train (:mod:`manip_id.transmission`): motor-side logs, motor terms
         self.transmission = transmission
-        self.layout = ParameterLayout(
-            self.joint_names,
-            self.dofs,
-            terms.enabled,
-            terms.shapes,
-            terms.mask(self.nv),
-            motors=transmission,
+        args = (self.joint_names, self.dofs, terms.enabled, terms.shapes, terms.mask(self.nv))
+        self.layout: ParameterLayout = (
+            MotorLayout(*args, motors=transmission)
+            if transmission is not None and transmission.n_parameters
+            else ParameterLayout(*args)
         )
 
     # ----------------------------------------------------------------- sizes
@@ -246,7 +244,8 @@ class Robot:
         for t, v in self.settings.get("joint_term_values", {}).items():
             per_term[t] = np.asarray(v, dtype=float)
         joint = [[per_term.get(t, zero)[dof] for t in self.terms.enabled] for dof in range(self.nv)]
-        motor = np.zeros(self.layout.n_motor)  # no nominal value, unless identified
+        tr = self.transmission
+        motor = np.zeros(0 if tr is None else tr.n_parameters)  # none, unless identified
         known = self.settings.get("motor_term_values")
         if known is not None and len(known) == motor.size:
             motor = np.asarray(known, dtype=float)

@@ -178,8 +178,8 @@ def apply_identified(robot, sidecar: dict) -> None:
     }
     robot.settings["joint_term_values"] = values
     motor = sidecar.get("motor_terms")
-    if motor and robot.layout.motors is not None:  # the identified motor terms, by name
-        names = robot.layout.motors.parameter_names
+    if motor and robot.transmission is not None:  # the identified motor terms, by name
+        names = robot.transmission.parameter_names
         robot.settings["motor_term_values"] = [float(motor.get(n, 0.0)) for n in names]
     blocks = sidecar.get("load_inertias")
     if blocks is not None:

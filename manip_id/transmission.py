@@ -56,6 +56,7 @@ from numpy.typing import ArrayLike
 
 from ._io.reading import read_toml
 from .errors import InputError
+from .parameters import ColumnOwner, ParameterLayout
 
 #: Motor term kinds -> their short parameter names, in column order.
 MOTOR_TERMS: dict[str, str] = {"inertia": "Ia", "viscous": "fv", "coulomb": "fc", "offset": "fo"}
@@ -179,7 +180,7 @@ class Transmission:
             "offset": self.q0.tolist(),
             "signals": self.signals,
             "motor_terms": list(self.motor_terms),
-            "motor_names": list(self.motor_names),
+            "motor_names": list(self.motor_names or ()),
         }
 
     # -------------------------------------------------------------------- sizes
@@ -221,12 +222,12 @@ class Transmission:
     @property
     def parameter_names(self) -> tuple[str, ...]:
         """Names of the motor-term columns, motor-major: ``motor1.Ia, motor1.fv, ...``."""
-        return tuple(f"{m}.{t}" for m in self.motor_names for t in self.term_names)
+        return tuple(f"{m}.{t}" for m in self.motor_names or () for t in self.term_names)
 
     @property
     def parameter_units(self) -> tuple[str, ...]:
         """Units of the motor-term columns, aligned with :attr:`parameter_names`."""
-        return tuple(MOTOR_UNITS[t] for _ in self.motor_names for t in self.term_names)
+        return tuple(MOTOR_UNITS[t] for _ in self.motor_names or () for t in self.term_names)
 
     @property
     def n_parameters(self) -> int:
@@ -348,6 +349,59 @@ class Transmission:
             f"Transmission(n={self.n}, signals={self.signals!r}, "
             f"motor_terms={list(self.motor_terms)}, diagonal={self.is_diagonal})"
         )
+
+
+class MotorLayout(ParameterLayout):
+    """A :class:`~manip_id.parameters.ParameterLayout` with a transmission's motor terms as
+    its last columns, after the joint terms (``motor6.Ia``, ...: :attr:`Transmission.
+    parameter_names`); ``motors`` is the transmission. Owners of motor columns have kind
+    ``"motor"``, the motor's index and the joint of the same index."""
+
+    def __init__(self, *args, motors: Transmission, **kwargs):
+        super().__init__(*args, **kwargs)
+        motors.check_size(self.nv)
+        self.motors = motors
+
+    @property
+    def motor_start(self) -> int:
+        """First motor-term column, 10 nb + nt nv."""
+        return self.n_rigid + self.n_terms * self.nv
+
+    @property
+    def n_parameters(self) -> int:
+        """Number of standard parameters p = 10 nb + nt nv + motor terms."""
+        return self.motor_start + self.motors.n_parameters
+
+    @cached_property
+    def names(self) -> tuple[str, ...]:
+        """The joint layout's names, then the motor terms' (``motor6.Ia``)."""
+        return (*super().names, *self.motors.parameter_names)
+
+    @cached_property
+    def units(self) -> tuple[str, ...]:
+        """The joint layout's units, then the motor terms' (motor side)."""
+        return (*super().units, *self.motors.parameter_units)
+
+    def joint_block(self, theta: ArrayLike) -> np.ndarray:
+        """The joint-term parameters, (..., p) -> (..., nv, nt); a view when possible."""
+        arr = self._check_theta(theta)
+        block = arr[..., self.n_rigid : self.motor_start]
+        return block.reshape(*arr.shape[:-1], self.nv, self.n_terms)
+
+    def motor_block(self, theta: ArrayLike) -> np.ndarray:
+        """The motor-term parameters, (..., p) -> (..., n_motor); a view."""
+        return self._check_theta(theta)[..., self.motor_start :]
+
+    def owner(self, column: int) -> ColumnOwner:
+        """What column ``column`` belongs to (a body, a joint term or a motor term)."""
+        col = int(column)
+        if not self.motor_start <= col < self.n_parameters:
+            return super().owner(col)
+        motor, k = divmod(col - self.motor_start, len(self.motors.motor_terms))
+        return ColumnOwner("motor", motor, self.dofs.joints[motor], self.motors.term_names[k])
+
+    def __repr__(self) -> str:
+        return f"{super().__repr__()[:-1]}, motors={self.motors!r})"
 
 
 def load_transmission(spec) -> Transmission | None:

@@ -56,7 +56,9 @@ def trajectory(robot, rate: float, duration: float, phase: float):
 
 def true_torques(robot, tr: Transmission, coeffs, q, dq, ddq) -> np.ndarray:
     """rnea + R^T (Ia ddtheta + fv dtheta + fc sign(dtheta) + fo), by hand."""
-    tau = np.array([pin.rnea(robot.model, robot.data, a, b, c) for a, b, c in zip(q, dq, ddq)])
+    tau = np.array(
+        [pin.rnea(robot.model, robot.data, a, b, c) for a, b, c in zip(q, dq, ddq, strict=False)]
+    )
     R = tr.R
     c = np.asarray(coeffs).reshape(tr.n, 4)
     dth, ddth = dq @ R.T, ddq @ R.T
