@@ -474,7 +474,6 @@ def load_robot(
     package_dirs: Sequence[str | Path] = (),
     identified: bool | str | Path | None = None,
     profile: str | Path | RobotProfile | bool | None = None,
-    transmission: Transmission | Mapping | str | Path | None = None,
 ) -> Robot:
     """Load a fixed-base robot.
 
@@ -511,10 +510,10 @@ def load_robot(
         Default: ``robots/NAME.toml`` for a robot loaded by name when it exists; a URDF
         loaded by path takes none (its file name decides nothing). Explicit arguments
         override the profile.
-    transmission
-        the drive train (:mod:`manip_id.transmission`): a
-        :class:`~manip_id.transmission.Transmission`, a table or a ``.toml`` path. Default:
-        the sidecar's (``identified``), else the profile's ``[transmission]``, else none.
+
+    The drive train (:mod:`manip_id.transmission`) is the sidecar's (``identified``), else
+    the profile's ``[transmission]``, else none; :meth:`Robot.with_transmission` gives
+    another.
     """
     selection = (
         active_joints
@@ -557,17 +556,15 @@ def load_robot(
         origin=src,
         reduction=Reduction(full_model, tuple(locked_ids), qref) if locked_ids else None,
         profile=prof,
-        transmission=_transmission_of(transmission, sidecar, prof),
+        transmission=_transmission_of(sidecar, prof),
     )
     if sidecar is not None:
         apply_identified(robot, sidecar)
     return robot
 
 
-def _transmission_of(spec, sidecar, profile) -> Transmission | None:
-    """The explicit transmission, else the sidecar's, else the profile's, else None."""
-    if spec is not None:
-        return load_transmission(spec)
+def _transmission_of(sidecar, profile) -> Transmission | None:
+    """The sidecar's transmission, else the profile's, else None."""
     if sidecar is not None and sidecar.get("transmission"):
         return Transmission.from_dict(sidecar["transmission"], source="sidecar")
     if profile is not None and profile.transmission is not None:

@@ -104,12 +104,12 @@ def test_bad_transmissions_say_what_came():
     with pytest.raises(InputError, match="motor_terms holds 'spring'"):
         Transmission(np.eye(2), motor_terms=["spring"])
     with pytest.raises(InputError, match="nv=6"):
-        load_robot("ur5", transmission=Transmission(np.eye(2)))
+        load_robot("ur5").with_transmission(Transmission(np.eye(2)))
 
 
 def test_coupled_regressor_equals_rnea_plus_motor_terms():
     tr = Transmission(wrist_matrix(), signals="motor", motor_terms=TERMS)
-    robot = load_robot("ur5", transmission=tr)
+    robot = load_robot("ur5").with_transmission(tr)
     assert robot.parameter_names[-4:] == ["motor6.Ia", "motor6.fv", "motor6.fc", "motor6.fo"]
     q, dq, ddq = robot.random_states(20, seed=3)
     theta = robot.nominal_parameters.copy()
@@ -125,7 +125,7 @@ def test_coupled_regressor_equals_rnea_plus_motor_terms():
 def test_diagonal_motor_terms_equal_scaled_joint_terms():
     R = np.diag([100.0, -80.0, 60.0, 50.0, 50.0, 40.0])
     tr = Transmission(R, motor_terms=["inertia", "viscous", "coulomb", "offset"])
-    motor = load_robot("ur5", transmission=tr)
+    motor = load_robot("ur5").with_transmission(tr)
     joint = load_robot("ur5", armature=True, friction="viscous,coulomb,offset")
     q, dq, ddq = motor.random_states(10, seed=1)
     c = motor_truth(6)
@@ -144,7 +144,7 @@ def test_diagonal_motor_terms_equal_scaled_joint_terms():
 def wrist(tmp_path_factory):
     folder = tmp_path_factory.mktemp("wrist")
     tr = Transmission(wrist_matrix(), signals="motor", motor_terms=TERMS)
-    robot = load_robot("ur5", transmission=tr)
+    robot = load_robot("ur5").with_transmission(tr)
     coeffs = motor_truth(6)
     runs = {}
     for name, phase in (("train", 0.0), ("valid", 2.0)):
@@ -290,7 +290,7 @@ def test_sidecar_round_trip_carries_the_transmission(tmp_path):
     from manip_id.export import export_urdf
 
     tr = Transmission(wrist_matrix(), signals="motor", motor_terms=TERMS)
-    robot = load_robot("ur5", transmission=tr)
+    robot = load_robot("ur5").with_transmission(tr)
     theta = robot.nominal_parameters.copy()
     theta[robot.layout.motor_start :] = motor_truth(6)
     out = export_urdf(robot, theta, tmp_path / "ur5_id.urdf")
@@ -311,7 +311,7 @@ def test_diagonal_transmission_written_as_urdf_transmissions(tmp_path):
     from manip_id.export import export_urdf
 
     R = np.diag([100.0, -80.0, 60.0, 50.0, 50.0, 40.0])
-    robot = load_robot("ur5", transmission=Transmission(R, motor_terms=["viscous"]))
+    robot = load_robot("ur5").with_transmission(Transmission(R, motor_terms=["viscous"]))
     out = export_urdf(robot, robot.nominal_parameters, tmp_path / "ur5_diag.urdf")
     root = ET.parse(out.path).getroot()
     got = {
