@@ -319,3 +319,23 @@ def test_diagonal_transmission_written_as_urdf_transmissions(tmp_path):
         for t in root.findall("transmission")
     }
     assert got == dict(zip(robot.dof_names, np.diag(R).tolist(), strict=True))
+
+
+def test_cutoff_on_the_real_panda_log():
+    """The real Panda log (skips when absent): a slow excitation (below 1 Hz on every joint
+    whose motion stands above its noise; joint 3 is noise-dominated and named), so the
+    cut-off is the 20 Hz minimum."""
+    from pathlib import Path
+
+    from manip_id.datasets import load_dataset
+
+    folder = Path("/work/shared/data/panda_gaz2019")
+    if not folder.is_dir():
+        pytest.skip("the real Panda log is not in /work/shared/data")
+    ds = load_dataset(folder)
+    choice = choose_cutoff(ds.t, ds.q, names=ds.joint_names)
+    kept = [
+        b for n, b in zip(ds.joint_names, choice.bandwidth, strict=True) if n not in choice.reason
+    ]
+    assert max(kept) < 1.0  # [Hz]
+    assert choice.cutoff == 20.0 and "minimum" in choice.reason

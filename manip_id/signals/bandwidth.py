@@ -16,7 +16,9 @@ preprocessing from the positions of the log itself:
    (a chi-square periodogram bin passes that margin by chance with probability ~1e-3);
 4. the bandwidth ``f_99,j``: the lowest frequency below which :data:`POWER_FRACTION`
    (99 %) of the remaining power of joint ``j`` lies; the log's bandwidth is the
-   largest over the joints;
+   largest over the joints, leaving out (and naming) a joint whose ``f_99`` exceeds
+   :data:`OUTLIER` (10) times the median joint's: its motion is too small against its
+   noise for the floor model (the real Panda log's joint 3, whose stamps jitter);
 5. ``cutoff = FACTOR * bandwidth`` (:data:`FACTOR` = 3: a zero-phase Butterworth of order
    4 passes ``f_99`` with a gain of ``1 - 3^-8``), raised to :data:`MIN_CUTOFF` (20 Hz) and
    capped at ``rate / (5 decimate)`` (0.4 times the Nyquist frequency of the kept
@@ -44,6 +46,8 @@ FACTOR = 3.0
 #: columns are wider-band than the motion; below ~20 Hz the filter's smearing of them
 #: exceeds 1 % torque noise on the simulated coupled wrist (tests/test_transmission.py).
 MIN_CUTOFF = 20.0
+#: A joint whose bandwidth is this many times the median joint's is noise-dominated [-].
+OUTLIER = 10.0
 #: Power over the noise floor a frequency needs to count as motion [-].
 NOISE_MARGIN = 10.0
 
@@ -152,7 +156,12 @@ class VelocitySpectrum:
             return CutoffChoice(
                 min(MIN_CUTOFF, cap), rate, bandwidth, "auto: no motion above the noise floor"
             )
-        j = int(np.argmax(bandwidth))
+        # a joint whose f_99 is OUTLIER times the median joint's is noise-dominated (its
+        # motion too small for the floor model, e.g. stamps with jitter): left out
+        med = float(np.median(bandwidth[total > 0]))
+        noisy = [names[k] for k in range(self.nv) if bandwidth[k] > OUTLIER * max(med, 0.1)]
+        kept = np.where([n in noisy for n in names], -np.inf, bandwidth)
+        j = int(np.argmax(kept))
         bw = float(bandwidth[j])
         raw = FACTOR * bw
         cutoff = min(max(raw, MIN_CUTOFF), cap)
@@ -160,6 +169,8 @@ class VelocitySpectrum:
             f"auto: {POWER_FRACTION:.0%} of each joint's velocity power lies below "
             f"{bw:.3g} Hz ({names[j]} the highest, {rate:.4g} Hz log)"
         )
+        if noisy:
+            why += f"; noise-dominated, left out: {', '.join(noisy)}"
         if cutoff == raw:
             why += f"; cut-off {FACTOR:g} x that = {cutoff:.3g} Hz"
         elif cutoff == cap:
