@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import warnings
 import math
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
