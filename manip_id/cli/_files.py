@@ -177,11 +177,16 @@ def _raw_parts(specs, vspecs, train, valid, options) -> list:
         key = (str(spec.path), spec.topic)
         if key not in raws:
             raws[key] = load_dataset(
-                spec.path, format=spec.format, columns=spec.columns, topic=spec.topic
+                spec.path,
+                format=spec.format,
+                columns=spec.columns,
+                topic=spec.topic,
+                rate=spec.rate,
             )
-        raw = raws[key]
+        raw, tr = raws[key], spec.transmission
+        tau = raw.tau if tr is None or tr.signals == "joint" else tr.to_joint(tau_motor=raw.tau)[3]
         scale = 1.0 if options.torque_scale is None else np.asarray(options.torque_scale)
-        parts.append((name, proc, raw.t, raw.tau * scale))
+        parts.append((name, proc, raw.t, tau * scale))
     return parts
 
 

@@ -130,7 +130,7 @@ def _check_files(args: argparse.Namespace) -> None:
             "--trim-standstill needs the pre-fit audit, which --scheduler / --per-file do not run"
         )
     if getattr(args, "model", "dynamic") != "dynamic":  # files read whole, without a FileSpec
-        for name in ("delay", "time_unit", "trim_standstill"):
+        for name in ("delay", "time_unit", "trim_standstill", "transmission", "rate"):
             if getattr(args, name, None) not in (None, False):
                 raise InputError(f"--{name.replace('_', '-')} applies to --model dynamic")
     if args.velocity_deadband is not None:
