@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -176,11 +177,16 @@ def _raw_parts(specs, vspecs, train, valid, options) -> list:
         key = (str(spec.path), spec.topic)
         if key not in raws:
             raws[key] = load_dataset(
-                spec.path, format=spec.format, columns=spec.columns, topic=spec.topic
+                spec.path,
+                format=spec.format,
+                columns=spec.columns,
+                topic=spec.topic,
+                rate=spec.rate,
             )
-        raw = raws[key]
+        raw, tr = raws[key], spec.transmission
+        tau = raw.tau if tr is None or tr.signals == "joint" else tr.to_joint(tau_motor=raw.tau)[3]
         scale = 1.0 if options.torque_scale is None else np.asarray(options.torque_scale)
-        parts.append((name, proc, raw.t, raw.tau * scale))
+        parts.append((name, proc, raw.t, tau * scale))
     return parts
 
 
@@ -208,8 +214,22 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     specs = file_specs(args.data, args, colmap)  # bad specs fail before the robot loads
     vspecs = file_specs(args.validate, args, colmap) if args.validate is not None else None
     robot = robot_from_args(args)
+    if robot.transmission is not None:  # the profile's, when --transmission is not given
+        specs = [
+            s if s.transmission else replace(s, transmission=robot.transmission) for s in specs
+        ]
+        if vspecs is not None:
+            vspecs = [
+                s if s.transmission else replace(s, transmission=robot.transmission) for s in vspecs
+            ]
     options = preprocess_options(args, robot.nv, None if profile is None else profile.torque_scale)
     f = _scan(robot, args, specs, vspecs, options, timings)
+    for s in f.specs + (f.vspecs or []):
+        scan = f.scans[s]
+        if scan.cutoff is not None:
+            print(f"{s.label}: cut-off {scan.cutoff.cutoff:.3g} Hz ({scan.cutoff.reason})")
+        if scan.derived_velocity:
+            print(f"{s.label}: no velocities in the file: dq differentiated from the filtered q")
     check_scans_temperature(robot, [f.scans[s] for s in f.vspecs or []])
     robot = reference_from_scans(robot, [f.scans[s] for s in f.specs])  # the law's T0
     if (text := reference_text(robot)) is not None:

@@ -27,6 +27,7 @@ from ._common import (
     parse_floats,
     print_warnings,
     profile_option,
+    transmission_option,
     warn,
 )
 
@@ -36,7 +37,7 @@ def robot_from_args(args: argparse.Namespace) -> Robot:
 
     joints = [j for j in args.joints.split(",") if j] if getattr(args, "joints", None) else None
     with native_stderr_captured("urdfdom"):  # its C++ messages become one warning line
-        return load_robot(
+        robot = load_robot(
             args.robot,
             armature=args.armature,
             friction=None if args.friction == "auto" else args.friction,
@@ -45,6 +46,8 @@ def robot_from_args(args: argparse.Namespace) -> Robot:
             package_dirs=args.package_dir,
             profile=profile_option(args),
         )
+    tr = transmission_option(args)  # --transmission, else the profile's
+    return robot if tr is None else robot.with_transmission(tr)
 
 
 def check_frame(robot, frame: str) -> None:
