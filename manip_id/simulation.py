@@ -179,7 +179,7 @@ def inverse_dynamics(robot: Robot, theta, q, dq, ddq, temp=None) -> np.ndarray:
     rnea = pin.rnea
     for k in range(n):
         tau[k] = rnea(model, data, q[k], dq[k], ddq[k])
-    if robot.terms.enabled:  # (joint_torques needs at least one joint term)
+    if robot.terms.enabled or robot.transmission is not None:  # joint or motor terms
         temp = None if temp is None else _per_sample(temp, n)
         tau += joint_torques(robot, theta, q, dq, ddq, armature=False, temp=temp)  # Ia: rnea
     return tau
@@ -539,7 +539,7 @@ class _BatchInverseDynamics:
         out = np.empty((self.robot.nv, q.shape[0]), order="F")  # [N m or N], sample per column
         pin.rneaInParallel(1, self.pool, q.T, dq.T, ddq.T, out)
         tau = out.T
-        if self.robot.terms.enabled:  # (armature is in the model's rnea)
+        if self.robot.terms.enabled or self.robot.transmission is not None:  # Ia: in rnea
             tau = tau + joint_torques(self.robot, self.theta, q, dq, ddq, armature=False, temp=temp)
         return tau
 

@@ -21,6 +21,7 @@ from ..datasets.stream import torque_scale_vector
 from ..errors import DataError, InputError
 from ..robot.model import Robot
 from ..signals import DEFAULT_CUTOFF, preprocess
+from ..signals.bandwidth import choose_cutoff
 from ..signals.butterworth import load_kernels
 from .delay import stream_lags
 from .findings import position_findings, torque_findings
@@ -220,7 +221,9 @@ def _motion_fits(robot, ds, still, eps: float, options: AuditOptions, findings: 
     if ds.ddq is None:
         cutoff = DEFAULT_CUTOFF if options.cutoff is None else options.cutoff
         try:
-            proc = preprocess(ds, cutoff=cutoff)
+            if cutoff == "auto":  # from the file's velocity spectrum (signals.bandwidth)
+                cutoff = choose_cutoff(ds.t, robot.dofs.angles(ds.q)).cutoff
+            proc = preprocess(ds, cutoff=float(cutoff))
         except (InputError, DataError) as exc:
             findings.append(f"torques not audited: {exc}")
             return [_joint(robot, j, still) for j in range(ds.nv)], None

@@ -22,7 +22,9 @@ from .._io import OutputSet, write_json  # noqa: F401 (the commands import write
 from ..datasets import parse_file_spec
 from ..errors import InputError, shorten
 from ..robot.profiles import find_profile, load_profile
+from ..robot.transmission import Transmission, load_transmission
 from ..signals import DEFAULT_CUTOFF, preprocess
+from ..signals.bandwidth import choose_cutoff
 
 
 def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
@@ -352,8 +354,11 @@ def add_file_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def add_stream_arguments(parser: argparse.ArgumentParser, trim: bool = True) -> None:
-    """``--delay``, ``--time-unit`` and (``trim``) ``--trim-standstill``."""
+def add_stream_arguments(
+    parser: argparse.ArgumentParser, trim: bool = True, rate: bool = True
+) -> None:
+    """``--delay``, ``--time-unit``, ``--transmission``, (``rate``) ``--rate`` and
+    (``trim``) ``--trim-standstill``."""
     g = parser.add_argument_group("streams (the audit's findings)")
     g.add_argument(
         "--delay",
@@ -367,6 +372,23 @@ def add_stream_arguments(parser: argparse.ArgumentParser, trim: bool = True) -> 
         choices=("s", "ms", "us", "ns"),
         default=None,
         help="unit of the files' time stamps [default s]",
+    )
+    if rate:
+        g.add_argument(
+            "--rate",
+            type=float,
+            metavar="HZ",
+            default=None,
+            help="sampling rate of files without a time column (t_k = k / HZ) [default: the "
+            "files' own time column]",
+        )
+    g.add_argument(
+        "--transmission",
+        metavar="FILE.toml",
+        default=None,
+        help="the drive train: matrix R (theta = R (q - offset)), offset, signals = "
+        '"motor" (the logs are motor-side, converted to the joints) or "joint", '
+        "motor_terms [default: the robot profile's [transmission], else none]",
     )
     if trim:
         g.add_argument(
@@ -384,7 +406,31 @@ def spec_options(args: argparse.Namespace) -> dict:
     return {
         "time_unit": getattr(args, "time_unit", None),
         "delay": None if values is None else tuple(values),
+        "rate": getattr(args, "rate", None),
+        "transmission": transmission_option(args),
     }
+
+
+def transmission_option(args: argparse.Namespace):
+    """The ``--transmission`` file read once (kept on ``args``), or None."""
+    value = getattr(args, "transmission", None)
+    if value is None or isinstance(value, Transmission):
+        return value
+    args.transmission = load_transmission(value)
+    return args.transmission
+
+
+def cutoff_value(text: str) -> float | str:
+    """``--cutoff``: a frequency [Hz] or ``auto`` (from each file's velocity spectrum)."""
+    if str(text).strip().lower() == "auto":
+        return "auto"
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a frequency [Hz] or 'auto', got {text!r}"
+        ) from None
+    return value
 
 
 def file_specs(values, args: argparse.Namespace, colmap) -> list:
@@ -454,6 +500,10 @@ def prepare(ds, args: argparse.Namespace, what: str):
         return ds
     cutoff = DEFAULT_CUTOFF if args.cutoff is None else args.cutoff
     try:
+        if cutoff == "auto":  # from the positions' velocity spectrum (signals.bandwidth)
+            choice = choose_cutoff(ds.t, ds.q, decimate=args.decimate)
+            print(f"{what}: cut-off {choice.cutoff:.3g} Hz ({choice.reason})")
+            cutoff = choice.cutoff
         return preprocess(
             ds, cutoff=cutoff, order=args.order, decimate=args.decimate, trim=args.trim
         )
@@ -464,8 +514,9 @@ def prepare(ds, args: argparse.Namespace, what: str):
 def check_preprocess_args(args: argparse.Namespace) -> None:
     """The checks of the preprocessing and streaming options (``--cutoff``, ``--trim``,
     ``--decimate``, ``--chunk``) that need no data."""
-    if args.cutoff is not None and not (math.isfinite(args.cutoff) and args.cutoff > 0):
-        raise InputError(f"--cutoff must be a positive frequency [Hz], got {args.cutoff}")
+    c = args.cutoff
+    if c is not None and c != "auto" and not (math.isfinite(c) and c > 0):
+        raise InputError(f"--cutoff must be a positive frequency [Hz] or auto, got {c}")
     if args.trim is not None and not (math.isfinite(args.trim) and args.trim >= 0):
         raise InputError(f"--trim must be >= 0 seconds, got {args.trim}")
     if args.decimate < 1:

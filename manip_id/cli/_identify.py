@@ -30,7 +30,10 @@ from ._runtime import check_scheduler, consistent_options
 # -------------------------------------------------------------------- checks
 def _check_args(args) -> None:
     if not args.simulate:
-        given = [n for n in ("duration", "rate", "noise", "seed") if getattr(args, n) is not None]
+        given = [n for n in ("duration", "noise", "seed") if getattr(args, n) is not None]
+        rate = getattr(args, "rate", None)  # with --data: files without a time column
+        if rate is not None and not (math.isfinite(rate) and rate > 0):
+            raise InputError(f"--rate must be a positive frequency [Hz], got {rate}")
         if given or args.optimize:
             raise InputError(f"--{(given or ['optimize'])[0]} applies to --simulate only")
     else:
@@ -122,7 +125,7 @@ def _check_files(args: argparse.Namespace) -> None:
             "--trim-standstill needs the pre-fit audit, which --scheduler / --per-file do not run"
         )
     if getattr(args, "model", "dynamic") != "dynamic":  # files read whole, without a FileSpec
-        for name in ("delay", "time_unit", "trim_standstill"):
+        for name in ("delay", "time_unit", "trim_standstill", "transmission", "rate"):
             if getattr(args, name, None) not in (None, False):
                 raise InputError(f"--{name.replace('_', '-')} applies to --model dynamic")
     if args.velocity_deadband is not None:

@@ -34,6 +34,7 @@ from ._common import (
     identify_report,
     parse_floats,
     profile_option,
+    transmission_option,
     warn,
 )
 
@@ -43,7 +44,7 @@ def robot_from_args(args: argparse.Namespace) -> Robot:
 
     joints = [j for j in args.joints.split(",") if j] if getattr(args, "joints", None) else None
     with native_stderr_captured("urdfdom"):  # its C++ messages become one warning line
-        return load_robot(
+        robot = load_robot(
             args.robot,
             armature=args.armature,
             friction=None if args.friction == "auto" else args.friction,
@@ -52,6 +53,8 @@ def robot_from_args(args: argparse.Namespace) -> Robot:
             package_dirs=args.package_dir,
             profile=profile_option(args),
         )
+    tr = transmission_option(args)  # --transmission, else the profile's
+    return robot if tr is None else robot.with_transmission(tr)
 
 
 def check_frame(robot, frame: str) -> None:
@@ -175,7 +178,7 @@ def _audit_options(options, currents: bool):
         torque_scale=options.torque_scale,
         drop_bad_rows=options.drop_bad_rows,
         standstill=options.velocity_deadband,
-        cutoff=options.cutoff,
+        cutoff=None if options.cutoff == "auto" else options.cutoff,  # auto: the audit's own
         currents=currents,
     )
 

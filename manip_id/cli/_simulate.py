@@ -18,6 +18,7 @@ import argparse
 import dataclasses
 import math
 import shutil
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -198,6 +199,12 @@ def _log(robot, run: Run, theta: np.ndarray, args, gains) -> Dataset:
         seed=run.seed,
     )
     data = sim.dataset
+    tr = robot.transmission
+    if tr is not None and tr.signals == "motor":  # a motor-side log: theta = R (q - offset)
+        q, dq, ddq, tau = tr.to_motor(data.q, data.dq, data.ddq, data.tau)
+        with warnings.catch_warnings():  # motor angles [rad] are large, not degrees
+            warnings.filterwarnings("ignore", message=".*degrees.*")
+            data = dataclasses.replace(data, q=q, dq=dq, ddq=ddq, tau=tau)
     if gains is not None:
         data = dataclasses.replace(data, tau=data.tau / gains)  # [A]
     return data
@@ -268,6 +275,7 @@ def _truth(robot, args, theta, masses: list[float], runs: list[Run], gains) -> d
         "duration": args.duration,
         "rate": args.rate,
         "drive_gains": None if gains is None else [float(g) for g in gains],
+        "transmission": None if robot.transmission is None else robot.transmission.to_dict(),
         "files": [{"name": r.name, "seed": r.seed, "payload_mass": r.mass} for r in runs],
     }
 

@@ -26,6 +26,7 @@ from ._common import (
     add_scheduler_argument,
     add_stream_arguments,
     command,
+    cutoff_value,
 )
 
 METHODS = ("ols", "wls", "rls", "gradient")
@@ -78,7 +79,8 @@ def register(sub) -> None:
         "--rate",
         type=float,
         default=None,
-        help=f"sampling rate [Hz] [default {SIM_DEFAULTS['rate']:g}]",
+        help=f"sampling rate [Hz] of the simulation [default {SIM_DEFAULTS['rate']:g}]; with "
+        "--data, the rate of files without a time column (t_k = k / HZ)",
     )
     sim.add_argument(
         "--noise",
@@ -141,9 +143,10 @@ def register(sub) -> None:
     )
     sig.add_argument(
         "--cutoff",
-        type=float,
+        type=cutoff_value,
         default=None,
-        help=f"low-pass cut-off [Hz] [default {DEFAULT_CUTOFF:g}]",
+        help=f"low-pass cut-off [Hz], or auto: 3 x the frequency below which 99 %% of each "
+        f"file's velocity power lies (printed with its reason) [default {DEFAULT_CUTOFF:g}]",
     )
     sig.add_argument(
         "--order",
@@ -268,7 +271,7 @@ def register(sub) -> None:
     )
     add_file_arguments(p)
     _add_fleet_arguments(p)
-    add_stream_arguments(p)
+    add_stream_arguments(p, rate=False)  # --rate: the simulation's, above
     p.set_defaults(func=command("manip_id.cli._identify"))
 
 

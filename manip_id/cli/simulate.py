@@ -111,6 +111,13 @@ def register(sub) -> None:
         f"[default {SIM_DEFAULTS['seed']}]",
     )
     p.add_argument(
+        "--transmission",
+        metavar="FILE.toml",
+        default=None,
+        help='the drive train (manip_id.robot.transmission): with signals = "motor" the logs are '
+        "motor-side (theta = R (q - offset), tau_motor = R^-T tau) [default: the profile's]",
+    )
+    p.add_argument(
         "--force",
         action="store_true",
         help="replace an --out folder that manip-id wrote [default: refuse]",

@@ -97,21 +97,23 @@ def check_shapes(shapes: dict[str, tuple[int, ...]], prefix: str = "") -> None:
     ``shapes`` maps names (``t`` of shape (N,), ``q``, ``dq``, ``tau``, optionally ``ddq``,
     each 2-D) to shapes, checked in that order; ``prefix`` starts every message (a file name).
     """
-    n = shapes["t"][0]
+    first = "t" if "t" in shapes else "q"  # a log without stamps: its positions
+    n = shapes[first][0]
     for name, shape in shapes.items():
         if shape[0] != n:
             raise DataError(
-                f"{prefix}t.shape=({n},) but {name}.shape={shape}: "
+                f"{prefix}{first}.shape={shapes[first]} but {name}.shape={shape}: "
                 "every array needs one row per time stamp"
             )
-    nv = shapes["dq"][1]
+    ref = "dq" if "dq" in shapes else "tau"  # a log of positions only: its torques
+    nv = shapes[ref][1]
     for name in ("tau", "ddq"):
         if name in shapes and shapes[name][1] != nv:
-            raise DataError(f"{prefix}dq.shape={shapes['dq']} but {name}.shape={shapes[name]}")
+            raise DataError(f"{prefix}{ref}.shape={shapes[ref]} but {name}.shape={shapes[name]}")
     temp = shapes.get("temp")
     if temp is not None and (len(temp) > 2 or (len(temp) == 2 and temp[1] not in (1, nv))):
         raise DataError(
-            f"{prefix}dq.shape={shapes['dq']} but temp.shape={temp}: give one temperature "
+            f"{prefix}{ref}.shape={shapes[ref]} but temp.shape={temp}: give one temperature "
             "column per joint or one column for every joint"
         )
 

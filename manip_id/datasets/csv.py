@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from .._numba import note_compile
-from ..errors import DataError, shorten
+from ..errors import DataError, InputError, shorten
 from .core import Dataset, check_time
 from .layout import FIELDS, Layout
 
@@ -119,7 +119,7 @@ def resolve_columns(path: Path, columns: Mapping | None, width: int | None = Non
                 found = [i for i, h in enumerate(header) if h.startswith(name + "_")]
             if found:
                 idx[name] = found
-    missing = [n for n in ("t", "q", "tau") if n not in idx]
+    missing = [n for n in ("q", "tau") if n not in idx]  # no t: the source's rate
     if missing:
         layout = (
             "header t,q_<joint>...,dq_<joint>...,tau_<joint>..."
@@ -130,7 +130,7 @@ def resolve_columns(path: Path, columns: Mapping | None, width: int | None = Non
             f"{path}: cannot find column(s) for {', '.join(missing)} ({layout})"
             + ("" if header is None else _column_hint(header))
         )
-    if len(idx["t"]) != 1:
+    if "t" in idx and len(idx["t"]) != 1:
         raise DataError(f"{path}: 't' must be one column, got {len(idx['t'])}")
     if width is None:
         width = len(header) if header is not None else None
@@ -297,9 +297,13 @@ class CsvSource:
     format = "csv"
     n_rows = None
 
-    def __init__(self, path: Path, columns: Mapping | None = None):
+    def __init__(self, path: Path, columns: Mapping | None = None, rate: float | None = None):
         self.path = Path(path)
         self.columns = resolve_columns(self.path, columns)
+        #: the sampling rate [Hz] of a file without a time column: ``t_k = k / rate``
+        self.rate = time_rate(self.path, "t" in self.columns.index, rate)
+        #: whether dq is differentiated from q (the file has none)
+        self.derive_dq = self.columns.derive_dq
         self.layout = self.columns.layout
         self.joint_names = self.columns.joint_names
         #: data row (0-based) -> why it could not be read; such rows are NaN
@@ -400,8 +404,10 @@ class CsvSource:
         """Packed float64 rows ``start:stop``, about ``chunk`` at a time."""
         chunk = max(int(chunk), 3)
         packed: Iterator[np.ndarray] = (self._pack(tab) for _, tab in self._tables(chunk))
+        if self.rate is not None:
+            packed = stamped(packed, self.rate)
         if self.columns.derive_dq:
-            packed = _derive_dq(packed, self.layout, self.path)
+            packed = derive_velocity(packed, self.layout, self.path)
         row = 0
         for block in packed:
             k = block.shape[0]
@@ -413,7 +419,35 @@ class CsvSource:
                 return
 
 
-def _derive_dq(blocks: Iterator[np.ndarray], layout: Layout, path: Path) -> Iterator[np.ndarray]:
+def time_rate(path: Path, has_time: bool, rate: float | None) -> float | None:
+    """The rate [Hz] that stamps a file without a time field, None for one with it; a file
+    with neither is refused with one line saying so."""
+    if has_time:
+        return None
+    if rate is None:
+        raise DataError(
+            f"{path} has no time column (t or time): give its sampling rate "
+            "(--rate HZ on the command line, FileSpec(rate=HZ))"
+        )
+    rate = float(rate)
+    if not (np.isfinite(rate) and rate > 0):
+        raise InputError(f"the sampling rate must be a positive number [Hz], got {rate}")
+    return rate
+
+
+def stamped(blocks: Iterator[np.ndarray], rate: float) -> Iterator[np.ndarray]:
+    """``blocks`` with the time column set to ``t_k = k / rate`` [s] (k: the row from the
+    first of the file)."""
+    row = 0
+    for block in blocks:
+        block[:, 0] = np.arange(row, row + block.shape[0]) / rate
+        row += block.shape[0]
+        yield block
+
+
+def derive_velocity(
+    blocks: Iterator[np.ndarray], layout: Layout, path: Path
+) -> Iterator[np.ndarray]:
     """Fill the dq columns with ``numpy.gradient(q, t, edge_order=2)`` across blocks.
 
     Each block is differentiated with the last row of the previous block and
@@ -454,9 +488,10 @@ def _derive_dq(blocks: Iterator[np.ndarray], layout: Layout, path: Path) -> Iter
         cur = nxt
 
 
-def load_csv(path: Path, columns: Mapping | None = None) -> Dataset:
-    """The CSV dataset ``path`` in memory (see the module docstring)."""
-    src = CsvSource(path, columns)
+def load_csv(path: Path, columns: Mapping | None = None, rate: float | None = None) -> Dataset:
+    """The CSV dataset ``path`` in memory (see the module docstring); ``rate`` [Hz] stamps a
+    file without a time column."""
+    src = CsvSource(path, columns, rate)
     blocks = list(src.chunks(1 << 16))
     if src.malformed:  # read whole: refused (the streamed reader may drop them)
         raise DataError(src.malformed[min(src.malformed)])

@@ -36,6 +36,7 @@ def load_dataset(
     columns: Mapping | None = None,
     topic: str | None = None,
     joint_names=None,
+    rate: float | None = None,
 ) -> Dataset:
     """Load measurements from a file or folder, whole.
 
@@ -56,6 +57,8 @@ def load_dataset(
     topic: ROS bags only, the ``sensor_msgs/msg/JointState`` topic (default the only one).
     joint_names: ROS bags only, the joints to read, in order (default those of
         the first message).
+    rate: NPZ and CSV files without a time column: their sampling rate [Hz]
+        (``t_k = k / rate``); an NPZ file without ``dq`` has it from central differences.
 
     Raises
     ------
@@ -72,9 +75,9 @@ def load_dataset(
     if columns is not None and fmt != "csv":
         raise DataError(f"a column map applies to CSV files only, not to format {fmt!r}")
     if fmt == "npz":
-        return load_npz(path, memory_budget(cap=MEMORY_BUDGET))  # and half the free memory
+        return load_npz(path, memory_budget(cap=MEMORY_BUDGET), rate)  # and half the free memory
     if fmt == "csv":
-        return load_csv(path, columns)
+        return load_csv(path, columns, rate)
     if fmt == "rosbag":
         src = BagSource(path, topic, joint_names)
         try:

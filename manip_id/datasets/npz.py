@@ -34,9 +34,10 @@ import numpy as np
 
 from ..errors import DataError
 from .core import Dataset, check_shapes
+from .csv import derive_velocity, time_rate
 from .layout import FIELDS, Layout
 
-REQUIRED = ("t", "q", "dq", "tau")
+REQUIRED = ("q", "tau")  # t: or a rate; dq: or differentiated
 
 
 @dataclass(frozen=True)
@@ -113,8 +114,9 @@ def inspect_npz(path: Path, max_bytes: int | None = None) -> tuple[dict[str, Npy
     missing = [k for k in REQUIRED if k not in members]
     if missing:
         raise DataError(
-            f"{path} lacks array(s) {', '.join(missing)}; an NPZ dataset holds t, q, dq, tau "
-            "and optionally ddq, temp, joint_names "
+            f"{path} lacks array(s) {', '.join(missing)}; an NPZ dataset holds q, tau, t (or "
+            "a sampling rate), dq (or it is differentiated) and optionally ddq, temp, "
+            "joint_names "
             f"(found {', '.join(sorted(members)) or 'none'})"
         )
     unknown = sorted(set(members) - {*FIELDS, "joint_names"})
@@ -141,7 +143,12 @@ def inspect_npz(path: Path, max_bytes: int | None = None) -> tuple[dict[str, Npy
                 f"{path}: {name} must have {want} dimension(s), got {name}.shape={m.shape}"
             )
     check_shapes({name: members[name].shape for name in FIELDS if name in members}, f"{path}: ")
-    n, nv = members["t"].shape[0], members["dq"].shape[1]
+    n, nv = members["q"].shape[0], members["tau"].shape[1]
+    if "dq" not in members and members["q"].shape[1] != nv:
+        raise DataError(
+            f"{path}: no dq array, and q ({members['q'].shape[1]} columns) cannot be "
+            f"differentiated into {nv} velocities"
+        )
     temp = members["temp"].shape if "temp" in members else None
     n_temp = 0 if temp is None else (temp[1] if len(temp) == 2 else 1)
     layout = Layout(nq=members["q"].shape[1], nv=nv, has_ddq="ddq" in members, n_temp=n_temp)
@@ -201,10 +208,14 @@ class NpzSource:
 
     format = "npz"
 
-    def __init__(self, path: Path, fortran_budget: int = 256 * 2**20):
+    def __init__(self, path: Path, fortran_budget: int = 256 * 2**20, rate: float | None = None):
         self.path = Path(path)
         self.members, self.layout = inspect_npz(self.path)
-        self.n_rows = self.members["t"].shape[0]
+        self.n_rows = self.members["q"].shape[0]
+        #: the rate [Hz] stamping a file without ``t`` (``t_k = k / rate``), else None
+        self.rate = time_rate(self.path, "t" in self.members, rate)
+        #: whether dq is differentiated from q (the file has none)
+        self.derive_dq = "dq" not in self.members
         self.joint_names = None
         with zipfile.ZipFile(self.path) as zf:  # deflated members cost a decompression per pass
             infos = zf.infolist()
@@ -226,8 +237,28 @@ class NpzSource:
                         self._whole[name] = np.lib.format.read_array(fh, allow_pickle=False)
 
     def chunks(self, chunk: int, start: int = 0, stop: int | None = None) -> Iterator[np.ndarray]:
-        """Packed float64 rows ``start:stop`` (columns of :class:`Layout`), ``chunk`` at a time."""
+        """Packed float64 rows ``start:stop`` (columns of :class:`Layout`), ``chunk`` at a time.
+
+        Without ``t``: ``t_k = k / rate``; without ``dq``: ``numpy.gradient(q, t)`` across
+        blocks, as for a CSV file (read from one row before ``start``)."""
         stop = self.n_rows if stop is None else min(stop, self.n_rows)
+        if not self.derive_dq:
+            yield from self._chunks(chunk, start, stop)
+            return
+        chunk = max(int(chunk), 3)
+        lo = max(start - 1, 0)  # one row before: the central difference of row ``start``
+        hi = min(stop + 1, self.n_rows)
+        blocks = derive_velocity(self._chunks(chunk, lo, hi), self.layout, self.path)
+        row = lo
+        for block in blocks:
+            k = block.shape[0]
+            a, b = max(start - row, 0), min(stop - row, k)
+            row += k
+            if b > a:
+                yield block[a:b]
+
+    def _chunks(self, chunk: int, start: int, stop: int) -> Iterator[np.ndarray]:
+        """The stored rows ``start:stop`` packed (t and dq filled or left NaN)."""
         names = [f for f in FIELDS if f in self.members]
         with zipfile.ZipFile(self.path) as zf:
             handles: dict[str, IO[bytes]] = {}
@@ -246,7 +277,9 @@ class NpzSource:
                     fh.seek(m.header_size + start * m.row_bytes)
                 for s in range(start, stop, chunk):
                     k = min(chunk, stop - s)
-                    out = np.empty((k, self.layout.width))
+                    out = np.full((k, self.layout.width), np.nan)
+                    if self.rate is not None:
+                        out[:, 0] = np.arange(s, s + k) / self.rate
                     for name in names:
                         cols = self.layout.slices[name]
                         if name in self._whole:
@@ -268,9 +301,26 @@ class NpzSource:
                     fh.close()
 
 
-def load_npz(path: Path, max_bytes: int | None = None) -> Dataset:
-    """The NPZ dataset ``path`` in memory (headers checked first, see :func:`inspect_npz`)."""
-    inspect_npz(path, max_bytes)
+def load_npz(path: Path, max_bytes: int | None = None, rate: float | None = None) -> Dataset:
+    """The NPZ dataset ``path`` in memory (headers checked first, see :func:`inspect_npz`);
+    ``rate`` [Hz] stamps a file without ``t`` (a file without ``dq`` has it differentiated)."""
+    members, layout = inspect_npz(path, max_bytes)
+    if "t" not in members or "dq" not in members:
+        src = NpzSource(path, rate=rate)
+        f = layout.unpack(np.vstack(list(src.chunks(1 << 16))))
+        ds = Dataset(
+            t=f["t"],
+            q=f["q"],
+            dq=f["dq"],
+            tau=f["tau"],
+            ddq=f.get("ddq"),
+            temp=f.get("temp"),
+            joint_names=src.joint_names,
+            meta={"source": str(path)},
+        )
+        if src.derive_dq:
+            ds.meta["dq"] = "central differences of q"
+        return ds
     try:
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
+from ..robot.transmission import Transmission, load_transmission
 from .adjust import check_time_unit
 
 _NUM = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
@@ -98,6 +99,11 @@ class FileSpec:
         :mod:`~.adjust`.
     delay: lag [s] of the torque stream behind the motion stream, one value or one per
         joint; the rows pair the motion of ``t`` with the torque of ``t + delay``.
+    rate: sampling rate [Hz] of a file without a time column (``t_k = k / rate``); a
+        file with one keeps its stamps.
+    transmission: the drive train (:class:`~manip_id.robot.transmission.Transmission`); with
+        ``signals = "motor"`` the file's positions, velocities, accelerations and torques
+        are motor-side and are converted to the joint side as they are read.
     """
 
     path: Path
@@ -107,8 +113,16 @@ class FileSpec:
     topic: str | None = None
     time_unit: str | None = None
     delay: float | tuple[float, ...] | None = None
+    rate: float | None = None
+    transmission: Transmission | None = field(default=None, compare=False)
 
     def __post_init__(self):
+        if self.rate is not None:
+            rate = float(self.rate)
+            if not (math.isfinite(rate) and rate > 0):
+                raise InputError(f"the sampling rate must be a positive number [Hz], got {rate}")
+            object.__setattr__(self, "rate", rate)
+        object.__setattr__(self, "transmission", load_transmission(self.transmission))
         object.__setattr__(self, "path", Path(self.path).expanduser())
         object.__setattr__(self, "time_unit", check_time_unit(self.time_unit))
         d = self.delay

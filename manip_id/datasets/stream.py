@@ -29,6 +29,7 @@ import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -45,6 +46,9 @@ from .panda import PANDA_FILES, is_panda_log, load_panda_gaz2019
 from .replay import RowCache
 from .rosbag import BagSource, is_bag
 from .spec import FileSpec, Window
+
+if TYPE_CHECKING:
+    from ..robot.transmission import Transmission
 
 #: Rows per block read from a file.
 READ_CHUNK = 1 << 15
@@ -128,10 +132,39 @@ def open_source(spec: FileSpec, joint_names=None, cache: RowCache | None = None)
     src = _raw_source(spec, fmt, joint_names)
     if cache is not None:
         src = cache.wrap(_source_key(spec, fmt, joint_names), src)
-    if spec.time_unit is None and spec.delay is None:
-        return src
-    delay = delay_vector(spec.delay, src.layout.nv, f"the delay of {spec.label}")
-    return AdjustedSource(src, TIME_UNITS[spec.time_unit or "s"], delay)
+    if spec.time_unit is not None or spec.delay is not None:
+        delay = delay_vector(spec.delay, src.layout.nv, f"the delay of {spec.label}")
+        src = AdjustedSource(src, TIME_UNITS[spec.time_unit or "s"], delay)
+    tr = spec.transmission
+    if tr is not None and tr.signals == "motor":
+        src = MotorSideSource(src, tr)
+    return src
+
+
+class MotorSideSource:
+    """A source whose rows are motor-side, converted to the joint side as they are read
+    (:meth:`~manip_id.robot.transmission.Transmission.convert_rows`: ``q = R^-1 theta + offset``,
+    ``dq = R^-1 dtheta``, ``ddq = R^-1 ddtheta``, ``tau = R^T tau_motor``)."""
+
+    def __init__(self, inner, transmission: Transmission):
+        lay = inner.layout
+        if lay.nq != transmission.n or lay.nv != transmission.n:
+            raise DataError(
+                f"{inner.path}: the transmission has {transmission.n} motors but the log has "
+                f"{lay.nq} positions and {lay.nv} velocities"
+            )
+        self.inner, self.transmission = inner, transmission
+        self.path, self.format, self.layout = inner.path, inner.format, lay
+        self.joint_names = inner.joint_names
+        self.n_rows = inner.n_rows
+        self.malformed = getattr(inner, "malformed", {})
+        self.compressed = getattr(inner, "compressed", False)
+        self.derive_dq = getattr(inner, "derive_dq", False)
+
+    def chunks(self, chunk: int, start: int = 0, stop: int | None = None) -> Iterator[np.ndarray]:
+        slices = self.layout.slices
+        for block in self.inner.chunks(chunk, start, stop):
+            yield self.transmission.convert_rows(block, slices)
 
 
 def _source_key(spec: FileSpec, fmt: str, joint_names) -> tuple:
@@ -141,15 +174,15 @@ def _source_key(spec: FileSpec, fmt: str, joint_names) -> tuple:
     st = path.stat()
     columns = None if spec.columns is None else repr(sorted(dict(spec.columns).items(), key=str))
     names = None if fmt != "rosbag" or joint_names is None else tuple(joint_names)
-    return (str(path), st.st_size, st.st_mtime_ns, fmt, columns, spec.topic, names)
+    return (str(path), st.st_size, st.st_mtime_ns, fmt, columns, spec.topic, names, spec.rate)
 
 
 def _raw_source(spec: FileSpec, fmt: str, joint_names):
     path = spec.path
     if fmt == "npz":
-        return NpzSource(path)
+        return NpzSource(path, rate=spec.rate)
     if fmt == "csv":
-        return CsvSource(path, spec.columns)
+        return CsvSource(path, spec.columns, spec.rate)
     if fmt == "rosbag":
         return BagSource(path, spec.topic, joint_names)
     return MemorySource(load_panda_gaz2019(path), path, "panda_gaz2019")

@@ -15,6 +15,9 @@
   whose ``rnea`` is the law's load torque (the URDF's nominal ones, not the exported);
 - ``active_joints``, ``locked_joints`` (name -> position), ``joint_terms``: how the robot
   was identified;
+- ``transmission`` and ``motor_terms`` (a robot with a drive train,
+  :mod:`manip_id.robot.transmission`): the matrix ``R``, offset, signals and motor terms, and the
+  identified motor terms by name (``motor6.Ia``: no URDF field);
 - ``composites``: per body, the link holding the identified composite, the links it
   carries and their share (:mod:`manip_id.export.links`);
 - ``meshes``: how mesh references were written and those that did not resolve;
@@ -101,6 +104,10 @@ def sidecar_document(
             [float(v) for v in load.inertias[i].toDynamicParameters()]
             for i in range(1, load.njoints)
         ]
+    tr = robot.transmission
+    if tr is not None:  # the drive train, and the motor terms by name (no URDF field)
+        doc["transmission"] = tr.to_dict()
+        doc["motor_terms"] = {n: values[n] for n in tr.parameter_names if n in values}
     if provenance:
         doc["provenance"] = dict(provenance)
     return doc

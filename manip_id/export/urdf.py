@@ -162,6 +162,30 @@ def _set_dynamics(robot, tree: LinkTree, theta: np.ndarray) -> None:
             dyn.set("friction", _fmt(fc))
 
 
+def _set_transmissions(robot, root: ET.Element) -> None:
+    """One ``<transmission>`` per joint with its ``mechanicalReduction`` (ROS
+    ``transmission_interface/SimpleTransmission``) when the robot's ``R`` is diagonal; a
+    coupled ``R`` and the motor terms have no URDF form: the sidecar holds them. Existing
+    transmissions of the same name are replaced."""
+    tr = robot.transmission
+    if tr is None or not tr.is_diagonal:
+        return
+    for j, (joint, motor, ratio) in enumerate(
+        zip(robot.dof_names, tr.motor_names, tr.ratios, strict=True)
+    ):
+        name = f"{joint}_transmission"
+        for old in root.findall("transmission"):
+            if old.get("name") == name:
+                root.remove(old)
+        el = ET.SubElement(root, "transmission", name=name)
+        ET.SubElement(el, "type").text = "transmission_interface/SimpleTransmission"
+        ET.SubElement(el, "joint", name=joint)
+        act = ET.SubElement(el, "actuator", name=motor)
+        ET.SubElement(act, "mechanicalReduction").text = _fmt(float(ratio))
+        if tr.q0[j] != 0.0:  # no URDF field: a comment for the reader (the sidecar has it)
+            el.append(ET.Comment(f" offset {_fmt(float(tr.q0[j]))} rad: see the sidecar "))
+
+
 @dataclass(frozen=True)
 class ExportedTree:
     """The rewritten URDF tree, its source and what the rewriting decided."""
@@ -225,6 +249,7 @@ def exported_tree(
                 nominal = _scaled_nominal(tree.links[link], comp.share)
                 set_inertial(tree.links[link], *nominal)
     _set_dynamics(robot, tree, theta)
+    _set_transmissions(robot, root)
     unresolved = rewrite_meshes(root, src.parent, robot.package_dirs, meshes)
     return ExportedTree(src, root, tree, composites, unresolved, meshes)
 

@@ -193,6 +193,14 @@ def _scan(robot: Robot, specs, vspecs, fopts: FileOptions, run: RunOptions, timi
     return SimpleNamespace(specs=specs, vspecs=vspecs, scans=scans, source=source, audit=audit)
 
 
+def with_transmission(robot: Robot, specs):
+    """``specs`` with the robot's drive train (its profile's or ``--transmission``) on each
+    spec that names none (None stays None)."""
+    if specs is None or robot.transmission is None:
+        return specs
+    return [s if s.transmission else replace(s, transmission=robot.transmission) for s in specs]
+
+
 def shared_files(specs, vspecs) -> dict:
     """``{"validation_in_training": [[validation label, training label], ...]}`` for each
     validation file that is also a training file (the same file, both whole or with the
@@ -211,7 +219,7 @@ def _audit_options(options: PreprocessOptions) -> AuditOptions:
         torque_scale=options.torque_scale,
         drop_bad_rows=options.drop_bad_rows,
         standstill=options.velocity_deadband,
-        cutoff=options.cutoff,
+        cutoff=options.cutoff if isinstance(options.cutoff, float) else None,  # auto: its own
     )
 
 
@@ -268,11 +276,16 @@ def _raw_parts(specs, vspecs, train, valid, options) -> list:
         key = (str(spec.path), spec.topic)
         if key not in raws:
             raws[key] = load_dataset(
-                spec.path, format=spec.format, columns=spec.columns, topic=spec.topic
+                spec.path,
+                format=spec.format,
+                columns=spec.columns,
+                topic=spec.topic,
+                rate=spec.rate,
             )
-        raw = raws[key]
+        raw, tr = raws[key], spec.transmission
+        tau = raw.tau if tr is None or tr.signals == "joint" else tr.to_joint(tau_motor=raw.tau)[3]
         scale = 1.0 if options.torque_scale is None else np.asarray(options.torque_scale)
-        parts.append((name, proc, raw.t, raw.tau * scale))
+        parts.append((name, proc, raw.t, tau * scale))
     return parts
 
 
@@ -322,6 +335,7 @@ def files_build(
     specs = file_specs(files, "data", fopts.window)
     records: dict | None
     vspecs = None if validation is None else file_specs(validation, "validation", fopts.window)
+    specs, vspecs = with_transmission(robot, specs), with_transmission(robot, vspecs)
     if fopts.distributed(run) or opts.model.name != "dynamic":
         return _distributed(robot, specs, vspecs, base, settings, opts, fopts)
     if fopts.split is not None and (len(specs) != 1 or vspecs is not None):
@@ -334,6 +348,12 @@ def files_build(
     timings: dict[str, float] = {}
     options = fopts.preprocess
     f = _scan(robot, specs, vspecs, fopts, run, timings)
+    for s in f.specs + (f.vspecs or []):
+        scan = f.scans[s]
+        if scan.cutoff is not None:
+            run.say(f"{s.label}: cut-off {scan.cutoff.cutoff:.3g} Hz ({scan.cutoff.reason})")
+        if scan.derived_velocity:
+            run.say(f"{s.label}: no velocities in the file: dq differentiated from the filtered q")
     check_scans_temperature(robot, [f.scans[s] for s in f.vspecs or []])
     robot = reference_from_scans(robot, [f.scans[s] for s in f.specs])  # the law's T0
     if (text := reference_text(robot)) is not None:

@@ -89,7 +89,8 @@ class PreprocessOptions:
     ----------
     cutoff
         low-pass cut-off [Hz]; None: :data:`~manip_id.signals.DEFAULT_CUTOFF`
-        when the file has no ddq, no filtering when it has.
+        when the file has no ddq, no filtering when it has; ``"auto"``: chosen per file
+        from its velocity power spectrum (:mod:`manip_id.signals.bandwidth`).
     order
         Butterworth order of the one-way filter.
     trim
@@ -117,7 +118,7 @@ class PreprocessOptions:
         rows per block of the blocked preprocessing.
     """
 
-    cutoff: float | None = None
+    cutoff: float | str | None = None
     order: int = DEFAULT_ORDER
     trim: float | None = None
     decimate: int = 1
@@ -141,7 +142,12 @@ class PreprocessOptions:
             raise InputError(f"decimate must be a positive integer, got {self.decimate}")
         if self.trim is not None and not self.trim >= 0:
             raise InputError(f"trim must be >= 0 seconds, got {self.trim}")
-        if self.cutoff is not None and not self.cutoff > 0:
+        if isinstance(self.cutoff, str):
+            if self.cutoff != "auto":
+                raise InputError(
+                    f"the cut-off must be 'auto' or a frequency [Hz], got {self.cutoff!r}"
+                )
+        elif self.cutoff is not None and not self.cutoff > 0:
             raise InputError(f"the cut-off must be positive [Hz], got {self.cutoff}")
 
     def preprocesses(self, has_ddq: bool) -> bool:

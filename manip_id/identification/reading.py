@@ -22,7 +22,7 @@ from __future__ import annotations
 import os
 import tempfile
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -54,6 +54,7 @@ from ..signals import (
     read_start,
     uniform_grid,
 )
+from ..signals.bandwidth import CutoffChoice, VelocitySpectrum
 from .options import PreprocessOptions
 
 
@@ -74,6 +75,10 @@ class FileScan:
     counts: RowCounts
     spill: str | None = None
     temperature: TemperatureStats | None = None  # the temp field's sums (None: no field)
+    #: the cut-off chosen from the file (``cutoff="auto"``), else None
+    cutoff: CutoffChoice | None = None
+    #: whether the file has no velocities (dq differentiated from the positions)
+    derived_velocity: bool = False
 
     def discard(self) -> None:
         """Remove the spill file (the scanned rows of a slow format), if any."""
@@ -162,6 +167,7 @@ def scan_file(
         standstill_eps=options.velocity_deadband,
     )
     counts = RowCounts()
+    spectrum = VelocitySpectrum(robot.nv) if options.cutoff == "auto" else None
     temp = src.layout.slices.get("temp")
     temperature: TemperatureStats | None = None
     spill = fh = None
@@ -172,6 +178,8 @@ def scan_file(
     try:
         for rows in read_rows(src, spec, options, counts):
             qa.add(rows)
+            if spectrum is not None:
+                spectrum.add(rows[:, 0], robot.dofs.angles(rows[:, src.layout.slices["q"]]))
             if temp is not None and rows.shape[0]:  # the sums of the reference T0
                 part = TemperatureStats.of(rows[:, temp])
                 temperature = part if temperature is None else temperature + part
@@ -212,7 +220,18 @@ def scan_file(
         counts=counts,
         spill=spill,
         temperature=temperature,
+        cutoff=None if spectrum is None else spectrum.choose(options.decimate, robot.dof_names),
+        derived_velocity=_derived_velocity(src),
     )
+
+
+def _derived_velocity(src) -> bool:
+    """Whether a source (or the one it wraps) differentiates dq from q (the file has none)."""
+    while src is not None:
+        if getattr(src, "derive_dq", False):
+            return True
+        src = getattr(src, "inner", None)
+    return False
 
 
 def _spilled_rows(path: str, width: int, chunk: int, start: int = 0) -> Iterator[np.ndarray]:
@@ -278,14 +297,20 @@ def iter_processed(
     start = max(int(start), 0)
     if not options.preprocesses(lay.has_ddq):
         return None, _checked_rows(src, scan, options, start)
+    cutoff, reason = options.cutoff, ""
+    if scan.cutoff is not None:  # "auto": the file's own
+        cutoff, reason = scan.cutoff.cutoff, scan.cutoff.reason
+    elif cutoff is None or cutoff == "auto":
+        cutoff = DEFAULT_CUTOFF
     try:
         signal_options = SignalOptions(
-            cutoff=DEFAULT_CUTOFF if options.cutoff is None else options.cutoff,
+            cutoff=float(cutoff),
             order=options.order,
             rate=options.rate,
             decimate=options.decimate,
             trim=options.trim,
-            velocity=options.velocity,
+            # a file without velocities: dq from the filtered q, as ddq from dq
+            velocity="differentiate" if scan.derived_velocity else options.velocity,
             filter_torque=options.filter_torque,
         )
         stats = StreamStats(scan.n, scan.t_first, scan.t_last, scan.dt_min, scan.dt_max)
@@ -302,6 +327,8 @@ def iter_processed(
             start=start,
             first_row=first,
         )
+        if reason:
+            settings = replace(settings, cutoff_reason=reason)
     except (InputError, DataError) as exc:
         raise type(exc)(f"{spec.label}: {exc}") from exc
     return settings, blocks

@@ -64,6 +64,7 @@ from .sources import (
     reference_configuration,
     resolve_profile,
 )
+from .transmission import MotorLayout, Transmission, load_transmission
 from .urdf_structure import check_no_active_mimic
 
 __all__ = [
@@ -100,6 +101,7 @@ class Robot:
         origin: RobotSource | None = None,
         reduction: Reduction | None = None,
         profile: RobotProfile | None = None,
+        transmission: Transmission | None = None,
     ):
         kinds = [model.joints[i].shortname() for i in range(1, model.njoints)]
         floating = [k for k in kinds if k in FLOATING_JOINTS]
@@ -138,8 +140,15 @@ class Robot:
                     )
         if terms.shapes is not None:
             terms.shapes.check_size(self.nv, f"robot {name!r}")
-        self.layout = ParameterLayout(
-            self.joint_names, self.dofs, terms.enabled, terms.shapes, terms.mask(self.nv)
+        if transmission is not None:
+            transmission.check_size(model.nv, f"robot {name!r}")
+        #: the drive train (:mod:`manip_id.robot.transmission`): motor-side logs, motor terms
+        self.transmission = transmission
+        args = (self.joint_names, self.dofs, terms.enabled, terms.shapes, terms.mask(self.nv))
+        self.layout: ParameterLayout = (
+            MotorLayout(*args, motors=transmission)
+            if transmission is not None and transmission.n_parameters
+            else ParameterLayout(*args)
         )
 
     # ----------------------------------------------------------------- sizes
@@ -240,7 +249,13 @@ class Robot:
         for t, v in self.settings.get("joint_term_values", {}).items():
             per_term[t] = np.asarray(v, dtype=float)
         joint = [[per_term.get(t, zero)[dof] for t in self.terms.enabled] for dof in range(self.nv)]
-        return np.concatenate([np.concatenate(rigid), np.asarray(joint, dtype=float).ravel()])
+        tr = self.transmission
+        motor = np.zeros(0 if tr is None else tr.n_parameters)  # none, unless identified
+        known = self.settings.get("motor_term_values")
+        if known is not None and len(known) == motor.size:
+            motor = np.asarray(known, dtype=float)
+        parts = [np.concatenate(rigid), np.asarray(joint, dtype=float).ravel(), motor]
+        return np.concatenate(parts)
 
     def with_terms(self, terms: JointTerms) -> Robot:
         """The same robot with other joint terms (a new :class:`Robot`; the model is shared)."""
@@ -253,8 +268,24 @@ class Robot:
             origin=self._origin,
             reduction=self._reduction,
             profile=self.profile,
+            transmission=self.transmission,
         )
         out.settings = dict(self.settings)  # an identified robot's offsets, load inertias
+        return out
+
+    def with_transmission(self, transmission) -> Robot:
+        """The same robot with another drive train (a :class:`~manip_id.robot.transmission.
+        Transmission`, a table or a ``.toml`` path; None: none); the model is shared."""
+        out = Robot(
+            self.name,
+            self.model,
+            self.terms,
+            origin=self._origin,
+            reduction=self._reduction,
+            profile=self.profile,
+            transmission=load_transmission(transmission),
+        )
+        out.settings = dict(self.settings)
         return out
 
     def parameter_index(self, name: str) -> int:
@@ -484,6 +515,10 @@ def load_robot(
         Default: ``robots/NAME.toml`` for a robot loaded by name when it exists; a URDF
         loaded by path takes none (its file name decides nothing). Explicit arguments
         override the profile.
+
+    The drive train (:mod:`manip_id.robot.transmission`) is the sidecar's (``identified``), else
+    the profile's ``[transmission]``, else none; :meth:`Robot.with_transmission` gives
+    another.
     """
     selection = (
         active_joints
@@ -529,7 +564,17 @@ def load_robot(
         origin=src,
         reduction=Reduction(full_model, tuple(locked_ids), qref) if locked_ids else None,
         profile=prof,
+        transmission=_transmission_of(sidecar, prof),
     )
     if sidecar is not None:
         apply_identified(robot, sidecar)
     return robot
+
+
+def _transmission_of(sidecar, profile) -> Transmission | None:
+    """The sidecar's transmission, else the profile's, else None."""
+    if sidecar is not None and sidecar.get("transmission"):
+        return Transmission.from_dict(sidecar["transmission"], source="sidecar")
+    if profile is not None and profile.transmission is not None:
+        return Transmission.from_dict(profile.transmission, source=profile.source or profile.name)
+    return None

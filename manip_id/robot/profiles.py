@@ -27,6 +27,11 @@ is optional::
     [data.columns]                      # CSV column map (see manip_id.datasets)
     q = "q*"
 
+    [transmission]                      # the drive train (manip_id.robot.transmission)
+    matrix = [[100, 0], [0, 50]]        # theta = R (q - offset)
+    signals = "motor"                   # the logs are motor-side
+    motor_terms = ["inertia", "viscous", "coulomb"]
+
 A URDF loaded by path takes no profile unless one is named (``profile=`` or
 ``--profile``): its file name decides nothing.
 """
@@ -42,10 +47,11 @@ from typing import Any
 from .._io.reading import read_toml
 from ..errors import InputError, RobotError
 from .friction import FRICTION_KINDS
+from .transmission import Transmission
 
 #: Keys a profile may hold, per table ("" is the top level).
 _KEYS: dict[str, tuple[str, ...]] = {
-    "": ("description", "model", "joints", "excitation", "data"),
+    "": ("description", "model", "joints", "excitation", "data", "transmission"),
     "model": ("friction", "armature", "spring"),
     "joints": ("active", "locked"),
     "excitation": ("harmonics", "period", "margin", "acceleration_limit"),
@@ -115,6 +121,8 @@ class RobotProfile:
     excitation: ExcitationProfile = field(default_factory=ExcitationProfile)
     torque_scale: float | tuple[float, ...] | None = None
     columns: Mapping[str, Any] | None = None
+    #: the ``[transmission]`` table (:mod:`manip_id.robot.transmission`), checked, or None
+    transmission: Mapping[str, Any] | None = None
 
     def active_for(self, all_joints: list[str]) -> list[str] | None:
         """The active joints among ``all_joints`` this profile asks for (None: all).
@@ -200,7 +208,16 @@ def parse_profile(raw: Mapping[str, Any], *, name: str, source: str = "") -> Rob
         ),
         torque_scale=_positive_values(data, "torque_scale", where, positive=False),
         columns=_table(data, "columns", where) or None,
+        transmission=_transmission_table(raw, where),
     )
+
+
+def _transmission_table(raw: Mapping[str, Any], where: str) -> dict[str, Any] | None:
+    """The ``[transmission]`` table, checked by building it once, or None."""
+    if "transmission" not in raw:
+        return None
+    table = _table(raw, "transmission", where)
+    return Transmission.from_dict(table, source=where).to_dict()
 
 
 # ------------------------------------------------------------------ checking

@@ -105,6 +105,9 @@ class RegressorEvaluator:
         # flat indices into a (nv, p) block of the diagonal entries of each term
         rows = np.arange(self.nv) * self.p
         self._flat = [(t, rows + self.layout.joint_columns(t.name)) for t in self.layout.term_table]
+        tr = robot.transmission
+        self.motors = tr if tr is not None and tr.n_parameters else None  # motor-term columns
+        self.motor_start = self.n_rigid + nt * self.nv  # [-] (p: no motor terms)
         self._needs_angles = any(t.needs_angles for t in self.layout.term_table)
         self._load_model = robot.load_model  # the load law's rnea: the nominal inertias
         self._load_data = self._load_model.createData()
@@ -259,6 +262,8 @@ class RegressorEvaluator:
         ``vel`` is the velocity the friction terms see and ``acc`` the acceleration
         of the armature (``dq, ddq`` for Y(q, dq, ddq); ``w, v`` for Slotine-Li).
         """
+        if self.motors is not None:  # the motor terms, mapped to the joints by R^T
+            Y[..., self.motor_start :] = self.motors.columns(vel, acc)
         if not self.terms:
             return
         if Y.ndim == 2:  # one sample: a few flat writes into the diagonal entries
@@ -327,17 +332,20 @@ class RegressorEvaluator:
         """
         n, nv, nr = q.shape[0], self.nv, self.n_rigid
         columns = np.asarray(columns, dtype=np.intp)
-        joint_cols = columns[columns >= nr] - nr
+        ms = self.motor_start
+        motor_cols = columns[columns >= ms] - ms
+        joint_cols = columns[(columns >= nr) & (columns < ms)] - nr
         owners = [self.layout.owner(nr + int(c)) for c in joint_cols]
         jc_dof = [o.index for o in owners]
         jc_term = [self.terms.index(o.parameter) for o in owners]
         # in the wide buffer, joint-term column i of ``columns`` sits at nr + i
         wide_index = np.where(columns < nr, columns, 0)
-        wide_index[columns >= nr] = nr + np.arange(joint_cols.size)
+        n_extra = joint_cols.size + motor_cols.size  # joint terms, then motor terms
+        wide_index[columns >= nr] = nr + np.arange(n_extra)
         selections = [wide_index[np.asarray(sj, dtype=np.intp)] for sj in supports]
         size = min(chunk, max(n, 1))
-        wide = np.zeros((size, nv, nr + joint_cols.size))
-        flat = wide.reshape(size * nv, nr + joint_cols.size)
+        wide = np.zeros((size, nv, nr + n_extra))
+        flat = wide.reshape(size * nv, nr + n_extra)
         outs = [np.empty((size, sel.size)) for sel in selections]
         for start in self.sequential(range(0, n, chunk)):  # one path (hysteresis)
             stop = min(start + chunk, n)
@@ -353,6 +361,9 @@ class RegressorEvaluator:
                 vals = self.joint_values(qs, dqs, ddqs, None if temp is None else temp[s])
                 for i, (j, t) in enumerate(zip(jc_dof, jc_term, strict=True)):
                     wide[:size_k, j, nr + i] = vals[:, j, t]
+            if motor_cols.size and self.motors is not None:
+                mc = self.motors.columns(dqs, ddqs)
+                wide[:size_k, :, nr + joint_cols.size :] = mc[:, :, motor_cols]
             blocks = []
             for j in range(nv):
                 out = outs[j][:size_k]
@@ -559,7 +570,10 @@ def joint_torques(
     ``Ia ddq + fv dq + fc sign(dq) + fo + k q + ...`` for the enabled terms with the
     values in ``theta`` (shape (p,)). With ``ddq=None`` or ``armature=False`` the
     armature term is left out (for inverse and forward dynamics by Pinocchio, where
-    armature belongs in the mass matrix: see :meth:`Robot.with_parameters`); the
+    armature belongs in the mass matrix: see :meth:`Robot.with_parameters`). The motor
+    terms of a transmission (:mod:`manip_id.robot.transmission`) are added through ``R^T``; their
+    rotor inertia ``R^T diag(Ia) R ddq`` (not a Pinocchio armature when ``R`` couples
+    joints) is left out only with ``ddq=None``. The
     ``load`` law needs ``ddq``, the ``temperature`` law ``temp`` (module docstring).
     """
     theta = as_float_array(theta, "theta", ndim=1)
@@ -571,11 +585,16 @@ def joint_torques(
     acc = np.zeros_like(np.asarray(dq, dtype=float)) if ddq is None else ddq
     _, (q, dq, acc) = check_states(robot, q=q, dq=dq, ddq=acc)
     temp = check_temperature(robot, temp, dq)
+    out, motors = np.zeros_like(dq), ev.motors
+    if motors is not None:  # motor terms through R^T (Ia: its reflected inertia R^T Ia R ddq)
+        coef_m = theta[ev.motor_start :].reshape(motors.n, -1).copy()
+        coef_m[:, 0] *= ddq is not None or "Ia" not in motors.term_names  # Ia: the first
+        out += motors.torques(coef_m.ravel(), dq, acc)
     if not ev.terms:
-        return np.zeros_like(dq)
+        return out
     vals = ev.joint_values(q, dq, acc, temp)  # (..., nv, nt)
     coef = robot.layout.joint_block(theta)
     if (ddq is None or not armature) and "Ia" in ev.terms:
         coef = coef.copy()
         coef[:, ev.terms.index("Ia")] = 0.0
-    return np.einsum("...jt,jt->...j", vals, coef)
+    return out + np.einsum("...jt,jt->...j", vals, coef)

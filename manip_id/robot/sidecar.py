@@ -214,6 +214,10 @@ def apply_identified(robot, sidecar: dict) -> None:
         if any(t in joints.get(d, {}) for d in robot.dof_names)
     }
     robot.settings["joint_term_values"] = values
+    motor = sidecar.get("motor_terms")
+    if motor and robot.transmission is not None:  # the identified motor terms, by name
+        names = robot.transmission.parameter_names
+        robot.settings["motor_term_values"] = [float(motor.get(n, 0.0)) for n in names]
     blocks = sidecar.get("load_inertias")
     if blocks is not None:
         blocks = np.asarray(blocks, dtype=float)

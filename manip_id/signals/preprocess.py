@@ -34,6 +34,8 @@ class PreprocessSettings:
     filter_torque: bool
     trim: int
     decimate: int
+    #: how the cut-off was chosen ("" : given; see :mod:`~manip_id.signals.bandwidth`)
+    cutoff_reason: str = ""
 
 
 @dataclass(frozen=True)

@@ -226,6 +226,11 @@ class ExcitationObjective:
         self._joint_derivs = []
         for pos in np.flatnonzero(~rigid):
             owner = robot.layout.owner(int(self.base[pos]))
+            if owner.kind == "motor":  # columns of R^T: no analytic derivative here
+                raise InputError(
+                    "excitation design does not take motor terms (manip_id.robot.transmission): "
+                    "design it on the robot without them (Robot.with_transmission(None))"
+                )
             if owner.parameter in kind_of:
                 self._joint_derivs.append((int(pos), owner.index, kind_of[owner.parameter]))
         self.evaluations = 0
