@@ -66,7 +66,7 @@ def coulomb_width(robot: Robot, theta, q, dt: float, eps: float = DEFAULT_EPS) -
     mjj = np.min([np.diag(pin.crba(model, data, qk)) for qk in qs], axis=0)
     fc = np.abs(np.asarray(theta, float)[robot.layout.joint_columns("fc")])
     with np.errstate(divide="ignore", invalid="ignore"):
-        need = np.where(mjj > 0, dt * fc / mjj, np.inf)
+        need = np.where(mjj > 0, dt * fc / mjj, 0.0)  # M_jj <= 0: no model to integrate
     return np.maximum(out, need)
 
 
