@@ -6,7 +6,15 @@ state the model is rolled out (:mod:`.rollout`, the measured torque as input) an
 
     J(theta_b) = sum_windows sum_k ||q_sim,k - q_k||^2 + w^2 ||dq_sim,k - dq_k||^2
 
-(``w`` [s] weighs velocity errors against position errors). The residuals' exact
+(``w`` [s] weighs velocity errors against position errors), plus the inverse-dynamics
+least-squares cost of the same data, ``T(theta_b) = ||Y_b theta_b - tau||^2``, weighted
+so that the torque fit cannot be traded away::
+
+    F(theta_b) = J(theta_b) + mu T(theta_b),     mu = rho J(theta_0) / T(theta_0)
+
+From the least-squares start (the minimum of T) every accepted step lowers F, so
+``T <= T(theta_0) (1 + 1/rho)``: the training torque error grows by at most
+``sqrt(1 + 1/rho)`` (1.095 for the default rho = 5). The residuals' exact
 parameter sensitivities come from differentiating the integrator step
 (:meth:`.forward.ForwardModel.linearization`)::
 
@@ -29,6 +37,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..errors import InputError
+from ..regressor import iter_regressor
 from ..robot import Robot
 from .forward import DEFAULT_EPS, ForwardModel, coulomb_width, standard_with_base
 from .result import IdentificationResult, RelativeError
@@ -53,6 +62,8 @@ class RefineOptions:
     velocity_weight: ``w`` [s] of the velocity residuals (default the horizon).
     eps: smallest Coulomb regularization width [rad/s or m/s] (:mod:`.forward`).
     tolerance: stop when an accepted step lowers the cost by less than this fraction.
+    torque_weight: ``rho`` of the inverse-dynamics term (module docstring); 0: pure output
+        error.
     """
 
     horizon: float = DEFAULT_HORIZON
@@ -61,12 +72,15 @@ class RefineOptions:
     velocity_weight: float | None = None
     eps: float = DEFAULT_EPS
     tolerance: float = 1e-4
+    torque_weight: float = 5.0
 
     def __post_init__(self):
         if not (np.isfinite(self.horizon) and self.horizon > 0):
             raise InputError(f"the refinement horizon must be > 0 seconds, got {self.horizon}")
         if self.windows is not None and (int(self.windows) != self.windows or self.windows < 1):
             raise InputError(f"the number of windows must be >= 1, got {self.windows}")
+        if not (np.isfinite(self.torque_weight) and self.torque_weight >= 0):
+            raise InputError(f"the torque weight must be >= 0, got {self.torque_weight}")
         if int(self.iterations) != self.iterations or self.iterations < 1:
             raise InputError(f"the number of iterations must be >= 1, got {self.iterations}")
 
@@ -113,7 +127,9 @@ def _cost(fm: ForwardModel, plan, w: float) -> float:
     for log, starts, steps in plan:
         for s in starts:
             q, v = simulate(fm, log, s, steps)
-            e = np.concatenate([q[1:] - log.q[s + 1 : s + steps + 1], w * (v[1:] - log.dq[s + 1 : s + steps + 1])])
+            e = np.concatenate(
+                [q[1:] - log.q[s + 1 : s + steps + 1], w * (v[1:] - log.dq[s + 1 : s + steps + 1])]
+            )
             c = float(np.sum(e**2))
             if not np.isfinite(c):
                 return np.inf
@@ -123,16 +139,33 @@ def _cost(fm: ForwardModel, plan, w: float) -> float:
 
 def _plan(logs: list[Log], options: RefineOptions, r: int) -> tuple[list, int, int]:
     steps = max(1, int(round(options.horizon / logs[0].dt)))
-    most = sum(max(0, (len(lg.t) - 1) // steps) for lg in logs)
-    if most < 1:
+    room = sum(max(0, len(lg.t) - steps) for lg in logs)  # start points with a full window
+    if room < 1:
         raise InputError(f"the refinement horizon of {steps} steps is longer than the data")
-    n = options.windows or int(np.clip(STEP_BUDGET // steps, 2 * r, most))
-    n = min(n, most)
+    n = options.windows or max(STEP_BUDGET // steps, 4 * r)
+    n = min(n, room)
     plan, total = [], sum(len(lg.t) for lg in logs)
     for lg in logs:
-        k = max(1, round(n * len(lg.t) / total))
-        plan.append((lg, start_points(len(lg.t), steps, k), steps))
+        if len(lg.t) > steps:
+            k = max(1, round(n * len(lg.t) / total))
+            plan.append((lg, start_points(len(lg.t), steps, k), steps))
     return plan, steps, sum(len(p[1]) for p in plan)
+
+
+def torque_sums(robot: Robot, base, datasets) -> tuple[np.ndarray, np.ndarray, float]:
+    """``A = Y_b^T Y_b`` (r, r), ``b = Y_b^T tau`` (r,), ``tau^T tau`` of the inverse-dynamics
+    least squares on ``datasets``, chunk by chunk."""
+    r = base.n_base
+    A, b, zz = np.zeros((r, r)), np.zeros(r), 0.0
+    for d in datasets:
+        tau = np.asarray(d.tau, float)
+        for c in iter_regressor(robot, d.q, d.dq, d.ddq):
+            Yb = c.Y[:, :, base.independent].reshape(-1, r)
+            z = tau[c.start : c.stop].reshape(-1)
+            A += Yb.T @ Yb
+            b += Yb.T @ z
+            zz += float(z @ z)
+    return A, b, zz
 
 
 def _torque_error(result, robot, datasets) -> tuple[float, np.ndarray] | None:
@@ -144,6 +177,48 @@ def _torque_error(result, robot, datasets) -> tuple[float, np.ndarray] | None:
     return float(np.linalg.norm(err) / np.linalg.norm(tau)), np.linalg.norm(
         err, axis=0
     ) / np.linalg.norm(tau, axis=0)
+
+
+def _lm(start: np.ndarray, sums, cost, torque, options: RefineOptions):
+    """Levenberg-Marquardt on ``F = J + mu T`` (module docstring); returns ``(theta_b,
+    sums at it, cost of J and F before and after, iterations, accepted steps)``."""
+    A, b, zz, mu = torque
+
+    def T(tb):
+        return float(tb @ A @ tb - 2 * b @ tb + zz)
+
+    theta_b = start
+    cur = sums(theta_b)
+    if not np.isfinite(cur.cost):
+        raise InputError(
+            "the starting model does not simulate (a rollout diverged): its mass matrix is "
+            "not positive definite along the data; start from a consistent estimate "
+            "(--consistent)"
+        )
+    F0 = F = cur.cost + mu * T(theta_b)
+    J0, lam, it, accepted = cur.cost, 1e-3, 0, 0
+    for it in range(1, options.iterations + 1):
+        H = cur.H + mu * A
+        g = cur.g + mu * (A @ theta_b - b)
+        D = np.diag(H).copy()
+        D[D <= 0] = max(float(D.max()), 1.0) * 1e-12
+        cand, Fc = None, np.inf
+        while lam < 1e12:
+            cand = theta_b + np.linalg.solve(H + lam * np.diag(D), -g)
+            Fc = cost(cand) + mu * T(cand)
+            if Fc < F:
+                lam = max(lam / 3.0, 1e-9)
+                break
+            lam *= 4.0
+        if not Fc < F:
+            break
+        accepted += 1
+        gain = (F - Fc) / F
+        theta_b, F = cand, Fc
+        cur = sums(theta_b)
+        if gain < options.tolerance:
+            break
+    return theta_b, cur, (J0, cur.cost, F0, F, T(start), T(theta_b)), it, accepted
 
 
 def refine(
@@ -178,9 +253,9 @@ def refine(
     plan, steps, n_windows = _plan(logs, options, r)
     dt = logs[0].dt
     w = options.horizon if options.velocity_weight is None else float(options.velocity_weight)
-    theta_b = np.asarray(result.estimate, dtype=float).copy()
+    start = np.asarray(result.estimate, dtype=float).copy()
     configs = np.concatenate([lg.q[::50] for lg in logs])
-    eps = coulomb_width(robot, standard_with_base(robot, theta_b, base), configs, dt, options.eps)
+    eps = coulomb_width(robot, standard_with_base(robot, start, base), configs, dt, options.eps)
 
     def model(tb):
         return ForwardModel(robot, standard_with_base(robot, tb, base), eps, base)
@@ -193,42 +268,13 @@ def refine(
                 _window_sums(fm, log, s, st, w, out)
         return out
 
-    cur = sums(theta_b)
-    if not np.isfinite(cur.cost):
-        raise InputError(
-            "the starting model does not simulate (a rollout diverged): its mass matrix is "
-            "not positive definite along the data; start from a consistent estimate "
-            "(--consistent)"
-        )
-    cost0, lam, it, accepted = cur.cost, 1e-3, 0, 0
-    for it in range(1, options.iterations + 1):
-        D = np.diag(cur.H).copy()
-        D[D <= 0] = max(float(D.max()), 1.0) * 1e-12
-        improved = False
-        while lam < 1e12:
-            step = np.linalg.solve(cur.H + lam * np.diag(D), -cur.g)
-            cand = theta_b + step
-            c = _cost(model(cand), plan, w)
-            if c < cur.cost:
-                improved, lam = True, max(lam / 3.0, 1e-9)
-                break
-            lam *= 4.0
-        if not improved:
-            break
-        accepted += 1
-        gain = (cur.cost - c) / cur.cost
-        theta_b = cand
-        cur = sums(theta_b)
-        if gain < options.tolerance:
-            break
-    Hinv = np.linalg.pinv(cur.H)
-    G = np.array(cur.scores)
-    cov = Hinv @ (G.T @ G) @ Hinv
-    dof = max(cur.n_residuals - r, 1)
-    cov_white = cur.cost / dof * Hinv
-    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        std_pct = np.where(theta_b != 0, 100 * std / np.abs(theta_b), np.inf)
+    A, b, zz = torque_sums(robot, base, datasets)
+    T0 = float(start @ A @ start - 2 * b @ start + zz)
+    J0 = _cost(model(start), plan, w)
+    mu = 0.0 if options.torque_weight == 0 or T0 <= 0 else options.torque_weight * J0 / T0
+    theta_b, cur, costs, it, accepted = _lm(
+        start, sums, lambda tb: _cost(model(tb), plan, w), (A, b, zz, mu), options
+    )
     record = {
         "method": "output-error",
         "horizon": steps * dt,
@@ -236,14 +282,33 @@ def refine(
         "windows": n_windows,
         "iterations": it,
         "accepted_steps": accepted,
-        "cost_before": cost0,
-        "cost_after": cur.cost,
+        "cost_before": costs[0],
+        "cost_after": costs[1],
+        "total_cost_before": costs[2],
+        "total_cost_after": costs[3],
+        "torque_rss_before": costs[4],
+        "torque_rss_after": costs[5],
+        "torque_weight": options.torque_weight,
         "velocity_weight": w,
         "coulomb_width": eps.tolist(),
-        "covariance": "sandwich over the windows' scores",
-        "start": result.method,
+        "covariance": "sandwich over the windows' scores of the output error",
+        "start": result.method
+        + (" (consistent)" if result.physically_consistent and result.standard else ""),
         "seconds": time.perf_counter() - t0,
     }
+    return _refined(result, robot, theta_b, cur, record, datasets, validation)
+
+
+def _refined(result, robot, theta_b, cur: _Sums, record: dict, datasets, validation):
+    """The refined :class:`IdentificationResult` (estimate, covariance, errors, record)."""
+    r = len(theta_b)
+    Hinv = np.linalg.pinv(cur.H)
+    G = np.array(cur.scores)
+    cov = Hinv @ (G.T @ G) @ Hinv
+    cov_white = cur.cost / max(cur.n_residuals - r, 1) * Hinv
+    std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        std_pct = np.where(theta_b != 0, 100 * std / np.abs(theta_b), np.inf)
     refined = replace(
         result,
         estimate=theta_b,
@@ -252,14 +317,18 @@ def refine(
         covariance=cov,
         covariance_white=cov_white,
         std_white=np.sqrt(np.clip(np.diag(cov_white), 0.0, None)),
-        uncertainty={"method": "windows", "n_blocks": n_windows, "block_samples": steps},
+        uncertainty={
+            "method": "windows",
+            "n_blocks": record["windows"],
+            "block_samples": record["steps"],
+        },
         standard=None,
         timings={**result.timings, "refine": record["seconds"]},
     )
     train = _torque_error(refined, robot, datasets)
     valid = _torque_error(refined, robot, list(validation or []))
     rel = result.relative_error
-    refined = replace(
+    return replace(
         refined,
         relative_error=replace(
             rel,
@@ -277,7 +346,6 @@ def refine(
             "refinement": record,
         },
     )
-    return refined
 
 
-__all__ = ["DEFAULT_HORIZON", "STEP_BUDGET", "RefineOptions", "refine"]
+__all__ = ["DEFAULT_HORIZON", "STEP_BUDGET", "RefineOptions", "refine", "torque_sums"]

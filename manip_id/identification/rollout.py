@@ -21,9 +21,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..datasets import Dataset, Layout, parse_file_spec
 from ..errors import InputError
 from ..robot import Robot
 from .forward import DEFAULT_EPS, ForwardModel, coulomb_width, standard_with_base
+from .options import PreprocessOptions
+from .reading import iter_processed
 
 #: Position error [rad or m] within which a horizon counts as followed.
 DEFAULT_TOLERANCE = 0.01
@@ -92,6 +95,34 @@ def as_log(data, name: str = "") -> Log:
     return Log(
         t, np.asarray(data.q, float), np.asarray(data.dq, float), np.asarray(data.tau, float), name
     )
+
+
+def read_logs(robot: Robot, files, options: PreprocessOptions | None = None) -> list[Dataset]:
+    """Each file (a path, ``PATH@START:STOP`` or a :class:`~manip_id.datasets.FileSpec`)
+    read and preprocessed as identification reads it (:func:`.reading.iter_processed`),
+    whole, as one :class:`~manip_id.datasets.Dataset` with ``ddq``."""
+    out = []
+    for f in files:
+        spec = parse_file_spec(f)
+        _, blocks = iter_processed(robot, spec, options)
+        parts = list(blocks)
+        if not parts:
+            raise InputError(f"{spec.label}: no samples left after preprocessing")
+        rows = np.concatenate(parts)
+        sl = Layout.processed(robot.nq, robot.nv, rows.shape[1]).slices
+        if "ddq" not in sl:
+            raise InputError(f"{spec.label}: no accelerations after preprocessing")
+        out.append(
+            Dataset(
+                t=rows[:, 0],
+                q=rows[:, sl["q"]],
+                dq=rows[:, sl["dq"]],
+                tau=rows[:, sl["tau"]],
+                ddq=rows[:, sl["ddq"]],
+                meta={"file": spec.label},
+            )
+        )
+    return out
 
 
 def start_points(n: int, steps: int, most: int) -> np.ndarray:
@@ -280,6 +311,7 @@ __all__ = [
     "RolloutReport",
     "Trace",
     "as_log",
+    "read_logs",
     "rollout_validation",
     "simulate",
     "start_points",
