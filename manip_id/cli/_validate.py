@@ -11,7 +11,6 @@ from ..identification.rollout import RolloutOptions, read_logs, rollout_validati
 from ._common import reserve_outputs
 from ._runtime import robot_from_args
 
-
 #: Joint terms a result names -> the friction law that enables them.
 _LAWS = {"fv": "viscous", "fc": "coulomb", "fo": "offset"}
 
@@ -35,7 +34,9 @@ def run(args: argparse.Namespace) -> int:
         horizon=args.horizon, starts=args.starts, tolerance=args.tolerance, eps=args.eps
     )
     if args.figure is not None and not str(args.figure).lower().endswith(".png"):
-        raise InputError(f"--figure writes a PNG: expected a name ending in .png, got {args.figure}")
+        raise InputError(
+            f"--figure writes a PNG: expected a name ending in .png, got {args.figure}"
+        )
     outputs = reserve_outputs(args)
     if args.figure is not None:
         outputs.file(args.figure, "--figure")

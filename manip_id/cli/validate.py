@@ -32,9 +32,7 @@ def register(sub) -> None:
         required=True,
         help="measurement files (formats and FILE@START:STOP windows as identify --data)",
     )
-    p.add_argument(
-        "--horizon", type=float, default=0.25, help="seconds integrated [default 0.25]"
-    )
+    p.add_argument("--horizon", type=float, default=0.25, help="seconds integrated [default 0.25]")
     p.add_argument(
         "--starts", type=int, default=200, help="most start points per file [default 200]"
     )

@@ -12,9 +12,9 @@ so that the torque fit cannot be traded away::
 
     F(theta_b) = J(theta_b) + mu T(theta_b),     mu = rho J(theta_0) / T(theta_0)
 
-From the least-squares start (the minimum of T) every accepted step lowers F, so
-``T <= T(theta_0) (1 + 1/rho)``: the training torque error grows by at most
-``sqrt(1 + 1/rho)`` (1.095 for the default rho = 5). The residuals' exact
+Every accepted step lowers F, so ``T <= T(theta_0) (1 + 1/rho)`` from any start: the
+training torque error grows by at most ``sqrt(1 + 1/rho)`` (1.095 for the default
+rho = 5). The residuals' exact
 parameter sensitivities come from differentiating the integrator step
 (:meth:`.forward.ForwardModel.linearization`)::
 
@@ -24,9 +24,15 @@ parameter sensitivities come from differentiating the integrator step
 and the normal equations ``(H + lambda diag H) d = -g`` are accumulated window by
 window (memory O(r^2)). The cost per iteration is ``windows x horizon`` linearizations,
 whatever the length of the log: the windows are spread over the data and their number is
-bounded (:class:`RefineOptions`). The covariance of the refined estimate is the sandwich
-``H^-1 (sum_w g_w g_w^T) H^-1`` over the windows' scores ``g_w`` (the residuals within a
-window are correlated; windows far apart are taken as independent).
+bounded (:class:`RefineOptions`); the torque sums take one regressor pass over the data,
+once. The covariance of the refined estimate is the sandwich of ``F``
+over blocks of the data, one per window (each sample with the window whose start is
+nearest)::
+
+    cov = H^-1 (sum_w s_w s_w^T) H^-1,   H = sum J_k^T J_k + mu Y_b^T Y_b,
+    s_w = sum_(k in w) J_k^T e_k + mu Y_b,w^T (Y_b,w theta_b - tau_w)
+
+(the residuals within a window are correlated; blocks are taken as independent).
 """
 
 from __future__ import annotations
@@ -40,7 +46,7 @@ from ..errors import InputError
 from ..regressor import iter_regressor
 from ..robot import Robot
 from .forward import DEFAULT_EPS, ForwardModel, coulomb_width, standard_with_base
-from .result import IdentificationResult, RelativeError
+from .result import IdentificationResult
 from .rollout import Log, as_log, simulate, start_points
 
 #: What a result's context says of the least-squares estimate alone (dropped on refining).
@@ -152,20 +158,36 @@ def _plan(logs: list[Log], options: RefineOptions, r: int) -> tuple[list, int, i
     return plan, steps, sum(len(p[1]) for p in plan)
 
 
-def torque_sums(robot: Robot, base, datasets) -> tuple[np.ndarray, np.ndarray, float]:
+def torque_sums(robot: Robot, base, datasets, plan=None):
     """``A = Y_b^T Y_b`` (r, r), ``b = Y_b^T tau`` (r,), ``tau^T tau`` of the inverse-dynamics
-    least squares on ``datasets``, chunk by chunk."""
+    least squares on ``datasets``, chunk by chunk; with a window ``plan`` (one entry per
+    dataset) also per window block (each sample to the window whose start is nearest),
+    ``A_w`` (W, r, r) and ``b_w`` (W, r), for the window sandwich of the covariance."""
     r = base.n_base
     A, b, zz = np.zeros((r, r)), np.zeros(r), 0.0
-    for d in datasets:
+    n_w = 0 if plan is None else sum(len(p[1]) for p in plan)
+    Aw, bw = np.zeros((n_w, r, r)), np.zeros((n_w, r))
+    offset = 0
+    for i, d in enumerate(datasets):
         tau = np.asarray(d.tau, float)
+        starts = None if plan is None else plan[i][1]
         for c in iter_regressor(robot, d.q, d.dq, d.ddq):
-            Yb = c.Y[:, :, base.independent].reshape(-1, r)
-            z = tau[c.start : c.stop].reshape(-1)
-            A += Yb.T @ Yb
-            b += Yb.T @ z
-            zz += float(z @ z)
-    return A, b, zz
+            Yb = c.Y[:, :, base.independent]
+            z = tau[c.start : c.stop]
+            if starts is not None:
+                mid = (starts[:-1] + starts[1:]) // 2
+                blk = np.searchsorted(mid, np.arange(c.start, c.stop), side="right")
+                for w in np.unique(blk):
+                    m = blk == w
+                    Yw, zw = Yb[m].reshape(-1, r), z[m].reshape(-1)
+                    Aw[offset + w] += Yw.T @ Yw
+                    bw[offset + w] += Yw.T @ zw
+            Yf, zf = Yb.reshape(-1, r), z.reshape(-1)
+            A += Yf.T @ Yf
+            b += Yf.T @ zf
+            zz += float(zf @ zf)
+        offset += 0 if starts is None else len(starts)
+    return A, b, zz, Aw, bw
 
 
 def _torque_error(result, robot, datasets) -> tuple[float, np.ndarray] | None:
@@ -197,7 +219,8 @@ def _lm(start: np.ndarray, sums, cost, torque, options: RefineOptions):
         )
     F0 = F = cur.cost + mu * T(theta_b)
     J0, lam, it, accepted = cur.cost, 1e-3, 0, 0
-    for it in range(1, options.iterations + 1):
+    while it < options.iterations:
+        it += 1
         H = cur.H + mu * A
         g = cur.g + mu * (A @ theta_b - b)
         D = np.diag(H).copy()
@@ -268,7 +291,7 @@ def refine(
                 _window_sums(fm, log, s, st, w, out)
         return out
 
-    A, b, zz = torque_sums(robot, base, datasets)
+    A, b, zz, Aw, bw = torque_sums(robot, base, datasets, plan)
     T0 = float(start @ A @ start - 2 * b @ start + zz)
     J0 = _cost(model(start), plan, w)
     mu = 0.0 if options.torque_weight == 0 or T0 <= 0 else options.torque_weight * J0 / T0
@@ -291,21 +314,24 @@ def refine(
         "torque_weight": options.torque_weight,
         "velocity_weight": w,
         "coulomb_width": eps.tolist(),
-        "covariance": "sandwich over the windows' scores of the output error",
+        "covariance": "sandwich H^-1 (sum_w s_w s_w^T) H^-1 of F over the window blocks",
         "start": result.method
         + (" (consistent)" if result.physically_consistent and result.standard else ""),
         "seconds": time.perf_counter() - t0,
     }
-    return _refined(result, robot, theta_b, cur, record, datasets, validation)
+    H = cur.H + mu * A
+    G = np.array(cur.scores) + mu * (Aw @ theta_b - bw)  # window scores of F / 2
+    return _refined(result, robot, theta_b, (H, G, cur), record, datasets, validation)
 
 
-def _refined(result, robot, theta_b, cur: _Sums, record: dict, datasets, validation):
-    """The refined :class:`IdentificationResult` (estimate, covariance, errors, record)."""
-    r = len(theta_b)
-    Hinv = np.linalg.pinv(cur.H)
-    G = np.array(cur.scores)
+def _refined(result, robot, theta_b, sandwich, record: dict, datasets, validation):
+    """The refined :class:`IdentificationResult` (estimate, covariance, errors, record).
+
+    ``sandwich`` = ``(H, G, sums)``: the Gauss-Newton matrix of ``F / 2`` (r, r), the
+    windows' scores (W, r) and the output-error sums at the estimate."""
+    H, G, _ = sandwich
+    Hinv = np.linalg.pinv(H)
     cov = Hinv @ (G.T @ G) @ Hinv
-    cov_white = cur.cost / max(cur.n_residuals - r, 1) * Hinv
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     with np.errstate(divide="ignore", invalid="ignore"):
         std_pct = np.where(theta_b != 0, 100 * std / np.abs(theta_b), np.inf)
@@ -315,8 +341,8 @@ def _refined(result, robot, theta_b, cur: _Sums, record: dict, datasets, validat
         std=std,
         std_percent=std_pct,
         covariance=cov,
-        covariance_white=cov_white,
-        std_white=np.sqrt(np.clip(np.diag(cov_white), 0.0, None)),
+        covariance_white=None,
+        std_white=None,
         uncertainty={
             "method": "windows",
             "n_blocks": record["windows"],
