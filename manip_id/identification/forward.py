@@ -137,16 +137,12 @@ class ForwardModel:
             elif t == "k":
                 dfq += c
             elif t not in _ANALYTIC:  # a smooth law of (angle, velocity): central differences
-                for x, out in ((q, dfq), (dq, dfv)):
-                    h = 1e-6 * (1.0 + np.abs(x))
-                    up = self._ev.joint_values(*self._shift(q, dq, x is q, h), self._zero)
-                    dn = self._ev.joint_values(*self._shift(q, dq, x is q, -h), self._zero)
-                    out += c * (up[:, i] - dn[:, i]) / (2 * h)
+                # each joint's term depends on its own coordinate: shift all at once
+                hq, hv = 1e-6 * (1.0 + np.abs(q)), 1e-6 * (1.0 + np.abs(dq))
+                jv, z = self._ev.joint_values, self._zero
+                dfq += c * (jv(q + hq, dq, z)[:, i] - jv(q - hq, dq, z)[:, i]) / (2 * hq)
+                dfv += c * (jv(q, dq + hv, z)[:, i] - jv(q, dq - hv, z)[:, i]) / (2 * hv)
         return dfq, dfv
-
-    @staticmethod
-    def _shift(q, dq, on_q: bool, h):
-        return (q + h, dq) if on_q else (q, dq + h)
 
     # ------------------------------------------------------------ dynamics
     def acceleration(self, q, dq, tau) -> np.ndarray:

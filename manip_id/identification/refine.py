@@ -225,7 +225,7 @@ def _lm(start: np.ndarray, sums, cost, torque, options: RefineOptions):
         g = cur.g + mu * (A @ theta_b - b)
         D = np.diag(H).copy()
         D[D <= 0] = max(float(D.max()), 1.0) * 1e-12
-        cand, Fc = None, np.inf
+        cand, Fc = theta_b, np.inf
         while lam < 1e12:
             cand = theta_b + np.linalg.solve(H + lam * np.diag(D), -g)
             Fc = cost(cand) + mu * T(cand)
@@ -352,6 +352,7 @@ def _refined(result, robot, theta_b, sandwich, record: dict, datasets, validatio
         timings={**result.timings, "refine": record["seconds"]},
     )
     train = _torque_error(refined, robot, datasets)
+    assert train is not None  # datasets is not empty (checked by refine)
     valid = _torque_error(refined, robot, list(validation or []))
     rel = result.relative_error
     return replace(

@@ -277,7 +277,8 @@ def rollout_validation(
     fm_id = ForwardModel(robot, theta, eps)
     fm_nom = ForwardModel(robot, robot.nominal_parameters, eps)
     finals: dict = {"id": [], "nom": []}
-    meas, traces = [], []
+    meas: list = []
+    traces: list[Trace] = []
     for lg in logs:
         steps = max(1, int(round(options.horizon / lg.dt)))
         starts = start_points(len(lg.t), steps, options.starts)
