@@ -14,7 +14,7 @@ import math
 import time
 
 from ..errors import InputError
-from ..identification.refine import RefineOptions, refine
+from ..identification.refine import DEFAULT_HORIZON, RefineOptions, refine
 from ..identification.rollout import RolloutOptions, read_logs, rollout_validation
 
 
@@ -23,8 +23,10 @@ def check_args(args: argparse.Namespace) -> None:
     refine_on = getattr(args, "refine", None) is not None
     rollout = getattr(args, "rollout", None)
     if not refine_on and rollout is None:
-        if getattr(args, "refine_horizon", None) is not None:
-            raise InputError("--refine-horizon applies to --refine output-error")
+        for name in ("refine_horizon", "refine_windows"):
+            if getattr(args, name, None) is not None:
+                flag = "--" + name.replace("_", "-")
+                raise InputError(f"{flag} applies to --refine output-error")
         return
     what = "--refine" if refine_on else "--rollout"
     if args.simulate or args.model != "dynamic" or args.method not in ("ols", "wls"):
@@ -39,6 +41,9 @@ def check_args(args: argparse.Namespace) -> None:
     h = getattr(args, "refine_horizon", None)
     if h is not None and not (refine_on and math.isfinite(h) and h > 0):
         raise InputError(f"--refine-horizon applies to --refine and is > 0 seconds, got {h}")
+    n = getattr(args, "refine_windows", None)
+    if n is not None and not (refine_on and n >= 1):
+        raise InputError(f"--refine-windows applies to --refine and is >= 1, got {n}")
 
 
 def refine_files(args, robot, result, specs, vspecs, options, timings: dict):
@@ -48,7 +53,10 @@ def refine_files(args, robot, result, specs, vspecs, options, timings: dict):
     t0 = time.perf_counter()
     train = read_logs(robot, specs, options)
     valid = read_logs(robot, vspecs, options) if vspecs else None
-    opts = RefineOptions() if args.refine_horizon is None else RefineOptions(args.refine_horizon)
+    opts = RefineOptions(
+        horizon=DEFAULT_HORIZON if args.refine_horizon is None else args.refine_horizon,
+        windows=args.refine_windows,
+    )
     out = refine(result, robot, train, validation=valid, options=opts)
     rec = out.context["refinement"]
     print(

@@ -151,6 +151,14 @@ def register(sub) -> None:
         help="window length of --refine [s] [default 0.1]",
     )
     p.add_argument(
+        "--refine-windows",
+        type=int,
+        metavar="N",
+        default=None,
+        help="number of windows of --refine [default: 20000 steps' worth, at least 4 per "
+        "base parameter, at most what the data hold]",
+    )
+    p.add_argument(
         "--rollout",
         type=float,
         metavar="SECONDS",
