@@ -8,6 +8,7 @@ import time
 from ..errors import InputError
 from ..identification import PreprocessOptions, load_result
 from ..identification.rollout import RolloutOptions, read_logs, rollout_validation
+from ..viz.rollout_figure import rollout_traces
 from ._common import reserve_outputs
 from ._runtime import robot_from_args
 
@@ -58,8 +59,6 @@ def run(args: argparse.Namespace) -> int:
     if args.json is not None:
         outputs.write_json(args.json, doc)
     if args.figure is not None:
-        from ..viz.rollout_figure import rollout_traces
-
         title = f"rollout over {report.horizon:g} s: measured, identified, nominal"
         outputs.write(
             args.figure, lambda tmp: rollout_traces(tmp, report.traces, report.joints, title=title)
