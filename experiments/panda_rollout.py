@@ -24,12 +24,15 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
 from manip_id import load_robot
+from manip_id.export import export_mjcf
+from manip_id.export.mjcf_rollout import mujoco_rollout_gap
 from manip_id.identification import (
     ConsistentOptions,
     PreprocessOptions,
@@ -40,6 +43,8 @@ from manip_id.identification import (
     refine,
     rollout_validation,
 )
+from manip_id.identification.forward import coulomb_width
+from manip_id.identification.rollout import as_log
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "panda_gaz2019"
 FRICTION = "viscous,coulomb,offset"
@@ -112,6 +117,30 @@ def main() -> None:
         assert nom is not None
         cells.append(f"{rms(nom.position_rms):12.4g} ({nom.diverged:3d})")
         print(f"  {h:8.2f} " + " ".join(f"{c:>20}" for c in cells))
+    mjcf_gap(robot, models["consistent"], valid, a.horizon, a.starts)
+
+
+def mjcf_gap(robot, result, valid, horizons, starts: int) -> None:
+    """The consistent model exported as MJCF and rolled out in MuJoCo (contacts off)
+    against the Pinocchio rollout of the same standard parameters."""
+    try:
+        import mujoco  # noqa: F401
+    except ImportError:
+        print("\nMuJoCo not installed: no MJCF rollout")
+        return
+    theta = result.standard.values
+    log = as_log(valid[0])
+    eps = coulomb_width(robot, theta, log.q[::50], log.dt)
+    print("\nexported MJCF in MuJoCo vs Pinocchio (consistent model) [rad, RMS over joints]")
+    print(f"  {'horizon':>8} {'|q_mj - q_pin|':>16} {'MuJoCo vs log':>14} {'Pinocchio vs log':>17}")
+    with tempfile.TemporaryDirectory() as tmp:
+        path = export_mjcf(robot, theta, Path(tmp) / "panda.xml").path
+        for h in horizons:
+            g = mujoco_rollout_gap(path, robot, theta, log, horizon=h, eps=eps, starts=starts)
+            print(
+                f"  {h:8.2f} {rms(g.gap_rms):16.4g} {rms(g.mujoco_rms):14.4g} "
+                f"{rms(g.pinocchio_rms):17.4g}"
+            )
 
 
 if __name__ == "__main__":

@@ -138,3 +138,24 @@ def test_bad_inputs_say_what_was_expected(pendulum):
     short = replace(ds, t=ds.t[:50], q=ds.q[:50], dq=ds.dq[:50], ddq=ds.ddq[:50], tau=ds.tau[:50])
     with pytest.raises(InputError, match="longer than the log"):
         rollout_validation(robot, fit, [short], options=RolloutOptions(horizon=1.0))
+
+
+def test_exported_mjcf_simulates_like_the_pinocchio_rollout(pendulum, tmp_path):
+    """Without Coulomb friction (where the simulators differ by design) MuJoCo's rollout of
+    the exported file and ours agree to round-off; with it, within the regularization."""
+    pytest.importorskip("mujoco")
+    from manip_id.export import export_mjcf
+    from manip_id.export.mjcf_rollout import mujoco_rollout_gap
+
+    robot, theta, ds = pendulum
+    log = as_log(ds)
+    no_fc = theta.copy()
+    no_fc[robot.layout.joint_columns("fc")] = 0.0
+    path = export_mjcf(robot, no_fc, tmp_path / "model.xml").path
+    gap = mujoco_rollout_gap(path, robot, no_fc, log, horizon=0.1, eps=0.01, starts=5)
+    assert gap.n_starts == 5
+    assert gap.gap_rms.max() < 1e-8  # [rad]: the same model, the same integrator
+    assert gap.pinocchio_rms.max() < 0.05  # and both far from the log (friction left out)
+    path = export_mjcf(robot, theta, tmp_path / "fc.xml").path
+    gap = mujoco_rollout_gap(path, robot, theta, log, horizon=0.1, eps=1e-3, starts=5)
+    assert gap.gap_rms.max() < 0.1 * max(gap.pinocchio_rms.max(), 1e-3)
