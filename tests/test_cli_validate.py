@@ -93,3 +93,29 @@ def test_validate_refuses_a_figure_that_is_not_png(logs, tmp_path, capsys):
     cmd = ["validate", "double_pendulum", "--model", str(tmp_path / "x.json"), "--data", str(valid)]
     assert main([*cmd, "--figure", str(tmp_path / "x.svg")]) == 2
     assert "PNG" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_real_panda_refined_model_rolls_out_closer(panda_log, tmp_path):
+    """Train 0-10.5 s, validate 10.5-15 s (the issue's protocol). Measured
+    (experiments/panda_rollout.py): rollout error at 0.25 s 0.118 rad refined against
+    0.166 rad consistent least squares (0.71x); validation torque error 1.665 % against
+    1.590 % plain least squares (1.05x) and 2.210 % consistent."""
+    d = str(panda_log)
+    base = ["identify", "panda", "--friction", "viscous,coulomb,offset", "--quiet"]
+    base += ["--data", f"{d}@0:10.5", "--validate", f"{d}@10.5:15"]
+    ls, cons, ref = (tmp_path / f"{n}.json" for n in ("ls", "cons", "ref"))
+    assert main([*base, "--json", str(ls)]) == 0
+    assert main([*base, "--consistent", "--rollout", "0.25", "--json", str(cons)]) == 0
+    args = [*base, "--consistent", "--refine", "output-error", "--rollout", "0.25"]
+    assert main([*args, "--json", str(ref)]) == 0
+    docs = {k: json.loads(p.read_text()) for k, p in (("ls", ls), ("cons", cons), ("ref", ref))}
+
+    def rollout(doc):
+        e = doc["rollout"]["identified"]["position_rms"]
+        return sum(x * x for x in e) ** 0.5
+
+    assert rollout(docs["ref"]) <= 0.8 * rollout(docs["cons"])
+    err = {k: d["relative_error"]["validation"] for k, d in docs.items()}
+    assert err["ref"] <= 1.1 * err["ls"]
+    assert docs["ref"]["rollout"]["identified"]["diverged"] == 0
