@@ -63,7 +63,8 @@ class RefineOptions:
 
     horizon: window length [s] (default 0.1).
     windows: number of windows (default: as many as fit :data:`STEP_BUDGET` linearization
-        steps per iteration, at least ``2 r``, at most what the data hold).
+        steps per iteration, at least ``4 r``, at most the start points the data hold;
+        windows may overlap).
     iterations: most Levenberg-Marquardt iterations.
     velocity_weight: ``w`` [s] of the velocity residuals (default the horizon).
     eps: smallest Coulomb regularization width [rad/s or m/s] (:mod:`.forward`).
