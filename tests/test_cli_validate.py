@@ -63,7 +63,9 @@ def test_identify_refines_and_rolls_out(logs, tmp_path):
     args = ["identify", "double_pendulum", "--friction", "viscous,coulomb", "--quiet"]
     args += ["--data", str(train), "--split", "0.7", "--refine", "output-error"]
     args += ["--refine-horizon", "0.05", "--refine-windows", "20"]
-    assert main([*args, "--rollout", "0.1", "--json", str(out)]) == 0
+    report = tmp_path / "report"
+    assert main([*args, "--rollout", "0.1", "--json", str(out), "--report", str(report)]) == 0
+    assert (report / "rollout.png").stat().st_size > 1000
     doc = json.loads(out.read_text())
     rec = doc["refinement"]
     assert rec["method"] == "output-error" and rec["steps"] == 25 and rec["windows"] == 20
