@@ -44,6 +44,7 @@ from ..viz.report_document import (
     add_raw_reference,
     result_document,
 )
+from . import _rollout
 from ._common import data_column_map, file_specs, profile_from_args, progress
 from ._runtime import (
     before_fit,
@@ -236,6 +237,7 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
             uncertainty=args.uncertainty,
             **consistent_kwargs(args),
         )
+        result = _rollout.refine_files(args, robot, result, f.specs, f.vspecs, options, timings)
         files = result.files or {}
         settings = files["train"][0].settings
         n_valid = 0 if f.vspecs is None else sum(x.n_samples for x in files["validation"])
@@ -253,6 +255,7 @@ def run(args: argparse.Namespace, outputs, t_start: float) -> int:
     report = result_document(robot, result, ctx)
     add_file_info(report, robot, f.specs, f.vspecs, f.scans, files, options, result)
     report["audit"] = f.audit.to_dict()
+    _rollout.rollout_files(args, robot, result, f.vspecs, options, report)
     if selection is not None:
         _note_selection(report, robot, selection)
     if args.report is not None and train is None:  # the report draws the samples

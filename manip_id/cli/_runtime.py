@@ -166,6 +166,7 @@ def report_options(args: argparse.Namespace, source: str | None = None):
         chunk=args.chunk,
         scene_assets=getattr(args, "scene_assets", "inline"),
         force=args.force,
+        rollout=getattr(args, "rollout_report", None),
     )
 
 

@@ -19,7 +19,9 @@ Members: :mod:`~.options` (one frozen dataclass per concern), :mod:`~.problem` (
 counts, records; the accumulation), :mod:`~.solve`, :mod:`~.result` and
 :mod:`~.document` (the one schema and its text), :mod:`~.arrays` (in-memory entry
 points), :mod:`~.reading`, :mod:`~.file_sums`, :mod:`~.files` (log files),
-:mod:`~.tasks` (the tasks of a distributed run).
+:mod:`~.tasks` (the tasks of a distributed run); :mod:`~.forward`, :mod:`~.rollout`
+and :mod:`~.refine` (the model integrated forward from the measured torques: rollout
+validation and output-error refinement).
 """
 
 from __future__ import annotations
@@ -54,7 +56,9 @@ from .options import (
 )
 from .problem import FileRecord, FileSums, Problem, accumulate_blocks, row_supports
 from .reading import FileScan, iter_processed, processed_count, scan_file, split_file
+from .refine import RefineOptions, refine
 from .result import IdentificationResult, RelativeError, load_result, result_from_dict
+from .rollout import RolloutOptions, RolloutReport, read_logs, rollout_validation
 from .solve import solve, validation_errors
 from .tasks import PartitionOptions, distributed_problem
 
@@ -77,7 +81,10 @@ __all__ = [
     "PreprocessOptions",
     "Problem",
     "RankOptions",
+    "RefineOptions",
     "RelativeError",
+    "RolloutOptions",
+    "RolloutReport",
     "RunOptions",
     "UncertaintyOptions",
     "accumulate_blocks",
@@ -94,12 +101,15 @@ __all__ = [
     "merge_accumulations",
     "parameter_flags",
     "processed_count",
+    "read_logs",
     "read_result_json",
+    "refine",
     "result_from_dict",
     "result_text",
     "verdict_text",
     "result_to_dict",
     "result_warnings",
+    "rollout_validation",
     "row_supports",
     "scan_file",
     "solve",
