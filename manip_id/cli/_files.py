@@ -27,6 +27,7 @@ from ..identification.file_run import collect
 from ..identification.selection import SelectionOptions
 from ..signals import DEFAULT_CUTOFF
 from ..viz.report_document import ReportSamples
+from . import _rollout
 from ._common import (
     data_column_map,
     exports_wanted,
@@ -70,6 +71,7 @@ def files_call(args: argparse.Namespace):
         split=args.split,
         partition=PartitionOptions(block=args.block, per_file=args.per_file) if fleet else None,
         select_friction=SelectionOptions() if args.friction == "auto" else None,
+        **_rollout.forward_options(args),
     )
     kwargs = dict(
         validation=vspecs,

@@ -15,7 +15,7 @@ import time
 from ..datasets import Window
 from ..errors import InputError
 from ..export import check_output, sidecar_path
-from . import _acceleration_free, _files, _simulated
+from . import _acceleration_free, _files, _rollout, _simulated
 from ._common import (
     FLEET_METHODS,
     check_preprocess_args,
@@ -67,6 +67,7 @@ def _check_args(args) -> None:
     _check_consistent_args(args)
     _check_fleet(args)
     _check_files(args)
+    _rollout.check_args(args)
 
 
 def _check_consistent_args(args) -> None:

@@ -183,8 +183,9 @@ def _audit_options(options, currents: bool):
     )
 
 
-def report_options(args: argparse.Namespace, source: str | None = None):
-    """The :class:`~manip_id.viz.report_document.ReportOptions` of identify's options."""
+def report_options(args: argparse.Namespace, source: str | None = None, rollout=None):
+    """The :class:`~manip_id.viz.report_document.ReportOptions` of identify's options
+    (``rollout``: the result's rollout validation, drawn in the report)."""
 
     if source is None:
         source = "simulated" if args.simulate else data_in_words(args.data)
@@ -194,6 +195,7 @@ def report_options(args: argparse.Namespace, source: str | None = None):
         chunk=args.chunk,
         scene_assets=getattr(args, "scene_assets", "inline"),
         force=args.force,
+        rollout=rollout,
     )
 
 
@@ -240,7 +242,12 @@ def write_outputs(args: argparse.Namespace, outputs, robot, result, report: dict
     path = None
     if args.report is not None:
         path = identify_report("write_identify_report")(
-            args.report_claim, robot, result, report, samples, options=report_options(args)
+            args.report_claim,
+            robot,
+            result,
+            report,
+            samples,
+            options=report_options(args, rollout=getattr(result, "rollout", None)),
         )
     if exports_wanted(args):
         stage_export(robot, result, args, outputs)

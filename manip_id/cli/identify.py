@@ -138,6 +138,36 @@ def register(sub) -> None:
         metavar="FRACTION",
         help="identify on the first FRACTION of the samples, validate on the rest",
     )
+    p.add_argument(
+        "--refine",
+        choices=("output-error",),
+        default=None,
+        help="refine the estimate by output error: Levenberg-Marquardt on the model rolled "
+        "out from the measured torques over short windows (docs/cli.md)",
+    )
+    p.add_argument(
+        "--refine-horizon",
+        type=float,
+        metavar="SECONDS",
+        default=None,
+        help="window length of --refine [s] [default 0.1]",
+    )
+    p.add_argument(
+        "--refine-windows",
+        type=int,
+        metavar="N",
+        default=None,
+        help="number of windows of --refine [default: 20000 steps' worth, at least 4 per "
+        "base parameter, at most what the data hold]",
+    )
+    p.add_argument(
+        "--rollout",
+        type=float,
+        metavar="SECONDS",
+        default=None,
+        help="roll the identified and the nominal model forward on the validation data over "
+        "SECONDS (as manip-id validate): JSON 'rollout', and a figure in --report",
+    )
     sig = p.add_argument_group(
         "signal processing (for data without ddq, or when --cutoff is given)"
     )

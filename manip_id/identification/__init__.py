@@ -24,7 +24,9 @@ it), :mod:`~.arrays` (in-memory data and blocks), :mod:`~.file_run` (the file pi
 audit, scans, temperature reference, friction choice), :mod:`~.reading`,
 :mod:`~.file_sums`, :mod:`~.files` (log files accumulated, here or as tasks),
 :mod:`~.tasks` (the tasks of a distributed run), :mod:`~.nominal_check` (joints the fit
-made worse than the nominal model)."""
+made worse than the nominal model); :mod:`~.forward`, :mod:`~.rollout` and :mod:`~.refine`
+(the model integrated forward from the measured torques: rollout validation and
+output-error refinement)."""
 
 from __future__ import annotations
 
@@ -65,7 +67,9 @@ from .problem import (
     row_supports,
 )
 from .reading import FileScan, iter_processed, processed_count, scan_file, split_file
+from .refine import RefineOptions, refine
 from .result import IdentificationResult, RelativeError, load_result, result_from_dict
+from .rollout import RolloutOptions, RolloutReport, read_logs, rollout_validation
 from .solve import solve, validation_errors
 from .tasks import PartitionOptions, distributed_problem
 
@@ -89,7 +93,10 @@ __all__ = [
     "PartitionOptions",
     "PreprocessOptions",
     "Problem",
+    "RefineOptions",
     "RelativeError",
+    "RolloutOptions",
+    "RolloutReport",
     "RunOptions",
     "SolveSettings",
     "UncertaintyOptions",
@@ -106,12 +113,15 @@ __all__ = [
     "merge_accumulations",
     "parameter_flags",
     "processed_count",
+    "read_logs",
     "read_result_json",
+    "refine",
     "result_from_dict",
     "result_text",
     "verdict_text",
     "result_to_dict",
     "result_warnings",
+    "rollout_validation",
     "row_supports",
     "scan_file",
     "solve",

@@ -47,7 +47,9 @@ from .options import (
 )
 from .problem import FileRecord, Problem, resolve_base
 from .reading import iter_processed, scan_file, split_file
+from .refine import RefineOptions, refine
 from .result import IdentificationResult
+from .rollout import RolloutOptions, read_logs, rollout_validation
 from .run_context import RunContext, file_keys, raw_reference, run_keys
 from .selection import SelectionOptions, select_model_files
 from .solve import solve
@@ -86,6 +88,13 @@ class FileOptions:
     select_friction : SelectionOptions or None
         Choose the friction law per joint (one fit per candidate; least squares and the
         dynamic model); None: the robot's joint terms.
+    refine : RefineOptions or None
+        Refine the least-squares estimate by output error on the training files
+        (:mod:`~manip_id.identification.refine`; ``context["refinement"]``).
+    rollout : RolloutOptions or None
+        Roll the identified and the nominal model forward on the validation files
+        (:mod:`~manip_id.identification.rollout`): ``result.rollout`` and
+        ``context["rollout"]``. Both need least squares, the dynamic model, one process.
     """
 
     preprocess: PreprocessOptions = field(default_factory=PreprocessOptions)
@@ -95,6 +104,8 @@ class FileOptions:
     split: float | None = None
     partition: PartitionOptions | None = None
     select_friction: SelectionOptions | None = None
+    refine: RefineOptions | None = None
+    rollout: RolloutOptions | None = None
 
     def __post_init__(self):
         if not isinstance(self.preprocess, PreprocessOptions):
@@ -336,6 +347,16 @@ def files_build(
     records: dict | None
     vspecs = None if validation is None else file_specs(validation, "validation", fopts.window)
     specs, vspecs = with_transmission(robot, specs), with_transmission(robot, vspecs)
+    forward = fopts.refine is not None or fopts.rollout is not None
+    if forward and (
+        fopts.distributed(run)
+        or opts.model.name != "dynamic"
+        or settings.method not in LEAST_SQUARES
+    ):
+        raise InputError(
+            "refine and rollout need least squares (ols, wls), the dynamic model and one "
+            "process (no scheduler, blocks or per-file estimates)"
+        )
     if fopts.distributed(run) or opts.model.name != "dynamic":
         return _distributed(robot, specs, vspecs, base, settings, opts, fopts)
     if fopts.split is not None and (len(specs) != 1 or vspecs is not None):
@@ -370,6 +391,7 @@ def files_build(
         )  # fmt: skip
         problem.settings = settings
         problem.post.append(lambda result: note_reference(result, robot))
+        problem.post += _forward_steps(robot, f, fopts, run)
         records = problem.files or {}
         preprocess = records["train"][0].settings
         n_valid = sum(x.n_samples for x in records["validation"] or [])
@@ -385,6 +407,45 @@ def files_build(
     )
     problem.context.update(keys)
     return problem
+
+
+def _forward_steps(robot: Robot, f, fopts: FileOptions, run: RunOptions) -> list:
+    """The post-steps of a least-squares file run that integrate the model forward: the
+    output-error refinement on the training files, then the rollout on the validation
+    files (each reads its files again, preprocessed as the fit read them)."""
+    options, steps = fopts.preprocess, []
+    if fopts.refine is not None:
+        ropts = fopts.refine
+
+        def refined(result: IdentificationResult) -> IdentificationResult:
+            t0 = time.perf_counter()
+            train = read_logs(robot, f.specs, options)
+            valid = read_logs(robot, f.vspecs, options) if f.vspecs else None
+            out = refine(result, robot, train, validation=valid, options=ropts)
+            rec = out.context["refinement"]
+            run.say(
+                f"output-error refinement: {rec['windows']} windows of {rec['horizon']:.3g} s, "
+                f"{rec['iterations']} iterations, cost {rec['cost_before']:.4g} -> "
+                f"{rec['cost_after']:.4g}"
+            )
+            out.timings["refine"] = time.perf_counter() - t0
+            return out
+
+        steps.append(refined)
+    if fopts.rollout is not None:
+        if not f.vspecs:
+            raise InputError("a rollout integrates on validation data: give validation or split")
+        oopts = fopts.rollout
+
+        def rolled(result: IdentificationResult) -> IdentificationResult:
+            logs = read_logs(robot, f.vspecs, options)
+            rep = rollout_validation(robot, result, logs, options=oopts)
+            run.say(rep.table())
+            result.context["rollout"] = rep.to_dict()
+            return replace(result, rollout=rep)
+
+        steps.append(rolled)
+    return steps
 
 
 def _qualities(scans: dict) -> dict:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -124,6 +125,10 @@ class IdentificationResult:
         :func:`identify` only: ``{"train": [...], "validation": [...]}``,
         the :class:`~manip_id.identification.FileAccumulation` of each file (its
         data-quality summary, samples, rows left out by the deadband)
+    rollout
+        a file run's rollout validation (``FileOptions(rollout=RolloutOptions(...))``):
+        the :class:`~manip_id.identification.RolloutReport` with its traces (for the
+        report's figure); its figures are ``context["rollout"]`` (the JSON's ``rollout``)
     """
 
     method: str
@@ -161,6 +166,7 @@ class IdentificationResult:
     uncertainty: dict | None = None
     #: the white-noise covariance beside the honest ``covariance``, shape (r, r)
     covariance_white: np.ndarray | None = None
+    rollout: Any = None  # RolloutReport (not imported: rollout imports this layer)
 
     def test_covariance(self) -> np.ndarray:
         """The covariance for tests on the base parameters (drift, monitor bounds), shape

@@ -28,6 +28,7 @@ from .report_tables import (
     report_selection_rows,
     report_summary,
 )
+from .rollout_figure import rollout_traces
 
 
 def build_scene(robot, result, full, title: str, notes: list, assets: str = "inline"):
@@ -207,6 +208,14 @@ def write_identify_report(
     if history is not None:
         figs["parameter_history"] = history
     full = samples.full
+    if options.rollout is not None and options.rollout.traces:
+        ro = options.rollout
+        figs["rollout"] = lambda path: rollout_traces(
+            path,
+            ro.traces,
+            ro.joints,
+            title=f"rollout over {ro.horizon:g} s from the measured torques: {run_name}",
+        )
     if options.simulated:
         figs["trajectory"] = lambda path: figures.trajectory_limits(
             path,

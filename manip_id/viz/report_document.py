@@ -48,6 +48,9 @@ class ReportOptions:
         ``inline`` (scene.html stands alone) or ``external``.
     force : bool
         Replace a report folder manip_id wrote.
+    rollout : RolloutReport or None
+        The rollout validation (``identify --rollout``) whose traces are drawn
+        (:class:`~manip_id.identification.rollout.RolloutReport`).
     """
 
     source: str
@@ -55,6 +58,7 @@ class ReportOptions:
     chunk: int = 1024
     scene_assets: str = "inline"
     force: bool = False
+    rollout: Any = None
 
 
 def data_in_words(paths) -> str:

@@ -1,0 +1,55 @@
+"""``identify --refine output-error`` and ``identify --rollout S``: checked before any
+work, then given to the library's file run as ``FileOptions(refine=..., rollout=...)``
+(:mod:`manip_id.identification.refine`, :mod:`manip_id.identification.rollout`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+from ..errors import InputError
+from ..identification.refine import DEFAULT_HORIZON, RefineOptions
+from ..identification.rollout import RolloutOptions
+
+
+def check_args(args: argparse.Namespace) -> None:
+    """Refuse what --refine and --rollout cannot do, before any work."""
+    refine_on = getattr(args, "refine", None) is not None
+    rollout = getattr(args, "rollout", None)
+    if not refine_on and rollout is None:
+        for name in ("refine_horizon", "refine_windows"):
+            if getattr(args, name, None) is not None:
+                flag = "--" + name.replace("_", "-")
+                raise InputError(f"{flag} applies to --refine output-error")
+        return
+    what = "--refine" if refine_on else "--rollout"
+    if args.simulate or args.model != "dynamic" or args.method not in ("ols", "wls"):
+        raise InputError(f"{what} applies to --data files, --method ols or wls, --model dynamic")
+    if getattr(args, "scheduler", None) is not None or getattr(args, "per_file", False):
+        raise InputError(f"{what} runs on one process: no --scheduler or --per-file")
+    if rollout is not None:
+        if not (math.isfinite(rollout) and rollout > 0):
+            raise InputError(f"--rollout must be a horizon > 0 seconds, got {rollout}")
+        if args.validate is None and args.split is None:
+            raise InputError("--rollout integrates on validation data: give --validate or --split")
+    h = getattr(args, "refine_horizon", None)
+    if h is not None and not (refine_on and math.isfinite(h) and h > 0):
+        raise InputError(f"--refine-horizon applies to --refine and is > 0 seconds, got {h}")
+    n = getattr(args, "refine_windows", None)
+    if n is not None and not (refine_on and n >= 1):
+        raise InputError(f"--refine-windows applies to --refine and is >= 1, got {n}")
+
+
+def forward_options(args: argparse.Namespace) -> dict:
+    """The :class:`~manip_id.identification.FileOptions` fields of ``--refine`` and
+    ``--rollout`` (the library's file run refines and rolls out)."""
+    out: dict = {}
+    if getattr(args, "refine", None) is not None:
+        out["refine"] = RefineOptions(
+            horizon=DEFAULT_HORIZON if args.refine_horizon is None else args.refine_horizon,
+            windows=args.refine_windows,
+        )
+    if getattr(args, "rollout", None) is not None:
+        out["rollout"] = RolloutOptions(horizon=args.rollout)
+    return out

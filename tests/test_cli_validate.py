@@ -1,0 +1,126 @@
+"""``manip-id validate`` and ``identify --refine output-error --rollout S`` end to end on
+simulated logs (the truth: a perturbed nominal model with friction)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from manip_id import load_robot
+from manip_id.cli import main
+from manip_id.datasets import save_dataset
+from manip_id.simulation import MeasurementNoise, simulate
+from manip_id.trajectories import random_trajectory
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory):
+    """Two logs of a double pendulum whose truth is the nominal model with its bodies
+    scaled (1.3 and 0.8) and viscous and Coulomb friction (1 % torque noise)."""
+    robot = load_robot("double_pendulum", friction="viscous,coulomb")
+    theta = robot.nominal_parameters.copy()
+    theta[robot.layout.joint_columns("fv")] = [0.05, 0.03]
+    theta[robot.layout.joint_columns("fc")] = [0.05, 0.02]
+    theta[robot.layout.body_slice(0)] *= 1.3  # a whole body scaled stays physical
+    theta[robot.layout.body_slice(1)] *= 0.8
+    folder = tmp_path_factory.mktemp("logs")
+    paths = []
+    for seed in (0, 1):
+        traj = random_trajectory(robot, harmonics=3, seed=seed)
+        noise = MeasurementNoise(tau=0.01)
+        sim = simulate(robot, traj, duration=5.0, rate=500.0, theta=theta, noise=noise, seed=seed)
+        paths.append(save_dataset(sim.dataset, folder / f"run_{seed}.npz"))
+    return tuple(paths)
+
+
+def test_validate_reports_identified_and_nominal(logs, tmp_path, capsys):
+    train, valid = logs
+    fit = tmp_path / "fit.json"
+    ident = ["identify", "double_pendulum", "--friction", "viscous,coulomb", "--quiet"]
+    assert main([*ident, "--data", str(train), "--json", str(fit)]) == 0
+    out, fig = tmp_path / "rollout.json", tmp_path / "rollout.png"
+    cmd = ["validate", "double_pendulum", "--model", str(fit), "--data", str(valid)]
+    assert (
+        main([*cmd, "--horizon", "0.1", "--starts", "10", "--json", str(out), "--figure", str(fig)])
+        == 0
+    )
+    doc = json.loads(out.read_text())["rollout"]
+    assert doc["horizon"] == 0.1
+    for side in ("identified", "nominal"):
+        assert len(doc[side]["position_rms"]) == 2 and len(doc[side]["velocity_rms"]) == 2
+        assert doc[side]["n_starts"] == 10
+    # the simulated truth differs from the nominal model: the identified one follows better
+    assert max(doc["identified"]["position_rms"]) < max(doc["nominal"]["position_rms"])
+    assert "tanh" in doc["regularization"]
+    assert fig.stat().st_size > 1000
+    assert "rollout over 0.1 s" in capsys.readouterr().out
+
+
+def test_identify_refines_and_rolls_out(logs, tmp_path):
+    train, _ = logs
+    out = tmp_path / "ref.json"
+    args = ["identify", "double_pendulum", "--friction", "viscous,coulomb", "--quiet"]
+    args += ["--data", str(train), "--split", "0.7", "--refine", "output-error"]
+    args += ["--refine-horizon", "0.05", "--refine-windows", "20"]
+    report = tmp_path / "report"
+    assert main([*args, "--rollout", "0.1", "--json", str(out), "--report", str(report)]) == 0
+    assert (report / "rollout.png").stat().st_size > 1000
+    doc = json.loads(out.read_text())
+    rec = doc["refinement"]
+    assert rec["method"] == "output-error" and rec["steps"] == 25 and rec["windows"] == 20
+    assert rec["cost_after"] <= rec["cost_before"]
+    assert doc["rollout"]["horizon"] == 0.1
+    assert doc["relative_error"]["validation"] < 0.1
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--rollout", "0.1"], "--validate or --split"),
+        (["--refine-horizon", "0.1"], "--refine-horizon applies"),
+        (["--refine-windows", "5"], "--refine-windows applies"),
+        (["--refine", "output-error", "--method", "rls"], "--method ols or wls"),
+    ],
+)
+def test_bad_identify_options_fail_before_work(logs, extra, message, capsys):
+    train, _ = logs
+    args = ["identify", "double_pendulum", "--data", str(train), *extra]
+    assert main(args) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_validate_refuses_a_figure_that_is_not_png(logs, tmp_path, capsys):
+    _, valid = logs
+    cmd = ["validate", "double_pendulum", "--model", str(tmp_path / "x.json"), "--data", str(valid)]
+    assert main([*cmd, "--figure", str(tmp_path / "x.svg")]) == 2
+    assert "PNG" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_real_panda_refined_model_rolls_out_closer(panda_log, tmp_path):
+    """Train 0-10.5 s, validate 10.5-15 s (the issue's protocol). Measured
+    (experiments/panda_rollout.py): rollout error at 0.25 s 0.118 rad refined against
+    0.166 rad consistent least squares (0.71x); validation torque error 1.665 % against
+    1.590 % plain least squares (1.05x) and 2.210 % consistent."""
+    d = str(panda_log)
+    # OLS, the protocol measured above: from the WLS start (the default) the refined
+    # model rolls out at 0.260 rad against 0.217 rad consistent (issue 40's note)
+    base = ["identify", "panda", "--friction", "viscous,coulomb,offset", "--quiet"]
+    base += ["--method", "ols"]
+    base += ["--data", f"{d}@0:10.5", "--validate", f"{d}@10.5:15"]
+    ls, cons, ref = (tmp_path / f"{n}.json" for n in ("ls", "cons", "ref"))
+    assert main([*base, "--json", str(ls)]) == 0
+    assert main([*base, "--consistent", "--rollout", "0.25", "--json", str(cons)]) == 0
+    args = [*base, "--consistent", "--refine", "output-error", "--rollout", "0.25"]
+    assert main([*args, "--json", str(ref)]) == 0
+    docs = {k: json.loads(p.read_text()) for k, p in (("ls", ls), ("cons", cons), ("ref", ref))}
+
+    def rollout(doc):
+        e = doc["rollout"]["identified"]["position_rms"]
+        return sum(x * x for x in e) ** 0.5
+
+    assert rollout(docs["ref"]) <= 0.8 * rollout(docs["cons"])
+    err = {k: d["relative_error"]["validation"] for k, d in docs.items()}
+    assert err["ref"] <= 1.1 * err["ls"]
+    assert docs["ref"]["rollout"]["identified"]["diverged"] == 0
