@@ -1,0 +1,143 @@
+"""The constraints of an excitation design on a time grid, with their Jacobians in ``z``.
+
+All are ``c(z) >= 0`` (SciPy's convention) over the grid ``t_k`` (spacing ``dt``):
+
+    position      lo_j + m w_j + dt/2 v_j  <=  q_j(t_k)  <=  hi_j - m w_j - dt/2 v_j
+    velocity      |dq_j(t_k)|  <= (1 - m) v_j - dt/2 a_j       (a_j: acceleration limit, when set)
+    acceleration  |ddq_j(t_k)| <= (1 - m) a_j
+    torque        |tau_j(t_k)| <= (1 - m) e_j                   (tau = rnea of the model)
+    clearance     d(q(t_k))    >= clearance + buffer           (the closest pair)
+
+with ``w_j = hi_j - lo_j``, ``v_j``, ``a_j``, ``e_j`` the velocity, acceleration and
+effort limits and ``m`` the relative margin. The ``dt/2`` terms keep positions and
+velocities within their limits between grid times (the motion moves at most
+``dt/2`` times its rate bound from the nearest sample). The first three are linear
+in ``z`` (``G z <= h``); torque and clearance are not, their Jacobians are exact
+(``pinocchio.computeRNEADerivatives``; the witness-point Jacobian of
+:mod:`.world`). The final trajectory is checked again on the dense grid of the
+run (:mod:`.verify`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from ..robot import Robot
+from .fourier import trajectory_to_configuration
+from .rest import RestFourier
+from .world import CollisionScene
+
+
+@dataclass(frozen=True)
+class Bounds:
+    """Per-DoF limits with the margin applied (NaN or inf: none), shape (nv,) each."""
+
+    lo: np.ndarray  # [rad or m]
+    hi: np.ndarray
+    velocity: np.ndarray  # [rad/s or m/s]
+    acceleration: np.ndarray  # [rad/s^2 or m/s^2], NaN when unset
+    effort: np.ndarray  # [N m or N], NaN when unset
+
+
+def linear_constraints(family: RestFourier, t: np.ndarray, bounds: Bounds):
+    """``(G, h)`` with ``G z <= h`` for the position, velocity and acceleration limits on ``t``."""
+    P, V, A = family.bases(t)
+    nv, k = family.nv, P.shape[1]
+    dt = float(t[1] - t[0]) if t.size > 1 else 0.0
+    rows, rhs = [], []
+    for j in range(nv):
+        block = np.zeros((t.size, family.n_free))
+        cols = slice(j * k, (j + 1) * k)
+        acc = bounds.acceleration[j]
+        slack_q = 0.5 * dt * bounds.velocity[j]
+        slack_v = 0.5 * dt * acc if np.isfinite(acc) else 0.0
+        for basis, upper, lower in (
+            (P, bounds.hi[j] - family.start[j] - slack_q, bounds.lo[j] - family.start[j] + slack_q),
+            (V, bounds.velocity[j] - slack_v, -bounds.velocity[j] + slack_v),
+            (A, acc, -acc),
+        ):
+            if not np.isfinite(upper):
+                continue
+            g = block.copy()
+            g[:, cols] = basis
+            rows += [g, -g]
+            rhs += [np.full(t.size, upper), np.full(t.size, -lower)]
+    return np.vstack(rows), np.concatenate(rhs)
+
+
+def chain_jacobian(family: RestFourier, t: np.ndarray, dq_: np.ndarray, dv_: np.ndarray, da_):
+    """``d c / d z`` from ``d c / d(q, dq, ddq)`` per sample, each (n, m, nv); shape (n m, nz)."""
+    P, V, A = family.bases(t)
+    n, m, nv = dq_.shape
+    J = dq_[..., None] * P[:, None, None, :] + dv_[..., None] * V[:, None, None, :]
+    J += da_[..., None] * A[:, None, None, :]
+    return J.reshape(n * m, nv * P.shape[1])
+
+
+class TorqueConstraint:
+    """``(1 - m) e_j -+ tau_j(t_k) >= 0`` on the joints with an effort limit."""
+
+    def __init__(self, robot: Robot, family: RestFourier, t: np.ndarray, effort: np.ndarray):
+        self.robot, self.family, self.t = robot, family, t
+        self.joints = np.flatnonzero(np.isfinite(effort))
+        self.effort = effort[self.joints]
+        self.model = robot.model
+        self.data = robot.model.createData()
+
+    def torques(self, angles, dq, ddq, derivatives: bool = False):
+        q = trajectory_to_configuration(self.robot, angles)
+        n, nv = q.shape[0], self.robot.nv
+        tau = np.empty((n, nv))
+        D = np.empty((3, n, nv, nv)) if derivatives else None
+        for k in range(n):
+            if derivatives:
+                dtq, dtv, dta = pin.computeRNEADerivatives(self.model, self.data, q[k], dq[k], ddq[k])
+                D[0, k], D[1, k] = dtq, dtv  # type: ignore[index]
+                D[2, k] = np.triu(dta) + np.triu(dta, 1).T  # type: ignore[index]
+                tau[k] = pin.rnea(self.model, self.data, q[k], dq[k], ddq[k])
+            else:
+                tau[k] = pin.rnea(self.model, self.data, q[k], dq[k], ddq[k])
+        return tau, D
+
+    def __call__(self, z):
+        tau, _ = self.torques(*self.family.states(z, self.t))
+        tj = tau[:, self.joints]
+        return np.concatenate([(self.effort - tj).ravel(), (self.effort + tj).ravel()])
+
+    def jacobian(self, z):
+        _, D = self.torques(*self.family.states(z, self.t), derivatives=True)
+        Dj = D[:, :, self.joints]  # type: ignore[index]
+        J = chain_jacobian(self.family, self.t, Dj[0], Dj[1], Dj[2])
+        return np.vstack([-J, J])
+
+
+class ClearanceConstraint:
+    """``d(q(t_k)) - limit >= 0`` for the closest pair at each grid time."""
+
+    def __init__(self, scene: CollisionScene, family: RestFourier, t: np.ndarray, limit: float):
+        self.scene, self.family, self.t, self.limit = scene, family, t, float(limit)
+        self._cache: tuple[bytes, np.ndarray, np.ndarray] | None = None
+
+    def _eval(self, z):
+        key = np.asarray(z, float).tobytes()
+        if self._cache is None or self._cache[0] != key:
+            angles, _, _ = self.family.states(z, self.t)
+            q = trajectory_to_configuration(self.scene.robot, angles)
+            n, nv = q.shape[0], self.family.nv
+            d, g = np.empty(n), np.empty((n, nv))
+            for k in range(n):
+                best, grad = self.scene.closest(q[k], gradient=True)
+                d[k], g[k] = best.distance, grad
+            self._cache = (key, d, g)
+        return self._cache[1], self._cache[2]
+
+    def __call__(self, z):
+        return self._eval(z)[0] - self.limit
+
+    def jacobian(self, z):
+        g = self._eval(z)[1]
+        zero = np.zeros_like(g)[:, None, :]
+        return chain_jacobian(self.family, self.t, g[:, None, :], zero, zero)
