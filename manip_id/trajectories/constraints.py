@@ -2,16 +2,20 @@
 
 All are ``c(z) >= 0`` (SciPy's convention) over the grid ``t_k`` (spacing ``dt``):
 
-    position      lo_j + m w_j + dt/2 v_j  <=  q_j(t_k)  <=  hi_j - m w_j - dt/2 v_j
-    velocity      |dq_j(t_k)|  <= (1 - m) v_j - dt/2 a_j       (a_j: acceleration limit, when set)
-    acceleration  |ddq_j(t_k)| <= (1 - m) a_j
+    position      lo_j + m w_j + s_j  <=  q_j(t_k)  <=  hi_j - m w_j - s_j
+    velocity      |dq_j(t_k)|  <= (1 - m) v_j - s_j B
+    acceleration  |ddq_j(t_k)| <= (1 - m) a_j - s_j B^2
     torque        |tau_j(t_k)| <= (1 - m) e_j                   (tau = rnea of the model)
     clearance     d(q(t_k))    >= clearance + buffer           (the closest pair)
 
 with ``w_j = hi_j - lo_j``, ``v_j``, ``a_j``, ``e_j`` the velocity, acceleration and
-effort limits and ``m`` the relative margin. The ``dt/2`` terms keep positions and
-velocities within their limits between grid times (the motion moves at most
-``dt/2`` times its rate bound from the nearest sample). The first three are linear
+effort limits and ``m`` the relative margin. The slacks ``s_j = dt^2/8 min(a_j, B v_j)``
+keep each signal within its limit between grid times: at an extremum between two
+samples the derivative vanishes, so the overshoot over the nearest sample (at most
+``dt/2`` away) is at most ``dt^2/8`` times the largest second derivative; and by
+Bernstein's inequality a trigonometric polynomial of top pulsation ``B = L wf``
+has ``max |f'| <= B max |f - c|``, so ``|ddq| <= B v_j`` and each further derivative
+costs another factor ``B``. The first three are linear
 in ``z`` (``G z <= h``); torque and clearance are not, their Jacobians are exact
 (``pinocchio.computeRNEADerivatives``; the witness-point Jacobian of
 :mod:`.world`). The final trajectory is checked again on the dense grid of the
@@ -52,12 +56,13 @@ def linear_constraints(family: RestFourier, t: np.ndarray, bounds: Bounds):
         block = np.zeros((t.size, family.n_free))
         cols = slice(j * k, (j + 1) * k)
         acc = bounds.acceleration[j]
-        slack_q = 0.5 * dt * bounds.velocity[j]
-        slack_v = 0.5 * dt * acc if np.isfinite(acc) else 0.0
+        top = family.harmonics * family.wf  # [rad/s] B
+        s = dt**2 / 8.0 * np.fmin(acc, top * bounds.velocity[j])
+        vel = bounds.velocity[j] - s * top
         for basis, upper, lower in (
-            (P, bounds.hi[j] - family.start[j] - slack_q, bounds.lo[j] - family.start[j] + slack_q),
-            (V, bounds.velocity[j] - slack_v, -bounds.velocity[j] + slack_v),
-            (A, acc, -acc),
+            (P, bounds.hi[j] - family.start[j] - s, bounds.lo[j] - family.start[j] + s),
+            (V, vel, -vel),
+            (A, acc - s * top**2, -acc + s * top**2),
         ):
             if not np.isfinite(upper):
                 continue

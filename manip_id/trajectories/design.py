@@ -12,7 +12,8 @@ repeated over ``duration``. Steps:
    the start pose until it passes, else the binding constraint is raised.
 
 Sampling density: the criterion uses ``20 L`` times per period (``L`` harmonics: the
-regressor's products of up to a few harmonics stay resolved); the constraints ``40 L``.
+regressor's products of up to a few harmonics stay resolved), and the constraints the
+same times plus the end (with the between-samples slacks of :mod:`.constraints`).
 """
 
 from __future__ import annotations
@@ -213,9 +214,9 @@ def design_excitation(
     bounds = _bounds(robot, opt)
     _check_start(robot, family.start, bounds)
     period = 1.0 / freq
-    n_cost, n_con = 20 * opt.harmonics, 40 * opt.harmonics
+    n_cost = 20 * opt.harmonics
     t_cost = np.arange(n_cost) * (period / n_cost)
-    t_con = np.linspace(0.0, period, n_con + 1)
+    t_con = np.linspace(0.0, period, n_cost + 1)
     if prior is None:
         an = analyze(robot, seed=opt.seed)
         base = np.asarray(an.base.independent, int)
@@ -235,7 +236,7 @@ def design_excitation(
     G, h = linear_constraints(family, t_con, bounds)
     nonlinear = []
     if opt.torque and np.isfinite(bounds.effort).any():
-        nonlinear.append(TorqueConstraint(robot, family, t_con[::2], bounds.effort))
+        nonlinear.append(TorqueConstraint(robot, family, t_con, bounds.effort))
     if scene.n_pairs:
         nonlinear.append(ClearanceConstraint(scene, family, t_con, opt.clearance + 0.005))
     rng = random_generator(opt.seed)

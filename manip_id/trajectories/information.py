@@ -185,5 +185,4 @@ class InformationModel:
 
 def _full_mass_row(M: np.ndarray, j: int) -> np.ndarray:
     """Row ``j`` of the symmetric mass matrix from Pinocchio's upper triangle."""
-    U = np.triu(M)
-    return U[j] + np.triu(M, 1)[:, j]
+    return np.concatenate([M[:j, j], M[j, j:]])
