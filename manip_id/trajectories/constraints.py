@@ -99,7 +99,9 @@ class TorqueConstraint:
         D = np.empty((3, n, nv, nv)) if derivatives else None
         for k in range(n):
             if derivatives:
-                dtq, dtv, dta = pin.computeRNEADerivatives(self.model, self.data, q[k], dq[k], ddq[k])
+                dtq, dtv, dta = pin.computeRNEADerivatives(
+                    self.model, self.data, q[k], dq[k], ddq[k]
+                )
                 D[0, k], D[1, k] = dtq, dtv  # type: ignore[index]
                 D[2, k] = np.triu(dta) + np.triu(dta, 1).T  # type: ignore[index]
                 tau[k] = pin.rnea(self.model, self.data, q[k], dq[k], ddq[k])

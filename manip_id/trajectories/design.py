@@ -23,18 +23,22 @@ import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+import pinocchio as pin
 
 from .._checks import random_generator
-from ..errors import InfeasibleTrajectoryError, InputError, NumericalError
+from ..errors import InfeasibleTrajectoryError, InputError, NumericalError, RobotError
 from ..identifiability import analyze
 from ..robot import Robot
 from .constraints import Bounds, ClearanceConstraint, TorqueConstraint, linear_constraints
-from .fourier import FourierTrajectory, dof_layout
+from .fourier import FourierTrajectory, dof_layout, trajectory_to_configuration
 from .information import CRITERIA, InformationModel, criterion_value
 from .limits import acceleration_limits, check_margin, design_position_bounds
 from .rest import RestFourier
 from .verify import DesignCheck, verify_design
 from .world import CollisionScene, World
+
+#: Relative std above which a base parameter is called poorly identified.
+POOR = 0.1
 
 
 @dataclass(frozen=True)
@@ -150,6 +154,54 @@ class ExcitationDesign:
         q, dq, ddq = self.trajectory.sample(t)
         return t, q, dq, ddq
 
+    def torques(self, robot: Robot, rate: float | None = None) -> np.ndarray:
+        """Nominal torques ``pinocchio.rnea`` [N m or N] at :meth:`samples`, shape (N, nv)."""
+        _, angles, dq, ddq = self.samples(rate)
+        q = trajectory_to_configuration(robot, angles)
+        model, data = robot.model, robot.model.createData()
+        return np.array([pin.rnea(model, data, q[k], dq[k], ddq[k]) for k in range(q.shape[0])])
+
+    def poorly_identified(self, threshold: float = POOR) -> list[tuple[str, float, float | None]]:
+        """``(name, predicted relative std, prior relative std)`` of the base parameters whose
+        predicted relative std (or prior one) exceeds ``threshold``, worst first."""
+        rel = self.predicted_relative_std
+        prior = None if self.prior_std is None else _relative(self.prior_std, self.reference)
+        rows = []
+        for i, name in enumerate(self.base_names):
+            before = None if prior is None else float(prior[i])
+            worst = max(rel[i], -np.inf if before is None else before)
+            if np.isfinite(rel[i]) and worst > threshold:
+                rows.append((name, float(rel[i]), before))
+        return sorted(rows, key=lambda r: -max(r[1], r[2] or 0.0))
+
+    def summary(self) -> list[str]:
+        """The terminal summary: criterion, cond, clearance, limit use, poorly identified."""
+        use = self.check.max_usage()
+        lines = [
+            f"excitation: {self.duration:g} s, {self.trajectory.harmonics} harmonics, "
+            f"base frequency {self.trajectory.wf / (2 * math.pi):.4g} Hz, designed in "
+            f"{self.design_time:.1f} s",
+            f"criterion {self.criterion_kind}: {self.criterion:.4g} (random starts, median: "
+            f"{self.criterion_random:.4g}; lower is better); cond {self.condition_number:.4g}",
+            f"min clearance {self.check.min_clearance:.4g} m"
+            + (
+                f" ({' / '.join(self.check.closest_pair)} at t={self.check.closest_time:.3g} s)"
+                if self.check.closest_pair
+                else ""
+            ),  # fmt: skip
+            "max limit use: "
+            + ", ".join(
+                f"{k} {'-' if v is None else f'{100 * v:.0f} %'}" for k, v in use.items()
+            ),  # fmt: skip
+        ]
+        poor = self.poorly_identified()
+        if poor:
+            lines.append(f"predicted relative std above {100 * POOR:.0f} % ({len(poor)}):")
+            for name, rel, before in poor[:8]:
+                was = "" if before is None else f" (before: {_pct(before)})"
+                lines.append(f"  {name}: {_pct(rel)}{was}")
+        return lines
+
     def to_dict(self) -> dict:
         rel = self.predicted_relative_std
         out = {
@@ -166,9 +218,12 @@ class ExcitationDesign:
             "closest_pair": list(self.check.closest_pair) if self.check.closest_pair else None,
             "closest_time": self.check.closest_time,
             "limit_usage": self.check.usage_dict(self.joint_names),
-            "predicted_std": {n: float(s) for n, s in zip(self.base_names, self.predicted_std)},
+            "predicted_std": {
+                n: float(s) for n, s in zip(self.base_names, self.predicted_std, strict=True)
+            },
             "predicted_relative_std": {
-                n: (None if not np.isfinite(r) else float(r)) for n, r in zip(self.base_names, rel)
+                n: (None if not np.isfinite(r) else float(r))
+                for n, r in zip(self.base_names, rel, strict=True)
             },
             "design_time": self.design_time,
             "coefficients": {
@@ -181,9 +236,14 @@ class ExcitationDesign:
         if self.prior_std is not None:
             prel = _relative(self.prior_std, self.reference)
             out["prior_relative_std"] = {
-                n: (None if not np.isfinite(r) else float(r)) for n, r in zip(self.base_names, prel)
+                n: (None if not np.isfinite(r) else float(r))
+                for n, r in zip(self.base_names, prel, strict=True)
             }
         return out
+
+
+def _pct(x: float) -> str:
+    return "not determined" if not np.isfinite(x) else f"{100 * x:.3g} %"
 
 
 def _relative(std: np.ndarray, ref: np.ndarray) -> np.ndarray:
@@ -232,12 +292,12 @@ def design_excitation(
     info = InformationModel(robot, base, noise_std)
     scale = opt.rate * duration / n_cost  # each grid sample stands for this many samples
     objective = _Objective(info, family, t_cost, F0, scale, opt.criterion)
-    scene = CollisionScene(robot, world, self_collision=opt.self_collision)
+    scene = _scene(robot, world, opt)
     G, h = linear_constraints(family, t_con, bounds)
     nonlinear = []
     if opt.torque and np.isfinite(bounds.effort).any():
         nonlinear.append(TorqueConstraint(robot, family, t_con, bounds.effort))
-    if scene.n_pairs:
+    if scene is not None and scene.n_pairs:
         nonlinear.append(ClearanceConstraint(scene, family, t_con, opt.clearance + 0.005))
     rng = random_generator(opt.seed)
     starts = []
@@ -253,7 +313,7 @@ def design_excitation(
     starts.sort(key=lambda s: s[0])
     f_random = float(np.median([s[0] for s in starts]))
     best_f, best_z = starts[0]
-    for f0, z0 in starts[: opt.refine]:
+    for _, z0 in starts[: opt.refine]:
         z = _slsqp(objective, z0, G, h, nonlinear, opt.maxiter)
         if z is None:
             continue
@@ -360,6 +420,19 @@ def _verified(robot, family, z, bounds, scene, opt, duration):
     raise check.error()
 
 
+def _scene(robot: Robot, world: World | None, opt: DesignOptions) -> CollisionScene | None:
+    """The collision scene; None for a robot without collision geometry and no world."""
+    try:
+        has_geometry = len(robot.collision_model.geometryObjects) > 0
+    except RobotError:
+        has_geometry = False
+    if not has_geometry:
+        if world is not None and world.objects:
+            raise InputError(f"robot {robot.name!r} has no collision geometry to check --world")
+        return None
+    return CollisionScene(robot, world, self_collision=opt.self_collision)
+
+
 def _checked_options(robot: Robot, duration, opt: DesignOptions) -> DesignOptions:
     if not isinstance(opt, DesignOptions):
         raise InputError(f"options must be DesignOptions, got {type(opt).__name__}")
@@ -381,7 +454,11 @@ def _checked_options(robot: Robot, duration, opt: DesignOptions) -> DesignOption
     if opt.base_frequency is not None:
         f = float(opt.base_frequency)
         periods = duration * f
-        if not (math.isfinite(f) and f > 0) or abs(periods - round(periods)) > 1e-6 or round(periods) < 1:
+        if (
+            not (math.isfinite(f) and f > 0)
+            or abs(periods - round(periods)) > 1e-6
+            or round(periods) < 1
+        ):
             raise InputError(
                 f"duration {duration} s must be a whole number of periods of the base "
                 f"frequency; got base_frequency={opt.base_frequency} Hz ({periods:.4g} periods)"

@@ -109,7 +109,9 @@ class InformationModel:
             m = robot.model.copy()
             m.armature = np.zeros(m.nv)
             self._models.append((m, m.createData()))
-        ref = np.array([robot.model.inertias[i].toDynamicParameters() for i in range(1, robot.model.njoints)])
+        ref = np.array(
+            [robot.model.inertias[i].toDynamicParameters() for i in range(1, robot.model.njoints)]
+        )
         self._theta_ref = ref.ravel()  # (n_rigid,)
         self._ref_model = self._models[0][0].copy()
         self._ref_data = self._ref_model.createData()

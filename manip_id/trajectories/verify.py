@@ -45,12 +45,18 @@ class DesignCheck:
 
     def usage_dict(self, joint_names: list[str]) -> dict:
         return {
-            kind: {n: (None if not np.isfinite(u) else float(u)) for n, u in zip(joint_names, use)}
+            kind: {
+                n: (None if not np.isfinite(u) else float(u))
+                for n, u in zip(joint_names, use, strict=True)
+            }
             for kind, use in self.usage.items()
         }
 
     def max_usage(self) -> dict:
-        return {k: (float(np.nanmax(u)) if np.isfinite(u).any() else None) for k, u in self.usage.items()}
+        return {
+            k: (float(np.nanmax(u)) if np.isfinite(u).any() else None)
+            for k, u in self.usage.items()
+        }
 
     def error(self) -> InfeasibleTrajectoryError:
         kind, what, t, value, allowed = self.violation  # type: ignore[misc]
@@ -60,7 +66,9 @@ class DesignCheck:
                 f"{value:.4g} m apart at t={t:.4g} s, need {allowed:.4g} m (clearance plus "
                 "the between-samples allowance)"
             )
-            return InfeasibleTrajectoryError(msg, joint=" / ".join(what), limit=kind, excess=allowed - value)
+            return InfeasibleTrajectoryError(
+                msg, joint=" / ".join(what), limit=kind, excess=allowed - value
+            )
         msg = (
             f"no motion found within the {kind} limit of joint {what!r}: {value:.4g} at "
             f"t={t:.4g} s, allowed {allowed:.4g} with the margin"
@@ -112,7 +120,13 @@ def verify_design(
                 "acceleration": bounds.acceleration[j],
                 "torque": bounds.effort[j],
             }[kind]
-            violation = (kind, robot.dof_names[j], float(t[k]), float(values[kind][k, j]), float(allowed))
+            violation = (
+                kind,
+                robot.dof_names[j],
+                float(t[k]),
+                float(values[kind][k, j]),
+                float(allowed),
+            )
     d_min, pair, t_min, allowance = np.inf, None, None, 0.0
     if scene is not None and scene.n_pairs:
         dists = np.empty(n)

@@ -33,11 +33,11 @@ from __future__ import annotations
 
 import math
 import os
-import tomllib
 from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
+import tomllib
 
 from ..errors import InputError, RobotError
 from ..robot import Robot
@@ -47,7 +47,7 @@ SHAPES = ("plane", "box", "sphere", "cylinder")
 
 @dataclass(frozen=True)
 class WorldObject:
-    """One obstacle: ``kind`` in :data:`SHAPES`, its sizes [m] and its placement in the base frame."""
+    """An obstacle: ``kind`` in :data:`SHAPES`, sizes [m], placement in the base frame."""
 
     kind: str
     name: str
@@ -116,7 +116,7 @@ _KEYS = {
 
 def _object(kind: str, name: str, entry: dict, source: str) -> WorldObject:
     required, optional = _KEYS[kind]
-    where = f"{source}: [[{kind}]] #{name[len(kind):]}"
+    where = f"{source}: [[{kind}]] #{name[len(kind) :]}"
     if not isinstance(entry, dict):
         raise InputError(f"{where}: expected a table, got {entry!r}")
     extra = sorted(set(entry) - set(required) - set(optional))
@@ -171,7 +171,10 @@ def srdf_path(robot: Robot) -> str | None:
     if not robot.source or not str(robot.source).endswith(".urdf"):
         return None
     folder, stem = os.path.split(os.path.splitext(str(robot.source))[0])
-    for cand in (os.path.join(folder, stem + ".srdf"), os.path.join(folder, "..", "srdf", stem + ".srdf")):
+    for cand in (
+        os.path.join(folder, stem + ".srdf"),
+        os.path.join(folder, "..", "srdf", stem + ".srdf"),
+    ):
         if os.path.isfile(cand):
             return cand
     return None
@@ -202,7 +205,9 @@ class CollisionScene:
         n_robot = len(geom.geometryObjects)
         world = world or World()
         for obj in world.objects:
-            geom.addGeometryObject(pin.GeometryObject(obj.name, 0, 0, obj.placement(), obj.geometry()))
+            geom.addGeometryObject(
+                pin.GeometryObject(obj.name, 0, 0, obj.placement(), obj.geometry())
+            )
         pairs: list[tuple[int, int]] = []
         if self_collision:
             geom.addAllCollisionPairs()
@@ -238,12 +243,12 @@ class CollisionScene:
         return len(self.pairs)
 
     def distances(self, q: np.ndarray) -> np.ndarray:
-        """Distances [m] of every pair at one configuration, shape (n_pairs,) (negative: overlap)."""
+        """Distances [m] of every pair at ``q``, shape (n_pairs,) (negative: overlap)."""
         pin.computeDistances(self.robot.model, self.data, self.geom, self.gdata, q)
         return np.array([r.min_distance for r in self.gdata.distanceResults])
 
     def closest(self, q: np.ndarray, gradient: bool = False):
-        """The closest pair at ``q`` (:class:`Closest`) and, with ``gradient``, dd/dv, shape (nv,)."""
+        """The closest pair at ``q`` (:class:`Closest`) and, with ``gradient``, dd/dv (nv,)."""
         d = self.distances(q)
         k = int(np.argmin(d))
         res = self.gdata.distanceResults[k]
