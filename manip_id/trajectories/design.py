@@ -34,7 +34,7 @@ from .fourier import FourierTrajectory, dof_layout, trajectory_to_configuration
 from .information import CRITERIA, InformationModel, criterion_value
 from .limits import acceleration_limits, check_margin, design_position_bounds
 from .rest import RestFourier
-from .verify import DesignCheck, verify_design
+from .verify import DesignCheck, named_values, verify_design
 from .world import CollisionScene, World
 
 #: Relative std above which a base parameter is called poorly identified.

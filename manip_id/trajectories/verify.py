@@ -153,6 +153,11 @@ def verify_design(
     return DesignCheck(usage, d_min, pair, t_min, allowance, violation)
 
 
+def named_values(names, values) -> dict:
+    """``{name: value}`` with None for a value that is not finite (JSON-safe)."""
+    return {n: (float(v) if np.isfinite(v) else None) for n, v in zip(names, values, strict=True)}
+
+
 def _peak(use: np.ndarray) -> np.ndarray:
     peak = np.max(np.where(np.isfinite(use), use, -np.inf), axis=0)
     return np.where(np.isneginf(peak), np.nan, peak)
