@@ -122,29 +122,38 @@ class TorqueConstraint:
 
 
 class ClearanceConstraint:
-    """``d(q(t_k)) - limit >= 0`` for the closest pair at each grid time."""
+    """``d(q(t_k)) - limit - dt v_k >= 0`` for the closest pair at each grid time.
+
+    ``v_k = sum_j |dq_j(t_k)| reach_j`` bounds the speed of every robot point
+    (:meth:`CollisionScene.point_speed_bound`); ``dt v_k`` covers both members of a
+    pair moving for ``dt/2`` towards each other, so the clearance holds between grid
+    times too (up to the speed changing within ``dt/2``: the final check covers that).
+    """
 
     def __init__(self, scene: CollisionScene, family: RestFourier, t: np.ndarray, limit: float):
         self.scene, self.family, self.t, self.limit = scene, family, t, float(limit)
-        self._cache: tuple[bytes, np.ndarray, np.ndarray] | None = None
+        self.dt = float(t[1] - t[0]) if t.size > 1 else 0.0
+        self._cache: tuple[bytes, np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def _eval(self, z):
         key = np.asarray(z, float).tobytes()
         if self._cache is None or self._cache[0] != key:
-            angles, _, _ = self.family.states(z, self.t)
+            angles, dq, _ = self.family.states(z, self.t)
             q = trajectory_to_configuration(self.scene.robot, angles)
             n, nv = q.shape[0], self.family.nv
             d, g = np.empty(n), np.empty((n, nv))
             for k in range(n):
                 best, grad = self.scene.closest(q[k], gradient=True)
                 d[k], g[k] = best.distance, grad
-            self._cache = (key, d, g)
-        return self._cache[1], self._cache[2]
+            self._cache = (key, d, g, dq)
+        return self._cache[1:]
 
     def __call__(self, z):
-        return self._eval(z)[0] - self.limit
+        d, _, dq = self._eval(z)
+        return d - self.limit - self.dt * (np.abs(dq) @ self.scene.reach)
 
     def jacobian(self, z):
-        g = self._eval(z)[1]
+        _, g, dq = self._eval(z)
+        dv = -self.dt * np.sign(dq) * self.scene.reach
         zero = np.zeros_like(g)[:, None, :]
-        return chain_jacobian(self.family, self.t, g[:, None, :], zero, zero)
+        return chain_jacobian(self.family, self.t, g[:, None, :], dv[:, None, :], zero)

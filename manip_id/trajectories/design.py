@@ -13,7 +13,8 @@ repeated over ``duration``. Steps:
 
 Sampling density: the criterion uses ``20 L`` times per period (``L`` harmonics: the
 regressor's products of up to a few harmonics stay resolved), and the constraints the
-same times plus the end (with the between-samples slacks of :mod:`.constraints`).
+same times plus the end (with the between-samples slacks of :mod:`.constraints`), the
+clearance ``80 L`` times (its between-samples allowance grows with the spacing).
 """
 
 from __future__ import annotations
@@ -298,7 +299,8 @@ def design_excitation(
     if opt.torque and np.isfinite(bounds.effort).any():
         nonlinear.append(TorqueConstraint(robot, family, t_con, bounds.effort))
     if scene is not None and scene.n_pairs:
-        nonlinear.append(ClearanceConstraint(scene, family, t_con, opt.clearance + 0.005))
+        t_clear = np.linspace(0.0, period, 4 * n_cost + 1)
+        nonlinear.append(ClearanceConstraint(scene, family, t_clear, opt.clearance))
     rng = random_generator(opt.seed)
     starts = []
     for _ in range(opt.starts):
@@ -410,13 +412,13 @@ def _slsqp(objective: _Objective, z0, G, h, nonlinear, maxiter: int):
 
 
 def _verified(robot, family, z, bounds, scene, opt, duration):
-    """Shrink ``z`` about the start pose until the dense check passes (at most 40 steps)."""
-    for _ in range(40):
+    """Shrink ``z`` about the start pose until the dense check passes (at most 8 steps)."""
+    for _ in range(8):
         check = verify_design(robot, family.trajectory(z), duration, opt.rate, bounds, scene,
                               clearance=opt.clearance, torque=opt.torque)  # fmt: skip
         if check.violation is None:
             return z, check
-        z = 0.97 * z
+        z = 0.9 * z
     raise check.error()
 
 
