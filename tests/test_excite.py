@@ -6,10 +6,12 @@ robot's own (mesh) geometry plus the world, gradients against central difference
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 import pytest
+from conftest import get_robot
 
 from manip_id import load_dataset
 from manip_id.cli import main
@@ -19,9 +21,7 @@ from manip_id.trajectories.design import _Objective
 from manip_id.trajectories.excitation import base_columns
 from manip_id.trajectories.fourier import trajectory_to_configuration
 from manip_id.trajectories.information import InformationModel, criterion_value
-from manip_id.trajectories.world import CollisionScene, srdf_path
-
-from conftest import get_robot
+from manip_id.trajectories.world import CollisionScene
 
 UR5_START = "0,-1.57,1.2,-1.2,-1.57,0"
 
@@ -107,11 +107,11 @@ def _independent_scene(robot, plane_offset: float):
 
     geom = robot.collision_model.copy()
     n = len(geom.geometryObjects)
-    geom.addGeometryObject(
-        pin.GeometryObject("table", 0, 0, pin.SE3.Identity(), coal.Halfspace(np.array([0.0, 0, 1]), plane_offset))
-    )  # fmt: skip
+    table = coal.Halfspace(np.array([0.0, 0.0, 1.0]), plane_offset)
+    geom.addGeometryObject(pin.GeometryObject("table", 0, 0, pin.SE3.Identity(), table))
     geom.addAllCollisionPairs()
-    pin.removeCollisionPairs(robot.model, geom, srdf_path(robot))
+    srdf = Path(robot.source).parents[1] / "srdf" / "ur5.srdf"  # example-robot-data's layout
+    pin.removeCollisionPairs(robot.model, geom, str(srdf))
     keep = []
     for cp in geom.collisionPairs:
         a, b = sorted((cp.first, cp.second))
@@ -187,8 +187,10 @@ def test_designed_motion_is_more_informative_than_random_ones_of_the_family():
         a, v, w = traj.sample(t)
         data = robot.model.createData()
         scale = 1.0 / (opts.noise * robot.effort_limit)
-        Y = np.vstack([scale[:, None] * pin.computeJointTorqueRegressor(robot.model, data, q, vk, wk)[:, base]
-                       for q, vk, wk in zip(a, v, w, strict=True)])  # fmt: skip
+        Y = np.vstack([
+            scale[:, None] * pin.computeJointTorqueRegressor(robot.model, data, q, vk, wk)[:, base]
+            for q, vk, wk in zip(a, v, w, strict=True)
+        ])  # fmt: skip
         return np.linalg.slogdet(Y.T @ Y)[1]
 
     fam = RestFourier(start, 3, 2 * np.pi / 4.0)
@@ -223,7 +225,9 @@ def test_every_output_format_parses_back(tmp_path, fmt):
         p = doc["points"][7]
         np.testing.assert_allclose(p["positions"], q[7], rtol=1e-9)
         np.testing.assert_allclose(p["accelerations"], ddq[7], rtol=1e-9)
-        assert p["time_from_start"]["sec"] + p["time_from_start"]["nanosec"] * 1e-9 == pytest.approx(0.7)
+        assert p["time_from_start"]["sec"] + p["time_from_start"][
+            "nanosec"
+        ] * 1e-9 == pytest.approx(0.7)
     elif fmt == "urscript":
         lines = path.read_text().splitlines()
         assert lines[0].startswith("def ") and "movej(" in lines[2]

@@ -249,7 +249,7 @@ def _pct(x: float) -> str:
 
 def _relative(std: np.ndarray, ref: np.ndarray) -> np.ndarray:
     scale = np.max(np.abs(ref)) if ref.size else 1.0
-    small = np.abs(ref) <= 1e-6 * max(scale, 1e-300)
+    small = np.abs(ref) <= 1e-3 * max(scale, 1e-300)  # products of inertia of ~0: no ratio
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(small, np.nan, std / np.abs(ref))
 
