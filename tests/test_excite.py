@@ -164,7 +164,7 @@ def test_excite_writes_a_trajectory_within_every_limit_and_clear_of_the_table(tm
         least = min(least, min(r.min_distance for r in gdata.distanceResults))
     assert least >= 0.03 - 1e-9
     doc = json.loads(js.read_text())["excitation"]
-    assert doc["min_clearance"] <= least + 1e-9  # hull distances never exceed mesh distances
+    assert doc["min_clearance"] <= least + 1e-4  # hulls contain the meshes (GJK tolerance)
     assert set(doc["limit_usage"]) == {"position", "velocity", "acceleration", "torque"}
     assert doc["criterion"] < doc["criterion_random"]
     # refuses to replace its output without --force
