@@ -46,7 +46,13 @@ coefficients of the rest-to-rest series, subject to the limits, the nominal
 torques and the clearance, and checks the result on the run's own grid.
 """
 
-from .design import DesignOptions, ExcitationDesign, PriorInformation, design_excitation
+from .design import (
+    DesignOptions,
+    ExcitationDesign,
+    PriorInformation,
+    design_excitation,
+    read_design,
+)
 from .excitation import (
     base_columns,
     excitation_condition_number,
@@ -76,6 +82,7 @@ __all__ = [
     "excitation_condition_number",
     "format_of",
     "random_trajectory",
+    "read_design",
     "trajectory_to_configuration",
     "write_trajectory",
 ]

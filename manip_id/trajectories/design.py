@@ -243,6 +243,27 @@ class ExcitationDesign:
         return out
 
 
+def read_design(path) -> tuple[FourierTrajectory, float]:
+    """The trajectory and duration [s] of a design JSON (``manip-id excite --json``)."""
+    import json
+
+    try:
+        with open(path, encoding="utf-8") as fh:
+            doc = json.load(fh)
+        exc = doc["excitation"]
+        c = exc["coefficients"]
+        traj = FourierTrajectory(c["q0"], c["a"], c["b"], c["wf"])
+        duration = float(exc["duration"])
+    except OSError as err:
+        raise InputError(f"cannot read the design {path}: {err}") from err
+    except (ValueError, KeyError, TypeError) as err:
+        raise InputError(
+            f"{path} is not a design of manip-id excite --json (expected excitation.duration "
+            f"and excitation.coefficients q0, a, b, wf): {err!r}"
+        ) from err
+    return traj, duration
+
+
 def _pct(x: float) -> str:
     return "not determined" if not np.isfinite(x) else f"{100 * x:.3g} %"
 
