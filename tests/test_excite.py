@@ -170,6 +170,14 @@ def test_excite_writes_a_trajectory_within_every_limit_and_clear_of_the_table(tm
     # refuses to replace its output without --force
     assert main([str(a) for a in argv]) == 2
     assert "exists; give --force" in capsys.readouterr().err
+    # simulate along the design: noise-free torques are rnea on the same motion
+    sim = tmp_path / "sim"
+    argv = ["simulate", "ur5", "--trajectory", js, "--out", sim, "--files", "1", "--noise", "0",
+            "--rate", "1000"]  # fmt: skip
+    assert main([str(a) for a in argv]) == 0, capsys.readouterr().err
+    log = load_dataset(sim / "run_0.npz")
+    np.testing.assert_allclose(log.q, d.q, atol=1e-8)  # the CSV holds 10 digits
+    np.testing.assert_allclose(log.tau, d.tau, atol=1e-6)
 
 
 def test_designed_motion_is_more_informative_than_random_ones_of_the_family():
