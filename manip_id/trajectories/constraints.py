@@ -116,7 +116,7 @@ class TorqueConstraint:
 
     def jacobian(self, z):
         _, D = self.torques(*self.family.states(z, self.t), derivatives=True)
-        Dj = D[:, :, self.joints]  # type: ignore[index]
+        Dj = D[:, :, self.joints]
         J = chain_jacobian(self.family, self.t, Dj[0], Dj[1], Dj[2])
         return np.vstack([-J, J])
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -35,7 +36,7 @@ from .fourier import FourierTrajectory, dof_layout, trajectory_to_configuration
 from .information import CRITERIA, InformationModel, criterion_value
 from .limits import acceleration_limits, check_margin, design_position_bounds
 from .rest import RestFourier
-from .verify import DesignCheck, named_values, verify_design
+from .verify import DesignCheck, verify_design
 from .world import CollisionScene, World
 
 #: Relative std above which a base parameter is called poorly identified.
@@ -316,7 +317,7 @@ def design_excitation(
     objective = _Objective(info, family, t_cost, F0, scale, opt.criterion)
     scene = _scene(robot, world, opt)
     G, h = linear_constraints(family, t_con, bounds)
-    nonlinear = []
+    nonlinear: list[TorqueConstraint | ClearanceConstraint] = []
     if opt.torque and np.isfinite(bounds.effort).any():
         nonlinear.append(TorqueConstraint(robot, family, t_con, bounds.effort))
     if scene is not None and scene.n_pairs:
@@ -488,7 +489,7 @@ def _checked_options(robot: Robot, duration, opt: DesignOptions) -> DesignOption
             )
     if 1.0 / (opt.base_frequency or 1.0 / duration) * opt.rate < 4 * opt.harmonics:
         raise InputError(f"rate {opt.rate} Hz is too low for {opt.harmonics} harmonics")
-    acc = opt.acceleration_limit
+    acc: Any = opt.acceleration_limit
     if acc is None and robot.profile is not None and robot.profile.excitation is not None:
         acc = robot.profile.excitation.acceleration_limit
     return replace(opt, acceleration_limit=acc)

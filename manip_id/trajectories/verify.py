@@ -107,7 +107,7 @@ def verify_design(
         }
     values = {"position": angles, "velocity": dq, "acceleration": ddq, "torque": tau}
     usage = {k: _peak(u) for k, u in uses.items()}
-    violation = None
+    violation: tuple | None = None
     worst = 1.0 + 1e-9
     for kind, u in uses.items():
         uu = np.where(np.isfinite(u), u, -np.inf)
@@ -131,18 +131,18 @@ def verify_design(
     if scene is not None and scene.n_pairs:
         dists = np.empty(n)
         which = np.empty(n, dtype=int)
-        for k in range(n):
-            d = scene.distances(q[k])
-            which[k] = int(np.argmin(d))
-            dists[k] = d[which[k]]
+        for i in range(n):
+            d = scene.distances(q[i])
+            which[i] = int(np.argmin(d))
+            dists[i] = d[which[i]]
         speed = np.abs(dq) @ scene.reach
         speed = np.maximum(speed, np.concatenate([speed[1:], speed[-1:]]))
         speed = np.maximum(speed, np.concatenate([speed[:1], speed[:-1]]))
         dt = duration / (n - 1)
         need = clearance + dt * speed
-        k = int(np.argmin(dists))
-        a, b = scene.pairs[which[k]]
-        d_min, pair, t_min = float(dists[k]), (scene.names[a], scene.names[b]), float(t[k])
+        kc = int(np.argmin(dists))
+        a, b = scene.pairs[which[kc]]
+        d_min, pair, t_min = float(dists[kc]), (scene.names[a], scene.names[b]), float(t[kc])
         allowance = float(np.max(dt * speed))
         short = dists - need
         kk = int(np.argmin(short))

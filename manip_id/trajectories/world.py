@@ -56,7 +56,7 @@ class WorldObject:
     rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def geometry(self):
-        import coal
+        import coal  # type: ignore[import-untyped]
 
         if self.kind == "plane":
             n = np.array(self.dims[:3])
