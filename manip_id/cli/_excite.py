@@ -8,6 +8,7 @@ import os
 import numpy as np
 
 from ..errors import InputError, OutputError
+from ..identification import load_result
 from ..trajectories import (
     DesignOptions,
     PriorInformation,
@@ -31,8 +32,6 @@ def run(args: argparse.Namespace) -> int:
     world = World.load(args.world) if args.world else None
     prior = None
     if args.previous is not None:
-        from ..identification import load_result  # heavy: only with --from
-
         result = load_result(args.previous)
         if list(result.base.names) != list(robot.parameter_names):
             raise InputError(

@@ -19,6 +19,7 @@ clearance ``80 L`` times (its between-samples allowance grows with the spacing).
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from dataclasses import dataclass, field, replace
@@ -246,8 +247,6 @@ class ExcitationDesign:
 
 def read_design(path) -> tuple[FourierTrajectory, float]:
     """The trajectory and duration [s] of a design JSON (``manip-id excite --json``)."""
-    import json
-
     try:
         with open(path, encoding="utf-8") as fh:
             doc = json.load(fh)
@@ -323,27 +322,7 @@ def design_excitation(
     if scene is not None and scene.n_pairs:
         t_clear = np.linspace(0.0, period, 4 * n_cost + 1)
         nonlinear.append(ClearanceConstraint(scene, family, t_clear, opt.clearance))
-    rng = random_generator(opt.seed)
-    starts = []
-    for _ in range(opt.starts):
-        z = _feasible_start(rng.standard_normal(family.n_free), G, h, nonlinear)
-        if z is not None:
-            starts.append((objective.value(z), z))
-    if not starts:
-        raise InfeasibleTrajectoryError(
-            "no random start of the Fourier family fits the limits, torques and clearance "
-            "about the start pose: loosen --margin/--clearance or choose another --start"
-        )
-    starts.sort(key=lambda s: s[0])
-    f_random = float(np.median([s[0] for s in starts]))
-    best_f, best_z = starts[0]
-    for _, z0 in starts[: opt.refine]:
-        z = _slsqp(objective, z0, G, h, nonlinear, opt.maxiter)
-        if z is None:
-            continue
-        f = objective.value(z)
-        if f < best_f and _feasible(z, G, h, nonlinear):
-            best_f, best_z = f, z
+    best_z, f_random = _search(objective, family.n_free, G, h, nonlinear, opt)
     z, check = _verified(robot, family, best_z, bounds, scene, opt, duration)
     f_final = objective.value(z)
     W = info.matrix(*family.states(z, t_cost))
@@ -392,6 +371,33 @@ class _Objective:
         P, V, A = self.bases
         grad = P.T @ g[0] + V.T @ g[1] + A.T @ g[2]  # (2L - 2, nv)
         return f, grad.T.ravel()
+
+
+def _search(objective: _Objective, n_free: int, G, h, nonlinear, opt: DesignOptions):
+    """Global start (random feasible starts), then SLSQP from the best ``opt.refine``;
+    returns the best feasible ``z`` and the median criterion of the random starts."""
+    rng = random_generator(opt.seed)
+    starts = []
+    for _ in range(opt.starts):
+        z = _feasible_start(rng.standard_normal(n_free), G, h, nonlinear)
+        if z is not None:
+            starts.append((objective.value(z), z))
+    if not starts:
+        raise InfeasibleTrajectoryError(
+            "no random start of the Fourier family fits the limits, torques and clearance "
+            "about the start pose: loosen --margin/--clearance or choose another --start"
+        )
+    starts.sort(key=lambda s: s[0])
+    f_random = float(np.median([s[0] for s in starts]))
+    best_f, best_z = starts[0]
+    for _, z0 in starts[: opt.refine]:
+        z = _slsqp(objective, z0, G, h, nonlinear, opt.maxiter)
+        if z is None:
+            continue
+        f = objective.value(z)
+        if f < best_f and _feasible(z, G, h, nonlinear):
+            best_f, best_z = f, z
+    return best_z, f_random
 
 
 def _feasible(z, G, h, nonlinear, tol: float = 1e-9) -> bool:

@@ -35,6 +35,7 @@ import math
 import os
 from dataclasses import dataclass, field
 
+import coal  # type: ignore[import-untyped]
 import numpy as np
 import pinocchio as pin
 import tomllib
@@ -56,8 +57,6 @@ class WorldObject:
     rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def geometry(self):
-        import coal  # type: ignore[import-untyped]
-
         if self.kind == "plane":
             n = np.array(self.dims[:3])
             return coal.Halfspace(n / np.linalg.norm(n), self.dims[3] / np.linalg.norm(n))
@@ -193,8 +192,6 @@ class CollisionScene:
     """Robot geometry (convex hulls) plus world objects, with the pairs to check."""
 
     def __init__(self, robot: Robot, world: World | None = None, *, self_collision: bool = True):
-        import coal
-
         self.robot = robot
         model = robot.model
         geom = robot.collision_model.copy()
