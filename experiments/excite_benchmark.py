@@ -53,7 +53,7 @@ RATE = 200.0  # [Hz] of the simulated logs
 def _identified(robot, base, traj, duration: float, seed: int):
     sim = simulate(robot, traj, duration=duration, rate=RATE, noise=MeasurementNoise(tau=0.01),
                    seed=seed)  # fmt: skip
-    return sim, identify(robot, sim.q, sim.dq, sim.ddq, sim.tau, base=base)
+    return sim, identify(robot, sim.dataset.q, sim.dataset.dq, sim.dataset.ddq, sim.dataset.tau, base=base)
 
 
 def _relative(result, reference: np.ndarray, keep: np.ndarray) -> np.ndarray:
@@ -124,9 +124,9 @@ def sequential_benchmark(name: str) -> dict:
     # the poor log is rank-deficient on its own (four joints still), so its "result" is its
     # information plus a weak prior (std = 100 % of each nominal value, at least 1e-3)
     sim0 = simulate(robot, poor_traj, duration=10.0, rate=RATE, noise=MeasurementNoise(tau=0.01))
-    sigma = np.sqrt(np.mean((sim0.tau - sim0.tau_true) ** 2, axis=0))  # [N m] the noise
+    sigma = np.sqrt(np.mean((sim0.dataset.tau - sim0.tau_true) ** 2, axis=0))  # [N m] the noise
     info0 = InformationModel(robot, base.independent, sigma)
-    W0 = info0.matrix(sim0.q, sim0.dq, sim0.ddq)  # angles = q for these robots
+    W0 = info0.matrix(sim0.dataset.q, sim0.dataset.dq, sim0.dataset.ddq)  # angles = q for these robots
     F0 = info0.information(W0) + np.diag(1.0 / np.maximum(np.abs(ref), 1e-3) ** 2)
     cov0 = np.linalg.inv(F0)
     std0 = np.sqrt(np.diag(cov0))
@@ -145,12 +145,12 @@ def sequential_benchmark(name: str) -> dict:
     for label, traj in (("designed", design.trajectory), ("random", rand)):
         sim = simulate(robot, traj, duration=10.0, rate=RATE, noise=MeasurementNoise(tau=0.01),
                        seed=3)  # fmt: skip
-        W = info0.matrix(sim.q, sim.dq, sim.ddq)
+        W = info0.matrix(sim.dataset.q, sim.dataset.dq, sim.dataset.ddq)
         F = F0 + info0.information(W)
         pred = np.sqrt(np.diag(np.linalg.inv(F)))[poor] / np.abs(ref[poor])
-        q = np.vstack([sim0.q, sim.q])
-        dq, ddq = np.vstack([sim0.dq, sim.dq]), np.vstack([sim0.ddq, sim.ddq])
-        tau = np.vstack([sim0.tau, sim.tau])
+        q = np.vstack([sim0.dataset.q, sim.dataset.q])
+        dq, ddq = np.vstack([sim0.dataset.dq, sim.dataset.dq]), np.vstack([sim0.dataset.ddq, sim.dataset.ddq])
+        tau = np.vstack([sim0.dataset.tau, sim.dataset.tau])
         res = identify(robot, q, dq, ddq, tau, base=base)
         real = np.abs(np.asarray(res.estimate) - ref)[poor] / np.abs(ref[poor])
         out[label] = {
