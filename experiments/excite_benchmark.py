@@ -53,7 +53,9 @@ RATE = 200.0  # [Hz] of the simulated logs
 def _identified(robot, base, traj, duration: float, seed: int):
     sim = simulate(robot, traj, duration=duration, rate=RATE, noise=MeasurementNoise(tau=0.01),
                    seed=seed)  # fmt: skip
-    return sim, identify(robot, sim.dataset.q, sim.dataset.dq, sim.dataset.ddq, sim.dataset.tau, base=base)
+    return sim, identify(
+        robot, sim.dataset.q, sim.dataset.dq, sim.dataset.ddq, sim.dataset.tau, base=base
+    )
 
 
 def _relative(result, reference: np.ndarray, keep: np.ndarray) -> np.ndarray:
@@ -126,7 +128,9 @@ def sequential_benchmark(name: str) -> dict:
     sim0 = simulate(robot, poor_traj, duration=10.0, rate=RATE, noise=MeasurementNoise(tau=0.01))
     sigma = np.sqrt(np.mean((sim0.dataset.tau - sim0.tau_true) ** 2, axis=0))  # [N m] the noise
     info0 = InformationModel(robot, base.independent, sigma)
-    W0 = info0.matrix(sim0.dataset.q, sim0.dataset.dq, sim0.dataset.ddq)  # angles = q for these robots
+    W0 = info0.matrix(
+        sim0.dataset.q, sim0.dataset.dq, sim0.dataset.ddq
+    )  # angles = q for these robots
     F0 = info0.information(W0) + np.diag(1.0 / np.maximum(np.abs(ref), 1e-3) ** 2)
     cov0 = np.linalg.inv(F0)
     std0 = np.sqrt(np.diag(cov0))
@@ -149,7 +153,10 @@ def sequential_benchmark(name: str) -> dict:
         F = F0 + info0.information(W)
         pred = np.sqrt(np.diag(np.linalg.inv(F)))[poor] / np.abs(ref[poor])
         q = np.vstack([sim0.dataset.q, sim.dataset.q])
-        dq, ddq = np.vstack([sim0.dataset.dq, sim.dataset.dq]), np.vstack([sim0.dataset.ddq, sim.dataset.ddq])
+        dq, ddq = (
+            np.vstack([sim0.dataset.dq, sim.dataset.dq]),
+            np.vstack([sim0.dataset.ddq, sim.dataset.ddq]),
+        )
         tau = np.vstack([sim0.dataset.tau, sim.dataset.tau])
         res = identify(robot, q, dq, ddq, tau, base=base)
         real = np.abs(np.asarray(res.estimate) - ref)[poor] / np.abs(ref[poor])
