@@ -250,3 +250,43 @@ def test_every_output_format_parses_back(tmp_path, fmt):
         d = load_dataset(path)
         np.testing.assert_allclose(d.ddq, ddq)
         assert d.joint_names == tuple(names)
+
+
+def test_sequential_design_predicts_the_std_of_the_combined_data():
+    from manip_id.identifiability import analyze
+    from manip_id.trajectories import DesignOptions, PriorInformation, design_excitation
+
+    robot = get_robot("ur5")
+    an = analyze(robot, seed=0)
+    base = np.asarray(an.base.independent)
+    sigma = 0.01 * robot.effort_limit  # [N m]
+    data = robot.model.createData()
+
+    def information(angles, dq, ddq):  # pinocchio's regressor, stacked and weighted
+        Y = np.vstack([
+            pin.computeJointTorqueRegressor(robot.model, data, a, v, w)[:, base] / sigma[:, None]
+            for a, v, w in zip(angles, dq, ddq, strict=True)
+        ])  # fmt: skip
+        return Y.T @ Y
+
+    rng = np.random.default_rng(4)  # a poor earlier log: small motions of three joints
+    n = 300
+    angles = np.array(UR5_START.split(","), float) + 0.05 * rng.standard_normal((n, 6))
+    angles[:, 3:] = angles[0, 3:]
+    dq, ddq = 0.2 * rng.standard_normal((2, n, 6))
+    dq[:, 3:] = ddq[:, 3:] = 0.0
+    theta = robot.nominal_parameters
+    ref = theta[base] + an.base.K @ theta[an.base.dependent]
+    F0 = information(angles, dq, ddq) + np.diag(1.0 / np.maximum(np.abs(ref), 1e-3) ** 2)
+    prior = PriorInformation(F0, base, list(an.base.base_names), ref, sigma)
+    opts = DesignOptions(harmonics=3, start=angles[0], starts=2, maxiter=10, rate=100.0,
+                         self_collision=False)  # fmt: skip
+    design = design_excitation(robot, 4.0, options=opts, prior=prior)
+    _, a, v, w = design.samples()
+    expected = np.sqrt(np.diag(np.linalg.inv(F0 + information(a[:-1], v[:-1], w[:-1]))))
+    np.testing.assert_allclose(design.predicted_std, expected, rtol=0.05)
+    before = np.sqrt(np.diag(np.linalg.inv(F0)))
+    keep = np.abs(ref) > 1e-3 * np.abs(ref).max()
+    poor = keep & (before > 0.1 * np.abs(ref))
+    assert poor.sum() >= 3
+    assert np.all(design.predicted_std[poor] < before[poor])
