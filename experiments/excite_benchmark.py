@@ -1,9 +1,11 @@
 """Designed vs random excitation: information, identified std, design time (ur5, panda).
 
 For each robot: ``design_excitation`` (20 s, 5 harmonics, D-optimal, torque limits,
-self-collision and a table plane 1 cm under the base) against random Fourier trajectories
-of the same duration and harmonics within the same joint limits (``random_trajectory``,
-periodic, 98 % of the tightest limit). Each motion is simulated (nominal parameters, 1 %
+self-collision and a table plane 1 cm under the base) against random trajectories of the
+same family within the same limits, torques and clearance (one random start of the design,
+no refinement, the same final check), and, beside, classical random Fourier trajectories
+within the joint limits only (``random_trajectory``: they may cross the table and the
+torque limits, so they are not an alternative a user could run). Each motion is simulated (nominal parameters, 1 %
 torque noise relative to each joint's RMS torque, 200 Hz) and identified (OLS on the
 structural base); the figures are the D criterion of the motion (``-log det F``, same
 weights), the geometric mean and the worst relative std of the base parameters (std /
@@ -69,6 +71,16 @@ def _d_criterion(robot, base, traj, duration: float) -> float:
     return criterion_value(info.information(W, RATE / 20.0), "d")[0]
 
 
+def _figures(robot, base, traj, ref, keep) -> dict:
+    _, r = _identified(robot, base, traj, 20.0, seed=1)
+    rel = _relative(r, ref, keep)
+    return {
+        "criterion": _d_criterion(robot, base.independent, traj, 20.0),
+        "gmean_rel_std": float(np.exp(np.mean(np.log(rel)))),
+        "worst_rel_std": float(rel.max()),
+    }
+
+
 def information_benchmark(name: str, n_random: int) -> dict:
     robot = load_robot(name)
     an = analyze(robot, seed=0)
@@ -82,17 +94,18 @@ def information_benchmark(name: str, n_random: int) -> dict:
     wall = time.perf_counter() - t0
     _, res = _identified(robot, base, design.trajectory, 20.0, seed=1)
     rel_d = _relative(res, ref, keep)
-    rows = []
+    rows, unsafe = [], []
     for s in range(n_random):
+        # a random member of the same family within the same limits, torques and clearance:
+        # one random start, no refinement (and the same final check)
+        opts = DesignOptions(start=start, starts=1, refine=0, seed=100 + s)
+        traj = design_excitation(robot, 20.0, options=opts, world=TABLE).trajectory
+        rows.append(_figures(robot, base, traj, ref, keep))
+        # and a classical random Fourier trajectory (joint limits only: it may hit the table)
         traj = random_trajectory(robot, 5, 2 * math.pi / 20.0, seed=100 + s)
-        _, r = _identified(robot, base, traj, 20.0, seed=1)
-        rel = _relative(r, ref, keep)
-        rows.append({
-            "criterion": _d_criterion(robot, base.independent, traj, 20.0),
-            "gmean_rel_std": float(np.exp(np.mean(np.log(rel)))),
-            "worst_rel_std": float(rel.max()),
-        })  # fmt: skip
+        unsafe.append(_figures(robot, base, traj, ref, keep))
     med = {k: float(np.median([r[k] for r in rows])) for k in rows[0]}
+    med_unsafe = {k: float(np.median([r[k] for r in unsafe])) for k in unsafe[0]}
     out = {
         "robot": name,
         "design_time": design.design_time,
@@ -106,6 +119,7 @@ def information_benchmark(name: str, n_random: int) -> dict:
         },
         "random_median": med,
         "random": rows,
+        "joint_limits_only_random_median": med_unsafe,
     }
     out["gmean_ratio"] = out["designed"]["gmean_rel_std"] / med["gmean_rel_std"]
     out["worst_ratio"] = out["designed"]["worst_rel_std"] / med["worst_rel_std"]
@@ -118,11 +132,14 @@ def sequential_benchmark(name: str) -> dict:
     base = an.base
     theta = robot.nominal_parameters
     ref = theta[base.independent] + base.K @ theta[base.dependent]
-    poor_traj = random_trajectory(robot, 5, 2 * math.pi / 10.0, seed=5)
-    scale = np.zeros(robot.nv)
-    scale[[0, 1, 2]] = 1.0  # three joints moving, the others still
-    poor_traj = type(poor_traj)(poor_traj.q0, poor_traj.a * scale[:, None],
-                                poor_traj.b * scale[:, None], poor_traj.wf)  # fmt: skip
+    start = None if STARTS[name] is None else np.array(STARTS[name])
+    opts = DesignOptions(start=start, starts=1, refine=0, seed=5)  # a random safe motion
+    full = design_excitation(robot, 10.0, options=opts, world=TABLE).trajectory
+    still = np.arange(robot.nv) >= 3  # three joints moving, the others still at rest
+    q0 = np.where(still, full.sample(0.0)[0], full.q0)
+    a, b = full.a.copy(), full.b.copy()
+    a[still], b[still] = 0.0, 0.0
+    poor_traj = type(full)(q0, a, b, full.wf)
     # the poor log is rank-deficient on its own (four joints still), so its "result" is its
     # information plus a weak prior (std = 100 % of each nominal value, at least 1e-3)
     sim0 = simulate(robot, poor_traj, duration=10.0, rate=RATE, noise=MeasurementNoise(tau=0.01))
@@ -138,12 +155,12 @@ def sequential_benchmark(name: str) -> dict:
     keep = np.abs(ref) > 1e-3 * np.abs(ref).max()
     poor = np.flatnonzero(keep & (rel0 > 0.1))
     prior = PriorInformation(F0, base.independent, list(base.base_names), ref, sigma)
-    start = poor_traj.sample(0.0)[0]
     t0 = time.perf_counter()
     design = design_excitation(robot, 10.0, options=DesignOptions(start=start), world=TABLE,
                                prior=prior)  # fmt: skip
     wall = time.perf_counter() - t0
-    rand = random_trajectory(robot, 5, 2 * math.pi / 10.0, seed=11)
+    opts = DesignOptions(start=start, starts=1, refine=0, seed=11)
+    rand = design_excitation(robot, 10.0, options=opts, world=TABLE).trajectory
     out = {"robot": name, "n_poor": int(poor.size), "design_wall": wall,
            "prior_worst_rel_std": float(rel0[poor].max())}  # fmt: skip
     for label, traj in (("designed", design.trajectory), ("random", rand)):
