@@ -1,16 +1,17 @@
 """Designed vs random excitation: information, identified std, design time (ur5, panda).
 
-For each robot: ``design_excitation`` (20 s, 5 harmonics, D-optimal, torque limits,
-self-collision and a table plane 1 cm under the base) against random trajectories of the
-same family within the same limits, torques and clearance (one random start of the design,
-no refinement, the same final check), and, beside, classical random Fourier trajectories
+For each robot: ``design_excitation`` (20 s, 5 harmonics, D-optimal, torque limits, self-
+collision and a table plane 1 cm under the base) against random trajectories of the same
+family within the same limits, torques and clearance (one random start of the design, no
+refinement, the same final check), and, beside, classical random Fourier trajectories
 within the joint limits only (``random_trajectory``: they may cross the table and the
-torque limits, so they are not an alternative a user could run). Each motion is
-simulated (nominal parameters, 1 % torque noise relative to each joint's RMS torque,
-200 Hz) and identified (OLS on the structural base); the figures are the D criterion of the motion (``-log det F``, same
-weights), the geometric mean and the worst relative std of the base parameters (std /
-|nominal base value|, over the parameters whose nominal value is not about zero) and the
-design time. The ratio designed / random median is measured in the same run.
+torque limits, so they are not an alternative a user could run). Each motion is simulated
+(nominal parameters, 1 % torque noise relative to each joint's RMS torque, 200 Hz) and
+identified (OLS on the structural base); the figures are the D criterion of the motion
+(``-log det F``, same weights), the geometric mean and the worst relative std of the base
+parameters (std / |nominal base value|, over the parameters whose nominal value is not
+about zero) and the design time. The ratio designed / random median is measured in the
+same run.
 
 Sequential (``--sequential``): a poor 10 s log (three joints moving) gives the prior
 information (its regressor information with its noise, plus a weak prior of 100 % of each
