@@ -101,10 +101,11 @@ _EXPORTS: dict[str, tuple[str, ...]] = {
     ".physics.perturbation": ("perturb_parameters",),
     ".simulation": ("MeasurementNoise", "SimulatedData", "simulate"),
     ".trajectories": (
-        "ExcitationResult",
+        "DesignOptions",
+        "ExcitationDesign",
         "FourierTrajectory",
         "check_limits",
-        "optimize_excitation",
+        "design_excitation",
         "random_trajectory",
     ),
 }

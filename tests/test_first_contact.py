@@ -207,3 +207,20 @@ def test_a_missing_command_or_option_is_found():
     assert "simulate --perturb" in missing_from_reference(without_option)
     without_command = text.replace("### manip-id warmup", "### warm up")
     assert "warmup" in missing_from_reference(without_command)
+
+
+def test_command_sections_are_written_from_the_parser():
+    """docs/cli.md's shared options and command sections are what docs/cli_reference.py
+    writes from the parser: an option whose help changed and a page left behind fail."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "_cli_reference", ROOT / "docs" / "cli_reference.py"
+    )
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    text = CLI_DOC.read_text(encoding="utf-8")
+    assert module.page(text) == text, "run: python docs/cli_reference.py"
+    stale = text.replace("estimator [default wls]", "estimator [default ols]")
+    assert module.page(stale) != stale  # the check bites

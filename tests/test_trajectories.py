@@ -1,4 +1,4 @@
-"""Fourier excitation trajectories: derivatives, limits, random and optimized excitation."""
+"""Fourier excitation trajectories: derivatives, limits, random and designed excitation."""
 
 from __future__ import annotations
 
@@ -10,16 +10,18 @@ from conftest import get_robot
 
 from manip_id import InfeasibleTrajectoryError, InputError, regressor
 from manip_id.trajectories import (
-    ExcitationObjective,
-    ExcitationSearch,
+    DesignOptions,
     FourierTrajectory,
+    RestFourier,
     base_columns,
     check_limits,
+    design_excitation,
     excitation_condition_number,
-    optimize_excitation,
     random_trajectory,
     trajectory_to_configuration,
 )
+from manip_id.trajectories.design import _Objective
+from manip_id.trajectories.information import InformationModel
 
 
 def _random_series(nv: int, L: int, wf: float, seed: int) -> FourierTrajectory:
@@ -234,44 +236,28 @@ def test_condition_number_matches_numpy():
 
 
 @pytest.mark.parametrize("name", ["double_pendulum", "msd"])
-def test_optimizer_beats_random_coefficients(name):
+def test_design_beats_random_coefficients(name):
     robot = get_robot(name, friction=("viscous", "coulomb"))
-    res = optimize_excitation(
-        robot,
-        harmonics=3,
-        seed=0,
-        acceleration_limit=20.0,
-        search=ExcitationSearch(n_points=30, maxiter=30, n_constraint_points=100, n_random=5),
-    )
-    assert res.condition_number < res.condition_number_initial
-    assert res.condition_number < res.condition_number_random
-    assert res.condition_number < res.condition_numbers_random.min()
-    check_limits(robot, res.trajectory, acceleration_limit=20.0)
-    # the reported figure is that of the returned trajectory
-    assert excitation_condition_number(robot, res.trajectory, 30) == pytest.approx(
-        res.condition_number, rel=1e-9
-    )
-    assert res.evaluations > 0 and res.time > 0
+    opts = DesignOptions(harmonics=3, acceleration_limit=20.0, starts=3, maxiter=20, rate=100.0)
+    res = design_excitation(robot, 6.0, options=opts)
+    assert res.criterion < res.criterion_random
+    check_limits(robot, res.trajectory, acceleration_limit=20.0)  # the limits' own check
+    q, dq, ddq = res.trajectory.sample(np.array([0.0, 6.0]))
+    np.testing.assert_allclose(dq, 0.0, atol=1e-12)
+    np.testing.assert_allclose(ddq, 0.0, atol=1e-12)
+    assert res.design_time > 0 and np.all(res.predicted_std > 0)
 
 
-def test_optimizer_improves_the_panda_in_a_few_iterations():
-    robot = get_robot("panda")
-    res = optimize_excitation(
-        robot,
-        harmonics=2,
-        search=ExcitationSearch(n_points=20, maxiter=4, n_constraint_points=60, n_random=0),
-    )
-    assert res.condition_number < res.condition_number_initial
-    assert math.isnan(res.condition_number_random)
-    assert res.usage.worst <= 1.0
-
-
-def test_optimizer_bad_input():
+def test_design_bad_input():
     robot = get_robot("msd")
-    with pytest.raises(InputError, match="n_points"):
-        optimize_excitation(robot, search=ExcitationSearch(n_points=0))
-    with pytest.raises(InputError, match="maxiter"):
-        optimize_excitation(robot, search=ExcitationSearch(maxiter=1.5))
+    with pytest.raises(InputError, match="harmonics"):
+        design_excitation(robot, 5.0, options=DesignOptions(harmonics=1))
+    with pytest.raises(InputError, match="criterion"):
+        design_excitation(robot, 5.0, options=DesignOptions(criterion="a"))
+    with pytest.raises(InputError, match="whole number of periods"):
+        design_excitation(robot, 5.0, options=DesignOptions(base_frequency=0.3))
+    with pytest.raises(InputError, match="duration"):
+        design_excitation(robot, -1.0)
 
 
 @pytest.mark.parametrize(
@@ -285,25 +271,21 @@ def test_optimizer_bad_input():
         ("msd", dict(armature=True, friction=("viscous", "coulomb"))),
     ],
 )
-def test_objective_gradient_matches_central_differences(name, kw):
+def test_design_gradient_matches_central_differences(name, kw):
     robot = get_robot(name, **kw)
     base = base_columns(robot)
-    obj = ExcitationObjective(robot, base, harmonics=2, wf=1.0, n_points=25)
-    x = random_trajectory(robot, 2, wf=1.0, seed=3).to_vector()
-    value, grad = obj.value_and_gradient(x)
-    assert value == pytest.approx(
-        math.log(
-            excitation_condition_number(
-                robot, FourierTrajectory.from_vector(x, robot.nv, 2, 1.0), 25, base
-            )
-        ),
-        rel=1e-9,
-    )
-    h = 1e-6
+    info = InformationModel(robot, base, np.ones(robot.nv))
+    fam = RestFourier(np.zeros(robot.nv) + 0.1, 2, 1.0)
+    t = np.arange(25) * (2 * math.pi / 25)
+    obj = _Objective(info, fam, t, np.eye(base.size) * 1e-3, 1.0, "d")
+    z = np.random.default_rng(3).standard_normal(fam.n_free)
+    value, grad = obj.value_and_gradient(z)
+    assert value == pytest.approx(obj.value(z), rel=1e-12)
+    h = 1e-5
     numeric = np.array(
-        [(obj.value(x + h * e) - obj.value(x - h * e)) / (2 * h) for e in np.eye(x.size)]
+        [(obj.value(z + h * e) - obj.value(z - h * e)) / (2 * h) for e in np.eye(z.size)]
     )
-    np.testing.assert_allclose(grad, numeric, atol=1e-4 * np.abs(numeric).max())
+    np.testing.assert_allclose(grad, numeric, atol=1e-5 * np.abs(numeric).max())
 
 
 def test_coefficient_vector_round_trip():

@@ -30,7 +30,8 @@ from ..datasets import Dataset, save_dataset
 from ..errors import InputError, ResourceError
 from ..physics.perturbation import MAX_REL, perturb_parameters
 from ..simulation import MeasurementNoise, check_simulation_memory, simulate
-from ._common import parse_floats, reserve_outputs
+from ..trajectories import read_design
+from ._common import SIM_DEFAULTS, parse_floats, reserve_outputs
 from ._runtime import robot_from_args
 from ._simulated import excitation
 from .simulate import LEVER
@@ -189,9 +190,12 @@ def _gains(args: argparse.Namespace, nv: int) -> np.ndarray | None:
 
 def _log(robot, run: Run, theta: np.ndarray, args, gains) -> Dataset:
     """The simulated log of one run (currents tau / gains in the torque columns with gains)."""
+    traj = args.design if args.design is not None else excitation(robot, run.seed)
+    if traj.nv != robot.nv:
+        raise InputError(f"--trajectory has {traj.nv} joints but {robot.name!r} has {robot.nv}")
     sim = simulate(
         robot,
-        excitation(robot, run.seed),
+        traj,
         duration=args.duration,
         rate=args.rate,
         theta=theta,
@@ -218,8 +222,13 @@ def _readme(robot, args, masses: list[float], runs: list[Run], gains) -> str:
         "",
         f"robot: {robot.name}; joint terms: {', '.join(robot.terms.enabled) or 'none'}",
         "truth: " + _truth_words(args) + " (truth.json: every parameter by name)",
-        f"motion: one random Fourier excitation per file (seed {runs[0].seed} for the first, "
-        "+1 per file); no two files repeat a motion",
+        (
+            f"motion: the designed excitation {args.trajectory} in every file (noise seed "
+            f"{runs[0].seed} for the first, +1 per file)"
+            if args.trajectory
+            else f"motion: one random Fourier excitation per file (seed {runs[0].seed} for the "
+            "first, +1 per file); no two files repeat a motion"
+        ),
         f"samples: {args.duration:g} s at {args.rate:g} Hz per file; q, dq and ddq exact"
         + (" (ddq not in MCAP bags)" if args.format == "mcap" else ""),
         f"torque noise: Gaussian, std {args.noise:g} x each joint's RMS torque",
@@ -288,6 +297,12 @@ def _lever(robot, theta: np.ndarray) -> np.ndarray:
 
 
 def run(args: argparse.Namespace) -> int:
+    args.design = None
+    if args.trajectory is not None:
+        args.design, design_duration = read_design(args.trajectory)
+        args.duration = design_duration if args.duration is None else args.duration
+    elif args.duration is None:
+        args.duration = SIM_DEFAULTS["duration"]
     masses, runs = _check(args)
     outputs = reserve_outputs(args)
     claim = outputs.report(args.out, "--out", force=args.force)  # checked and claimed first

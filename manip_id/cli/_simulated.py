@@ -10,6 +10,7 @@ identifies it as a log would be.
 from __future__ import annotations
 
 import argparse
+import math
 import time
 
 import numpy as np
@@ -20,7 +21,7 @@ from ..execution import resolve_workers
 from ..identification import RunOptions, identify
 from ..identification.run_context import RunContext, raw_reference
 from ..simulation import MeasurementNoise, SimulationStream, check_simulation_memory
-from ..trajectories import optimize_excitation, random_trajectory
+from ..trajectories import DEFAULT_WF, DesignOptions, design_excitation, random_trajectory
 from ..viz.report_document import ReportSamples
 from ._common import (
     SIM_DEFAULTS,
@@ -43,12 +44,22 @@ from ._runtime import (
 
 
 def excitation(robot, seed: int, *, optimize: bool = False):
-    """The excitation of the simulating commands: a random (or condition-optimized) Fourier
-    trajectory of ``seed``, designed by the robot's profile (robots/NAME.toml
-    ``[excitation]``), else with 5 harmonics."""
+    """The excitation of the simulating commands: a random (or D-optimal, rest-to-rest,
+    :func:`~manip_id.trajectories.design_excitation`) Fourier trajectory of ``seed``,
+    designed by the robot's profile (robots/NAME.toml ``[excitation]``), else with 5
+    harmonics and a 10 s period."""
     design = {"harmonics": 5, **(robot.profile.excitation.design_kwargs() if robot.profile else {})}
     if optimize:
-        return optimize_excitation(robot, seed=seed, **design).trajectory
+        period = 2 * math.pi / design.get("wf", DEFAULT_WF)  # [s]
+        options = DesignOptions(
+            harmonics=max(2, design["harmonics"]),
+            margin=design.get("margin", 0.05),
+            acceleration_limit=design.get("acceleration_limit"),
+            seed=seed,
+            starts=4,
+            refine=1,
+        )
+        return design_excitation(robot, period, options=options).trajectory
     return random_trajectory(robot, seed=seed, **design)
 
 

@@ -98,7 +98,8 @@ def register(sub) -> None:
     sim.add_argument(
         "--optimize",
         action="store_true",
-        help="optimize the excitation (condition number) instead of a random one",
+        help="design the excitation (D-optimal, rest to rest, within the limits, torques and "
+        "self-collision: as manip-id excite) instead of a random one",
     )
     p.add_argument("--method", choices=METHODS, default="wls", help="estimator [default wls]")
     p.add_argument(

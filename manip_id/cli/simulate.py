@@ -41,9 +41,17 @@ def register(sub) -> None:
     p.add_argument(
         "--duration",
         type=float,
-        default=SIM_DEFAULTS["duration"],
+        default=None,
         metavar="S",
-        help=f"length of each log [s] [default {SIM_DEFAULTS['duration']:g}]",
+        help=f"length of each log [s] [default: the --trajectory's, else "
+        f"{SIM_DEFAULTS['duration']:g}]",
+    )
+    p.add_argument(
+        "--trajectory",
+        default=None,
+        metavar="DESIGN.json",
+        help="simulate along this designed excitation (the --json of manip-id excite) in "
+        "every file, each with its own noise [default: a random excitation per file]",
     )
     p.add_argument(
         "--rate",

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from ..datasets.stream import torque_scale_vector
 from ..robot.model import Robot
 
 
@@ -176,7 +177,8 @@ def file_keys(robot: Robot, specs, vspecs, qualities: dict, files, options) -> d
     keys: dict = {"data_quality": [qualities[s].to_dict() for s in specs]}
     if vspecs is not None:
         keys["validation_data_quality"] = [qualities[s].to_dict() for s in vspecs]
-    keys["torque_scale"] = None if options.torque_scale is None else list(options.torque_scale)
+    scale = torque_scale_vector(options.torque_scale, robot.nv)  # one gain, or one per joint
+    keys["torque_scale"] = None if scale is None else scale.tolist()
     if files is not None:
         keys["files"] = [f.summary(joints) for f in files["train"]]
         if files["validation"] is not None:

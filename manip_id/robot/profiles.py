@@ -89,7 +89,7 @@ class ExcitationProfile:
 
     def design_kwargs(self) -> dict[str, Any]:
         """The keyword arguments it sets of :func:`~manip_id.trajectories.random_trajectory`
-        and :func:`~manip_id.trajectories.optimize_excitation` (``harmonics``, ``wf``,
+        and :func:`~manip_id.trajectories.design_excitation` (``harmonics``, ``wf``,
         ``margin``, ``acceleration_limit``)."""
         out: dict[str, Any] = {}
         if self.harmonics is not None:

@@ -1,8 +1,14 @@
-"""Excitation trajectories: finite Fourier series per joint (Swevers et al.).
+"""Excitation trajectories: finite Fourier series per joint (Swevers et al.) and their design.
 
 Members: ``fourier.py`` (the series, angles -> configurations), ``limits.py``
 (limit checks with a margin), ``excitation.py`` (random trajectories within the
-limits, the condition-number optimum). The math they share:
+limits, the condition number of one), ``rest.py`` (the series at rest in a start
+pose at both ends), ``information.py`` (the information about the base parameters
+and the D / cond / E criteria with exact gradients), ``constraints.py`` (limits,
+torques and clearance on a time grid), ``world.py`` (collision geometry and the
+world file), ``verify.py`` (the check on the run's grid), ``design.py`` (the front
+door :func:`design_excitation`), ``writers.py`` (CSV, NPZ, JSON, ROS 2 YAML,
+URScript). The math they share:
 
 For joint ``j`` with ``L`` harmonics and base pulsation ``wf`` [rad/s]::
 
@@ -29,41 +35,54 @@ Limits (:func:`check_limits`) with a relative ``margin`` ``m``::
 
 A limit that the description leaves unset (infinite, zero, inverted or wider
 than :data:`manip_id.robot.parameters.UNSET_LIMIT` = 1e3) is not checked. Trajectory
-design (:func:`random_trajectory`, :func:`optimize_excitation`) still needs
+design (:func:`random_trajectory`, :func:`design_excitation`) still needs
 finite bounds: it uses
 :meth:`Robot.sampling_bounds` ([-pi, pi] for unset positions) and
 :meth:`Robot.velocity_bounds` (2 [unit/s] for unset velocities).
 
-Excitation (:func:`optimize_excitation`) minimizes the condition number of the
-base regressor ``W = [Y(q(t_k), dq(t_k), ddq(t_k))[:, base]]_k`` (stacked,
-shape (n_points nv, n_base)) over the coefficients, subject to the sampled
-limits, with SLSQP (linear constraints, objective ``log cond(W)``).
+Design (:func:`design_excitation`) maximizes the information of the base
+regressor ``Y_b(q(t), dq(t), ddq(t))`` (joint terms included) over the free
+coefficients of the rest-to-rest series, subject to the limits, the nominal
+torques and the clearance, and checks the result on the run's own grid.
 """
 
+from .design import (
+    DesignOptions,
+    ExcitationDesign,
+    PriorInformation,
+    design_excitation,
+    read_design,
+)
 from .excitation import (
-    ExcitationObjective,
-    ExcitationResult,
-    ExcitationSearch,
     base_columns,
     excitation_condition_number,
-    optimize_excitation,
     random_trajectory,
 )
 from .fourier import DEFAULT_WF, FourierTrajectory, trajectory_to_configuration
 from .limits import DEFAULT_CHECK_POINTS, LimitUsage, check_limits
+from .rest import RestFourier
+from .world import World, WorldObject
+from .writers import FORMATS, format_of, write_trajectory
 
 __all__ = [
     "DEFAULT_CHECK_POINTS",
     "DEFAULT_WF",
-    "ExcitationObjective",
-    "ExcitationResult",
-    "ExcitationSearch",
+    "FORMATS",
+    "DesignOptions",
+    "ExcitationDesign",
     "FourierTrajectory",
     "LimitUsage",
+    "PriorInformation",
+    "RestFourier",
+    "World",
+    "WorldObject",
     "base_columns",
     "check_limits",
+    "design_excitation",
     "excitation_condition_number",
-    "optimize_excitation",
+    "format_of",
     "random_trajectory",
+    "read_design",
     "trajectory_to_configuration",
+    "write_trajectory",
 ]

@@ -108,7 +108,8 @@ class FourierTrajectory:
         """The coefficients as one vector ``x = [q0 (nv), a_1, b_1, ..., a_nv, b_nv]``.
 
         Shape (nv + 2 nv L,): ``q0`` first, then per joint its ``L`` sine and
-        ``L`` cosine coefficients (the variables of :func:`optimize_excitation`).
+        ``L`` cosine coefficients (the variables of
+        :func:`~manip_id.trajectories.design_excitation`).
         """
         return np.concatenate([self.q0, np.hstack([self.a, self.b]).ravel()])
 
