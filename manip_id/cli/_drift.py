@@ -26,7 +26,7 @@ def run(args: argparse.Namespace) -> int:
     args.outputs = getattr(args, "outputs", None) or OutputSet()
     args.outputs.add_inputs([args.reference])
     outputs = reserve_outputs(args)
-    robot = robot_from_args(args)
+    robot = robot_from_args(args, args.reference)
     reference = load_result(args.reference)
     options = PreprocessOptions(cutoff=args.cutoff)
     data = args.data if args.group_by == "file" else _by_folder(args.data)

@@ -76,7 +76,7 @@ def _reserve(args):
 
 def _robot(args):
     if not args.identified:
-        return robot_from_args(args)
+        return robot_from_args(args, args.model)
 
     with native_stderr_captured("urdfdom"):
         return load_robot(args.robot, identified=True, package_dirs=args.package_dir)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
@@ -22,7 +23,7 @@ from ..estimators.consistent.bounds import bound_options
 from ..execution import available_cores, cap_local_workers
 from ..export import export_texts, mjcf_text, sidecar_path
 from ..export.sidecar import identification_provenance
-from ..identification import ConsistentOptions, PreprocessOptions
+from ..identification import ConsistentOptions, PreprocessOptions, read_result_json
 from ..identification.run_context import run_keys, with_context
 from ..payload import load_torque_scale
 from ..robot.model import Robot, load_robot
@@ -39,9 +40,15 @@ from ._common import (
 )
 
 
-def robot_from_args(args: argparse.Namespace) -> Robot:
-    """Load the robot named by :func:`add_robot_arguments` options."""
+def robot_from_args(args: argparse.Namespace, model=None) -> Robot:
+    """Load the robot named by :func:`add_robot_arguments` options.
 
+    ``model``: a saved result (``RESULT.json`` or a report folder) the robot is for: the
+    model structure it was identified with (joint terms and laws, active joints, drive
+    train) is the default; an option that contradicts it is refused in one line.
+    """
+
+    structure = None if model is None else result_structure(model, args.robot)
     joints = [j for j in args.joints.split(",") if j] if getattr(args, "joints", None) else None
     with native_stderr_captured("urdfdom"):  # its C++ messages become one warning line
         robot = load_robot(
@@ -52,9 +59,46 @@ def robot_from_args(args: argparse.Namespace) -> Robot:
             active_joints=joints,
             package_dirs=args.package_dir,
             profile=profile_option(args),
+            structure=structure,
         )
     tr = transmission_option(args)  # --transmission, else the profile's
-    return robot if tr is None else robot.with_transmission(tr)
+    robot = robot if tr is None else robot.with_transmission(tr)
+    if structure is not None:
+        check_structure(robot, structure, model)
+    return robot
+
+
+def result_structure(model, robot_spec: str) -> dict | None:
+    """The ``model_structure`` of a saved result (None for a result written before it was
+    recorded); a result of another robot is refused."""
+    path = Path(model)
+    doc = read_result_json(path / "result.json" if path.is_dir() else path, "result")
+    structure = doc.get("model_structure")
+    if not isinstance(structure, dict):
+        return None
+    name, spec = structure.get("robot"), Path(str(robot_spec)).stem
+    if name is not None and name != spec and str(robot_spec) != name:
+        raise InputError(f"{model} is a model of robot {name!r}, not of {robot_spec!r}")
+    return structure
+
+
+def check_structure(robot: Robot, structure: dict, model) -> None:
+    """Refuse a robot whose joint terms or active joints differ from those ``model`` was
+    identified with (an explicit --friction, --armature, --spring, --joints or
+    --transmission that contradicts it)."""
+    want = (list(structure.get("joint_terms", [])), list(structure.get("active_joints", [])))
+    have = (list(robot.terms.enabled), list(robot.joint_names))
+    if want[0] != have[0]:
+        raise InputError(
+            f"{model} was identified with the joint terms {want[0]}, but the options given "
+            f"make {have[0]}: leave out --friction, --armature and --spring (the result's "
+            "model is used)"
+        )
+    if want[1] != have[1]:
+        raise InputError(
+            f"{model} was identified on the joints {want[1]}, but the options given make "
+            f"{have[1]}: leave out --joints (the result's joints are used)"
+        )
 
 
 def check_frame(robot, frame: str) -> None:

@@ -16,19 +16,6 @@ from ._runtime import robot_from_args
 _LAWS = {"fv": "viscous", "fc": "coulomb", "fo": "offset"}
 
 
-def _terms_of(result, args: argparse.Namespace) -> None:
-    """Without --friction, --armature and --spring: the joint terms the result was
-    identified with (its ``joint_terms``), when they are the plain ones."""
-    terms = result.context.get("joint_terms")
-    if terms is None or any(v is not None for v in (args.friction, args.armature, args.spring)):
-        return
-    if not set(terms) <= {*_LAWS, "Ia", "k"}:
-        return  # other laws: the robot's profile or the options must say them
-    args.friction = ",".join(_LAWS[t] for t in terms if t in _LAWS) or "none"
-    args.armature = "Ia" in terms
-    args.spring = "k" in terms
-
-
 def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     options = RolloutOptions(
@@ -42,8 +29,7 @@ def run(args: argparse.Namespace) -> int:
     if args.figure is not None:
         outputs.file(args.figure, "--figure")
     result = load_result(args.model)
-    _terms_of(result, args)
-    robot = robot_from_args(args)
+    robot = robot_from_args(args, args.model)
     logs = read_logs(
         robot, args.data, PreprocessOptions(cutoff=args.cutoff, order=args.order, trim=args.trim)
     )

@@ -31,7 +31,6 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 
@@ -42,35 +41,12 @@ from ..robot.sidecar import (  # noqa: F401  (re-exported: the reading half live
     SIDECAR_VERSION,
     apply_identified,
     identified_options,
+    joint_model_document,
     locked_configuration,
+    locked_joints,
     read_sidecar,
     sidecar_path,
 )
-
-
-def locked_joints(robot) -> dict[str, Any]:
-    """The joints locked for the identification and their positions [rad or m] (a list of
-    the joint's coordinates for a joint of several, e.g. a continuous joint's cos, sin)."""
-    full, q = robot.full_model, robot.locked_configuration
-    out: dict[str, Any] = {}
-    for i in range(1, full.njoints):
-        name = full.names[i]
-        if name not in robot.joint_names:
-            jm = full.joints[i]
-            coords = [float(v) for v in q[jm.idx_q : jm.idx_q + jm.nq]]
-            out[name] = coords[0] if jm.nq == 1 else coords
-    return out
-
-
-def joint_model_document(terms) -> dict:
-    """The sidecar's ``joint_model`` of a robot's :class:`~manip_id.robot.model.JointTerms`."""
-    shapes = terms.shapes
-    return {
-        **{f: bool(getattr(terms, f)) for f in MODEL_FLAGS},
-        "harmonics": int(terms.harmonics),
-        "shapes": None if shapes is None else shapes.to_dict(),
-        "per_dof": None if terms.per_dof is None else [list(k) for k in terms.per_dof],
-    }
 
 
 def sidecar_document(

@@ -26,6 +26,7 @@ from ..estimators.uncertainty import Uncertainty, solution_uncertainty
 from ..identifiability import RankAnalysis, analyze_information
 from ..metrics import finite_or_none, relative_error
 from ..robot.model import Robot
+from ..robot.sidecar import model_structure
 from .options import LEAST_SQUARES, ConsistentOptions, UncertaintyOptions, check_method
 from .problem import FileSums, Problem, block_temperature, check_samples
 from .result import IdentificationResult, RelativeError
@@ -396,7 +397,7 @@ def solve(
         output_names=[] if problem.model == "dynamic" else _outputs(robot, problem.model),
         files=problem.files,
         raw_error=raw_errors(problem, fit.estimate, nominal_b),
-        context=dict(problem.context),
+        context={"model_structure": model_structure(robot), **problem.context},
     )
     for step in problem.post:
         result = step(result)

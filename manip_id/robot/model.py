@@ -26,6 +26,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -46,7 +47,12 @@ from .parameters import (
 )
 from .profiles import RobotProfile
 from .regressor import RegressorEvaluator
-from .sidecar import apply_identified, identified_joint_model, identified_options
+from .sidecar import (
+    apply_identified,
+    identified_joint_model,
+    identified_options,
+    structure_options,
+)
 from .sidecar import locked_configuration as sidecar_locked
 from .sources import (
     FLOATING_JOINTS,
@@ -479,6 +485,7 @@ def load_robot(
     package_dirs: Sequence[str | Path] = (),
     identified: bool | str | Path | None = None,
     profile: str | Path | RobotProfile | bool | None = None,
+    structure: Mapping[str, Any] | None = None,
 ) -> Robot:
     """Load a fixed-base robot.
 
@@ -515,6 +522,11 @@ def load_robot(
         Default: ``robots/NAME.toml`` for a robot loaded by name when it exists; a URDF
         loaded by path takes none (its file name decides nothing). Explicit arguments
         override the profile.
+    structure
+        the model structure a result was identified with (its ``model_structure``,
+        :func:`manip_id.robot.sidecar.model_structure`): its joint terms and their laws,
+        active and locked joints and drive train become the defaults (explicit arguments
+        still win); the nominal parameters stay the URDF's.
 
     The drive train (:mod:`manip_id.robot.transmission`) is the sidecar's (``identified``), else
     the profile's ``[transmission]``, else none; :meth:`Robot.with_transmission` gives
@@ -537,9 +549,16 @@ def load_robot(
         )
         if locked_configuration is None:
             locked_configuration = sidecar_locked(sidecar)
+    elif structure is not None:
+        armature, friction, spring, active_joints = structure_options(
+            structure, armature, friction, spring, active_joints
+        )
+        if locked_configuration is None:
+            locked_configuration = sidecar_locked(structure)
     prof = resolve_profile(profile, name, src.by_path)
     terms = joint_terms(armature, friction, spring, profile_terms(prof))
-    model_fields = None if sidecar is None else identified_joint_model(sidecar, **explicit)
+    described = sidecar if sidecar is not None else structure
+    model_fields = None if described is None else identified_joint_model(described, **explicit)
     if model_fields is not None:  # the identified laws, shapes and per-joint models
         terms = JointTerms(**model_fields)
 
@@ -564,7 +583,7 @@ def load_robot(
         origin=src,
         reduction=Reduction(full_model, tuple(locked_ids), qref) if locked_ids else None,
         profile=prof,
-        transmission=_transmission_of(sidecar, prof),
+        transmission=_transmission_of(described, prof),
     )
     if sidecar is not None:
         apply_identified(robot, sidecar)
@@ -572,7 +591,7 @@ def load_robot(
 
 
 def _transmission_of(sidecar, profile) -> Transmission | None:
-    """The sidecar's transmission, else the profile's, else None."""
+    """The sidecar's (or model structure's) transmission, else the profile's, else None."""
     if sidecar is not None and sidecar.get("transmission"):
         return Transmission.from_dict(sidecar["transmission"], source="sidecar")
     if profile is not None and profile.transmission is not None:

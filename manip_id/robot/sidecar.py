@@ -12,6 +12,7 @@ here (:func:`identified_options`, :func:`locked_configuration`, :func:`apply_ide
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -126,6 +127,46 @@ def _check_parameters(f: Fields, data: dict) -> None:
                 )
 
 
+def locked_joints(robot) -> dict[str, Any]:
+    """The joints locked for the identification and their positions [rad or m] (a list of
+    the joint's coordinates for a joint of several, e.g. a continuous joint's cos, sin)."""
+    full, q = robot.full_model, robot.locked_configuration
+    out: dict[str, Any] = {}
+    for i in range(1, full.njoints):
+        name = full.names[i]
+        if name not in robot.joint_names:
+            jm = full.joints[i]
+            coords = [float(v) for v in q[jm.idx_q : jm.idx_q + jm.nq]]
+            out[name] = coords[0] if jm.nq == 1 else coords
+    return out
+
+
+def joint_model_document(terms) -> dict:
+    """The sidecar's ``joint_model`` of a robot's :class:`~manip_id.robot.model.JointTerms`."""
+    shapes = terms.shapes
+    return {
+        **{f: bool(getattr(terms, f)) for f in MODEL_FLAGS},
+        "harmonics": int(terms.harmonics),
+        "shapes": None if shapes is None else shapes.to_dict(),
+        "per_dof": None if terms.per_dof is None else [list(k) for k in terms.per_dof],
+    }
+
+
+def model_structure(robot) -> dict:
+    """The structure of ``robot``'s model, as a result and a sidecar record it: the
+    active and locked joints, the joint terms and their laws, the drive train.
+    ``load_robot(NAME, structure=...)`` loads the same model again."""
+    tr = robot.transmission
+    return {
+        "robot": robot.name,
+        "active_joints": list(robot.joint_names),
+        "locked_joints": locked_joints(robot),
+        "joint_terms": list(robot.terms.enabled),
+        "joint_model": joint_model_document(robot.terms),
+        "transmission": None if tr is None else tr.to_dict(),
+    }
+
+
 def identified_options(spec: str, identified, armature, friction, spring, active_joints):
     """The sidecar of an exported URDF and the load options it implies (explicit ones win).
 
@@ -135,6 +176,12 @@ def identified_options(spec: str, identified, armature, friction, spring, active
     """
     path = sidecar_path(spec) if identified is True else Path(identified)
     data = read_sidecar(path)
+    return (data, *structure_options(data, armature, friction, spring, active_joints))
+
+
+def structure_options(data, armature, friction, spring, active_joints):
+    """The load options a model structure (a sidecar, a result's ``model_structure``)
+    implies, explicit ones winning: ``(armature, friction, spring, active_joints)``."""
     terms = [t for t in data.get("joint_terms", []) if t in _TERM_FLAGS]
     if armature is None:
         armature = "Ia" in terms
@@ -144,7 +191,7 @@ def identified_options(spec: str, identified, armature, friction, spring, active
         spring = "k" in terms
     if active_joints is None:
         active_joints = list(data["active_joints"])
-    return data, armature, friction, spring, active_joints
+    return armature, friction, spring, active_joints
 
 
 def _toggle(per_dof, term: str, on: bool | None):
@@ -153,7 +200,7 @@ def _toggle(per_dof, term: str, on: bool | None):
     return tuple(tuple(t for t in keep if t != term) + ((term,) if on else ()) for keep in per_dof)
 
 
-def identified_joint_model(sidecar: dict, *, armature=None, friction=None, spring=None):
+def identified_joint_model(sidecar: Mapping, *, armature=None, friction=None, spring=None):
     """The fields of the :class:`~manip_id.robot.model.JointTerms` the sidecar's ``joint_model``
     records (its laws, ``harmonics``, ``shapes``, ``per_dof``), or None when the caller
     names the friction kinds (``friction`` not None: theirs win) or the sidecar has no
@@ -179,7 +226,7 @@ def identified_joint_model(sidecar: dict, *, armature=None, friction=None, sprin
     return fields
 
 
-def locked_configuration(sidecar: dict) -> dict[str, Any] | None:
+def locked_configuration(sidecar: Mapping) -> dict[str, Any] | None:
     """The sidecar's locked joints as ``JointSelection(locked_configuration=...)`` of
     :func:`manip_id.robot.model.load_robot` takes them (None without them, version 1)."""
     locked = sidecar.get("locked_joints")
