@@ -12,7 +12,9 @@ is imported by :func:`command` when the command runs.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
+import io
 import math
 import os
 import sys
@@ -542,3 +544,23 @@ def command(module: str):
         return importlib.import_module(module).run(args)
 
     return run
+
+
+def add_quiet_verbose(parser: argparse.ArgumentParser, verbose_help: str) -> None:
+    """``--quiet`` (nothing on stdout: no tables, no bar; errors and warnings stay on
+    stderr) or ``--verbose`` (``verbose_help``), one of them: the same words in every
+    command that prints an answer."""
+    g = parser.add_mutually_exclusive_group()
+    g.add_argument(
+        "--quiet",
+        action="store_true",
+        help="print nothing but errors and warnings (no progress bar, no tables)",
+    )
+    g.add_argument("--verbose", action="store_true", help=verbose_help)
+
+
+def quiet_stdout(args: argparse.Namespace):
+    """A context in which ``--quiet`` sends stdout nowhere (else it changes nothing)."""
+    if getattr(args, "quiet", False):
+        return contextlib.redirect_stdout(io.StringIO())
+    return contextlib.nullcontext()

@@ -11,7 +11,7 @@ import time
 from ..errors import InputError
 from ..payload import check_known_payload, identify_drive_gains
 from ..viz.payload_report import write_drive_gain_report
-from ._common import parse_floats
+from ._common import parse_floats, quiet_stdout
 from ._payload import (
     check_run_args,
     input_paths,
@@ -25,6 +25,12 @@ from ._runtime import check_frame, print_warnings, robot_from_args
 
 
 def run(args: argparse.Namespace) -> int:
+    """``manip-id drive-gains`` (``--quiet``: nothing on stdout)."""
+    with quiet_stdout(args):
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
     t_start = time.perf_counter()
     check_run_args(args)
     if not (math.isfinite(args.payload_mass) and args.payload_mass > 0):

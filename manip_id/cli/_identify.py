@@ -7,8 +7,6 @@ simulation (:mod:`._simulated`). The options are declared in :mod:`.identify`.
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
 import math
 import time
 
@@ -22,6 +20,7 @@ from ._common import (
     explicit_workers,
     fleet_wanted,
     parse_floats,
+    quiet_stdout,
     reserve_outputs,
 )
 from ._runtime import check_scheduler, consistent_options
@@ -173,9 +172,7 @@ def _check_fleet(args: argparse.Namespace) -> None:
 # ----------------------------------------------------------------------- run
 def run(args: argparse.Namespace) -> int:
     """``manip-id identify`` (``--quiet``: nothing on stdout)."""
-    if not getattr(args, "quiet", False):
-        return _run(args)
-    with contextlib.redirect_stdout(io.StringIO()):
+    with quiet_stdout(args):
         return _run(args)
 
 

@@ -18,12 +18,13 @@ from ..execution import portable_robot
 from ..export import PayloadLink, check_output, payload_urdf_texts, sidecar_path
 from ..export.sidecar import identification_provenance
 from ..identification import PreprocessOptions, iter_processed, scan_file
-from ..payload import identify_payload, load_known_base
+from ..payload import identify_payload, load_known_base, load_torque_scale
 from ..viz.payload_report import write_payload_report
 from ._common import (
     check_preprocess_args,
     column_map,
     parse_floats,
+    quiet_stdout,
     spec_options,
     write_json,
 )
@@ -214,10 +215,14 @@ def publish_json(args, doc: dict) -> None:
         write_json(args.json, doc)
 
 
+#: The single-file inputs besides the runs (checked against the outputs too).
+INPUT_FILES = ("known_base", "torque_scale_from")
+
+
 def input_paths(args) -> list[str]:
     """The input files (paths without their windows), for the output checks."""
     out = []
-    for t in [*args.unloaded, *args.loaded, getattr(args, "known_base", None)]:
+    for t in [*args.unloaded, *args.loaded, *(getattr(args, k, None) for k in INPUT_FILES)]:
         if t is None:
             continue
         p = Path(t)
@@ -267,6 +272,12 @@ def preprocess_settings(runs: list) -> list:
 
 # ---------------------------------------------------------------------- run
 def run(args: argparse.Namespace) -> int:
+    """``manip-id payload`` (``--quiet``: nothing on stdout)."""
+    with quiet_stdout(args):
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
     t_start = time.perf_counter()
     check_run_args(args)
     if args.known_base is not None and args.unloaded:
@@ -282,8 +293,12 @@ def run(args: argparse.Namespace) -> int:
     robot = robot_from_args(args)
     check_frame(robot, args.frame)
     scale = None
+    if args.torque_scale is not None and args.torque_scale_from is not None:
+        raise InputError("give --torque-scale or --torque-scale-from, not both")
     if args.torque_scale is not None:
         scale = parse_floats(args.torque_scale, "--torque-scale")
+    elif args.torque_scale_from is not None:  # the gains drive-gains identified
+        scale = [float(g) for g in load_torque_scale(args.torque_scale_from, robot)]
     distributed = args.scheduler is not None
     if distributed:  # the tasks read the files: send them a light robot
         unloaded, loaded, source = read_runs(args, portable_robot(robot), scale, scan=False)

@@ -12,7 +12,7 @@ The JSON's ``drive_gains`` feed ``manip-id identify --torque-scale-from RESULT.j
 
 from __future__ import annotations
 
-from ._common import add_robot_arguments, command
+from ._common import add_quiet_verbose, add_robot_arguments, command
 from .payload import (
     add_run_arguments,
 )
@@ -59,10 +59,9 @@ def register(sub) -> None:
         action="store_true",
         help="replace a --report folder manip-id wrote [default: refuse]",
     )
-    p.add_argument(
-        "--verbose",
-        action="store_true",
-        help="also print each file's data quality and the pre-fit audit's table "
+    add_quiet_verbose(
+        p,
+        "also print each file's data quality and the pre-fit audit's table "
         "[default: the audit in one line; the data quality is in --json]",
     )
     p.set_defaults(func=command("manip_id.cli._drive_gains"))

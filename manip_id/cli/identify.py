@@ -22,6 +22,7 @@ from ._common import (
     SIM_DEFAULTS,
     add_execution_arguments,
     add_file_arguments,
+    add_quiet_verbose,
     add_robot_arguments,
     add_scheduler_argument,
     add_stream_arguments,
@@ -204,15 +205,9 @@ def register(sub) -> None:
         action="store_true",
         help="replace a non-empty --report folder or an existing --export-urdf file",
     )
-    p.add_argument(
-        "--quiet",
-        action="store_true",
-        help="print nothing but errors and warnings (no progress bar, no tables)",
-    )
-    p.add_argument(
-        "--verbose",
-        action="store_true",
-        help="also print every base parameter (value, std, nominal, unit, flags), the audit's "
+    add_quiet_verbose(
+        p,
+        "also print every base parameter (value, std, nominal, unit, flags), the audit's "
         "table and each file's data quality [default: the answer in about 25 lines; the full "
         "table is always in --json and --report]",
     )

@@ -21,6 +21,7 @@ import argparse
 
 from ._common import (
     add_execution_arguments,
+    add_quiet_verbose,
     add_robot_arguments,
     add_scheduler_argument,
     add_stream_arguments,
@@ -139,6 +140,12 @@ def register(sub) -> None:
         help="multiply the torque columns of every file (one value, or one per joint)",
     )
     p.add_argument(
+        "--torque-scale-from",
+        metavar="RESULT.json",
+        default=None,
+        help="the drive gains of 'manip-id drive-gains --json' as --torque-scale",
+    )
+    p.add_argument(
         "--export-urdf",
         metavar="OUT.urdf",
         default=None,
@@ -156,10 +163,9 @@ def register(sub) -> None:
         "each file is one task (read, preprocessed and accumulated on a worker), the sums "
         "are added on the cluster and the payload is solved here",
     )
-    p.add_argument(
-        "--verbose",
-        action="store_true",
-        help="also print each file's data quality and the pre-fit audit's table "
+    add_quiet_verbose(
+        p,
+        "also print each file's data quality and the pre-fit audit's table "
         "[default: the audit in one line; the data quality is in --json]",
     )
     p.set_defaults(func=command("manip_id.cli._payload"))
