@@ -285,6 +285,11 @@ class OutputWarning(ManipIdWarning):
     folder of an earlier run that was killed."""
 
 
+class MonitorWarning(ManipIdWarning):
+    """Collision-monitor bounds the user should look at: calibrated on the runs the model
+    was identified on (in-sample, too tight on new runs)."""
+
+
 class PayloadWarning(ManipIdWarning):
     """A payload or drive-gain result the user should look at (also in ``result.warnings``)."""
 

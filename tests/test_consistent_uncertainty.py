@@ -72,7 +72,11 @@ def test_consistent_std_matches_the_spread_under_correlated_noise(ur5_setup):
     ratio_white = float(np.median(spread / white[moved]))
     assert 0.75 <= ratio_honest <= 1.33, (ratio_honest, ratio_white)
     assert not 0.5 <= ratio_white <= 2.0, (ratio_honest, ratio_white)
-    assert draws[0].to_dict()["standard_parameters"][0]["std"] is not None
+    rows = draws[0].to_dict()["standard_parameters"]
+    data = [k for k, row in enumerate(rows) if row.get("source", "data") == "data"]
+    assert len(data) >= 30  # the data set them: each carries its std
+    assert all(rows[k]["std"] is not None for k in data)
+    assert all(row["std"] is None for row in rows if row.get("source", "data") != "data")
 
 
 def test_white_noise_consistent_std_about_white(ur5_setup):

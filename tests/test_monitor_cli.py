@@ -172,3 +172,27 @@ def test_monitor_reads_csv_columns_and_windows(robot, files, tmp_path):
     assert len(a) == 1 and 101.5 <= a[0]["start"] <= 102.2  # the window is in seconds from
     for x, y in zip(a, b, strict=True):  # the first stamp; times are the file's own
         assert x["start"] == pytest.approx(y["start"]) and x["peak"] == pytest.approx(y["peak"])
+
+
+def test_bounds_from_the_training_files_are_flagged_in_sample(robot, files, tmp_path):
+    """Calibrating on the files the model was identified on warns and says so in the JSON;
+    another file, or another window of a training file, does not."""
+    from manip_id.errors import MonitorWarning
+    from manip_id.monitor import calibrate_thresholds, load_model
+
+    model = load_model(robot, _result(robot, files, "plain"))
+    assert {path for path, _ in model.training} == {files["calib"], files["calib2"]}
+    with pytest.warns(MonitorWarning, match="training data"):
+        th = calibrate_thresholds(robot, model, [files["clean"], files["calib2"]])
+    assert th.in_sample == [files["calib2"]] and th.to_dict()["in_sample"] == [files["calib2"]]
+    clean = calibrate_thresholds(robot, model, [files["clean"]])
+    assert clean.in_sample == []
+    trained = identify(robot, [f"{files['calib']}@0:2"], files=FileOptions(audit=False))
+    path = tmp_path / "windowed.json"
+    path.write_text(json.dumps(trained.to_dict()))
+    windowed = load_model(robot, str(path))
+    assert windowed.training == ((files["calib"], "0:2"),)
+    later = calibrate_thresholds(robot, windowed, [f"{files['calib']}@2:5"])
+    assert later.in_sample == []
+    with pytest.warns(MonitorWarning):
+        calibrate_thresholds(robot, windowed, [files["calib"]])  # the whole file holds it

@@ -2,8 +2,9 @@
 
 The log is identified as ``manip-id identify --split 0.7`` does (viscous, Coulomb and
 offset friction); the bounds are calibrated on the training part (raw signals, the
-observer's defaults), then the validation part must raise no alarm, and the validation
-part with 2 N m added to joint 4 for 0.5 s (at three places) must be detected each time.
+observer's defaults; the log is one run, so the calibration is in-sample and says so),
+then the validation part must raise no alarm, and the validation part with 2 N m added
+to joint 4 for 0.5 s (at three places) must be detected each time.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import pytest
 
 from manip_id import load_robot
 from manip_id.cli import main
+from manip_id.errors import MonitorWarning
 from manip_id.monitor import CollisionMonitor, calibrate_thresholds, load_model, read_log
 
 DELAY = 0.1  # stated detection delay [s]
@@ -30,7 +32,9 @@ def panda_setup(panda_log, tmp_path_factory):
     model = load_model(robot, out)
     train = read_log(robot, f"{panda_log}@:{split}")
     valid = read_log(robot, f"{panda_log}@{split}:")
-    th = calibrate_thresholds(robot, model, [train])
+    with pytest.warns(MonitorWarning, match="training data"):
+        th = calibrate_thresholds(robot, model, [train])
+    assert th.in_sample == [train.file]
     return robot, model, th, valid
 
 

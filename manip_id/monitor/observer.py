@@ -69,6 +69,8 @@ class MonitorModel:
         too small on correlated residuals; the result's own name when it gives one), or None.
     base: the base parametrization the covariance refers to, or None.
     source: where the model came from (a result file, ``"robot"`` for its own parameters).
+    training: the logs the model was identified on, ``(path, window or None)`` each (a file
+        run's result; empty when unknown, e.g. arrays).
     """
 
     robot_name: str
@@ -77,6 +79,7 @@ class MonitorModel:
     covariance_kind: str | None = None
     base: object | None = None
     source: str = ""
+    training: tuple[tuple[str, str | None], ...] = ()
 
 
 def check_parameters(robot: Robot, theta: ArrayLike) -> np.ndarray:
@@ -147,6 +150,28 @@ def model_from_result(robot: Robot, result, source: str = "") -> MonitorModel:
         covariance_kind=kind,
         base=base,
         source=source,
+        training=training_logs(result),
+    )
+
+
+def training_logs(result) -> tuple[tuple[str, str | None], ...]:
+    """``(path, window or None)`` of each file a result was identified on: the file run's
+    accumulations in memory, the ``files`` of a saved result; empty when it does not say."""
+    files = getattr(result, "files", None)
+    if isinstance(files, dict):
+        specs = [getattr(f, "spec", None) for f in files.get("train") or []]
+        return tuple(
+            (str(s.path), None if s.window is None else str(s.window))
+            for s in specs
+            if s is not None
+        )
+    saved = (getattr(result, "context", None) or {}).get("files")
+    if not isinstance(saved, list):
+        return ()
+    return tuple(
+        (str(f["file"]), None if f.get("window") is None else str(f["window"]))
+        for f in saved
+        if isinstance(f, dict) and isinstance(f.get("file"), str)
     )
 
 

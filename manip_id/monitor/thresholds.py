@@ -29,6 +29,8 @@ new data the rate is what it is, see ``manip-id monitor``).
 
 from __future__ import annotations
 
+import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -38,7 +40,8 @@ from scipy.special import ndtri
 from .._checks import as_real
 from .._io.fields import Fields
 from .._io.reading import read_json
-from ..errors import DataError, InputError
+from ..datasets import parse_file_spec
+from ..errors import DataError, InputError, MonitorWarning
 from ..robot.model import Robot
 from ..robot.regressor import iter_regressor
 from .logs import MonitorLog, ReadOptions, as_logs
@@ -78,6 +81,8 @@ class Thresholds:
     n_samples: calibration samples
     covariance_kind: the kind of covariance behind ``model_bound``, or None
     files: the calibration logs
+    in_sample: the calibration logs the model was identified on (its own residuals are
+        smaller than a new run's: the bounds are too tight, false alarms above the rate)
     """
 
     dof_names: list[str]
@@ -93,6 +98,7 @@ class Thresholds:
     n_samples: int
     covariance_kind: str | None = None
     files: list[str] = field(default_factory=list)
+    in_sample: list[str] = field(default_factory=list)
 
     @property
     def level(self) -> float:
@@ -108,6 +114,7 @@ class Thresholds:
             "rate": float(self.rate),
             "covariance_kind": self.covariance_kind,
             "files": list(self.files),
+            "in_sample": list(self.in_sample),
             "joints": [
                 {
                     "name": n,
@@ -144,6 +151,7 @@ class Thresholds:
                 n_samples=int(doc["n_samples"]),
                 covariance_kind=doc.get("covariance_kind"),
                 files=list(doc.get("files", [])),
+                in_sample=list(doc.get("in_sample", [])),
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise DataError(
@@ -166,8 +174,9 @@ def _check_fields(f: Fields, doc: dict) -> None:
     n = doc.get("n_samples")
     if isinstance(n, bool) or not isinstance(n, int) or n < 0:
         raise f.fail("n_samples", "an integer >= 0", n)
-    if doc.get("files") is not None:
-        f.list(doc["files"], "files")
+    for key in ("files", "in_sample"):
+        if doc.get(key) is not None:
+            f.list(doc[key], key)
 
 
 def load_thresholds(path) -> Thresholds:
@@ -297,6 +306,17 @@ def calibrate_thresholds(
             "no bound can be set (noise-free data?)"
         )
     above = a > bound
+    own = _in_sample(logs, mmodel)
+    if own:
+        warnings.warn(
+            MonitorWarning(
+                f"the calibration log(s) {', '.join(own)} are the model's training data: a "
+                "fit's residuals on its own data are smaller than on a new run, so these bounds "
+                "are too tight (false alarms above the asked rate); calibrate on collision-free "
+                "runs the model was not identified on"
+            ),
+            stacklevel=2,
+        )
     return Thresholds(
         dof_names=list(robot.dof_names),
         bound=bound,
@@ -311,4 +331,25 @@ def calibrate_thresholds(
         n_samples=n,
         covariance_kind=kind,
         files=[lg.file for lg in logs],
+        in_sample=own,
     )
+
+
+def _in_sample(logs: list[MonitorLog], model: MonitorModel | None) -> list[str]:
+    """Labels of the calibration logs that are files (and windows) ``model`` was identified
+    on: the same file, and the same window or a whole file on either side."""
+    if model is None or not model.training:
+        return []
+    trained = [(os.path.realpath(path), window) for path, window in model.training]
+    out = []
+    for lg in logs:
+        try:
+            spec = parse_file_spec(lg.file)
+        except (InputError, DataError, ValueError):
+            continue
+        if not spec.path.exists():
+            continue
+        here = (os.path.realpath(spec.path), None if spec.window is None else str(spec.window))
+        if any(here[0] == p and (w is None or here[1] is None or w == here[1]) for p, w in trained):
+            out.append(lg.file)
+    return out
