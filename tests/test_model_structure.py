@@ -43,12 +43,12 @@ def test_the_result_records_its_model_and_load_robot_rebuilds_it():
     assert structure["joint_terms"] == list(robot.terms.enabled) == ["Ia", "fv", "fo"]
     assert structure["active_joints"] == list(robot.joint_names)
     assert set(structure["locked_joints"]) == {"panda_finger_joint1", "panda_finger_joint2"}
-    again = load_robot("panda", structure=structure)
+    again = load_robot("panda", identified=structure)
     assert again.parameter_names == robot.parameter_names
     assert again.terms.enabled == robot.terms.enabled
     np.testing.assert_allclose(again.locked_configuration, robot.locked_configuration)
     # explicit options still win over the structure
-    assert load_robot("panda", structure=structure, friction="coulomb").terms.enabled != (
+    assert load_robot("panda", identified=structure, friction="coulomb").terms.enabled != (
         robot.terms.enabled
     )
     assert model_structure(again) == structure

@@ -189,3 +189,23 @@ def test_temperature_reference_same_in_both(files, tmp_path, capsys):
     t0 = mine["friction_shapes"]["temperature_reference"]
     np.testing.assert_allclose(t0, arrays["temp"].mean(axis=0), rtol=1e-9)  # the mean
     assert "temperature law: T0" in printed
+
+
+@pytest.mark.slow
+def test_dask_run_same_in_both(files, tmp_path, capsys):
+    """Files as Dask tasks (a local cluster of one worker, started and stopped by the run):
+    the command line and the library give the same document, and the serial run's estimate."""
+    robot, train, valid = files
+    argv = ["identify", "ur5", "--friction", FRICTION, "--data", train, "--validate", valid]
+    out = tmp_path / "dask.json"
+    capsys.readouterr()
+    assert main([*argv, "--scheduler", "local:1", "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    result = identify(robot, [train], validation=[valid], run=RunOptions(scheduler="local:1"))
+    mine = json.loads(json.dumps(result.to_dict()))
+    _same(_strip(doc), _strip(mine))
+    assert doc["source"]["scheduler"] == mine["source"]["scheduler"]
+    # the tasks scan their own files: no pre-fit audit on this path, in both alike
+    assert "audit" not in doc and "audit" not in mine
+    serial = identify(robot, [train], validation=[valid], run=RunOptions(workers=1))
+    np.testing.assert_allclose(result.estimate, serial.estimate, rtol=1e-9, atol=1e-9)

@@ -59,7 +59,7 @@ def robot_from_args(args: argparse.Namespace, model=None) -> Robot:
             active_joints=joints,
             package_dirs=args.package_dir,
             profile=profile_option(args),
-            structure=structure,
+            identified=structure,
         )
     tr = transmission_option(args)  # --transmission, else the profile's
     robot = robot if tr is None else robot.with_transmission(tr)

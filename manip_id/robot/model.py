@@ -483,9 +483,8 @@ def load_robot(
     spring: bool | None = None,
     active_joints: Sequence[str] | JointSelection | None = None,
     package_dirs: Sequence[str | Path] = (),
-    identified: bool | str | Path | None = None,
+    identified: bool | str | Path | Mapping[str, Any] | None = None,
     profile: str | Path | RobotProfile | bool | None = None,
-    structure: Mapping[str, Any] | None = None,
 ) -> Robot:
     """Load a fixed-base robot.
 
@@ -515,18 +514,17 @@ def load_robot(
         its sidecar (``NAME.identified.json`` next to it), or give the sidecar's path.
         Its joint terms, active joints and the positions of the locked ones, armature,
         offset and spring become the defaults and the nominal parameters (explicit
-        arguments still win).
+        arguments still win). Or the model structure a result was identified with (a
+        mapping: its ``model_structure``, :func:`manip_id.robot.sidecar.model_structure`):
+        its joint terms and their laws, active and locked joints and drive train become
+        the defaults (explicit arguments still win); the nominal parameters stay the
+        URDF's.
     profile
         the identification profile (:mod:`manip_id.robot.profiles`): a robot name or a
         ``.toml`` path, a :class:`~manip_id.robot.profiles.RobotProfile`, or False for none.
         Default: ``robots/NAME.toml`` for a robot loaded by name when it exists; a URDF
         loaded by path takes none (its file name decides nothing). Explicit arguments
         override the profile.
-    structure
-        the model structure a result was identified with (its ``model_structure``,
-        :func:`manip_id.robot.sidecar.model_structure`): its joint terms and their laws,
-        active and locked joints and drive train become the defaults (explicit arguments
-        still win); the nominal parameters stay the URDF's.
 
     The drive train (:mod:`manip_id.robot.transmission`) is the sidecar's (``identified``), else
     the profile's ``[transmission]``, else none; :meth:`Robot.with_transmission` gives
@@ -541,7 +539,9 @@ def load_robot(
     spec_str = str(spec)
     src = load_source(spec_str, [str(p) for p in package_dirs])
     model, name = src.model, src.name
-    sidecar = None
+    sidecar, structure = None, None
+    if isinstance(identified, Mapping):
+        structure, identified = identified, None
     explicit = {"armature": armature, "friction": friction, "spring": spring}
     if identified is not None and identified is not False:
         sidecar, armature, friction, spring, active_joints = identified_options(

@@ -155,7 +155,7 @@ def joint_model_document(terms) -> dict:
 def model_structure(robot) -> dict:
     """The structure of ``robot``'s model, as a result and a sidecar record it: the
     active and locked joints, the joint terms and their laws, the drive train.
-    ``load_robot(NAME, structure=...)`` loads the same model again."""
+    ``load_robot(NAME, identified=...)`` loads the same model again."""
     tr = robot.transmission
     return {
         "robot": robot.name,
