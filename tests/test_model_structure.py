@@ -79,3 +79,48 @@ def test_a_result_of_another_robot_is_refused(logs, capsys):
     ref, run_1 = str(logs / "ref.json"), str(logs / "sim" / "run_1.npz")
     assert main(["drift", "panda", "--reference", ref, "--data", run_1]) == 2
     assert "robot 'ur5', not of 'panda'" in capsys.readouterr().err
+
+
+def test_payload_takes_the_joint_model_of_its_known_base(logs, tmp_path, capsys):
+    """payload --known-base: the result's joint terms, no --friction repeated; a
+    contradicting one refused in one line."""
+    sim = tmp_path / "loaded"
+    argv = ["simulate", "ur5", "--out", str(sim), "--files", "1", "--duration", "6"]
+    assert main([*argv, "--friction", "viscous", "--payload", "1.5", "--seed", "5", "--quiet"]) == 0
+    loaded = sorted(p for p in sim.glob("*.npz") if "payload" in p.name or "1.5" in p.name)
+    assert loaded, sorted(p.name for p in sim.iterdir())
+    out = tmp_path / "payload.json"
+    argv = ["payload", "ur5", "--known-base", str(logs / "ref.json"), "--loaded", str(loaded[0]),
+            "--frame", "wrist_3_link", "--quiet"]  # fmt: skip
+    assert main([*argv, "--json", str(out)]) == 0
+    assert json.loads(out.read_text())["payload"]["mass"] == pytest.approx(1.5, rel=0.05)
+    capsys.readouterr()
+    assert main([*argv, "--friction", "viscous,coulomb"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "['fv']" in err[0], err
+
+
+def test_simulate_an_identified_model(logs, tmp_path):
+    """simulate --model: the logs' torques are the result's model, Y(q, dq, ddq) theta with
+    the identified base parameters (the regressor, independent of the simulation)."""
+    from manip_id.robot.regressor import regressor
+
+    plain = logs / "ref.json"  # plain least squares: fv < 0 on a joint, not simulable
+    argv = ["simulate", "ur5", "--files", "1", "--duration", "2", "--noise", "0", "--quiet"]
+    assert main([*argv, "--model", str(plain), "--out", str(tmp_path / "no")]) == 2
+    assert not (tmp_path / "no").exists()
+    ref = tmp_path / "consistent.json"
+    run_0 = str(logs / "sim" / "run_0.npz")
+    fit = ["identify", "ur5", "--friction", "viscous", "--data", run_0, "--consistent"]
+    assert main([*fit, "--json", str(ref), "--quiet"]) == 0
+    out = tmp_path / "again"
+    assert main([*argv, "--model", str(ref), "--out", str(out)]) == 0
+    truth = json.loads((out / "truth.json").read_text())
+    assert truth["joint_terms"] == ["fv"] and truth["differs_from_urdf"]["model"] == str(ref)
+    result = load_result(ref)
+    robot = load_robot("ur5", friction="viscous")
+    with np.load(next(out.glob("*.npz"))) as z:
+        Y = regressor(robot, z["q"], z["dq"], z["ddq"])[:, :, result.base.independent]
+        # base columns: Y_b beta (beta the identified base parameters)
+        tau = np.einsum("nvk,k->nv", Y, result.estimate)
+        np.testing.assert_allclose(z["tau"], tau, rtol=1e-7, atol=1e-7)

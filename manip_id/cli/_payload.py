@@ -290,7 +290,7 @@ def _run(args: argparse.Namespace) -> int:
     reserve_json(args, input_paths(args))
     _reserve_export(args, input_paths(args))
     known = load_known_base(args.known_base) if args.known_base is not None else None
-    robot = robot_from_args(args)
+    robot = robot_from_args(args, args.known_base)  # the known base's joint model
     check_frame(robot, args.frame)
     scale = None
     if args.torque_scale is not None and args.torque_scale_from is not None:

@@ -27,8 +27,10 @@ import numpy as np
 from .._io import write_json
 from ..control.closed_loop import with_payload
 from ..datasets import Dataset, save_dataset
-from ..errors import InputError, ResourceError
-from ..physics.perturbation import MAX_REL, perturb_parameters
+from ..errors import InputError, PhysicalConsistencyError, ResourceError
+from ..identification import load_result
+from ..monitor import model_from_result
+from ..physics.perturbation import MAX_REL, perturb_parameters, require_physical
 from ..simulation import MeasurementNoise, check_simulation_memory, simulate
 from ..trajectories import read_design
 from ._common import SIM_DEFAULTS, parse_floats, reserve_outputs
@@ -131,10 +133,13 @@ def joint_term_values(text: str | None) -> dict[str, float]:
 
 
 def truth_parameters(robot, args: argparse.Namespace) -> np.ndarray:
-    """The parameters behind the logs, shape (p,): the nominal ones with ``--joint-terms``
-    set for every joint, perturbed by ``--perturb`` (seed ``--seed``), plus the ``--tool``
-    mass on the last body."""
-    theta = robot.nominal_parameters.copy()
+    """The parameters behind the logs, shape (p,): the nominal ones (``--model``: the
+    result's) with ``--joint-terms`` set for every joint, perturbed by ``--perturb`` (seed
+    ``--seed``), plus the ``--tool`` mass on the last body."""
+    if args.model is None:
+        theta = robot.nominal_parameters.copy()
+    else:  # the identified base parameters, the regrouped columns at the URDF's values
+        theta = _model_parameters(robot, Path(args.model))
     values = joint_term_values(args.joint_terms)
     missing = [t for t in values if t not in robot.terms.enabled]
     if missing:
@@ -148,6 +153,28 @@ def truth_parameters(robot, args: argparse.Namespace) -> np.ndarray:
         joint[:, robot.terms.enabled.index(term)] = value
     theta = perturb_parameters(robot, args.perturb, seed=args.seed, theta=theta)
     return with_payload(robot, theta, args.tool) if args.tool else theta
+
+
+def _model_parameters(robot, path: Path) -> np.ndarray:
+    """The standard parameters of a saved result, shape (p,): its physically consistent
+    standard parameters when it has them (``--consistent``), else its base parameters with
+    the regrouped columns at the URDF's values (the same torques); a model that is not
+    physically consistent is refused (it cannot be simulated)."""
+    result = load_result(path / "result.json" if path.is_dir() else path)
+    theta = model_from_result(robot, result, source=str(path)).theta
+    rows = result.context.get("standard_parameters")
+    if result.context.get("physically_consistent") and isinstance(rows, list):
+        values = {r.get("name"): r.get("value") for r in rows if isinstance(r, dict)}
+        if set(values) == set(robot.parameter_names):
+            theta = np.array([float(values[n]) for n in robot.parameter_names])
+    try:
+        require_physical(robot, theta)
+    except PhysicalConsistencyError as exc:
+        raise InputError(
+            f"--model {path}: its parameters cannot be simulated ({exc}); identify with "
+            "--consistent for a physically consistent model"
+        ) from None
+    return theta
 
 
 def _cut(text, n: int = 80) -> str:
@@ -256,9 +283,8 @@ def _truth_words(args) -> str:
         parts.append(f"inertial parameters perturbed by about {100 * args.perturb:g} %")
     if args.tool:
         parts.append(f"a {args.tool:g} kg tool (not in the URDF) at {LEVER:g} m on the last body")
-    if not parts:
-        return "the robot's nominal parameters"
-    return "the robot's nominal parameters with " + ", ".join(parts)
+    own = "the robot's nominal parameters" if args.model is None else f"the model of {args.model}"
+    return own + (" with " + ", ".join(parts) if parts else "")
 
 
 def _truth(robot, args, theta, masses: list[float], runs: list[Run], gains) -> dict:
@@ -279,6 +305,7 @@ def _truth(robot, args, theta, masses: list[float], runs: list[Run], gains) -> d
             "perturb": args.perturb,
             "perturb_seed": args.seed,
             "tool_mass": args.tool,
+            "model": args.model,
         },
         "noise": {"tau_relative": args.noise},
         "duration": args.duration,
@@ -306,7 +333,7 @@ def run(args: argparse.Namespace) -> int:
     masses, runs = _check(args)
     outputs = reserve_outputs(args)
     claim = outputs.report(args.out, "--out", force=args.force)  # checked and claimed first
-    robot = robot_from_args(args)
+    robot = robot_from_args(args, args.model)  # --model: the result's joint model
     gains = _gains(args, robot.nv)
     check_simulation_memory(robot, int(round(args.duration * args.rate)))
     _check_disk(robot, args, runs)

@@ -120,7 +120,8 @@ def register(sub) -> None:
         "--known-base",
         metavar="RESULT.json",
         default=None,
-        help="base parameters of an earlier 'manip-id identify --json' instead of --unloaded",
+        help="base parameters of an earlier 'manip-id identify --json' instead of --unloaded; "
+        "its joint terms and joints are the model's (no --friction to repeat)",
     )
     p.add_argument(
         "--consistent",

@@ -77,6 +77,15 @@ def register(sub) -> None:
     )
     truth = p.add_argument_group("a robot that differs from its URDF (the truth of the logs)")
     truth.add_argument(
+        "--model",
+        default=None,
+        metavar="RESULT.json",
+        help="simulate an identified model (manip-id identify --json, a report's folder): "
+        "its physically consistent standard parameters (--consistent), else its base "
+        "parameters with the regrouped columns at the URDF's values (the same torques); its "
+        "joint terms and joints [default: the URDF's parameters]",
+    )
+    truth.add_argument(
         "--joint-terms",
         default=None,
         metavar="TERM=VALUE[,...]",
