@@ -585,3 +585,94 @@ def test_a_killed_runs_staged_file_is_named_by_the_next_run(work, capsys):
     status, _, err = _run(capsys, "rank", "msd", "--samples", "30", "--json", "o.json")
     assert status == 0 and stale.name in err and stale.exists()
     assert not [p for p in os.listdir(work) if ".tmp-" in p and str(os.getpid()) in p]
+
+
+# ------------------------------------------------- the monitor and the temperature law
+TREF = 35.0  # the truth's reference temperature [degC]
+FV0, FV1 = np.array([0.3, 0.2]), np.array([-0.006, -0.004])  # [N m s/rad], [N m s/(rad K)]
+FC0, FC1 = np.array([0.8, 0.5]), np.array([-0.012, -0.008])  # [N m], [N m/K]
+TEMP_LAW = "viscous,coulomb,temperature"
+
+
+def _hot_record(seed: int, rate: float = 1000.0, duration: float = 2.0):
+    """``(t, q, dq, ddq, tau, T)``: Pinocchio's rnea plus the temperature law written out
+    in numpy (reference TREF), the temperature drifting 25 -> 45 degC (joint 2 4 K warmer)."""
+    import pinocchio as pin
+
+    from manip_id import load_robot
+    from manip_id.trajectories import random_trajectory
+
+    robot = load_robot("double_pendulum", friction=())
+    t = np.arange(int(duration * rate)) / rate
+    q, dq, ddq = random_trajectory(robot, harmonics=4, wf=0.4, seed=seed).sample(t)
+    m, d = robot.model, robot.model.createData()
+    rigid = np.array([pin.rnea(m, d, a, b, c) for a, b, c in zip(q, dq, ddq, strict=True)])
+    temp = 25.0 + 20.0 * t[:, None] / t[-1] + np.array([0.0, 4.0])  # [degC]
+    friction = (FV0 + FV1 * (temp - TREF)) * dq + (FC0 + FC1 * (temp - TREF)) * np.sign(dq)
+    return t, q, dq, ddq, rigid + friction, temp
+
+
+def test_the_monitor_runs_the_temperature_law_on_the_measured_temperature():
+    from manip_id import load_robot
+    from manip_id.errors import MissingTemperatureError
+    from manip_id.monitor import CollisionMonitor
+    from manip_id.robot.friction import FrictionShapes
+    from manip_id.robot.model import JointTerms
+
+    shapes = FrictionShapes(temperature_reference=(TREF, TREF))
+    robot = load_robot("double_pendulum", friction=()).with_terms(
+        JointTerms(viscous=True, coulomb=True, temperature=True, shapes=shapes)
+    )
+    theta = robot.nominal_parameters.copy()
+    for name, v in (("fv", FV0), ("fc", FC0), ("fvt", FV1), ("fct", FC1)):
+        theta[robot.layout.joint_columns(name)] = v
+    t, q, dq, _, tau, temp = _hot_record(seed=3)
+    mon = CollisionMonitor(robot, theta, gain=25.0, filter_gain=None)
+    # no external torque: the residual is the discretization error only
+    assert np.abs(mon.run(t, q, dq, tau, temp=temp).residual).max() < 1e-6
+    # the same run read 20 K too warm: the friction difference shows (so T is used)
+    assert np.abs(mon.run(t, q, dq, tau, temp=temp + 20.0).residual).max() > 0.2
+    with pytest.raises(MissingTemperatureError, match="temp"):
+        mon.run(t, q, dq, tau)
+    mon.reset()
+    with pytest.raises(MissingTemperatureError, match="temp"):
+        mon.step(q[0], dq[0], tau[0], 0.001)
+    # a temperature dropout is skipped like any other
+    mon.step(q[0], dq[0], tau[0], 0.001, temp[0])
+    assert mon.step(q[1], dq[1], tau[1], 0.001, [np.nan, 30.0]).skipped and mon.dropouts == 1
+
+
+def test_monitor_cli_with_the_temperature_law_reads_the_logs_temp(work, capsys):
+    from manip_id.datasets import Dataset, save_dataset
+
+    names = ("joint1", "joint2")
+    for seed, name in ((1, "train"), (2, "calib"), (4, "data")):
+        t, q, dq, ddq, tau, temp = _hot_record(seed, rate=200.0, duration=10.0)
+        save_dataset(Dataset(t=t, q=q, dq=dq, ddq=ddq, tau=tau, joint_names=names, temp=temp),
+                     work / f"{name}.npz")  # fmt: skip
+        if name == "data":
+            plain = Dataset(t=t, q=q, dq=dq, ddq=ddq, tau=tau, joint_names=names)
+            save_dataset(plain, work / "plain.npz")
+    argv = ["identify", "double_pendulum", "--friction", TEMP_LAW, "--quiet"]
+    assert main([*argv, "--data", "train.npz", "--json", "res.json"]) == 0
+    capsys.readouterr()
+    mon = ["monitor", "double_pendulum", "--model", "res.json", "--calibrate", "calib.npz"]
+    status, out, err = _run(capsys, *mon, "--data", "data.npz", "--json", "mon.json")
+    assert status == 0, err
+    import json
+
+    doc = json.loads((work / "mon.json").read_text())
+    # a model that fits the law (noise-free data): bounds far below the friction's size
+    assert max(j["bound"] for j in doc["thresholds"]["joints"]) < 0.05
+    line = _error(capsys, *mon, "--data", "plain.npz")
+    assert "plain.npz" in line and "temp" in line and "npz" in line
+
+
+def test_the_monitor_refuses_the_load_law_in_one_line(work, capsys):
+    from manip_id import load_robot
+    from manip_id.errors import InputError
+    from manip_id.monitor import CollisionMonitor
+
+    robot = load_robot("double_pendulum", friction="viscous,load")
+    with pytest.raises(InputError, match="cannot run the load friction law"):
+        CollisionMonitor(robot, robot.nominal_parameters)

@@ -18,6 +18,7 @@ from ..monitor import (  # the package loads with the command, not with --help
     ReadOptions,
     as_logs,
     calibrate_thresholds,
+    check_temperatures,
     load_model,
     load_thresholds,
     model_from_robot,
@@ -107,17 +108,18 @@ def run(args: argparse.Namespace) -> int:
             "with --identified"
         )
     model = load_model(robot, args.model) if args.model else model_from_robot(robot)
-    if args.thresholds is not None:
+    calib = None if args.thresholds is not None else as_logs(robot, args.calibrate, options)
+    logs = as_logs(robot, args.data, options)
+    check_temperatures([*(calib or []), *logs], robot.layout.needs_temperature)  # before work
+    if calib is None:
         th = load_thresholds(args.thresholds)
         gain, fgain = th.gain, th.filter_gain
     else:
-        calib = as_logs(robot, args.calibrate, options)
         th = calibrate_thresholds(
             robot, model, calib, false_alarm=args.false_alarm, gain=gain, filter_gain=fgain
         )
-    logs = as_logs(robot, args.data, options)
     mon = CollisionMonitor(robot, model, th, gain=gain, filter_gain=fgain)
-    runs = [mon.run(lg.t, lg.q, lg.dq, lg.tau, file=lg.file) for lg in logs]
+    runs = [mon.run(lg.t, lg.q, lg.dq, lg.tau, file=lg.file, temp=lg.temp) for lg in logs]
     detections = [d for run in runs for d in run.detections()]
     doc = {
         "robot": robot.name,

@@ -13,7 +13,7 @@ when ``|r_j| > b_j``; the bounds ``b_j`` come from collision-free runs
 """
 
 from .detections import Detection, MonitorRun
-from .logs import MonitorLog, ReadOptions, as_logs, read_log
+from .logs import MonitorLog, ReadOptions, as_logs, check_temperatures, read_log
 from .observer import (
     DEFAULT_FILTER_GAIN,
     DEFAULT_GAIN,
@@ -42,6 +42,7 @@ __all__ = [
     "Thresholds",
     "as_logs",
     "calibrate_thresholds",
+    "check_temperatures",
     "check_parameters",
     "covariance_kind",
     "load_model",

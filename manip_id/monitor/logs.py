@@ -3,7 +3,10 @@
 An online observer sees the raw signals, so a file is read with the pipeline's readers
 (any format, a window ``FILE@START:STOP``, a torque scale, dropped bad rows, a CSV column
 map, a ROS bag topic) but not filtered or differentiated: ``t`` (the file's own time
-[s]), ``q``, ``dq``, ``tau`` as logged (``ddq`` when the file has it).
+[s]), ``q``, ``dq``, ``tau`` as logged (``ddq`` when the file has it, ``temp`` the joints'
+temperature when it holds a temp field: the ``temperature`` friction law needs it, as
+identify does; a log without one is refused for that law with
+:class:`~manip_id.errors.MissingTemperatureError`).
 """
 
 from __future__ import annotations
@@ -16,14 +19,16 @@ import numpy as np
 
 from ..datasets import Dataset, FileSpec, check_robot, iter_rows, open_source, parse_file_spec
 from ..datasets.stream import RowCounts, collect, infer_format, torque_scale_vector
-from ..errors import DataError, InputError
+from ..errors import DataError, InputError, MissingTemperatureError
 from ..robot.model import Robot
 
 
 @dataclass(frozen=True)
 class MonitorLog:
     """One log: ``t`` (N,) [s], ``q`` (N, nq), ``dq``, ``tau`` (N, nv), ``ddq`` or None,
-    ``file`` its label, ``n_dropped`` rows left out for NaN/Inf."""
+    ``file`` its label, ``n_dropped`` rows left out for NaN/Inf, ``temp`` the joints'
+    temperature [degC or K], (N, nv) or (N, 1), or None; ``format`` and ``fields`` what the
+    file was (for the message of a missing temperature)."""
 
     file: str
     t: np.ndarray
@@ -32,6 +37,9 @@ class MonitorLog:
     tau: np.ndarray
     ddq: np.ndarray | None = None
     n_dropped: int = 0
+    temp: np.ndarray | None = None
+    format: str = "arrays"
+    fields: tuple[str, ...] = ("t", "q", "dq", "tau")
 
     @property
     def n_samples(self) -> int:
@@ -88,7 +96,10 @@ def read_log(robot: Robot, spec, options: ReadOptions | None = None) -> MonitorL
         raise DataError(msg if str(spec.path) in msg else f"{spec.label}: {msg}") from exc
     if ds.t.size < 2:
         raise DataError(f"{spec.label}: {ds.t.size} usable sample(s); need at least 2")
-    return MonitorLog(spec.label, ds.t, ds.q, ds.dq, ds.tau, ds.ddq, counts.n_dropped)
+    fields = tuple(src.layout.fields)
+    return MonitorLog(
+        spec.label, ds.t, ds.q, ds.dq, ds.tau, ds.ddq, counts.n_dropped, ds.temp, src.format, fields
+    )
 
 
 def as_logs(robot: Robot, data, options: ReadOptions | None = None) -> list[MonitorLog]:
@@ -104,13 +115,17 @@ def as_logs(robot: Robot, data, options: ReadOptions | None = None) -> list[Moni
             out.append(item)
         elif isinstance(item, Dataset):
             check_robot(item, robot)
-            out.append(MonitorLog(f"dataset {i}", item.t, item.q, item.dq, item.tau, item.ddq))
+            out.append(
+                MonitorLog(
+                    f"dataset {i}", item.t, item.q, item.dq, item.tau, item.ddq, temp=item.temp
+                )
+            )
         elif isinstance(item, Mapping):
             missing = [k for k in ("t", "q", "dq", "tau") if k not in item]
             if missing:
                 raise InputError(f"log {i} misses {missing} (expected keys t, q, dq, tau)")
             arr = {k: np.asarray(item[k], dtype=float) for k in ("t", "q", "dq", "tau")}
-            ddq = item.get("ddq")
+            ddq, temp = item.get("ddq"), item.get("temp")
             out.append(
                 MonitorLog(
                     file=str(item.get("file", f"log {i}")),
@@ -119,8 +134,20 @@ def as_logs(robot: Robot, data, options: ReadOptions | None = None) -> list[Moni
                     dq=arr["dq"],
                     tau=arr["tau"],
                     ddq=None if ddq is None else np.asarray(ddq, dtype=float),
+                    temp=None if temp is None else np.asarray(temp, dtype=float),
                 )
             )
         else:
             out.append(read_log(robot, item, options))
     return out
+
+
+def check_temperatures(logs: Sequence[MonitorLog], needed: bool) -> None:
+    """When the model needs the temperature (``needed``), every log must carry one:
+    :class:`~manip_id.errors.MissingTemperatureError` naming the first that does not
+    (before any work)."""
+    if not needed:
+        return
+    for lg in logs:
+        if lg.temp is None:
+            raise MissingTemperatureError(lg.file, lg.format, lg.fields)

@@ -28,6 +28,13 @@ through ``K K2 / ((s + K)(s + K2))``: unit gain at rest, noise above ``K2`` atte
 longer delay (default ``K2 = K = 25`` [1/s], which on the real Panda log at 1 kHz keeps the
 velocity glitches under the bounds); ``filter_gain=None`` is the first-order observer above.
 
+Friction laws. ``f`` is every enabled joint term with the robot's friction shapes (Stribeck
+velocities, sigmoid slopes, the temperature law's reference ``T0``); the ``temperature`` law
+uses the measured temperature of each sample (``temp`` of :meth:`CollisionMonitor.step`, the
+logs' ``temp`` field, as identify reads it). The ``load`` law (the nominal rigid-body torque,
+which needs the acceleration the observer avoids) and the ``hysteresis`` law (a state of the
+whole path) are refused when the monitor is built, in one line.
+
 The model is the robot's Pinocchio model with the identified inertias and armature
 (:meth:`~manip_id.robot.model.Robot.with_parameters`) and the identified joint terms. A standard
 vector that has the identified base parameters gives the same ``M``, ``C^T dq``, ``g`` and
@@ -45,7 +52,7 @@ import pinocchio as pin
 from numpy.typing import ArrayLike
 
 from .._checks import as_float_array, check_finite, positive_vector
-from ..errors import InputError, ModelMismatchError
+from ..errors import InputError, MissingTemperatureError, ModelMismatchError
 from ..identification import load_result
 from ..robot.model import Robot, available_robots
 from .detections import MonitorRun
@@ -228,11 +235,16 @@ class CollisionMonitor:
     Use :meth:`step` once per sample (the first call only initializes, ``r = 0``) and
     :meth:`reset` between runs; :meth:`run` runs a whole log.
 
-    **Dropouts**: a sample holding NaN or Inf (a sensor dropout) is skipped: the observer's
-    state is left as it was, its ``dt`` is added to the next sample's (the integral spans
-    the gap), the returned :class:`MonitorStep` has ``skipped=True`` and the last residual,
-    and :attr:`dropouts` counts them. One dropout therefore never blinds the monitor. The
-    check costs three ``isfinite`` calls of nv values a step (about a microsecond).
+    **Dropouts**: a sample holding NaN or Inf (a sensor dropout; the temperature too, for
+    the ``temperature`` law) is skipped: the observer's state is left as it was, its ``dt``
+    is added to the next sample's (the integral spans the gap), the returned
+    :class:`MonitorStep` has ``skipped=True`` and the last residual, and :attr:`dropouts`
+    counts them. One dropout therefore never blinds the monitor. The check costs three
+    ``isfinite`` calls of nv values a step (about a microsecond).
+
+    **Friction laws** (module docstring): with the ``temperature`` law every :meth:`step`
+    needs ``temp`` (and :meth:`run` a ``temp`` per sample); the ``load`` and ``hysteresis``
+    laws are refused with :class:`~manip_id.errors.InputError`.
     """
 
     def __init__(
@@ -264,6 +276,8 @@ class CollisionMonitor:
         self.nq, self.nv = robot.nq, robot.nv
         self._zero = np.zeros(self.nv)
         self._terms = _friction_terms(robot, self.theta)
+        self._shapes = robot.layout.shapes
+        self.needs_temperature = any(t.needs == "temp" for t, _ in self._terms)
         self._spring = robot.layout.has_term("k")
         self._dt = -1.0  # the step of the cached decay factors [s]
         self.reset()
@@ -278,8 +292,11 @@ class CollisionMonitor:
         self.residual = np.zeros(self.nv)  # the output (filtered when filter_gain) [N m or N]
 
     # ------------------------------------------------------------- the model
-    def momentum_and_input(self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray):
-        """``p = M(q) dq`` and ``u = tau + C^T(q, dq) dq - g(q) - f(q, dq)``, shape (nv,) each."""
+    def momentum_and_input(
+        self, q: np.ndarray, dq: np.ndarray, tau: np.ndarray, temp: np.ndarray | None = None
+    ):
+        """``p = M(q) dq`` and ``u = tau + C^T(q, dq) dq - g(q) - f(q, dq)``, shape (nv,) each
+        (``temp`` (nv,) [degC or K]: the temperature law's, else None)."""
         model, data = self.model, self.data
         p = pin.rnea(self._model0, self._data0, q, self._zero, dq)  # M(q) dq, armature too
         C = pin.computeCoriolisMatrix(model, data, q, dq)
@@ -288,11 +305,13 @@ class CollisionMonitor:
         if self._terms:
             angles = self.robot.dofs.angles(q) if self._spring else None
             for term, coef in self._terms:
-                u -= term.torque(coef, angles, dq, None)
+                u -= term.torque(coef, angles, dq, None, self._shapes, temp=temp)
         return p.copy(), u
 
     # ------------------------------------------------------------------ steps
-    def step(self, q: ArrayLike, dq: ArrayLike, tau: ArrayLike, dt: float) -> MonitorStep:
+    def step(
+        self, q: ArrayLike, dq: ArrayLike, tau: ArrayLike, dt: float, temp: ArrayLike | None = None
+    ) -> MonitorStep:
         """Advance the observer by one sample (module docstring, discrete form).
 
         Parameters
@@ -302,6 +321,8 @@ class CollisionMonitor:
         tau: measured joint torques, shape (nv,) [N m or N]
         dt: time since the previous sample [s], a finite number > 0 (checked on every
             call; its value is not used on the first)
+        temp: the joints' temperature [degC or K], a scalar, (1,) or (nv,): needed by the
+            ``temperature`` friction law (else ignored)
 
         Returns
         -------
@@ -320,13 +341,15 @@ class CollisionMonitor:
                 f"step takes one sample: {q.shape=}, {dq.shape=}, {tau.shape=} but "
                 f"robot.nq={self.nq}, robot.nv={self.nv}"
             )
-        if not (np.isfinite(q).all() and np.isfinite(dq).all() and np.isfinite(tau).all()):
+        temp = self._temperature(temp)
+        finite = np.isfinite(q).all() and np.isfinite(dq).all() and np.isfinite(tau).all()
+        if not finite or (temp is not None and not np.isfinite(temp).all()):
             self.dropouts += 1
             if self._p is not None:
                 self._gap += float(dt)
             last = self.residual.copy()
             return MonitorStep(last, np.abs(last) > self.thresholds, skipped=True)
-        p, u = self.momentum_and_input(q, dq, tau)
+        p, u = self.momentum_and_input(q, dq, tau, temp)
         if self._p is not None:
             dt, self._gap = float(dt) + self._gap, 0.0
             if dt != self._dt:  # decay factors, recomputed when the step changes
@@ -345,21 +368,44 @@ class CollisionMonitor:
         self._p, self._u = p, u
         return MonitorStep(self.residual.copy(), np.abs(self.residual) > self.thresholds)
 
+    def _temperature(self, temp) -> np.ndarray | None:
+        """One sample's temperature as (nv,), or None when the law does not need it."""
+        if not self.needs_temperature:
+            return None
+        if temp is None:
+            raise MissingTemperatureError("the sample", "arrays", ("q", "dq", "tau"))
+        arr = as_float_array(temp, "temp", ndim=(0, 1))
+        if arr.ndim and arr.shape not in ((1,), (self.nv,)):
+            raise InputError(
+                f"temp.shape={arr.shape} but robot.nv={self.nv}: give one temperature per "
+                "joint or one for every joint"
+            )
+        return np.broadcast_to(arr, (self.nv,))
+
     def run(
-        self, t: ArrayLike, q: ArrayLike, dq: ArrayLike, tau: ArrayLike, file: str = ""
+        self,
+        t: ArrayLike,
+        q: ArrayLike,
+        dq: ArrayLike,
+        tau: ArrayLike,
+        file: str = "",
+        temp: ArrayLike | None = None,
     ) -> MonitorRun:
         """The observer over one log (it is :meth:`reset` first).
 
         ``t`` (N,) [s], increasing; ``q`` (N, nq); ``dq``, ``tau`` (N, nv); ``file`` the
-        log's label. Returns the :class:`~manip_id.monitor.MonitorRun` (residuals, flags,
+        log's label; ``temp`` (N, nv) or (N, 1) [degC or K], the ``temperature`` law's
+        (else ignored). Returns the :class:`~manip_id.monitor.MonitorRun` (residuals, flags,
         detection intervals).
         """
         ts, qs, dqs, taus = _check_log(self.robot, t, q, dq, tau)
+        temps = self._log_temperature(temp, dqs, file)
         self.reset()
         r = np.empty((ts.size, self.nv))
         dts = np.diff(ts, prepend=ts[0])
         for k in range(ts.size):
-            r[k] = self.step(qs[k], dqs[k], taus[k], float(dts[k]) if k else 1.0).residual
+            tk = None if temps is None else temps[k]
+            r[k] = self.step(qs[k], dqs[k], taus[k], float(dts[k]) if k else 1.0, tk).residual
         return MonitorRun(
             t=ts,
             residual=r,
@@ -369,9 +415,40 @@ class CollisionMonitor:
         )
 
 
+    def _log_temperature(self, temp, dq: np.ndarray, file: str) -> np.ndarray | None:
+        """A log's temperature broadcast to ``dq``'s shape, or None when not needed."""
+        if not self.needs_temperature:
+            return None
+        if temp is None:
+            raise MissingTemperatureError(file or "the log", "arrays", ("t", "q", "dq", "tau"))
+        arr = as_float_array(temp, "temp", ndim=2)
+        if arr.shape[0] != dq.shape[0] or arr.shape[1] not in (1, self.nv):
+            raise InputError(
+                f"temp.shape={arr.shape} but dq.shape={dq.shape}: give one temperature column "
+                f"per joint ({self.nv}) or one for every joint, one row per sample"
+            )
+        check_finite(arr, "temp")
+        return np.broadcast_to(arr, dq.shape)
+
+
+#: Joint terms the observer cannot evaluate from one sample, and why.
+_UNSUPPORTED = {
+    "load": "the load law needs the nominal rigid-body torque, hence the acceleration the "
+    "observer avoids",
+    "history": "the hysteresis law's state depends on the whole path, not on one sample",
+}
+
+
 def _friction_terms(robot: Robot, theta: np.ndarray) -> list:
-    """(term, coefficients (nv,)) of the enabled joint terms except the armature (in M)."""
+    """(term, coefficients (nv,)) of the enabled joint terms except the armature (in M);
+    :class:`InputError` for a law the observer cannot evaluate (module docstring)."""
     lay = robot.layout
+    for t in lay.term_table:
+        if t.needs in _UNSUPPORTED:
+            raise InputError(
+                f"the collision monitor cannot run the {t.flag} friction law ({t.name} term): "
+                f"{_UNSUPPORTED[t.needs]}; identify a model without it for the monitor"
+            )
     return [(t, theta[lay.joint_columns(t.name)].copy()) for t in lay.term_table if t.name != "Ia"]
 
 

@@ -44,7 +44,7 @@ from ..datasets import parse_file_spec
 from ..errors import DataError, InputError, MonitorWarning
 from ..robot.model import Robot
 from ..robot.regressor import iter_regressor
-from .logs import MonitorLog, ReadOptions, as_logs
+from .logs import MonitorLog, ReadOptions, as_logs, check_temperatures
 from .observer import (
     DEFAULT_FILTER_GAIN,
     DEFAULT_GAIN,
@@ -229,7 +229,7 @@ def filtered_variance(
     wf = np.zeros_like(w)
     dts = np.diff(log.t, prepend=log.t[0])
     total = np.zeros(robot.nv)
-    for chunk in iter_regressor(robot, log.q, log.dq, ddq, chunk=1024):
+    for chunk in iter_regressor(robot, log.q, log.dq, ddq, chunk=1024, temp=log.temp):
         Yb = chunk.Y[:, :, ind]
         for i in range(Yb.shape[0]):
             k = chunk.start + i
@@ -282,7 +282,8 @@ def calibrate_thresholds(
     theta, mmodel = _theta_and_model(robot, model)
     mon = CollisionMonitor(robot, theta, None, gain=gain, filter_gain=filter_gain)
     logs = as_logs(robot, data, options)
-    runs = [mon.run(lg.t, lg.q, lg.dq, lg.tau, file=lg.file) for lg in logs]
+    check_temperatures(logs, mon.needs_temperature)
+    runs = [mon.run(lg.t, lg.q, lg.dq, lg.tau, file=lg.file, temp=lg.temp) for lg in logs]
     r = np.vstack([run.residual for run in runs])
     n, nv = r.shape
     level = alpha / nv
