@@ -676,3 +676,141 @@ def test_the_monitor_refuses_the_load_law_in_one_line(work, capsys):
     robot = load_robot("double_pendulum", friction="viscous,load")
     with pytest.raises(InputError, match="cannot run the load friction law"):
         CollisionMonitor(robot, robot.nominal_parameters)
+
+
+# ------------------------------------------------------------ the online estimators
+def _estimators():
+    from manip_id.estimators.concurrent import ConcurrentLearningEstimator
+    from manip_id.estimators.drem import DREMEstimator
+    from manip_id.estimators.online import GradientEstimator, RLSEstimator
+
+    return {
+        "gradient": lambda: GradientEstimator(np.zeros(3), [1.0, 2.0, 0.5]),
+        "normalized": lambda: GradientEstimator(np.zeros(3), 1.0, normalized=True),
+        "rls": lambda: RLSEstimator(np.zeros(3), 10.0, forgetting=0.99),
+        "drem": lambda: DREMEstimator(np.zeros(3)),
+        "concurrent": lambda: ConcurrentLearningEstimator(np.zeros(3), 1.0),
+    }
+
+
+@pytest.mark.parametrize("law", list(_estimators()))
+def test_an_estimators_dropout_is_the_sample_left_out(law):
+    """Skipping a NaN sample (the documented policy) gives the estimate of the same run
+    without that sample, and the time still advances by its dt."""
+    rng = np.random.default_rng(0)
+    theta = np.array([1.0, -2.0, 0.5])
+    Ys = rng.standard_normal((40, 2, 3))
+    zs = Ys @ theta
+    holed, clean = _estimators()[law](), _estimators()[law]()
+    for k in range(40):
+        Y = np.full((2, 3), np.nan) if k == 17 else Ys[k]
+        holed.step(Y, zs[k] if k != 5 else np.array([np.inf, 0.0]), 0.01)
+        if k not in (5, 17):
+            clean.step(Ys[k], zs[k], 0.01)
+    assert holed.dropouts == 2 and clean.dropouts == 0 and not holed.skipped
+    np.testing.assert_array_equal(holed.theta, clean.theta)
+    assert holed.t == pytest.approx(40 * 0.01) and clean.t == pytest.approx(38 * 0.01)
+    assert np.isfinite(holed.theta).all()
+
+
+@pytest.mark.parametrize("law", list(_estimators()))
+@pytest.mark.parametrize("dt", [-0.01, float("nan"), float("inf"), "0.01", True, None])
+def test_an_estimator_refuses_a_bad_time_step(law, dt):
+    from manip_id.errors import InputError
+
+    est = _estimators()[law]()
+    with pytest.raises(InputError, match="dt"):
+        est.step(np.ones((2, 3)), np.ones(2), dt)
+    assert est.steps == 0 and est.t == 0.0
+
+
+@pytest.mark.parametrize("law", ["gradient", "normalized", "drem", "concurrent"])
+def test_a_continuous_law_refuses_dt_zero_and_rls_takes_it(law):
+    from manip_id.errors import InputError
+
+    with pytest.raises(InputError, match="positive time step"):
+        _estimators()[law]().step(np.ones((2, 3)), np.ones(2), 0.0)
+    rls = _estimators()["rls"]()
+    rls.step(np.ones((2, 3)), np.ones(2), 0.0)  # discrete: dt only stamps the time
+    assert rls.steps == 1
+
+
+@pytest.mark.parametrize("law", list(_estimators()))
+@pytest.mark.parametrize(
+    ("Y", "z", "match"),
+    [
+        (np.ones((2, 3)) * 1j, np.ones(2), "complex"),
+        (np.ones((2, 3)), "ab", "numeric"),
+        (object(), np.ones(2), "numeric"),
+        (np.ones((2, 2, 3)), np.ones((2, 2)), r"Y.shape=\(2, 2, 3\)"),
+        (np.ones((2, 4)), np.ones(2), "p=3"),
+    ],
+)
+def test_an_estimator_refuses_bad_samples_with_our_error(law, Y, z, match):
+    from manip_id.errors import InputError
+
+    with pytest.raises(InputError, match=match):
+        _estimators()[law]().step(Y, z, 0.01)
+
+
+def _controller(composite: float):
+    from manip_id import load_robot
+    from manip_id.control.adaptive import AdaptiveGains, SlotineLiController
+
+    robot = load_robot("double_pendulum", friction="viscous")
+    gains = AdaptiveGains(composite=composite, filter_bandwidth=20.0 if composite else 0.0)
+    return robot, SlotineLiController(robot, robot.nominal_parameters * 0.8, gains)
+
+
+@pytest.mark.parametrize("composite", [0.0, 5.0])
+def test_the_adaptive_controller_holds_its_torque_over_a_dropout(composite):
+    """A dropout holds the last torque and the last instant's adaptation; the run then
+    equals the one whose controller never saw that instant (its dt joined the one before)."""
+    _, holed = _controller(composite)
+    _, clean = _controller(composite)
+    t = np.arange(30) * 0.002
+    for k, tk in enumerate(t):
+        q = np.array([np.sin(tk), np.cos(2 * tk)])
+        dq = np.array([np.cos(tk), -2 * np.sin(2 * tk)])
+        ref = (np.zeros(2), np.zeros(2), np.zeros(2))
+        if k == 12:
+            last = holed.tau.copy()
+            tau = holed.torque(np.array([np.nan, 0.0]), dq, *ref)
+            np.testing.assert_array_equal(tau, last)
+            assert holed.skipped and holed.dropouts == 1
+            holed.adapt(0.002)
+            continue
+        holed.torque(q, dq, *ref)
+        holed.adapt(0.002)
+        clean.torque(q, dq, *ref)
+        clean.adapt(0.004 if k == 11 else 0.002)
+    np.testing.assert_allclose(holed.theta_hat, clean.theta_hat, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(holed.tau, clean.tau, rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda c: c.adapt(-0.001), "dt"),
+        (lambda c: c.adapt(float("nan")), "dt"),
+        (lambda c: c.adapt("0.001"), "dt"),
+        (
+            lambda c: c.torque(np.zeros(3), np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2)),
+            r"q.shape=\(3,\)",
+        ),  # fmt: skip
+        (
+            lambda c: c.torque(np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2), [np.nan, 0]),
+            "reference ddq_d",
+        ),  # fmt: skip
+        (
+            lambda c: c.torque(np.zeros(2), ["a", "b"], np.zeros(2), np.zeros(2), np.zeros(2)),
+            "dq must be numeric",
+        ),  # fmt: skip
+    ],
+)
+def test_the_adaptive_controller_refuses_bad_calls_with_our_error(call, match):
+    from manip_id.errors import InputError
+
+    _, ctrl = _controller(0.0)
+    with pytest.raises(InputError, match=match):
+        call(ctrl)

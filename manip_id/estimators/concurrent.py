@@ -150,7 +150,9 @@ class ConcurrentLearningEstimator(OnlineEstimator):
         self.sigma_min = best
 
     def step(self, Y, z, dt: float) -> np.ndarray:
-        """One Euler step of length ``dt`` [s]; returns the estimate (a view: do not modify)."""
+        """One Euler step of length ``dt`` [s] (> 0); returns the estimate (a view: do not
+        modify). A sample holding NaN/Inf is skipped (:mod:`~manip_id.estimators.online`)."""
+        dt = self._dt(dt)
         th = self._theta
         try:
             Ya, za, e = self._prediction_error(Y, z)
@@ -158,12 +160,15 @@ class ConcurrentLearningEstimator(OnlineEstimator):
         except (ValueError, TypeError) as exc:
             raise self._bad(Y, z, exc) from exc
         if not math.isfinite(float(np.sum(e))):
-            raise self._bad(Y, z)
+            return self._dropout(Y, z, dt)
         if self.normalized:
             Y2 = Ya[None] if Ya.ndim == 1 else Ya
             g = g / (1.0 + float(np.sum((Y2 @ self._G) * Y2)))
         Y2 = Ya[None] if Ya.ndim == 1 else Ya
-        self._consider(Y2, np.atleast_1d(za))
+        try:
+            self._consider(Y2, np.atleast_1d(za))
+        except np.linalg.LinAlgError as exc:  # finite but absurd values (an overflow)
+            raise self._bad(Y, z, exc) from exc
         g = g + (self._S @ th - self._b)  # sum_j Y_j^T eps_j
         th -= dt * (self._G @ g)
         self._finish(e, dt)

@@ -161,7 +161,9 @@ class DREMEstimator(OnlineEstimator):
         return delta, Z
 
     def step(self, Y, z, dt: float) -> np.ndarray:
-        """One step of length ``dt`` [s]; returns the estimate (a view: do not modify)."""
+        """One step of length ``dt`` [s] (> 0); returns the estimate (a view: do not
+        modify). A sample holding NaN/Inf is skipped (:mod:`~manip_id.estimators.online`)."""
+        dt = self._dt(dt)
         th = self._theta
         try:
             Ya, za, e = self._prediction_error(Y, z)
@@ -172,7 +174,7 @@ class DREMEstimator(OnlineEstimator):
         except (ValueError, TypeError) as exc:
             raise self._bad(Y, z, exc) from exc
         if not math.isfinite(float(np.sum(e)) + float(YY.sum())):
-            raise self._bad(Y, z)
+            return self._dropout(Y, z, dt)
         a = math.exp(-self.alpha * dt)
         g = -math.expm1(-self.alpha * dt) / self.alpha  # (1 - a)/alpha [s]
         self._Phi *= a

@@ -33,9 +33,19 @@ and ``P0 = p0 I`` the estimate is the regularized least-squares one
 Projection: with ``bounds=(lower, upper)`` the estimate is clipped to the box
 after every update (the Euclidean projection).
 
-The step is written for hot loops: no checks beyond what NumPy does, plus one
-scalar test that the prediction error is finite (NaN/Inf in Y or z raise
-:class:`~manip_id.errors.InputError` naming the step).
+Checks of every step (written for hot loops): ``dt`` must be a finite number of seconds,
+``> 0`` for the continuous-time laws (gradient, DREM, concurrent learning), ``>= 0`` for
+RLS (a discrete law whose ``dt`` only advances the time stamps), else
+:class:`~manip_id.errors.InputError`; ``Y`` and ``z`` of the wrong shape or dtype raise
+:class:`~manip_id.errors.InputError` too. Together with the one scalar test that the
+prediction error is finite, this costs about a microsecond a step.
+
+Dropouts: a sample whose ``Y`` or ``z`` holds NaN or Inf (a sensor dropout) is skipped,
+as :class:`~manip_id.monitor.CollisionMonitor` skips one: the estimate (and the RLS
+covariance, the DREM and concurrent-learning memories) stay as they were, the time
+advances by ``dt``, :attr:`~OnlineEstimator.skipped` is True until the next sample that is
+used, and :attr:`~OnlineEstimator.dropouts` counts them. (A finite prediction error implies
+finite ``Y`` and ``z``: every entry of ``Y`` enters ``Y theta_hat``.)
 """
 
 from __future__ import annotations
@@ -48,6 +58,14 @@ from scipy.linalg.lapack import dposv
 
 from .._checks import as_float_array, check_finite, spd_gain, spd_matrix
 from ..errors import InputError, NumericalError
+
+
+def _real(x, name: str):
+    """``x`` unchanged when a float64 array or a float (the hot path), else as a float64
+    array; :class:`InputError` for complex, text or objects."""
+    if type(x) is float or (type(x) is np.ndarray and x.dtype == np.float64):
+        return x
+    return as_float_array(x, name)
 
 
 @dataclass(frozen=True)
@@ -98,6 +116,8 @@ class OnlineEstimator:
         self.record_every = record_every
         self.t = float(t0)
         self.steps = 0
+        self.dropouts = 0  # samples skipped for NaN/Inf (module docstring)
+        self.skipped = False  # whether the last sample was skipped
         self.last_error: np.ndarray | float = float("nan")
         self._t: list[float] = [self.t]
         self._th: list[np.ndarray] = [self._theta.copy()]
@@ -117,22 +137,57 @@ class OnlineEstimator:
         """``(Y, z, e)``: ``Y`` and ``z`` as float arrays and the prediction error
         ``e = Y theta_hat - z``, shape (m,) (scalar for ``phi`` (p,)). Mismatched shapes raise
         ValueError or TypeError, which ``step`` turns into :meth:`_bad`."""
-        Ya = np.asarray(Y, dtype=float)
-        za = np.asarray(z, dtype=float)
+        Ya, za = np.asarray(_real(Y, "Y")), np.asarray(_real(z, "z"))
+        if Ya.ndim not in (1, 2):
+            raise ValueError("regressor dimensions")
         e = Ya @ self._theta - za
         if np.shape(e) != za.shape:
             raise ValueError("output shape")
         return Ya, za, e
 
-    def _bad(self, Y, z, exc: Exception | None = None) -> InputError | NumericalError:
-        Ya, za = np.asarray(Y), np.asarray(z)
+    def _dt(self, dt, zero: bool = False) -> float:
+        """``dt`` [s] checked (module docstring): finite and > 0 (``>= 0`` when ``zero``)."""
+        if type(dt) is not float:
+            if isinstance(dt, bool) or not isinstance(dt, (int, np.integer, np.floating)):
+                raise InputError(f"dt must be a number of seconds, got {type(dt).__name__}")
+            dt = float(dt)
+        if not (math.isfinite(dt) and (dt > 0.0 or (zero and dt == 0.0))):
+            need = "finite time step >= 0" if zero else "finite positive time step"
+            raise InputError(f"dt must be a {need} [s], got {dt} (step {self.steps})")
+        return dt
+
+    def _dropout(self, Y, z, dt: float) -> np.ndarray:
+        """A sample whose prediction error is not finite: skipped when ``Y`` or ``z`` hold
+        NaN/Inf (module docstring); otherwise the error :meth:`_bad` names."""
+        Ya, za = np.asarray(_real(Y, "Y")), np.asarray(_real(z, "z"))
+        if self._shape_problem(Ya, za) is not None or (
+            np.isfinite(Ya).all() and np.isfinite(za).all()
+        ):
+            raise self._bad(Y, z)
+        self.dropouts += 1
+        self.skipped = True
+        self.t += dt
+        return self._theta
+
+    def _shape_problem(self, Ya: np.ndarray, za: np.ndarray) -> str | None:
+        """What is wrong with the shapes of ``Y`` and ``z``, or None."""
         if Ya.ndim not in (1, 2) or Ya.shape[-1] != self.p:
-            msg = (
+            return (
                 f"Y.shape={Ya.shape} but the estimator has p={self.p} parameters: give Y of "
                 f"shape (nv, {self.p}) or phi of shape ({self.p},)"
             )
-        elif za.shape != Ya.shape[:-1]:
-            msg = f"Y.shape={Ya.shape} but z.shape={za.shape}; expected z.shape={Ya.shape[:-1]}"
+        if za.shape != Ya.shape[:-1]:
+            return f"Y.shape={Ya.shape} but z.shape={za.shape}; expected z.shape={Ya.shape[:-1]}"
+        return None
+
+    def _bad(self, Y, z, exc: Exception | None = None) -> InputError | NumericalError:
+        try:
+            Ya, za = np.asarray(_real(Y, "Y")), np.asarray(_real(z, "z"))
+        except InputError as bad:
+            return bad
+        problem = self._shape_problem(Ya, za)
+        if problem is not None:
+            msg = problem
         elif not (np.isfinite(Ya).all() and np.isfinite(za).all()):
             msg = f"Y or z holds NaN or Inf at step {self.steps}"
         else:  # valid inputs: the update itself broke down
@@ -154,6 +209,7 @@ class OnlineEstimator:
         if self._lo is not None:
             np.clip(self._theta, self._lo, self._hi, out=self._theta)
         self.last_error = e
+        self.skipped = False
         self.steps += 1
         self.t += dt
         if self.record_every and self.steps % self.record_every == 0:
@@ -202,7 +258,10 @@ class GradientEstimator(OnlineEstimator):
         return np.diag(self._gdiag) if self._G is None else self._G.copy()
 
     def step(self, Y, z, dt: float) -> np.ndarray:
-        """One Euler step of length ``dt`` [s]; returns the estimate (a view: do not modify)."""
+        """One Euler step of length ``dt`` [s] (> 0); returns the estimate (a view: do not
+        modify). A sample holding NaN/Inf is skipped (module docstring)."""
+        dt = self._dt(dt)
+        Y, z = _real(Y, "Y"), _real(z, "z")
         th, g = self._theta, self._g
         try:
             e = Y @ th - z
@@ -215,7 +274,7 @@ class GradientEstimator(OnlineEstimator):
         except (ValueError, TypeError, AttributeError) as exc:
             raise self._bad(Y, z, exc) from exc
         if not math.isfinite(float(np.sum(e))):
-            raise self._bad(Y, z)
+            return self._dropout(Y, z, dt)
         h = dt
         if self._G is None:
             g *= self._gdiag
@@ -288,7 +347,10 @@ class RLSEstimator(OnlineEstimator):
         return self._P.copy()
 
     def step(self, Y, z, dt: float = 0.0) -> np.ndarray:
-        """One update with sample (Y, z); ``dt`` [s] only advances the time stamps."""
+        """One update with sample (Y, z); ``dt`` [s] (>= 0) only advances the time stamps.
+        A sample holding NaN/Inf is skipped (module docstring)."""
+        dt = self._dt(dt, zero=True)
+        Y, z = _real(Y, "Y"), _real(z, "z")
         th, P = self._theta, self._P
         lam = self.forgetting
         if lam < 1.0 and self.p_max is not None:
@@ -296,6 +358,8 @@ class RLSEstimator(OnlineEstimator):
             lam = 1.0 - (1.0 - lam) * (1.0 - x)
         try:
             e = Y @ th - z
+            if not math.isfinite(float(np.sum(e))):
+                return self._dropout(Y, z, dt)
             if Y.ndim == 1:
                 Pphi = P @ Y
                 den = lam + float(Y @ Pphi)

@@ -414,7 +414,6 @@ class CollisionMonitor:
             file=file,
         )
 
-
     def _log_temperature(self, temp, dq: np.ndarray, file: str) -> np.ndarray | None:
         """A log's temperature broadcast to ``dq``'s shape, or None when not needed."""
         if not self.needs_temperature:
