@@ -31,6 +31,8 @@ SMALL = 64 * 2**20
 MAX_STEPS = 10**8
 #: The most Fourier harmonics per joint of an excitation trajectory.
 MAX_HARMONICS = 1000
+#: The magnitudes a torque scale may have: from the logged unit (mN m, A, counts) to N m.
+TORQUE_SCALE_RANGE = (1e-9, 1e9)
 
 
 def gib(n_bytes: float) -> str:
@@ -109,6 +111,7 @@ __all__ = [
     "MAX_STEPS",
     "MEMORY_SHARE",
     "REGRESSOR_BUFFER_LIMIT",
+    "TORQUE_SCALE_RANGE",
     "check_count",
     "check_memory",
     "check_regressor_buffer",

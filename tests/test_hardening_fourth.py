@@ -14,6 +14,7 @@
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import time
@@ -814,3 +815,96 @@ def test_the_adaptive_controller_refuses_bad_calls_with_our_error(call, match):
     _, ctrl = _controller(0.0)
     with pytest.raises(InputError, match=match):
         call(ctrl)
+
+
+# ------------------------------------------------------------------ robot profiles
+PROFILE_DOC = {
+    "description": "a double pendulum",
+    "model": {"friction": ["viscous", "coulomb"], "armature": False},
+    "joints": {"active": ["joint1", "joint2"]},
+    "excitation": {"harmonics": 3, "period": 5.0, "margin": 0.05, "acceleration_limit": [5.0, 6.0]},
+    "data": {"torque_scale": [1.0, 2.0], "columns": {"q": "q*", "tau": ["e1", "e2"]}},
+}
+PROFILE_VALUES = [*BAD_VALUES, "joint9", 1e300, 0, 10**9, "position:abc", {"x": 1}, "é", [[1.0]]]
+
+
+def _profile_or_error(doc: dict):
+    """The robot loaded with profile ``doc`` (its per-joint values usable), or the error."""
+    from manip_id import load_robot
+    from manip_id.datasets.stream import torque_scale_vector
+    from manip_id.errors import ManipIdError
+    from manip_id.robot.profiles import parse_profile
+    from manip_id.trajectories.limits import acceleration_limits
+
+    try:
+        prof = parse_profile(doc, name="p", source="p.toml")
+        robot = load_robot("double_pendulum", profile=prof)
+    except ManipIdError as exc:
+        text = str(exc)
+        assert "\n" not in text and len(text) < 1000 and "p.toml" in text, text
+        return exc
+    # accepted: every per-joint value fits the robot, every number is finite and sane
+    torque_scale_vector(prof.torque_scale, robot.nv)
+    acceleration_limits(robot, prof.excitation.acceleration_limit)
+    kw = prof.excitation.design_kwargs()
+    assert 1 <= kw.get("harmonics", 1) <= 1000 and 0 < kw.get("wf", 1.0) < 1e3
+    return robot
+
+
+@PROPERTY
+@given(st.data())
+def test_a_mutated_profile_loads_or_gives_one_clear_error(data):
+    import copy
+
+    doc = copy.deepcopy(PROFILE_DOC)
+    paths = [p for p, _ in _paths(doc)]
+    path = data.draw(st.sampled_from(paths))
+    parent = doc
+    for key in path[:-1]:
+        parent = parent[key]
+    action = data.draw(st.sampled_from(["delete", "replace", "add"]))
+    if action == "delete" and isinstance(parent, dict):
+        del parent[path[-1]]
+    elif action == "add" and isinstance(parent, dict):
+        parent[data.draw(st.sampled_from(["extra", "frictions", "Period", "é"]))] = 1
+    else:
+        parent[path[-1]] = data.draw(st.sampled_from(PROFILE_VALUES))
+    _profile_or_error(doc)
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        ({"description": 5}, "description must be a string"),
+        ({"excitation": {"period": 1e300}}, "excitation.period must be a number <= 10000"),
+        ({"excitation": {"period": 1e-300}}, "excitation.period must be a number >= 0.01"),
+        ({"excitation": {"harmonics": 10**9}}, "excitation.harmonics must be a positive integer"),
+        ({"excitation": {"acceleration_limit": 1e300}}, "excitation.acceleration_limit must"),
+        ({"excitation": {"acceleration_limit": [1.0, 2.0, 3.0]}}, "holds 3 values"),
+        ({"data": {"torque_scale": 1e308}}, "data.torque_scale must be non-zero numbers"),
+        ({"data": {"torque_scale": [1.0, 2.0, 3.0]}}, "holds 3 values"),
+        ({"data": {"columns": {"q": 5.5}}}, "data.columns.q must be column names"),
+        ({"data": {"columns": {"t": ""}}}, "data.columns.t must be column names"),
+        ({"joints": {"active": ["joint1", "joint1"]}}, "joints.active must be distinct"),
+        ({"joints": {"active": []}}, "joints.active must be a non-empty list"),
+        ({"joints": {"locked": ["joint1", "joint2"]}}, "joints.locked locks every joint"),
+        ({"joints": {"active": ["joint9"]}}, "unknown joint 'joint9'"),
+        ({"model": {"friction": ["position:abc"]}}, "model.friction: position friction"),
+    ],
+)
+def test_a_bad_profile_is_refused_naming_the_file_and_the_key(change, match):
+    from manip_id.errors import InputError
+
+    doc = {**PROFILE_DOC, **change}
+    if "joints" not in change:
+        doc["joints"] = PROFILE_DOC["joints"]
+    err = _profile_or_error(doc)
+    assert isinstance(err, InputError) and "profile p.toml" in str(err), err
+    assert re.search(match, str(err)), str(err)
+
+
+def test_a_profile_column_field_that_is_no_field_is_named_by_the_command(work, capsys):
+    (work / "p.toml").write_text('[data.columns]\nbogus = "x*"\n')
+    (work / "run.csv").write_text("t,q,tau\n0,0,0\n0.1,0,0\n")
+    line = _error(capsys, "audit", "msd", "--profile", "p.toml", "--data", "run.csv")
+    assert "p.toml" in line and "data.columns.'bogus'" in line

@@ -97,7 +97,7 @@ def test_excitation_profile_keeps_panda_within_its_datasheet_accelerations():
         ("[joints]\nactive = ['a']\nlocked = ['b']\n", "not both"),
         ("[excitation]\nharmonics = 2.5\n", "harmonics must be a positive integer"),
         ("[excitation]\nmargin = 0.7\n", r"margin must be in \[0, 0.5\)"),
-        ("[data]\ntorque_scale = [1.0, 0.0]\n", "torque_scale must be non-zero"),
+        ("[data]\ntorque_scale = [1.0, 0.0]\n", r"torque_scale\[1\] must be non-zero"),
         ("[exitation]\nharmonics = 5\n", "unknown key 'exitation'"),
         ("[model]\nfrictions = []\n", "unknown key model.'frictions'"),
     ],

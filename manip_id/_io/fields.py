@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import DataError
+from ..errors import DataError, ManipIdError
 
 
 def _shown(value: Any) -> str:
@@ -31,14 +31,19 @@ class Fields:
     ----------
     where : str or os.PathLike
         The file, or what the document is, as the messages name it.
+    error : type
+        The exception class raised (:class:`~manip_id.errors.DataError` for data files;
+        a reader of options, such as a robot profile, gives
+        :class:`~manip_id.errors.InputError`).
     """
 
-    def __init__(self, where: object):
+    def __init__(self, where: object, error: type[ManipIdError] = DataError):
         self.where = str(where)
+        self.error = error
 
-    def fail(self, field: str, expected: str, got: Any) -> DataError:
+    def fail(self, field: str, expected: str, got: Any) -> ManipIdError:
         """The error of a field that is not what it must be."""
-        return DataError(f"{self.where}: {field} must be {expected}, got {_shown(got)}")
+        return self.error(f"{self.where}: {field} must be {expected}, got {_shown(got)}")
 
     def object(self, value: Any, field: str) -> dict:
         """A JSON object (dict)."""
@@ -115,7 +120,7 @@ class Fields:
         allowed = set(known)
         unknown = [n for n in names if n not in allowed]
         if unknown:
-            raise DataError(
+            raise self.error(
                 f"{self.where}: unknown {what} {', '.join(map(repr, unknown[:4]))} "
                 f"(expected of {', '.join(sorted(allowed)[:8]) or 'none'})"
             )

@@ -11,7 +11,7 @@ from ..errors import InputError
 from ..payload import load_torque_scale
 from ..viz.audit_report import write_audit_report
 from ._common import (
-    column_map,
+    data_column_map,
     input_paths,
     parse_floats,
     profile_from_args,
@@ -37,9 +37,7 @@ def run(args: argparse.Namespace) -> int:
     outputs = reserve_outputs(args)
     outputs.add_inputs(input_paths(args))
     profile = profile_from_args(args)
-    colmap = column_map(args.column)
-    if colmap is None and profile is not None and profile.columns:
-        colmap = dict(profile.columns)
+    colmap = data_column_map(args, profile)
     robot = robot_from_args(args)
     given: object = None
     if args.torque_scale_from is not None:

@@ -22,6 +22,7 @@ import warnings
 
 from .._io import OutputSet, write_json  # noqa: F401 (the commands import write_json here)
 from ..datasets import parse_file_spec
+from ..datasets.layout import FIELDS
 from ..errors import InputError, shorten
 from ..robot.profiles import find_profile, load_profile
 from ..robot.transmission import Transmission, load_transmission
@@ -450,6 +451,13 @@ def data_column_map(args: argparse.Namespace, profile) -> dict | None:
     colmap = column_map(args.column)
     if colmap is None and profile is not None and profile.columns:
         colmap = dict(profile.columns)
+        unknown = [k for k in colmap if k not in (*FIELDS, "joint_names")]
+        if unknown:
+            raise InputError(
+                f"profile {profile.source or profile.name}: unknown key "
+                f"data.columns.{shorten(unknown[0])!r}; expected some of "
+                f"{[*FIELDS, 'joint_names']}"
+            )
     return colmap
 
 

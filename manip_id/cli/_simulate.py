@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .._io import write_json
+from .._io.fields import Fields
 from ..control.closed_loop import with_payload
 from ..datasets import Dataset, save_dataset
 from ..errors import InputError, PhysicalConsistencyError, ResourceError
@@ -166,7 +167,10 @@ def _model_parameters(robot, path: Path) -> np.ndarray:
     if result.context.get("physically_consistent") and isinstance(rows, list):
         values = {r.get("name"): r.get("value") for r in rows if isinstance(r, dict)}
         if set(values) == set(robot.parameter_names):
-            theta = np.array([float(values[n]) for n in robot.parameter_names])
+            f = Fields(path)
+            theta = np.array(
+                [f.number(values[n], f"standard_parameters {n}") for n in robot.parameter_names]
+            )
     try:
         require_physical(robot, theta)
     except PhysicalConsistencyError as exc:

@@ -36,6 +36,7 @@ import numpy as np
 from .._checks import MEASURED_LIMITS
 from .._io.reading import check_data_path
 from ..errors import DataError, InputError
+from ..resources import TORQUE_SCALE_RANGE
 from .adjust import TIME_UNITS, AdjustedSource, delay_vector
 from .core import Dataset, check_time, check_values
 from .csv import TRUNCATED, CsvSource
@@ -211,10 +212,6 @@ class RowCounts:
         self.reasons[reason] = self.reasons.get(reason, 0) + int(rows.size)
         first = int(rows.min())
         self.first_dropped = first if self.first_dropped is None else min(self.first_dropped, first)
-
-
-#: The magnitudes a torque scale may have: from the logged unit (mN m, A, counts) to N m.
-TORQUE_SCALE_RANGE = (1e-9, 1e9)
 
 
 def torque_scale_vector(scale, nv: int, what: str = "torque scale") -> np.ndarray | None:

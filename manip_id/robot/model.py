@@ -563,7 +563,8 @@ def load_robot(
         terms = JointTerms(**model_fields)
 
     all_joints = [model.names[i] for i in range(1, model.njoints)]
-    if active_joints is None and prof is not None:
+    profile_joints = active_joints is None and prof is not None  # the profile's selection
+    if profile_joints and prof is not None:
         active_joints = prof.active_for(all_joints)
     locked = locked_names(name, all_joints, active_joints)
     if src.source is not None and str(src.source).endswith(".urdf"):
@@ -576,6 +577,8 @@ def load_robot(
         qref = reference_configuration(model, locked_configuration, all_joints)
         locked_ids = [model.getJointId(j) for j in locked]
         model = pin.buildReducedModel(model, locked_ids, qref)
+    if profile_joints and described is None and prof is not None:
+        prof.check_robot(name, model.nv)  # its per-joint values fit the joints it moves
     robot = Robot(
         name,
         model,

@@ -34,6 +34,12 @@ is optional::
 
 A URDF loaded by path takes no profile unless one is named (``profile=`` or
 ``--profile``): its file name decides nothing.
+
+Every key is checked when the file is read (:func:`parse_profile`, through
+:class:`~manip_id._io.fields.Fields`: types, finite numbers within :data:`LIMITS`,
+distinct joints) and against the robot when it is loaded (:meth:`RobotProfile.active_for`,
+:meth:`RobotProfile.check_robot`); each failure is one :class:`InputError` naming the
+file and the key.
 """
 
 from __future__ import annotations
@@ -44,9 +50,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .._io.fields import Fields
 from .._io.reading import read_toml
-from ..errors import InputError, RobotError
-from .friction import FRICTION_KINDS
+from ..errors import InputError, RobotError, shorten
+from ..resources import MAX_HARMONICS, TORQUE_SCALE_RANGE
+from .friction import FRICTION_KINDS, parse_friction
 from .transmission import Transmission
 
 #: Keys a profile may hold, per table ("" is the top level).
@@ -140,7 +148,34 @@ class RobotProfile:
             )
         if self.active_joints is not None:
             return list(self.active_joints)
-        return [j for j in all_joints if j not in set(self.locked_joints or ())]
+        active = [j for j in all_joints if j not in set(self.locked_joints or ())]
+        if not active:
+            raise InputError(
+                f"profile {self.source or self.name}: joints.locked locks every joint of the "
+                "model; at least one joint must move"
+            )
+        return active
+
+    def check_robot(self, robot_name: str, nv: int) -> None:
+        """The per-joint values (``excitation.acceleration_limit``, ``data.torque_scale``,
+        the transmission) hold one value or one per joint of a robot that moves the
+        profile's joints (``nv`` of them); :class:`InputError` naming the file and key."""
+        where = self.source or self.name
+        for key, values in (
+            ("excitation.acceleration_limit", self.excitation.acceleration_limit),
+            ("data.torque_scale", self.torque_scale),
+        ):
+            if isinstance(values, tuple) and len(values) not in (1, nv):
+                raise InputError(
+                    f"profile {where}: {key} holds {len(values)} values, but {robot_name} moves "
+                    f"{nv} joint(s): give one value or one per joint"
+                )
+        if self.transmission is not None:
+            tr = Transmission.from_dict(self.transmission, source=where)
+            try:
+                tr.check_size(nv, robot_name)
+            except InputError as err:
+                raise InputError(f"profile {where}: transmission: {err}") from err
 
 
 def profile_path(name: str) -> Path:
@@ -171,8 +206,15 @@ def find_profile(name: str) -> RobotProfile | None:
 
 
 def parse_profile(raw: Mapping[str, Any], *, name: str, source: str = "") -> RobotProfile:
-    """A :class:`RobotProfile` from the parsed TOML tables (module docstring)."""
+    """A :class:`RobotProfile` from the parsed TOML tables (module docstring).
+
+    Every key is checked at the door through :class:`~manip_id._io.fields.Fields`: unknown
+    keys, wrong types, non-finite numbers and numbers outside :data:`LIMITS` raise one
+    :class:`InputError` naming the file, the key and what was expected. (Joint names are
+    checked against the robot by :meth:`RobotProfile.check_robot` when it is loaded.)
+    """
     where = source or name
+    f = Fields(f"profile {where}", error=InputError)
     _check_keys(raw, "", where)
     model = _table(raw, "model", where)
     joints = _table(raw, "joints", where)
@@ -180,34 +222,51 @@ def parse_profile(raw: Mapping[str, Any], *, name: str, source: str = "") -> Rob
     data = _table(raw, "data", where)
     friction = model.get("friction")
     if friction is not None:
-        friction = tuple(_strings(friction, "model.friction", where))
-        bad = [f for f in friction if f.partition(":")[0] not in _FRICTION]
+        friction = tuple(_strings(f, friction, "model.friction"))
+        bad = [x for x in friction if x.partition(":")[0] not in _FRICTION]
         if bad:
             raise InputError(
                 f"profile {where}: model.friction holds {bad[0]!r}; expected some of "
                 f"{list(_FRICTION)}"
             )
+        try:
+            parse_friction(list(friction))
+        except InputError as err:
+            raise InputError(f"profile {where}: model.friction: {err}") from err
     if "active" in joints and "locked" in joints:
         raise InputError(f"profile {where}: give joints.active or joints.locked, not both")
-    active = joints.get("active")
-    locked = joints.get("locked")
+    active, locked = joints.get("active"), joints.get("locked")
+    acc_lo, acc_hi = LIMITS["acceleration_limit"]
+    ts_lo, ts_hi = TORQUE_SCALE_RANGE
     return RobotProfile(
         name=name,
         source=source,
-        description=str(raw.get("description", "")),
+        description=f.text(raw.get("description", ""), "description"),
         friction=friction,
-        armature=_bool(model, "armature", where),
-        spring=_bool(model, "spring", where),
-        active_joints=None if active is None else tuple(_strings(active, "joints.active", where)),
-        locked_joints=None if locked is None else tuple(_strings(locked, "joints.locked", where)),
+        armature=_bool(f, model, "model.armature"),
+        spring=_bool(f, model, "model.spring"),
+        active_joints=_joints(f, active, "joints.active"),
+        locked_joints=_joints(f, locked, "joints.locked"),
         excitation=ExcitationProfile(
-            harmonics=_positive(exc, "harmonics", where, integer=True),
-            period=_positive(exc, "period", where),
-            margin=_fraction(exc, "margin", where),
-            acceleration_limit=_positive_values(exc, "acceleration_limit", where),
-        ),
-        torque_scale=_positive_values(data, "torque_scale", where, positive=False),
-        columns=_table(data, "columns", where) or None,
+            harmonics=_harmonics(f, exc),
+            period=_in(f, exc, "period", "excitation.period"),
+            margin=_fraction(f, exc, "excitation.margin"),
+            acceleration_limit=_values(
+                f,
+                exc.get("acceleration_limit"),
+                "excitation.acceleration_limit",
+                f"positive numbers <= {acc_hi:g} [rad/s^2 or m/s^2]",
+                lambda v: acc_lo < v <= acc_hi,
+            ),
+        ),  # fmt: skip
+        torque_scale=_values(
+            f,
+            data.get("torque_scale"),
+            "data.torque_scale",
+            f"non-zero numbers of magnitude in [{ts_lo:g}, {ts_hi:g}] (a gain to N m)",
+            lambda v: ts_lo <= abs(v) <= ts_hi,
+        ),  # fmt: skip
+        columns=_columns(f, data.get("columns")),
         transmission=_transmission_table(raw, where),
     )
 
@@ -221,6 +280,14 @@ def _transmission_table(raw: Mapping[str, Any], where: str) -> dict[str, Any] | 
 
 
 # ------------------------------------------------------------------ checking
+#: The ranges of a profile's numbers (absurd values are refused at the door): an excitation
+#: period [s] of 10 ms to about three hours, accelerations up to 1e6 [rad/s^2 or m/s^2].
+LIMITS: dict[str, tuple[float, float]] = {
+    "period": (1e-2, 1e4),
+    "acceleration_limit": (0.0, 1e6),
+}
+
+
 def _check_keys(table: Mapping[str, Any], name: str, where: str) -> None:
     allowed = _KEYS.get(name)
     if allowed is None:
@@ -229,7 +296,8 @@ def _check_keys(table: Mapping[str, Any], name: str, where: str) -> None:
     if unknown:
         prefix = f"{name}." if name else ""
         raise InputError(
-            f"profile {where}: unknown key {prefix}{unknown[0]!r}; expected some of {list(allowed)}"
+            f"profile {where}: unknown key {prefix}{shorten(unknown[0])!r}; expected some of "
+            f"{list(allowed)}"
         )
 
 
@@ -241,54 +309,89 @@ def _table(raw: Mapping[str, Any], key: str, where: str) -> dict[str, Any]:
     return dict(value)
 
 
-def _strings(value: Any, key: str, where: str) -> list[str]:
+def _strings(f: Fields, value: Any, key: str) -> list[str]:
+    """A list of names, or one string of names separated by commas or spaces."""
     if isinstance(value, str):
         value = [v for v in value.replace(",", " ").split() if v]
-    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-        raise InputError(f"profile {where}: {key} must be a list of names, got {value!r}")
-    return list(value)
+    return f.texts(value, key)
 
 
-def _bool(table: Mapping[str, Any], key: str, where: str) -> bool | None:
-    value = table.get(key)
-    if value is None or isinstance(value, bool):
-        return value
-    raise InputError(f"profile {where}: {key} must be true or false, got {value!r}")
+def _joints(f: Fields, value: Any, key: str) -> tuple[str, ...] | None:
+    """A list of distinct joint names (or None)."""
+    if value is None:
+        return None
+    names = _strings(f, value, key)
+    if not names and key == "joints.active":
+        raise f.fail(key, "a non-empty list of joint names (at least one joint moves)", value)
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise f.fail(key, "distinct joint names", f"{shorten(twice[0])!r} twice")
+    return tuple(names)
 
 
-def _number(value: Any, key: str, where: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise InputError(f"profile {where}: {key} must be a finite number, got {value!r}")
-    return float(value)
+def _bool(f: Fields, table: Mapping[str, Any], key: str) -> bool | None:
+    value = table.get(key.rpartition(".")[2])
+    return None if value is None else f.boolean(value, key)
 
 
-def _positive(table, key: str, where: str, *, integer: bool = False) -> Any:
+def _harmonics(f: Fields, table: Mapping[str, Any]) -> int | None:
+    if "harmonics" not in table:
+        return None
+    value = table["harmonics"]
+    what = f"a positive integer <= {MAX_HARMONICS}"
+    if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= MAX_HARMONICS:
+        if isinstance(value, float) and value.is_integer() and 1 <= value <= MAX_HARMONICS:
+            return int(value)
+        raise f.fail("excitation.harmonics", what, value)
+    return int(value)
+
+
+def _in(f: Fields, table: Mapping[str, Any], key: str, field: str) -> float | None:
+    """A number in the range of :data:`LIMITS` ``[key]`` (or None)."""
     if key not in table:
         return None
-    value = _number(table[key], key, where)
-    if value <= 0 or (integer and value != int(value)):
-        kind = "a positive integer" if integer else "positive"
-        raise InputError(f"profile {where}: {key} must be {kind}, got {table[key]!r}")
-    return int(value) if integer else value
+    lo, hi = LIMITS[key]
+    return f.number(table[key], field, minimum=lo, maximum=hi)
 
 
-def _fraction(table, key: str, where: str) -> float | None:
+def _fraction(f: Fields, table: Mapping[str, Any], field: str) -> float | None:
+    key = field.rpartition(".")[2]
     if key not in table:
         return None
-    value = _number(table[key], key, where)
+    value = f.number(table[key], field)
     if not 0 <= value < 0.5:
-        raise InputError(f"profile {where}: {key} must be in [0, 0.5), got {value}")
-    return value
+        raise f.fail(field, "in [0, 0.5)", table[key])
+    return abs(value)
 
 
-def _positive_values(table, key: str, where: str, *, positive: bool = True) -> Any:
-    if key not in table:
+def _values(f: Fields, raw: Any, field: str, what: str, ok) -> Any:
+    """One number or a non-empty list of numbers each passing ``ok`` (or None)."""
+    if raw is None:
         return None
-    raw = table[key]
-    values = [raw] if not isinstance(raw, list) else raw
-    nums = [_number(v, key, where) for v in values]
-    bad = any(v <= 0 for v in nums) if positive else any(v == 0 for v in nums)
-    if not nums or bad:
-        what = "positive" if positive else "non-zero"
-        raise InputError(f"profile {where}: {key} must be {what}, got {raw!r}")
+    items = f.list(raw, field, nonempty=True) if isinstance(raw, list) else [raw]
+    nums = [f.number(v, field if len(items) == 1 else f"{field}[{k}]") for k, v in enumerate(items)]
+    for k, v in enumerate(nums):
+        if not ok(v):
+            raise f.fail(field if not isinstance(raw, list) else f"{field}[{k}]", what, items[k])
     return nums[0] if not isinstance(raw, list) else tuple(nums)
+
+
+def _columns(f: Fields, raw: Any) -> dict[str, Any] | None:
+    """The ``[data.columns]`` table: per field a column name or pattern, a 0-based index,
+    or a non-empty list of them (the fields themselves are checked where the map is used,
+    by the data readers)."""
+    if raw is None:
+        return None
+    table = f.object(dict(raw) if isinstance(raw, Mapping) else raw, "data.columns")
+    for key, value in table.items():
+        field = f"data.columns.{key}"
+        items = value if isinstance(value, list) else [value]
+        if not items:
+            raise f.fail(field, "a column, a pattern or a list of them", value)
+        for item in items:
+            ok = (isinstance(item, str) and item.strip()) or (
+                isinstance(item, int) and not isinstance(item, bool)
+            )
+            if not ok:
+                raise f.fail(field, "column names, patterns or 0-based indices", value)
+    return table or None

@@ -498,6 +498,13 @@ def _checked_options(robot: Robot, duration, opt: DesignOptions) -> DesignOption
     acc: Any = opt.acceleration_limit
     if acc is None and robot.profile is not None and robot.profile.excitation is not None:
         acc = robot.profile.excitation.acceleration_limit
+        if isinstance(acc, tuple) and len(acc) not in (1, robot.nv):
+            prof = robot.profile
+            raise InputError(
+                f"profile {prof.source or prof.name}: excitation.acceleration_limit holds "
+                f"{len(acc)} values (one per joint of the profile's joints), but this robot "
+                f"moves {robot.nv}: give acceleration_limit (--acceleration-limit) for them"
+            )
     return replace(opt, acceleration_limit=acc)
 
 
