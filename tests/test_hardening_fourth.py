@@ -908,3 +908,51 @@ def test_a_profile_column_field_that_is_no_field_is_named_by_the_command(work, c
     (work / "run.csv").write_text("t,q,tau\n0,0,0\n0.1,0,0\n")
     line = _error(capsys, "audit", "msd", "--profile", "p.toml", "--data", "run.csv")
     assert "p.toml" in line and "data.columns.'bogus'" in line
+
+
+# ----------------------------------------------------------- repair: a negative mass
+def _two_link_urdf(mass: float) -> str:
+    """Two revolute joints; the first body is link l1 (``mass``, CoM and inertia rotated)
+    plus l1b fixed to it (0.5 kg): the fixed link is merged into the body."""
+    inertial = '<inertia ixx="0.01" ixy="0.001" ixz="0" iyy="0.02" iyz="0" izz="0.025"/>'
+    return f"""<?xml version="1.0"?>
+<robot name="neg">
+  <link name="base"/>
+  <link name="l1"><inertial><origin xyz="0.1 0.02 0" rpy="0.3 0 0.2"/>
+    <mass value="{mass}"/>{inertial}</inertial></link>
+  <link name="l1b"><inertial><origin xyz="0 0 0.05"/><mass value="0.5"/>
+    <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.001"/></inertial></link>
+  <link name="l2"><inertial><origin xyz="0.1 0 0"/><mass value="1.0"/>{inertial}</inertial></link>
+  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>
+    <origin xyz="0 0 0.1"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" velocity="3" effort="50"/></joint>
+  <joint name="fix" type="fixed"><parent link="l1"/><child link="l1b"/>
+    <origin xyz="0.2 0 0" rpy="0 0.4 0"/></joint>
+  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/>
+    <origin xyz="0.3 0 0"/><axis xyz="0 1 0"/>
+    <limit lower="-3" upper="3" velocity="3" effort="50"/></joint>
+</robot>
+"""
+
+
+def test_a_negative_mass_is_read_as_the_urdf_says_and_repaired_as_a_sign_slip(work, capsys):
+    from manip_id import load_robot
+
+    blocks = {}
+    for label, mass in (("neg", -2.0), ("pos", 2.0), ("zero", 0.0)):
+        (work / f"{label}.urdf").write_text(_two_link_urdf(mass))
+        blocks[label] = load_robot(str(work / f"{label}.urdf")).nominal_parameters[:10]
+    # a body's 10 parameters are affine in a link's mass: Pinocchio's own readings of the
+    # +2 and 0 kg files give the -2 kg body (Pinocchio itself garbles a negative mass)
+    expected = 2.0 * blocks["zero"] - blocks["pos"]
+    np.testing.assert_allclose(blocks["neg"], expected, rtol=1e-12, atol=1e-14)
+    status, out, err = _run(capsys, "repair", "neg.urdf", "out.urdf", "--json", "rep.json")
+    assert status == 0, err
+    assert "passes the eigenvalue test" in out
+    fixed = load_robot(str(work / "out.urdf")).nominal_parameters[:10]
+    m = -expected[0]  # the body's mass -1.5 kg taken as 1.5 kg
+    assert fixed[0] == pytest.approx(m, rel=1e-9)
+    np.testing.assert_allclose(fixed[1:4], expected[1:4], rtol=1e-9)  # the first moment kept
+    after = load_robot(str(work / "out.urdf")).nominal_parameters[10:]
+    before = load_robot(str(work / "neg.urdf")).nominal_parameters[10:]
+    np.testing.assert_allclose(after, before, rtol=1e-9)  # the physical body j2 untouched

@@ -25,7 +25,7 @@ from .friction import FRICTION_KINDS as FRICTION_KINDS  # re-exported
 from .friction import FrictionShapes, FrictionSpec, friction_columns, parse_friction
 from .parameters import JOINT_TERM_NAMES
 from .profiles import RobotProfile, find_profile, load_profile, robots_dir
-from .urdf_structure import check_urdf_structure
+from .urdf_structure import check_urdf_structure, negative_mass_inertials
 
 #: Fixed-base manipulators of example-robot-data listed by ``manip-id robots``.
 #: Any other fixed-base name of example-robot-data loads too.
@@ -165,10 +165,36 @@ def load_urdf(path: Path) -> pin.Model:
     try:
         with native_stderr_captured("urdfdom", error=RobotError), warnings.catch_warnings():
             warnings.simplefilter("ignore")  # urdfdom's errors: refused, not a massless body
-            return pin.buildModelFromUrdf(str(path))
+            model = pin.buildModelFromUrdf(str(path))
     except Exception as exc:
         cause = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise RobotError(f"cannot read URDF {path}: {cause}") from exc
+    inertials = negative_mass_inertials(path)
+    if inertials:
+        _restore_negative_masses(model, inertials)
+    return model
+
+
+def _restore_negative_masses(model: pin.Model, inertials: dict) -> None:
+    """The inertia of each joint carrying a link of negative mass, rebuilt as the sum of
+    its links' 10 standard parameters (linear: no division by the mass;
+    :func:`~manip_id.robot.urdf_structure.negative_mass_inertials`)."""
+    bodies: dict[int, list] = {}
+    for frame in model.frames:
+        if frame.type == pin.FrameType.BODY and frame.name in inertials:
+            bodies.setdefault(int(frame.parentJoint), []).append(frame)
+    for j, frames in bodies.items():
+        if j == 0 or all(inertials[f.name][0] >= 0 for f in frames):
+            continue
+        total = np.zeros(10)
+        for f in frames:
+            m, xyz, rpy, (ixx, ixy, ixz, iyy, iyz, izz) = inertials[f.name]
+            R = pin.rpy.rpyToMatrix(*rpy)
+            I_c = R @ np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]]) @ R.T
+            link = pin.Inertia(m, np.array(xyz, dtype=float), I_c)
+            total += f.placement.act(link).toDynamicParameters()
+        if total[0] != 0:  # (a total of exactly zero has no centre of mass to keep)
+            model.inertias[j] = pin.Inertia.FromDynamicParameters(total)
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,8 @@ joints (baxter's grippers: 19 joints), with a warning.
 
 Inertias are not structure beyond their magnitude: ``manip-id view`` needs none, and the
 commands that use them check them (a negative mass in a simulated URDF is refused by the
-simulation's check of the nominal parameters).
+simulation's check of the nominal parameters; ``manip-id repair`` takes it as a sign slip,
+on the URDF's own values: :func:`negative_mass_inertials`).
 """
 
 from __future__ import annotations
@@ -94,6 +95,43 @@ def _check_inertial(link: ET.Element, where: str) -> None:
                     f"{where}: link {name!r} has {what} {key}={value[0]:g}, beyond manip-id's "
                     f"bound of {MAX_INERTIAL:g} [kg or kg m^2]: check the URDF's units"
                 )
+
+
+def negative_mass_inertials(path) -> dict[str, tuple[float, list[float], list[float], list[float]]]:
+    """``{link: (mass, xyz, rpy, [ixx, ixy, ixz, iyy, iyz, izz])}`` of every link's
+    ``<inertial>`` when some link of the URDF has a negative mass, else ``{}``.
+
+    Pinocchio cannot hold such a link: adding a body of negative total mass to a joint
+    clamps the mass in the division for the centre of mass (``c = m c / max(m, eps)``), so
+    its model holds a CoM of some 1e30 m. :func:`~manip_id.robot.sources.load_urdf` rebuilds
+    the inertias of those joints from these values (the 10 standard parameters are linear
+    in each link's, no division), so that :mod:`manip_id.physics.repair` sees the URDF's
+    own body and can take its mass as a sign slip.
+    """
+    try:
+        root = ET.fromstring(read_text(path, "URDF", "urdf", error=RobotError))
+    except ET.ParseError:
+        return {}
+    out: dict[str, tuple[float, list[float], list[float], list[float]]] = {}
+    negative = False
+    for link in root.iter("link"):
+        inertial = link.find("inertial")
+        if inertial is None:
+            continue
+        mass_el = inertial.find("mass")
+        mass = _numbers(None if mass_el is None else mass_el.get("value"), 1, "mass")
+        origin = inertial.find("origin")
+        xyz = _numbers(None if origin is None else origin.get("xyz"), 3, "xyz")
+        rpy = _numbers(None if origin is None else origin.get("rpy"), 3, "rpy")
+        el = inertial.find("inertia")
+        keys = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+        entries = [_numbers(None if el is None else el.get(k), 1, k) for k in keys]
+        m = mass[0] if mass else 0.0
+        negative = negative or m < 0
+        out[str(link.get("name"))] = (
+            m, xyz or [0.0] * 3, rpy or [0.0] * 3, [e[0] if e else 0.0 for e in entries]
+        )  # fmt: skip
+    return out if negative else {}
 
 
 def mimic_joints(path) -> dict[str, str]:
