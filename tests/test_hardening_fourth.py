@@ -956,3 +956,76 @@ def test_a_negative_mass_is_read_as_the_urdf_says_and_repaired_as_a_sign_slip(wo
     after = load_robot(str(work / "out.urdf")).nominal_parameters[10:]
     before = load_robot(str(work / "neg.urdf")).nominal_parameters[10:]
     np.testing.assert_allclose(after, before, rtol=1e-9)  # the physical body j2 untouched
+
+
+# ------------------------------------------------------ SIGTERM: a swallowed signal
+def test_a_sigterm_swallowed_in_a_weakref_callback_still_terminates(work, capsys, monkeypatch):
+    """A SIGTERM whose exception Python swallows (delivered inside a weakref callback, as
+    it can be while a Dask cluster closes) printed "Exception ignored ... Traceback" and the
+    run went on to publish, exit 0. Now: no traceback, nothing published, 143."""
+    import signal
+    import weakref
+
+    from manip_id._io.outputs import OutputSet
+
+    original = OutputSet.write_json
+
+    def write_json(self, *args, **kwargs):
+        class Thing:
+            pass
+
+        thing = Thing()
+        ref = weakref.ref(thing, lambda _: os.kill(os.getpid(), signal.SIGTERM))
+        del thing  # the callback runs: the handler raises inside it, and Python swallows it
+        assert ref() is None
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(OutputSet, "write_json", write_json)
+    status, _, err = _run(capsys, "identify", "msd", "--simulate", "--duration", "2",
+                          "--json", "o.json")  # fmt: skip
+    assert status == 128 + signal.SIGTERM
+    assert err.strip().splitlines()[-1] == "manip-id: terminated"
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+    assert not (work / "o.json").exists()
+    assert [p.name for p in work.iterdir()] == []
+    assert signal.getsignal(signal.SIGTERM) is not None and OutputSet.before_publish is None
+
+
+@pytest.mark.slow
+def test_sigterm_during_a_dask_payload_run_is_one_line(work):
+    """``payload --scheduler local:1`` terminated mid-run (its cluster on 127.0.0.1):
+    exit 143, one line, no traceback, no output, its processes gone."""
+    import signal
+
+    import psutil
+
+    assert main(["simulate", "ur5", "--out", "sim", "--files", "1", "--duration", "300",
+                 "--payload", "1.0"]) == 0  # fmt: skip
+    cmd = [sys.executable, "-m", "manip_id", "payload", "ur5", "--unloaded", "sim/run_0.npz",
+           "--loaded", "sim/payload_1kg_0.npz", "--frame", "tool0", "--scheduler", "local:1",
+           "--json", "o.json"]  # fmt: skip
+    proc = subprocess.Popen(cmd, cwd=work, env=ENV, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE)  # fmt: skip
+    parent = psutil.Process(proc.pid)
+    children: list = []
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            children[:] = parent.children(recursive=True)
+            if len(children) >= 2:  # the cluster's nanny and worker are up
+                break
+            time.sleep(0.1)
+        assert proc.poll() is None and children, "the Dask cluster never started"
+        time.sleep(1.0)  # into the accumulation
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(60) == 143
+        err = proc.stderr.read().decode()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        proc.stderr.close()
+    assert err.strip().splitlines() == ["manip-id: terminated"], err
+    _, alive = psutil.wait_procs(children, timeout=10)
+    assert alive == []
+    assert not (work / "o.json").exists()

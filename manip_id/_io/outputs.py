@@ -6,7 +6,7 @@ import contextlib
 import signal
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Protocol
+from typing import ClassVar, Protocol
 
 from ..errors import OutputError
 from .files import StagedFile, as_path, is_ancestor, json_text, same_file
@@ -36,6 +36,12 @@ class OutputSet:
     Leaving the ``with`` block without :meth:`publish` (an exception, a signal)
     discards every temporary.
     """
+
+    #: Called before anything is published (process-wide, set by the command line's
+    #: ``main``): raises when a termination signal arrived whose exception was swallowed
+    #: (one delivered inside a weakref callback or a ``__del__`` is printed and ignored by
+    #: Python), so that a terminated run publishes nothing. None: no check.
+    before_publish: ClassVar[Callable[[], None] | None] = None
 
     def __init__(self, inputs: Iterable = ()):
         self.inputs = [Path(p) for p in inputs if p is not None]
@@ -95,6 +101,13 @@ class OutputSet:
         SIGINT, SIGTERM and SIGHUP are held back during the renames (they take effect
         right after), so an interrupt never publishes half of the outputs.
         """
+        check = OutputSet.before_publish
+        if check is not None:
+            try:
+                check()
+            except BaseException:
+                self.discard()
+                raise
         with _signals_held():
             try:
                 for item in self._items:

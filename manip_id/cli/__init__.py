@@ -20,7 +20,9 @@ anything else: a bug                           1       ``manip-id: internal erro
 =============================================  ======  ==============================
 
 Whatever happens, unpublished temporaries are removed and the child processes this
-command started are stopped. Warnings (NumPy, SciPy, ours) are printed once each as
+command started are stopped. A SIGTERM whose exception Python swallows (raised inside a
+weakref callback or a ``__del__``, as while a Dask cluster closes) is still the end of the
+run: no "Exception ignored" traceback, nothing published, status 143 (``_received``). Warnings (NumPy, SciPy, ours) are printed once each as
 ``manip-id: warning: ...``; tracebacks appear only with ``--debug``.
 """
 
@@ -191,6 +193,32 @@ def stop_children(timeout: float = 3.0) -> None:
 
 
 # ----------------------------------------------------------------- the main
+#: The termination signal received by :func:`main` (None: none). Python swallows an
+#: exception raised inside a weakref callback or a ``__del__`` (it prints "Exception
+#: ignored in ..." with a traceback and goes on): a SIGTERM landing there, as it can while
+#: a Dask cluster closes, would be lost. So the handler also records it here; the
+#: swallowed :class:`Terminated` is not printed (:func:`_unraisable`), the outputs are not
+#: published (:attr:`OutputSet.before_publish`) and :func:`main` ends as terminated.
+_received: list[int] = []
+
+
+def _check_terminated() -> None:
+    """Raise :class:`Terminated` when a termination signal was received (and swallowed)."""
+    if _received:
+        raise Terminated(_received[0])
+
+
+def _unraisable(default):
+    """A ``sys.unraisablehook`` that keeps quiet about a swallowed :class:`Terminated`."""
+
+    def hook(unraisable):
+        if unraisable.exc_type is not None and issubclass(unraisable.exc_type, Terminated):
+            return  # recorded in _received: main() ends as terminated
+        default(unraisable)
+
+    return hook
+
+
 def _install_signal_handlers():
     """SIGTERM and SIGHUP raise :class:`Terminated` in the main process (not in forks)."""
     if not hasattr(signal, "SIGTERM"):  # pragma: no cover
@@ -200,6 +228,8 @@ def _install_signal_handlers():
     def handler(signum, frame):
         if os.getpid() != main_pid:  # a forked worker: leave the parent's state alone
             os._exit(128 + signum)
+        if not _received:
+            _received.append(signum)
         raise Terminated(signum)
 
     old = {}
@@ -219,7 +249,11 @@ def main(argv: list[str] | None = None) -> int:
 
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv[: argv.index("--")] if "--" in argv else "--debug" in argv
+    _received.clear()
     old_handlers = _install_signal_handlers()
+    old_hook = sys.unraisablehook
+    sys.unraisablehook = _unraisable(old_hook)
+    OutputSet.before_publish = _check_terminated
     outputs = OutputSet()
     status = 0
     interrupted = False
@@ -238,6 +272,7 @@ def main(argv: list[str] | None = None) -> int:
             args = parser.parse_args(argv)
             args.outputs = outputs
             status = int(args.func(args) or 0)
+            _check_terminated()  # a signal whose exception was swallowed on the way
         except ManipIdError as exc:
             if debug:
                 traceback.print_exc()
@@ -285,6 +320,8 @@ def main(argv: list[str] | None = None) -> int:
                 stop_children()
             for sig, old in old_handlers.items():
                 signal.signal(sig, old)
+            sys.unraisablehook = old_hook
+            OutputSet.before_publish = None
     return status
 
 
