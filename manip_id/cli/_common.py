@@ -158,6 +158,12 @@ def profile_from_args(args: argparse.Namespace):
 
 #: Options naming input files or folders (the outputs must not be one of them).
 INPUT_OPTIONS = ("robot", "data", "validate", "urdf", "package_dir")
+#: Options naming other files a command reads (results, references, designs, worlds,
+#: transmissions, profiles, calibration and payload runs): never to be written over.
+READ_OPTIONS = (
+    "model", "reference", "thresholds", "trajectory", "world", "previous", "transmission",
+    "profile", "calibrate", "unloaded", "loaded", "torque_scale_from", "known_base", "input",
+)  # fmt: skip
 #: Options naming output files, and the option naming a report folder.
 FILE_OUTPUT_OPTIONS = ("json", "html", "export_urdf")
 
@@ -165,7 +171,7 @@ FILE_OUTPUT_OPTIONS = ("json", "html", "export_urdf")
 def input_paths(args: argparse.Namespace) -> list[str]:
     """Every existing path among the input options of ``args`` (``FILE@WINDOW``: FILE)."""
     paths = []
-    for name in INPUT_OPTIONS + ("torque_scale_from", "known_base", "input"):
+    for name in INPUT_OPTIONS + READ_OPTIONS:
         value = getattr(args, name, None)
         for item in value if isinstance(value, list) else [value]:
             if not isinstance(item, str) or not item:
