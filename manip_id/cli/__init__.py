@@ -22,8 +22,9 @@ anything else: a bug                           1       ``manip-id: internal erro
 Whatever happens, unpublished temporaries are removed and the child processes this
 command started are stopped. A SIGTERM whose exception Python swallows (raised inside a
 weakref callback or a ``__del__``, as while a Dask cluster closes) is still the end of the
-run: no "Exception ignored" traceback, nothing published, status 143 (``_received``). Warnings (NumPy, SciPy, ours) are printed once each as
-``manip-id: warning: ...``; tracebacks appear only with ``--debug``.
+run: no "Exception ignored" traceback, nothing published, status 143 (``_received``).
+Warnings (NumPy, SciPy, ours) are printed once each as ``manip-id: warning: ...``;
+tracebacks appear only with ``--debug``.
 """
 
 from __future__ import annotations

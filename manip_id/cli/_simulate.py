@@ -338,6 +338,8 @@ def run(args: argparse.Namespace) -> int:
     outputs = reserve_outputs(args)
     claim = outputs.report(args.out, "--out", force=args.force)  # checked and claimed first
     robot = robot_from_args(args, args.model)  # --model: the result's joint model
+    if args.trajectory is not None:
+        read_design(args.trajectory, robot)  # the design's robot and joints, before work
     gains = _gains(args, robot.nv)
     check_simulation_memory(robot, int(round(args.duration * args.rate)))
     _check_disk(robot, args, runs)
