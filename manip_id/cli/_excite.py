@@ -9,6 +9,7 @@ import numpy as np
 
 from ..errors import InputError, OutputError
 from ..identification import load_result
+from ..robot.model import available_robots
 from ..trajectories import (
     DesignOptions,
     PriorInformation,
@@ -33,6 +34,12 @@ def run(args: argparse.Namespace) -> int:
     prior = None
     if args.previous is not None:
         result = load_result(args.previous)
+        if result.robot_name != robot.name and {result.robot_name, robot.name} <= set(
+            available_robots()
+        ):
+            raise InputError(
+                f"{args.previous} is a result of robot {result.robot_name!r}, not of {robot.name!r}"
+            )
         if list(result.base.names) != list(robot.parameter_names):
             raise InputError(
                 f"{args.previous} was identified with other parameters than {robot.name!r} has "

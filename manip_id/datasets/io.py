@@ -117,8 +117,16 @@ def save_dataset(dataset: Dataset, path: str | Path, *, format: str | None = Non
 
 
 def output_format(path: Path, format: str | None) -> str:
-    """``"npz"``, ``"csv"`` or ``"mcap"`` from ``format`` or the suffix of ``path``."""
-    fmt = format or {".npz": "npz", ".csv": "csv", ".mcap": "mcap"}.get(path.suffix.lower())
+    """``"npz"``, ``"csv"`` or ``"mcap"`` from ``format`` or the suffix of ``path``; a
+    ``format`` that contradicts the path's own suffix (NPZ bytes into ``run.csv``) is
+    refused with :class:`DataError`."""
+    by_suffix = {".npz": "npz", ".csv": "csv", ".mcap": "mcap"}.get(path.suffix.lower())
+    if format is not None and by_suffix is not None and format != by_suffix:
+        raise DataError(
+            f"cannot save to {path}: its suffix says {by_suffix} but the format asked is "
+            f"{format!r}; name the file for its format (or leave the format out)"
+        )
+    fmt = format or by_suffix
     if fmt not in ("npz", "csv", "mcap"):
         raise DataError(
             f"cannot save to {path}: unknown format {format or path.suffix!r}; "

@@ -148,7 +148,9 @@ def _plan(logs: list[Log], options: RefineOptions, r: int) -> tuple[list, int, i
     steps = max(1, int(round(options.horizon / logs[0].dt)))
     room = sum(max(0, len(lg.t) - steps) for lg in logs)  # start points with a full window
     if room < 1:
-        raise InputError(f"the refinement horizon of {steps} steps is longer than the data")
+        raise InputError(
+            f"the refinement horizon of {float(steps):.4g} steps is longer than the data"
+        )
     n = options.windows or max(STEP_BUDGET // steps, 4 * r)
     n = min(n, room)
     plan, total = [], sum(len(lg.t) for lg in logs)

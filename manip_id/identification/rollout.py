@@ -130,7 +130,7 @@ def start_points(n: int, steps: int, most: int) -> np.ndarray:
     last = n - 1 - steps
     if last < 0:
         raise InputError(
-            f"the horizon of {steps} steps is longer than the log ({n} samples): "
+            f"the horizon of {float(steps):.4g} steps is longer than the log ({n} samples): "
             "use a shorter horizon or a longer log"
         )
     return np.unique(np.linspace(0, last, min(int(most), last + 1)).round().astype(int))

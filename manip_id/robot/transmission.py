@@ -55,7 +55,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .._io.reading import read_toml
-from ..errors import InputError
+from ..errors import InputError, shorten
 from .parameters import ColumnOwner, ParameterLayout
 
 #: Motor term kinds -> their short parameter names, in column order.
@@ -69,6 +69,13 @@ SIGNALS: tuple[str, ...] = ("motor", "joint")
 MAX_CONDITION = 1e12
 
 
+#: The largest magnitude of a transmission matrix entry (a gear ratio, motor per joint):
+#: beyond it the number is no drive's (harmonic drives reach a few hundred).
+MAX_RATIO = 1e6
+#: The largest magnitude of a joint offset [rad or m] (the plausible positions).
+MAX_OFFSET = 1e4
+
+
 def _matrix(value: Any, where: str) -> np.ndarray:
     try:
         R = np.array(value, dtype=float)
@@ -77,7 +84,12 @@ def _matrix(value: Any, where: str) -> np.ndarray:
     if R.ndim != 2 or R.shape[0] != R.shape[1] or R.shape[0] == 0:
         raise InputError(f"{where}: matrix must be square (n, n), got shape {R.shape}")
     if not np.isfinite(R).all():
-        raise InputError(f"{where}: matrix must be finite, got {R.tolist()}")
+        raise InputError(f"{where}: matrix must be finite, got {shorten(R.tolist())}")
+    if np.abs(R).max() > MAX_RATIO:
+        raise InputError(
+            f"{where}: matrix entries must be gear ratios of magnitude <= {MAX_RATIO:g} "
+            f"(motor per joint), got {float(np.abs(R).max()):g}"
+        )
     cond = np.linalg.cond(R)
     if not cond < MAX_CONDITION:
         raise InputError(
@@ -119,8 +131,11 @@ class Transmission:
         R.setflags(write=False)
         n = R.shape[0]
         off = np.zeros(n) if self.offset is None else np.array(self.offset, dtype=float)
-        if off.shape != (n,) or not np.isfinite(off).all():
-            raise InputError(f"{where}: offset must be {n} finite values, got {off.tolist()}")
+        if off.shape != (n,) or not np.isfinite(off).all() or np.abs(off).max() > MAX_OFFSET:
+            raise InputError(
+                f"{where}: offset must be {n} finite values of magnitude <= {MAX_OFFSET:g} "
+                f"[rad or m], got {shorten(off.tolist())}"
+            )
         off.setflags(write=False)
         if self.signals not in SIGNALS:
             raise InputError(f"{where}: signals must be 'motor' or 'joint', got {self.signals!r}")

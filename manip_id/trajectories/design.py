@@ -32,6 +32,7 @@ from .._io.fields import Fields
 from .._io.reading import read_json
 from ..errors import InfeasibleTrajectoryError, InputError, NumericalError, RobotError
 from ..identifiability import analyze
+from ..resources import MAX_STEPS, check_count
 from ..robot.model import Robot, available_robots
 from .constraints import Bounds, ClearanceConstraint, TorqueConstraint, linear_constraints
 from .fourier import FourierTrajectory, dof_layout, trajectory_to_configuration
@@ -246,6 +247,8 @@ class ExcitationDesign:
         return out
 
 
+#: The largest relative torque noise of a design (:class:`DesignOptions` ``noise``).
+MAX_DESIGN_NOISE = 100.0
 #: The largest magnitude of a design's Fourier coefficients [rad or m] (the plausible
 #: positions of :data:`manip_id._checks.MEASURED_LIMITS`).
 MAX_COEFFICIENT = MEASURED_LIMITS["q"][1]
@@ -518,6 +521,12 @@ def _checked_options(robot: Robot, duration, opt: DesignOptions) -> DesignOption
         v = getattr(opt, name)
         if not (math.isfinite(v) and (v > 0 or (name == "clearance" and v == 0))):
             raise InputError(f"{name} must be a positive number, got {v}")
+    if opt.noise > MAX_DESIGN_NOISE:
+        raise InputError(
+            f"noise is the torque noise std relative to the effort limits: at most "
+            f"{MAX_DESIGN_NOISE:g}, got {opt.noise:g}"
+        )
+    check_count(duration * opt.rate, MAX_STEPS, "the design's sample count (duration x rate)")
     for name, least in (("starts", 1), ("refine", 0), ("maxiter", 0), ("seed", 0)):
         v = getattr(opt, name)
         if int(v) != v or v < least:
