@@ -1029,3 +1029,149 @@ def test_sigterm_during_a_dask_payload_run_is_one_line(work):
     _, alive = psutil.wait_procs(children, timeout=10)
     assert alive == []
     assert not (work / "o.json").exists()
+
+
+# ------------------------------------------------- the newer commands, hostile inputs
+@pytest.fixture(scope="module")
+def msd_files(tmp_path_factory):
+    """An msd result (res.json) and one simulated log (sim/run_0.npz)."""
+    folder = tmp_path_factory.mktemp("msd")
+    cwd = os.getcwd()
+    os.chdir(folder)
+    try:
+        assert main(["simulate", "msd", "--out", "sim", "--files", "1", "--duration", "5"]) == 0
+        assert main(["identify", "msd", "--data", "sim/run_0.npz", "--json", "res.json",
+                     "--quiet"]) == 0  # fmt: skip
+    finally:
+        os.chdir(cwd)
+    return folder
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["validate", "msd", "--model", "res.json", "--data", "sim/run_0.npz", "--json", "res.json"],
+        [
+            "drift",
+            "msd",
+            "--reference",
+            "res.json",
+            "--data",
+            "sim/run_0.npz",
+            "--json",
+            "res.json",
+        ],  # fmt: skip
+        ["excite", "msd", "--duration", "4", "--from", "res.json", "--out", "res.json", "--force"],
+    ],
+    ids=["validate", "drift", "excite"],
+)
+def test_an_output_onto_a_file_the_command_reads_is_refused(msd_files, monkeypatch, capsys, argv):
+    monkeypatch.chdir(msd_files)
+    before = (msd_files / "res.json").read_bytes()
+    line = _error(capsys, *argv)
+    assert "is one of the inputs" in line and "res.json" in line
+    assert (msd_files / "res.json").read_bytes() == before
+
+
+MSD_DESIGN = {
+    "robot": "msd",
+    "excitation": {
+        "duration": 2.0,
+        "rate": 200.0,
+        "coefficients": {"q0": [0.0], "a": [[0.1, 0.05]], "b": [[0.0, 0.02]], "wf": 1.0},
+    },
+}
+
+
+@pytest.mark.parametrize(
+    ("path", "value", "match"),
+    [
+        (None, None, None),  # the design as written: simulated
+        (("excitation", "coefficients", "a", 0, 0), float("nan"), r"a\[0\]\[0\] must be a finite"),
+        (("excitation", "coefficients", "a", 0), "x", r"a\[0\] must be a non-empty list"),
+        (("excitation", "coefficients", "b"), [[1.0]], r"b\[0\] must be a row of 2 numbers"),
+        (("excitation", "coefficients", "a", 0, 0), 1e300, "a must be coefficients of magnitude"),
+        (("excitation", "coefficients", "wf"), 1e300, "below the Nyquist pulsation"),
+        (("excitation", "coefficients", "wf"), 0, "wf must be a positive number"),
+        (("excitation", "rate"), "fast", "excitation.rate must be a finite number"),
+        (("excitation", "duration"), -1, "excitation.duration must be a positive number"),
+        (("excitation", "coefficients"), None, "excitation.coefficients must be an object"),
+        (("robot",), 5, "robot must be a string"),
+        (("robot",), "ur5", "a design for robot 'ur5', not for 'msd'"),
+        (("excitation", "coefficients", "q0"), [0.0, 0.0], "a must be a 2 x 2 matrix"),
+    ],
+)
+def test_a_design_is_read_at_its_door(work, capsys, path, value, match):
+    import copy
+    import json
+
+    doc = copy.deepcopy(MSD_DESIGN)
+    if path is not None:
+        parent = doc
+        for key in path[:-1]:
+            parent = parent[key]
+        parent[path[-1]] = value
+    (work / "d.json").write_text(json.dumps(doc))
+    argv = ["simulate", "msd", "--out", "sim", "--trajectory", "d.json", "--files", "1"]
+    if match is None:
+        assert main(argv) == 0
+        return
+    line = _error(capsys, *argv)
+    assert "d.json" in line and re.search(match, line), line
+    assert not (work / "sim").exists()
+
+
+def test_a_design_nested_too_deep_or_binary_is_one_line(work, capsys):
+    (work / "deep.json").write_text("[" * 100_000)
+    (work / "bin.json").write_bytes(b"PK\x03\x04\xff\xfe\x00")
+    for name in ("deep.json", "bin.json"):
+        line = _error(capsys, "simulate", "msd", "--out", "sim", "--trajectory", name)
+        assert name in line and "Error(" not in line
+
+
+@pytest.mark.parametrize(
+    ("extra", "match"),
+    [
+        (["--duration", "1e300"], "sample count"),
+        (["--duration", "4", "--noise", "1e300"], "noise is the torque noise std"),
+    ],
+)
+def test_excite_refuses_absurd_numbers_at_their_option(work, capsys, extra, match):
+    line = _error(capsys, "excite", "msd", "--out", "e.json", *extra)
+    assert match in line
+    assert not (work / "e.json").exists()
+
+
+def test_excite_from_another_robots_result_says_so(msd_files, work, capsys):
+    line = _error(capsys, "excite", "double_pendulum", "--duration", "4", "--out", "e.json",
+                  "--from", str(msd_files / "res.json"))  # fmt: skip
+    assert "a result of robot 'msd', not of 'double_pendulum'" in line
+
+
+def test_convert_refuses_a_format_that_contradicts_the_suffix(msd_files, work, capsys):
+    run = str(msd_files / "sim" / "run_0.npz")
+    line = _error(capsys, "convert", run, "out.csv", "--format", "npz")
+    assert "suffix says csv" in line and "'npz'" in line
+    assert not (work / "out.csv").exists()
+    assert main(["convert", run, "out.csv", "--format", "csv"]) == 0
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("matrix = [[1e308]]\n", "gear ratios of magnitude <= 1e+06"),
+        ("matrix = [[10.0]]\noffset = [1e300]\n", "offset must be 1 finite values of magnitude"),
+    ],
+)
+def test_a_transmission_with_absurd_numbers_is_refused(msd_files, work, capsys, text, match):
+    (work / "t.toml").write_text(text)
+    line = _error(capsys, "identify", "msd", "--data", str(msd_files / "sim" / "run_0.npz"),
+                  "--transmission", "t.toml")  # fmt: skip
+    assert "t.toml" in line and match in line
+
+
+def test_a_huge_rollout_horizon_gives_a_short_message(msd_files, monkeypatch, capsys):
+    monkeypatch.chdir(msd_files)
+    line = _error(capsys, "validate", "msd", "--model", "res.json", "--data", "sim/run_0.npz",
+                  "--horizon", "1e300")  # fmt: skip
+    assert len(line) < 200 and "horizon" in line, line
