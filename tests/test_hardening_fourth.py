@@ -1175,3 +1175,32 @@ def test_a_huge_rollout_horizon_gives_a_short_message(msd_files, monkeypatch, ca
     line = _error(capsys, "validate", "msd", "--model", "res.json", "--data", "sim/run_0.npz",
                   "--horizon", "1e300")  # fmt: skip
     assert len(line) < 200 and "horizon" in line, line
+
+
+def test_a_pickled_npz_member_is_named_as_such(work, capsys):
+    np.savez(work / "obj.npz", t=np.array([object()] * 3, dtype=object), q=np.zeros((3, 1)),
+             dq=np.zeros((3, 1)), tau=np.zeros((3, 1)))  # fmt: skip
+    line = _error(capsys, "identify", "msd", "--data", "obj.npz")
+    assert "holds Python objects" in line and "truncated" not in line
+
+
+def test_an_absurd_delay_is_refused_at_the_option(msd_files, work, capsys):
+    line = _error(capsys, "identify", "msd", "--data", str(msd_files / "sim" / "run_0.npz"),
+                  "--delay", "1e300")  # fmt: skip
+    assert "delay" in line and "<= 60" in line
+
+
+def test_a_joint_named_twice_is_refused(msd_files, work, capsys):
+    line = _error(capsys, "rank", "double_pendulum", "--joints", "joint1,joint1")
+    assert "'joint1' twice" in line
+
+
+def test_a_drift_reference_of_another_robot_is_refused_by_name(msd_files, work, capsys):
+    import json
+
+    doc = json.loads((msd_files / "res.json").read_text())
+    doc["robot"] = "ur5"
+    (work / "ref.json").write_text(json.dumps(doc))
+    line = _error(capsys, "drift", "msd", "--reference", "ref.json", "--data",
+                  str(msd_files / "sim" / "run_0.npz"))  # fmt: skip
+    assert "'ur5'" in line and "'msd'" in line

@@ -46,6 +46,11 @@ def check_time_unit(unit) -> str | None:
     return unit
 
 
+#: The largest magnitude of a signal delay [s] (``--delay``): a sensor's lag, not a shift
+#: of the record.
+MAX_DELAY = 60.0
+
+
 def delay_vector(delay, nv: int, what: str = "--delay") -> np.ndarray | None:
     """Per-joint delays [s], shape (nv,), from one value or nv values (None: no delay)."""
     if delay is None:
@@ -53,8 +58,11 @@ def delay_vector(delay, nv: int, what: str = "--delay") -> np.ndarray | None:
     arr = np.atleast_1d(np.asarray(delay, dtype=float))
     if arr.ndim != 1 or arr.size not in (1, nv):
         raise InputError(f"{what} takes one value or one per joint ({nv}), got {arr.size} values")
-    if not np.isfinite(arr).all():
-        raise InputError(f"{what} must be finite seconds, got {arr.tolist()}")
+    if not np.isfinite(arr).all() or np.abs(arr).max() > MAX_DELAY:
+        raise InputError(
+            f"{what} must be finite seconds of magnitude <= {MAX_DELAY:g} (a sensor's delay), "
+            f"got {arr.tolist()}"
+        )
     return np.broadcast_to(arr, (nv,)).copy()
 
 

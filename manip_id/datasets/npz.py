@@ -76,6 +76,11 @@ def _member_header(zf: zipfile.ZipFile, info: zipfile.ZipInfo, path: Path) -> Np
     ) as exc:  # fmt: skip
         raise DataError(f"cannot read {path} as NPZ: member {info.filename}: {exc}") from exc
     dtype = np.dtype(dtype)
+    if dtype.hasobject:  # a pickle: never loaded (its size is not the array's either)
+        raise DataError(
+            f"{path}: member {info.filename} holds Python objects ({dtype}), a pickle that "
+            "manip-id never loads: save numeric arrays (np.savez with float arrays)"
+        )
     size = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
     if header + size != info.file_size:
         raise DataError(

@@ -39,7 +39,7 @@ from ..identification import (
     identify,
 )
 from ..identification.document import single_standard
-from ..robot.model import Robot
+from ..robot.model import Robot, available_robots
 from ..robot.parameters import JOINT_TERM
 from . import covariance_kind
 
@@ -246,6 +246,12 @@ def drift_files(
     """
     if not 0.0 < float(alpha) < 1.0:
         raise InputError(f"alpha must be a level in (0, 1), got {alpha}")
+    if reference.robot_name != robot.name and {reference.robot_name, robot.name} <= set(
+        available_robots()
+    ):  # two robots known by name (a URDF loaded by path is checked by its parameters)
+        raise ModelMismatchError(
+            "the reference", f"a reference of {robot.name!r}", f"one of {reference.robot_name!r}"
+        )
     if list(reference.base.names) != list(robot.parameter_names):
         raise ModelMismatchError(
             "the reference's parameters",

@@ -284,6 +284,9 @@ def locked_names(name: str, all_joints: list[str], active_joints) -> list[str]:
         )
     if not active_joints:
         raise InputError("active_joints is empty: at least one joint must move")
+    twice = sorted({j for j in active_joints if active_joints.count(j) > 1})
+    if twice:
+        raise InputError(f"active_joints names {twice[0]!r} twice: give each joint once")
     return [j for j in all_joints if j not in active_joints]
 
 
