@@ -1204,3 +1204,30 @@ def test_a_drift_reference_of_another_robot_is_refused_by_name(msd_files, work, 
     line = _error(capsys, "drift", "msd", "--reference", "ref.json", "--data",
                   str(msd_files / "sim" / "run_0.npz"))  # fmt: skip
     assert "'ur5'" in line and "'msd'" in line
+
+
+def test_the_monitor_uses_the_models_friction_shapes():
+    """The observer evaluated the Stribeck term with the default velocity whatever the
+    model's: a model with vs = 0.3 rad/s left a residual of its friction on clean data."""
+    import pinocchio as pin
+
+    from manip_id import load_robot
+    from manip_id.monitor import CollisionMonitor
+    from manip_id.robot.friction import FrictionShapes
+    from manip_id.robot.model import JointTerms
+    from manip_id.trajectories import random_trajectory
+
+    vs, fs = np.array([0.3, 0.3]), np.array([0.7, 0.4])  # [rad/s], [N m]
+    base = load_robot("double_pendulum", friction=())
+    robot = base.with_terms(
+        JointTerms(stribeck=True, shapes=FrictionShapes(stribeck_velocity=tuple(vs)))
+    )
+    theta = robot.nominal_parameters.copy()
+    theta[robot.layout.joint_columns("fs")] = fs
+    t = np.arange(2000) / 1000.0
+    q, dq, ddq = random_trajectory(base, harmonics=4, wf=0.4, seed=3).sample(t)
+    m, d = base.model, base.model.createData()
+    rigid = np.array([pin.rnea(m, d, a, b, c) for a, b, c in zip(q, dq, ddq, strict=True)])
+    tau = rigid + fs * np.exp(-((dq / vs) ** 2)) * np.sign(dq)  # the law written out
+    mon = CollisionMonitor(robot, theta, gain=25.0, filter_gain=None)
+    assert np.abs(mon.run(t, q, dq, tau).residual).max() < 1e-6
