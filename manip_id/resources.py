@@ -31,6 +31,8 @@ SMALL = 64 * 2**20
 MAX_STEPS = 10**8
 #: The most Fourier harmonics per joint of an excitation trajectory.
 MAX_HARMONICS = 1000
+#: Largest payload mass accepted [kg] (a manipulator's payload, not a building).
+MAX_PAYLOAD_MASS = 1e4
 #: The magnitudes a torque scale may have: from the logged unit (mN m, A, counts) to N m.
 TORQUE_SCALE_RANGE = (1e-9, 1e9)
 
@@ -108,6 +110,7 @@ def check_count(value: float, limit: float, what: str, unit: str = "") -> None:
 __all__ = [
     "FLOAT",
     "MAX_HARMONICS",
+    "MAX_PAYLOAD_MASS",
     "MAX_STEPS",
     "MEMORY_SHARE",
     "REGRESSOR_BUFFER_LIMIT",

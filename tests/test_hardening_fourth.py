@@ -1231,3 +1231,30 @@ def test_the_monitor_uses_the_models_friction_shapes():
     tau = rigid + fs * np.exp(-((dq / vs) ** 2)) * np.sign(dq)  # the law written out
     mon = CollisionMonitor(robot, theta, gain=25.0, filter_gain=None)
     assert np.abs(mon.run(t, q, dq, tau).residual).max() < 1e-6
+
+
+def repair_nominal(robot, theta):
+    from manip_id.physics.repair import repair_nominal as repair
+
+    return repair(robot, theta)
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda M, r: M.with_payload(r, r.nominal_parameters, "heavy"), "payload mass"),
+        (lambda M, r: M.with_payload(r, r.nominal_parameters, 1e300), "<= 10000"),
+        (lambda M, r: repair_nominal(r, "abc"), "theta"),
+        (lambda M, r: repair_nominal(r, np.zeros(r.n_parameters) + 1j), "complex"),
+        (lambda M, r: M.load_result(5), "path of a result file"),
+        (lambda M, r: r.with_parameters(np.full(r.n_parameters, np.nan)), "theta holds nan"),
+    ],
+)
+def test_the_api_refuses_bad_values_with_our_error(call, match):
+    import manip_id as M
+    from manip_id import load_robot
+    from manip_id.errors import ManipIdError
+
+    robot = load_robot("double_pendulum")
+    with pytest.raises(ManipIdError, match=match):
+        call(M, robot)

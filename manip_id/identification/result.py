@@ -9,6 +9,7 @@ is ``||tau - tau_hat|| / ||tau||`` over all stacked samples and joints, also per
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -424,8 +425,11 @@ def load_result(path) -> IdentificationResult:
     """Read a saved identification result (``manip-id identify --json``, a report's
     result.json) back into an :class:`~manip_id.identification.IdentificationResult`.
 
-    Raises :class:`~manip_id.errors.DataError` for a missing, unreadable or foreign file.
+    Raises :class:`~manip_id.errors.DataError` for a missing, unreadable or foreign file,
+    :class:`~manip_id.errors.InputError` for a ``path`` that is no path.
     """
+    if not isinstance(path, str | os.PathLike) or not str(path):
+        raise InputError(f"load_result takes the path of a result file, got {path!r}")
     path = Path(path)
     doc = read_result_json(path)
     try:

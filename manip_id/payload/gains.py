@@ -22,6 +22,7 @@ from ..errors import DataError, InputError
 from ..estimators import InformationAccumulator, solve_accumulator
 from ..identifiability import BaseParameters, RankAnalysis, analyze, analyze_information
 from ..metrics import relative_error
+from ..resources import MAX_PAYLOAD_MASS
 from ..robot.model import Robot
 from .gain_estimators import check_payload_present, ml_gains, tls
 from .gain_uncertainty import GainUncertainty, gain_uncertainty
@@ -127,8 +128,6 @@ class _GainSums:
     runs: dict = field(default_factory=dict)  # per kind, the runs' summaries (RunSums.runs)
 
 
-#: Largest known payload mass accepted [kg] (a manipulator's payload, not a building).
-MAX_PAYLOAD_MASS = 1e4
 #: Largest distance of a known payload's centre of mass from its frame [m].
 MAX_PAYLOAD_REACH = 10.0
 

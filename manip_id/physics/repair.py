@@ -185,7 +185,11 @@ def repair_nominal(robot, theta=None) -> RepairResult:
     :class:`RepairResult`: the bodies that passed the eigenvalue test are unchanged,
     bit for bit; ``consistency`` checks the result independently.
     """
-    theta = np.array(robot.nominal_parameters if theta is None else theta, dtype=float)
+    theta = (
+        robot.nominal_parameters.copy()
+        if theta is None
+        else np.array(as_float_array(theta, "theta", ndim=1))
+    )
     if theta.shape != (robot.n_parameters,):
         raise InputError(f"{theta.shape=} but robot.n_parameters={robot.n_parameters}")
     report = check_consistency(robot, np.nan_to_num(theta))

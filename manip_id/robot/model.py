@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from .._checks import as_float_array, random_generator
+from .._checks import as_float_array, check_finite, random_generator
 from .._native import native_stderr_captured
 from ..errors import InputError, RobotError
 from ..resources import check_model_size
@@ -313,8 +313,10 @@ class Robot:
         describes (a URDF armature the parameter vector cannot represent is
         dropped). Friction and spring terms are not part of a Pinocchio model:
         apply them with :func:`manip_id.robot.regressor.joint_torques`.
+        ``theta`` must be finite (:class:`~manip_id.errors.InputError` otherwise).
         """
         blocks = self.rigid_body_parameters(theta)
+        check_finite(np.asarray(theta, dtype=float), "theta")
         model = self.model.copy()
         for i, block in enumerate(blocks, start=1):
             model.inertias[i] = pin.Inertia.FromDynamicParameters(np.asarray(block))

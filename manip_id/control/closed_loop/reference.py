@@ -13,8 +13,9 @@ import math
 import numpy as np
 import pinocchio as pin
 
-from ..._checks import as_float_array, random_generator
+from ..._checks import as_float_array, as_real, random_generator
 from ...errors import InputError
+from ...resources import MAX_PAYLOAD_MASS
 from ...robot.model import Robot
 from ...trajectories import FourierTrajectory, check_limits, trajectory_to_configuration
 
@@ -26,9 +27,9 @@ def with_payload(robot: Robot, theta, mass: float, lever=None) -> np.ndarray:
     along the last joint's axis (a tool on the flange: no gravity torque about that
     axis itself), or along z when the axis is not a coordinate axis. Returns shape (p,).
     """
-    mass = float(mass)
-    if not math.isfinite(mass) or mass < 0:
-        raise InputError(f"payload mass must be >= 0 [kg], got {mass}")
+    mass = as_real(mass, "payload mass", minimum=0.0, unit="kg")
+    if mass > MAX_PAYLOAD_MASS:
+        raise InputError(f"payload mass must be <= {MAX_PAYLOAD_MASS:g} [kg], got {mass:g}")
     if lever is None:
         kind = robot.model.joints[robot.model.njoints - 1].shortname()
         axis = {"X": 0, "Y": 1, "Z": 2}.get(kind[-1], 2) if kind[-2:-1] in ("R", "P") else 2
