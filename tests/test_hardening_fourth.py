@@ -1258,3 +1258,17 @@ def test_the_api_refuses_bad_values_with_our_error(call, match):
     robot = load_robot("double_pendulum")
     with pytest.raises(ManipIdError, match=match):
         call(M, robot)
+
+
+@pytest.mark.parametrize(
+    ("extra", "match"),
+    [
+        (["--substeps", "1000000000"], "integration steps \\(duration x rate x substeps\\)"),
+        (["--rate", "nan"], "rate must be positive"),
+        (["--kappa", "nan"], "--kappa must be a rate >= 0"),
+        (["--period", "1e-300"], "--period 1e-300 s is too short"),
+    ],
+)
+def test_adapt_refuses_absurd_numbers_at_their_option(work, capsys, extra, match):
+    line = _error(capsys, "adapt", "double_pendulum", "--duration", "0.5", *extra)
+    assert re.search(match, line), line

@@ -5,26 +5,38 @@ printed, saved and reported (the options are declared in :mod:`.adapt`).
 from __future__ import annotations
 
 import argparse
+import math
 
 import numpy as np
 
 from ..control.adaptive import CompositeLaw, default_gains
 from ..control.closed_loop import ClosedLoopOptions, compare_fixed, default_reference, with_payload
+from ..errors import InputError
 from ..simulation import perturb_parameters, require_physical
 from ..trajectories import trajectory_to_configuration
 from ..viz.adapt_report import write_adapt_report
 from ._common import finish, reserve_outputs
 from ._runtime import robot_from_args
 
+#: The harmonics of the reference (:func:`~manip_id.control.default_reference`'s default).
+HARMONICS = 3
+
 
 def _compare(robot, args: argparse.Namespace):
     """The adaptive and the fixed-parameter runs on the perturbed plant (:func:`compare_fixed`)."""
+    if not (math.isfinite(args.kappa) and args.kappa >= 0):  # checked given or not
+        raise InputError(f"--kappa must be a rate >= 0 [1/s], got {args.kappa}")
+    if math.isfinite(args.rate) and args.rate > 0 and args.period * args.rate < 2 * HARMONICS:
+        raise InputError(
+            f"--period {args.period:g} s is too short for the reference's {HARMONICS} harmonics "
+            f"at {args.rate:g} Hz: at least {2 * HARMONICS / args.rate:g} s"
+        )
     theta0 = robot.nominal_parameters
     require_physical(robot, theta0)  # the simulated plant: a message naming the body
     theta_true = perturb_parameters(robot, args.perturb, seed=args.seed)
     theta_true = with_payload(robot, theta_true, args.payload)
     reference = default_reference(
-        robot, amplitude=args.amplitude, period=args.period, seed=args.seed
+        robot, amplitude=args.amplitude, period=args.period, harmonics=HARMONICS, seed=args.seed
     )
     q_start = trajectory_to_configuration(robot, reference.sample(0.0)[0])
     gains = default_gains(
@@ -56,7 +68,7 @@ def _compare(robot, args: argparse.Namespace):
             noise_q=args.noise_q,
             noise_dq=args.noise_dq,
             seed=args.seed,
-            record_every=max(int(round(args.rate / 100.0)), 1),
+            record_every=max(int(round(args.rate / 100.0)), 1) if math.isfinite(args.rate) else 1,
         ),
     )
 

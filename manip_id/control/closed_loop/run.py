@@ -13,6 +13,7 @@ from numpy.typing import ArrayLike
 
 from ..._checks import as_float_array, random_generator
 from ...errors import InputError, NumericalError
+from ...resources import MAX_STEPS, check_count
 from ...robot.model import Robot
 from ...robot.regressor import RegressorEvaluator
 from ...trajectories import FourierTrajectory
@@ -225,6 +226,10 @@ def _check_timing(options: ClosedLoopOptions) -> tuple[float, float, int, int, i
         )
     if int(substeps) != substeps or int(substeps) < 1:
         raise InputError(f"substeps must be a positive integer, got {substeps}")
+    check_count(  # the integrator's steps, before any is taken (about 10 us each)
+        float(n) * int(substeps), MAX_STEPS,
+        "the closed-loop run's integration steps (duration x rate x substeps)",
+    )  # fmt: skip
     if int(record_every) != record_every or int(record_every) < 1:
         raise InputError(f"record_every must be a positive integer, got {record_every}")
     return duration, rate, n, int(substeps), int(record_every)
