@@ -1272,3 +1272,37 @@ def test_the_api_refuses_bad_values_with_our_error(call, match):
 def test_adapt_refuses_absurd_numbers_at_their_option(work, capsys, extra, match):
     line = _error(capsys, "adapt", "double_pendulum", "--duration", "0.5", *extra)
     assert re.search(match, line), line
+
+
+def test_show_names_a_payload_or_gains_document_for_what_it_is(work, capsys):
+    import json
+
+    doc = {"command": "drive-gains", "robot": "msd", "drive_gains": [], "n_samples": {}}
+    (work / "g.json").write_text(json.dumps(doc))
+    line = _error(capsys, "show", "g.json")
+    assert "the JSON of manip-id drive-gains, not an identification result" in line
+
+
+def test_an_absurd_gain_from_a_gains_file_names_the_file(work):
+    import json
+
+    from manip_id import load_robot
+    from manip_id.errors import DataError
+    from manip_id.payload.known import load_torque_scale
+
+    doc = {
+        "command": "drive-gains",
+        "robot": "msd",
+        "drive_gains": [{"joint": "cart", "gain": 1e300}],
+    }
+    (work / "g.json").write_text(json.dumps(doc))
+    with pytest.raises(
+        DataError, match=r"g.json: the drive gain of cart must be a number <= 1e\+09"
+    ):
+        load_torque_scale(work / "g.json", load_robot("msd"))
+
+
+def test_a_huge_trim_gives_a_short_message(msd_files, work, capsys):
+    line = _error(capsys, "identify", "msd", "--data", str(msd_files / "sim" / "run_0.npz"),
+                  "--trim", "1e300")  # fmt: skip
+    assert len(line) < 300 and "trimming" in line, line

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import DataError, InputError
+from ..errors import DataError, InputError, shorten
 from ..estimators import OnlineHistory
 from ..estimators.consistent import StandardEstimate
 from ..identifiability import BaseParameters, RankAnalysis
@@ -432,6 +432,11 @@ def load_result(path) -> IdentificationResult:
         raise InputError(f"load_result takes the path of a result file, got {path!r}")
     path = Path(path)
     doc = read_result_json(path)
+    command = doc.get("command")
+    if isinstance(command, str) and command != "identify":  # payload, drive-gains
+        raise DataError(
+            f"{path} is the JSON of manip-id {shorten(command)}, not an identification result"
+        )
     try:
         return result_from_dict(doc)
     except DataError as exc:

@@ -17,6 +17,7 @@ from .._io.fields import Fields
 from ..errors import DataError, InputError
 from ..identifiability import BaseParameters
 from ..identification.document import read_result_json
+from ..resources import TORQUE_SCALE_RANGE
 from ..robot.model import Robot
 
 
@@ -141,7 +142,12 @@ def load_torque_scale(path, robot: Robot | None = None) -> np.ndarray:
             raise DataError(f"{path}: the drive gain of {joint} was not determined")
         if row.get("gain") is None:
             raise DataError(f"{path}: the drive gain of {joint} was not determined")
-        gains.append(f.number(row["gain"], f"the drive gain of {joint}", positive=True))
+        gains.append(
+            f.number(
+                row["gain"], f"the drive gain of {joint}", positive=True,
+                minimum=TORQUE_SCALE_RANGE[0], maximum=TORQUE_SCALE_RANGE[1],
+            )
+        )  # fmt: skip
         joints.append(joint)
     if len(set(joints)) != len(joints):
         raise DataError(f"{path}: a joint appears twice among the drive gains")

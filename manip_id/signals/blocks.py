@@ -247,7 +247,10 @@ def preprocess_blocks(
         uniform_rows = (fields(c) for c in chunks)
     n_trim = settings.trim
     if n_trim < 0 or 2 * n_trim > n_uniform - 2:
-        raise DataError(f"trimming {n_trim} + {n_trim} samples leaves fewer than 2 of {n_uniform}")
+        raise DataError(
+            f"trimming {float(n_trim):.4g} + {float(n_trim):.4g} samples leaves fewer than 2 of "
+            f"{n_uniform}"
+        )
     D, margin = int(options.decimate), overlap_margin(filt)
     cut = _Cut(nq, nv, n_trim + int(start) * D, n_uniform - n_trim, D, margin, n_temp)
     a0 = _first_block(stats, options, block, start)

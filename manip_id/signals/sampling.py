@@ -145,5 +145,7 @@ def trim_samples(dataset: Dataset, start: int, stop: int | None = None) -> Datas
         raise InputError(f"trim counts must be >= 0, got {start}, {stop}")
     n = dataset.n_samples
     if start + stop > n - 2:
-        raise DataError(f"trimming {start} + {stop} samples leaves fewer than 2 of {n}")
+        raise DataError(
+            f"trimming {float(start):.4g} + {float(stop):.4g} samples leaves fewer than 2 of {n}"
+        )
     return dataset.slice(start, n - stop)
