@@ -1306,3 +1306,35 @@ def test_a_huge_trim_gives_a_short_message(msd_files, work, capsys):
     line = _error(capsys, "identify", "msd", "--data", str(msd_files / "sim" / "run_0.npz"),
                   "--trim", "1e300")  # fmt: skip
     assert len(line) < 300 and "trimming" in line, line
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda E: E["gradient"](record_every="x"),
+        lambda E: E["gradient"](t0=float("nan")),
+        lambda E: E["gradient"](t0="x"),
+        lambda E: E["gradient"](bounds=(np.nan, 1.0)),
+        lambda E: E["gradient"](bounds=(np.zeros(3), np.ones(3))),
+        lambda E: E["rls"](forgetting="x"),
+        lambda E: E["rls"](p_min="x"),
+        lambda E: E["rls"](p_max=float("nan")),
+        lambda E: E["drem"](alpha="x"),
+        lambda E: E["drem"](mu="x"),
+        lambda E: E["concurrent"](stack_size="x"),
+    ],
+)
+def test_an_estimators_constructor_refuses_bad_values_with_our_error(make):
+    from manip_id.errors import InputError
+    from manip_id.estimators.concurrent import ConcurrentLearningEstimator
+    from manip_id.estimators.drem import DREMEstimator
+    from manip_id.estimators.online import GradientEstimator, RLSEstimator
+
+    E = {
+        "gradient": lambda **k: GradientEstimator(np.zeros(2), 1.0, **k),
+        "rls": lambda **k: RLSEstimator(np.zeros(2), 1.0, **k),
+        "drem": lambda **k: DREMEstimator(np.zeros(2), **k),
+        "concurrent": lambda **k: ConcurrentLearningEstimator(np.zeros(2), 1.0, **k),
+    }
+    with pytest.raises(InputError):
+        make(E)

@@ -35,7 +35,7 @@ import math
 
 import numpy as np
 
-from .._checks import spd_gain
+from .._checks import as_int, as_real, spd_gain
 from ..errors import InputError
 from .online import OnlineEstimator
 
@@ -79,10 +79,10 @@ class ConcurrentLearningEstimator(OnlineEstimator):
         super().__init__(theta0, bounds=bounds, record_every=record_every, t0=t0)
         g = spd_gain(gamma, "gamma", self.p)
         self._G = np.diag(g) if g.ndim == 1 else g
-        n = 2 * self.p if stack_size is None else int(stack_size)
+        n = 2 * self.p if stack_size is None else as_int(stack_size, "stack_size")
         if n < 1:
             raise InputError(f"stack_size must be a positive number of samples, got {stack_size}")
-        novelty = float(novelty)
+        novelty = as_real(novelty, "novelty")
         if not (math.isfinite(novelty) and novelty >= 0):
             raise InputError(f"novelty must be >= 0, got {novelty}")
         self.stack_size = n

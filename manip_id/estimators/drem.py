@@ -66,7 +66,7 @@ import math
 
 import numpy as np
 
-from .._checks import positive_vector
+from .._checks import as_real, positive_vector
 from ..errors import InputError
 from .online import OnlineEstimator
 
@@ -120,10 +120,10 @@ class DREMEstimator(OnlineEstimator):
         super().__init__(theta0, bounds=bounds, record_every=record_every, t0=t0)
         unit = "1/s" if normalized else "1/(s Delta^2)"
         self._gamma = positive_vector(gamma, "gamma", self.p, unit)
-        alpha = float(alpha)
+        alpha = as_real(alpha, "alpha", unit="1/s")
         if not (math.isfinite(alpha) and alpha > 0):
             raise InputError(f"alpha must be a positive bandwidth [1/s], got {alpha}")
-        mu = float(mu)
+        mu = as_real(mu, "mu")
         if not (math.isfinite(mu) and mu > 0):
             raise InputError(f"mu must be positive (dimensionless), got {mu}")
         self.alpha = alpha

@@ -56,7 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg.lapack import dposv
 
-from .._checks import as_float_array, check_finite, spd_gain, spd_matrix
+from .._checks import as_float_array, as_int, as_real, check_finite, spd_gain, spd_matrix
 from ..errors import InputError, NumericalError
 
 
@@ -103,18 +103,22 @@ class OnlineEstimator:
                 raise InputError(
                     "bounds must be a pair (lower, upper) of arrays of shape (p,)"
                 ) from exc
-            lo = np.broadcast_to(as_float_array(lo, "lower bound"), (self.p,)).copy()
-            hi = np.broadcast_to(as_float_array(hi, "upper bound"), (self.p,)).copy()
+            lo, hi = as_float_array(lo, "lower bound"), as_float_array(hi, "upper bound")
+            if lo.shape not in ((), (1,), (self.p,)) or hi.shape not in ((), (1,), (self.p,)):
+                raise InputError(
+                    f"bounds must be scalars or shape ({self.p},), got {lo.shape} and {hi.shape}"
+                )
+            lo = np.broadcast_to(lo, (self.p,)).copy()
+            hi = np.broadcast_to(hi, (self.p,)).copy()
+            if np.isnan(lo).any() or np.isnan(hi).any():
+                raise InputError("bounds must not hold NaN (use -inf or inf for no bound)")
             if np.any(lo > hi):
                 i = int(np.argmax(lo > hi))
                 raise InputError(f"lower bound {lo[i]} > upper bound {hi[i]} for parameter {i}")
             self._lo, self._hi = lo, hi
             np.clip(self._theta, lo, hi, out=self._theta)
-        record_every = int(record_every)
-        if record_every < 0:
-            raise InputError(f"record_every must be >= 0 (0: no history), got {record_every}")
-        self.record_every = record_every
-        self.t = float(t0)
+        self.record_every = as_int(record_every, "record_every (0: no history)", minimum=0)
+        self.t = as_real(t0, "t0", unit="s")
         self.steps = 0
         self.dropouts = 0  # samples skipped for NaN/Inf (module docstring)
         self.skipped = False  # whether the last sample was skipped
@@ -326,7 +330,9 @@ class RLSEstimator(OnlineEstimator):
     ):
         super().__init__(theta0, bounds=bounds, record_every=record_every, t0=t0)
         P = spd_matrix(P0, "P0", self.p)
-        lam = float(forgetting)
+        lam = as_real(forgetting, "forgetting")
+        p_min = None if p_min is None else as_real(p_min, "p_min")
+        p_max = None if p_max is None else as_real(p_max, "p_max")
         if not 0.0 < lam <= 1.0:
             raise InputError(f"forgetting must be in (0, 1], got {forgetting}")
         if p_max is None and lam < 1.0:
