@@ -104,7 +104,7 @@ def read_log(robot: Robot, spec, options: ReadOptions | None = None) -> MonitorL
 
 def as_logs(robot: Robot, data, options: ReadOptions | None = None) -> list[MonitorLog]:
     """Logs from files, :class:`MonitorLog` s, datasets or ``{"t", "q", "dq", "tau"}``
-    mappings, one or a sequence of them."""
+    mappings (with ``"ddq"`` and ``"temp"`` when they have them), one or a sequence."""
     single = isinstance(data, str | os.PathLike | FileSpec | MonitorLog | Dataset | Mapping)
     items: Sequence = [data] if single else list(data)
     if not items:
