@@ -1338,3 +1338,12 @@ def test_an_estimators_constructor_refuses_bad_values_with_our_error(make):
     }
     with pytest.raises(InputError):
         make(E)
+
+
+@pytest.mark.parametrize("q", ["ab", np.zeros(2) + 1j, object()], ids=["text", "complex", "object"])
+def test_the_monitor_step_refuses_bad_dtypes_with_our_error(q):
+    from manip_id.errors import InputError
+
+    _, monitor = _monitor()
+    with pytest.raises(InputError, match="q"):
+        monitor.step(q, np.zeros(2), np.zeros(2), 0.01)

@@ -333,9 +333,7 @@ class CollisionMonitor:
             raise InputError(f"dt must be a number of seconds, got {type(dt).__name__}")
         if not (np.isfinite(dt) and dt > 0):
             raise InputError(f"dt must be a finite positive time step [s], got {dt}")
-        q = np.asarray(q, dtype=float)
-        dq = np.asarray(dq, dtype=float)
-        tau = np.asarray(tau, dtype=float)
+        q, dq, tau = _sample(q, "q"), _sample(dq, "dq"), _sample(tau, "tau")
         if q.shape != (self.nq,) or dq.shape != (self.nv,) or tau.shape != (self.nv,):
             raise InputError(
                 f"step takes one sample: {q.shape=}, {dq.shape=}, {tau.shape=} but "
@@ -428,6 +426,14 @@ class CollisionMonitor:
             )
         check_finite(arr, "temp")
         return np.broadcast_to(arr, dq.shape)
+
+
+def _sample(x, name: str) -> np.ndarray:
+    """One sample's array: a float64 array passes as it is (the hot path), anything else
+    through :func:`~manip_id._checks.as_float_array` (our error for text, complex, objects)."""
+    if type(x) is np.ndarray and x.dtype == np.float64:
+        return x
+    return as_float_array(x, name)
 
 
 #: Joint terms the observer cannot evaluate from one sample, and why.
