@@ -77,7 +77,8 @@ def motion(nv: int, phase: float):
 def write_log(robot, path: Path, phase: float, rng) -> None:
     R, c = wrist_matrix(), motor_truth(robot.nv)
     q, dq, ddq = motion(robot.nv, phase)
-    tau = np.array([pin.rnea(robot.model, robot.data, a, b, d) for a, b, d in zip(q, dq, ddq)])
+    rows = zip(q, dq, ddq, strict=True)
+    tau = np.array([pin.rnea(robot.model, robot.data, a, b, d) for a, b, d in rows])
     dth, ddth = dq @ R.T, ddq @ R.T
     tau += (c[:, 0] * ddth + c[:, 1] * dth + c[:, 2] * np.sign(dth) + c[:, 3]) @ R
     tau += NOISE * np.sqrt(np.mean(tau**2, axis=0)) * rng.standard_normal(tau.shape)
