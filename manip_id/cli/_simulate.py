@@ -164,9 +164,13 @@ def _model_parameters(robot, path: Path) -> np.ndarray:
     theta = model_from_result(robot, result, source=str(path)).theta
     rows = result.context.get("standard_parameters")
     if result.context.get("physically_consistent") and isinstance(rows, list):
-        values = {r.get("name"): r.get("value") for r in rows if isinstance(r, dict)}
-        if set(values) == set(robot.parameter_names):
-            theta = np.array([float(values[n]) for n in robot.parameter_names])
+        values = {
+            r.get("name"): float(r["value"])
+            for r in rows
+            if isinstance(r, dict) and isinstance(r.get("value"), int | float)
+        }
+        if set(values) == set(robot.parameter_names):  # every one a number
+            theta = np.array([values[n] for n in robot.parameter_names])
     try:
         require_physical(robot, theta)
     except PhysicalConsistencyError as exc:
