@@ -128,7 +128,7 @@ def _information_answer(design) -> tuple[str, str]:
     rel = design.predicted_relative_std
     finite = rel[np.isfinite(rel)]
     gmean = float(np.exp(np.mean(np.log(finite)))) if finite.size else float("nan")
-    poor = design.poorly_identified(POOR)
+    poor = [p for p in design.poorly_identified(POOR) if p[1] > POOR]  # after the run
     better = design.criterion < design.criterion_random
     text = (
         f'<p class="verdict">Criterion {_esc(design.criterion_kind)} = '
