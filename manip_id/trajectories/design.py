@@ -223,7 +223,9 @@ class ExcitationDesign:
             "criterion": self.criterion,
             "criterion_random": self.criterion_random,
             "condition_number": self.condition_number,
-            "min_clearance": self.check.min_clearance,
+            "min_clearance": self.check.min_clearance  # [m]; None: no pair was checked
+            if math.isfinite(self.check.min_clearance)
+            else None,
             "closest_pair": list(self.check.closest_pair) if self.check.closest_pair else None,
             "closest_time": self.check.closest_time,
             "closest_points": None
