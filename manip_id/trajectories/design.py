@@ -192,7 +192,11 @@ class ExcitationDesign:
             f"{self.design_time:.1f} s",
             f"criterion {self.criterion_kind}: {self.criterion:.4g} (random starts, median: "
             f"{self.criterion_random:.4g}; lower is better); cond {self.condition_number:.4g}",
-            f"min clearance {self.check.min_clearance:.4g} m"
+            (
+                f"min clearance {self.check.min_clearance:.4g} m"
+                if math.isfinite(self.check.min_clearance)
+                else "min clearance: not checked (no collision geometry or pairs)"
+            )
             + (
                 f" ({' / '.join(self.check.closest_pair)} at t={self.check.closest_time:.3g} s)"
                 if self.check.closest_pair
