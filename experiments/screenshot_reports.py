@@ -96,7 +96,7 @@ def reports(out: Path) -> dict[str, Path]:
     r["excite"] = out / "excite"
     run(
         ["excite", "panda", "--duration", "6", "--harmonics", "3", "--world", str(world)]
-        + ["--starts", "3", "--maxiter", "15", "--out", str(out / "excite.mcap"), "--force"]
+        + ["--starts", "3", "--maxiter", "15", "--out", str(out / "excite.mcap")]
         + _rep(r, "excite")
     )
     view = out / "view"
