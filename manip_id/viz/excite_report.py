@@ -247,8 +247,8 @@ def _mark_closest(scene: RobotScene, c) -> None:
         [
             f"{swatch} {number(c.min_clearance, 3)} m, {_esc(c.closest_pair[0])} / "
             f"{_esc(c.closest_pair[1])}",
-            f"at t = {c.closest_time:.3f} s (red; the page opens there with "
-            f"#t={c.closest_time:.3f})",
+            f"at t = {c.closest_time:.3f} s, in red (add #t={c.closest_time:.3f} to the "
+            "page's address to open it there)",
         ],
     )
     for k, p in enumerate((p1, p2)):
