@@ -148,3 +148,37 @@ def test_a_refinement_that_rolls_out_worse_is_named():
     assert refinement_worse(report(np.array([0.09, 0.2, 0.05])), start) is None  # better
     same = report(start.identified.position_rms * REFINEMENT_WORSE)  # within the margin
     assert refinement_worse(same, start) is None
+
+
+def test_refine_with_an_export_is_refused_before_work(tmp_path, capsys):
+    """The refined estimate is base parameters: no consistent model to export."""
+    out = tmp_path / "r.urdf"
+    argv = ["identify", "ur5", "--simulate", "--duration", "2", "--consistent"]
+    assert main([*argv, "--refine", "output-error", "--export-urdf", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--refine gives base parameters" in err[0], err
+    assert not out.exists()
+
+
+def test_non_physical_values_of_a_refined_estimate_get_their_own_advice():
+    """A negative viscous coefficient after the refinement: the warning says the refinement
+    is not constrained, and its advice is not "add --consistent" (which was given)."""
+    from dataclasses import replace
+
+    from manip_id.cli._answer import advice_for
+    from manip_id.identification import identify
+
+    robot = load_robot("double_pendulum", friction="viscous")
+    traj = random_trajectory(robot, harmonics=3, seed=1)
+    d = simulate(robot, traj, duration=4.0, rate=100.0).dataset
+    result = identify(robot, (d.q, d.dq, d.ddq, d.tau), method="ols")
+    k = result.names.index(next(n for n in result.names if n.endswith(".fv")))
+    bad = replace(result, estimate=result.estimate.copy())
+    bad.estimate[k] = -0.5  # [N m s/rad]
+    plain = [w for w in bad.to_dict()["warnings"] if w.startswith("non-physical values")]
+    assert len(plain) == 1 and "refinement" not in plain[0]
+    assert advice_for(plain[0]).startswith("add --consistent")
+    refined = replace(bad, context={**bad.context, "refinement": {"method": "output-error"}})
+    text = next(w for w in refined.to_dict()["warnings"] if w.startswith("non-physical values"))
+    assert "not constrained to physical values" in text
+    assert "leave out --refine" in advice_for(text)
