@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 export OPENBLAS_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
 
-.PHONY: demo test test-quick warmup lint format system-deps bench clean docs docs-check
+.PHONY: demo test test-quick test-parallel warmup lint format system-deps bench clean docs docs-check
 
 $(PY):
 	@$(PYTHON) -m venv $(VENV)
@@ -44,6 +44,11 @@ test: $(STAMP) system-deps warmup
 # the suite without the tests marked slow (browser, end-to-end, Monte Carlo)
 test-quick: $(STAMP) warmup
 	$(PY) -m pytest -q -m "not slow"
+
+# the whole suite on two processes (pytest-xdist): faster on two free cores, about twice
+# the memory (tests/README.md gives both)
+test-parallel: $(STAMP) system-deps warmup
+	$(PY) -m pytest -q -n 2
 
 # A panda that differs from its URDF as a real one does (a 0.8 kg tool, friction, inertias
 # off by ~30 %): trained on one excitation (demo-data/run_0.npz), validated on another

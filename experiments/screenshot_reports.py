@@ -2,7 +2,8 @@
 
 Writes simulated logs, then the reports of ``identify`` (one run, ``--consistent``),
 ``identify`` on several files in memory, the fleet (``--per-file``), ``payload``,
-``monitor``, ``adapt`` and ``rank`` and the page of ``view --html``; each report's
+``monitor``, ``adapt``, ``rank`` and ``excite`` (panda above a table with a box) and the
+page of ``view --html``; each report's
 ``index.html`` and ``scene.html`` are photographed at 1400 x 900 px (the scene at the
 start, the middle and the end of its animation), so one can look at them::
 
@@ -87,6 +88,17 @@ def reports(out: Path) -> dict[str, Path]:
     )
     run(["adapt", "panda", "--duration", "2"] + _rep(r, "adapt"))
     run(["rank", "ur5", "--data", files[0]] + _rep(r, "rank"))
+    world = out / "world.toml"
+    world.write_text(
+        "[[plane]]\nnormal = [0, 0, 1]\noffset = -0.01\n"
+        "[[box]]\nsize = [0.3, 0.3, 0.3]\nposition = [0.6, 0.0, 0.15]\n"
+    )
+    r["excite"] = out / "excite"
+    run(
+        ["excite", "panda", "--duration", "6", "--harmonics", "3", "--world", str(world)]
+        + ["--starts", "3", "--maxiter", "15", "--out", str(out / "excite.mcap")]
+        + _rep(r, "excite")
+    )
     view = out / "view"
     view.mkdir(exist_ok=True)
     run(["view", "panda", "--simulate", "--html", str(view / "scene.html")])

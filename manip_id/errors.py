@@ -285,6 +285,11 @@ class OutputWarning(ManipIdWarning):
     folder of an earlier run that was killed."""
 
 
+class DataWarning(ManipIdWarning):
+    """Data that would make a figure mean less than it says: a validation part that
+    repeats the training motion."""
+
+
 class MonitorWarning(ManipIdWarning):
     """Collision-monitor bounds the user should look at: calibrated on the runs the model
     was identified on (in-sample, too tight on new runs)."""

@@ -477,6 +477,7 @@ class SimulationStream:
             "noise_dq": self.noise_dq,
             "rate": self.rate,
             "seed": self.seed,
+            "period": float(self.trajectory.period),  # [s] the motion repeats after it
         }
 
     def dataset(self, start: int = 0, stop: int | None = None) -> Dataset:

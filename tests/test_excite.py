@@ -16,7 +16,7 @@ from conftest import get_robot
 from manip_id import load_dataset
 from manip_id.cli import main
 from manip_id.errors import InputError
-from manip_id.trajectories import RestFourier, World, write_trajectory
+from manip_id.trajectories import RestFourier, World, format_of, write_trajectory
 from manip_id.trajectories.design import _Objective
 from manip_id.trajectories.excitation import base_columns
 from manip_id.trajectories.fourier import trajectory_to_configuration
@@ -217,7 +217,7 @@ def test_designed_motion_is_more_informative_than_random_ones_of_the_family():
     assert logdet(design.trajectory) > max(random_values)
 
 
-@pytest.mark.parametrize("fmt", ["yaml", "urscript", "json", "npz"])
+@pytest.mark.parametrize("fmt", ["yaml", "urscript", "json", "npz", "mcap"])
 def test_every_output_format_parses_back(tmp_path, fmt):
     rng = np.random.default_rng(0)
     t = np.linspace(0, 1, 11)
@@ -246,6 +246,15 @@ def test_every_output_format_parses_back(tmp_path, fmt):
     elif fmt == "json":
         doc = json.loads(path.read_text())
         np.testing.assert_allclose(doc["tau"], tau)
+    elif fmt == "mcap":
+        from rosbags.highlevel import AnyReader
+
+        assert format_of(path) == "mcap"
+        with AnyReader([path]) as reader:
+            (msg,) = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages()]
+        assert list(msg.joint_names) == names and len(msg.points) == 11
+        np.testing.assert_array_equal(msg.points[7].velocities, dq[7])
+        assert msg.points[7].time_from_start.nanosec == 700_000_000
     else:
         d = load_dataset(path)
         np.testing.assert_allclose(d.ddq, ddq)
@@ -253,6 +262,13 @@ def test_every_output_format_parses_back(tmp_path, fmt):
 
 
 def test_sequential_design_predicts_the_std_of_the_combined_data():
+    _sequential_design()
+
+
+def _sequential_design():
+    """A design after a poor earlier log (its information built here from pinocchio's
+    regressor); returns it with the relative std before and after computed here and the
+    mask of the parameters the earlier log left poorly identified."""
     from manip_id.identifiability import analyze
     from manip_id.trajectories import DesignOptions, PriorInformation, design_excitation
 
@@ -290,3 +306,127 @@ def test_sequential_design_predicts_the_std_of_the_combined_data():
     poor = keep & (before > 0.1 * np.abs(ref))
     assert poor.sum() >= 3
     assert np.all(design.predicted_std[poor] < before[poor])
+    with np.errstate(divide="ignore"):
+        return design, before / np.abs(ref), expected / np.abs(ref), poor
+
+
+def test_sequential_report_names_the_poorly_identified_parameters_before_and_after(tmp_path):
+    from manip_id.viz.excite_report import write_excite_report
+
+    design, before, after, poor = _sequential_design()
+    robot = get_robot("ur5")
+    doc = {"robot": "ur5", "excitation": design.to_dict()}
+    write_excite_report(tmp_path / "rep", robot, design, doc, source="previous.json")
+    index = (tmp_path / "rep" / "index.html").read_text()
+    start = index.index("What does it add to the earlier data?")
+    section = index[start : index.index("</table>", start)]
+    assert "previous.json" in section
+    rows = {}
+    for tr in section.split("<tr")[2:]:
+        cells = [c.split("</td>")[0] for c in tr.split("<td>")[1:]]
+        rows[cells[0]] = (float(cells[1]), float(cells[2]))
+    names = design.base_names
+    assert {names[i] for i in np.flatnonzero(poor)} <= set(rows)  # every one the prior left
+    for name, (shown_before, shown_after) in rows.items():
+        i = names.index(name)
+        assert shown_before == pytest.approx(100 * before[i], rel=5e-3)
+        assert shown_after == pytest.approx(100 * after[i], rel=0.05)
+
+
+def _series(coefficients: dict, t: np.ndarray):
+    """The Fourier series of the design's JSON coefficients, evaluated here (positions,
+    velocities, accelerations), shape (N, nv) each."""
+    q0, a, b = (np.asarray(coefficients[k], float) for k in ("q0", "a", "b"))
+    wf = float(coefficients["wf"])
+    w = wf * np.arange(1, a.shape[1] + 1)  # [rad/s] per harmonic
+    s, c = np.sin(np.outer(t, w)), np.cos(np.outer(t, w))  # (N, L)
+    q = q0 + s @ (a / w).T - c @ (b / w).T
+    return q, c @ a.T + s @ b.T, -(s * w) @ a.T + (c * w) @ b.T
+
+
+def _usage_table(index: str) -> dict:
+    """The limit-usage table of the report's index.html: joint -> {column: text}."""
+    from html.parser import HTMLParser
+
+    start = index.index("Does it stay within the limits?")
+    table = index[index.index("<table>", start) : index.index("</table>", start)]
+
+    class Cells(HTMLParser):
+        rows: list[list[str]] = []
+
+        def handle_starttag(self, tag, attrs):
+            if tag == "tr":
+                self.rows.append([])
+
+        def handle_data(self, data):
+            if self.rows and data.strip():
+                self.rows[-1].append(data.strip())
+
+    p = Cells()
+    p.rows = []
+    p.feed(table)
+    head, *body = p.rows
+    return {r[0]: dict(zip(head[1:], r[1:], strict=True)) for r in body}
+
+
+def test_excite_report_and_mcap_agree_with_independent_checks(tmp_path, capsys):
+    from rosbags.highlevel import AnyReader
+
+    robot = get_robot("ur5")
+    m, margin, rate = robot.model, 0.05, 200.0
+    (tmp_path / "table.toml").write_text("[[plane]]\nnormal = [0, 0, 1]\noffset = -0.01\n")
+    out, js, rep = tmp_path / "traj.mcap", tmp_path / "design.json", tmp_path / "rep"
+    argv = ["excite", "ur5", "--duration", "4", "--harmonics", "3", "--start", UR5_START,
+            "--world", tmp_path / "table.toml", "--out", out, "--json", js, "--report", rep,
+            "--starts", "2", "--maxiter", "10", "--rate", rate]  # fmt: skip
+    assert main([str(a) for a in argv]) == 0, capsys.readouterr().err
+    doc = json.loads(js.read_text())["excitation"]
+    # the MCAP bag: one JointTrajectory, read back with rosbags' own reader
+    with AnyReader([out]) as reader:
+        (conn,) = reader.connections
+        assert conn.msgtype == "trajectory_msgs/msg/JointTrajectory"
+        assert conn.topic == "/joint_trajectory_controller/joint_trajectory"
+        (msg,) = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages()]
+    assert list(msg.joint_names) == list(robot.dof_names) and len(msg.points) == 801
+    t = np.array([p.time_from_start.sec + 1e-9 * p.time_from_start.nanosec for p in msg.points])
+    np.testing.assert_allclose(t, np.arange(801) / rate, atol=1e-9)
+    q, dq, ddq = (np.array([getattr(p, f) for p in msg.points])
+                  for f in ("positions", "velocities", "accelerations"))  # fmt: skip
+    for got, want in zip((q, dq, ddq), _series(doc["coefficients"], t), strict=True):
+        np.testing.assert_allclose(got, want, atol=1e-9)
+    assert all(p.effort.size == 0 for p in msg.points)
+    # limit usage: the JSON against the bag's samples and the URDF, then the report's table
+    data = m.createData()
+    tau = np.array([pin.rnea(m, data, *s) for s in zip(q, dq, ddq, strict=True)])
+    lo, hi = m.lowerPositionLimit, m.upperPositionLimit
+    expected = {
+        "position": np.abs(q - 0.5 * (lo + hi)).max(axis=0) / ((1 - 2 * margin) * (hi - lo) / 2),
+        "velocity": np.abs(dq).max(axis=0) / ((1 - margin) * m.velocityLimit),
+        "torque": np.abs(tau).max(axis=0) / ((1 - margin) * m.effortLimit),
+    }
+    table = _usage_table((rep / "index.html").read_text())
+    assert list(table) == list(robot.dof_names)
+    for kind, values in doc["limit_usage"].items():
+        for j, name in enumerate(robot.dof_names):
+            shown = table[name][f"{kind} [%]"]
+            if values[name] is None:
+                assert kind == "acceleration" and shown == "no limit"
+                continue
+            assert float(shown) == pytest.approx(100 * values[name], rel=5e-3)
+            if kind in expected:
+                assert values[name] == pytest.approx(expected[kind][j], rel=1e-6)
+    # the closest approach: its witness points are min_clearance apart
+    p1, p2 = np.array(doc["closest_points"])
+    assert np.linalg.norm(p2 - p1) == pytest.approx(doc["min_clearance"], abs=1e-6)
+    if "plane0" in doc["closest_pair"]:
+        assert (p2 if doc["closest_pair"][1] == "plane0" else p1)[2] == pytest.approx(-0.01)
+    scene = (rep / "scene.html").read_text()
+    assert "closest approach" in scene and doc["closest_pair"][0] in scene and "plane0" in scene
+    for name in ("limit_usage", "motion", "predicted_std"):
+        assert (rep / f"{name}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert json.loads((rep / "result.json").read_text())["excitation"] == doc
+    # the report folder is not replaced without --force
+    argv[argv.index(out)] = tmp_path / "other.mcap"
+    argv[argv.index(js)] = tmp_path / "other.json"
+    assert main([str(a) for a in argv]) == 2
+    assert "--force" in capsys.readouterr().err

@@ -124,3 +124,45 @@ def test_simulate_an_identified_model(logs, tmp_path):
         # base columns: Y_b beta (beta the identified base parameters)
         tau = np.einsum("nvk,k->nv", Y, result.estimate)
         np.testing.assert_allclose(z["tau"], tau, rtol=1e-7, atol=1e-7)
+
+
+def test_export_writes_a_saved_consistent_result_as_identify_would(logs, tmp_path, capsys):
+    """manip-id export: the URDF of a saved --consistent result equals the one identify
+    wrote in the same run (provenance aside); Pinocchio reads the result's masses from it;
+    a plain result, an existing file and a contradicting --friction are refused."""
+    import pinocchio as pin
+
+    run_0 = str(logs / "sim" / "run_0.npz")
+    ref, direct = tmp_path / "ref.json", tmp_path / "direct.urdf"
+    fit = ["identify", "ur5", "--friction", "viscous", "--data", run_0, "--consistent"]
+    assert main([*fit, "--json", str(ref), "--export-urdf", str(direct), "--quiet"]) == 0
+    again = tmp_path / "again.urdf"
+    base = ["export", "ur5", "--model", str(ref)]
+    assert main([*base, "--export-urdf", str(again), "--export-mjcf", str(tmp_path / "a.xml")]) == 0
+
+    def body(path):
+        return [ln for ln in path.read_text().splitlines() if "provenance" not in ln]
+
+    assert body(again) == body(direct)
+    masses = {
+        r["name"]: r["value"]
+        for r in json.loads(ref.read_text())["standard_parameters"]
+        if r["name"].endswith(".m")
+    }
+    model = pin.buildModelFromUrdf(str(again))
+    for j in range(1, model.njoints):
+        name = model.names[j]
+        assert model.inertias[j].mass == pytest.approx(masses[f"{name}.m"], rel=1e-6), name
+    capsys.readouterr()
+    for argv, says in (
+        ([*base, "--export-urdf", str(again)], "exists"),
+        ([*base, "--friction", "viscous,coulomb", "--export-urdf", str(tmp_path / "b.urdf")],
+         "['fv']"),
+        (["export", "ur5", "--model", str(logs / "ref.json"), "--export-urdf",
+          str(tmp_path / "c.urdf")], "no physically consistent"),
+        (base, "--export-urdf"),
+    ):  # fmt: skip
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and says in err[0], err
+    assert not (tmp_path / "b.urdf").exists() and not (tmp_path / "c.urdf").exists()

@@ -8,6 +8,7 @@ collision-free file.
 
 from __future__ import annotations
 
+import html
 import json
 
 import numpy as np
@@ -103,6 +104,9 @@ def test_monitor_json_from_results(robot, files, kind, tmp_path, capsys):
         first = doc["detections"][0]["start"]
         assert f"the first alarm at {first:.4f} s" in page and first >= 100.0 + a
         assert page.count('class="bad"') >= 1  # the hit joint crossed its bound
+        # calibrated on the files the model was identified on: the page says so
+        assert "Calibrated on the model's own training data" in html.unescape(page)
+        assert doc["thresholds"]["in_sample"] == [files["calib"], files["calib2"]]
 
 
 def test_monitor_with_saved_thresholds(robot, files, tmp_path):

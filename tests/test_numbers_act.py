@@ -346,3 +346,23 @@ def test_point_mass_payload_is_reported_as_such(synchronous_logs, tmp_path, caps
     doc = json.loads(out.read_text())
     assert doc["payload"]["point_mass"] is True
     assert abs(doc["payload"]["mass"] - 2.0) < 0.01
+
+
+def test_split_of_a_periodic_simulation_warns_in_the_api():
+    """Dataset.split says what the CLI says when the training part of a periodic simulated
+    motion spans more than one period (the period from the trajectory, independent)."""
+    import warnings
+
+    from manip_id.errors import DataWarning
+
+    robot = get_robot("ur5")
+    traj = random_trajectory(robot, seed=3, harmonics=3)
+    period = float(traj.period)
+    long = simulate(robot, traj, duration=2.0 * period, rate=50.0).dataset
+    with pytest.warns(DataWarning, match=f"periodic \\({period:g} s\\)"):
+        long.split(0.7)  # 1.4 periods of training
+    short = simulate(robot, traj, duration=1.2 * period, rate=50.0).dataset
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        train, valid = short.split(0.7)  # 0.84 periods: new motion in the validation part
+    assert train.duration < period

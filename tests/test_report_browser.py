@@ -1,6 +1,6 @@
 """Each report kind's scene in headless Chromium: the robot frames the view beside the legend.
 
-The scene of each report (identify --consistent, payload, adapt) is rendered at the size
+The scene of each report (identify --consistent, payload, adapt, excite) is rendered at the size
 it has in the report page (the iframe: about 1170 x 600 px) at several times of its motion,
 and once with the robot hidden (the same camera); the pixels that differ are the robot's.
 From them: the frames together span >= 60 % of the canvas height (or, for a motion wider
@@ -66,3 +66,19 @@ def test_adapt_report_frames_the_robot(tmp_path):
     rep = tmp_path / "rep"
     assert main(["adapt", "panda", "--duration", "0.5", "--report", str(rep)]) == 0
     _check(framing(rep / "scene.html", tmp_path, times=(0, 0.25, 0.5)))
+
+
+def test_excite_report_frames_the_robot(tmp_path):
+    """The designed motion with the table and a box of the world file: the robot (hidden
+    for the background, the world objects stay) framed over the whole motion."""
+    world = tmp_path / "world.toml"
+    world.write_text(
+        "[[plane]]\nnormal = [0, 0, 1]\noffset = -0.01\n"
+        "[[box]]\nsize = [0.3, 0.3, 0.3]\nposition = [0.6, 0.0, 0.15]\n"
+    )
+    rep = tmp_path / "rep"
+    argv = ["excite", "panda", "--duration", "4", "--harmonics", "3", "--starts", "2"]
+    argv += ["--maxiter", "10", "--rate", "100", "--world", str(world)]
+    assert main([*argv, "--out", str(tmp_path / "t.csv"), "--report", str(rep)]) == 0
+    assert "closest approach" in (rep / "scene.html").read_text()
+    _check(framing(rep / "scene.html", tmp_path, times=(0, 1, 2, 3)))

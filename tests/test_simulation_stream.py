@@ -11,7 +11,7 @@ import pytest
 from manip_id import identify, load_robot, regressor
 from manip_id import simulation as sim_mod
 from manip_id.cli import main
-from manip_id.errors import InputError
+from manip_id.errors import DataWarning, InputError
 from manip_id.identification import RunOptions
 from manip_id.simulation import MeasurementNoise, SimulationStream, simulate
 from manip_id.trajectories import random_trajectory
@@ -132,7 +132,9 @@ def test_cli_streamed_simulation_equals_whole_array_identification(ur10, tmp_pat
     data = simulate(
         ur10, traj, duration=30.0, rate=40.0, noise=MeasurementNoise(tau=0.01), seed=5
     ).dataset
-    train, valid = data.split(0.7)
+    with pytest.warns(DataWarning, match="repeats the training motion"):  # as the CLI says
+        train, valid = data.split(0.7)
+    assert any("repeat the training motion" in w for w in got["warnings"])
     ref = identify(
         ur10,
         (train.q, train.dq, train.ddq, train.tau),

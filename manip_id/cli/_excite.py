@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 
 import numpy as np
 
+from .._io import OutputSet
 from ..errors import InputError, OutputError
 from ..identification import load_result
 from ..robot.model import available_robots
@@ -27,6 +29,7 @@ def run(args: argparse.Namespace) -> int:
     for path in (args.out, args.json):
         if path is not None and os.path.exists(path) and not args.force:
             raise OutputError(f"{path} exists; give --force to replace it")
+    args.outputs = OutputSet(inputs=[p for p in (args.world, args.previous) if p])
     outputs = reserve_outputs(args)
     outputs.file(args.out, "--out")
     robot = robot_from_args(args)
@@ -70,11 +73,20 @@ def run(args: argparse.Namespace) -> int:
     outputs.write(
         args.out, lambda tmp: write_trajectory(tmp, fmt, t, q, dq, ddq, tau, robot.dof_names)
     )
+    doc = {"robot": robot.name, "excitation": design.to_dict()}
     if args.json is not None:
-        outputs.write_json(args.json, {"robot": robot.name, "excitation": design.to_dict()})
+        outputs.write_json(args.json, doc)
+    if args.report is not None:
+        # matplotlib and meshcat are loaded only when a report is written
+        viz = importlib.import_module("manip_id.viz.excite_report")
+        viz.write_excite_report(
+            args.report_claim, robot, design, doc, source=args.previous, force=args.force
+        )
     print("\n".join(design.summary()))
     outputs.publish()
     print(f"wrote {args.out}" + (f" and {args.json}" if args.json else ""))
+    if args.report is not None:
+        print(f"wrote the report to {args.report}/index.html")
     return 0
 
 

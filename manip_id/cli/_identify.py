@@ -100,6 +100,12 @@ def _check_consistent_args(args) -> None:
             "--consistent does not combine with --scheduler or --per-file (the fleet path) "
             "yet: run it without them (several --data files are accumulated alike)"
         )
+    if getattr(args, "refine", None) and (args.export_urdf or args.export_mjcf):
+        raise InputError(
+            "--refine gives base parameters, not a physical model: an export writes the "
+            "consistent estimate, so export without --refine (or later: manip-id export "
+            "ROBOT --model RESULT.json of the consistent run)"
+        )
     if args.export_urdf:
         check_output(args.export_urdf, force=args.force)
     if args.export_mjcf:

@@ -183,10 +183,13 @@ def run_document(robot, result, args: argparse.Namespace, ctx, timings: dict, ex
     return result, report
 
 
-def stage_export(robot, result, args: argparse.Namespace, outputs) -> None:
-    """Stage the exported URDF / MJCF and their sidecars (published with the other outputs)."""
-    prov = identification_provenance("manip-id identify", vars(args), result)
-    theta = result.standard.values
+def stage_export(
+    robot, result, args: argparse.Namespace, outputs, theta=None, command="manip-id identify"
+) -> None:
+    """Stage the exported URDF / MJCF and their sidecars (published with the other outputs);
+    ``theta``: the standard parameters to write [default: the result's consistent ones]."""
+    prov = identification_provenance(command, vars(args), result)
+    theta = result.standard.values if theta is None else theta
     if getattr(args, "export_urdf", None):
         texts = export_texts(robot, theta, args.export_urdf, provenance=prov)
         outputs.write_text(args.export_urdf, texts.urdf)

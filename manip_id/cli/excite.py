@@ -3,14 +3,15 @@
 A finite Fourier series per joint, at rest in the start pose at both ends, maximizing the
 information about the base parameters (:func:`manip_id.trajectories.design_excitation`)
 within the joint position, velocity, acceleration and torque limits, clear of the robot's
-own links and of the ``--world`` objects; written as CSV, NPZ, JSON, ROS 2 YAML or URScript.
+own links and of the ``--world`` objects; written as CSV, NPZ, JSON, ROS 2 YAML, a ROS 2
+MCAP bag or URScript; ``--report DIR`` a folder to look at before the robot moves.
 """
 
 from __future__ import annotations
 
 from ._common import add_robot_arguments, command
 
-FORMATS = ("csv", "npz", "json", "yaml", "urscript")
+FORMATS = ("csv", "npz", "json", "yaml", "mcap", "urscript")
 
 
 def register(sub) -> None:
@@ -29,7 +30,7 @@ def register(sub) -> None:
         "--format",
         choices=FORMATS,
         default=None,
-        help="format of --out [default: from its suffix: .csv .npz .json .yaml .script]",
+        help="format of --out [default: from its suffix: .csv .npz .json .yaml .mcap .script]",
     )
     p.add_argument("--harmonics", type=int, default=5, help="harmonics per joint [default 5]")
     p.add_argument(
@@ -128,8 +129,17 @@ def register(sub) -> None:
         "std) [default: none]",
     )
     p.add_argument(
+        "--report",
+        default=None,
+        metavar="DIR",
+        help="write a report folder to look at before the run: the motion animated with the "
+        "world and the closest approach, limit usage per joint, clearance, predicted std "
+        "[default: none]",
+    )
+    p.add_argument(
         "--force",
         action="store_true",
-        help="replace existing --out / --json files [default: refuse]",
+        help="replace existing --out / --json files and a --report folder manip-id wrote "
+        "[default: refuse]",
     )
     p.set_defaults(func=command("manip_id.cli._excite"))

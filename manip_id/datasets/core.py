@@ -26,7 +26,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .._checks import as_float_array, as_int, as_real, check_finite, check_magnitude
-from ..errors import DataError, InputError
+from ..errors import DataError, DataWarning, InputError
 from ..robot.parameters import bounded_range
 
 #: Largest |q| [rad] taken as radians; beyond it positions look like degrees.
@@ -213,7 +213,19 @@ class Dataset:
             raise DataError(f"split fraction must be in (0, 1), got {fraction}")
         k = int(round(fraction * self.n_samples))
         k = min(max(k, 2), self.n_samples - 2)
-        return self.slice(0, k), self.slice(k, self.n_samples)
+        train, valid = self.slice(0, k), self.slice(k, self.n_samples)
+        period = (self.meta or {}).get("period")
+        if period and train.duration >= float(period):
+            warnings.warn(
+                DataWarning(
+                    f"the validation part repeats the training motion: the motion is periodic "
+                    f"({float(period):g} s) and the training part spans {train.duration:g} s, "
+                    "more than one period; its validation error then measures noise, not "
+                    "prediction on new motion (validate on another trajectory)"
+                ),
+                stacklevel=2,
+            )
+        return train, valid
 
 
 def check_robot(dataset: Dataset, robot) -> None:

@@ -284,41 +284,61 @@ def write_bag(
     ``blocks()`` returns an iterator of packed rows (ddq is not written).
     Stamps need ``t >= 0`` [s]: ``header.stamp`` and the log time both carry ``t``.
     """
-    from rosbags.rosbag2 import StoragePlugin, Writer
-
     path = Path(path)
-    if path.exists() and path.is_dir() and not (path / "metadata.yaml").is_file():
-        raise DataError(f"{path} is a folder that is not a ROS 2 bag: refusing to replace it")
     names = list(joint_names) if joint_names else [f"j{i}" for i in range(layout.nv)]
     if layout.nq != layout.nv:
         raise DataError(
             f"a JointState bag carries one position per joint, but q has {layout.nq} columns "
             f"for {layout.nv} joints"
         )
-    store = _typestore()
-    JointState = store.types[JOINT_STATE]
-    Header = store.types["std_msgs/msg/Header"]
-    Time = store.types["builtin_interfaces/msg/Time"]
     sq, sdq, stau = layout.slices["q"], layout.slices["dq"], layout.slices["tau"]
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmpdir = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}."))
-    bag = tmpdir / "bag"
-    try:
-        with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
-            conn = writer.add_connection(topic, JOINT_STATE, typestore=store)
-            for block in blocks():
-                if block.shape[0] and block[:, 0].min() < 0:
-                    raise DataError(f"cannot stamp negative times in a ROS bag ({path})")
-                for row in block:
-                    ns = int(round(row[0] * 1e9))
-                    msg = JointState(
+
+    def messages(store):
+        JointState = store.types[JOINT_STATE]
+        Header = store.types["std_msgs/msg/Header"]
+        Time = store.types["builtin_interfaces/msg/Time"]
+        for block in blocks():
+            if block.shape[0] and block[:, 0].min() < 0:
+                raise DataError(f"cannot stamp negative times in a ROS bag ({path})")
+            for row in block:
+                ns = int(round(row[0] * 1e9))
+                yield (
+                    ns,
+                    JointState(
                         header=Header(stamp=Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id=""),
                         name=names,
                         position=np.ascontiguousarray(row[sq]),
                         velocity=np.ascontiguousarray(row[sdq]),
                         effort=np.ascontiguousarray(row[stau]),
-                    )
-                    writer.write(conn, ns, store.serialize_cdr(msg, JOINT_STATE))
+                    ),
+                )
+
+    return write_messages(path, topic, JOINT_STATE, messages, bare=bare)
+
+
+def write_messages(path: Path, topic: str, msgtype: str, messages, bare: bool | None = None):
+    """Write the messages of one ``topic`` of type ``msgtype`` (e.g.
+    ``trajectory_msgs/msg/JointTrajectory``) as a ROS 2 bag with MCAP storage.
+
+    ``messages(store)`` yields ``(log time [ns], message)`` with the messages built from the
+    types of ``store`` (rosbags' ROS 2 Humble type store). ``bare`` (default: ``path`` ends
+    in ``.mcap``) gives one bare MCAP file, else a rosbag2 folder; either is written to a
+    temporary first and renamed into place. Returns ``path``.
+    """
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    path = Path(path)
+    if path.exists() and path.is_dir() and not (path / "metadata.yaml").is_file():
+        raise DataError(f"{path} is a folder that is not a ROS 2 bag: refusing to replace it")
+    store = _typestore()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmpdir = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}."))
+    bag = tmpdir / "bag"
+    try:
+        with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+            conn = writer.add_connection(topic, msgtype, typestore=store)
+            for ns, msg in messages(store):
+                writer.write(conn, ns, store.serialize_cdr(msg, msgtype))
         if path.suffix.lower() == ".mcap" if bare is None else bare:
             produced = next(bag.glob("*.mcap"))
             os.chmod(produced, 0o644)

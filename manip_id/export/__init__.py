@@ -8,6 +8,8 @@
   robot, bodies' ``inertial``, joints' ``armature``, ``damping`` and ``frictionloss``.
 - :func:`export_payload_urdf` (:mod:`~manip_id.export.payload_link`): the robot's URDF
   with an identified payload as a fixed link.
+- :func:`saved_parameters` (:mod:`~manip_id.export.saved`): the physically consistent
+  standard parameters of a saved result, to export it later (``manip-id export``).
 
 Every export refuses a parameter vector that is not physically consistent, checks its
 outputs before the work, never replaces a file unless ``force``, and writes the sidecar
@@ -18,6 +20,7 @@ from .links import CARRIED_POLICIES, Composite
 from .meshes import MESH_POLICIES
 from .mjcf import export_mjcf, mjcf_text
 from .payload_link import PayloadLink, export_payload_urdf, payload_urdf_texts
+from .saved import saved_parameters
 from .sidecar import (
     SIDECAR_FORMAT,
     SIDECAR_VERSION,
@@ -49,5 +52,6 @@ __all__ = [
     "mjcf_text",
     "payload_urdf_texts",
     "read_sidecar",
+    "saved_parameters",
     "sidecar_path",
 ]

@@ -150,6 +150,10 @@ def parameter_flags(result, poorly_identified: float = POORLY_IDENTIFIED) -> lis
     return out
 
 
+#: Said of the non-physical values of a refined estimate (its own "Do:" in the advice).
+REFINED_UNCONSTRAINED = "the output-error refinement is not constrained to physical values"
+
+
 def result_warnings(
     result,
     flags: list[list[str]],
@@ -172,10 +176,13 @@ def result_warnings(
         if NON_PHYSICAL in fl
     ]
     if bad:
+        refined = "refinement" in (getattr(result, "context", None) or {})
         out.append(
             "non-physical values: "
             + ", ".join(bad)
-            + " (each is one standard parameter that must be positive)"
+            + " (each is one standard parameter that must be positive"
+            + (f"; {REFINED_UNCONSTRAINED}" if refined else "")
+            + ")"
         )
     undetermined = [n for n, fl in zip(result.names, flags, strict=True) if NOT_DETERMINED in fl]
     if undetermined:

@@ -414,10 +414,12 @@ def _forward_steps(robot: Robot, f, fopts: FileOptions, run: RunOptions) -> list
     output-error refinement on the training files, then the rollout on the validation
     files (each reads its files again, preprocessed as the fit read them)."""
     options, steps = fopts.preprocess, []
+    start: dict = {}  # the estimate the refinement started from (rolled out beside it)
     if fopts.refine is not None:
         ropts = fopts.refine
 
         def refined(result: IdentificationResult) -> IdentificationResult:
+            start["result"] = result
             t0 = time.perf_counter()
             train = read_logs(robot, f.specs, options)
             valid = read_logs(robot, f.vspecs, options) if f.vspecs else None
@@ -442,10 +444,36 @@ def _forward_steps(robot: Robot, f, fopts: FileOptions, run: RunOptions) -> list
             rep = rollout_validation(robot, result, logs, options=oopts)
             run.say(rep.table())
             result.context["rollout"] = rep.to_dict()
+            if "result" in start:  # refined: the start's rollout beside it, and a word if worse
+                before = rollout_validation(robot, start["result"], logs, options=oopts)
+                result.context["rollout"]["before_refinement"] = before.identified.to_dict()
+                if (text := refinement_worse(rep, before)) is not None:
+                    result.context.setdefault("warnings", []).append(text)
             return replace(result, rollout=rep)
 
         steps.append(rolled)
     return steps
+
+
+#: A refined model whose validation rollout error exceeds its start's by this factor is
+#: named in a warning.
+REFINEMENT_WORSE = 1.05
+
+
+def refinement_worse(after, before) -> str | None:
+    """The warning when the output-error refinement made the validation rollout worse
+    (position RMS over the joints at the horizon, of two
+    :class:`~manip_id.identification.rollout.RolloutReport` s), else None."""
+    a = float(np.linalg.norm(after.identified.position_rms))
+    b = float(np.linalg.norm(before.identified.position_rms))
+    if not (np.isfinite(a) and np.isfinite(b)) or a <= REFINEMENT_WORSE * b:
+        return None
+    return (
+        f"the output-error refinement made the validation rollout worse: position error "
+        f"{a:.4g} rad at {after.horizon:g} s against {b:.4g} rad before it (fit on the "
+        "training windows, it does not carry to these data); keep the unrefined model "
+        "(leave out --refine) or refine over the horizon you validate (--refine-horizon)"
+    )
 
 
 def _qualities(scans: dict) -> dict:

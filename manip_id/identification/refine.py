@@ -61,16 +61,24 @@ STEP_BUDGET = 20_000
 class RefineOptions:
     """How the output-error refinement runs.
 
-    horizon: window length [s] (default 0.1).
-    windows: number of windows (default: as many as fit :data:`STEP_BUDGET` linearization
+    Attributes
+    ----------
+    horizon
+        window length [s] (default 0.1).
+    windows
+        number of windows (default: as many as fit :data:`STEP_BUDGET` linearization
         steps per iteration, at least ``4 r``, at most the start points the data hold;
         windows may overlap).
-    iterations: most Levenberg-Marquardt iterations.
-    velocity_weight: ``w`` [s] of the velocity residuals (default the horizon).
-    eps: smallest Coulomb regularization width [rad/s or m/s] (:mod:`.forward`).
-    tolerance: stop when an accepted step lowers the cost by less than this fraction.
-    torque_weight: ``rho`` of the inverse-dynamics term (module docstring); 0: pure output
-        error.
+    iterations
+        most Levenberg-Marquardt iterations.
+    velocity_weight
+        ``w`` [s] of the velocity residuals (default the horizon).
+    eps
+        smallest Coulomb regularization width [rad/s or m/s] (:mod:`.forward`).
+    tolerance
+        stop when an accepted step lowers the cost by less than this fraction.
+    torque_weight
+        ``rho`` of the inverse-dynamics term (module docstring); 0: pure output error.
     """
 
     horizon: float = DEFAULT_HORIZON

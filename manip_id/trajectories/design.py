@@ -127,7 +127,7 @@ class ExcitationDesign:
     median over the random starts (same limits); ``predicted_std`` the predicted std of
     each base parameter after the run (with the prior, of the combined data) and
     ``prior_std`` before it (None without prior); ``check`` the verification on the
-    run's grid (limits used, least clearance and where).
+    run's grid (limits used, least clearance and where); ``world`` the obstacles kept clear of.
     """
 
     trajectory: FourierTrajectory
@@ -145,11 +145,17 @@ class ExcitationDesign:
     design_time: float
     joint_names: list[str]
     options: DesignOptions = field(repr=False, default_factory=DesignOptions)
+    world: World | None = None
 
     @property
     def predicted_relative_std(self) -> np.ndarray:
         """``std / |value|`` per base parameter (NaN where the value is about zero)."""
         return _relative(self.predicted_std, self.reference)
+
+    @property
+    def prior_relative_std(self) -> np.ndarray | None:
+        """``std / |value|`` per base parameter before the run (None without a prior)."""
+        return None if self.prior_std is None else _relative(self.prior_std, self.reference)
 
     def samples(self, rate: float | None = None):
         """``(t, q, dq, ddq)`` at ``rate`` [Hz] over ``[0, duration]`` (both ends included)."""
@@ -188,7 +194,11 @@ class ExcitationDesign:
             f"{self.design_time:.1f} s",
             f"criterion {self.criterion_kind}: {self.criterion:.4g} (random starts, median: "
             f"{self.criterion_random:.4g}; lower is better); cond {self.condition_number:.4g}",
-            f"min clearance {self.check.min_clearance:.4g} m"
+            (
+                f"min clearance {self.check.min_clearance:.4g} m"
+                if math.isfinite(self.check.min_clearance)
+                else "min clearance: not checked (no collision geometry or pairs)"
+            )
             + (
                 f" ({' / '.join(self.check.closest_pair)} at t={self.check.closest_time:.3g} s)"
                 if self.check.closest_pair
@@ -219,9 +229,14 @@ class ExcitationDesign:
             "criterion": self.criterion,
             "criterion_random": self.criterion_random,
             "condition_number": self.condition_number,
-            "min_clearance": self.check.min_clearance,
+            "min_clearance": self.check.min_clearance  # [m]; None: no pair was checked
+            if math.isfinite(self.check.min_clearance)
+            else None,
             "closest_pair": list(self.check.closest_pair) if self.check.closest_pair else None,
             "closest_time": self.check.closest_time,
+            "closest_points": None
+            if self.check.closest_points is None
+            else self.check.closest_points.tolist(),
             "limit_usage": self.check.usage_dict(self.joint_names),
             "predicted_std": {
                 n: float(s) for n, s in zip(self.base_names, self.predicted_std, strict=True)
@@ -389,6 +404,7 @@ def design_excitation(
         design_time=time.perf_counter() - t_begin,
         joint_names=list(robot.dof_names),
         options=opt,
+        world=world,
     )
 
 

@@ -31,7 +31,8 @@ class DesignCheck:
 
     ``usage[kind]``: per joint, peak use of the limit with its margin (1 = reached, NaN =
     unset), shape (nv,); ``min_clearance`` [m] the least distance over the samples
-    (inf without pairs) between ``closest_pair`` at ``closest_time`` [s];
+    (inf without pairs) between ``closest_pair`` at ``closest_time`` [s], at the witness
+    points ``closest_points`` (one on each member, base frame [m], shape (2, 3));
     ``clearance_allowance`` [m] the largest continuous-time allowance used; ``violation``
     ``(kind, what, time, value, allowed)`` of the worst violation, or None.
     """
@@ -42,6 +43,7 @@ class DesignCheck:
     closest_time: float | None
     clearance_allowance: float
     violation: tuple | None
+    closest_points: np.ndarray | None = None
 
     def usage_dict(self, joint_names: list[str]) -> dict:
         return {
@@ -127,7 +129,7 @@ def verify_design(
                 float(values[kind][k, j]),
                 float(allowed),
             )
-    d_min, pair, t_min, allowance = np.inf, None, None, 0.0
+    d_min, pair, t_min, allowance, points = np.inf, None, None, 0.0, None
     if scene is not None and scene.n_pairs:
         dists = np.empty(n)
         which = np.empty(n, dtype=int)
@@ -143,6 +145,7 @@ def verify_design(
         kc = int(np.argmin(dists))
         a, b = scene.pairs[which[kc]]
         d_min, pair, t_min = float(dists[kc]), (scene.names[a], scene.names[b]), float(t[kc])
+        points = np.array(scene.witness_points(q[kc], which[kc]))
         allowance = float(np.max(dt * speed))
         short = dists - need
         kk = int(np.argmin(short))
@@ -150,7 +153,7 @@ def verify_design(
             a, b = scene.pairs[which[kk]]
             violation = ("clearance", (scene.names[a], scene.names[b]), float(t[kk]),
                          float(dists[kk]), float(need[kk]))  # fmt: skip
-    return DesignCheck(usage, d_min, pair, t_min, allowance, violation)
+    return DesignCheck(usage, d_min, pair, t_min, allowance, violation, points)
 
 
 def named_values(names, values) -> dict:

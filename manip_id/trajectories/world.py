@@ -244,6 +244,12 @@ class CollisionScene:
         pin.computeDistances(self.robot.model, self.data, self.geom, self.gdata, q)
         return np.array([r.min_distance for r in self.gdata.distanceResults])
 
+    def witness_points(self, q: np.ndarray, pair: int) -> tuple[np.ndarray, np.ndarray]:
+        """The nearest points [m] (base frame) of pair number ``pair`` at ``q``, one on each."""
+        self.distances(q)
+        res = self.gdata.distanceResults[int(pair)]
+        return np.array(res.getNearestPoint1()), np.array(res.getNearestPoint2())
+
     def closest(self, q: np.ndarray, gradient: bool = False):
         """The closest pair at ``q`` (:class:`Closest`) and, with ``gradient``, dd/dv (nv,)."""
         d = self.distances(q)

@@ -9,8 +9,21 @@ Each writer takes the samples ``t`` [s] (N,), ``q`` [rad or m], ``dq``, ``ddq``,
     json      ``{"joint_names", "t", "q", "dq", "ddq", "tau"}`` (lists of rows)
     yaml      a ROS 2 ``trajectory_msgs/msg/JointTrajectory`` (positions, velocities,
               accelerations, effort, time_from_start of every point)
+    mcap      a ROS 2 bag (one MCAP file, written with ``rosbags``) holding one
+              ``trajectory_msgs/msg/JointTrajectory`` on :data:`TRAJECTORY_TOPIC` at log
+              time 0: positions, velocities, accelerations and time_from_start of every
+              point, no effort (see below)
     urscript  a UR program: ``movej`` to the start pose, then one ``servoj`` per sample
               with ``t = 1 / rate`` (the controller's own period: 125 Hz CB3, 500 Hz e-Series)
+
+Why a JointTrajectory and not a JointState stream in the bag: a JointState stream is what
+a robot reports (its ``joint_state_broadcaster`` publishes ``/joint_states``); replaying
+one commands nothing and collides with the live robot's own. A JointTrajectory on the
+``joint_trajectory_controller``'s topic is the command: ``ros2 bag play traj.mcap`` hands
+the whole motion to the controller, which interpolates between the points at its own
+update rate (``--remap`` the topic for a controller of another name). The effort field
+stays empty because that controller refuses trajectories with efforts unless it commands
+efforts; the CSV, NPZ, JSON and YAML files keep the nominal torques.
 """
 
 from __future__ import annotations
@@ -20,11 +33,15 @@ from pathlib import Path
 
 import numpy as np
 
+from ..datasets.rosbag import write_messages
 from ..errors import InputError
 
-FORMATS = ("csv", "npz", "json", "yaml", "urscript")
+FORMATS = ("csv", "npz", "json", "yaml", "mcap", "urscript")
 SUFFIXES = {".csv": "csv", ".npz": "npz", ".json": "json", ".yaml": "yaml", ".yml": "yaml",
-            ".script": "urscript", ".urscript": "urscript"}  # fmt: skip
+            ".mcap": "mcap", ".script": "urscript", ".urscript": "urscript"}  # fmt: skip
+#: The topic of the JointTrajectory in an MCAP bag: ros2_controllers' joint_trajectory_controller.
+TRAJECTORY_TOPIC = "/joint_trajectory_controller/joint_trajectory"
+JOINT_TRAJECTORY = "trajectory_msgs/msg/JointTrajectory"
 
 
 def format_of(path, fmt: str | None = None) -> str:
@@ -56,6 +73,8 @@ def write_trajectory(path, fmt: str, t, q, dq, ddq, tau, joint_names) -> None:
         Path(path).write_text(json.dumps(doc) + "\n", encoding="utf-8")
     elif fmt == "yaml":
         Path(path).write_text(_joint_trajectory_yaml(t, q, dq, ddq, tau, names), encoding="utf-8")
+    elif fmt == "mcap":
+        write_joint_trajectory_bag(path, t, q, dq, ddq, names)
     elif fmt == "urscript":
         Path(path).write_text(_urscript(t, q, names), encoding="utf-8")
     else:
@@ -83,10 +102,7 @@ def _joint_trajectory_yaml(t, q, dq, ddq, tau, names) -> str:
         "points:",
     ]
     for k in range(t.size):
-        sec = int(np.floor(t[k]))
-        nsec = int(round((t[k] - sec) * 1e9))
-        if nsec >= 1_000_000_000:
-            sec, nsec = sec + 1, nsec - 1_000_000_000
+        sec, nsec = _sec_nsec(t[k])
         lines += [
             f"- positions: {_floats(q[k])}",
             f"  velocities: {_floats(dq[k])}",
@@ -95,6 +111,40 @@ def _joint_trajectory_yaml(t, q, dq, ddq, tau, names) -> str:
             f"  time_from_start: {{sec: {sec}, nanosec: {nsec}}}",
         ]
     return "\n".join(lines) + "\n"
+
+
+def _sec_nsec(t: float) -> tuple[int, int]:
+    """A time [s] >= 0 as (sec, nanosec) of ROS 2 (nanoseconds rounded)."""
+    ns = int(round(float(t) * 1e9))
+    return ns // 10**9, ns % 10**9
+
+
+def write_joint_trajectory_bag(path, t, q, dq, ddq, names, topic: str = TRAJECTORY_TOPIC):
+    """One ``trajectory_msgs/msg/JointTrajectory`` (stamp 0: start on receipt) with a point
+    per sample, in a bare MCAP bag at ``path`` (module docstring)."""
+
+    def messages(store):
+        types = store.types
+        Time, Duration = (
+            types["builtin_interfaces/msg/Time"],
+            types["builtin_interfaces/msg/Duration"],
+        )
+        Point = types["trajectory_msgs/msg/JointTrajectoryPoint"]
+        empty = np.zeros(0)
+        points = [
+            Point(
+                positions=np.ascontiguousarray(q[k], dtype=np.float64),
+                velocities=np.ascontiguousarray(dq[k], dtype=np.float64),
+                accelerations=np.ascontiguousarray(ddq[k], dtype=np.float64),
+                effort=empty,
+                time_from_start=Duration(*_sec_nsec(t[k])),
+            )
+            for k in range(len(t))
+        ]
+        header = types["std_msgs/msg/Header"](stamp=Time(sec=0, nanosec=0), frame_id="")
+        yield 0, types[JOINT_TRAJECTORY](header=header, joint_names=list(names), points=points)
+
+    write_messages(Path(path), topic, JOINT_TRAJECTORY, messages, bare=True)
 
 
 def _urscript(t, q, names) -> str:

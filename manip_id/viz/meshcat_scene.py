@@ -512,6 +512,14 @@ class RobotScene:
         )
         return self
 
+    def add_object(self, name: str, geometry, material, transform, legend=None) -> None:
+        """A fixed meshcat ``geometry`` with ``material`` at ``transform`` (4x4, world frame
+        [m]) under ``world/<name>``; ``legend``: a :class:`LegendSection` for the page."""
+        self._vis[f"world/{name}"].set_object(geometry, material)
+        self._vis[f"world/{name}"].set_transform(np.asarray(transform, dtype=float))
+        if legend is not None:
+            self._legend.append(legend)
+
     # -------------------------------------------------------------- output
     def commands(self) -> list[bytes]:
         """The scene as msgpack-packed meshcat commands, in replay order."""
@@ -584,9 +592,8 @@ class RobotScene:
     def serve(self, open_browser: bool = False, host: str = "127.0.0.1") -> LiveView:
         """Replay the scene into a live meshcat viewer; returns the :class:`LiveView`.
 
-        The meshcat server is started here (:func:`manip_id.viz.meshcat_server.start_server`)
-        with its web server on ``host`` only (127.0.0.1 by default) and its command
-        socket on 127.0.0.1; it stops with :meth:`LiveView.stop`, or with this process
-        whatever ends it. Its URL is ``view.url``.
+        The meshcat server (:func:`~manip_id.viz.meshcat_server.start_server`) listens on
+        ``host`` (web) and 127.0.0.1 (commands); it stops with :meth:`LiveView.stop` or
+        with this process. Its URL is ``view.url``.
         """
         return replay(self.commands(), host, open_browser)

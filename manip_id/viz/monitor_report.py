@@ -152,6 +152,14 @@ def write_monitor_report(folder, robot, th, runs, detections, doc: dict, *, forc
         f"<p>Bounds at a false-alarm rate of {th.false_alarm:g} per sample (any joint), from "
         f"{th.n_samples} calibration samples (measured rate there {number(th.rate, 3)}).</p>"
     )
+    if th.in_sample:
+        how += (
+            '<p class="bad">Calibrated on the model\'s own training data ('
+            + ", ".join(_esc(f) for f in th.in_sample)
+            + "): a fit's residuals there are smaller than on a new run, so the bounds are "
+            "too tight and new runs will alarm more often than the rate above. Calibrate on "
+            "collision-free runs the model was not identified on.</p>"
+        )
     content = ReportContent(
         title=f"manip-id monitor {robot.name}",
         summary={

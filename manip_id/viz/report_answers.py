@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ..identification import NOT_DETERMINED
+from ..identification.document import REFINED_UNCONSTRAINED
 from ..identification.document_text import mass_sources
 from ..identification.nominal_check import WORSE_PREFIX
 from .report import html_table
@@ -34,6 +35,11 @@ from .report_tables import not_determined, number
 MASS_RATIO = 3.0
 #: What addresses a warning: (words of the warning, the advice).
 ADVICE: tuple[tuple[str, str], ...] = (
+    (
+        REFINED_UNCONSTRAINED,
+        "where a physical model is needed (export, simulation), use the consistent estimate: "
+        "leave out --refine",
+    ),
     ("non-physical values", "add --consistent to estimate a physical model"),
     ("not physical", "add --consistent to estimate a physical model"),
     (
