@@ -108,11 +108,12 @@ def run(args: argparse.Namespace) -> int:
             "with --identified"
         )
     model = load_model(robot, args.model) if args.model else model_from_robot(robot)
-    calib = None if args.thresholds is not None else as_logs(robot, args.calibrate, options)
+    saved = None if args.thresholds is None else load_thresholds(args.thresholds)  # small: first
+    calib = None if saved is not None else as_logs(robot, args.calibrate, options)
     logs = as_logs(robot, args.data, options)
     check_temperatures([*(calib or []), *logs], robot.layout.needs_temperature)  # before work
-    if calib is None:
-        th = load_thresholds(args.thresholds)
+    if saved is not None:
+        th = saved
         gain, fgain = th.gain, th.filter_gain
     else:
         th = calibrate_thresholds(

@@ -493,8 +493,8 @@ def load_robot(
     Parameters
     ----------
     spec
-        a name of example-robot-data (``"panda"``, ``"ur5"``, ...), a path to a
-        URDF file, or ``"msd"`` (the one-DoF mass-spring-damper of ``robots/msd.urdf``).
+        an example-robot-data name (``"panda"``, ...), a URDF path, or ``"msd"`` (a 1-DoF
+        mass-spring-damper, ``robots/msd.urdf``).
     armature
         model a rotor inertia per joint (column ddq_j). Default: the profile's, else off.
     friction
@@ -512,15 +512,12 @@ def load_robot(
     package_dirs
         folders where ``package://`` mesh paths of a URDF are resolved.
     identified
-        for a URDF written by :func:`manip_id.export.export_urdf`: ``True`` reads
-        its sidecar (``NAME.identified.json`` next to it), or give the sidecar's path.
-        Its joint terms, active joints and the positions of the locked ones, armature,
-        offset and spring become the defaults and the nominal parameters (explicit
-        arguments still win). Or the model structure a result was identified with (a
-        mapping: its ``model_structure``, :func:`manip_id.robot.sidecar.model_structure`):
-        its joint terms and their laws, active and locked joints and drive train become
-        the defaults (explicit arguments still win); the nominal parameters stay the
-        URDF's.
+        ``True`` or a sidecar's path, for a URDF written by :func:`manip_id.export.export_urdf`
+        (``NAME.identified.json``): its joint terms, active and locked joints, armature,
+        offset and spring become the defaults and the nominal parameters; or a result's
+        ``model_structure`` (a mapping, :func:`manip_id.robot.sidecar.model_structure`):
+        its joint model and drive train become the defaults, the nominal parameters stay
+        the URDF's. Explicit arguments win either way.
     profile
         the identification profile (:mod:`manip_id.robot.profiles`): a robot name or a
         ``.toml`` path, a :class:`~manip_id.robot.profiles.RobotProfile`, or False for none.
@@ -528,9 +525,8 @@ def load_robot(
         loaded by path takes none (its file name decides nothing). Explicit arguments
         override the profile.
 
-    The drive train (:mod:`manip_id.robot.transmission`) is the sidecar's (``identified``), else
-    the profile's ``[transmission]``, else none; :meth:`Robot.with_transmission` gives
-    another.
+    The drive train (:mod:`manip_id.robot.transmission`): the sidecar's, else the profile's
+    ``[transmission]``, else none (:meth:`Robot.with_transmission` gives another).
     """
     selection = (
         active_joints

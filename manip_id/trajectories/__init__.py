@@ -51,8 +51,8 @@ from .design import (
     ExcitationDesign,
     PriorInformation,
     design_excitation,
-    read_design,
 )
+from .design_file import read_design
 from .excitation import (
     base_columns,
     excitation_condition_number,
