@@ -163,13 +163,16 @@ def header_samples(specs: Iterable[str | os.PathLike | FileSpec]) -> int | None:
 def portable_robot(robot: Robot) -> Robot:
     """A copy of ``robot`` that holds what identification needs and pickles small.
 
-    The Pinocchio model and the joint terms (about 0.2 MB pickled), without any
-    geometry or cached evaluator: what is sent to the workers.
+    The Pinocchio model, the joint terms and the drive train (its motor terms are
+    parameters; about 0.2 MB pickled), without any geometry or cached evaluator: what is
+    sent to the workers.
     """
     origin = RobotSource(
         robot.model, robot.name, robot.source, list(robot.package_dirs), robot.settings, {}, False
     )
-    return Robot(robot.name, robot.model, robot.terms, origin=origin)
+    return Robot(
+        robot.name, robot.model, robot.terms, origin=origin, transmission=robot.transmission
+    )
 
 
 def add_values(*values):

@@ -340,3 +340,61 @@ def test_cutoff_on_the_real_panda_log():
     ]
     assert max(kept) < 1.0  # [Hz]
     assert choice.cutoff == 20.0 and "minimum" in choice.reason
+
+
+def test_files_as_tasks_carry_the_drive_train(wrist):
+    """Per-file estimates (files as tasks, the drift path) with a transmission: the workers'
+    robot keeps its drive train (it was dropped: IndexError on the motor columns), and the
+    pooled estimate equals the one of the file read here."""
+    from manip_id.identification import PartitionOptions
+
+    folder, tr, robot, coeffs, runs = wrist
+    spec = FileSpec(motor_log(folder / "tasks.npz", tr, *runs["train"]), transmission=tr)
+    here = identify(robot, [spec], method="ols", files=FileOptions(audit=False))
+    tasks = identify(
+        robot,
+        [spec],
+        method="ols",
+        files=FileOptions(audit=False, partition=PartitionOptions(per_file=True)),
+    )
+    np.testing.assert_allclose(tasks.estimate, here.estimate, rtol=1e-9, atol=1e-12)
+    assert tasks.per_file[0].error is None
+
+
+def test_monitor_and_drift_read_motor_side_logs_through_the_drive_train(tmp_path, capsys):
+    """A motor-side log of a robot with gear ratios (no motor terms): monitor converts it as
+    identify does (no alarm on a collision-free run), drift finds it unchanged; a model with
+    motor terms is refused by the monitor in one line (it does not model them)."""
+    import json
+
+    from manip_id.cli import main
+
+    gears = tmp_path / "gears.toml"
+    gears.write_text(
+        "matrix = [[100, 0, 0, 0, 0, 0], [0, 100, 0, 0, 0, 0], [0, 0, 80, 0, 0, 0],\n"
+        "          [0, 0, 0, 60, 0, 0], [0, 0, 0, 0, 50, 0], [0, 0, 0, 0, 50, 50]]\n"
+        'signals = "motor"\n'
+    )
+    sim, ref = tmp_path / "sim", tmp_path / "ref.json"
+    argv = ["simulate", "ur5", "--out", str(sim), "--files", "3", "--duration", "4"]
+    assert main([*argv, "--transmission", str(gears), "--friction", "viscous", "--quiet"]) == 0
+    run = [str(sim / f"run_{k}.npz") for k in range(3)]
+    fit = ["identify", "ur5", "--friction", "viscous", "--transmission", str(gears)]
+    assert main([*fit, "--data", run[0], "--validate", run[1], "--json", str(ref), "--quiet"]) == 0
+    out = tmp_path / "monitor.json"
+    argv = ["monitor", "ur5", "--model", str(ref), "--calibrate", run[1], "--data", run[2]]
+    assert main([*argv, "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["detections"] == [] and doc["files"][0]["n_samples"] > 700
+    assert main(["drift", "ur5", "--reference", str(ref), "--data", run[2]]) == 0
+    assert "unchanged" in capsys.readouterr().out
+    motors = tmp_path / "motors.toml"
+    motors.write_text(gears.read_text() + 'motor_terms = ["viscous"]\n')
+    ref_m = tmp_path / "ref_m.json"
+    fit_m = ["identify", "ur5", "--friction", "viscous", "--transmission", str(motors)]
+    assert main([*fit_m, "--data", run[0], "--json", str(ref_m), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["monitor", "ur5", "--model", str(ref_m), "--calibrate", run[1],
+                 "--data", run[2]]) == 2  # fmt: skip
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "does not model motor terms" in err[0], err

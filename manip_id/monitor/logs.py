@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -73,6 +73,8 @@ def read_log(robot: Robot, spec, options: ReadOptions | None = None) -> MonitorL
     """
     options = options or ReadOptions()
     spec = parse_file_spec(spec, window=options.window)
+    if robot.transmission is not None and not spec.transmission:  # motor-side logs converted
+        spec = replace(spec, transmission=robot.transmission)
     fmt = spec.format or (infer_format(spec.path) if spec.path.exists() else None)
     if fmt == "csv" and options.columns is not None:  # the column map is for CSV files
         spec = FileSpec(spec.path, spec.window, spec.format, options.columns, spec.topic)

@@ -258,6 +258,13 @@ class CollisionMonitor:
     ):
         if isinstance(theta, MonitorModel):
             theta = theta.theta
+        tr = robot.transmission
+        if tr is not None and tr.n_parameters:
+            raise InputError(
+                f"the monitor does not model motor terms (the drive train of {robot.name!r} "
+                f"has {', '.join(tr.motor_terms)}): identify the model for the monitor with a "
+                "transmission without motor_terms (the logs are still converted)"
+            )
         self.robot = robot
         self.theta = check_parameters(robot, theta)
         self.thresholds = _bounds(robot, thresholds)  # before the gains: they may be theirs
