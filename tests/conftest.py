@@ -12,6 +12,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import ctypes  # noqa: E402
 import functools  # noqa: E402
 import gc  # noqa: E402
+import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import pytest  # noqa: E402
@@ -77,12 +78,23 @@ def _malloc_trim() -> None:
         pass
 
 
+def _release() -> None:
+    """Close the figures left open, collect the garbage, hand freed heap pages back."""
+    pyplot = sys.modules.get("matplotlib.pyplot")
+    if pyplot is not None:
+        pyplot.close("all")
+    gc.collect()
+    _malloc_trim()
+    _released_at[0] = _rss()
+
+
 @pytest.hookimpl(trylast=True)
 def pytest_runtest_teardown(item, nextitem):
-    """After a test whose leftovers grew the resident set by :data:`_RELEASE_STEP`: collect
-    the garbage and trim the heap (cheap: a /proc read per test, a collection rarely)."""
-    rss = _rss()
-    if rss > _released_at[0] + _RELEASE_STEP:
-        gc.collect()
-        _malloc_trim()
-        _released_at[0] = _rss()
+    """After the last test of a module (its module fixtures are gone), and after a test
+    whose leftovers grew the resident set by :data:`_RELEASE_STEP`: release the memory.
+    Measured over the first 60 test files: 150-250 MiB less resident set after each file
+    than with the growth rule alone (two workers of ``make test`` each keep it)."""
+    if nextitem is None or nextitem.module is not item.module:
+        _release()
+    elif _rss() > _released_at[0] + _RELEASE_STEP:
+        _release()
