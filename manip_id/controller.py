@@ -170,7 +170,9 @@ def reference_names(controller: Controller | None) -> tuple[str, ...]:
     return tuple(sorted(names))
 
 
-def read_reference(path, controller: Controller, nv: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def read_reference(
+    path, controller: Controller, nv: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(t, q_ref, dq_ref)`` of a log file (NPZ or CSV): time stamps [s] (N,) and the
     reference columns named by ``controller``, (N, nv) each."""
     path = Path(path).expanduser()

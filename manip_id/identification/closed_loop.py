@@ -34,12 +34,15 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..controller import Controller, track
+from ..controller import Controller, on_grid, read_reference, track
+from ..datasets import parse_file_spec
 from ..errors import InputError, NumericalError
 from ..robot.model import Robot
 from ..robot.regressor import iter_regressor
 from .forward import DEFAULT_EPS, ForwardModel, coulomb_width, standard_with_base
+from .options import PreprocessOptions
 from .result import IdentificationResult
+from .rollout import read_logs
 
 #: The closed-loop estimators: name -> what it is.
 CLOSED_LOOP_METHODS: dict[str, str] = {
@@ -114,6 +117,44 @@ class ClosedLoopLog:
         return float((t[-1] - t[0]) / (len(t) - 1))
 
 
+def check_closed_loop(robot: Robot, options: ClosedLoopOptions, specs) -> None:
+    """Refuse, before any work, what a closed-loop estimator cannot do with these files:
+    a controller of another size, a motor-side drive train, files without a reference."""
+    options.controller.check_size(robot.nv)
+    tr = robot.transmission
+    if tr is not None and tr.signals == "motor":
+        raise InputError(
+            "the closed-loop estimators read joint-side logs; the drive train's signals are "
+            "motor-side (the controller's reference would be too)"
+        )
+    if robot.nq != robot.nv:
+        raise InputError(
+            f"the closed-loop estimators integrate q with dq: robot.nq={robot.nq} but "
+            f"robot.nv={robot.nv} (continuous joints are not supported)"
+        )
+    for spec in specs:
+        spec = parse_file_spec(spec)
+        if spec.path.suffix.lower() not in (".npz", ".csv"):
+            raise InputError(
+                f"{spec.label}: the controller's reference is read from NPZ or CSV logs"
+            )
+
+
+def closed_loop_logs(
+    robot: Robot, files, options: PreprocessOptions | None, controller: Controller
+) -> list[ClosedLoopLog]:
+    """Each file preprocessed as identification reads it (:func:`.rollout.read_logs`),
+    with the controller's reference read from the same file and taken at its samples."""
+    out = []
+    for f, data in zip(files, read_logs(robot, files, options), strict=True):
+        path = parse_file_spec(f).path
+        t_ref, q_ref, dq_ref = read_reference(path, controller, robot.nv)
+        out.append(
+            ClosedLoopLog(data, on_grid(t_ref, q_ref, data.t), on_grid(t_ref, dq_ref, data.t))
+        )
+    return out
+
+
 def _simulated(fm: ForwardModel, log: ClosedLoopLog, controller: Controller, substeps: int):
     d = log.data
     run = track(
@@ -162,10 +203,15 @@ def _sums(robot, base, fm, logs, controller, substeps, weights, chunk=2048):
         tot2 += float(np.sum(tau**2))
         pos2 += float(np.sum((run.q - d.q) ** 2))
         n += tau.size
-    return A, S, b, {
-        "simulated_torque_error": float(np.sqrt(err2 / tot2)) if tot2 > 0 else None,
-        "position_rms": float(np.sqrt(pos2 / n)),
-    }
+    return (
+        A,
+        S,
+        b,
+        {
+            "simulated_torque_error": float(np.sqrt(err2 / tot2)) if tot2 > 0 else None,
+            "position_rms": float(np.sqrt(pos2 / n)),
+        },
+    )
 
 
 def _joint_weights(robot, base, logs, theta_b) -> np.ndarray:
@@ -341,5 +387,7 @@ __all__ = [
     "CLOSED_LOOP_METHODS",
     "ClosedLoopLog",
     "ClosedLoopOptions",
+    "check_closed_loop",
     "closed_loop_estimate",
+    "closed_loop_logs",
 ]
