@@ -14,10 +14,14 @@ noise-free states ``(q_s, dq_s, ddq_s)`` and their regressor ``Y_s = Y(q_s, dq_s
     DIDIM (Gautier, Janot, Vandanjon 2013): least squares of tau on Y_s,
           theta_{k+1} = (Y_s^T W Y_s)^-1 Y_s^T W tau
 
-from the least-squares start ``theta_0`` (OLS), iterated until the relative step
+from the least-squares start ``theta_0`` (OLS; the nominal model, DIDIM's classical a
+priori start, when the least-squares model diverges in closed loop, as an estimate that
+is not positive definite may), iterated until the relative step
 ``||theta_{k+1} - theta_k|| / ||theta_k||`` falls below the tolerance (converged) or the
-iterations run out (stated). ``W`` weighs joint ``j`` by ``1 / sigma_j^2``, the variance of
-the start's residuals on joint ``j`` (fixed over the iterations). Memory: the sums
+iterations run out (stated). A step whose model diverges in closed loop is halved until it
+does not (``step_factor`` in the history). ``W`` weighs joint ``j`` by
+``1 / sigma_j^2``, the variance of the start's residuals on joint ``j`` (fixed over the
+iterations). Memory: the sums
 ``Y_s^T W Y``, ``Y_s^T W Y_s`` (r, r) and ``Y_s^T W tau`` (r,) accumulated chunk by chunk
 of samples, each chunk's two regressors computed side by side; the simulated states of one
 log are held (N, nv) as the data are.
@@ -49,6 +53,8 @@ CLOSED_LOOP_METHODS: dict[str, str] = {
     "iv": "IDIM-IV: instruments from the model simulated in closed loop with the controller",
     "didim": "DIDIM: least squares on the regressor of the simulated closed loop",
 }
+#: Most halvings of a step whose model diverges in closed loop.
+MAX_HALVINGS = 10
 #: What a result's context says of the least-squares estimate alone (dropped here).
 _STALE = {"standard_parameters", "physically_consistent"}
 
@@ -166,7 +172,8 @@ def _simulated(fm: ForwardModel, log: ClosedLoopLog, controller: Controller, sub
 
 def _sums(robot, base, fm, logs, controller, substeps, weights, chunk=2048):
     """``A = Y_s^T W Y``, ``S = Y_s^T W Y_s`` (r, r), ``b = Y_s^T W tau`` (r,), and the
-    simulated closed loop's figures (torque error, tracking error of the model)."""
+    simulated closed loop's figures (torque error, tracking error of the model); None
+    when the model diverges in closed loop."""
     r = base.n_base
     cols = np.asarray(base.independent)
     A, S, b = np.zeros((r, r)), np.zeros((r, r)), np.zeros(r)
@@ -177,12 +184,7 @@ def _sums(robot, base, fm, logs, controller, substeps, weights, chunk=2048):
     for log in logs:
         run = _simulated(fm, log, controller, substeps)
         if run.diverged:
-            raise NumericalError(
-                "closed-loop simulation of the estimate",
-                "the model diverged in closed loop with the controller",
-                hint="its mass matrix is not positive definite along the motion, or the loop "
-                "is unstable with it; start from a consistent estimate or check the gains",
-            )
+            return None
         d = log.data
         tau = np.asarray(d.tau, float)
         meas = iter_regressor(robot, d.q, d.dq, d.ddq, chunk)
@@ -269,13 +271,28 @@ def closed_loop_estimate(
     configs = np.concatenate([np.asarray(log.data.q)[::50] for log in logs])
     eps = coulomb_width(robot, standard_with_base(robot, start, base), configs, dt, options.eps)
     weights = _joint_weights(robot, base, logs, start)
-    theta = start
     history: list[dict] = []
-    converged = False
-    A = S = None
+
+    def sums_at(tb):
+        fm = ForwardModel(robot, standard_with_base(robot, tb, base), eps)
+        return _sums(robot, base, fm, logs, ctrl, options.substeps, weights)
+
+    theta, start_name = start, result.method
+    cur = sums_at(theta)
+    if cur is None:  # DIDIM's classical start: the a priori (nominal) model
+        theta = base.to_base(robot.nominal_parameters)
+        start_name = f"nominal (the {result.method} estimate diverges in closed loop)"
+        cur = sums_at(theta)
+        if cur is None:
+            raise NumericalError(
+                "closed-loop simulation",
+                f"neither the {result.method} estimate nor the nominal model simulates in "
+                "closed loop with the controller",
+                hint="check the controller's gains and the reference columns",
+            )
+    converged, stopped = False, None
     for k in range(1, options.iterations + 1):
-        fm = ForwardModel(robot, standard_with_base(robot, theta, base), eps)
-        A, S, b, figures = _sums(robot, base, fm, logs, ctrl, options.substeps, weights)
+        A, S, b, figures = cur
         lhs = A if options.method == "iv" else S
         try:
             new = np.linalg.solve(lhs, b)
@@ -284,12 +301,22 @@ def closed_loop_estimate(
                 f"{options.method} estimate", f"the normal matrix is singular at iteration {k}"
             ) from exc
         step = float(np.linalg.norm(new - theta) / max(np.linalg.norm(theta), 1e-300))
-        history.append({"iteration": k, "step": step, **figures})
-        theta = new
+        entry = {"iteration": k, "step": step, **figures}
         if step < options.tolerance:
-            converged = True
+            history.append(entry)
+            theta, converged = new, True
             break
-    assert A is not None and S is not None
+        # a step whose model diverges in closed loop is halved (at most MAX_HALVINGS times)
+        factor, nxt = 1.0, sums_at(new)
+        while nxt is None and factor > 0.5**MAX_HALVINGS:
+            factor *= 0.5
+            nxt = sums_at(theta + factor * (new - theta))
+        history.append({**entry, "step_factor": factor})
+        if nxt is None:
+            stopped = "every shortened step diverged in closed loop"
+            break
+        theta, cur = theta + factor * (new - theta), nxt
+    A, S = cur[0], cur[1]
     record = {
         "method": options.method,
         "description": CLOSED_LOOP_METHODS[options.method],
@@ -301,7 +328,8 @@ def closed_loop_estimate(
         "coulomb_width": eps.tolist(),
         "joint_weights": weights.tolist(),
         "history": history,
-        "start": result.method,
+        "stopped": stopped,
+        "start": start_name,
         "seconds": time.perf_counter() - t0,
     }
     return _estimated(result, robot, theta, logs, validation, record, weights, (A, S))
