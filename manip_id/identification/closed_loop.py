@@ -246,7 +246,8 @@ def closed_loop_estimate(
     training logs (:class:`ClosedLoopLog`); ``validation``: preprocessed datasets for the
     validation torque error. The returned result has ``method`` ``"iv"`` or ``"didim"``,
     and ``context["closed_loop"]`` = ``{method, controller, iterations, converged,
-    tolerance, history, start, seconds}`` (``history``: per iteration the relative step,
+    tolerance, history, stopped, start}`` (the seconds in ``timings["closed_loop"]``;
+    ``history``: per iteration the relative step,
     the simulated torque error and the model's position error against the log).
     """
     t0 = time.perf_counter()
@@ -330,14 +331,14 @@ def closed_loop_estimate(
         "history": history,
         "stopped": stopped,
         "start": start_name,
-        "seconds": time.perf_counter() - t0,
     }
-    return _estimated(result, robot, theta, logs, validation, record, weights, (A, S))
+    seconds = time.perf_counter() - t0  # in the timings (a run's figure, not the record's)
+    return _estimated(result, robot, theta, logs, validation, record, weights, (A, S, seconds))
 
 
 def _estimated(result, robot, theta_b, logs, validation, record, weights, sums):
     """The :class:`IdentificationResult` of the closed-loop estimate (covariance, errors)."""
-    A, S = sums
+    A, S, seconds = sums
     base = result.base
     cols = np.asarray(base.independent)
     wss, n_rows = 0.0, 0
@@ -369,7 +370,7 @@ def _estimated(result, robot, theta_b, logs, validation, record, weights, sums):
         std_white=std,
         uncertainty={"method": "white", "reason": f"{record['method']}: white residuals"},
         standard=None,
-        timings={**result.timings, "closed_loop": record["seconds"]},
+        timings={**result.timings, "closed_loop": seconds},
     )
     train = _torque_error(out, robot, [log.data for log in logs])
     valid = _torque_error(out, robot, list(validation or []))
