@@ -257,8 +257,7 @@ def track(
     controller: Controller,
     q_ref,
     dq_ref,
-    q0,
-    dq0,
+    start,
     dt: float,
     *,
     substeps: int = 1,
@@ -268,7 +267,8 @@ def track(
 
     At each sample ``k`` (period ``dt`` [s]) the controller reads ``measure(q, dq)`` (the
     true state when None), computes ``tau_k`` (module docstring) and holds it over the
-    period, integrated in ``substeps`` semi-implicit Euler steps from ``(q0, dq0)``.
+    period, integrated in ``substeps`` semi-implicit Euler steps from ``start`` =
+    ``(q0, dq0)``.
     ``q_ref``, ``dq_ref``: (N, nv). Positions are added linearly (``nq == nv``).
     """
     q_ref, dq_ref = np.asarray(q_ref, float), np.asarray(dq_ref, float)
@@ -277,7 +277,7 @@ def track(
     if int(substeps) != substeps or substeps < 1:
         raise InputError(f"substeps must be a positive integer, got {substeps}")
     h = dt / substeps
-    q, v = np.array(q0, dtype=float), np.array(dq0, dtype=float)
+    q, v = (np.array(x, dtype=float) for x in start)
     out_q, out_v, out_t, out_a = (np.empty((n, nv)) for _ in range(4))
     integral = np.zeros(nv)
     kp, kd, ki = controller.kp, controller.kd, controller.ki

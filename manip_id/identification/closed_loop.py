@@ -164,7 +164,7 @@ def closed_loop_logs(
 def _simulated(fm: ForwardModel, log: ClosedLoopLog, controller: Controller, substeps: int):
     d = log.data
     run = track(
-        fm.acceleration, controller, log.q_ref, log.dq_ref, d.q[0], d.dq[0], log.dt,
+        fm.acceleration, controller, log.q_ref, log.dq_ref, (d.q[0], d.dq[0]), log.dt,
         substeps=substeps,
     )  # fmt: skip
     return run
@@ -232,6 +232,39 @@ def _joint_weights(robot, base, logs, theta_b) -> np.ndarray:
     return 1.0 / var
 
 
+def _iterate(sums_at, theta, cur, options: ClosedLoopOptions):
+    """The fixed-point iterations of IV or DIDIM from ``theta`` (sums ``cur`` there):
+    ``(theta, sums at it, history, converged, why it stopped early or None)``."""
+    history: list[dict] = []
+    converged, stopped = False, None
+    for k in range(1, options.iterations + 1):
+        A, S, b, figures = cur
+        lhs = A if options.method == "iv" else S
+        try:
+            new = np.linalg.solve(lhs, b)
+        except np.linalg.LinAlgError as exc:
+            raise NumericalError(
+                f"{options.method} estimate", f"the normal matrix is singular at iteration {k}"
+            ) from exc
+        step = float(np.linalg.norm(new - theta) / max(np.linalg.norm(theta), 1e-300))
+        entry = {"iteration": k, "step": step, **figures}
+        if step < options.tolerance:
+            history.append(entry)
+            theta, converged = new, True
+            break
+        # a step whose model diverges in closed loop is halved (at most MAX_HALVINGS times)
+        factor, nxt = 1.0, sums_at(new)
+        while nxt is None and factor > 0.5**MAX_HALVINGS:
+            factor *= 0.5
+            nxt = sums_at(theta + factor * (new - theta))
+        history.append({**entry, "step_factor": factor})
+        if nxt is None:
+            stopped = "every shortened step diverged in closed loop"
+            break
+        theta, cur = theta + factor * (new - theta), nxt
+    return theta, cur, history, converged, stopped
+
+
 def closed_loop_estimate(
     result: IdentificationResult,
     robot: Robot,
@@ -272,7 +305,6 @@ def closed_loop_estimate(
     configs = np.concatenate([np.asarray(log.data.q)[::50] for log in logs])
     eps = coulomb_width(robot, standard_with_base(robot, start, base), configs, dt, options.eps)
     weights = _joint_weights(robot, base, logs, start)
-    history: list[dict] = []
 
     def sums_at(tb):
         fm = ForwardModel(robot, standard_with_base(robot, tb, base), eps)
@@ -291,32 +323,7 @@ def closed_loop_estimate(
                 "closed loop with the controller",
                 hint="check the controller's gains and the reference columns",
             )
-    converged, stopped = False, None
-    for k in range(1, options.iterations + 1):
-        A, S, b, figures = cur
-        lhs = A if options.method == "iv" else S
-        try:
-            new = np.linalg.solve(lhs, b)
-        except np.linalg.LinAlgError as exc:
-            raise NumericalError(
-                f"{options.method} estimate", f"the normal matrix is singular at iteration {k}"
-            ) from exc
-        step = float(np.linalg.norm(new - theta) / max(np.linalg.norm(theta), 1e-300))
-        entry = {"iteration": k, "step": step, **figures}
-        if step < options.tolerance:
-            history.append(entry)
-            theta, converged = new, True
-            break
-        # a step whose model diverges in closed loop is halved (at most MAX_HALVINGS times)
-        factor, nxt = 1.0, sums_at(new)
-        while nxt is None and factor > 0.5**MAX_HALVINGS:
-            factor *= 0.5
-            nxt = sums_at(theta + factor * (new - theta))
-        history.append({**entry, "step_factor": factor})
-        if nxt is None:
-            stopped = "every shortened step diverged in closed loop"
-            break
-        theta, cur = theta + factor * (new - theta), nxt
+    theta, cur, history, converged, stopped = _iterate(sums_at, theta, cur, options)
     A, S = cur[0], cur[1]
     record = {
         "method": options.method,

@@ -30,6 +30,9 @@ from ...simulation import MeasurementNoise
 from ...trajectories import FourierTrajectory
 from .plant import Plant
 
+#: Physics steps (semi-implicit Euler) per control period of the true robot.
+SUBSTEPS = 10
+
 
 @dataclass(frozen=True)
 class TrackingLog:
@@ -54,13 +57,12 @@ def simulate_tracking(
     theta=None,
     noise: MeasurementNoise | None = None,
     seed: int = 0,
-    substeps: int = 10,
 ) -> TrackingLog:
     """The closed-loop log of ``robot`` (true parameters ``theta``, default the nominal)
     tracking ``trajectory`` with ``controller`` (module docstring).
 
-    ``duration`` [s], ``rate`` [Hz] (the control and log rate), ``substeps`` physics steps
-    per control period; ``noise``: torque noise relative to each joint's RMS commanded
+    ``duration`` [s], ``rate`` [Hz] (the control and log rate), :data:`SUBSTEPS` physics
+    steps per control period; ``noise``: torque noise relative to each joint's RMS commanded
     torque, position [rad] and velocity [rad/s] noise of the measurement the controller
     reads and the log holds; ``seed``: the noise's.
     """
@@ -78,7 +80,7 @@ def simulate_tracking(
     n = int(math.floor(duration * rate + 1e-9)) + 1
     noise = noise or MeasurementNoise()
     theta_true = robot.nominal_parameters if theta is None else np.asarray(theta, float)
-    plant = Plant(robot, theta_true, rate=rate, substeps=substeps)
+    plant = Plant(robot, theta_true, rate=rate, substeps=SUBSTEPS)
     t = np.arange(n) / rate
     q_ref, dq_ref, _ = trajectory.sample(t)
     rng = np.random.default_rng(seed)
@@ -93,10 +95,9 @@ def simulate_tracking(
         controller,
         q_ref,
         dq_ref,
-        q_ref[0],
-        dq_ref[0],
+        (q_ref[0], dq_ref[0]),
         1.0 / rate,
-        substeps=substeps,
+        substeps=SUBSTEPS,
         measure=measure if (sq > 0 or sv > 0) else None,
     )
     if run.diverged:
@@ -114,4 +115,4 @@ def simulate_tracking(
     return TrackingLog(data, q_ref, dq_ref, theta_true, np.sqrt(np.mean(err**2, axis=0)))
 
 
-__all__ = ["TrackingLog", "simulate_tracking"]
+__all__ = ["SUBSTEPS", "TrackingLog", "simulate_tracking"]
