@@ -55,7 +55,7 @@ class Controller:
     kp, kd : numpy.ndarray
         proportional [N m/rad] and derivative [N m s/rad] gains, shape (nv,), >= 0.
     ki : numpy.ndarray
-        integral gains [N m/(rad s)], shape (nv,), >= 0 (zeros: a PD).
+        integral gains [N m/(rad s)], shape (nv,), >= 0 (None given: zeros, a PD).
     q_column, dq_column : str
         names of the reference columns of the log.
     source : str
@@ -159,7 +159,8 @@ def load_controller(path, nv: int | None = None) -> Controller:
             )
     if q_col == dq_col:
         raise InputError(f"{path}: reference.q and reference.dq are both {q_col!r}")
-    return Controller(gains["kp"], gains["kd"], gains.get("ki"), q_col, dq_col, str(path))
+    ki = gains.get("ki", np.zeros(n))
+    return Controller(gains["kp"], gains["kd"], ki, q_col, dq_col, str(path))
 
 
 def reference_names(controller: Controller | None) -> tuple[str, ...]:

@@ -21,6 +21,7 @@ import shutil
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -251,14 +252,13 @@ def _save_tracking(log: TrackingLog, controller, path: Path, fmt: str) -> None:
     """A closed-loop log with its reference columns (:mod:`manip_id.controller`)."""
     d = log.dataset
     qc, dqc = controller.q_column, controller.dq_column
+    names = tuple(d.joint_names or ())
     if fmt == "npz":
+        arrays: dict[str, Any] = {"t": d.t, "q": d.q, "dq": d.dq, "tau": d.tau}
+        arrays.update({qc: log.q_ref, dqc: log.dq_ref, "joint_names": np.array(names)})
         with open(path, "wb") as fh:
-            np.savez(
-                fh, t=d.t, q=d.q, dq=d.dq, tau=d.tau, joint_names=np.array(d.joint_names),
-                **{qc: log.q_ref, dqc: log.dq_ref},
-            )  # fmt: skip
+            np.savez(fh, **arrays)
         return
-    names = d.joint_names
     header = ["t"] + [f"{f}_{j}" for f in ("q", "dq", "tau", qc, dqc) for j in names]
     rows = np.column_stack([d.t, d.q, d.dq, d.tau, log.q_ref, log.dq_ref])
     np.savetxt(path, rows, delimiter=",", header=",".join(header), comments="", fmt="%.17g")

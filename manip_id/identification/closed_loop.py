@@ -39,7 +39,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..controller import Controller, on_grid, read_reference, track
-from ..datasets import parse_file_spec
+from ..datasets import Dataset, parse_file_spec
 from ..errors import InputError, NumericalError
 from ..robot.model import Robot
 from ..robot.regressor import iter_regressor
@@ -52,6 +52,11 @@ from .rollout import read_logs
 CLOSED_LOOP_METHODS: dict[str, str] = {
     "iv": "IDIM-IV: instruments from the model simulated in closed loop with the controller",
     "didim": "DIDIM: least squares on the regressor of the simulated closed loop",
+}
+#: How the covariance of each estimator is made (the result's ``uncertainty.reason``).
+_COVARIANCE = {
+    "iv": "iv: s^2 A^-1 S A^-T, A = Y_s^T W Y, S = Y_s^T W Y_s, white residuals",
+    "didim": "didim: s^2 (Y_s^T W Y_s)^-1, white residuals",
 }
 #: Most halvings of a step whose model diverges in closed loop.
 MAX_HALVINGS = 10
@@ -112,14 +117,14 @@ class ClosedLoopLog:
     ``dq``, ``ddq``, ``tau``: a :class:`~manip_id.datasets.Dataset`) and the controller's
     reference on the same samples, ``q_ref``, ``dq_ref`` (N, nv)."""
 
-    data: object
+    data: Dataset
     q_ref: np.ndarray
     dq_ref: np.ndarray
 
     @property
     def dt(self) -> float:
         """The log step [s] (the mean one)."""
-        t = np.asarray(self.data.t, float)
+        t = np.asarray(self.data.t, dtype=float)
         return float((t[-1] - t[0]) / (len(t) - 1))
 
 
@@ -246,7 +251,7 @@ def _iterate(sums_at, theta, cur, options: ClosedLoopOptions):
             raise NumericalError(
                 f"{options.method} estimate", f"the normal matrix is singular at iteration {k}"
             ) from exc
-        step = float(np.linalg.norm(new - theta) / max(np.linalg.norm(theta), 1e-300))
+        step = float(np.linalg.norm(new - theta)) / max(float(np.linalg.norm(theta)), 1e-300)
         entry = {"iteration": k, "step": step, **figures}
         if step < options.tolerance:
             history.append(entry)
@@ -375,7 +380,7 @@ def _estimated(result, robot, theta_b, logs, validation, record, weights, sums):
         covariance=cov,
         covariance_white=cov,
         std_white=std,
-        uncertainty={"method": "white", "reason": f"{record['method']}: white residuals"},
+        uncertainty={"method": "white", "reason": _COVARIANCE[record["method"]]},
         standard=None,
         timings={**result.timings, "closed_loop": seconds},
     )
