@@ -73,7 +73,7 @@ def errors(robot, result_path: Path, truth: dict) -> tuple[float, float]:
 
 
 def one(robot_name: str, tau_noise: float, a, tmp: Path) -> list[dict]:
-    rob = ["--profile", "none", "--friction", "viscous"]
+    rob = ["--friction", "viscous"]  # the robot's profile (panda: fingers locked)
     robot = load_robot(robot_name, friction="viscous")
     ctrl = controller_file(robot, a.wn, tmp / f"{robot_name}.toml")
     sim = tmp / f"{robot_name}_{tau_noise:g}"
@@ -131,11 +131,6 @@ def main() -> None:
     parser.add_argument("--duration", type=float, default=10.0, help="per log [s]")
     parser.add_argument("--json", default=None, help="also write the rows as JSON here")
     a = parser.parse_args()
-    rows = []
-    with tempfile.TemporaryDirectory() as d:
-        for robot_name in a.robots.split(","):
-            for tau_noise in (0.01, 0.05):
-                rows += one(robot_name, tau_noise, a, Path(d))
     print(
         f"PD at {a.wn:g} rad/s, 1 kHz, position noise {a.position_noise:g} rad, cut-off "
         f"{a.cutoff:g} Hz, {a.duration:g} s per log"
@@ -144,16 +139,24 @@ def main() -> None:
         "| robot | torque noise | method | median rel. error | norm rel. error | "
         "validation torque error | rollout 0.25 s [rad] | identify [s] | vs OLS | iterations |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|")
-    for r in rows:
-        print(
-            f"| {r['robot']} | {100 * r['tau_noise']:g} % | {r['method']} | "
-            f"{100 * r['median_rel']:.2f} % | {100 * r['norm_rel']:.3f} % | "
-            f"{100 * r['validation']:.2f} % | {r['rollout']:.2e} | {r['seconds']:.1f} | "
-            f"{r['time_ratio']:.2f}x | {r['iterations'] if r['iterations'] else ''} |"
-        )
-    if a.json:
-        Path(a.json).write_text(json.dumps(rows, indent=1))
+    print("|---|---|---|---|---|---|---|---|---|---|", flush=True)
+    rows = []
+    with tempfile.TemporaryDirectory() as d:
+        for robot_name in a.robots.split(","):
+            for tau_noise in (0.01, 0.05):
+                new = one(robot_name, tau_noise, a, Path(d))
+                for r in new:
+                    print(
+                        f"| {r['robot']} | {100 * r['tau_noise']:g} % | {r['method']} | "
+                        f"{100 * r['median_rel']:.2f} % | {100 * r['norm_rel']:.3f} % | "
+                        f"{100 * r['validation']:.2f} % | {r['rollout']:.2e} | "
+                        f"{r['seconds']:.1f} | {r['time_ratio']:.2f}x | "
+                        f"{r['iterations'] if r['iterations'] else ''} |",
+                        flush=True,
+                    )
+                rows += new
+                if a.json:
+                    Path(a.json).write_text(json.dumps(rows, indent=1))
 
 
 if __name__ == "__main__":

@@ -26,10 +26,10 @@ def check_args(args: argparse.Namespace) -> None:
                 raise InputError(f"{flag} applies to --refine output-error")
         return
     what = "--refine" if refine_on else "--rollout"
-    if args.simulate or args.model != "dynamic" or args.method not in ("ols", "wls", *CLOSED_LOOP):
-        raise InputError(
-            f"{what} applies to --data files, --method ols, wls, iv or didim, --model dynamic"
-        )
+    methods = ("ols", "wls") if refine_on else ("ols", "wls", *CLOSED_LOOP)
+    if args.simulate or args.model != "dynamic" or args.method not in methods:
+        words = "ols or wls" if refine_on else "ols, wls, iv or didim"
+        raise InputError(f"{what} applies to --data files, --method {words}, --model dynamic")
     if getattr(args, "scheduler", None) is not None or getattr(args, "per_file", False):
         raise InputError(f"{what} runs on one process: no --scheduler or --per-file")
     if rollout is not None:
