@@ -42,6 +42,8 @@ from .errors import DataError, InputError
 
 #: Default names of the reference columns (NPZ arrays; CSV prefixes ``<name>_<joint>``).
 REFERENCE_COLUMNS = ("qref", "dqref")
+#: Prefixes of a CSV log's measured columns: no reference name may start with them.
+MEASURED_PREFIXES = ("q_", "dq_", "ddq_", "tau_", "temp_")
 #: Keys of a controller file.
 KEYS = ("kp", "kd", "ki", "reference")
 
@@ -152,6 +154,12 @@ def load_controller(path, nv: int | None = None) -> Controller:
     q_col = f.text(ref.get("q", REFERENCE_COLUMNS[0]), "reference.q")
     dq_col = f.text(ref.get("dq", REFERENCE_COLUMNS[1]), "reference.dq")
     for key, name in (("reference.q", q_col), ("reference.dq", dq_col)):
+        if name.startswith(MEASURED_PREFIXES):
+            raise InputError(
+                f"{path}: {key} {name!r} starts like a measured column "
+                f"({', '.join(MEASURED_PREFIXES)}): a CSV reader would take its columns for "
+                "the measured ones; e.g. 'qref'"
+            )
         if not (name.isidentifier() and name.endswith("ref")):
             raise InputError(
                 f"{path}: {key} must be a column name ending in 'ref' (letters, digits, _; "

@@ -16,7 +16,7 @@ from conftest import get_robot
 
 from manip_id.cli import main
 from manip_id.control.closed_loop import simulate_tracking
-from manip_id.controller import Controller, load_controller
+from manip_id.controller import Controller, load_controller, read_reference
 from manip_id.errors import InputError
 from manip_id.identification import (
     ClosedLoopOptions,
@@ -140,6 +140,7 @@ def test_iv_and_didim_beat_biased_least_squares(closed_loop):
         ("kp = [1.0, 2.0]\nkd = [1.0, 1.0]\nki = 3\n", "ki must be a non-empty list"),
         ('kp = [1, 2]\nkd = [1, 1]\n[reference]\nq = "q"\n', "reference.q must be a column"),
         ('kp = [1, 2]\nkd = [1, 1]\n[reference]\nq = "dqref"\n', "both 'dqref'"),
+        ('kp = [1, 2]\nkd = [1, 1]\n[reference]\nq = "q_ref"\n', "starts like a measured"),
         ("kp = [1.0, 2.0\n", "cannot read controller file"),
     ],
 )
@@ -151,9 +152,29 @@ def test_bad_controller_files_are_one_error_naming_file_and_key(tmp_path, text, 
     assert message in str(info.value) and str(path) in str(info.value)
 
 
-def test_a_pid_file_reads_back():
-    ctrl = Controller([1.0, 2.0], [0.1, 0.2], [0.5, 0.0])
-    assert ctrl.kind == "pid" and ctrl.to_dict()["reference"] == {"q": "qref", "dq": "dqref"}
+def test_a_pid_log_is_the_pid_law_and_its_csv_reads_back(tmp_path):
+    robot = get_robot("double_pendulum", friction="viscous")
+    path = tmp_path / "pid.toml"
+    path.write_text(
+        'kp = [12.0, 4.0]\nkd = [0.9, 0.3]\nki = [30.0, 10.0]\n[reference]\nq = "qd_ref"\n'
+    )
+    ctrl = load_controller(path, 2)
+    assert ctrl.kind == "pid" and ctrl.to_dict()["reference"] == {"q": "qd_ref", "dq": "dqref"}
+    traj = random_trajectory(robot, harmonics=3, seed=4)
+    log = simulate_tracking(robot, traj, ctrl, duration=0.5, rate=1000.0)
+    d = log.dataset
+    e = log.q_ref - d.q
+    law = ctrl.kp * e + ctrl.kd * (log.dq_ref - d.dq) + ctrl.ki * np.cumsum(e, axis=0) / 1000.0
+    np.testing.assert_allclose(d.tau, law, rtol=1e-10, atol=1e-12)
+    # a CSV log's reference columns qd_ref_<joint>, dqref_<joint> read back
+    csv = tmp_path / "pid.csv"
+    names = robot.joint_names
+    head = ["t"] + [f"{f}_{j}" for f in ("q", "dq", "tau", "qd_ref", "dqref") for j in names]
+    rows = np.column_stack([d.t, d.q, d.dq, d.tau, log.q_ref, log.dq_ref])
+    np.savetxt(csv, rows, delimiter=",", header=",".join(head), comments="", fmt="%.17g")
+    t, q_ref, dq_ref = read_reference(csv, ctrl, 2)
+    np.testing.assert_allclose(q_ref, log.q_ref, rtol=1e-15)
+    np.testing.assert_allclose(dq_ref, log.dq_ref, rtol=1e-15)
 
 
 @pytest.mark.parametrize(
