@@ -211,10 +211,11 @@ def test_dask_run_same_in_both(files, tmp_path, capsys):
     np.testing.assert_allclose(result.estimate, serial.estimate, rtol=1e-9, atol=1e-9)
 
 
-@pytest.mark.parametrize("method", ["iv", "didim"])
+@pytest.mark.parametrize("method", ["iv", pytest.param("didim", marks=pytest.mark.slow)])
 def test_closed_loop_estimators_same_in_both(tmp_path, capsys, method):
     """A closed-loop log (PD tracking, noisy positions): ``--method iv/didim --controller``
-    and ``FileOptions(closed_loop=...)`` from OLS give the same document."""
+    and ``FileOptions(closed_loop=...)`` from OLS give the same document (didim: the same
+    path, slow)."""
     import pinocchio as pin
 
     from manip_id.control.closed_loop import simulate_tracking
