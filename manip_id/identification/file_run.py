@@ -376,7 +376,7 @@ def files_build(
             "per-file estimates)"
         )
     if fopts.closed_loop is not None:
-        check_closed_loop(robot, fopts.closed_loop, specs + (vspecs or []))
+        check_closed_loop(robot, fopts.closed_loop, specs)  # the training files hold a reference
     if fopts.distributed(run) or opts.model.name != "dynamic":
         return _distributed(robot, specs, vspecs, base, settings, opts, fopts)
     if fopts.split is not None and (len(specs) != 1 or vspecs is not None):
