@@ -214,6 +214,30 @@ def read_reference(
     return t, qr, dqr
 
 
+def check_reference(path, controller: Controller) -> None:
+    """Refuse, before any work, a log (NPZ or CSV) without the controller's reference
+    columns: an NPZ's member names, a CSV's header alone are read."""
+    path = Path(path).expanduser()
+    names = (controller.q_column, controller.dq_column)
+    try:
+        if path.suffix.lower() == ".npz":
+            with zipfile.ZipFile(path) as zf:
+                found = {n[:-4] for n in zf.namelist() if n.endswith(".npy")}
+            missing = [n for n in names if n not in found]
+        else:
+            with open(path, encoding="utf-8-sig") as fh:
+                header = [h.strip() for h in fh.readline().strip().split(",")]
+            missing = [n for n in names if not any(h.startswith(n + "_") for h in header)]
+    except (OSError, UnicodeDecodeError, zipfile.BadZipFile) as exc:
+        raise DataError(f"cannot read the reference of {path}: {exc}") from exc
+    if missing:
+        where = "arrays" if path.suffix.lower() == ".npz" else "columns <name>_<joint>"
+        raise DataError(
+            f"{path}: no reference {where} {', '.join(missing)} for the controller "
+            f"{controller.source or ''} (a closed-loop log holds the reference it tracked)"
+        )
+
+
 def _csv_reference(path: Path, names) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     try:
         with open(path, encoding="utf-8-sig") as fh:
@@ -312,6 +336,7 @@ __all__ = [
     "REFERENCE_COLUMNS",
     "Controller",
     "Tracked",
+    "check_reference",
     "load_controller",
     "on_grid",
     "read_reference",

@@ -201,6 +201,19 @@ def test_bad_closed_loop_options_fail_in_one_line(closed_loop, tmp_path, capsys,
     assert message in err and err.count("\n") == 1, err
 
 
+def test_a_log_without_the_reference_is_refused_before_work(closed_loop, tmp_path, capsys):
+    robot, ctrl, path, _ = closed_loop
+    with np.load(path) as z:
+        plain = {k: z[k] for k in ("t", "q", "dq", "tau")}
+    bare = tmp_path / "open_loop.npz"
+    np.savez(bare, **plain)
+    toml = str(_write_toml(tmp_path / "ctrl.toml", ctrl))
+    argv = ["identify", "double_pendulum", "--friction", "viscous", "--data", str(bare)]
+    assert main([*argv, "--method", "iv", "--controller", toml]) == 2
+    err = capsys.readouterr().err
+    assert "no reference arrays qref, dqref" in err and err.count("\n") == 1, err
+
+
 def test_a_controller_of_another_size_is_refused(closed_loop, tmp_path, capsys):
     _, _, path, _ = closed_loop
     toml = tmp_path / "ctrl.toml"

@@ -38,7 +38,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..controller import Controller, on_grid, read_reference, track
+from ..controller import Controller, check_reference, on_grid, read_reference, track
 from ..datasets import Dataset, parse_file_spec
 from ..errors import InputError, NumericalError
 from ..robot.model import Robot
@@ -149,6 +149,7 @@ def check_closed_loop(robot: Robot, options: ClosedLoopOptions, specs) -> None:
             raise InputError(
                 f"{spec.label}: the controller's reference is read from NPZ or CSV logs"
             )
+        check_reference(spec.path, options.controller)
 
 
 def closed_loop_logs(
