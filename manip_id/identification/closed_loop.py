@@ -382,6 +382,9 @@ def _estimated(result, robot, theta_b, logs, validation, record, weights, sums):
         covariance_white=cov,
         std_white=std,
         uncertainty={"method": "white", "reason": _COVARIANCE[record["method"]]},
+        solver=f"{record['method']}: {record['iterations']} closed-loop simulations from "
+        f"{record['start']} ({'converged' if record['converged'] else 'not converged'}); "
+        "each step a linear solve (LU)",
         standard=None,
         timings={**result.timings, "closed_loop": seconds},
     )
