@@ -45,8 +45,9 @@ LAYERS: list[tuple[str, str, tuple[str, ...]]] = [
     ),
     (
         "data",
-        "Measured data and its readers; filtering; excitation; synthetic data; the log auditor.",
-        ("datasets", "signals", "trajectories", "simulation", "audit"),
+        "Measured data and its readers; filtering; excitation; synthetic data; the log auditor; "
+        "the controller of a closed-loop log.",
+        ("datasets", "signals", "trajectories", "simulation", "audit", "controller"),
     ),
     (
         "execution",

@@ -209,3 +209,41 @@ def test_dask_run_same_in_both(files, tmp_path, capsys):
     assert "audit" not in doc and "audit" not in mine
     serial = identify(robot, [train], validation=[valid], run=RunOptions(workers=1))
     np.testing.assert_allclose(result.estimate, serial.estimate, rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("method", ["iv", pytest.param("didim", marks=pytest.mark.slow)])
+def test_closed_loop_estimators_same_in_both(tmp_path, capsys, method):
+    """A closed-loop log (PD tracking, noisy positions): ``--method iv/didim --controller``
+    and ``FileOptions(closed_loop=...)`` from OLS give the same document (didim: the same
+    path, slow)."""
+    import pinocchio as pin
+
+    from manip_id.control.closed_loop import simulate_tracking
+    from manip_id.controller import load_controller
+    from manip_id.identification import ClosedLoopOptions
+    from manip_id.simulation import MeasurementNoise
+    from manip_id.trajectories import random_trajectory
+
+    robot = get_robot("ur5", friction="viscous")
+    model = robot.model
+    mjj = np.diag(pin.crba(model, model.createData(), pin.neutral(model)))
+    toml = tmp_path / "pd.toml"
+    toml.write_text(f"kp = {(mjj * 900).tolist()}\nkd = {(mjj * 60).tolist()}\n")
+    ctrl = load_controller(toml, robot.nv)
+    traj = random_trajectory(robot, harmonics=3, seed=3)
+    noise = MeasurementNoise(tau=0.01, q=1e-4)
+    log = simulate_tracking(robot, traj, ctrl, duration=2.0, rate=500.0, noise=noise, seed=2)
+    d = log.dataset
+    path = tmp_path / "loop.npz"
+    np.savez(path, t=d.t, q=d.q, dq=d.dq, tau=d.tau, qref=log.q_ref, dqref=log.dq_ref)
+    argv = ["identify", "ur5", "--friction", "viscous", "--data", str(path), "--cutoff", "20"]
+    doc, printed = _cli(tmp_path, capsys, [*argv, "--method", method, "--controller", str(toml)])
+    files = FileOptions(
+        preprocess=PreprocessOptions(cutoff=20.0), closed_loop=ClosedLoopOptions(method, ctrl)
+    )
+    result = identify(robot, str(path), method="ols", files=files, run=RunOptions(workers=1))
+    mine = json.loads(json.dumps(result.to_dict()))
+    _same(_strip(doc), _strip(mine))
+    assert set(doc) == set(result.to_dict())  # --json keys == to_dict() keys
+    assert doc["method"] == method and doc["closed_loop"]["iterations"] >= 1
+    assert f"{method}: " in printed and "iterations from ols" in printed

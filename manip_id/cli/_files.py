@@ -72,10 +72,11 @@ def files_call(args: argparse.Namespace):
         partition=PartitionOptions(block=args.block, per_file=args.per_file) if fleet else None,
         select_friction=SelectionOptions() if args.friction == "auto" else None,
         **_rollout.forward_options(args),
+        **_rollout.closed_loop_options(args, robot.nv),
     )
     kwargs = dict(
         validation=vspecs,
-        method=args.method,
+        method="ols" if args.method in _rollout.CLOSED_LOOP else args.method,  # their start
         consistent=consistent_options(args),
         model=ModelOptions(args.model, window_length=args.window_length),
         run=RunOptions(

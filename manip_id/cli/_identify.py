@@ -28,6 +28,7 @@ from ._runtime import check_scheduler, consistent_options
 
 # -------------------------------------------------------------------- checks
 def _check_args(args) -> None:
+    _rollout.check_closed_loop_args(args)  # first: --method iv/didim without --controller
     if not args.simulate:
         given = [n for n in ("duration", "noise", "seed") if getattr(args, n) is not None]
         rate = getattr(args, "rate", None)  # with --data: files without a time column

@@ -21,12 +21,14 @@ import shutil
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from .._io import write_json
 from .._io.fields import Fields
-from ..control.closed_loop import with_payload
+from ..control.closed_loop import TrackingLog, simulate_tracking, with_payload
+from ..controller import load_controller
 from ..datasets import Dataset, save_dataset
 from ..errors import InputError, PhysicalConsistencyError, ResourceError
 from ..identification import load_result
@@ -45,6 +47,7 @@ JOINT_TERMS = ("Ia", "fv", "fc", "fo", "k")
 MAX_LOGS = 10_000
 #: Bounds of the numbers that shape the logs, refused at their option beyond them.
 MAX_NOISE = 100.0  # relative to the RMS torque
+MAX_STATE_NOISE = 1.0  # [rad or m, rad/s or m/s]
 MAX_PAYLOAD = 1e4  # [kg]
 GAIN_RANGE = (1e-6, 1e6)  # [N m/A]
 #: Bytes per stored value of each format (CSV: a printed float and its comma).
@@ -70,6 +73,17 @@ def _check(args: argparse.Namespace) -> tuple[list[float], list[Run]]:
         value = getattr(args, name)
         if not (math.isfinite(value) and value > 0):
             raise InputError(f"--{name} must be a positive number, got {value}")
+    for name in ("position_noise", "velocity_noise"):
+        value = getattr(args, name)
+        if not (math.isfinite(value) and 0 <= value <= MAX_STATE_NOISE):
+            raise InputError(
+                f"--{name.replace('_', '-')} must be in [0, {MAX_STATE_NOISE:g}], got {value}"
+            )
+    if args.controller is not None:
+        if args.format == "mcap":
+            raise InputError("--controller writes the reference columns: --format npz or csv")
+        if args.drive_gains is not None:
+            raise InputError("--controller logs the commanded torques: no --drive-gains")
     if not (math.isfinite(args.noise) and 0 <= args.noise <= MAX_NOISE):
         raise InputError(
             f"--noise must be in [0, {MAX_NOISE:g}] (relative to the RMS torque), got {args.noise}"
@@ -219,6 +233,37 @@ def _gains(args: argparse.Namespace, nv: int) -> np.ndarray | None:
     return gains
 
 
+def _noise(args) -> MeasurementNoise:
+    return MeasurementNoise(tau=args.noise, q=args.position_noise, dq=args.velocity_noise)
+
+
+def _tracking_log(robot, run: Run, theta: np.ndarray, args) -> TrackingLog:
+    """The closed-loop log of one run (``--controller``)."""
+    traj = args.design if args.design is not None else excitation(robot, run.seed)
+    if traj.nv != robot.nv:
+        raise InputError(f"--trajectory has {traj.nv} joints but {robot.name!r} has {robot.nv}")
+    return simulate_tracking(
+        robot, traj, args.loop, duration=args.duration, rate=args.rate, theta=theta,
+        noise=_noise(args), seed=run.seed,
+    )  # fmt: skip
+
+
+def _save_tracking(log: TrackingLog, controller, path: Path, fmt: str) -> None:
+    """A closed-loop log with its reference columns (:mod:`manip_id.controller`)."""
+    d = log.dataset
+    qc, dqc = controller.q_column, controller.dq_column
+    names = tuple(d.joint_names or ())
+    if fmt == "npz":
+        arrays: dict[str, Any] = {"t": d.t, "q": d.q, "dq": d.dq, "tau": d.tau}
+        arrays.update({qc: log.q_ref, dqc: log.dq_ref, "joint_names": np.array(names)})
+        with open(path, "wb") as fh:
+            np.savez(fh, **arrays)
+        return
+    header = ["t"] + [f"{f}_{j}" for f in ("q", "dq", "tau", qc, dqc) for j in names]
+    rows = np.column_stack([d.t, d.q, d.dq, d.tau, log.q_ref, log.dq_ref])
+    np.savetxt(path, rows, delimiter=",", header=",".join(header), comments="", fmt="%.17g")
+
+
 def _log(robot, run: Run, theta: np.ndarray, args, gains) -> Dataset:
     """The simulated log of one run (currents tau / gains in the torque columns with gains)."""
     traj = args.design if args.design is not None else excitation(robot, run.seed)
@@ -230,7 +275,7 @@ def _log(robot, run: Run, theta: np.ndarray, args, gains) -> Dataset:
         duration=args.duration,
         rate=args.rate,
         theta=theta,
-        noise=MeasurementNoise(tau=args.noise),
+        noise=_noise(args),
         seed=run.seed,
     )
     data = sim.dataset
@@ -260,10 +305,25 @@ def _readme(robot, args, masses: list[float], runs: list[Run], gains) -> str:
             else f"motion: one random Fourier excitation per file (seed {runs[0].seed} for the "
             "first, +1 per file); no two files repeat a motion"
         ),
-        f"samples: {args.duration:g} s at {args.rate:g} Hz per file; q, dq and ddq exact"
-        + (" (ddq not in MCAP bags)" if args.format == "mcap" else ""),
+        f"samples: {args.duration:g} s at {args.rate:g} Hz per file; "
+        + (
+            "q, dq measured (noise below), no ddq"
+            if args.controller
+            else "q, dq and ddq exact"
+            + (" (ddq not in MCAP bags)" if args.format == "mcap" else "")
+        ),
         f"torque noise: Gaussian, std {args.noise:g} x each joint's RMS torque",
+        f"position noise: Gaussian, std {args.position_noise:g} rad; velocity noise: std "
+        f"{args.velocity_noise:g} rad/s",
     ]
+    if args.controller:
+        lines.append(
+            f"closed loop: the {args.loop.kind.upper()} controller of {args.controller} tracks the "
+            f"excitation (columns {args.loop.q_column}_<joint>, {args.loop.dq_column}_<joint>; "
+            "NPZ arrays of those names), reading the noisy measurement; torque columns: "
+            "the commanded torques (identify --method iv --controller "
+            f"{args.controller})"
+        )
     if masses:
         lines.append(
             f"payload: point mass(es) {', '.join(f'{m:g}' for m in masses)} kg at {LEVER:g} m "
@@ -311,7 +371,12 @@ def _truth(robot, args, theta, masses: list[float], runs: list[Run], gains) -> d
             "tool_mass": args.tool,
             "model": args.model,
         },
-        "noise": {"tau_relative": args.noise},
+        "noise": {
+            "tau_relative": args.noise,
+            "position": args.position_noise,
+            "velocity": args.velocity_noise,
+        },
+        "controller": None if args.loop is None else args.loop.to_dict(),
         "duration": args.duration,
         "rate": args.rate,
         "drive_gains": None if gains is None else [float(g) for g in gains],
@@ -341,6 +406,10 @@ def run(args: argparse.Namespace) -> int:
     if args.trajectory is not None:
         read_design(args.trajectory, robot)  # the design's robot and joints, before work
     gains = _gains(args, robot.nv)
+    args.loop = None if args.controller is None else load_controller(args.controller, robot.nv)
+    tr = robot.transmission
+    if args.loop is not None and tr is not None and tr.signals == "motor":
+        raise InputError("--controller writes joint-side logs: no motor-side --transmission")
     check_simulation_memory(robot, int(round(args.duration * args.rate)))
     _check_disk(robot, args, runs)
     theta = truth_parameters(robot, args)
@@ -348,7 +417,12 @@ def run(args: argparse.Namespace) -> int:
     def fill(folder: Path) -> None:
         for r in runs:
             truth = with_payload(robot, theta, r.mass) if r.mass else theta
-            save_dataset(_log(robot, r, truth, args, gains), folder / r.name, format=args.format)
+            if args.loop is not None:
+                log = _tracking_log(robot, r, truth, args)
+                _save_tracking(log, args.loop, folder / r.name, args.format)
+            else:
+                data = _log(robot, r, truth, args, gains)
+                save_dataset(data, folder / r.name, format=args.format)
             if not args.quiet:
                 print(f"simulated {r.name}")
         (folder / "README.txt").write_text(_readme(robot, args, masses, runs, gains))

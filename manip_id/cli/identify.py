@@ -30,7 +30,7 @@ from ._common import (
     cutoff_value,
 )
 
-METHODS = ("ols", "wls", "rls", "gradient")
+METHODS = ("ols", "wls", "rls", "gradient", "iv", "didim")
 
 
 def register(sub) -> None:
@@ -102,7 +102,20 @@ def register(sub) -> None:
         help="design the excitation (D-optimal, rest to rest, within the limits, torques and "
         "self-collision: as manip-id excite) instead of a random one",
     )
-    p.add_argument("--method", choices=METHODS, default="wls", help="estimator [default wls]")
+    p.add_argument(
+        "--method",
+        choices=METHODS,
+        default="wls",
+        help="estimator [default wls]; iv (IDIM-IV) and didim (DIDIM) are the closed-loop "
+        "estimators of logs recorded with the known controller of --controller",
+    )
+    p.add_argument(
+        "--controller",
+        metavar="FILE.toml",
+        default=None,
+        help="the PD/PID controller of closed-loop logs (kp, kd[, ki] per joint; the "
+        "reference columns qref, dqref of the logs): needed by --method iv and didim",
+    )
     p.add_argument(
         "--uncertainty",
         choices=("auto", "white", "hac"),

@@ -69,6 +69,30 @@ def register(sub) -> None:
         f"[default {SIM_DEFAULTS['noise']:g}]",
     )
     p.add_argument(
+        "--position-noise",
+        type=float,
+        default=0.0,
+        metavar="RAD",
+        help="Gaussian noise std on the logged positions [rad or m] (0: exact) [default 0]",
+    )
+    p.add_argument(
+        "--velocity-noise",
+        type=float,
+        default=0.0,
+        metavar="RAD/S",
+        help="Gaussian noise std on the logged velocities [rad/s or m/s] [default 0]",
+    )
+    p.add_argument(
+        "--controller",
+        default=None,
+        metavar="FILE.toml",
+        help="simulate in closed loop: the robot driven by this PD/PID controller (kp, kd[, "
+        "ki] per joint) tracking the excitation, which the logs hold as the reference columns "
+        "(qref, dqref); the controller reads the noisy measurement; the torque columns are the "
+        "commanded torques; no ddq is logged (npz or csv) [default: open loop, inverse "
+        "dynamics along the excitation]",
+    )
+    p.add_argument(
         "--payload",
         default=None,
         metavar="MASS[,MASS...]",

@@ -124,11 +124,12 @@ def inspect_npz(path: Path, max_bytes: int | None = None) -> tuple[dict[str, Npy
             "joint_names "
             f"(found {', '.join(sorted(members)) or 'none'})"
         )
-    unknown = sorted(set(members) - {*FIELDS, "joint_names"})
+    # a closed-loop log's reference arrays (qref, dqref: manip_id.controller) are not read
+    unknown = sorted(n for n in set(members) - {*FIELDS, "joint_names"} if not n.endswith("ref"))
     if unknown:
         raise DataError(
             f"{path} holds unexpected array(s) {', '.join(unknown)}; "
-            "expected t, q, dq, tau, ddq, temp, joint_names"
+            "expected t, q, dq, tau, ddq, temp, joint_names (and reference arrays *ref)"
         )
     for name, m in members.items():
         kind = m.dtype.kind

@@ -26,11 +26,13 @@ audit, scans, temperature reference, friction choice), :mod:`~.reading`,
 :mod:`~.tasks` (the tasks of a distributed run), :mod:`~.nominal_check` (joints the fit
 made worse than the nominal model); :mod:`~.forward`, :mod:`~.rollout` and :mod:`~.refine`
 (the model integrated forward from the measured torques: rollout validation and
-output-error refinement)."""
+output-error refinement); :mod:`~.closed_loop` (IDIM-IV and DIDIM: closed-loop logs with a
+known controller)."""
 
 from __future__ import annotations
 
 from .arrays import accumulate_parts
+from .closed_loop import CLOSED_LOOP_METHODS, ClosedLoopOptions, closed_loop_estimate
 from .data_sources import data_source
 from .document import (
     CONDITION_LIMIT,
@@ -74,12 +76,14 @@ from .solve import solve, validation_errors
 from .tasks import PartitionOptions, distributed_problem
 
 __all__ = [
+    "CLOSED_LOOP_METHODS",
     "CONDITION_LIMIT",
     "CONVERGENCE_LIMIT",
     "LEAST_SQUARES",
     "METHODS",
     "NOT_DETERMINED",
     "POORLY_IDENTIFIED",
+    "ClosedLoopOptions",
     "ConsistentOptions",
     "FileAccumulation",
     "FileEstimate",
@@ -105,6 +109,7 @@ __all__ = [
     "accumulate_files",
     "accumulate_parts",
     "build_problem",
+    "closed_loop_estimate",
     "data_source",
     "distributed_problem",
     "identify",

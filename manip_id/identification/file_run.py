@@ -36,6 +36,12 @@ from ..errors import InputError
 from ..identifiability import BaseParameters
 from ..robot.model import Robot
 from .arrays import CallOptions, samples_problem
+from .closed_loop import (
+    ClosedLoopOptions,
+    check_closed_loop,
+    closed_loop_estimate,
+    closed_loop_logs,
+)
 from .data_sources import Samples
 from .files import distributed_files_problem, files_problem
 from .options import (
@@ -95,6 +101,11 @@ class FileOptions:
         Roll the identified and the nominal model forward on the validation files
         (:mod:`~manip_id.identification.rollout`): ``result.rollout`` and
         ``context["rollout"]``. Both need least squares, the dynamic model, one process.
+    closed_loop : ClosedLoopOptions or None
+        Closed-loop logs with a known controller: IDIM-IV or DIDIM
+        (:mod:`~manip_id.identification.closed_loop`) from the least-squares estimate of
+        ``method`` (``"ols"`` for the classical start), ``context["closed_loop"]``; the
+        logs hold the controller's reference columns. Not with ``refine``.
     """
 
     preprocess: PreprocessOptions = field(default_factory=PreprocessOptions)
@@ -106,6 +117,7 @@ class FileOptions:
     select_friction: SelectionOptions | None = None
     refine: RefineOptions | None = None
     rollout: RolloutOptions | None = None
+    closed_loop: ClosedLoopOptions | None = None
 
     def __post_init__(self):
         if not isinstance(self.preprocess, PreprocessOptions):
@@ -116,6 +128,10 @@ class FileOptions:
             raise InputError(f"split must be a fraction in (0, 1), got {self.split}")
         if self.trim_standstill and not self.audit:
             raise InputError("trim_standstill needs the pre-fit audit (audit=True)")
+        if self.closed_loop is not None and self.refine is not None:
+            raise InputError(
+                "closed_loop (iv, didim) and refine both replace the estimate: give one"
+            )
 
     def distributed(self, run: RunOptions) -> bool:
         """Whether the files are tasks (a scheduler, blocks, or per-file estimates)."""
@@ -348,15 +364,19 @@ def files_build(
     vspecs = None if validation is None else file_specs(validation, "validation", fopts.window)
     specs, vspecs = with_transmission(robot, specs), with_transmission(robot, vspecs)
     forward = fopts.refine is not None or fopts.rollout is not None
+    forward = forward or fopts.closed_loop is not None
     if forward and (
         fopts.distributed(run)
         or opts.model.name != "dynamic"
         or settings.method not in LEAST_SQUARES
     ):
         raise InputError(
-            "refine and rollout need least squares (ols, wls), the dynamic model and one "
-            "process (no scheduler, blocks or per-file estimates)"
+            "refine, rollout and the closed-loop estimators (iv, didim) need a least-squares "
+            "start (ols, wls), the dynamic model and one process (no scheduler, blocks or "
+            "per-file estimates)"
         )
+    if fopts.closed_loop is not None:
+        check_closed_loop(robot, fopts.closed_loop, specs)  # the training files hold a reference
     if fopts.distributed(run) or opts.model.name != "dynamic":
         return _distributed(robot, specs, vspecs, base, settings, opts, fopts)
     if fopts.split is not None and (len(specs) != 1 or vspecs is not None):
@@ -415,6 +435,25 @@ def _forward_steps(robot: Robot, f, fopts: FileOptions, run: RunOptions) -> list
     files (each reads its files again, preprocessed as the fit read them)."""
     options, steps = fopts.preprocess, []
     start: dict = {}  # the estimate the refinement started from (rolled out beside it)
+    if fopts.closed_loop is not None:
+        copts = fopts.closed_loop
+
+        def estimated(result: IdentificationResult) -> IdentificationResult:
+            t0 = time.perf_counter()
+            train = closed_loop_logs(robot, f.specs, options, copts.controller)
+            valid = read_logs(robot, f.vspecs, options) if f.vspecs else None
+            out = closed_loop_estimate(result, robot, train, options=copts, validation=valid)
+            rec = out.context["closed_loop"]
+            state = "converged" if rec["converged"] else "NOT converged"
+            last = rec["history"][-1]["step"]
+            run.say(
+                f"{copts.method}: {rec['iterations']} iterations from {rec['start']}, {state} "
+                f"(last relative step {last:.2g}, tolerance {rec['tolerance']:.2g})"
+            )
+            out.timings["closed_loop"] = time.perf_counter() - t0
+            return out
+
+        steps.append(estimated)
     if fopts.refine is not None:
         ropts = fopts.refine
 

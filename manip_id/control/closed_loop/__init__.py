@@ -27,7 +27,9 @@ record, plant over one period, adapt). :func:`simulate` checks its inputs and ru
 Modules: :mod:`~manip_id.control.closed_loop.reference` (the reference, its limits and the
 validation states; payloads), :mod:`~manip_id.control.closed_loop.plant` (plant and sensors),
 :mod:`~manip_id.control.closed_loop.recorder` (the log of a run) and
-:mod:`~manip_id.control.closed_loop.run` (a step, a run, the comparison with fixed parameters).
+:mod:`~manip_id.control.closed_loop.run` (a step, a run, the comparison with fixed parameters),
+:mod:`~manip_id.control.closed_loop.tracking` (a closed-loop log with a known PD/PID
+controller, for the closed-loop estimators).
 """
 
 from __future__ import annotations
@@ -44,6 +46,7 @@ from .run import (
     simulate,
     step,
 )
+from .tracking import TrackingLog, simulate_tracking
 
 __all__ = [
     "AdaptiveComparison",
@@ -53,10 +56,12 @@ __all__ = [
     "Recorder",
     "SensorNoise",
     "Setpoint",
+    "TrackingLog",
     "check_reference",
     "compare_fixed",
     "default_reference",
     "simulate",
+    "simulate_tracking",
     "step",
     "validation_states",
     "with_payload",
