@@ -6,7 +6,9 @@ repeated over ``duration``. Steps:
 1. global start: ``options.starts`` random coefficient vectors, each scaled about the
    start pose to fit the linear limits (and shrunk until torques and clearance hold);
 2. local refinement: SLSQP on the criterion (:mod:`.information`, exact gradient) from
-   the ``options.refine`` best starts, under the constraints of :mod:`.constraints`;
+   the ``options.refine`` best starts, under the constraints of :mod:`.constraints`
+   (a working set of the rows near their bound, re-screened until all hold:
+   :mod:`.working_set`);
 3. verification on the run's own grid (``rate``): :func:`.verify.verify_design`; a
    trajectory that leaves a limit between the optimizer's grid times is shrunk about
    the start pose until it passes, else the binding constraint is raised.
@@ -38,6 +40,7 @@ from .information import CRITERIA, InformationModel, criterion_value
 from .limits import acceleration_limits, check_margin, design_position_bounds
 from .rest import RestFourier
 from .verify import DesignCheck, verify_design
+from .working_set import feasible, refine
 from .world import CollisionScene, World
 
 #: Relative std above which a base parameter is called poorly identified.
@@ -322,7 +325,7 @@ def design_excitation(
     if scene is not None and scene.n_pairs:
         t_clear = np.linspace(0.0, period, 4 * n_cost + 1)
         nonlinear.append(ClearanceConstraint(scene, family, t_clear, opt.clearance))
-    best_z, f_random = _search(objective, family.n_free, G, h, nonlinear, opt)
+    best_z, f_random = _search(objective, family.n_free, G, h, t_con.size, nonlinear, opt)
     z, check = _verified(robot, family, best_z, bounds, scene, opt, duration)
     f_final = objective.value(z)
     W = info.matrix(*family.states(z, t_cost))
@@ -374,7 +377,7 @@ class _Objective:
         return f, grad.T.ravel()
 
 
-def _search(objective: _Objective, n_free: int, G, h, nonlinear, opt: DesignOptions):
+def _search(objective: _Objective, n_free: int, G, h, n_times: int, nonlinear, opt: DesignOptions):
     """Global start (random feasible starts), then SLSQP from the best ``opt.refine``;
     returns the best feasible ``z`` and the median criterion of the random starts."""
     rng = random_generator(opt.seed)
@@ -392,17 +395,13 @@ def _search(objective: _Objective, n_free: int, G, h, nonlinear, opt: DesignOpti
     f_random = float(np.median([s[0] for s in starts]))
     best_f, best_z = starts[0]
     for _, z0 in starts[: opt.refine]:
-        z = _slsqp(objective, z0, G, h, nonlinear, opt.maxiter)
+        z, _rows = refine(objective, z0, G, h, n_times, nonlinear, opt.maxiter)
         if z is None:
             continue
         f = objective.value(z)
-        if f < best_f and _feasible(z, G, h, nonlinear):
+        if f < best_f and feasible(z, G, h, nonlinear):
             best_f, best_z = f, z
     return best_z, f_random
-
-
-def _feasible(z, G, h, nonlinear, tol: float = 1e-9) -> bool:
-    return bool(np.all(G @ z <= h + tol)) and all(np.all(c(z) >= -tol) for c in nonlinear)
 
 
 def _feasible_start(z, G, h, nonlinear, fill: float = 0.9):
@@ -419,25 +418,6 @@ def _feasible_start(z, G, h, nonlinear, fill: float = 0.9):
             return z
         z = 0.5 * z
     return None
-
-
-def _slsqp(objective: _Objective, z0, G, h, nonlinear, maxiter: int):
-    import scipy.optimize  # heavy: only when a design runs
-
-    cons = [{"type": "ineq", "fun": lambda z: h - G @ z, "jac": lambda _z: -G}]
-    cons += [{"type": "ineq", "fun": c, "jac": c.jacobian} for c in nonlinear]
-    try:
-        res = scipy.optimize.minimize(
-            objective.value_and_gradient,
-            z0,
-            jac=True,
-            method="SLSQP",
-            constraints=cons,
-            options={"maxiter": int(maxiter), "ftol": 1e-7},
-        )
-    except ValueError as exc:  # pragma: no cover - SLSQP breaking down on its own iterates
-        raise NumericalError("excitation design (SLSQP)", str(exc)) from exc
-    return res.x if np.all(np.isfinite(res.x)) else None
 
 
 def _verified(robot, family, z, bounds, scene, opt, duration):
