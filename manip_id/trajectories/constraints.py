@@ -136,8 +136,12 @@ class TorqueConstraint:
             return None
         nj, n = self.joints.size, self.t.size
         times = rows.reshape(2, n, nj).any(axis=(0, 2))
-        sub = TorqueConstraint(self.robot, self.family, self.t[times], self.effort_all)
+        sub = self._like(self.t[times], self.effort_all)
         return _RowSubset(sub, rows.reshape(2, n, nj)[:, times, :].ravel())
+
+    def _like(self, t, effort) -> TorqueConstraint:
+        """The same constraint on other grid times ``t`` and effort limits."""
+        return TorqueConstraint(self.robot, self.family, t, effort)
 
     def rows(self, mask) -> int:
         return 0 if mask is None else int(mask[0].sum())

@@ -36,6 +36,7 @@ from ..resources import MAX_STEPS, check_count
 from ..robot.model import Robot
 from .constraints import Bounds, ClearanceConstraint, TorqueConstraint, linear_constraints
 from .fourier import FourierTrajectory, dof_layout, trajectory_to_configuration
+from .identified_torque import IdentifiedTorques, UncertainTorqueConstraint
 from .information import CRITERIA, InformationModel, criterion_value
 from .limits import acceleration_limits, check_margin, design_position_bounds
 from .rest import RestFourier
@@ -63,6 +64,9 @@ class PriorInformation:
         their values (relative std are taken against them), shape (r,)
     noise_std : numpy.ndarray
         per-joint torque noise std [N m or N] of the earlier data, shape (nv,)
+    covariance : numpy.ndarray or None
+        the covariance of the estimate, shape (r, r): the torque limits then hold for the
+        identified model plus ``DesignOptions.sigma`` standard deviations (None: nominal)
     """
 
     information: np.ndarray
@@ -70,6 +74,7 @@ class PriorInformation:
     names: list[str]
     estimate: np.ndarray
     noise_std: np.ndarray
+    covariance: np.ndarray | None = None
 
     @classmethod
     def from_result(cls, result) -> PriorInformation:
@@ -83,6 +88,7 @@ class PriorInformation:
             names=list(result.names),
             estimate=np.asarray(result.estimate, float),
             noise_std=np.sqrt(np.asarray(result.noise_variance, float)),
+            covariance=0.5 * (cov + cov.T),
         )
 
 
@@ -96,7 +102,9 @@ class DesignOptions:
     configuration, else the neutral pose, clipped to the limits); criterion: "d", "cond"
     or "e"; margin: fraction of each limit kept free; acceleration_limit
     [rad/s^2], scalar or (nv,) (default the profile's, else none); torque: impose the
-    URDF effort limits; clearance [m]: least distance between non-adjacent links and to
+    URDF effort limits (on the nominal model's torques; with a prior that has a covariance,
+    on the identified model's plus ``sigma`` standard deviations); sigma: that many
+    standard deviations (default 3); clearance [m]: least distance between non-adjacent links and to
     the world; self_collision: check link pairs; noise: torque noise std relative to
     each joint's effort limit (the weights of the criterion; a prior's own noise wins);
     rate [Hz]: sampling of the written trajectory and of the final check; starts,
@@ -110,6 +118,7 @@ class DesignOptions:
     margin: float = 0.05
     acceleration_limit: float | np.ndarray | None = None
     torque: bool = True
+    sigma: float = 3.0
     clearance: float = 0.02
     self_collision: bool = True
     noise: float = 0.01
@@ -128,7 +137,8 @@ class ExcitationDesign:
     median over the random starts (same limits); ``predicted_std`` the predicted std of
     each base parameter after the run (with the prior, of the combined data) and
     ``prior_std`` before it (None without prior); ``check`` the verification on the
-    run's grid (limits used, least clearance and where); ``world`` the obstacles kept clear of.
+    run's grid (limits used, least clearance and where); ``world`` the obstacles kept clear of;
+    ``torque_model`` what the torque limits were checked on ("nominal" or "identified + k sigma").
     """
 
     trajectory: FourierTrajectory
@@ -147,6 +157,7 @@ class ExcitationDesign:
     joint_names: list[str]
     options: DesignOptions = field(repr=False, default_factory=DesignOptions)
     world: World | None = None
+    torque_model: str = "nominal"
 
     @property
     def predicted_relative_std(self) -> np.ndarray:
@@ -205,7 +216,7 @@ class ExcitationDesign:
                 if self.check.closest_pair
                 else ""
             ),  # fmt: skip
-            "max limit use: "
+            f"max limit use (torques: {self.torque_model}): "
             + ", ".join(
                 f"{k} {'-' if v is None else f'{100 * v:.0f} %'}" for k, v in use.items()
             ),  # fmt: skip
@@ -239,6 +250,7 @@ class ExcitationDesign:
             if self.check.closest_points is None
             else self.check.closest_points.tolist(),
             "limit_usage": self.check.usage_dict(self.joint_names),
+            "torque_model": self.torque_model,
             "predicted_std": {
                 n: float(s) for n, s in zip(self.base_names, self.predicted_std, strict=True)
             },
@@ -320,13 +332,21 @@ def design_excitation(
     scene = _scene(robot, world, opt)
     G, h = linear_constraints(family, t_con, bounds)
     nonlinear: list[TorqueConstraint | ClearanceConstraint] = []
+    torque_model = None
+    if opt.torque and prior is not None and prior.covariance is not None:
+        torque_model = IdentifiedTorques(robot, base, reference, prior.covariance, opt.sigma)
     if opt.torque and np.isfinite(bounds.effort).any():
-        nonlinear.append(TorqueConstraint(robot, family, t_con, bounds.effort))
+        if torque_model is None:
+            nonlinear.append(TorqueConstraint(robot, family, t_con, bounds.effort))
+        else:
+            nonlinear.append(
+                UncertainTorqueConstraint(robot, family, t_con, bounds.effort, torque_model)
+            )
     if scene is not None and scene.n_pairs:
         t_clear = np.linspace(0.0, period, 4 * n_cost + 1)
         nonlinear.append(ClearanceConstraint(scene, family, t_clear, opt.clearance))
     best_z, f_random = _search(objective, family.n_free, G, h, t_con.size, nonlinear, opt)
-    z, check = _verified(robot, family, best_z, bounds, scene, opt, duration)
+    z, check = _verified(robot, family, best_z, bounds, scene, opt, duration, torque_model)
     f_final = objective.value(z)
     W = info.matrix(*family.states(z, t_cost))
     F_new = info.information(W, scale)
@@ -349,6 +369,7 @@ def design_excitation(
         joint_names=list(robot.dof_names),
         options=opt,
         world=world,
+        torque_model="nominal" if torque_model is None else f"identified + {opt.sigma:g} sigma",
     )
 
 
@@ -420,11 +441,12 @@ def _feasible_start(z, G, h, nonlinear, fill: float = 0.9):
     return None
 
 
-def _verified(robot, family, z, bounds, scene, opt, duration):
+def _verified(robot, family, z, bounds, scene, opt, duration, torque_model=None):
     """Shrink ``z`` about the start pose until the dense check passes (at most 8 steps)."""
     for _ in range(8):
         check = verify_design(robot, family.trajectory(z), duration, opt.rate, bounds, scene,
-                              clearance=opt.clearance, torque=opt.torque)  # fmt: skip
+                              clearance=opt.clearance, torque=opt.torque,
+                              torque_model=torque_model)  # fmt: skip
         if check.violation is None:
             return z, check
         z = 0.9 * z
@@ -454,9 +476,9 @@ def _checked_options(robot: Robot, duration, opt: DesignOptions) -> DesignOption
     if not 2 <= int(opt.harmonics) <= 50 or int(opt.harmonics) != opt.harmonics:
         raise InputError(f"harmonics must be an integer in [2, 50], got {opt.harmonics}")
     check_margin(opt.margin)
-    for name in ("clearance", "noise", "rate"):
+    for name in ("clearance", "noise", "rate", "sigma"):
         v = getattr(opt, name)
-        if not (math.isfinite(v) and (v > 0 or (name == "clearance" and v == 0))):
+        if not (math.isfinite(v) and (v > 0 or (name in ("clearance", "sigma") and v == 0))):
             raise InputError(f"{name} must be a positive number, got {v}")
     if opt.noise > MAX_DESIGN_NOISE:
         raise InputError(

@@ -88,13 +88,18 @@ def verify_design(
     *,
     clearance: float,
     torque: bool = True,
+    torque_model=None,
 ) -> DesignCheck:
-    """Check ``trajectory`` at ``rate`` [Hz] over ``[0, duration]`` (module docstring)."""
+    """Check ``trajectory`` at ``rate`` [Hz] over ``[0, duration]`` (module docstring);
+    ``torque_model``: an :class:`~.identified_torque.IdentifiedTorques` whose torques with
+    their ``k`` standard deviations are checked instead of the nominal model's."""
     n = int(round(duration * rate)) + 1
     t = np.linspace(0.0, duration, n)
     angles, dq, ddq = trajectory.sample(t)
     q = trajectory_to_configuration(robot, angles)
-    if torque:
+    if torque and torque_model is not None:
+        tau = torque_model.magnitude(angles, dq, ddq)
+    elif torque:
         model, data = robot.model, robot.model.createData()
         tau = np.array([pin.rnea(model, data, q[k], dq[k], ddq[k]) for k in range(n)])
     else:
