@@ -30,7 +30,7 @@ import numpy as np
 import pinocchio as pin
 
 from .._checks import random_generator
-from ..errors import InfeasibleTrajectoryError, InputError, NumericalError, RobotError
+from ..errors import InfeasibleTrajectoryError, InputError, RobotError
 from ..identifiability import analyze
 from ..resources import MAX_STEPS, check_count
 from ..robot.model import Robot

@@ -8,15 +8,15 @@ time, so the refinement passes SLSQP the rows that can bind: in every block of r
 signal of one joint, or the least clearance, over the grid) whose slack ``c`` falls below
 :data:`LEVEL` of its room (``c`` at zero motion), the grid times where ``c`` has a local
 minimum, with :data:`WIDTH` neighbours on each side (the minimum moves with ``z``), and
-every violated local minimum. Each block of linear rows also gives SLSQP one smooth
-guard row, ``-log(sum_k exp(-s c_k / room_k)) / s + log(n) / s >= 0`` (a soft minimum:
-it lets a row exceed its bound by at most ``log(n) / s`` of its room, :data:`GUARD`),
-so that a signal with no row in the set cannot run away. After each SLSQP run every row is evaluated again; while some row is
-violated, the near rows at the new point join the set (the set only grows), the point
-is pulled back to the last feasible one along the segment between them (bisection) and
-SLSQP restarts there, at most :data:`ROUNDS` times; a feasible iterate at SLSQP's
-iteration limit is refined once more likewise. The result is the last feasible point
-(the start when none is): every row holds there.
+every violated local minimum. Each block of linear rows also gives SLSQP one smooth guard
+row, ``-log(sum_k exp(-s c_k / room_k)) / s + log(n) / s >= 0`` (a soft minimum: it lets
+a row exceed its bound by at most ``log(n) / s`` of its room, :data:`GUARD`), so that a
+signal with no row in the set cannot run away. After each SLSQP run every row is
+evaluated again; while some row is violated, the near rows at the new point join the set
+(the set only grows), the point is pulled back to the last feasible one along the segment
+between them (bisection) and SLSQP restarts there, at most :data:`ROUNDS` times; a
+feasible iterate at SLSQP's iteration limit is refined once more likewise. The result is
+the last feasible point (the start when none is): every row holds there.
 """
 
 from __future__ import annotations
@@ -69,7 +69,9 @@ class WorkingSet:
         for i, c in enumerate(self.nonlinear):
             mask = c.screen(z, near_rows)
             old = self.masks[i]
-            self.masks[i] = mask if old is None else tuple(a | b for a, b in zip(old, mask))
+            if old is not None:
+                mask = tuple(a | b for a, b in zip(old, mask, strict=True))
+            self.masks[i] = mask
 
     def constraints(self) -> list[dict]:
         """SciPy constraint dicts of the working set."""
@@ -77,7 +79,7 @@ class WorkingSet:
         cons = [_guard(self.G, self.h, self.n)]
         if h.size:
             cons.append({"type": "ineq", "fun": lambda z: h - G @ z, "jac": lambda _z: -G})
-        for c, mask in zip(self.nonlinear, self.masks):
+        for c, mask in zip(self.nonlinear, self.masks, strict=True):
             sub = c.restricted(mask)
             if sub is not None:
                 cons.append({"type": "ineq", "fun": sub, "jac": sub.jacobian})
@@ -85,9 +87,8 @@ class WorkingSet:
 
     def size(self) -> int:
         """Rows in the working set (linear and nonlinear)."""
-        return int(self.linear.sum()) + sum(
-            c.rows(m) for c, m in zip(self.nonlinear, self.masks)
-        )
+        pairs = zip(self.nonlinear, self.masks, strict=True)
+        return int(self.linear.sum()) + sum(c.rows(m) for c, m in pairs)
 
 
 def _guard(G: np.ndarray, h: np.ndarray, n: int) -> dict:
