@@ -13,10 +13,13 @@ repeated over ``duration``. Steps:
    trajectory that leaves a limit between the optimizer's grid times is shrunk about
    the start pose until it passes, else the binding constraint is raised.
 
-Sampling density: the criterion uses ``20 L`` times per period (``L`` harmonics: the
-regressor's products of up to a few harmonics stay resolved), and the constraints the
-same times plus the end (with the between-samples slacks of :mod:`.constraints`), the
-clearance ``80 L`` times (its between-samples allowance grows with the spacing).
+Sampling density: the criterion uses ``10 L`` times per period (``L`` harmonics: the
+information is a periodic integral of products of the regressor's entries, whose
+velocity products reach ``4 L`` harmonics, and an equally spaced sum of ``n`` samples
+integrates a trigonometric polynomial of degree below ``n`` exactly; on the panda's 20 s
+designs the criterion on ``8 L`` to ``80 L`` samples agrees to 0.05), the constraints
+``20 L + 1`` times (with the between-samples slacks of :mod:`.constraints`), the
+clearance ``80 L + 1`` times (its between-samples allowance grows with the spacing).
 """
 
 from __future__ import annotations
@@ -44,6 +47,10 @@ from .verify import DesignCheck, verify_design
 from .working_set import feasible, refine
 from .world import CollisionScene, World
 
+#: Criterion samples per period and harmonic (module docstring).
+COST_SAMPLES = 10
+#: Constraint samples per period and harmonic (clearance: four times as many).
+CONSTRAINT_SAMPLES = 20
 #: Relative std above which a base parameter is called poorly identified.
 POOR = 0.1
 
@@ -311,9 +318,9 @@ def design_excitation(
     bounds = _bounds(robot, opt)
     _check_start(robot, family.start, bounds)
     period = 1.0 / freq
-    n_cost = 20 * opt.harmonics
+    n_cost, n_con = COST_SAMPLES * opt.harmonics, CONSTRAINT_SAMPLES * opt.harmonics
     t_cost = np.arange(n_cost) * (period / n_cost)
-    t_con = np.linspace(0.0, period, n_cost + 1)
+    t_con = np.linspace(0.0, period, n_con + 1)
     if prior is None:
         an = analyze(robot, seed=opt.seed)
         base = np.asarray(an.base.independent, int)
@@ -343,7 +350,7 @@ def design_excitation(
                 UncertainTorqueConstraint(robot, family, t_con, bounds.effort, torque_model)
             )
     if scene is not None and scene.n_pairs:
-        t_clear = np.linspace(0.0, period, 4 * n_cost + 1)
+        t_clear = np.linspace(0.0, period, 4 * n_con + 1)
         nonlinear.append(ClearanceConstraint(scene, family, t_clear, opt.clearance))
     best_z, f_random = _search(objective, family.n_free, G, h, t_con.size, nonlinear, opt)
     z, check = _verified(robot, family, best_z, bounds, scene, opt, duration, torque_model)
