@@ -355,8 +355,9 @@ def design_excitation(
     best_z, f_random = _search(objective, family.n_free, G, h, t_con.size, nonlinear, opt)
     z, check = _verified(robot, family, best_z, bounds, scene, opt, duration, torque_model)
     f_final = objective.value(z)
-    W = info.matrix(*family.states(z, t_cost))
-    F_new = info.information(W, scale)
+    t_pred = np.arange(4 * n_con) * (period / (4 * n_con))  # the prediction: a finer grid
+    W = info.matrix(*family.states(z, t_pred))
+    F_new = info.information(W, opt.rate * duration / t_pred.size)
     cov = np.linalg.pinv(F0 + F_new)
     lam = np.linalg.eigvalsh(F_new)
     return ExcitationDesign(
