@@ -43,7 +43,7 @@ from .identified_torque import IdentifiedTorques, UncertainTorqueConstraint
 from .information import CRITERIA, InformationModel, criterion_value
 from .limits import acceleration_limits, check_margin, design_position_bounds
 from .rest import RestFourier
-from .verify import DesignCheck, verify_design
+from .verify import NOMINAL, DesignCheck, verify_design
 from .working_set import feasible, refine
 from .world import CollisionScene, World
 
@@ -451,10 +451,10 @@ def _feasible_start(z, G, h, nonlinear, fill: float = 0.9):
 
 def _verified(robot, family, z, bounds, scene, opt, duration, torque_model=None):
     """Shrink ``z`` about the start pose until the dense check passes (at most 8 steps)."""
+    checked = (torque_model or NOMINAL) if opt.torque else None
     for _ in range(8):
         check = verify_design(robot, family.trajectory(z), duration, opt.rate, bounds, scene,
-                              clearance=opt.clearance, torque=opt.torque,
-                              torque_model=torque_model)  # fmt: skip
+                              clearance=opt.clearance, torque=checked)  # fmt: skip
         if check.violation is None:
             return z, check
         z = 0.9 * z

@@ -180,7 +180,7 @@ class InformationModel:
             dtq, dtv, dta = pin.computeRNEADerivatives(m, d, q, v, a)
             out[0] += dtq[j] - alpha[j] * rq[j]
             out[1] += dtv[j] - alpha[j] * rv[j]
-            out[2] += _full_mass_row(dta, j) - alpha[j] * ra[j]
+            out[2] += _full_mass_row(dta, int(j)) - alpha[j] * ra[j]
         return out
 
 
