@@ -20,7 +20,7 @@ a random 10 s addition: predicted worst relative std of the parameters the prior
 10 %, and realized (OLS on the poor log plus the addition: its std and its error).
 
 Run: ``.venv/bin/python experiments/excite_benchmark.py [--robots ur5,panda] [--random 5]
-[--sequential] [--json OUT]``
+[--sequential | --sequential-only] [--json OUT]``
 """
 
 from __future__ import annotations
@@ -190,10 +190,17 @@ def main(argv=None) -> int:
     parser.add_argument("--robots", default="ur5,panda")
     parser.add_argument("--random", type=int, default=5, help="random trajectories per robot")
     parser.add_argument("--sequential", action="store_true")
+    parser.add_argument("--sequential-only", action="store_true", help="skip the information part")
     parser.add_argument("--json", default=None)
     args = parser.parse_args(argv)
     report = {"information": [], "sequential": []}
+    args.sequential |= args.sequential_only
     for name in args.robots.split(","):
+        if args.sequential_only:
+            s = sequential_benchmark(name)
+            report["sequential"].append(s)
+            print(json.dumps(s), flush=True)
+            continue
         r = information_benchmark(name, args.random)
         report["information"].append(r)
         d, m = r["designed"], r["random_median"]

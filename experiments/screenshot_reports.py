@@ -2,7 +2,8 @@
 
 Writes simulated logs, then the reports of ``identify`` (one run, ``--consistent``),
 ``identify`` on several files in memory, the fleet (``--per-file``), ``payload``,
-``monitor``, ``adapt``, ``rank`` and ``excite`` (panda above a table with a box) and the
+``monitor``, ``adapt``, ``rank`` and ``excite`` (panda above a table, a box beside it and
+one far away, which the camera must frame) and the
 page of ``view --html``; each report's
 ``index.html`` and ``scene.html`` are photographed at 1400 x 900 px (the scene at the
 start, the middle and the end of its animation), so one can look at them::
@@ -92,6 +93,7 @@ def reports(out: Path) -> dict[str, Path]:
     world.write_text(
         "[[plane]]\nnormal = [0, 0, 1]\noffset = -0.01\n"
         "[[box]]\nsize = [0.3, 0.3, 0.3]\nposition = [0.6, 0.0, 0.15]\n"
+        "[[box]]\nsize = [0.3, 0.3, 0.3]\nposition = [1.6, 0.9, 0.15]\n"  # far: framed too
     )
     r["excite"] = out / "excite"
     run(

@@ -34,9 +34,9 @@ def framing(scene_html, tmp_path, times=(0,)) -> dict:
     return frames_in_view(scene_html, tmp_path, times, size=SIZE)
 
 
-def _check(fig: dict) -> None:
+def _check(fig: dict, least: float = 0.6) -> None:
     # the motion spans the canvas's height, or the width beside the legend for a wide one
-    assert max(fig["height"], fig["width"]) >= 0.6, f"the robot spans {fig} of the canvas"
+    assert max(fig["height"], fig["width"]) >= least, f"the robot spans {fig} of the canvas"
     # every frame inside the canvas and right of the legend (the legend never covers it)
     assert all(fig["inside"]), fig
 
@@ -70,7 +70,7 @@ def test_adapt_report_frames_the_robot(tmp_path):
 
 def test_excite_report_frames_the_robot(tmp_path):
     """The designed motion with the table and a box of the world file: the robot (hidden
-    for the background, the world objects stay) framed over the whole motion."""
+    for the background, the world objects stay) framed over the whole motion, with the box."""
     world = tmp_path / "world.toml"
     world.write_text(
         "[[plane]]\nnormal = [0, 0, 1]\noffset = -0.01\n"
@@ -81,4 +81,6 @@ def test_excite_report_frames_the_robot(tmp_path):
     argv += ["--maxiter", "10", "--rate", "100", "--world", str(world)]
     assert main([*argv, "--out", str(tmp_path / "t.csv"), "--report", str(rep)]) == 0
     assert "closest approach" in (rep / "scene.html").read_text()
-    _check(framing(rep / "scene.html", tmp_path, times=(0, 1, 2, 3)))
+    # the camera frames the box too (test_excite_search: a far box in view), so the robot
+    # spans less of the canvas than alone
+    _check(framing(rep / "scene.html", tmp_path, times=(0, 1, 2, 3)), least=0.45)

@@ -59,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
         margin=args.margin,
         acceleration_limit=_acceleration(args, robot.nv),
         torque=not args.no_torque_limits,
+        sigma=args.sigma,
         clearance=args.clearance,
         self_collision=not args.no_self_collision,
         noise=args.noise,

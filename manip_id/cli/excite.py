@@ -113,6 +113,15 @@ def register(sub) -> None:
         "criterion counts its information too [default: none]",
     )
     p.add_argument(
+        "--sigma",
+        type=float,
+        default=3.0,
+        metavar="K",
+        help="with --from: the torque limits hold for the identified model's torques plus K "
+        "standard deviations of their prediction (from the result's covariance) instead of "
+        "the nominal model's [default 3]",
+    )
+    p.add_argument(
         "--starts", type=int, default=8,
         help="random starts of the global search [default 8]",
     )  # fmt: skip

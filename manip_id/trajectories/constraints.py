@@ -89,6 +89,7 @@ class TorqueConstraint:
         self.robot, self.family, self.t = robot, family, t
         self.joints = np.flatnonzero(np.isfinite(effort))
         self.effort = effort[self.joints]
+        self.effort_all = np.asarray(effort, float)
         self.model = robot.model
         self.data = robot.model.createData()
 
@@ -120,6 +121,44 @@ class TorqueConstraint:
         J = chain_jacobian(self.family, self.t, Dj[0], Dj[1], Dj[2])
         return np.vstack([-J, J])
 
+    def screen(self, z, near) -> tuple[np.ndarray]:
+        """``(rows,)``: a bool mask of the rows ``near`` (:mod:`.working_set`) finds close
+        to their bound at ``z``, shape (2 n nj,); the room of a row is its effort limit."""
+        nj, n = self.joints.size, self.t.size
+        blocks = self(z).reshape(2, n, nj).transpose(0, 2, 1).reshape(2 * nj, n)
+        mask = near(blocks, np.tile(self.effort, 2)[:, None])
+        return (mask.reshape(2, nj, n).transpose(0, 2, 1).ravel(),)
+
+    def restricted(self, mask) -> _RowSubset | None:
+        """The rows of ``mask`` (:meth:`screen`), evaluated at their grid times only."""
+        (rows,) = mask
+        if not rows.any():
+            return None
+        nj, n = self.joints.size, self.t.size
+        times = rows.reshape(2, n, nj).any(axis=(0, 2))
+        sub = self._like(self.t[times], self.effort_all)
+        return _RowSubset(sub, rows.reshape(2, n, nj)[:, times, :].ravel())
+
+    def _like(self, t, effort) -> TorqueConstraint:
+        """The same constraint on other grid times ``t`` and effort limits."""
+        return TorqueConstraint(self.robot, self.family, t, effort)
+
+    def rows(self, mask) -> int:
+        return 0 if mask is None else int(mask[0].sum())
+
+
+class _RowSubset:
+    """Some rows of a constraint (values and Jacobian)."""
+
+    def __init__(self, constraint, rows: np.ndarray):
+        self.constraint, self.keep = constraint, rows
+
+    def __call__(self, z):
+        return self.constraint(z)[self.keep]
+
+    def jacobian(self, z):
+        return self.constraint.jacobian(z)[self.keep]
+
 
 class ClearanceConstraint:
     """``d(q(t_k)) - limit - dt v_k >= 0`` for the closest pair at each grid time.
@@ -130,9 +169,21 @@ class ClearanceConstraint:
     times too (up to the speed changing within ``dt/2``: the final check covers that).
     """
 
-    def __init__(self, scene: CollisionScene, family: RestFourier, t: np.ndarray, limit: float):
+    #: Least room [m] a clearance row is screened against (:meth:`screen`).
+    MIN_ROOM = 0.05
+
+    def __init__(
+        self,
+        scene: CollisionScene,
+        family: RestFourier,
+        t: np.ndarray,
+        limit: float,
+        dt: float | None = None,
+    ):
         self.scene, self.family, self.t, self.limit = scene, family, t, float(limit)
-        self.dt = float(t[1] - t[0]) if t.size > 1 else 0.0
+        if dt is None:
+            dt = float(t[1] - t[0]) if t.size > 1 else 0.0
+        self.dt = float(dt)  # [s] the grid spacing the between-samples allowance covers
         self._cache: tuple[bytes, np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def _eval(self, z):
@@ -157,3 +208,20 @@ class ClearanceConstraint:
         dv = -self.dt * np.sign(dq) * self.scene.reach
         zero = np.zeros_like(g)[:, None, :]
         return chain_jacobian(self.family, self.t, g[:, None, :], dv[:, None, :], zero)
+
+    def screen(self, z, near) -> tuple[np.ndarray]:
+        """``(times,)``: the grid times ``near`` (:mod:`.working_set`) finds close to the
+        clearance at ``z``; the room is the start pose's slack (at least :data:`MIN_ROOM`)."""
+        q = trajectory_to_configuration(self.scene.robot, self.family.start[None, :])[0]
+        room = max(self.scene.closest(q)[0].distance - self.limit, self.MIN_ROOM)
+        return (near(self(z)[None, :], np.array([[room]]))[0],)
+
+    def restricted(self, mask) -> ClearanceConstraint | None:
+        """The constraint on the grid times of ``mask`` (:meth:`screen`), same allowance."""
+        (times,) = mask
+        if not times.any():
+            return None
+        return ClearanceConstraint(self.scene, self.family, self.t[times], self.limit, self.dt)
+
+    def rows(self, mask) -> int:
+        return 0 if mask is None else int(mask[0].sum())

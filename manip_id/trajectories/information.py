@@ -118,6 +118,9 @@ class InformationModel:
             [robot.model.inertias[i].toDynamicParameters() for i in range(1, robot.model.njoints)]
         )
         self._theta_ref = ref.ravel()  # (n_rigid,)
+        masses = self._theta_ref[0::10]
+        self._least_mass = float(np.min(masses[masses > 0]))  # [kg]
+        self._lower = np.tril_indices(self.nv, -1)
         self._ref_model = self._models[0][0].copy()
         self._ref_data = self._ref_model.createData()
 
@@ -162,32 +165,23 @@ class InformationModel:
         """``sum_j d tau_j(theta_j) / d(q, v, a)``, shape (3, nv), exact (module docstring)."""
         nb = self.robot.model.njoints - 1
         out = np.zeros((3, self.nv))
-        mass_ref = self._theta_ref[0::10]
-        for j, (m, d) in enumerate(self._models):
-            th = theta[j]
-            if not np.any(th):
-                continue
-            alpha = 1.0 + np.max(np.abs(th[0::10])) / np.min(mass_ref[mass_ref > 0])
-            shifted = (th + alpha * self._theta_ref).reshape(nb, 10)
+        rows = np.flatnonzero(np.any(theta, axis=1))
+        if rows.size == 0:
+            return out
+        rq, rv, ra = pin.computeRNEADerivatives(self._ref_model, self._ref_data, q, v, a)
+        ra = ra.copy()
+        ra[self._lower] = ra.T[self._lower]  # Pinocchio fills the upper triangle
+        alpha = 1.0 + np.max(np.abs(theta[:, 0::10]), axis=1) / self._least_mass
+        shifted = (theta + alpha[:, None] * self._theta_ref).reshape(self.nv, nb, 10)
+        for j in rows:
+            m, d = self._models[j]
             for i in range(nb):
-                m.inertias[i + 1] = pin.Inertia.FromDynamicParameters(shifted[i])
+                m.inertias[i + 1] = pin.Inertia.FromDynamicParameters(shifted[j, i])
             dtq, dtv, dta = pin.computeRNEADerivatives(m, d, q, v, a)
-            out[0] += dtq[j]
-            out[1] += dtv[j]
-            out[2] += _full_mass_row(dta, j)
-            rq, rv, ra = self._reference_derivatives(q, v, a)
-            out[0] -= alpha * rq[j]
-            out[1] -= alpha * rv[j]
-            out[2] -= alpha * _full_mass_row(ra, j)
+            out[0] += dtq[j] - alpha[j] * rq[j]
+            out[1] += dtv[j] - alpha[j] * rv[j]
+            out[2] += _full_mass_row(dta, int(j)) - alpha[j] * ra[j]
         return out
-
-    def _reference_derivatives(self, q, v, a):
-        key = (q.tobytes(), v.tobytes(), a.tobytes())
-        if getattr(self, "_ref_key", None) != key:
-            dq_, dv_, da_ = pin.computeRNEADerivatives(self._ref_model, self._ref_data, q, v, a)
-            self._ref_cache = (dq_.copy(), dv_.copy(), da_.copy())
-            self._ref_key = key
-        return self._ref_cache
 
 
 def _full_mass_row(M: np.ndarray, j: int) -> np.ndarray:

@@ -23,6 +23,8 @@ from .fourier import FourierTrajectory, trajectory_to_configuration
 from .world import CollisionScene
 
 KINDS = ("position", "velocity", "acceleration", "torque")
+#: :func:`verify_design` checks the nominal model's torques (``pinocchio.rnea``).
+NOMINAL = "nominal"
 
 
 @dataclass(frozen=True)
@@ -87,14 +89,19 @@ def verify_design(
     scene: CollisionScene | None,
     *,
     clearance: float,
-    torque: bool = True,
+    torque=NOMINAL,
 ) -> DesignCheck:
-    """Check ``trajectory`` at ``rate`` [Hz] over ``[0, duration]`` (module docstring)."""
+    """Check ``trajectory`` at ``rate`` [Hz] over ``[0, duration]`` (module docstring);
+    ``torque``: :data:`NOMINAL` (``pinocchio.rnea`` of the robot's model), None (torques
+    not checked) or an :class:`~.identified_torque.IdentifiedTorques`, whose torques with
+    their ``k`` standard deviations are checked."""
     n = int(round(duration * rate)) + 1
     t = np.linspace(0.0, duration, n)
     angles, dq, ddq = trajectory.sample(t)
     q = trajectory_to_configuration(robot, angles)
-    if torque:
+    if torque is not None and torque is not NOMINAL:
+        tau = torque.magnitude(angles, dq, ddq)
+    elif torque is NOMINAL:
         model, data = robot.model, robot.model.createData()
         tau = np.array([pin.rnea(model, data, q[k], dq[k], ddq[k]) for k in range(n)])
     else:

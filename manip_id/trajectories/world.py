@@ -252,12 +252,12 @@ class CollisionScene:
 
     def closest(self, q: np.ndarray, gradient: bool = False):
         """The closest pair at ``q`` (:class:`Closest`) and, with ``gradient``, dd/dv (nv,)."""
-        d = self.distances(q)
-        k = int(np.argmin(d))
+        # computeDistances returns the pair of the least distance: no list of every pair
+        k = int(pin.computeDistances(self.robot.model, self.data, self.geom, self.gdata, q))
         res = self.gdata.distanceResults[k]
         p1, p2 = np.array(res.getNearestPoint1()), np.array(res.getNearestPoint2())
         a, b = self.pairs[k]
-        best = Closest(float(d[k]), (self.names[a], self.names[b]), (p1, p2))
+        best = Closest(float(res.min_distance), (self.names[a], self.names[b]), (p1, p2))
         if not gradient:
             return best, None
         model, data = self.robot.model, self.data

@@ -231,8 +231,24 @@ def excite_scene(robot, design, title: str) -> RobotScene:
         last = k == len(objects) - 1  # the legend once, with every object
         legend = LegendSection("world (--world)", lines) if last else None
         scene.add_object(obj.name, geometry, material, T, legend)
+    corners = [_object_corners(o) for o in objects if o.kind != "plane"]  # planes: unbounded
+    if corners:
+        scene.frame_points(np.vstack(corners))  # the camera frames the objects too
     _mark_closest(scene, design.check)
     return scene
+
+
+def _object_corners(obj) -> np.ndarray:
+    """The corners of a bounded world object's box, base frame [m], shape (8, 3)."""
+    d = obj.dims
+    half = {
+        "box": 0.5 * np.asarray(d[:3], dtype=float),
+        "sphere": np.full(3, float(d[0])),
+        "cylinder": np.array([d[0], d[0], 0.5 * d[1]], dtype=float),  # coal: along z
+    }[obj.kind]
+    signs = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)])
+    T = obj.placement()
+    return (signs * half) @ T.rotation.T + T.translation
 
 
 def _mark_closest(scene: RobotScene, c) -> None:

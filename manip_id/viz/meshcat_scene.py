@@ -79,9 +79,8 @@ SET_STYLES: tuple[tuple[tuple[float, float, float, float], bool], ...] = (
     ((0.55, 0.15, 0.75, 0.35), False),
     ((0.00, 0.55, 0.65, 0.35), False),
 )
-#: The colours of :data:`SET_STYLES` (earlier releases' name).
-SET_COLORS = tuple(c for c, _ in SET_STYLES)
 GREY = (0.6, 0.6, 0.6, 1.0)
+Y_AXIS = np.array([0.0, 1.0, 0.0])
 _ROBOT_ROOT = "robot"
 #: Share of the view (height, or width when wider) the robot's swept volume spans: every
 #: pose of the animation (or the one pose of a still scene) fits in the view.
@@ -90,17 +89,6 @@ FILL = 0.9
 SWEPT_POSES = 60
 #: Mesh vertices per mesh and pose in the swept volume (a sample of each mesh's).
 SWEPT_VERTICES = 40
-
-
-def _rotation_y_to(axis: np.ndarray) -> np.ndarray:
-    """A rotation matrix taking the y axis to the unit vector ``axis``, shape (3, 3)."""
-    y = np.array([0.0, 1.0, 0.0])
-    v = np.cross(y, axis)
-    c = float(y @ axis)
-    if np.linalg.norm(v) < 1e-12:
-        return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
-    vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
-    return np.eye(3) + vx + vx @ vx / (1.0 + c)
 
 
 # ------------------------------------------------------------------ trajectory
@@ -182,6 +170,7 @@ class RobotScene:
         self._t: np.ndarray | None = None
         self._q: np.ndarray | None = None
         self._link_colors: dict[int, tuple] | None = None
+        self._framed_extra = np.zeros((0, 3))  # [m] world points the camera frames too
         q0 = robot.neutral() if q is None else check_trajectory(robot, [0.0], q)[1][0]
         self._q_static = q0
         self._size = self._joint_box_size(q0)
@@ -256,7 +245,7 @@ class RobotScene:
                     continue
                 axis = np.asarray(end, dtype=float) / length
                 T = np.eye(4)
-                T[:3, :3] = _rotation_y_to(axis)  # meshcat cylinders lie along y
+                T[:3, :3] = pin.Quaternion.FromTwoVectors(Y_AXIS, axis).matrix()  # meshcat: along y
                 T[:3, 3] = 0.5 * np.asarray(end, dtype=float)
                 path = f"{_ROBOT_ROOT}/links/{name}/segment{k}"
                 self._vis[path].set_object(mg.Cylinder(length, radius), material)
@@ -316,12 +305,14 @@ class RobotScene:
         (shape (N, nq), :data:`SWEPT_POSES` of them spread evenly; the start pose
         ``q_start`` alone without a motion) span :data:`FILL` of the view, seen broadside
         and centred (:func:`~manip_id.viz.camera.place_camera`), so the whole motion stays
-        in view."""
+        in view; and the points given to :meth:`frame_points` (world objects)."""
+        self._frame_args = (q_start, qs)
         poses = [np.asarray(q_start, dtype=float)]
         if qs is not None:
             qs = np.atleast_2d(qs)
             poses += list(qs[np.linspace(0, len(qs) - 1, min(len(qs), SWEPT_POSES)).astype(int)])
         swept = np.vstack([self._points(q, vertices=SWEPT_VERTICES) for q in poses])
+        swept = np.vstack([swept, self._framed_extra])
         center = 0.5 * (swept.min(axis=0) + swept.max(axis=0))
         pad = center + 0.1 * np.vstack([np.eye(3), -np.eye(3)])  # a robot of a point: 20 cm
         swept = convex_hull(np.vstack([swept, pad]) - center)
@@ -511,6 +502,12 @@ class RobotScene:
             )
         )
         return self
+
+    def frame_points(self, points) -> None:
+        """Frame ``points`` (world [m], shape (n, 3); e.g. a world object) with the robot."""
+        pts = np.asarray(points, dtype=float).reshape(-1, 3)
+        self._framed_extra = np.vstack([self._framed_extra, pts[np.isfinite(pts).all(1)]])
+        self._set_camera(*self._frame_args)
 
     def add_object(self, name: str, geometry, material, transform, legend=None) -> None:
         """A fixed meshcat ``geometry`` with ``material`` at ``transform`` (4x4, world frame
