@@ -167,8 +167,10 @@ class Dataset:
         check_time(clean["t"])
         if np.abs(clean["q"]).max() > DEGREES_THRESHOLD:
             warnings.warn(
-                f"positions reach {np.abs(clean['q']).max():.1f}: are they in degrees? "
-                "manip_id expects radians (meters for prismatic joints)",
+                DataWarning(
+                    f"positions reach {np.abs(clean['q']).max():.1f}: are they in degrees? "
+                    "manip_id expects radians (meters for prismatic joints)"
+                ),
                 stacklevel=3,
             )
         for name, arr in clean.items():

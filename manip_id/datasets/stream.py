@@ -35,7 +35,7 @@ import numpy as np
 
 from .._checks import MEASURED_LIMITS
 from .._io.reading import check_data_path
-from ..errors import DataError, InputError
+from ..errors import DataError, DataWarning, InputError
 from ..resources import TORQUE_SCALE_RANGE
 from .adjust import TIME_UNITS, AdjustedSource, delay_vector
 from .core import Dataset, check_time, check_values
@@ -270,7 +270,8 @@ def _drop_non_finite(source, block, raw, finite, drop_bad_rows: bool, counts: Ro
     bad = np.flatnonzero(~finite)
     cut = np.array([malformed.get(int(r), "").startswith(TRUNCATED) for r in raw[bad]], bool)
     if cut.any():  # a log cut short: its last line goes, whatever drop_bad_rows says
-        warnings.warn(f"{source.path}: {malformed[int(raw[bad[cut][0]])]}: dropped", stacklevel=4)
+        text = f"{source.path}: {malformed[int(raw[bad[cut][0]])]}: dropped"
+        warnings.warn(DataWarning(text), stacklevel=4)
         counts.drop("truncated last line", raw[bad[cut]])
         finite = finite.copy()
         finite[bad[cut]] = True  # not to be seen again below
@@ -436,8 +437,10 @@ def _check_window(source, window, counts: RowCounts, rows_seen: int, t0, t_last,
             )
         if window.stop is not None and window.stop > n:
             warnings.warn(
-                f"the window @{window} of {path} ends after its {n} samples: kept rows "
-                f"{window.start or 0} .. {n - 1}",
+                DataWarning(
+                    f"the window @{window} of {path} ends after its {n} samples: kept rows "
+                    f"{window.start or 0} .. {n - 1}"
+                ),
                 stacklevel=3,
             )
     if not kept:
