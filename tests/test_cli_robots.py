@@ -30,3 +30,12 @@ def test_bad_input_is_one_line_exit_2():
     lines = proc.stderr.strip().splitlines()
     assert "Traceback" not in proc.stderr
     assert lines[-1].startswith("manip-id: error:")
+
+
+def test_an_unknown_robot_named_is_one_error_line(capsys):
+    """A name the user asks for that does not load: exit 2, one line naming it, no table."""
+    assert main(["robots", "ur5", "nosuch"]) == 2
+    captured = capsys.readouterr()
+    err = captured.err.strip().splitlines()
+    assert len(err) == 1 and "'nosuch'" in err[0] and "ur5" in err[0], err
+    assert captured.out == ""

@@ -11,10 +11,14 @@ from ..robot.model import available_robots, load_robot
 
 
 def run(args: argparse.Namespace) -> int:
+    named = list(getattr(args, "names", None) or [])
+    # a robot the user names must load (an unknown name is one error line, exit 2); in the
+    # full list a robot this install cannot load is shown as unavailable
+    robots = {name: load_robot(name) for name in named}
     print(f"{'name':28s} {'nq':>4s} {'nv':>4s} {'parameters':>11s}  profile")
-    for name in getattr(args, "names", None) or available_robots():
+    for name in named or available_robots():
         try:
-            robot = load_robot(name)
+            robot = robots[name] if name in robots else load_robot(name)
         except RobotError as exc:
             print(f"{name:28s} unavailable: {exc}")
             continue
