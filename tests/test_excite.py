@@ -430,3 +430,13 @@ def test_excite_report_and_mcap_agree_with_independent_checks(tmp_path, capsys):
     argv[argv.index(js)] = tmp_path / "other.json"
     assert main([str(a) for a in argv]) == 2
     assert "--force" in capsys.readouterr().err
+
+
+def test_sigma_without_from_is_refused_before_work(tmp_path, capsys):
+    """--sigma sets the identified model's torque margin: without --from it has no model."""
+    out = tmp_path / "t.csv"
+    argv = ["excite", "ur5", "--duration", "4", "--sigma", "2", "--out", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--sigma applies with --from" in err[0], err
+    assert not out.exists()

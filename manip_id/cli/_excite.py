@@ -25,6 +25,11 @@ from ._runtime import robot_from_args
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.sigma is not None and args.previous is None:
+        raise InputError(
+            "--sigma applies with --from RESULT.json (the identified model's torques plus K "
+            "standard deviations); without --from the torque limits hold for the nominal model"
+        )
     fmt = format_of(args.out, args.format)
     for path in (args.out, args.json):
         if path is not None and os.path.exists(path) and not args.force:
@@ -59,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
         margin=args.margin,
         acceleration_limit=_acceleration(args, robot.nv),
         torque=not args.no_torque_limits,
-        sigma=args.sigma,
+        sigma=DesignOptions.sigma if args.sigma is None else args.sigma,
         clearance=args.clearance,
         self_collision=not args.no_self_collision,
         noise=args.noise,

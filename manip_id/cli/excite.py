@@ -115,7 +115,7 @@ def register(sub) -> None:
     p.add_argument(
         "--sigma",
         type=float,
-        default=3.0,
+        default=None,
         metavar="K",
         help="with --from: the torque limits hold for the identified model's torques plus K "
         "standard deviations of their prediction (from the result's covariance) instead of "
