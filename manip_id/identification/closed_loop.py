@@ -45,6 +45,7 @@ from ..robot.model import Robot
 from ..robot.regressor import iter_regressor
 from .forward import DEFAULT_EPS, ForwardModel, coulomb_width, standard_with_base
 from .options import PreprocessOptions
+from .refine import with_errors_of
 from .result import IdentificationResult
 from .rollout import read_logs
 
@@ -61,7 +62,6 @@ _COVARIANCE = {
 #: Most halvings of a step whose model diverges in closed loop.
 MAX_HALVINGS = 10
 #: What a result's context says of the least-squares estimate alone (dropped here).
-_STALE = {"standard_parameters", "physically_consistent"}
 
 
 @dataclass(frozen=True)
@@ -388,44 +388,8 @@ def _estimated(result, robot, theta_b, logs, validation, record, weights, sums):
         standard=None,
         timings={**result.timings, "closed_loop": seconds},
     )
-    train = _torque_error(out, robot, [log.data for log in logs])
-    valid = _torque_error(out, robot, list(validation or []))
-    assert train is not None
-    rel = result.relative_error
-    return replace(
-        out,
-        relative_error=replace(
-            rel,
-            train=train[0],
-            train_per_joint=train[1],
-            validation=None if valid is None else valid[0],
-            validation_per_joint=None if valid is None else valid[1],
-            validation_per_file=None,
-            train_moving=None,
-            validation_moving=None,
-        ),
-        raw_error=None,
-        context={
-            **{k: v for k, v in result.context.items() if k not in _STALE},
-            "closed_loop": record,
-        },
-    )
-
-
-def _torque_error(result, robot, datasets):
-    if not datasets:
-        return None
-    num = den = 0.0
-    nj = np.zeros(robot.nv)
-    dj = np.zeros(robot.nv)
-    for d in datasets:
-        tau = np.asarray(d.tau, float)
-        err = tau - result.predict(robot, d.q, d.dq, d.ddq)
-        num += float(np.sum(err**2))
-        den += float(np.sum(tau**2))
-        nj += np.sum(err**2, axis=0)
-        dj += np.sum(tau**2, axis=0)
-    return float(np.sqrt(num / den)), np.sqrt(nj / dj)
+    datasets = [log.data for log in logs]
+    return with_errors_of(result, out, robot, datasets, validation, "closed_loop", record)
 
 
 __all__ = [

@@ -202,14 +202,48 @@ def torque_sums(robot: Robot, base, datasets, plan=None):
 
 
 def _torque_error(result, robot, datasets) -> tuple[float, np.ndarray] | None:
+    """Relative RMS torque error of ``result`` on ``datasets``, overall and per joint
+    (sums file by file: no stacked copy of the logs)."""
     if not datasets:
         return None
-    tau = np.concatenate([np.asarray(d.tau, float) for d in datasets])
-    pred = np.concatenate([result.predict(robot, d.q, d.dq, d.ddq) for d in datasets])
-    err = tau - pred
-    return float(np.linalg.norm(err) / np.linalg.norm(tau)), np.linalg.norm(
-        err, axis=0
-    ) / np.linalg.norm(tau, axis=0)
+    num = den = 0.0
+    nj = np.zeros(robot.nv)
+    dj = np.zeros(robot.nv)
+    for d in datasets:
+        tau = np.asarray(d.tau, float)
+        err = tau - result.predict(robot, d.q, d.dq, d.ddq)
+        num += float(np.sum(err**2))
+        den += float(np.sum(tau**2))
+        nj += np.sum(err**2, axis=0)
+        dj += np.sum(tau**2, axis=0)
+    return float(np.sqrt(num / den)), np.sqrt(nj / dj)
+
+
+def with_errors_of(result, new, robot, datasets, validation, key: str, record: dict):
+    """``new`` (an estimate replacing ``result``'s) with its own torque errors on the
+    training and validation data, ``result``'s context less what no longer holds (the
+    standard parameters, consistency), and ``record`` under ``key`` in the context."""
+    train = _torque_error(new, robot, list(datasets))
+    assert train is not None  # the training data are not empty (checked by the callers)
+    valid = _torque_error(new, robot, list(validation or []))
+    return replace(
+        new,
+        relative_error=replace(
+            result.relative_error,
+            train=train[0],
+            train_per_joint=train[1],
+            validation=None if valid is None else valid[0],
+            validation_per_joint=None if valid is None else valid[1],
+            validation_per_file=None,
+            train_moving=None,
+            validation_moving=None,
+        ),
+        raw_error=None,
+        context={
+            **{k: v for k, v in result.context.items() if k not in _STALE},
+            key: record,
+        },
+    )
 
 
 def _lm(start: np.ndarray, sums, cost, torque, options: RefineOptions):
@@ -362,28 +396,7 @@ def _refined(result, robot, theta_b, sandwich, record: dict, datasets, validatio
         standard=None,
         timings={**result.timings, "refine": record["seconds"]},
     )
-    train = _torque_error(refined, robot, datasets)
-    assert train is not None  # datasets is not empty (checked by refine)
-    valid = _torque_error(refined, robot, list(validation or []))
-    rel = result.relative_error
-    return replace(
-        refined,
-        relative_error=replace(
-            rel,
-            train=train[0],
-            train_per_joint=train[1],
-            validation=None if valid is None else valid[0],
-            validation_per_joint=None if valid is None else valid[1],
-            validation_per_file=None,
-            train_moving=None,
-            validation_moving=None,
-        ),
-        raw_error=None,
-        context={
-            **{k: v for k, v in result.context.items() if k not in _STALE},
-            "refinement": record,
-        },
-    )
+    return with_errors_of(result, refined, robot, datasets, validation, "refinement", record)
 
 
 __all__ = ["DEFAULT_HORIZON", "STEP_BUDGET", "RefineOptions", "refine", "torque_sums"]
